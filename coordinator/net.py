@@ -1,0 +1,673 @@
+"""The Petri-net model of a robotic task (paper section 2): structure and firing rule, no I/O.
+
+A :class:`PetriNet` is frozen and keyed by ids: two nets loaded from the same file compare equal.
+Its places carry a :class:`PlaceKind` — *resource* (a robot, a camera), *primitive_task* (a token
+there means a primitive action of that primitive task is running), *control* (edited by the
+operator, e.g. ``runs_remaining``) or *plain*. Its transitions carry the events linked to them
+(``int:<task>.<outcome>`` raised by a primitive task, ``ext:<topic>`` raised by a sensor or device),
+a priority and a weight for conflict resolution and, for the GSPN view (section 2, "Quantitative
+Performance Evaluation"), a kind (immediate or exponential), a rate and a server semantics.
+
+A :class:`Marking` maps place ids to token counts. It is immutable and hashable; places with zero
+tokens are not stored, so ``Marking({"p": 0}) == Marking({})``.
+
+Firing rule (ordinary P/T semantics with inhibitor arcs): transition *t* is enabled in marking *M*
+when ``M(p) >= W(p, t)`` for every input place *p* and ``M(q) < I(q, t)`` for every inhibitor arc
+of weight ``I(q, t)``; firing gives ``M' = M - Pre[:, t] + Post[:, t]``. The interpreted-net
+execution semantics (events, busy tokens of running primitive actions) are in
+:mod:`coordinator.engine`; this module is the structure they share with the analyses.
+"""
+
+from __future__ import annotations
+
+import enum
+import re
+from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass, field
+from functools import cached_property
+from types import MappingProxyType
+from typing import Any
+
+import numpy as np
+
+from coordinator.errors import NetError, NotEnabledError
+
+__all__ = [
+    "PlaceKind",
+    "TransitionKind",
+    "Place",
+    "Transition",
+    "Arc",
+    "ActionSpec",
+    "PrimitiveTask",
+    "Marking",
+    "PetriNet",
+    "parse_event",
+    "EVENT_RE",
+    "INFINITE_SERVERS",
+]
+
+#: Event names: ``int:<task>.<outcome>`` or ``ext:<topic>``; identifiers are ``[A-Za-z_][A-Za-z0-9_]*``.
+EVENT_RE = re.compile(
+    r"^(?:int:(?P<task>[A-Za-z_][A-Za-z0-9_]*)\.(?P<outcome>[A-Za-z_][A-Za-z0-9_]*)"
+    r"|ext:(?P<topic>[A-Za-z_][A-Za-z0-9_]*))$"
+)
+_ID_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
+
+#: Value of :attr:`Transition.servers` for infinite-server semantics.
+INFINITE_SERVERS: None = None
+
+
+def parse_event(name: str) -> tuple[str, str, str]:
+    """Split an event name into its parts.
+
+    Args:
+        name: ``"int:<task>.<outcome>"`` or ``"ext:<topic>"``.
+
+    Returns:
+        ``("int", task, outcome)`` or ``("ext", topic, "")``.
+
+    Raises:
+        NetError: if the name matches neither form.
+    """
+    match = EVENT_RE.match(name)
+    if match is None:
+        raise NetError(
+            f"bad event name {name!r}: expected 'int:<task>.<outcome>' or 'ext:<topic>' "
+            "with identifiers made of letters, digits and '_'"
+        )
+    if match.group("task") is not None:
+        return ("int", match.group("task"), match.group("outcome"))
+    return ("ext", match.group("topic"), "")
+
+
+class PlaceKind(enum.Enum):
+    """What a place stands for in the robotic task model (section 2)."""
+
+    #: A resource: a robot, a camera, an object to be manipulated.
+    RESOURCE = "resource"
+    #: A primitive task: each token is one running instance of one of its primitive actions.
+    PRIMITIVE_TASK = "primitive_task"
+    #: A place for task flow control only; the operator inserts and removes its tokens (section 5).
+    CONTROL = "control"
+    #: Any other place (a condition, a buffer).
+    PLAIN = "plain"
+
+
+class TransitionKind(enum.Enum):
+    """Timing of a transition in the GSPN view."""
+
+    #: Fires in zero time; conflicts among immediate transitions are random switches (weights).
+    IMMEDIATE = "immediate"
+    #: Fires after an exponentially distributed delay of rate :attr:`Transition.rate` (1/s).
+    EXPONENTIAL = "exponential"
+
+
+def _check_id(what: str, value: str) -> None:
+    if not isinstance(value, str) or not _ID_RE.match(value):
+        raise NetError(
+            f"bad {what} id {value!r}: use letters, digits, '_', '.', '-', starting with a letter or '_'"
+        )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Place:
+    """A place of the net.
+
+    Attributes:
+        id: unique id within the net.
+        kind: what the place stands for.
+        task: name of the primitive task, for ``kind == PRIMITIVE_TASK`` only.
+        label: text for displays; defaults to the id.
+        capacity: informational bound on tokens (not enforced by the firing rule), or ``None``.
+    """
+
+    id: str
+    kind: PlaceKind = PlaceKind.PLAIN
+    task: str | None = None
+    label: str = ""
+    capacity: int | None = None
+
+    def __post_init__(self) -> None:
+        _check_id("place", self.id)
+        if self.kind is PlaceKind.PRIMITIVE_TASK and not self.task:
+            raise NetError(f"primitive_task place {self.id!r} names no task")
+        if self.kind is not PlaceKind.PRIMITIVE_TASK and self.task is not None:
+            raise NetError(f"place {self.id!r} of kind {self.kind.value} cannot name a task")
+        if self.capacity is not None and self.capacity < 0:
+            raise NetError(f"place {self.id!r} has a negative capacity {self.capacity}")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Transition:
+    """A transition of the net.
+
+    Attributes:
+        id: unique id within the net.
+        events: events linked to the transition (section 2); it fires when enabled *and* every linked
+            event has occurred. No events: fires as soon as it is enabled.
+        priority: conflict resolution, higher first (GSPN priority of immediate transitions).
+        weight: random-switch weight among fireable transitions of equal priority (> 0).
+        kind: immediate or exponential (GSPN view).
+        rate: firing rate in 1/s of an exponential transition (per server), else ``None``.
+        servers: 1 for single-server, ``None`` (:data:`INFINITE_SERVERS`) for infinite-server
+            semantics, or any k ≥ 1 for k-server semantics.
+        hidden: an error-recovery branch that displays may hide (section 2).
+        label: text for displays; defaults to the id.
+    """
+
+    id: str
+    events: tuple[str, ...] = ()
+    priority: int = 0
+    weight: float = 1.0
+    kind: TransitionKind = TransitionKind.IMMEDIATE
+    rate: float | None = None
+    servers: int | None = 1
+    hidden: bool = False
+    label: str = ""
+
+    def __post_init__(self) -> None:
+        _check_id("transition", self.id)
+        for event in self.events:
+            parse_event(event)
+        if len(set(self.events)) != len(self.events):
+            raise NetError(f"transition {self.id!r} lists an event twice")
+        if not self.weight > 0:
+            raise NetError(f"transition {self.id!r} has weight {self.weight}; weights must be > 0")
+        if self.kind is TransitionKind.EXPONENTIAL:
+            if self.rate is None or not self.rate > 0:
+                raise NetError(f"exponential transition {self.id!r} needs a rate > 0 (1/s)")
+        elif self.rate is not None:
+            raise NetError(f"immediate transition {self.id!r} cannot have a rate")
+        if self.servers is not None and self.servers < 1:
+            raise NetError(f"transition {self.id!r} has servers={self.servers}; use >= 1 or 'infinite'")
+
+    @property
+    def external_events(self) -> tuple[str, ...]:
+        """The ``ext:`` events linked to this transition."""
+        return tuple(e for e in self.events if e.startswith("ext:"))
+
+    @property
+    def internal_events(self) -> tuple[str, ...]:
+        """The ``int:`` events linked to this transition."""
+        return tuple(e for e in self.events if e.startswith("int:"))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Arc:
+    """An arc between a place and a transition (either direction).
+
+    Attributes:
+        source: id of a place or a transition.
+        target: id of a transition or a place (the other kind).
+        weight: multiplicity, ≥ 1.
+        inhibitor: an inhibitor arc (place → transition only): the transition is disabled while the
+            place holds ``weight`` tokens or more.
+    """
+
+    source: str
+    target: str
+    weight: int = 1
+    inhibitor: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.weight, int) or isinstance(self.weight, bool) or self.weight < 1:
+            raise NetError(
+                f"arc {self.source} -> {self.target} has weight {self.weight!r}; weights are integers >= 1"
+            )
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ActionSpec:
+    """One primitive action that can translate a primitive task (section 2).
+
+    Attributes:
+        name: the action's name in ``services.toml``.
+        params: parameters passed to the action on every call.
+        cost: a-priori cost C(a) in the task's cost unit (section 3), or ``None`` if measured only.
+    """
+
+    name: str
+    params: Mapping[str, Any] = field(default_factory=dict, hash=False)
+    cost: float | None = None
+
+    def __post_init__(self) -> None:
+        _check_id("action", self.name)
+        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
+        if self.cost is not None and self.cost < 0:
+            raise NetError(f"action {self.name!r} has a negative cost {self.cost}")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class PrimitiveTask:
+    """A primitive task and its alternative primitive actions (sections 2 and 4).
+
+    Attributes:
+        name: the task name used in places and ``int:<name>.<outcome>`` events.
+        actions: the translating primitive actions (at least one).
+        deadline_s: deadline of one instance in seconds; exceeding it is an ``error`` status.
+        learner: learning configuration (section 4), e.g. ``{"scheme": "pursuit", "rate": 0.05}``;
+            empty means the first action is always chosen.
+        mean_time_s: a-priori mean duration of an instance in seconds (GSPN view), or ``None``.
+        reliability: a-priori probability of the normal exit (GSPN random switch), or ``None``.
+    """
+
+    name: str
+    actions: tuple[ActionSpec, ...]
+    deadline_s: float | None = None
+    learner: Mapping[str, Any] = field(default_factory=dict, hash=False)
+    mean_time_s: float | None = None
+    reliability: float | None = None
+
+    def __post_init__(self) -> None:
+        _check_id("task", self.name)
+        if not self.actions:
+            raise NetError(f"primitive task {self.name!r} has no primitive action")
+        names = [a.name for a in self.actions]
+        if len(set(names)) != len(names):
+            raise NetError(f"primitive task {self.name!r} lists an action twice")
+        object.__setattr__(self, "learner", MappingProxyType(dict(self.learner)))
+        if self.deadline_s is not None and not self.deadline_s > 0:
+            raise NetError(f"primitive task {self.name!r} has deadline {self.deadline_s}; must be > 0 s")
+        if self.mean_time_s is not None and not self.mean_time_s > 0:
+            raise NetError(f"primitive task {self.name!r} has mean_time_s {self.mean_time_s}; must be > 0")
+        if self.reliability is not None and not 0.0 <= self.reliability <= 1.0:
+            raise NetError(f"primitive task {self.name!r} has reliability {self.reliability}; must be in [0, 1]")
+
+    def action(self, name: str) -> ActionSpec:
+        """Return the action called ``name``.
+
+        Raises:
+            KeyError: if the task has no such action.
+        """
+        for spec in self.actions:
+            if spec.name == name:
+                return spec
+        raise KeyError(f"primitive task {self.name!r} has no action {name!r}")
+
+
+class Marking(Mapping[str, int]):
+    """An immutable, hashable marking: place id → token count (≥ 0).
+
+    Missing places hold 0 tokens; zero counts are not stored. Equality and hash ignore order.
+
+    Raises:
+        NetError: on a negative or non-integer count.
+    """
+
+    __slots__ = ("_items", "_hash")
+
+    def __init__(self, tokens: Mapping[str, int] | Iterable[tuple[str, int]] = ()) -> None:
+        items = tokens.items() if isinstance(tokens, Mapping) else tokens
+        data: dict[str, int] = {}
+        for place, count in items:
+            if isinstance(count, bool) or not isinstance(count, (int, np.integer)):
+                raise NetError(f"token count of {place!r} must be an integer, got {count!r}")
+            if count < 0:
+                raise NetError(f"token count of {place!r} is negative ({count})")
+            if count:
+                data[str(place)] = int(count)
+        self._items: dict[str, int] = dict(sorted(data.items()))
+        self._hash: int | None = None
+
+    def __getitem__(self, place: str) -> int:
+        return self._items.get(place, 0)
+
+    def __contains__(self, place: object) -> bool:
+        return place in self._items
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._items)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __hash__(self) -> int:
+        if self._hash is None:
+            self._hash = hash(tuple(self._items.items()))
+        return self._hash
+
+    def __eq__(self, other: object) -> bool:
+        if isinstance(other, Marking):
+            return self._items == other._items
+        if isinstance(other, Mapping):
+            return self._items == {k: v for k, v in other.items() if v}
+        return NotImplemented
+
+    def __repr__(self) -> str:
+        inner = ", ".join(f"{k}: {v}" for k, v in self._items.items())
+        return f"Marking({{{inner}}})"
+
+    @property
+    def total(self) -> int:
+        """Total number of tokens."""
+        return sum(self._items.values())
+
+    def add(self, delta: Mapping[str, int]) -> Marking:
+        """Return a new marking with ``delta`` (place → signed change) added.
+
+        Raises:
+            NetError: if a count would become negative.
+        """
+        data = dict(self._items)
+        for place, change in delta.items():
+            data[place] = data.get(place, 0) + change
+        return Marking(data)
+
+    def to_dict(self) -> dict[str, int]:
+        """Return a plain dict of the non-empty places (for serialisation)."""
+        return dict(self._items)
+
+
+@dataclass(frozen=True, eq=True)
+class PetriNet:
+    """A frozen, id-keyed Petri net: places, transitions, arcs, initial marking, primitive tasks.
+
+    Build with keyword arguments; ``PetriNet.build(...)`` accepts any iterables. The constructor
+    checks the structure (unknown ids, place→place arcs, duplicate arcs, unknown tasks) and raises
+    :class:`~coordinator.errors.NetError`; interpretation checks (exits of primitive tasks, events)
+    are in :meth:`interpretation_problems`.
+
+    Attributes:
+        name: net name.
+        places: places in a fixed order (the row order of every matrix).
+        transitions: transitions in a fixed order (the column order of every matrix).
+        arcs: arcs.
+        initial_marking: M0.
+        tasks: primitive tasks by name.
+        description: free text.
+        home_marking: a declared home marking for reversibility analysis, or ``None`` (M0 is used).
+    """
+
+    name: str
+    places: tuple[Place, ...]
+    transitions: tuple[Transition, ...]
+    arcs: tuple[Arc, ...]
+    initial_marking: Marking = field(default_factory=Marking)
+    tasks: Mapping[str, PrimitiveTask] = field(default_factory=dict, hash=False)
+    description: str = ""
+    home_marking: Marking | None = None
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "places", tuple(self.places))
+        object.__setattr__(self, "transitions", tuple(self.transitions))
+        object.__setattr__(self, "arcs", tuple(self.arcs))
+        object.__setattr__(self, "tasks", MappingProxyType(dict(self.tasks)))
+        if not isinstance(self.initial_marking, Marking):
+            object.__setattr__(self, "initial_marking", Marking(self.initial_marking))
+        if self.home_marking is not None and not isinstance(self.home_marking, Marking):
+            object.__setattr__(self, "home_marking", Marking(self.home_marking))
+        self._check_structure()
+
+    # ------------------------------------------------------------------ construction checks
+    def _check_structure(self) -> None:
+        place_ids = [p.id for p in self.places]
+        trans_ids = [t.id for t in self.transitions]
+        for what, ids in (("place", place_ids), ("transition", trans_ids)):
+            seen: set[str] = set()
+            for i in ids:
+                if i in seen:
+                    raise NetError(f"duplicate {what} id {i!r}")
+                seen.add(i)
+        both = set(place_ids) & set(trans_ids)
+        if both:
+            raise NetError(f"id {sorted(both)[0]!r} is both a place and a transition")
+        pset, tset = set(place_ids), set(trans_ids)
+        seen_arcs: set[tuple[str, str, bool]] = set()
+        for arc in self.arcs:
+            src_p, src_t = arc.source in pset, arc.source in tset
+            dst_p, dst_t = arc.target in pset, arc.target in tset
+            if not (src_p or src_t):
+                raise NetError(f"arc {arc.source} -> {arc.target}: unknown place or transition {arc.source!r}")
+            if not (dst_p or dst_t):
+                raise NetError(f"arc {arc.source} -> {arc.target}: unknown place or transition {arc.target!r}")
+            if src_p and dst_p:
+                raise NetError(f"arc {arc.source} -> {arc.target} joins two places; arcs join a place and a transition")
+            if src_t and dst_t:
+                raise NetError(
+                    f"arc {arc.source} -> {arc.target} joins two transitions; arcs join a place and a transition"
+                )
+            if arc.inhibitor and not src_p:
+                raise NetError(f"inhibitor arc {arc.source} -> {arc.target} must go from a place to a transition")
+            key = (arc.source, arc.target, arc.inhibitor)
+            if key in seen_arcs:
+                raise NetError(f"arc {arc.source} -> {arc.target} is given twice; use one arc with a weight")
+            seen_arcs.add(key)
+        for marking, what in ((self.initial_marking, "initial"), (self.home_marking, "home")):
+            if marking is None:
+                continue
+            for place in marking:
+                if place not in pset:
+                    raise NetError(f"{what} marking puts tokens in unknown place {place!r}")
+        for place in self.places:
+            if place.kind is PlaceKind.PRIMITIVE_TASK and place.task not in self.tasks:
+                raise NetError(f"place {place.id!r} names primitive task {place.task!r}, which is not defined")
+        for name, task in self.tasks.items():
+            if name != task.name:
+                raise NetError(f"task registered as {name!r} is named {task.name!r}")
+
+    def interpretation_problems(self) -> list[tuple[str, str]]:
+        """Check the interpreted-net rules of section 2.
+
+        Returns:
+            ``(element id, problem)`` pairs, empty when the net is a valid task net:
+            every primitive-task place has at least one normal exit (a transition linked to
+            ``int:<task>.<outcome>`` with outcome ≠ ``error``) and one error exit
+            (``int:<task>.error``); every ``int:`` event names a primitive task that has a place
+            among the transition's input places; at most one ``ext:`` event per transition
+            (external events are pulses, two never occur at the same instant).
+        """
+        problems: list[tuple[str, str]] = []
+        inputs = self.input_places
+        for t in self.transitions:
+            if len(t.external_events) > 1:
+                problems.append((t.id, f"transition {t.id!r} links {len(t.external_events)} external events; "
+                                       "external events are pulses, link at most one"))
+            in_tasks = {self.place(p).task for p in inputs[t.id] if self.place(p).kind is PlaceKind.PRIMITIVE_TASK}
+            for event in t.internal_events:
+                _, task, _ = parse_event(event)
+                if task not in self.tasks:
+                    problems.append((t.id, f"transition {t.id!r} links {event!r} but no primitive task {task!r} exists"))
+                elif task not in in_tasks:
+                    problems.append((t.id, f"transition {t.id!r} links {event!r} but no input place of it "
+                                           f"is a place of primitive task {task!r}"))
+        outputs_of_place: dict[str, list[str]] = {p.id: [] for p in self.places}
+        for t in self.transitions:
+            for p in inputs[t.id]:
+                outputs_of_place[p].append(t.id)
+        for p in self.places:
+            if p.kind is not PlaceKind.PRIMITIVE_TASK:
+                continue
+            normal = error = False
+            for tid in outputs_of_place[p.id]:
+                for event in self.transition(tid).internal_events:
+                    _, task, outcome = parse_event(event)
+                    if task != p.task:
+                        continue
+                    if outcome == "error":
+                        error = True
+                    else:
+                        normal = True
+            if not normal:
+                problems.append((p.id, f"primitive-task place {p.id!r} ({p.task}) has no normal exit: "
+                                       f"link a transition leaving it to 'int:{p.task}.ok'"))
+            if not error:
+                problems.append((p.id, f"primitive-task place {p.id!r} ({p.task}) has no error exit: "
+                                       f"link a transition leaving it to 'int:{p.task}.error'"))
+        return problems
+
+    # ------------------------------------------------------------------ lookup
+    @cached_property
+    def place_index(self) -> Mapping[str, int]:
+        """Place id → row index in the matrices."""
+        return MappingProxyType({p.id: i for i, p in enumerate(self.places)})
+
+    @cached_property
+    def transition_index(self) -> Mapping[str, int]:
+        """Transition id → column index in the matrices."""
+        return MappingProxyType({t.id: j for j, t in enumerate(self.transitions)})
+
+    def place(self, place_id: str) -> Place:
+        """Return the place with this id.
+
+        Raises:
+            KeyError: if there is none.
+        """
+        try:
+            return self.places[self.place_index[place_id]]
+        except KeyError:
+            raise KeyError(f"net {self.name!r} has no place {place_id!r}") from None
+
+    def transition(self, transition_id: str) -> Transition:
+        """Return the transition with this id.
+
+        Raises:
+            KeyError: if there is none.
+        """
+        try:
+            return self.transitions[self.transition_index[transition_id]]
+        except KeyError:
+            raise KeyError(f"net {self.name!r} has no transition {transition_id!r}") from None
+
+    @cached_property
+    def input_places(self) -> Mapping[str, Mapping[str, int]]:
+        """Transition id → {input place id: arc weight} (normal arcs only)."""
+        return self._adjacency(lambda a: a.source in self.place_index and not a.inhibitor, "target", "source")
+
+    @cached_property
+    def output_places(self) -> Mapping[str, Mapping[str, int]]:
+        """Transition id → {output place id: arc weight}."""
+        return self._adjacency(lambda a: a.source in self.transition_index, "source", "target")
+
+    @cached_property
+    def inhibitor_places(self) -> Mapping[str, Mapping[str, int]]:
+        """Transition id → {place id: inhibitor threshold}."""
+        return self._adjacency(lambda a: a.inhibitor, "target", "source")
+
+    def _adjacency(self, keep: Any, tkey: str, pkey: str) -> Mapping[str, Mapping[str, int]]:
+        table: dict[str, dict[str, int]] = {t.id: {} for t in self.transitions}
+        for arc in self.arcs:
+            if keep(arc):
+                table[getattr(arc, tkey)][getattr(arc, pkey)] = arc.weight
+        return MappingProxyType({k: MappingProxyType(v) for k, v in table.items()})
+
+    @cached_property
+    def task_places(self) -> Mapping[str, tuple[str, ...]]:
+        """Primitive task name → ids of its places."""
+        table: dict[str, list[str]] = {name: [] for name in self.tasks}
+        for p in self.places:
+            if p.kind is PlaceKind.PRIMITIVE_TASK and p.task is not None:
+                table[p.task].append(p.id)
+        return MappingProxyType({k: tuple(v) for k, v in table.items()})
+
+    # ------------------------------------------------------------------ matrices
+    @cached_property
+    def pre(self) -> np.ndarray:
+        """Pre-incidence matrix, shape (|P|, |T|), int64: ``pre[p, t]`` = weight of arc p → t."""
+        return self._matrix(self.input_places)
+
+    @cached_property
+    def post(self) -> np.ndarray:
+        """Post-incidence matrix, shape (|P|, |T|), int64: ``post[p, t]`` = weight of arc t → p."""
+        return self._matrix(self.output_places)
+
+    @cached_property
+    def inhibitor(self) -> np.ndarray:
+        """Inhibitor matrix, shape (|P|, |T|), int64: threshold of the inhibitor arc p → t, 0 if none."""
+        return self._matrix(self.inhibitor_places)
+
+    @cached_property
+    def incidence(self) -> np.ndarray:
+        """Incidence matrix C = Post − Pre, shape (|P|, |T|), int64."""
+        out = self.post - self.pre
+        out.flags.writeable = False
+        return out
+
+    def _matrix(self, table: Mapping[str, Mapping[str, int]]) -> np.ndarray:
+        out = np.zeros((len(self.places), len(self.transitions)), dtype=np.int64)
+        for tid, places in table.items():
+            j = self.transition_index[tid]
+            for pid, w in places.items():
+                out[self.place_index[pid], j] = w
+        out.flags.writeable = False
+        return out
+
+    def vector(self, marking: Mapping[str, int]) -> np.ndarray:
+        """Return a marking as a vector of shape (|P|,), int64, in :attr:`places` order.
+
+        Raises:
+            KeyError: if the marking names an unknown place.
+        """
+        vec = np.zeros(len(self.places), dtype=np.int64)
+        for pid, count in marking.items():
+            if count:
+                vec[self.place_index[pid] if pid in self.place_index else self._unknown(pid)] = count
+        return vec
+
+    def _unknown(self, pid: str) -> int:
+        raise KeyError(f"net {self.name!r} has no place {pid!r}")
+
+    def marking(self, vector: np.ndarray | Iterable[int]) -> Marking:
+        """Return the :class:`Marking` of a vector of shape (|P|,) in :attr:`places` order."""
+        return Marking((p.id, int(c)) for p, c in zip(self.places, vector, strict=True) if c)
+
+    # ------------------------------------------------------------------ firing rule
+    def enabled(self, marking: Mapping[str, int], transition_id: str) -> bool:
+        """Tell whether ``transition_id`` is enabled in ``marking`` (inhibitor arcs honoured).
+
+        Raises:
+            KeyError: if the transition does not exist.
+        """
+        if transition_id not in self.transition_index:
+            raise KeyError(f"net {self.name!r} has no transition {transition_id!r}")
+        for pid, w in self.input_places[transition_id].items():
+            if marking.get(pid, 0) < w:
+                return False
+        for pid, w in self.inhibitor_places[transition_id].items():
+            if marking.get(pid, 0) >= w:
+                return False
+        return True
+
+    def enabled_transitions(self, marking: Mapping[str, int]) -> tuple[str, ...]:
+        """Return the ids of the transitions enabled in ``marking``, in net order."""
+        return tuple(t.id for t in self.transitions if self.enabled(marking, t.id))
+
+    def fire(self, marking: Mapping[str, int], transition_id: str) -> Marking:
+        """Fire a transition and return the new marking (the argument is not changed).
+
+        Raises:
+            NotEnabledError: if the transition is not enabled in ``marking``.
+            KeyError: if the transition does not exist.
+        """
+        if not self.enabled(marking, transition_id):
+            raise NotEnabledError(
+                f"transition {transition_id!r} is not enabled in {Marking(marking)!r}"
+            )
+        data = dict(marking)
+        for pid, w in self.input_places[transition_id].items():
+            data[pid] = data.get(pid, 0) - w
+        for pid, w in self.output_places[transition_id].items():
+            data[pid] = data.get(pid, 0) + w
+        return Marking(data)
+
+    # ------------------------------------------------------------------ derived nets
+    def with_initial_marking(self, marking: Mapping[str, int]) -> PetriNet:
+        """Return a copy of the net with another initial marking."""
+        return PetriNet(
+            name=self.name, places=self.places, transitions=self.transitions, arcs=self.arcs,
+            initial_marking=Marking(marking), tasks=self.tasks, description=self.description,
+            home_marking=self.home_marking,
+        )
+
+    def __hash__(self) -> int:
+        return hash((self.name, self.places, self.transitions, frozenset(self.arcs), self.initial_marking))
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, PetriNet):
+            return NotImplemented
+        return (
+            self.name == other.name and self.places == other.places
+            and self.transitions == other.transitions and set(self.arcs) == set(other.arcs)
+            and self.initial_marking == other.initial_marking and dict(self.tasks) == dict(other.tasks)
+            and self.description == other.description and self.home_marking == other.home_marking
+        )
