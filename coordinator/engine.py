@@ -1,0 +1,706 @@
+"""Execution semantics of an interpreted Petri net (paper section 2; DESIGN.md §3), sans-IO.
+
+The engine holds the marking of a task net and the instances of its primitive tasks. It does no
+I/O and never looks at a clock: inputs are method calls, outputs are effect records that the
+asyncio runtime (:mod:`coordinator.runtime`) journals and carries out.
+
+Rules of this module:
+
+* A transition is *enabled* when every input place holds at least the arc weight in available
+  tokens and no inhibitor place reaches its threshold. A token in a primitive-task place is
+  available only once its instance has ended: while the primitive action runs, the token is busy.
+* It *fires* when enabled and every linked event has occurred. ``int:<task>.<outcome>`` events are
+  latched on the token of an ended instance until a firing consumes that token: an instance that
+  ended with **success** carries ``ok`` and ``success``, **failure** carries ``ok`` and ``failure``,
+  **error** carries ``error``; a named outcome reported by the action is added. ``ext:<topic>``
+  events are pulses: during :meth:`Engine.pulse` each transition linked to the topic may fire once;
+  afterwards the pulse is gone.
+* Among transitions that can fire at the same instant, the highest priority wins; ties are broken
+  by a random switch on the weights, drawn from a generator seeded at construction, so a run is
+  reproducible.
+* A token entering a primitive-task place starts one instance: the engine asks its chooser (the
+  learner of section 4) which primitive action to run and emits :class:`StartAction`.
+* Operator commands (section 5): insert/remove tokens in control places, pause, step (fire exactly
+  one transition), resume, abort (cancel every running instance).
+
+Write-ahead use (the journal is written before a firing is applied)::
+
+    firing = engine.next_firing()      # decide, without changing the marking
+    journal.write(firing)
+    effects = engine.apply(firing)     # change the marking, start instances
+
+:meth:`Engine.advance` runs that loop with a ``before_fire`` hook.
+"""
+
+from __future__ import annotations
+
+import enum
+import random
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from coordinator.errors import EngineError, NetError, NotEnabledError
+from coordinator.net import Marking, PetriNet, PlaceKind, parse_event
+
+__all__ = [
+    "Status",
+    "EngineState",
+    "Instance",
+    "Firing",
+    "StartAction",
+    "CancelAction",
+    "Effect",
+    "Engine",
+    "Chooser",
+    "outcome_events",
+]
+
+
+class Status(enum.Enum):
+    """Status a primitive action returns on completion (section 4)."""
+
+    #: The specifications were fully met.
+    SUCCESS = "success"
+    #: The specifications were not fully met, but execution proceeds along the normal branch.
+    FAILURE = "failure"
+    #: The specifications were not met and error recovery is required (timeout, node lost...).
+    ERROR = "error"
+
+
+class EngineState(enum.Enum):
+    """Where a run stands."""
+
+    #: Transitions can fire, instances are running, or the net waits for an external event.
+    RUNNING = "running"
+    #: The operator paused the run: nothing fires except by :meth:`Engine.step`.
+    PAUSED = "paused"
+    #: Nothing can ever happen again without an operator: no transition can fire, no instance
+    #: runs and no transition waits for an external event.
+    DEAD = "dead"
+    #: The operator aborted the run.
+    ABORTED = "aborted"
+
+
+def outcome_events(status: Status, outcome: str | None = None) -> frozenset[str]:
+    """Return the outcome names latched on a token when an instance ends (DESIGN.md §3).
+
+    Args:
+        status: the status the primitive action returned.
+        outcome: an optional named outcome (an identifier) reported by the action.
+
+    Returns:
+        ``{"ok", "success"}``, ``{"ok", "failure"}`` or ``{"error"}``, plus ``outcome`` if given.
+    """
+    base = {
+        Status.SUCCESS: {"ok", "success"},
+        Status.FAILURE: {"ok", "failure"},
+        Status.ERROR: {"error"},
+    }[status]
+    return frozenset(base | ({outcome} if outcome else set()))
+
+
+@dataclass(slots=True)
+class Instance:
+    """One running (or ended, not yet consumed) instance of a primitive task.
+
+    Attributes:
+        id: unique id within the run (also used as the call id towards the node).
+        task: primitive task name.
+        place: id of the primitive-task place holding its token.
+        action: the primitive action chosen to translate the task.
+        status: ``None`` while running, then the returned status.
+        outcomes: outcome names latched on the token once ended (see :func:`outcome_events`).
+    """
+
+    id: str
+    task: str
+    place: str
+    action: str
+    status: Status | None = None
+    outcomes: frozenset[str] = frozenset()
+
+    @property
+    def running(self) -> bool:
+        """True while the primitive action has not returned."""
+        return self.status is None
+
+
+@dataclass(frozen=True, slots=True)
+class Firing:
+    """A decided firing, journaled before it is applied.
+
+    Attributes:
+        seq: 1-based firing number in the run.
+        transition: id of the transition.
+        consumed: place id → tokens removed.
+        produced: place id → tokens added.
+        instances: ids of the ended instances whose tokens are consumed.
+        pulse: the external event that let it fire, or ``None``.
+    """
+
+    seq: int
+    transition: str
+    consumed: Mapping[str, int]
+    produced: Mapping[str, int]
+    instances: tuple[str, ...] = ()
+    pulse: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class StartAction:
+    """Request to start a primitive action for a new instance.
+
+    Attributes:
+        instance: instance id (use it as the call id: nodes deduplicate repeated ids).
+        task: primitive task name.
+        place: primitive-task place id.
+        action: primitive action name (placed on a node by ``services.toml``).
+        params: parameters for the call.
+        deadline_s: deadline in seconds, or ``None``.
+    """
+
+    instance: str
+    task: str
+    place: str
+    action: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+    deadline_s: float | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class CancelAction:
+    """Request to cancel a running primitive action.
+
+    Attributes:
+        instance: instance id.
+        reason: why, in words.
+    """
+
+    instance: str
+    reason: str
+
+
+Effect = Firing | StartAction | CancelAction
+
+#: Chooses the primitive action of a primitive task: ``(task name, action names) -> action name``.
+Chooser = Callable[[str, tuple[str, ...]], str]
+
+
+def _first(task: str, actions: tuple[str, ...]) -> str:
+    return actions[0]
+
+
+class Engine:
+    """Executor of an interpreted Petri net, without I/O.
+
+    Args:
+        net: the task net (validate it first: see :meth:`PetriNet.interpretation_problems`).
+        seed: seed of the random switch between fireable transitions of equal priority.
+        chooser: picks the primitive action of each new instance; defaults to the first action.
+        instance_prefix: prefix of instance ids (e.g. the run id), so ids are unique across runs.
+        marking: start from this marking instead of the net's initial marking.
+
+    Raises:
+        EngineError: if ``marking`` names an unknown place.
+    """
+
+    def __init__(
+        self,
+        net: PetriNet,
+        *,
+        seed: int = 0,
+        chooser: Chooser | None = None,
+        instance_prefix: str = "i",
+        marking: Mapping[str, int] | None = None,
+    ) -> None:
+        self.net = net
+        self._rng = random.Random(seed)
+        self._seed = seed
+        self._chooser: Chooser = chooser or _first
+        self._prefix = instance_prefix
+        self._next_instance = 1
+        self._fired = 0
+        self._state = EngineState.RUNNING
+        self._pulse: str | None = None
+        self._pulse_fired: set[str] = set()
+        start = net.initial_marking if marking is None else Marking(marking)
+        for pid in start:
+            if pid not in net.place_index:
+                raise EngineError(f"marking names unknown place {pid!r}")
+        self._counts: dict[str, int] = {p.id: start[p.id] for p in net.places}
+        self._instances: dict[str, Instance] = {}
+        self._ended: dict[str, list[Instance]] = {pid: [] for pid in self._task_place_ids()}
+        self._started = False
+        # static tables
+        self._inputs = {t.id: tuple(net.input_places[t.id].items()) for t in net.transitions}
+        self._outputs = {t.id: tuple(net.output_places[t.id].items()) for t in net.transitions}
+        self._inhib = {t.id: tuple(net.inhibitor_places[t.id].items()) for t in net.transitions}
+        self._priority = {t.id: t.priority for t in net.transitions}
+        self._weight = {t.id: t.weight for t in net.transitions}
+        self._ext = {t.id: (t.external_events[0][4:] if t.external_events else None) for t in net.transitions}
+        self._needs: dict[str, dict[str, frozenset[str]]] = {}
+        for t in net.transitions:
+            per_task: dict[str, set[str]] = {}
+            for event in t.internal_events:
+                _, task, outcome = parse_event(event)
+                per_task.setdefault(task, set()).add(outcome)
+            self._needs[t.id] = {k: frozenset(v) for k, v in per_task.items()}
+        self._task_of = {p.id: p.task for p in net.places if p.kind is PlaceKind.PRIMITIVE_TASK}
+        self._control = {p.id for p in net.places if p.kind is PlaceKind.CONTROL}
+        deps: dict[str, set[str]] = {p.id: set() for p in net.places}
+        for t in net.transitions:
+            for pid, _ in self._inputs[t.id] + self._inhib[t.id]:
+                deps[pid].add(t.id)
+        self._order = {t.id: j for j, t in enumerate(net.transitions)}
+        self._dependents = {pid: tuple(sorted(ts, key=self._order.__getitem__)) for pid, ts in deps.items()}
+        self._by_topic: dict[str, tuple[str, ...]] = {}
+        for t in net.transitions:
+            topic = self._ext[t.id]
+            if topic is not None:
+                self._by_topic[topic] = self._by_topic.get(topic, ()) + (t.id,)
+        # incremental set of transitions without external event that can fire now
+        self._fireable: dict[str, None] = {}
+        self._dirty: set[str] = {t.id for t in net.transitions if self._ext[t.id] is None}
+
+    def _task_place_ids(self) -> list[str]:
+        return [p.id for p in self.net.places if p.kind is PlaceKind.PRIMITIVE_TASK]
+
+    # ------------------------------------------------------------------ views
+    @property
+    def state(self) -> EngineState:
+        """Where the run stands (recomputed: DEAD once nothing can happen)."""
+        if self._state in (EngineState.PAUSED, EngineState.ABORTED):
+            return self._state
+        if self._refresh() or self.running_instances() or self.waiting_for():
+            return EngineState.RUNNING
+        return EngineState.DEAD
+
+    @property
+    def marking(self) -> Marking:
+        """Current marking (tokens of running instances included)."""
+        return Marking(self._counts)
+
+    @property
+    def fired(self) -> int:
+        """Number of firings applied so far."""
+        return self._fired
+
+    def running_instances(self) -> list[Instance]:
+        """Instances whose primitive action has not returned, in start order."""
+        return [i for i in self._instances.values() if i.running]
+
+    def ended_instances(self) -> list[Instance]:
+        """Ended instances whose token is still in its place (events latched), in end order."""
+        return [i for lst in self._ended.values() for i in lst]
+
+    def instance(self, instance_id: str) -> Instance:
+        """Return a live (running or ended, unconsumed) instance.
+
+        Raises:
+            EngineError: if there is no such instance.
+        """
+        try:
+            return self._instances[instance_id]
+        except KeyError:
+            raise EngineError(f"no instance {instance_id!r} in this run") from None
+
+    def waiting_for(self) -> tuple[str, ...]:
+        """External events (``ext:<topic>``) that would let some transition fire now."""
+        topics = []
+        for topic, tids in self._by_topic.items():
+            if any(self._can_fire(t) for t in tids):
+                topics.append(f"ext:{topic}")
+        return tuple(topics)
+
+    # ------------------------------------------------------------------ enabling
+    def _available(self, pid: str, need: frozenset[str] | None) -> int:
+        if pid not in self._task_of:
+            return self._counts[pid]
+        ended = self._ended[pid]
+        if not need:
+            return len(ended)
+        return sum(1 for inst in ended if need <= inst.outcomes)
+
+    def _can_fire(self, tid: str) -> bool:
+        """Enabled, with internal events latched (external event not checked)."""
+        needs = self._needs[tid]
+        counts = self._counts
+        for pid, w in self._inputs[tid]:
+            task = self._task_of.get(pid)
+            if task is None:
+                if counts[pid] < w:
+                    return False
+            elif self._available(pid, needs.get(task)) < w:
+                return False
+        for pid, w in self._inhib[tid]:
+            if counts[pid] >= w:
+                return False
+        if needs:
+            in_tasks = {self._task_of.get(pid) for pid, _ in self._inputs[tid]}
+            if not set(needs) <= in_tasks:
+                return False
+        return True
+
+    def _refresh(self) -> bool:
+        """Bring the fireable set up to date; return True if it is not empty."""
+        if self._dirty:
+            fireable = self._fireable
+            for tid in self._dirty:
+                if self._ext[tid] is not None:
+                    continue
+                if self._can_fire(tid):
+                    fireable[tid] = None
+                else:
+                    fireable.pop(tid, None)
+            self._dirty.clear()
+        return bool(self._fireable)
+
+    def enabled(self) -> tuple[str, ...]:
+        """Transitions that could fire now, ignoring pause (external ones only during their pulse)."""
+        self._refresh()
+        cands = set(self._fireable)
+        if self._pulse is not None:
+            cands.update(t for t in self._by_topic.get(self._pulse, ())
+                         if t not in self._pulse_fired and self._can_fire(t))
+        return tuple(sorted(cands, key=self._order.__getitem__))
+
+    # ------------------------------------------------------------------ deciding and firing
+    def next_firing(self, *, ignore_pause: bool = False) -> Firing | None:
+        """Decide the next firing without applying it.
+
+        Returns:
+            The firing (priority first, then a seeded random switch on weights), or ``None`` if
+            nothing can fire now, the run is paused (unless ``ignore_pause``) or aborted.
+        """
+        if self._state is EngineState.ABORTED:
+            return None
+        if self._state is EngineState.PAUSED and not ignore_pause:
+            return None
+        self._refresh()
+        cands = list(self._fireable)
+        if self._pulse is not None:
+            for tid in self._by_topic.get(self._pulse, ()):
+                if tid not in self._pulse_fired and self._can_fire(tid):
+                    cands.append(tid)
+        if not cands:
+            return None
+        tid = self._pick(cands)
+        return self._decide(tid)
+
+    def _pick(self, cands: list[str]) -> str:
+        if len(cands) == 1:
+            return cands[0]
+        prio = self._priority
+        top = max(prio[t] for t in cands)
+        best = [t for t in cands if prio[t] == top]
+        if len(best) == 1:
+            return best[0]
+        best.sort(key=self._order.__getitem__)
+        weights = [self._weight[t] for t in best]
+        if min(weights) == max(weights):
+            return best[self._rng.randrange(len(best))]
+        return self._rng.choices(best, weights=weights)[0]
+
+    def _decide(self, tid: str) -> Firing:
+        needs = self._needs[tid]
+        consumed: dict[str, int] = {}
+        instances: list[str] = []
+        for pid, w in self._inputs[tid]:
+            consumed[pid] = w
+            task = self._task_of.get(pid)
+            if task is not None:
+                need = needs.get(task)
+                chosen = [i.id for i in self._ended[pid] if not need or need <= i.outcomes][:w]
+                instances.extend(chosen)
+        produced = dict(self._outputs[tid])
+        pulse = f"ext:{self._ext[tid]}" if self._ext[tid] is not None else None
+        return Firing(self._fired + 1, tid, MappingProxyType(consumed), MappingProxyType(produced),
+                      tuple(instances), pulse)
+
+    def apply(self, firing: Firing) -> list[Effect]:
+        """Apply a firing decided by :meth:`next_firing` (or read back from the journal).
+
+        Returns:
+            ``[firing]`` followed by a :class:`StartAction` for every token entering a
+            primitive-task place.
+
+        Raises:
+            NotEnabledError: if the firing is not possible in the current state (stale decision).
+        """
+        tid = firing.transition
+        if tid not in self._inputs:
+            raise NotEnabledError(f"unknown transition {tid!r}")
+        if not self._can_fire(tid) or (self._ext[tid] is not None and firing.pulse is None):
+            raise NotEnabledError(f"transition {tid!r} cannot fire in {self.marking!r}")
+        for iid in firing.instances:
+            inst = self._instances.get(iid)
+            if inst is None or inst.running:
+                raise NotEnabledError(f"firing {tid!r} consumes instance {iid!r}, which has not ended")
+        for iid in firing.instances:
+            inst = self._instances.pop(iid)
+            self._ended[inst.place].remove(inst)
+        counts = self._counts
+        for pid, w in firing.consumed.items():
+            counts[pid] -= w
+            self._dirty.update(self._dependents[pid])
+        effects: list[Effect] = [firing]
+        for pid, w in firing.produced.items():
+            counts[pid] += w
+            self._dirty.update(self._dependents[pid])
+            if pid in self._task_of:
+                effects.extend(self._start(pid) for _ in range(w))
+        self._fired = max(self._fired, firing.seq)
+        if firing.pulse is not None:
+            self._pulse_fired.add(tid)
+        return effects
+
+    def _start(self, pid: str) -> StartAction:
+        task_name = self._task_of[pid]
+        assert task_name is not None
+        task = self.net.tasks[task_name]
+        names = tuple(a.name for a in task.actions)
+        action = self._chooser(task_name, names)
+        if action not in names:
+            raise EngineError(f"chooser picked {action!r}, not an action of primitive task {task_name!r}")
+        iid = f"{self._prefix}{self._next_instance}"
+        self._next_instance += 1
+        self._instances[iid] = Instance(iid, task_name, pid, action)
+        spec = task.action(action)
+        return StartAction(iid, task_name, pid, action, spec.params, task.deadline_s)
+
+    def start(self) -> list[Effect]:
+        """Start instances for tokens that sit in primitive-task places of the starting marking.
+
+        Call once before the first :meth:`advance`. Returns the :class:`StartAction` effects.
+
+        Raises:
+            EngineError: if called twice.
+        """
+        if self._started:
+            raise EngineError("the run has already started")
+        self._started = True
+        effects: list[Effect] = []
+        held = {pid: len(lst) for pid, lst in self._ended.items()}
+        running: dict[str, int] = {}
+        for inst in self._instances.values():
+            if inst.running:
+                running[inst.place] = running.get(inst.place, 0) + 1
+        for pid in self._task_of:
+            free = self._counts[pid] - held.get(pid, 0) - running.get(pid, 0)
+            effects.extend(self._start(pid) for _ in range(max(free, 0)))
+        return effects
+
+    def advance(
+        self,
+        before_fire: Callable[[Firing], None] | None = None,
+        *,
+        max_firings: int = 10_000,
+    ) -> list[Effect]:
+        """Fire until nothing can fire now, the run is paused, or ``max_firings`` is reached.
+
+        Args:
+            before_fire: called with each decided firing before it is applied (write-ahead journal).
+            max_firings: bound on firings in this call, so a net that cycles without waiting for any
+                event cannot starve the caller's event loop; call again to continue.
+
+        Returns:
+            The effects in order: each :class:`Firing` followed by the :class:`StartAction` it caused.
+        """
+        effects: list[Effect] = []
+        for _ in range(max_firings):
+            firing = self.next_firing()
+            if firing is None:
+                break
+            if before_fire is not None:
+                before_fire(firing)
+            effects.extend(self.apply(firing))
+        return effects
+
+    # ------------------------------------------------------------------ inputs
+    def complete(self, instance_id: str, status: Status | str, outcome: str | None = None) -> Instance:
+        """Record that a primitive action returned; latch its events on the token.
+
+        Args:
+            instance_id: the instance (call id).
+            status: success, failure or error.
+            outcome: optional named outcome, an identifier (raises ``int:<task>.<outcome>``).
+
+        Returns:
+            The ended instance.
+
+        Raises:
+            EngineError: unknown instance, instance already ended, bad status or outcome name.
+        """
+        inst = self.instance(instance_id)
+        if not inst.running:
+            raise EngineError(f"instance {instance_id!r} has already ended with {inst.status.value}")  # type: ignore[union-attr]
+        try:
+            st = status if isinstance(status, Status) else Status(status)
+        except ValueError:
+            raise EngineError(f"bad status {status!r}: expected success, failure or error") from None
+        if outcome is not None and not outcome.isidentifier():
+            raise EngineError(f"bad outcome name {outcome!r}: must be an identifier")
+        inst.status = st
+        inst.outcomes = outcome_events(st, outcome)
+        self._ended[inst.place].append(inst)
+        self._dirty.update(self._dependents[inst.place])
+        return inst
+
+    def pulse(
+        self,
+        event: str,
+        before_fire: Callable[[Firing], None] | None = None,
+        *,
+        max_firings: int = 10_000,
+    ) -> list[Effect]:
+        """Deliver an external event as a pulse and fire what it allows (DESIGN.md §3).
+
+        During the pulse each transition linked to ``event`` may fire once, interleaved with the
+        other firings by priority; when no more can fire the pulse is dropped. A paused or aborted
+        run ignores pulses (they are lost, as pulses are).
+
+        Args:
+            event: ``"ext:<topic>"`` or the bare topic.
+            before_fire: as in :meth:`advance`.
+            max_firings: as in :meth:`advance`.
+
+        Returns:
+            The effects, as in :meth:`advance`.
+
+        Raises:
+            EngineError: if the name is not an external event.
+        """
+        name = event if event.startswith("ext:") else f"ext:{event}"
+        try:
+            _, topic, _ = parse_event(name)
+        except NetError:
+            raise EngineError(f"{event!r} is not an external event name") from None
+        self._pulse, self._pulse_fired = topic, set()
+        try:
+            return self.advance(before_fire, max_firings=max_firings)
+        finally:
+            self._pulse = None
+            self._pulse_fired = set()
+
+    # ------------------------------------------------------------------ operator commands
+    def insert_tokens(self, place: str, count: int = 1) -> None:
+        """Put ``count`` tokens in a control place (section 5).
+
+        Raises:
+            EngineError: if the place is not a control place or ``count`` < 1.
+        """
+        self._check_control(place, count)
+        self._counts[place] += count
+        self._dirty.update(self._dependents[place])
+
+    def remove_tokens(self, place: str, count: int = 1) -> None:
+        """Take ``count`` tokens from a control place (section 5).
+
+        Raises:
+            EngineError: if the place is not a control place, ``count`` < 1, or it holds fewer tokens.
+        """
+        self._check_control(place, count)
+        if self._counts[place] < count:
+            raise EngineError(f"control place {place!r} holds {self._counts[place]} tokens; cannot remove {count}")
+        self._counts[place] -= count
+        self._dirty.update(self._dependents[place])
+
+    def _check_control(self, place: str, count: int) -> None:
+        if place not in self._counts:
+            raise EngineError(f"no place {place!r} in net {self.net.name!r}")
+        if place not in self._control:
+            raise EngineError(f"place {place!r} is not a control place; the operator edits control places only")
+        if not isinstance(count, int) or count < 1:
+            raise EngineError(f"token count must be a positive integer, got {count!r}")
+
+    def pause(self) -> None:
+        """Stop firing; running primitive actions go on and their results are latched.
+
+        Raises:
+            EngineError: if the run was aborted.
+        """
+        self._not_aborted()
+        self._state = EngineState.PAUSED
+
+    def resume(self) -> None:
+        """Leave the paused state.
+
+        Raises:
+            EngineError: if the run was aborted.
+        """
+        self._not_aborted()
+        self._state = EngineState.RUNNING
+
+    @property
+    def paused(self) -> bool:
+        """True while paused."""
+        return self._state is EngineState.PAUSED
+
+    def step(self, before_fire: Callable[[Firing], None] | None = None) -> list[Effect]:
+        """Fire exactly one transition, paused or not; return its effects (empty if none can fire).
+
+        Raises:
+            EngineError: if the run was aborted.
+        """
+        self._not_aborted()
+        firing = self.next_firing(ignore_pause=True)
+        if firing is None:
+            return []
+        if before_fire is not None:
+            before_fire(firing)
+        return self.apply(firing)
+
+    def abort(self, reason: str = "aborted by the operator") -> list[Effect]:
+        """Cancel every running instance and stop the run for good.
+
+        Returns:
+            A :class:`CancelAction` per running instance.
+        """
+        self._state = EngineState.ABORTED
+        return [CancelAction(i.id, reason) for i in self.running_instances()]
+
+    def _not_aborted(self) -> None:
+        if self._state is EngineState.ABORTED:
+            raise EngineError("the run was aborted")
+
+    # ------------------------------------------------------------------ recovery
+    def restore(self, marking: Mapping[str, int], instances: Iterable[Instance], *,
+                fired: int, next_instance: int) -> None:
+        """Rebuild the state of a run from its journal (``petrobot run --resume``).
+
+        Args:
+            marking: the marking after the last journaled firing and operator command.
+            instances: live instances (running, or ended with their status and outcomes) in start order.
+            fired: number of firings journaled.
+            next_instance: the next instance number to use.
+
+        Raises:
+            EngineError: if an instance sits in a place that is not a primitive-task place of its task,
+                or a place holds fewer tokens than its instances.
+        """
+        counts = {p.id: 0 for p in self.net.places}
+        for pid, c in marking.items():
+            if pid not in counts:
+                raise EngineError(f"journal marking names unknown place {pid!r}")
+            counts[pid] = c
+        self._counts = counts
+        self._instances = {}
+        self._ended = {pid: [] for pid in self._task_place_ids()}
+        per_place: dict[str, int] = {}
+        for inst in instances:
+            if self._task_of.get(inst.place) != inst.task:
+                raise EngineError(f"instance {inst.id!r} of {inst.task!r} cannot sit in place {inst.place!r}")
+            self._instances[inst.id] = inst
+            if not inst.running:
+                self._ended[inst.place].append(inst)
+            per_place[inst.place] = per_place.get(inst.place, 0) + 1
+        for pid, n in per_place.items():
+            if counts[pid] < n:
+                raise EngineError(f"place {pid!r} holds {counts[pid]} tokens but {n} instances")
+        self._fired = fired
+        self._next_instance = next_instance
+        self._rng = random.Random(f"{self._seed}:{fired}")
+        self._fireable = {}
+        self._dirty = {t.id for t in self.net.transitions if self._ext[t.id] is None}
