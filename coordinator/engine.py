@@ -254,15 +254,27 @@ class Engine:
             for pid, _ in self._inputs[t.id] + self._inhib[t.id]:
                 deps[pid].add(t.id)
         self._order = {t.id: j for j, t in enumerate(net.transitions)}
-        self._dependents = {pid: tuple(sorted(ts, key=self._order.__getitem__)) for pid, ts in deps.items()}
+        self._tids = tuple(t.id for t in net.transitions)
+        # transition *indices*: a set of ints iterates in the same order in every process
+        self._dependents = {pid: tuple(sorted(self._order[t] for t in ts)) for pid, ts in deps.items()}
         self._by_topic: dict[str, tuple[str, ...]] = {}
         for t in net.transitions:
             topic = self._ext[t.id]
             if topic is not None:
                 self._by_topic[topic] = self._by_topic.get(topic, ()) + (t.id,)
-        # incremental set of transitions without external event that can fire now
-        self._fireable: dict[str, None] = {}
-        self._dirty: set[str] = {t.id for t in net.transitions if self._ext[t.id] is None}
+        self._consumed_map = {t.id: MappingProxyType(dict(self._inputs[t.id])) for t in net.transitions}
+        self._produced_map = {t.id: MappingProxyType(dict(self._outputs[t.id])) for t in net.transitions}
+        self._task_inputs = {t.id: any(pid in self._task_of for pid, _ in self._inputs[t.id])
+                             for t in net.transitions}
+        self._pulse_of = {t.id: (f"ext:{self._ext[t.id]}" if self._ext[t.id] else None) for t in net.transitions}
+        #: every transition has the same priority and weight: a conflict is a uniform draw
+        self._uniform = len({(t.priority, t.weight) for t in net.transitions}) <= 1
+        # incremental set of transitions without external event that can fire now: a list for O(1)
+        # uniform draws plus the position of each member
+        self._fireable: list[str] = []
+        self._fpos: dict[str, int] = {}
+        self._dirty: set[int] = set(range(len(self._tids)))
+        self._decided: Firing | None = None
 
     def _task_place_ids(self) -> list[str]:
         return [p.id for p in self.net.places if p.kind is PlaceKind.PRIMITIVE_TASK]
@@ -325,8 +337,16 @@ class Engine:
 
     def _can_fire(self, tid: str) -> bool:
         """Enabled, with internal events latched (external event not checked)."""
-        needs = self._needs[tid]
         counts = self._counts
+        if not self._task_inputs[tid]:
+            for pid, w in self._inputs[tid]:
+                if counts[pid] < w:
+                    return False
+            for pid, w in self._inhib[tid]:
+                if counts[pid] >= w:
+                    return False
+            return not self._needs[tid]
+        needs = self._needs[tid]
         for pid, w in self._inputs[tid]:
             task = self._task_of.get(pid)
             if task is None:
@@ -346,14 +366,22 @@ class Engine:
     def _refresh(self) -> bool:
         """Bring the fireable set up to date; return True if it is not empty."""
         if self._dirty:
-            fireable = self._fireable
-            for tid in self._dirty:
-                if self._ext[tid] is not None:
+            fireable, fpos, ext, can_fire = self._fireable, self._fpos, self._ext, self._can_fire
+            tids = self._tids
+            for j in self._dirty:
+                tid = tids[j]
+                if ext[tid] is not None:
                     continue
-                if self._can_fire(tid):
-                    fireable[tid] = None
-                else:
-                    fireable.pop(tid, None)
+                if can_fire(tid):
+                    if tid not in fpos:
+                        fpos[tid] = len(fireable)
+                        fireable.append(tid)
+                elif tid in fpos:
+                    i = fpos.pop(tid)
+                    last = fireable.pop()
+                    if last != tid:
+                        fireable[i] = last
+                        fpos[last] = i
             self._dirty.clear()
         return bool(self._fireable)
 
@@ -379,15 +407,27 @@ class Engine:
         if self._state is EngineState.PAUSED and not ignore_pause:
             return None
         self._refresh()
-        cands = list(self._fireable)
-        if self._pulse is not None:
+        if self._pulse is None:
+            cands = self._fireable
+            if not cands:
+                return None
+            if len(cands) == 1:
+                tid = cands[0]
+            elif self._uniform:
+                tid = cands[int(self._rng.random() * len(cands))]
+            else:
+                tid = self._pick(list(cands))
+        else:
+            cands = list(self._fireable)
             for tid in self._by_topic.get(self._pulse, ()):
                 if tid not in self._pulse_fired and self._can_fire(tid):
                     cands.append(tid)
-        if not cands:
-            return None
-        tid = self._pick(cands)
-        return self._decide(tid)
+            if not cands:
+                return None
+            tid = self._pick(cands)
+        firing = self._decide(tid)
+        self._decided = firing
+        return firing
 
     def _pick(self, cands: list[str]) -> str:
         if len(cands) == 1:
@@ -404,20 +444,16 @@ class Engine:
         return self._rng.choices(best, weights=weights)[0]
 
     def _decide(self, tid: str) -> Firing:
-        needs = self._needs[tid]
-        consumed: dict[str, int] = {}
         instances: list[str] = []
-        for pid, w in self._inputs[tid]:
-            consumed[pid] = w
-            task = self._task_of.get(pid)
-            if task is not None:
-                need = needs.get(task)
-                chosen = [i.id for i in self._ended[pid] if not need or need <= i.outcomes][:w]
-                instances.extend(chosen)
-        produced = dict(self._outputs[tid])
-        pulse = f"ext:{self._ext[tid]}" if self._ext[tid] is not None else None
-        return Firing(self._fired + 1, tid, MappingProxyType(consumed), MappingProxyType(produced),
-                      tuple(instances), pulse)
+        if self._task_inputs[tid]:
+            needs = self._needs[tid]
+            for pid, w in self._inputs[tid]:
+                task = self._task_of.get(pid)
+                if task is not None:
+                    need = needs.get(task)
+                    instances.extend([i.id for i in self._ended[pid] if not need or need <= i.outcomes][:w])
+        return Firing(self._fired + 1, tid, self._consumed_map[tid], self._produced_map[tid],
+                      tuple(instances), self._pulse_of[tid])
 
     def apply(self, firing: Firing) -> list[Effect]:
         """Apply a firing decided by :meth:`next_firing` (or read back from the journal).
@@ -430,25 +466,27 @@ class Engine:
             NotEnabledError: if the firing is not possible in the current state (stale decision).
         """
         tid = firing.transition
-        if tid not in self._inputs:
-            raise NotEnabledError(f"unknown transition {tid!r}")
-        if not self._can_fire(tid) or (self._ext[tid] is not None and firing.pulse is None):
-            raise NotEnabledError(f"transition {tid!r} cannot fire in {self.marking!r}")
-        for iid in firing.instances:
-            inst = self._instances.get(iid)
-            if inst is None or inst.running:
-                raise NotEnabledError(f"firing {tid!r} consumes instance {iid!r}, which has not ended")
+        if firing is not self._decided:  # a decision from elsewhere (journal replay, stale): check it
+            if tid not in self._inputs:
+                raise NotEnabledError(f"unknown transition {tid!r}")
+            if not self._can_fire(tid) or (self._ext[tid] is not None and firing.pulse is None):
+                raise NotEnabledError(f"transition {tid!r} cannot fire in {self.marking!r}")
+            for iid in firing.instances:
+                inst = self._instances.get(iid)
+                if inst is None or inst.running:
+                    raise NotEnabledError(f"firing {tid!r} consumes instance {iid!r}, which has not ended")
+        self._decided = None
         for iid in firing.instances:
             inst = self._instances.pop(iid)
             self._ended[inst.place].remove(inst)
-        counts = self._counts
+        counts, dirty, deps = self._counts, self._dirty, self._dependents
         for pid, w in firing.consumed.items():
             counts[pid] -= w
-            self._dirty.update(self._dependents[pid])
+            dirty.update(deps[pid])
         effects: list[Effect] = [firing]
         for pid, w in firing.produced.items():
             counts[pid] += w
-            self._dirty.update(self._dependents[pid])
+            dirty.update(deps[pid])
             if pid in self._task_of:
                 effects.extend(self._start(pid) for _ in range(w))
         self._fired = max(self._fired, firing.seq)
@@ -544,6 +582,7 @@ class Engine:
             raise EngineError(f"bad outcome name {outcome!r}: must be an identifier")
         inst.status = st
         inst.outcomes = outcome_events(st, outcome)
+        self._decided = None
         self._ended[inst.place].append(inst)
         self._dirty.update(self._dependents[inst.place])
         return inst
@@ -577,12 +616,11 @@ class Engine:
             _, topic, _ = parse_event(name)
         except NetError:
             raise EngineError(f"{event!r} is not an external event name") from None
-        self._pulse, self._pulse_fired = topic, set()
+        self._pulse, self._pulse_fired, self._decided = topic, set(), None
         try:
             return self.advance(before_fire, max_firings=max_firings)
         finally:
-            self._pulse = None
-            self._pulse_fired = set()
+            self._pulse, self._pulse_fired, self._decided = None, set(), None
 
     # ------------------------------------------------------------------ operator commands
     def insert_tokens(self, place: str, count: int = 1) -> None:
@@ -594,6 +632,7 @@ class Engine:
         self._check_control(place, count)
         self._counts[place] += count
         self._dirty.update(self._dependents[place])
+        self._decided = None
 
     def remove_tokens(self, place: str, count: int = 1) -> None:
         """Take ``count`` tokens from a control place (section 5).
@@ -606,6 +645,7 @@ class Engine:
             raise EngineError(f"control place {place!r} holds {self._counts[place]} tokens; cannot remove {count}")
         self._counts[place] -= count
         self._dirty.update(self._dependents[place])
+        self._decided = None
 
     def _check_control(self, place: str, count: int) -> None:
         if place not in self._counts:
@@ -702,5 +742,5 @@ class Engine:
         self._fired = fired
         self._next_instance = next_instance
         self._rng = random.Random(f"{self._seed}:{fired}")
-        self._fireable = {}
-        self._dirty = {t.id for t in self.net.transitions if self._ext[t.id] is None}
+        self._fireable, self._fpos, self._decided = [], {}, None
+        self._dirty = set(range(len(self._tids)))

@@ -319,3 +319,25 @@ def test_a_chooser_that_picks_an_unknown_action_is_refused():
     engine = Engine(task_net(), chooser=lambda task, actions: "teleport")
     with pytest.raises(EngineError, match="teleport"):
         engine.advance()
+
+
+def test_a_seeded_run_fires_the_same_sequence_in_another_process():
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "from coordinator.net import *; from coordinator.engine import Engine\n"
+        "ps=[Place(id=f'p{i}') for i in range(20)]; ts=[Transition(id=f't{i}') for i in range(20)]\n"
+        "arcs=[Arc(source=f'p{i}',target=f't{i}') for i in range(20)]"
+        "+[Arc(source=f't{i}',target=f'p{(i*7+3)%20}') for i in range(20)]\n"
+        "net=PetriNet(name='n',places=ps,transitions=ts,arcs=arcs,initial_marking={f'p{i}':1 for i in range(0,20,3)})\n"
+        "print(','.join(f.transition for f in Engine(net, seed=5).advance(max_firings=300)))\n"
+    )
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    outs = set()
+    for hashseed in ("1", "2", "3"):
+        env = dict(os.environ, PYTHONHASHSEED=hashseed, PYTHONPATH=root)
+        outs.add(subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
+                                check=True, timeout=60).stdout)
+    assert len(outs) == 1
