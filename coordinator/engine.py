@@ -535,6 +535,7 @@ class Engine:
         before_fire: Callable[[Firing], None] | None = None,
         *,
         max_firings: int = 10_000,
+        after_fire: Callable[[list[Effect]], None] | None = None,
     ) -> list[Effect]:
         """Fire until nothing can fire now, the run is paused, or ``max_firings`` is reached.
 
@@ -542,6 +543,8 @@ class Engine:
             before_fire: called with each decided firing before it is applied (write-ahead journal).
             max_firings: bound on firings in this call, so a net that cycles without waiting for any
                 event cannot starve the caller's event loop; call again to continue.
+            after_fire: called with the effects of each firing right after it is applied (to act on
+                them while the marking is the one they produced).
 
         Returns:
             The effects in order: each :class:`Firing` followed by the :class:`StartAction` it caused.
@@ -553,7 +556,10 @@ class Engine:
                 break
             if before_fire is not None:
                 before_fire(firing)
-            effects.extend(self.apply(firing))
+            applied = self.apply(firing)
+            if after_fire is not None:
+                after_fire(applied)
+            effects.extend(applied)
         return effects
 
     # ------------------------------------------------------------------ inputs
@@ -593,6 +599,7 @@ class Engine:
         before_fire: Callable[[Firing], None] | None = None,
         *,
         max_firings: int = 10_000,
+        after_fire: Callable[[list[Effect]], None] | None = None,
     ) -> list[Effect]:
         """Deliver an external event as a pulse and fire what it allows (DESIGN.md §3).
 
@@ -602,8 +609,7 @@ class Engine:
 
         Args:
             event: ``"ext:<topic>"`` or the bare topic.
-            before_fire: as in :meth:`advance`.
-            max_firings: as in :meth:`advance`.
+            before_fire, max_firings, after_fire: as in :meth:`advance`.
 
         Returns:
             The effects, as in :meth:`advance`.
@@ -618,7 +624,7 @@ class Engine:
             raise EngineError(f"{event!r} is not an external event name") from None
         self._pulse, self._pulse_fired, self._decided = topic, set(), None
         try:
-            return self.advance(before_fire, max_firings=max_firings)
+            return self.advance(before_fire, max_firings=max_firings, after_fire=after_fire)
         finally:
             self._pulse, self._pulse_fired, self._decided = None, set(), None
 
@@ -629,7 +635,7 @@ class Engine:
         Raises:
             EngineError: if the place is not a control place or ``count`` < 1.
         """
-        self._check_control(place, count)
+        self.check_tokens("insert", place, count)
         self._counts[place] += count
         self._dirty.update(self._dependents[place])
         self._decided = None
@@ -640,20 +646,26 @@ class Engine:
         Raises:
             EngineError: if the place is not a control place, ``count`` < 1, or it holds fewer tokens.
         """
-        self._check_control(place, count)
-        if self._counts[place] < count:
-            raise EngineError(f"control place {place!r} holds {self._counts[place]} tokens; cannot remove {count}")
+        self.check_tokens("remove", place, count)
         self._counts[place] -= count
         self._dirty.update(self._dependents[place])
         self._decided = None
 
-    def _check_control(self, place: str, count: int) -> None:
+    def check_tokens(self, command: str, place: str, count: int) -> None:
+        """Check an ``insert``/``remove`` command without applying it (to journal it first).
+
+        Raises:
+            EngineError: unknown place, not a control place, count < 1, or removing more tokens
+                than the place holds.
+        """
         if place not in self._counts:
             raise EngineError(f"no place {place!r} in net {self.net.name!r}")
         if place not in self._control:
             raise EngineError(f"place {place!r} is not a control place; the operator edits control places only")
         if not isinstance(count, int) or count < 1:
             raise EngineError(f"token count must be a positive integer, got {count!r}")
+        if command == "remove" and self._counts[place] < count:
+            raise EngineError(f"control place {place!r} holds {self._counts[place]} tokens; cannot remove {count}")
 
     def pause(self) -> None:
         """Stop firing; running primitive actions go on and their results are latched.
@@ -678,7 +690,8 @@ class Engine:
         """True while paused."""
         return self._state is EngineState.PAUSED
 
-    def step(self, before_fire: Callable[[Firing], None] | None = None) -> list[Effect]:
+    def step(self, before_fire: Callable[[Firing], None] | None = None,
+             after_fire: Callable[[list[Effect]], None] | None = None) -> list[Effect]:
         """Fire exactly one transition, paused or not; return its effects (empty if none can fire).
 
         Raises:
@@ -690,7 +703,10 @@ class Engine:
             return []
         if before_fire is not None:
             before_fire(firing)
-        return self.apply(firing)
+        applied = self.apply(firing)
+        if after_fire is not None:
+            after_fire(applied)
+        return applied
 
     def abort(self, reason: str = "aborted by the operator") -> list[Effect]:
         """Cancel every running instance and stop the run for good.
