@@ -1,0 +1,500 @@
+"""PNML import and export of place/transition nets (ISO/IEC 15909-2, 2009 grammar).
+
+Reads the 2009 grammar (``<pnml><net type=".../ptnet"><page><place>...``, labels holding
+``<text>``), the older dialect that writes ``<value>`` instead of ``<text>`` and puts nodes straight
+under ``<net>`` without a ``<page>`` (PIPE-style ``"Default,3"`` markings included), nested or
+multiple pages (flattened; reference places and transitions resolved to the nodes they stand for),
+and ``<type value="inhibitor"/>`` on arcs. Ids of places and transitions are kept. Duplicate arcs
+between the same place and transition are merged by adding their weights.
+
+The interpretation that plain PNML cannot express (place kinds, primitive tasks and their actions,
+events, priorities, weights, GSPN timing, hidden branches, inhibitor arcs, labels, the home marking)
+travels in ``<toolspecific tool="petrobot" version="1">`` elements, so that a net written by
+:func:`dump_pnml` reads back equal (``loads_pnml(dump_pnml(n)) == n``). A model without them -
+any Model Checking Contest model - loads as a net of plain places and immediate transitions.
+
+Every problem raises :class:`~coordinator.errors.NetError` (syntax errors and non-P/T nets:
+:class:`~coordinator.errors.NetFileError`) naming the file and the 1-based line of the element.
+
+Reference: ISO/IEC 15909-2:2011, *Petri net Markup Language*; Hillah, Kordon, Petrucci, Trèves,
+"PNML Framework", 2010.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+import xml.parsers.expat
+from collections.abc import Callable
+from functools import partial
+from pathlib import Path
+from typing import Any, TypeVar
+from xml.etree import ElementTree as ET
+from xml.sax.saxutils import escape, quoteattr
+
+from coordinator.errors import NetError, NetFileError
+from coordinator.net import (
+    ActionSpec,
+    Arc,
+    Marking,
+    PetriNet,
+    Place,
+    PlaceKind,
+    PrimitiveTask,
+    Transition,
+    TransitionKind,
+)
+
+__all__ = ["PNML_NS", "PTNET_TYPE", "TOOL", "TOOL_VERSION", "dump_pnml", "load_pnml", "loads_pnml", "save_pnml"]
+
+#: XML namespace of the 2009 grammar.
+PNML_NS = "http://www.pnml.org/version-2009/grammar/pnml"
+#: Net type of place/transition nets in the 2009 grammar.
+PTNET_TYPE = "http://www.pnml.org/version-2009/grammar/ptnet"
+#: ``tool`` attribute of our ``<toolspecific>`` elements.
+TOOL = "petrobot"
+#: ``version`` attribute of our ``<toolspecific>`` elements.
+TOOL_VERSION = "1"
+
+_T = TypeVar("_T")
+_NOT_PT = ("symmetricnet", "highlevelnet", "pt-hlpng", "hlpng", "coloured", "colored")
+
+
+# ---------------------------------------------------------------------------------------- parsing
+def _parse_xml(data: bytes, path: str) -> tuple[ET.Element, dict[ET.Element, int]]:
+    """Parse XML with expat, stripping namespaces, and remember each element's line."""
+    builder = ET.TreeBuilder()
+    lines: dict[ET.Element, int] = {}
+    parser = xml.parsers.expat.ParserCreate(namespace_separator="}")
+
+    def start(tag: str, attrs: dict[str, str]) -> None:
+        local = tag.rsplit("}", 1)[-1]
+        attributes = {k.rsplit("}", 1)[-1]: v for k, v in attrs.items()}
+        lines[builder.start(local, attributes)] = parser.CurrentLineNumber
+
+    def end(tag: str) -> None:
+        builder.end(tag.rsplit("}", 1)[-1])
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = end
+    parser.CharacterDataHandler = builder.data
+    parser.buffer_text = True
+    try:
+        parser.Parse(data, True)
+    except xml.parsers.expat.ExpatError as exc:
+        raise NetFileError(
+            f"not well-formed XML: {xml.parsers.expat.ErrorString(exc.code)} (column {exc.offset + 1})",
+            path=path, line=exc.lineno,
+        ) from None
+    return builder.close(), lines
+
+
+def _label_text(elem: ET.Element | None) -> str | None:
+    """Text of a PNML label: ``<text>`` (2009) or ``<value>`` (older dialect), stripped."""
+    if elem is None:
+        return None
+    for child in elem:
+        if child.tag in ("text", "value"):
+            return (child.text or "").strip()
+    return None
+
+
+class _Reader:
+    """One PNML document being turned into a :class:`PetriNet`."""
+
+    def __init__(self, root: ET.Element, lines: dict[ET.Element, int], path: str) -> None:
+        self.root = root
+        self.lines = lines
+        self.path = path
+
+    def error(self, problem: str, elem: ET.Element | None) -> NetError:
+        return NetError(problem, path=self.path, line=self.lines.get(elem) if elem is not None else None)
+
+    def guarded(self, elem: ET.Element, build: Callable[[], _T]) -> _T:
+        """Run a constructor of the net model; re-raise its NetError with this element's line."""
+        try:
+            return build()
+        except NetError as exc:
+            raise self.error(exc.problem, elem) from None
+        except (TypeError, ValueError) as exc:
+            raise self.error(str(exc), elem) from None
+
+    def integer(self, text: str | None, what: str, elem: ET.Element, minimum: int) -> int:
+        if text is None or text == "":
+            raise self.error(f"{what} is empty", elem)
+        # PIPE writes "Default,3"; the 2009 grammar writes "3".
+        token = text.rsplit(",", 1)[-1].strip()
+        try:
+            value = int(token)
+        except ValueError:
+            raise self.error(f"{what} {text!r} is not an integer", elem) from None
+        if value < minimum:
+            raise self.error(f"{what} is {value}; it must be >= {minimum}", elem)
+        return value
+
+    def number(self, text: str | None, what: str, elem: ET.Element) -> float | None:
+        """Parse an optional float attribute."""
+        if text is None:
+            return None
+        try:
+            return float(text)
+        except ValueError:
+            raise self.error(f"{what} {text!r} is not a number", elem) from None
+
+    def tool(self, elem: ET.Element) -> ET.Element | None:
+        for child in elem:
+            if child.tag == "toolspecific" and child.get("tool") == TOOL:
+                version = child.get("version", TOOL_VERSION)
+                if version != TOOL_VERSION:
+                    raise self.error(f"toolspecific petrobot version {version!r} is not supported "
+                                     f"(expected {TOOL_VERSION!r})", child)
+                return child
+        return None
+
+    # ---------------------------------------------------------------- net
+    def net(self, net_id: str | None) -> PetriNet:
+        root = self.root
+        if root.tag == "net":
+            nets = [root]
+        elif root.tag == "pnml":
+            nets = [n for n in root if n.tag == "net"]
+        else:
+            raise NetFileError(f"not a PNML document: root element is <{root.tag}>", path=self.path, line=1)
+        if net_id is not None:
+            nets = [n for n in nets if n.get("id") == net_id]
+            if not nets:
+                raise NetFileError(f"no <net> with id {net_id!r}", path=self.path, line=1)
+        if not nets:
+            raise NetFileError("the document holds no <net>", path=self.path, line=1)
+        if len(nets) > 1:
+            ids = ", ".join(repr(n.get("id")) for n in nets)
+            raise self.error(f"the document holds {len(nets)} nets ({ids}); choose one with net_id", nets[1])
+        return self.read_net(nets[0])
+
+    def read_net(self, net: ET.Element) -> PetriNet:
+        ntype = (net.get("type") or "").lower()
+        if any(word in ntype for word in _NOT_PT):
+            raise NetFileError(f"net type {net.get('type')!r} is not a place/transition net",
+                               path=self.path, line=self.lines.get(net))
+        places: dict[str, ET.Element] = {}
+        transitions: dict[str, ET.Element] = {}
+        arcs: list[ET.Element] = []
+        refs: dict[str, tuple[str, ET.Element]] = {}
+        self.collect(net, places, transitions, arcs, refs)
+
+        tool = self.tool(net)
+        tasks = self.read_tasks(tool) if tool is not None else {}
+        marking: dict[str, int] = {}
+        place_objs = [self.read_place(pid, elem, marking) for pid, elem in places.items()]
+        trans_objs = [self.read_transition(tid, elem) for tid, elem in transitions.items()]
+        arc_objs = self.read_arcs(arcs, refs, places, transitions)
+
+        name = _label_text(net.find("name")) or net.get("id") or "net"
+        description = ""
+        home: Marking | None = None
+        if tool is not None:
+            desc = tool.find("description")
+            if desc is not None:
+                description = desc.text or ""
+            home_elem = tool.find("home")
+            if home_elem is not None:
+                home = Marking({
+                    tok.get("place", ""): self.integer(tok.get("count"), "home token count", tok, 0)
+                    for tok in home_elem.iter("token")
+                })
+        return self.guarded(net, lambda: PetriNet(
+            name=name, places=tuple(place_objs), transitions=tuple(trans_objs), arcs=tuple(arc_objs),
+            initial_marking=Marking(marking), tasks=tasks, description=description, home_marking=home,
+        ))
+
+    def collect(self, container: ET.Element, places: dict[str, ET.Element],
+                transitions: dict[str, ET.Element], arcs: list[ET.Element],
+                refs: dict[str, tuple[str, ET.Element]]) -> None:
+        """Gather nodes and arcs of ``container`` and of all its pages, recursively."""
+        for child in container:
+            tag = child.tag
+            if tag == "page":
+                self.collect(child, places, transitions, arcs, refs)
+                continue
+            if tag not in ("place", "transition", "arc", "referencePlace", "referenceTransition"):
+                continue
+            ident = child.get("id")
+            if not ident:
+                raise self.error(f"<{tag}> has no id", child)
+            if ident in places or ident in transitions or ident in refs:
+                raise self.error(f"duplicate id {ident!r}", child)
+            if tag == "place":
+                places[ident] = child
+            elif tag == "transition":
+                transitions[ident] = child
+            elif tag == "arc":
+                arcs.append(child)
+            else:
+                ref = child.get("ref")
+                if not ref:
+                    raise self.error(f"<{tag}> {ident!r} has no ref", child)
+                refs[ident] = (ref, child)
+
+    # ---------------------------------------------------------------- nodes
+    def read_place(self, pid: str, elem: ET.Element, marking: dict[str, int]) -> Place:
+        text = _label_text(elem.find("initialMarking"))
+        if text:
+            tokens = self.integer(text, f"initial marking of place {pid!r}", elem, 0)
+            if tokens:
+                marking[pid] = tokens
+        tool = self.tool(elem)
+        if tool is None:
+            name = _label_text(elem.find("name"))
+            label = name if name and name != pid else ""
+            return self.guarded(elem, lambda: Place(id=pid, label=label))
+        kind_text = tool.get("kind", "plain")
+        try:
+            kind = PlaceKind(kind_text)
+        except ValueError:
+            raise self.error(f"place {pid!r} has unknown kind {kind_text!r}", tool) from None
+        capacity = tool.get("capacity")
+        cap = None if capacity is None else self.integer(capacity, f"capacity of place {pid!r}", tool, 0)
+        return self.guarded(elem, lambda: Place(
+            id=pid, kind=kind, task=tool.get("task"), label=tool.get("label", ""), capacity=cap))
+
+    def read_transition(self, tid: str, elem: ET.Element) -> Transition:
+        tool = self.tool(elem)
+        if tool is None:
+            name = _label_text(elem.find("name"))
+            label = name if name and name != tid else ""
+            return self.guarded(elem, lambda: Transition(id=tid, label=label))
+        kind_text = tool.get("kind", "immediate")
+        try:
+            kind = TransitionKind(kind_text)
+        except ValueError:
+            raise self.error(f"transition {tid!r} has unknown kind {kind_text!r}", tool) from None
+        events = tuple(ev.get("name", "") for ev in tool.iter("event"))
+        servers_text = tool.get("servers", "1")
+        servers = None if servers_text == "infinite" else self.integer(
+            servers_text, f"servers of transition {tid!r}", tool, 1)
+        rate = tool.get("rate")
+        hidden = tool.get("hidden", "false")
+        if hidden not in ("true", "false"):
+            raise self.error(f"transition {tid!r}: hidden must be 'true' or 'false', not {hidden!r}", tool)
+        priority = self.integer(tool.get("priority", "0"), f"priority of transition {tid!r}", tool, -(2**63))
+        return self.guarded(elem, lambda: Transition(
+            id=tid, events=events, priority=priority, weight=float(tool.get("weight", "1.0")),
+            kind=kind, rate=None if rate is None else float(rate), servers=servers,
+            hidden=hidden == "true", label=tool.get("label", ""),
+        ))
+
+    def read_arcs(self, arcs: list[ET.Element], refs: dict[str, tuple[str, ET.Element]],
+                  places: dict[str, ET.Element], transitions: dict[str, ET.Element]) -> list[Arc]:
+        def resolve(node: str, elem: ET.Element) -> str:
+            seen: set[str] = set()
+            while node in refs and node not in seen:
+                seen.add(node)
+                node = refs[node][0]
+            if node not in places and node not in transitions:
+                raise self.error(f"arc {elem.get('id')!r} refers to unknown node {node!r}", elem)
+            return node
+
+        merged: dict[tuple[str, str, bool], int] = {}
+        first_elem: dict[tuple[str, str, bool], ET.Element] = {}
+        for elem in arcs:
+            source = resolve(elem.get("source") or "", elem)
+            target = resolve(elem.get("target") or "", elem)
+            if (source in places) == (target in places):
+                what = "places" if source in places else "transitions"
+                raise self.error(f"arc {elem.get('id')!r} joins two {what} ({source} -> {target}); "
+                                 "arcs join a place and a transition", elem)
+            text = _label_text(elem.find("inscription"))
+            weight = 1 if not text else self.integer(text, f"weight of arc {elem.get('id')!r}", elem, 1)
+            tool = self.tool(elem)
+            type_elem = elem.find("type")
+            inhibitor = (tool is not None and tool.get("inhibitor") == "true") or (
+                type_elem is not None and (type_elem.get("value") or _label_text(type_elem)) == "inhibitor")
+            key = (source, target, inhibitor)
+            merged[key] = merged.get(key, 0) + weight
+            first_elem.setdefault(key, elem)
+        return [self.guarded(first_elem[key], partial(Arc, source=key[0], target=key[1], weight=w,
+                                                      inhibitor=key[2]))
+                for key, w in merged.items()]
+
+    # ---------------------------------------------------------------- tasks
+    def read_tasks(self, tool: ET.Element) -> dict[str, PrimitiveTask]:
+        tasks: dict[str, PrimitiveTask] = {}
+        container = tool.find("tasks")
+        if container is None:
+            return tasks
+        for elem in container.iter("task"):
+            name = elem.get("name", "")
+            if name in tasks:
+                raise self.error(f"primitive task {name!r} is defined twice", elem)
+            actions: list[ActionSpec] = []
+            for act in elem.iter("action"):
+                cost = self.number(act.get("cost"), f"cost of action {act.get('name')!r}", act)
+                actions.append(self.guarded(act, partial(
+                    ActionSpec, name=act.get("name", ""), params=self.toml_table(act.find("params")), cost=cost)))
+            numbers = {key: self.number(elem.get(key), f"{key} of task {name!r}", elem)
+                       for key in ("deadline_s", "mean_time_s", "reliability")}
+            tasks[name] = self.guarded(elem, partial(
+                PrimitiveTask, name=name, actions=tuple(actions), learner=self.toml_table(elem.find("learner")),
+                **numbers))
+        return tasks
+
+    def toml_table(self, elem: ET.Element | None) -> dict[str, Any]:
+        """Read a table kept as a TOML inline table in the text of ``elem``."""
+        if elem is None or not (elem.text or "").strip():
+            return {}
+        try:
+            return dict(tomllib.loads("value = " + (elem.text or "").strip())["value"])
+        except (tomllib.TOMLDecodeError, TypeError, ValueError) as exc:
+            raise self.error(f"<{elem.tag}> does not hold a TOML inline table: {exc}", elem) from None
+
+
+def loads_pnml(text: str | bytes, path: str = "<string>", *, net_id: str | None = None) -> PetriNet:
+    """Read a PNML document.
+
+    Args:
+        text: the XML document.
+        path: name used in error messages.
+        net_id: id of the ``<net>`` to read when the document holds several.
+
+    Returns:
+        The net. Without petrobot tool-specific data, places are plain and transitions immediate.
+
+    Raises:
+        NetFileError: on malformed XML, a document with no or several nets, a non-P/T net type.
+        NetError: on a structural problem (unknown arc end, arc between two places, bad marking or
+            inscription, duplicate id), naming ``path`` and the element's line.
+    """
+    data = text.encode("utf-8") if isinstance(text, str) else text
+    root, lines = _parse_xml(data, path)
+    return _Reader(root, lines, path).net(net_id)
+
+
+def load_pnml(path: str | Path, *, net_id: str | None = None) -> PetriNet:
+    """Read a PNML file; see :func:`loads_pnml`.
+
+    Raises:
+        NetFileError: if the file cannot be read, or as :func:`loads_pnml`.
+        NetError: as :func:`loads_pnml`.
+    """
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise NetFileError(f"cannot read net file: {exc.strerror or exc}", path=str(path)) from None
+    return loads_pnml(data, str(path), net_id=net_id)
+
+
+# ---------------------------------------------------------------------------------------- writing
+def _num(value: float) -> str:
+    """Exact text of a float (``repr`` round-trips)."""
+    if math.isnan(value) or math.isinf(value):
+        raise NetError(f"cannot write non-finite number {value!r} to PNML")
+    return repr(float(value))
+
+
+def _attrs(pairs: dict[str, str | None]) -> str:
+    return "".join(f" {k}={quoteattr(v)}" for k, v in pairs.items() if v is not None)
+
+
+def dump_pnml(net: PetriNet) -> str:
+    """Write a net as a PNML document (2009 grammar, one page, petrobot tool-specific data).
+
+    Arc ids are generated (``a1``, ``a2``... made unique against node ids); the net's ``id`` is
+    ``net`` and its name label carries :attr:`PetriNet.name`.
+
+    Returns:
+        The XML text, UTF-8, with an XML declaration.
+
+    Raises:
+        NetError: if a number to write is not finite.
+    """
+    from coordinator.netfile import (
+        format_value,  # TOML writer; imported here, netfile imports us
+    )
+
+    out: list[str] = ['<?xml version="1.0" encoding="utf-8"?>', f'<pnml xmlns="{PNML_NS}">',
+                      f'  <net id="net" type="{PTNET_TYPE}">',
+                      f"    <name><text>{escape(net.name)}</text></name>"]
+    net_tool: list[str] = []
+    if net.description:
+        net_tool.append(f"        <description>{escape(net.description)}</description>")
+    if net.home_marking is not None:
+        net_tool.append("        <home>")
+        net_tool += [f"          <token{_attrs({'place': p, 'count': str(c)})}/>" for p, c in net.home_marking.items()]
+        net_tool.append("        </home>")
+    if net.tasks:
+        net_tool.append("        <tasks>")
+        for task in net.tasks.values():
+            net_tool.append("          <task" + _attrs({
+                "name": task.name,
+                "deadline_s": None if task.deadline_s is None else _num(task.deadline_s),
+                "mean_time_s": None if task.mean_time_s is None else _num(task.mean_time_s),
+                "reliability": None if task.reliability is None else _num(task.reliability),
+            }) + ">")
+            for action in task.actions:
+                attrs = _attrs({"name": action.name, "cost": None if action.cost is None else _num(action.cost)})
+                if action.params:
+                    net_tool.append(f"            <action{attrs}><params>"
+                                    f"{escape(format_value(dict(action.params)))}</params></action>")
+                else:
+                    net_tool.append(f"            <action{attrs}/>")
+            if task.learner:
+                net_tool.append(f"            <learner>{escape(format_value(dict(task.learner)))}</learner>")
+            net_tool.append("          </task>")
+        net_tool.append("        </tasks>")
+    if net_tool:
+        out.append(f'    <toolspecific tool="{TOOL}" version="{TOOL_VERSION}">')
+        out += [line[2:] for line in net_tool]
+        out.append("    </toolspecific>")
+    out.append('    <page id="page0">')
+    for place in net.places:
+        out.append(f"      <place id={quoteattr(place.id)}>")
+        out.append(f"        <name><text>{escape(place.label or place.id)}</text></name>")
+        tokens = net.initial_marking[place.id]
+        if tokens:
+            out.append(f"        <initialMarking><text>{tokens}</text></initialMarking>")
+        out.append(f'        <toolspecific tool="{TOOL}" version="{TOOL_VERSION}"' + _attrs({
+            "kind": place.kind.value, "task": place.task, "label": place.label or None,
+            "capacity": None if place.capacity is None else str(place.capacity),
+        }) + "/>")
+        out.append("      </place>")
+    for t in net.transitions:
+        out.append(f"      <transition id={quoteattr(t.id)}>")
+        out.append(f"        <name><text>{escape(t.label or t.id)}</text></name>")
+        head = f'        <toolspecific tool="{TOOL}" version="{TOOL_VERSION}"' + _attrs({
+            "kind": t.kind.value, "priority": str(t.priority), "weight": _num(t.weight),
+            "rate": None if t.rate is None else _num(t.rate),
+            "servers": "infinite" if t.servers is None else str(t.servers),
+            "hidden": "true" if t.hidden else "false", "label": t.label or None,
+        })
+        if t.events:
+            out.append(head + ">")
+            out += [f"          <event name={quoteattr(e)}/>" for e in t.events]
+            out.append("        </toolspecific>")
+        else:
+            out.append(head + "/>")
+        out.append("      </transition>")
+    taken = {p.id for p in net.places} | {t.id for t in net.transitions} | {"net", "page0"}
+    for counter, arc in enumerate(net.arcs, start=1):
+        arc_id = f"a{counter}"
+        while arc_id in taken:
+            arc_id = "_" + arc_id
+        out.append(f"      <arc{_attrs({'id': arc_id, 'source': arc.source, 'target': arc.target})}>")
+        if arc.weight != 1:
+            out.append(f"        <inscription><text>{arc.weight}</text></inscription>")
+        if arc.inhibitor:
+            out.append(f'        <toolspecific tool="{TOOL}" version="{TOOL_VERSION}" inhibitor="true"/>')
+        out.append("      </arc>")
+    out += ["    </page>", "  </net>", "</pnml>", ""]
+    return "\n".join(out)
+
+
+def save_pnml(net: PetriNet, path: str | Path) -> None:
+    """Write :func:`dump_pnml` of ``net`` to ``path`` (UTF-8).
+
+    Raises:
+        NetFileError: if the file cannot be written.
+    """
+    try:
+        Path(path).write_text(dump_pnml(net), encoding="utf-8")
+    except OSError as exc:
+        raise NetFileError(f"cannot write net file: {exc.strerror or exc}", path=str(path)) from None
