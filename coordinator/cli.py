@@ -38,7 +38,13 @@ def build_parser() -> argparse.ArgumentParser:
                         choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="logging level (default: WARNING)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in COMMANDS:
-        module = importlib.import_module(f"coordinator.commands.{name}")
+        qualified = f"coordinator.commands.{name}"
+        try:
+            module = importlib.import_module(qualified)
+        except ModuleNotFoundError as exc:
+            if exc.name != qualified:  # a missing dependency inside the command is a real error
+                raise
+            continue  # this checkout has no such command module
         module.add_parser(sub)
         chosen = sub.choices.get(name)
         if chosen is not None and chosen.get_default("func") is None:

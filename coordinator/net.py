@@ -53,6 +53,7 @@ EVENT_RE = re.compile(
     r"|ext:(?P<topic>[A-Za-z_][A-Za-z0-9_]*))$"
 )
 _ID_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
+_NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 #: Value of :attr:`Transition.servers` for infinite-server semantics.
 INFINITE_SERVERS: None = None
@@ -260,7 +261,9 @@ class PrimitiveTask:
     reliability: float | None = None
 
     def __post_init__(self) -> None:
-        _check_id("task", self.name)
+        if not isinstance(self.name, str) or not _NAME_RE.match(self.name):
+            raise NetError(f"bad primitive task name {self.name!r}: it appears in 'int:<task>.<outcome>' events, "
+                           "so use letters, digits and '_', starting with a letter or '_'")
         if not self.actions:
             raise NetError(f"primitive task {self.name!r} has no primitive action")
         names = [a.name for a in self.actions]
@@ -436,9 +439,9 @@ class PetriNet:
         for marking, what in ((self.initial_marking, "initial"), (self.home_marking, "home")):
             if marking is None:
                 continue
-            for place in marking:
-                if place not in pset:
-                    raise NetError(f"{what} marking puts tokens in unknown place {place!r}")
+            for pid in marking:
+                if pid not in pset:
+                    raise NetError(f"{what} marking puts tokens in unknown place {pid!r}")
         for place in self.places:
             if place.kind is PlaceKind.PRIMITIVE_TASK and place.task not in self.tasks:
                 raise NetError(f"place {place.id!r} names primitive task {place.task!r}, which is not defined")

@@ -1,0 +1,292 @@
+"""The coordinator runs task nets whose primitive actions live on real node processes (127.0.0.1)."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from coordinator.journal import Journal
+from coordinator.netfile import loads_net
+from coordinator.runtime import OperatorCommand, Runtime
+from services.client import ServiceClient
+
+ROOT = Path(__file__).resolve().parents[2]
+Cluster = Any  # the `cluster` fixture of conftest.py
+
+pytestmark = [pytest.mark.integration, pytest.mark.timeout(90)]
+
+TWO_NODE_NET = """
+[net]
+name = "two_nodes"
+
+[[place]]
+id = "runs"
+kind = "control"
+tokens = 2
+
+[[place]]
+id = "robot"
+kind = "resource"
+tokens = 1
+
+[[place]]
+id = "sensing"
+kind = "primitive_task"
+task = "sense"
+
+[[place]]
+id = "computing"
+kind = "primitive_task"
+task = "compute"
+
+[[place]]
+id = "done"
+
+[[place]]
+id = "failed"
+
+[task.sense]
+actions = [{ name = "echo", params = { x = 1 } }]
+deadline_s = 5.0
+
+[task.compute]
+actions = [{ name = "SLOW_ACTION", params = { seconds = SECONDS } }]
+deadline_s = 30.0
+
+[[transition]]
+id = "start"
+inputs = { runs = 1, robot = 1 }
+outputs = { sensing = 1 }
+
+[[transition]]
+id = "sensed"
+events = ["int:sense.ok"]
+inputs = { sensing = 1 }
+outputs = { computing = 1 }
+
+[[transition]]
+id = "sense_error"
+events = ["int:sense.error"]
+hidden = true
+inputs = { sensing = 1 }
+outputs = { robot = 1, failed = 1 }
+
+[[transition]]
+id = "computed"
+events = ["int:compute.ok"]
+inputs = { computing = 1 }
+outputs = { robot = 1, done = 1 }
+
+[[transition]]
+id = "compute_error"
+events = ["int:compute.error"]
+hidden = true
+inputs = { computing = 1 }
+outputs = { robot = 1, failed = 1 }
+"""
+
+
+def two_node_net(action: str = "wait", seconds: float = 0.05):
+    return loads_net(TWO_NODE_NET.replace("SLOW_ACTION", action).replace("SECONDS", str(seconds)))
+
+
+async def run_net(cluster: Cluster, net, journal_path: Path, *, key: bytes | None = None,
+                  commands=(), max_seconds: float = 30.0):
+    events: list[tuple[str, dict]] = []
+    with Journal(journal_path) as journal:
+        async with ServiceClient(cluster.location, key or cluster.key) as client:
+            runtime = Runtime(net, client, journal, seed=3, observer=lambda k, i: events.append((k, i)))
+            for cmd in commands:
+                runtime.command(cmd)
+            summary = await runtime.run(max_seconds=max_seconds)
+    return summary, events
+
+
+def nodes_of(journal_path: Path) -> dict[str, set[str]]:
+    with sqlite3.connect(journal_path) as db:
+        rows = db.execute("SELECT action, node FROM action_result").fetchall()
+    out: dict[str, set[str]] = {}
+    for action, node in rows:
+        out.setdefault(action, set()).add(node)
+    return out
+
+
+async def test_a_net_runs_with_its_actions_on_two_nodes(cluster: Cluster, tmp_path: Path):
+    cluster.write_services()
+    cluster.start("alpha", "beta")
+    summary, events = await run_net(cluster, two_node_net("slow"), tmp_path / "j.sqlite")
+    assert summary.end_state == "dead"
+    assert summary.final_marking == {"robot": 1, "done": 2}
+    assert nodes_of(tmp_path / "j.sqlite") == {"echo": {"alpha"}, "slow": {"beta"}}
+    fired = [i["transition"] for k, i in events if k == "fire"]
+    assert fired == ["start", "sensed", "computed", "start", "sensed", "computed"]
+
+
+async def test_moving_an_action_to_another_node_is_an_edit_of_services_toml_only(cluster: Cluster, tmp_path: Path):
+    cluster.write_services()
+    cluster.start("alpha", "beta")
+    net = two_node_net("slow")
+    await run_net(cluster, net, tmp_path / "before.sqlite")
+    assert nodes_of(tmp_path / "before.sqlite")["slow"] == {"beta"}
+    text = cluster.services_path.read_text()
+    moved = text.replace('[actions.slow]\nnode = "beta"', '[actions.slow]\nnode = "alpha"')
+    assert moved != text
+    cluster.services_path.write_text(moved)
+    cluster._location = None
+    cluster.restart("alpha")
+    summary, _ = await run_net(cluster, net, tmp_path / "after.sqlite")
+    assert summary.final_marking == {"robot": 1, "done": 2}
+    assert nodes_of(tmp_path / "after.sqlite")["slow"] == {"alpha"}
+
+
+async def test_a_node_killed_mid_action_takes_the_error_branch_and_loses_no_token(cluster: Cluster, tmp_path: Path):
+    cluster.write_services()
+    cluster.start("alpha", "beta")
+    net = two_node_net("slow", seconds=20.0).with_initial_marking({"runs": 1, "robot": 1})
+    killed_at: list[float] = []
+
+    async def killer():
+        while not any(k == "start" and i["action"] == "slow" for k, i in seen):
+            await asyncio.sleep(0.02)
+        await asyncio.sleep(0.2)
+        cluster.kill("beta")
+        killed_at.append(time.monotonic())
+
+    seen: list[tuple[str, dict]] = []
+    with Journal(tmp_path / "j.sqlite") as journal:
+        async with ServiceClient(cluster.location, cluster.key) as client:
+            runtime = Runtime(net, client, journal, observer=lambda k, i: seen.append((k, i)))
+            kill_task = asyncio.create_task(killer())
+            summary = await runtime.run(max_seconds=30)
+            await kill_task
+    results = [i for k, i in seen if k == "result" and i["action"] == "slow"]
+    assert results and results[0]["status"] == "error"
+    ended_at = time.monotonic()
+    assert ended_at - killed_at[0] < 5.0
+    assert summary.final_marking == {"robot": 1, "failed": 1}
+    fired = [i["transition"] for k, i in seen if k == "fire"]
+    assert fired[-1] == "compute_error"
+
+
+async def test_an_error_result_arrives_within_1_5_s_of_a_node_dying(cluster: Cluster, tmp_path: Path):
+    cluster.write_services()
+    cluster.start("alpha", "beta")
+    async with ServiceClient(cluster.location, cluster.key) as client:
+        call = asyncio.create_task(client.call("slow", {"seconds": 20.0}))
+        await asyncio.sleep(0.5)
+        cluster.kill("beta", signal.SIGSTOP)  # a hung host: no FIN, no RST, only silence
+        t0 = time.monotonic()
+        result = await asyncio.wait_for(call, 10)
+        elapsed = time.monotonic() - t0
+        cluster.kill("beta", signal.SIGCONT)
+    assert result.status == "error"
+    assert elapsed < 1.5 + 0.3
+
+
+async def test_a_coordinator_with_a_wrong_key_is_refused_and_takes_the_error_branch(cluster: Cluster, tmp_path: Path):
+    cluster.write_services()
+    cluster.start("alpha", "beta")
+    net = two_node_net("slow").with_initial_marking({"runs": 1, "robot": 1})
+    summary, events = await run_net(cluster, net, tmp_path / "j.sqlite", key=b"not the key" * 3)
+    results = [i for k, i in events if k == "result"]
+    assert results[0]["status"] == "error"
+    assert "auth" in (results[0]["reason"] or "").lower() or "key" in (results[0]["reason"] or "").lower()
+    assert summary.final_marking == {"robot": 1, "failed": 1}
+    assert "auth" in cluster.log("alpha").lower() or "refus" in cluster.log("alpha").lower()
+
+
+async def test_operator_removing_runs_stops_the_experiment_early(cluster: Cluster, tmp_path: Path):
+    cluster.write_services()
+    cluster.start("alpha", "beta")
+    net = two_node_net("slow", seconds=0.3).with_initial_marking({"runs": 4, "robot": 1})
+    summary, _ = await run_net(cluster, net, tmp_path / "j.sqlite",
+                               commands=[OperatorCommand("remove", "runs", 3)])
+    assert summary.final_marking == {"robot": 1, "done": 1}
+    with sqlite3.connect(tmp_path / "j.sqlite") as db:
+        assert db.execute("SELECT command, place, count FROM operator").fetchall() == [("remove", "runs", 3)]
+
+
+TICK_NET = """
+[net]
+name = "ticks"
+
+[[place]]
+id = "runs"
+kind = "control"
+tokens = 3
+
+[[place]]
+id = "armed"
+
+[[place]]
+id = "shots"
+
+[[transition]]
+id = "arm"
+inputs = { runs = 1 }
+outputs = { armed = 1 }
+
+[[transition]]
+id = "shoot"
+events = ["ext:tick"]
+inputs = { armed = 1 }
+outputs = { shots = 1 }
+"""
+
+
+async def test_external_events_from_a_node_driver_fire_transitions_as_pulses(cluster: Cluster, tmp_path: Path):
+    cluster.write_services()
+    cluster.start("alpha", "beta")
+    summary, events = await run_net(cluster, loads_net(TICK_NET), tmp_path / "j.sqlite", max_seconds=20)
+    assert summary.final_marking == {"shots": 3}
+    pulses = [i["pulse"] for k, i in events if k == "fire" and i["transition"] == "shoot"]
+    assert pulses == ["ext:tick"] * 3
+
+
+@pytest.mark.slow
+def test_a_killed_coordinator_resumes_from_the_journal_without_running_an_action_twice(cluster: Cluster,
+                                                                                        tmp_path: Path):
+    cluster.write_services()
+    cluster.start("alpha", "beta")
+    net_path = tmp_path / "net.toml"
+    net_path.write_text(TWO_NODE_NET.replace("SLOW_ACTION", "tally").replace("params = { seconds = SECONDS }",
+                                                                             "params = { key = \"k\" }")
+                        .replace('{ name = "echo", params = { x = 1 } }', '{ name = "slow", params = { seconds = 1.5 } }'))
+    journal = tmp_path / "j.sqlite"
+    cmd = [sys.executable, "-m", "coordinator.cli", "run", str(net_path), "--services", str(cluster.services_path),
+           "--journal", str(journal), "--key-file", str(cluster.key_file), "--lines", "--no-input"]
+    env = cluster.env()
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline:  # wait until the first 'slow' call has been journaled
+        time.sleep(0.1)
+        if journal.exists():
+            try:
+                with sqlite3.connect(journal) as db:
+                    if db.execute("SELECT count(*) FROM action_start WHERE action='slow'").fetchone()[0]:
+                        break
+            except sqlite3.OperationalError:  # the coordinator has not created its tables yet
+                continue
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=10)
+    done = subprocess.run(cmd + ["--resume"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stdout + done.stderr
+    with sqlite3.connect(journal) as db:
+        runs = db.execute("SELECT id, end_state FROM run").fetchall()
+        assert len(runs) == 1 and runs[0][1] == "dead"
+        starts = db.execute("SELECT instance FROM action_start WHERE action='slow'").fetchall()
+        assert len(starts) == 2  # two runs; the interrupted call was re-issued, not started anew
+    assert "{'robot': 1, 'done': 2}" in done.stdout or "'done': 2" in done.stdout
+    # tally counts in global memory how often the compute action really ran: once per run
+    with Journal(journal) as j:
+        values = [r for r in j.results() if r.action == "tally"]
+    assert len(values) == 2
