@@ -1,0 +1,137 @@
+"""The SQLite journal: write-ahead records and recovery of an interrupted run (no sockets)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from coordinator.engine import Engine, Firing, StartAction
+from coordinator.errors import JournalError
+from coordinator.journal import Journal
+from coordinator.netfile import loads_net
+
+NET = """
+[net]
+name = "j"
+
+[[place]]
+id = "runs"
+kind = "control"
+tokens = 2
+
+[[place]]
+id = "work"
+kind = "primitive_task"
+task = "w"
+
+[[place]]
+id = "done"
+
+[task.w]
+actions = ["a", "b"]
+
+[[transition]]
+id = "go"
+inputs = { runs = 1 }
+outputs = { work = 1 }
+
+[[transition]]
+id = "ok"
+events = ["int:w.ok"]
+inputs = { work = 1 }
+outputs = { done = 1 }
+
+[[transition]]
+id = "err"
+events = ["int:w.error"]
+inputs = { work = 1 }
+outputs = { runs = 1 }
+"""
+
+
+def journaled_engine(journal: Journal, net, run: str) -> tuple[Engine, list[StartAction]]:
+    engine = Engine(net, instance_prefix=f"{run}-")
+    starts: list[StartAction] = []
+
+    def act(effects) -> None:
+        for e in effects:
+            if isinstance(e, StartAction):
+                journal.action_start(run, e.instance, e.task, e.place, e.action, "alpha", e.params)
+                starts.append(e)
+
+    act(engine.start())
+    engine.advance(lambda f: journal.firing(run, f), after_fire=act)
+    return engine, starts
+
+
+def test_recovery_rebuilds_marking_and_running_instances(tmp_path: Path):
+    net = loads_net(NET)
+    with Journal(tmp_path / "j.sqlite") as journal:
+        run = journal.begin_run(net, seed=4)
+        engine, starts = journaled_engine(journal, net, run)
+        assert len(starts) == 2
+        first, second = starts
+        journal.action_result(run, first.instance, "w", first.action, "alpha", "success", wall_s=0.1)
+        engine.complete(first.instance, "success")
+        journal.operator(run, "insert", "runs", 1)
+        engine.insert_tokens("runs", 1)
+        # crash here: 'second' is still running; the operator's token is not yet used
+    with Journal(tmp_path / "j.sqlite") as journal:
+        assert journal.last_unfinished_run("j") == run
+        rec = journal.recover(net, run)
+    assert rec.seed == 4
+    assert rec.marking == engine.marking == {"work": 2, "runs": 1}
+    assert [(i.id, i.running) for i in rec.instances] == [(first.instance, False), (second.instance, True)]
+    assert rec.nodes[second.instance] == "alpha"
+    assert rec.next_instance == 3
+    again = Engine(net, instance_prefix=f"{run}-")
+    again.restore(rec.marking, rec.instances, fired=rec.fired, next_instance=rec.next_instance)
+    assert again.start() == []  # every token in a task place already has its instance
+    effects = again.advance()
+    assert sorted(e.transition for e in effects if isinstance(e, Firing)) == ["go", "ok"]
+    assert [e.instance for e in effects if isinstance(e, StartAction)] == [f"{run}-3"]
+
+
+def test_firings_are_journaled_before_they_are_applied(tmp_path: Path):
+    net = loads_net(NET)
+    with Journal(tmp_path / "j.sqlite") as journal:
+        run = journal.begin_run(net)
+        engine = Engine(net)
+        seen = []
+
+        def before(firing: Firing) -> None:
+            seen.append((journal.firings(run)[-1][0] if journal.firings(run) else 0, dict(engine.marking)))
+            journal.firing(run, firing)
+
+        engine.advance(before)
+        assert [m for _, m in seen] == [{"runs": 2}, {"runs": 1, "work": 1}]
+        rows = journal.firings(run)
+        assert [r[1] for r in rows] == ["go", "go"]
+
+
+def test_learner_state_is_replaced_not_appended(tmp_path: Path):
+    with Journal(tmp_path / "j.sqlite") as journal:
+        journal.save_learner("w", "pursuit", {"p": [0.5, 0.5]})
+        journal.save_learner("w", "pursuit", {"p": [0.9, 0.1]})
+        assert journal.load_learner() == {"w": ("pursuit", {"p": [0.9, 0.1]})}
+
+
+def test_values_that_json_cannot_hold_are_not_a_crash(tmp_path: Path):
+    with Journal(tmp_path / "j.sqlite") as journal:
+        journal.action_result("r", "i", "w", "a", None, "success", value=object())
+        journal.action_result("r", "i2", "w", "a", None, "success", value={"img": b"\x00" * 10})
+        rows = list(journal.results("r"))
+    assert [r.instance for r in rows] == ["i", "i2"]
+
+
+def test_a_file_that_is_not_a_journal_is_refused(tmp_path: Path):
+    bad = tmp_path / "bad.sqlite"
+    bad.write_bytes(b"this is not sqlite" * 100)
+    with pytest.raises(JournalError, match="bad.sqlite"):
+        Journal(bad)
+
+
+def test_recovering_an_unknown_run_is_an_error(tmp_path: Path):
+    with Journal(tmp_path / "j.sqlite") as journal, pytest.raises(JournalError, match="no run"):
+        journal.recover(loads_net(NET), "nope")
