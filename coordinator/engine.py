@@ -262,6 +262,10 @@ class Engine:
             topic = self._ext[t.id]
             if topic is not None:
                 self._by_topic[topic] = self._by_topic.get(topic, ()) + (t.id,)
+        self._touch = {t.id: frozenset(j for pid, _ in self._inputs[t.id] + self._outputs[t.id]
+                                       for j in self._dependents[pid]) for t in net.transitions}
+        self._task_outputs = {t.id: tuple((pid, w) for pid, w in self._outputs[t.id] if pid in self._task_of)
+                              for t in net.transitions}
         self._consumed_map = {t.id: MappingProxyType(dict(self._inputs[t.id])) for t in net.transitions}
         self._produced_map = {t.id: MappingProxyType(dict(self._outputs[t.id])) for t in net.transitions}
         self._task_inputs = {t.id: any(pid in self._task_of for pid, _ in self._inputs[t.id])
@@ -479,16 +483,15 @@ class Engine:
         for iid in firing.instances:
             inst = self._instances.pop(iid)
             self._ended[inst.place].remove(inst)
-        counts, dirty, deps = self._counts, self._dirty, self._dependents
+        counts = self._counts
         for pid, w in firing.consumed.items():
             counts[pid] -= w
-            dirty.update(deps[pid])
-        effects: list[Effect] = [firing]
         for pid, w in firing.produced.items():
             counts[pid] += w
-            dirty.update(deps[pid])
-            if pid in self._task_of:
-                effects.extend(self._start(pid) for _ in range(w))
+        self._dirty |= self._touch[tid]
+        effects: list[Effect] = [firing]
+        for pid, w in self._task_outputs[tid]:
+            effects.extend(self._start(pid) for _ in range(w))
         self._fired = max(self._fired, firing.seq)
         if firing.pulse is not None:
             self._pulse_fired.add(tid)
