@@ -1,0 +1,160 @@
+"""Small real primitive actions for the foundation demo, the tests and the RPC benchmark.
+
+* ``echo``: returns its params (the benchmark's action: the protocol's own cost);
+* ``wait``: waits ``seconds`` on the event loop, sending progress feedback, honouring cancel;
+* ``compute_primes``: counts primes below ``n`` with a sieve in a worker thread (real CPU work;
+  cost = CPU seconds of that work);
+* ``coin``: a seeded Bernoulli draw returning success / failure / error, to exercise net branches;
+* ``fail``: raises, to exercise the node's exception path;
+* ``remember``: writes a value to the global memory and reads it back (memory service demo);
+* ``tally``: increments a counter in the global memory and returns it (shows a call ran once);
+* ``announce``: publishes an external event from the node;
+* :class:`Ticker`: a driver publishing a ``tick`` event every ``period_s`` seconds.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import random
+import time
+from typing import Any
+
+from services.action import (
+    ActionOutcome,
+    CallContext,
+    Driver,
+    NodeContext,
+    PrimitiveAction,
+)
+
+__all__ = [
+    "ComputePrimes", "Ticker", "announce", "coin", "count_primes_below", "echo", "fail", "remember", "tally", "wait",
+]
+
+
+async def echo(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    """Return ``params`` unchanged as the value; status success."""
+    return ActionOutcome("success", value=params)
+
+
+async def wait(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    """Wait ``params["seconds"]`` (default 1.0 s), reporting progress ``{"fraction": f}`` every ``step`` s.
+
+    Cancellation and the deadline cut the wait short (the CancelledError propagates).
+    """
+    seconds = float(params.get("seconds", 1.0))
+    step = max(0.001, float(params.get("step", 0.1)))
+    loop = asyncio.get_running_loop()
+    start = loop.time()
+    end = start + seconds
+    while (now := loop.time()) < end:
+        await asyncio.sleep(min(step, end - now))
+        ctx.feedback({"fraction": min(1.0, (loop.time() - start) / seconds) if seconds > 0 else 1.0})
+    return ActionOutcome("success", value={"waited_s": loop.time() - start}, cost=seconds)
+
+
+def count_primes_below(n: int) -> int:
+    """Number of primes p < n (sieve of Eratosthenes; O(n log log n) time, n bytes of memory)."""
+    import numpy as np  # here, so that nodes not hosting this action start faster
+
+    if n < 3:
+        return 0
+    sieve = np.ones(n, dtype=bool)
+    sieve[:2] = False
+    for p in range(2, math.isqrt(n - 1) + 1):
+        if sieve[p]:
+            sieve[p * p::p] = False
+    return int(sieve.sum())
+
+
+class ComputePrimes(PrimitiveAction):
+    """Count primes below ``params["n"]`` (default 1,000,000) in a worker thread.
+
+    The event loop stays free for heartbeats. Value ``{"n": n, "count": k}``; cost = CPU seconds of
+    the sieve (thread CPU time).
+    """
+
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+        n = int(params.get("n", 1_000_000))
+        if n < 0 or n > 200_000_000:
+            return ActionOutcome("failure", outcome="bad_n", value={"n": n})
+
+        def work() -> tuple[int, float]:
+            c0 = time.thread_time()
+            k = count_primes_below(n)
+            return k, time.thread_time() - c0
+
+        count, cpu = await asyncio.to_thread(work)
+        return ActionOutcome("success", value={"n": n, "count": count}, cost=cpu)
+
+
+async def coin(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    """A seeded draw: success with ``p_success``, error with ``p_error``, else failure.
+
+    Params: ``seed`` (int, default: the call id's hash), ``p_success`` (default 0.5), ``p_error``
+    (default 0.0). Outcome ``"heads"`` on success and ``"tails"`` otherwise.
+    """
+    seed = params.get("seed")
+    rng = random.Random(seed if seed is not None else ctx.call_id)
+    u = rng.random()
+    p_s = float(params.get("p_success", 0.5))
+    p_e = float(params.get("p_error", 0.0))
+    if u < p_s:
+        return ActionOutcome("success", outcome="heads", value=u)
+    if u < p_s + p_e:
+        return ActionOutcome("error", outcome="tails", value=u)
+    return ActionOutcome("failure", outcome="tails", value=u)
+
+
+async def fail(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    """Raise RuntimeError(params["message"]) (the node turns it into status error)."""
+    raise RuntimeError(str(params.get("message", "deliberate failure")))
+
+
+async def remember(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    """Store ``params["value"]`` under ``params["key"]`` in the global memory and read it back."""
+    key = str(params.get("key", "demo"))
+    await ctx.memory.set(key, params.get("value"))
+    return ActionOutcome("success", value=await ctx.memory.get(key))
+
+
+async def tally(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    """Add 1 to the global-memory counter ``params["key"]`` (default ``"tally"``); value = new count."""
+    key = str(params.get("key", "tally"))
+    count = int(await ctx.memory.get(key, 0)) + 1
+    await ctx.memory.set(key, count)
+    return ActionOutcome("success", value=count)
+
+
+async def announce(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    """Publish external event ``params["topic"]`` with ``params.get("data")`` from this node."""
+    ctx.publish(str(params["topic"]), params.get("data"))
+    return ActionOutcome("success")
+
+
+class Ticker(Driver):
+    """Publishes ``params["topic"]`` (default ``"tick"``) every ``params["period_s"]`` (default 0.1 s).
+
+    Event data: ``{"n": k}`` with k counting from 1.
+    """
+
+    def __init__(self, name: str, params: Any) -> None:
+        super().__init__(name, params)
+        self._task: asyncio.Task[None] | None = None
+
+    async def setup(self, node: NodeContext) -> None:
+        self._task = asyncio.get_running_loop().create_task(self._tick())
+
+    async def _tick(self) -> None:
+        topic = str(self.params.get("topic", "tick"))
+        period = float(self.params.get("period_s", 0.1))
+        n = 0
+        while True:
+            await asyncio.sleep(period)
+            n += 1
+            self.publish(topic, {"n": n})
+
+    async def teardown(self) -> None:
+        if self._task is not None:
+            self._task.cancel()

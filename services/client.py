@@ -1,0 +1,651 @@
+"""The calling side of the protocol: :class:`ServiceClient` (the coordinator) and :class:`NodeLink`.
+
+A thin asyncio shell around :class:`services.protocol.Connection` (docs/protocol.md). Where an
+action runs comes only from services.toml (:class:`services.location.Location`).
+
+Failure model: :meth:`NodeLink.call` never raises for node trouble. A node that cannot be reached,
+dies during a call, rejects the call or stops answering heartbeats turns the call into a
+:class:`CallResult` with ``status="error"`` and a ``reason``. A silent node is declared dead after
+three heartbeat periods without any frame (0.75 s with the default 0.25 s), so every running call on
+it ends within about 1 s. The next call reconnects, retrying with exponential backoff
+(50 ms doubling to 0.5 s) for at most ``connect_timeout_s``.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import itertools
+import logging
+import socket
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Self
+
+from coordinator.errors import AuthenticationError, ProtocolError, RemoteProtocolError
+from services.location import Location
+from services.protocol import (
+    DEFAULT_MAX_FRAME,
+    Accepted,
+    Bye,
+    Call,
+    Cancel,
+    Connection,
+    Event,
+    Feedback,
+    Hello,
+    Message,
+    Ping,
+    Pong,
+    Rejected,
+    Result,
+    Role,
+    State,
+    Subscribe,
+    Unsubscribe,
+    Welcome,
+)
+
+__all__ = ["CallResult", "EventCallback", "FeedbackCallback", "NodeLink", "ServiceClient"]
+
+log = logging.getLogger("petrobot.client")
+
+EventCallback = Callable[[Event], None]
+"""Called with each :class:`Event` of a subscribed topic; must not block."""
+FeedbackCallback = Callable[[Any], None]
+"""Called with the ``data`` of each feedback message of a call; must not block."""
+
+_DEADLINE_GRACE_S = 1.0
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class CallResult:
+    """The end of one call, as seen by the caller.
+
+    Attributes:
+        call_id: the call id (client-made).
+        action: action name.
+        node: node the call went to.
+        status: ``"success"``, ``"failure"`` or ``"error"``.
+        outcome: named outcome or ``None``.
+        value: the action's value (any msgpack value).
+        cost: the action's cost figure or ``None``.
+        wall_s: wall-clock duration on the node, seconds (0 if it never ran).
+        cpu_s: node CPU time during the call, seconds.
+        reason: why an error happened (node text, ``"busy"``, ``"connection lost"``...), else ``None``.
+    """
+
+    call_id: str
+    action: str
+    node: str
+    status: str
+    outcome: str | None = None
+    value: Any = None
+    cost: float | None = None
+    wall_s: float = 0.0
+    cpu_s: float = 0.0
+    reason: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        """True unless the status is ``"error"`` (success and failure both take the normal branch)."""
+        return self.status != "error"
+
+
+class _Pending:
+    __slots__ = ("accepted", "action", "future", "on_feedback")
+
+    def __init__(self, future: asyncio.Future[CallResult], action: str, on_feedback: FeedbackCallback | None) -> None:
+        self.future = future
+        self.action = action
+        self.on_feedback = on_feedback
+        self.accepted = False
+
+
+class _Wire(asyncio.Protocol):
+    """One TCP connection of a NodeLink."""
+
+    def __init__(self, link: NodeLink) -> None:
+        self.link = link
+        self.conn = Connection(Role.CLIENT, link._key, name=link.name, max_frame=link.max_frame)
+        self.loop = asyncio.get_running_loop()
+        self.transport: asyncio.Transport | None = None
+        self.opened: asyncio.Future[None] = self.loop.create_future()
+        self.closed = False
+        self.last_rx = self.loop.time()
+        self._flush_scheduled = False
+
+    # ---- asyncio callbacks
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        sock = transport.get_extra_info("socket")
+        if sock is not None:
+            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+
+    def data_received(self, data: bytes) -> None:
+        self.last_rx = self.loop.time()
+        conn = self.conn
+        conn.receive_data(data)
+        try:
+            while (msg := conn.next_event()) is not None:
+                self._handle(msg)
+        except ProtocolError as exc:
+            reason = "auth_failed" if isinstance(exc, AuthenticationError) else f"protocol_error: {exc}"
+            log.warning("node %s: %s", self.link.node, exc)
+            self.abort(exc, reason)
+            return
+        self._flush()
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._dead(ConnectionError(f"connection lost{': ' + str(exc) if exc else ''}"))
+
+    # ---- output
+
+    def send(self, msg: Message) -> None:
+        self.conn.send(msg)
+        if not self._flush_scheduled:
+            self._flush_scheduled = True
+            self.loop.call_soon(self._flush)
+
+    def _flush(self) -> None:
+        self._flush_scheduled = False
+        data = self.conn.data_to_send()
+        if data and self.transport is not None and not self.transport.is_closing():
+            self.transport.write(data)
+
+    # ---- input
+
+    def _handle(self, msg: Message) -> None:
+        kind = type(msg)
+        link = self.link
+        if kind is Result:
+            assert isinstance(msg, Result)
+            p = link._pending.pop(msg.id, None)
+            if p is not None and not p.future.done():
+                p.future.set_result(CallResult(
+                    call_id=msg.id, action=p.action, node=link.node, status=msg.status,
+                    outcome=msg.outcome, value=msg.value, cost=msg.cost, wall_s=msg.wall_s,
+                    cpu_s=msg.cpu_s, reason=msg.reason,
+                ))
+        elif kind is Accepted:
+            p = link._pending.get(msg.id)  # type: ignore[attr-defined]
+            if p is not None:
+                p.accepted = True
+        elif kind is Feedback:
+            assert isinstance(msg, Feedback)
+            p = link._pending.get(msg.id)
+            if p is not None and p.on_feedback is not None:
+                try:
+                    p.on_feedback(msg.data)
+                except Exception:
+                    log.exception("feedback callback of call %s failed", msg.id)
+        elif kind is Rejected:
+            assert isinstance(msg, Rejected)
+            p = link._pending.pop(msg.id, None)
+            if p is not None and not p.future.done():
+                p.future.set_result(link._error(msg.id, p.action, msg.reason))
+        elif kind is Event:
+            assert isinstance(msg, Event)
+            for cb in list(link._topics.get(msg.topic, ())):
+                try:
+                    cb(msg)
+                except Exception:
+                    log.exception("event callback for %s failed", msg.topic)
+        elif kind is Ping:
+            self.send(Pong(seq=msg.seq))  # type: ignore[attr-defined]
+        elif kind is Pong:
+            pass
+        elif kind is Hello:
+            pass  # the connection answered with auth by itself
+        elif kind is Welcome:
+            if not self.opened.done():
+                self.opened.set_result(None)
+        elif kind is Bye:
+            assert isinstance(msg, Bye)
+            if msg.reason.startswith("auth_failed") and not self.opened.done():
+                exc: Exception = AuthenticationError(f"node {link.node} refused our key (auth_failed)")
+            else:
+                exc = ConnectionError(f"node said bye: {msg.reason}")
+            self.abort(exc, None)
+
+    # ---- teardown
+
+    def abort(self, exc: Exception, reason: str | None) -> None:
+        """Close this connection (sending ``bye`` with ``reason`` if given) and fail its calls."""
+        if reason is not None and self.transport is not None and not self.transport.is_closing():
+            try:
+                self.conn.send(Bye(reason=reason))
+                self._flush()
+            except ProtocolError:
+                pass
+        if self.transport is not None:
+            self.transport.close()
+        self._dead(exc)
+
+    def _dead(self, exc: Exception) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        if not self.opened.done():
+            self.opened.set_exception(exc)
+            self.opened.exception()  # mark retrieved
+        self.link._lost(self, exc)
+
+
+class NodeLink:
+    """An authenticated, self-healing connection to one node.
+
+    Used by :class:`ServiceClient` (one per node) and by nodes that reach other nodes (global
+    memory, set-point streaming).
+
+    Args:
+        node: the node's name (for results and logs).
+        address: ``(host, port)``.
+        key: the shared key.
+        name: this client's name, sent in ``auth``.
+        heartbeat_s: ping period; the node is dead after 3 periods of silence.
+        connect_timeout_s: budget for (re)connecting at the start of a call.
+        local_addr: optional ``(host, port)`` to bind the client socket to (tests of local-only).
+        max_frame: frame size cap, bytes.
+    """
+
+    def __init__(
+        self,
+        node: str,
+        address: tuple[str, int],
+        key: bytes,
+        *,
+        name: str = "coordinator",
+        heartbeat_s: float = 0.25,
+        connect_timeout_s: float = 1.0,
+        local_addr: tuple[str, int] | None = None,
+        max_frame: int = DEFAULT_MAX_FRAME,
+    ) -> None:
+        self.node = node
+        self.address = address
+        self.name = name
+        self.heartbeat_s = heartbeat_s
+        self.connect_timeout_s = connect_timeout_s
+        self.local_addr = local_addr
+        self.max_frame = max_frame
+        self._key = key
+        self._wire: _Wire | None = None
+        self._connecting: asyncio.Task[_Wire] | None = None
+        self._pending: dict[str, _Pending] = {}
+        self._topics: dict[str, list[EventCallback]] = {}
+        self._heartbeat: asyncio.Task[None] | None = None
+        self._keeper: asyncio.Task[None] | None = None
+        self._closed = False
+        self._ids = itertools.count(1)
+        self._id_prefix = uuid.uuid4().hex[:16]
+        self._ping_seq = itertools.count(1)
+
+    # ---- public API
+
+    @property
+    def connected(self) -> bool:
+        """True while an authenticated connection is open."""
+        w = self._wire
+        return w is not None and not w.closed and w.conn.state is State.OPEN
+
+    def new_call_id(self) -> str:
+        """A fresh call id, unique across clients (random prefix + counter)."""
+        return f"{self._id_prefix}-{next(self._ids)}"
+
+    async def call(
+        self,
+        action: str,
+        params: dict[str, Any] | None = None,
+        *,
+        call_id: str | None = None,
+        deadline_s: float | None = None,
+        on_feedback: FeedbackCallback | None = None,
+    ) -> CallResult:
+        """Call ``action`` on this node and wait for its result.
+
+        Args:
+            action: action name.
+            params: parameters (msgpack map), merged over the action's defaults on the node.
+            call_id: client-made id; reuse an id to get the first result again without re-running.
+            deadline_s: deadline in seconds from now, enforced by the node (``reason="deadline"``);
+                the client gives up 1 s after it if the node says nothing.
+            on_feedback: called with each feedback ``data``.
+
+        Returns:
+            The result; ``status="error"`` with a ``reason`` for every kind of node trouble.
+
+        Raises:
+            asyncio.CancelledError: the awaiting task was cancelled (a cancel is sent to the node).
+        """
+        cid = call_id if call_id is not None else self.new_call_id()
+        wire = self._wire
+        if wire is None or wire.closed or wire.conn.state is not State.OPEN:
+            try:
+                wire = await self._ensure_connected()
+            except AuthenticationError as exc:
+                return self._error(cid, action, f"authentication failed: {exc}")
+            except (TimeoutError, OSError, ProtocolError) as exc:
+                return self._error(cid, action, f"node {self.node} unreachable: {_describe(exc)}")
+        if cid in self._pending:
+            return self._error(cid, action, f"call id {cid} is already waiting on this link")
+        loop = asyncio.get_running_loop()
+        fut: asyncio.Future[CallResult] = loop.create_future()
+        self._pending[cid] = _Pending(fut, action, on_feedback)
+        deadline_ms = None if deadline_s is None else max(0, int(deadline_s * 1000))
+        try:
+            wire.send(Call(id=cid, action=action, params=params or {}, deadline_ms=deadline_ms))
+        except ProtocolError as exc:
+            self._pending.pop(cid, None)
+            return self._error(cid, action, f"cannot send call: {exc}")
+        try:
+            if deadline_s is None:
+                return await fut
+            try:
+                async with asyncio.timeout(deadline_s + _DEADLINE_GRACE_S):
+                    return await fut
+            except TimeoutError:
+                self._pending.pop(cid, None)
+                self._send_cancel(cid)
+                return self._error(cid, action, "deadline (no answer from node)")
+        except asyncio.CancelledError:
+            if self._pending.pop(cid, None) is not None:
+                self._send_cancel(cid)
+            raise
+
+    async def cancel(self, call_id: str) -> bool:
+        """Ask the node to cancel ``call_id``; its result then comes back with reason ``"cancelled"``.
+
+        Returns:
+            True if the call was waiting on this link and a cancel was sent.
+        """
+        if call_id not in self._pending:
+            return False
+        return self._send_cancel(call_id)
+
+    def subscribe(self, topic: str, callback: EventCallback) -> None:
+        """Receive every event of ``topic`` published by this node (resubscribes after reconnect)."""
+        topic = topic.removeprefix("ext:")
+        cbs = self._topics.setdefault(topic, [])
+        cbs.append(callback)
+        if len(cbs) == 1 and self.connected:
+            assert self._wire is not None
+            self._wire.send(Subscribe(topic=topic))
+        if self._keeper is None or self._keeper.done():
+            self._keeper = asyncio.get_running_loop().create_task(self._keep_connected())
+
+    def unsubscribe(self, topic: str, callback: EventCallback | None = None) -> None:
+        """Stop delivering ``topic`` to ``callback`` (or to every callback)."""
+        topic = topic.removeprefix("ext:")
+        cbs = self._topics.get(topic)
+        if not cbs:
+            return
+        if callback is None:
+            cbs.clear()
+        elif callback in cbs:
+            cbs.remove(callback)
+        if not cbs:
+            del self._topics[topic]
+            if self.connected:
+                assert self._wire is not None
+                self._wire.send(Unsubscribe(topic=topic))
+
+    async def connect(self) -> None:
+        """Connect now (normally done by the first call).
+
+        Raises:
+            OSError: the node cannot be reached within ``connect_timeout_s``.
+            AuthenticationError: the node does not hold our key.
+        """
+        await self._ensure_connected()
+
+    async def close(self) -> None:
+        """Say bye, close the connection and fail the calls still waiting (reason ``"client closed"``)."""
+        self._closed = True
+        for task in (self._keeper, self._heartbeat, self._connecting):
+            if task is not None and not task.done():
+                task.cancel()
+        for task in (self._keeper, self._heartbeat, self._connecting):
+            if task is not None:
+                # their outcome no longer matters: we are closing
+                with contextlib.suppress(asyncio.CancelledError, OSError, ProtocolError, TimeoutError):
+                    await task
+        if self._wire is not None:
+            self._wire.abort(ConnectionError("client closed"), "client closed")
+        self._fail_all("client closed")
+
+    # ---- internals
+
+    def _error(self, cid: str, action: str, reason: str) -> CallResult:
+        return CallResult(call_id=cid, action=action, node=self.node, status="error", reason=reason)
+
+    def _send_cancel(self, cid: str) -> bool:
+        w = self._wire
+        if w is None or w.closed or w.conn.state is not State.OPEN:
+            return False
+        try:
+            w.send(Cancel(id=cid))
+        except ProtocolError:
+            return False
+        return True
+
+    async def _ensure_connected(self) -> _Wire:
+        if self._closed:
+            raise ConnectionError("link closed")
+        w = self._wire
+        if w is not None and not w.closed and w.conn.state is State.OPEN:
+            return w
+        if self._connecting is None or self._connecting.done():
+            self._connecting = asyncio.get_running_loop().create_task(self._connect_with_backoff())
+        return await asyncio.shield(self._connecting)
+
+    async def _connect_with_backoff(self) -> _Wire:
+        loop = asyncio.get_running_loop()
+        give_up = loop.time() + self.connect_timeout_s
+        delay = 0.05
+        while True:
+            try:
+                return await self._connect_once(max(0.05, give_up - loop.time()))
+            except AuthenticationError:
+                raise
+            except (TimeoutError, OSError, RemoteProtocolError):
+                if loop.time() + delay >= give_up:
+                    raise
+            await asyncio.sleep(delay)
+            delay = min(delay * 2, 0.5)
+
+    async def _connect_once(self, timeout: float) -> _Wire:
+        loop = asyncio.get_running_loop()
+        host, port = self.address
+        async with asyncio.timeout(timeout):
+            _, wire = await loop.create_connection(lambda: _Wire(self), host, port, local_addr=self.local_addr)
+            try:
+                await wire.opened
+            except BaseException:
+                if wire.transport is not None:
+                    wire.transport.abort()
+                raise
+        self._wire = wire
+        log.info("connected to node %s at %s:%d", self.node, host, port)
+        for topic in self._topics:
+            wire.send(Subscribe(topic=topic))
+        if self._heartbeat is None or self._heartbeat.done():
+            self._heartbeat = loop.create_task(self._heartbeat_loop())
+        return wire
+
+    async def _heartbeat_loop(self) -> None:
+        loop = asyncio.get_running_loop()
+        period = self.heartbeat_s
+        while True:
+            before = loop.time()
+            await asyncio.sleep(period)
+            now = loop.time()
+            w = self._wire
+            if w is None or w.closed:
+                continue
+            if now - before > 2 * period:
+                # our own loop was blocked: frames may be waiting unread, so judge next time
+                continue
+            if now - w.last_rx > 3 * period:
+                log.warning("node %s missed 3 heartbeats: declaring it dead", self.node)
+                w.abort(ConnectionError("heartbeat timeout"), "heartbeat_timeout")
+                continue
+            if w.conn.state is State.OPEN:
+                try:
+                    w.send(Ping(seq=next(self._ping_seq)))
+                except ProtocolError:
+                    pass
+
+    async def _keep_connected(self) -> None:
+        """Keep a connection up while topics are subscribed (reconnect with backoff up to 2 s)."""
+        delay = 0.05
+        while self._topics and not self._closed:
+            if self.connected:
+                delay = 0.05
+                await asyncio.sleep(self.heartbeat_s)
+                continue
+            try:
+                await self._ensure_connected()
+            except AuthenticationError as exc:
+                log.error("cannot subscribe on node %s: %s", self.node, exc)
+                return
+            except (TimeoutError, OSError, ProtocolError):
+                await asyncio.sleep(delay)
+                delay = min(delay * 2, 2.0)
+
+    def _lost(self, wire: _Wire, exc: Exception) -> None:
+        if wire is not self._wire:
+            return
+        self._wire = None
+        if not self._closed:
+            log.warning("lost node %s: %s", self.node, exc)
+        self._fail_all(str(exc) or exc.__class__.__name__)
+
+    def _fail_all(self, reason: str) -> None:
+        pending, self._pending = self._pending, {}
+        for cid, p in pending.items():
+            if not p.future.done():
+                p.future.set_result(self._error(cid, p.action, reason))
+
+
+def _describe(exc: BaseException) -> str:
+    if isinstance(exc, asyncio.TimeoutError):
+        return "timed out"
+    return str(exc) or exc.__class__.__name__
+
+
+class ServiceClient:
+    """Call primitive actions by name; services.toml says where each runs.
+
+    Use as an async context manager::
+
+        async with ServiceClient(load_location("services.toml"), load_key()) as client:
+            res = await client.call("echo", {"x": 1})
+
+    Args:
+        location: the parsed services.toml.
+        key: the shared key.
+        name: client name sent to nodes.
+        heartbeat_s: ping period per node connection.
+        connect_timeout_s: reconnect budget at the start of a call.
+    """
+
+    def __init__(
+        self,
+        location: Location,
+        key: bytes,
+        *,
+        name: str = "coordinator",
+        heartbeat_s: float = 0.25,
+        connect_timeout_s: float = 1.0,
+        local_addr: tuple[str, int] | None = None,
+    ) -> None:
+        self.location = location
+        self.name = name
+        self.heartbeat_s = heartbeat_s
+        self.connect_timeout_s = connect_timeout_s
+        self.local_addr = local_addr
+        self._key = key
+        self._links: dict[str, NodeLink] = {}
+        self._call_node: dict[str, str] = {}
+
+    async def __aenter__(self) -> Self:
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    def link(self, node: str) -> NodeLink:
+        """The (lazily created) link to ``node``.
+
+        Raises:
+            LocationError: unknown node.
+        """
+        link = self._links.get(node)
+        if link is None:
+            link = NodeLink(
+                node, self.location.address(node), self._key, name=self.name,
+                heartbeat_s=self.heartbeat_s, connect_timeout_s=self.connect_timeout_s,
+                local_addr=self.local_addr,
+            )
+            self._links[node] = link
+        return link
+
+    async def call(
+        self,
+        action: str,
+        params: dict[str, Any] | None = None,
+        *,
+        call_id: str | None = None,
+        deadline_s: float | None = None,
+        on_feedback: FeedbackCallback | None = None,
+    ) -> CallResult:
+        """Call ``action`` on the node services.toml places it on (see :meth:`NodeLink.call`).
+
+        ``deadline_s`` defaults to the action's ``deadline_s`` in services.toml.
+
+        Raises:
+            LocationError: ``action`` is not in services.toml (a configuration error, not node trouble).
+        """
+        spec = self.location.action(action)
+        if deadline_s is None:
+            deadline_s = spec.deadline_s
+        link = self.link(spec.node)
+        cid = call_id if call_id is not None else link.new_call_id()
+        self._call_node[cid] = spec.node
+        try:
+            return await link.call(action, params, call_id=cid, deadline_s=deadline_s, on_feedback=on_feedback)
+        finally:
+            self._call_node.pop(cid, None)
+
+    async def cancel(self, call_id: str) -> bool:
+        """Cancel a running call by id (the call then returns ``error`` with reason ``"cancelled"``).
+
+        Returns:
+            True if the call was running and a cancel was sent.
+        """
+        node = self._call_node.get(call_id)
+        if node is None:
+            return False
+        return await self._links[node].cancel(call_id)
+
+    def subscribe(self, topic: str, callback: EventCallback) -> None:
+        """Deliver external event ``topic`` to ``callback``, from the node services.toml names.
+
+        Raises:
+            LocationError: no node publishes ``topic``.
+        """
+        self.link(self.location.publisher_of(topic)).subscribe(topic, callback)
+
+    def unsubscribe(self, topic: str, callback: EventCallback | None = None) -> None:
+        """Stop delivering ``topic`` to ``callback`` (or to all callbacks)."""
+        self.link(self.location.publisher_of(topic)).unsubscribe(topic, callback)
+
+    async def close(self) -> None:
+        """Close every node link."""
+        links = list(self._links.values())
+        self._links.clear()
+        for link in links:
+            await link.close()

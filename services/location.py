@@ -1,0 +1,342 @@
+"""The location file ``services.toml``: which node hosts which primitive action (paper §5).
+
+"The designer must initially define in a file the location of the different primitive actions and
+then the software will know where to direct a request for such a service" (Lima et al., §5). This
+module parses that file with :mod:`tomllib` into a frozen :class:`Location`; it does no other I/O.
+
+Format (every section optional except ``[nodes.*]``)::
+
+    [nodes.alpha]                 # one node per host
+    host = "127.0.0.1"
+    port = 7101
+    max_in_flight = 16            # optional cap on concurrently running calls
+
+    [actions.echo]
+    node = "alpha"
+    impl = "services.actions.demo:echo"   # importable "module:attr"
+    local_only = false            # optional: refuse callers not on the node's own host
+    deadline_s = 5.0              # optional default deadline, seconds
+    params = { k = 1 }            # optional default params, merged under the call's params
+
+    [drivers.camera]              # optional background components started with the node
+    node = "alpha"
+    impl = "services.actions.vision:CameraDriver"
+    params = {}
+
+    [events.image_sampling_tick]  # which node publishes each external event topic
+    node = "alpha"
+
+    [memory]                      # which node hosts the global memory service
+    node = "alpha"
+
+The global memory actions ``memory.get``, ``memory.set`` and ``memory.keys`` are placed on the
+``[memory]`` node implicitly.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+from coordinator.errors import LocationError
+
+__all__ = [
+    "MEMORY_ACTIONS",
+    "ActionSpec",
+    "DriverSpec",
+    "Location",
+    "NodeSpec",
+    "load_location",
+    "parse_location",
+]
+
+MEMORY_ACTIONS = ("memory.get", "memory.set", "memory.keys")
+"""Actions of the global memory service, hosted by the ``[memory]`` node."""
+
+MEMORY_IMPL = "services.actions.memory:memory_actions"
+_IMPL_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_][\w.]*$")
+_NAME_RE = re.compile(r"^[A-Za-z_][\w.\-]*$")
+_DEFAULT_MAX_IN_FLIGHT = 16
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class NodeSpec:
+    """One node (one per host).
+
+    Attributes:
+        name: node name (table key).
+        host: address the node listens on and clients connect to.
+        port: TCP port.
+        max_in_flight: cap on concurrently running calls; more are rejected with ``"busy"``.
+    """
+
+    name: str
+    host: str
+    port: int
+    max_in_flight: int = _DEFAULT_MAX_IN_FLIGHT
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ActionSpec:
+    """Where and how a primitive action runs.
+
+    Attributes:
+        name: action name, as called.
+        node: hosting node.
+        impl: ``"module:attr"`` of a PrimitiveAction class/instance or an async function.
+        local_only: refuse callers that are not on the node's own host.
+        deadline_s: default deadline in seconds, or ``None``.
+        params: default parameters, merged under each call's params.
+    """
+
+    name: str
+    node: str
+    impl: str
+    local_only: bool = False
+    deadline_s: float | None = None
+    params: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class DriverSpec:
+    """A background component (a hardware card) started with its node.
+
+    Attributes:
+        name: driver name, the key under which actions find it (``ctx.drivers[name]``).
+        node: hosting node.
+        impl: ``"module:attr"`` of a Driver subclass.
+        params: constructor parameters.
+    """
+
+    name: str
+    node: str
+    impl: str
+    params: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Location:
+    """The parsed location file.
+
+    Attributes:
+        path: file it came from (``"<string>"`` when parsed from text).
+        nodes: node specs by name.
+        actions: action specs by name (memory actions included when ``[memory]`` is set).
+        drivers: driver specs by name.
+        events: publishing node by event topic.
+        memory_node: node hosting the global memory, or ``None``.
+    """
+
+    path: str
+    nodes: Mapping[str, NodeSpec]
+    actions: Mapping[str, ActionSpec]
+    drivers: Mapping[str, DriverSpec]
+    events: Mapping[str, str]
+    memory_node: str | None = None
+
+    def node_of(self, action: str) -> str:
+        """Name of the node hosting ``action``.
+
+        Raises:
+            LocationError: unknown action.
+        """
+        spec = self.actions.get(action)
+        if spec is None:
+            raise LocationError(f"{self.path}: no action named {action!r}")
+        return spec.node
+
+    def action(self, action: str) -> ActionSpec:
+        """The spec of ``action``.
+
+        Raises:
+            LocationError: unknown action.
+        """
+        spec = self.actions.get(action)
+        if spec is None:
+            raise LocationError(f"{self.path}: no action named {action!r}")
+        return spec
+
+    def address(self, node: str) -> tuple[str, int]:
+        """``(host, port)`` of ``node``.
+
+        Raises:
+            LocationError: unknown node.
+        """
+        spec = self.nodes.get(node)
+        if spec is None:
+            raise LocationError(f"{self.path}: no node named {node!r}")
+        return spec.host, spec.port
+
+    def actions_on(self, node: str) -> tuple[ActionSpec, ...]:
+        """Specs of every action hosted by ``node``, in file order."""
+        return tuple(a for a in self.actions.values() if a.node == node)
+
+    def drivers_on(self, node: str) -> tuple[DriverSpec, ...]:
+        """Specs of every driver started with ``node``, in file order."""
+        return tuple(d for d in self.drivers.values() if d.node == node)
+
+    def publisher_of(self, topic: str) -> str:
+        """Name of the node that publishes external event ``topic`` (``ext:`` prefix allowed).
+
+        Raises:
+            LocationError: no node publishes ``topic``.
+        """
+        topic = topic.removeprefix("ext:")
+        node = self.events.get(topic)
+        if node is None:
+            raise LocationError(f"{self.path}: no node publishes event {topic!r} (add [events.{topic}])")
+        return node
+
+
+def load_location(path: str | os.PathLike[str]) -> Location:
+    """Read and parse a location file.
+
+    Raises:
+        LocationError: the file cannot be read, is not TOML, or is inconsistent.
+    """
+    p = os.fspath(path)
+    try:
+        with open(p, "rb") as fh:
+            text = fh.read().decode("utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise LocationError(f"{p}: cannot read location file: {exc}") from exc
+    return parse_location(text, path=p)
+
+
+def _table(doc: Mapping[str, Any], key: str, where: str) -> Mapping[str, Any]:
+    value = doc.get(key, {})
+    if not isinstance(value, dict):
+        raise LocationError(f"{where}: [{key}] must be a table")
+    return value
+
+
+def _check_keys(entry: Mapping[str, Any], allowed: set[str], where: str) -> None:
+    extra = set(entry) - allowed
+    if extra:
+        raise LocationError(f"{where}: unknown key(s) {', '.join(sorted(extra))}")
+
+
+def parse_location(text: str, *, path: str = "<string>") -> Location:
+    """Parse the text of a location file.
+
+    Args:
+        text: TOML text.
+        path: file name used in error messages.
+
+    Raises:
+        LocationError: bad TOML, unknown node, bad impl string, duplicate address, bad types.
+    """
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise LocationError(f"{path}: not valid TOML: {exc}") from exc
+    _check_keys(doc, {"nodes", "actions", "drivers", "events", "memory"}, path)
+
+    nodes: dict[str, NodeSpec] = {}
+    seen_addr: dict[tuple[str, int], str] = {}
+    for name, entry in _table(doc, "nodes", path).items():
+        where = f"{path}: [nodes.{name}]"
+        if not isinstance(entry, dict):
+            raise LocationError(f"{where} must be a table")
+        _check_keys(entry, {"host", "port", "max_in_flight"}, where)
+        if not _NAME_RE.match(name):
+            raise LocationError(f"{where}: bad node name")
+        host = entry.get("host")
+        port = entry.get("port")
+        cap = entry.get("max_in_flight", _DEFAULT_MAX_IN_FLIGHT)
+        if not isinstance(host, str) or not host:
+            raise LocationError(f"{where}: host must be a non-empty string")
+        if type(port) is not int or not 0 < port < 65536:
+            raise LocationError(f"{where}: port must be an integer in 1..65535")
+        if type(cap) is not int or cap < 1:
+            raise LocationError(f"{where}: max_in_flight must be a positive integer")
+        if (host, port) in seen_addr:
+            raise LocationError(f"{where}: duplicate address {host}:{port} (also node {seen_addr[host, port]!r})")
+        seen_addr[host, port] = name
+        nodes[name] = NodeSpec(name=name, host=host, port=port, max_in_flight=cap)
+    if not nodes:
+        raise LocationError(f"{path}: no [nodes.*] table")
+
+    def node_ref(entry: Mapping[str, Any], where: str) -> str:
+        node = entry.get("node")
+        if not isinstance(node, str):
+            raise LocationError(f"{where}: node must be a string")
+        if node not in nodes:
+            raise LocationError(f"{where}: unknown node {node!r} (known: {', '.join(sorted(nodes))})")
+        return node
+
+    def impl_ref(entry: Mapping[str, Any], where: str) -> str:
+        impl = entry.get("impl")
+        if not isinstance(impl, str) or not _IMPL_RE.match(impl):
+            raise LocationError(f"{where}: impl must be an importable \"module:attr\" string, got {impl!r}")
+        return impl
+
+    def params_of(entry: Mapping[str, Any], where: str) -> Mapping[str, Any]:
+        params = entry.get("params", {})
+        if not isinstance(params, dict):
+            raise LocationError(f"{where}: params must be a table")
+        return MappingProxyType(dict(params))
+
+    memory_node: str | None = None
+    mem = _table(doc, "memory", path)
+    if mem:
+        _check_keys(mem, {"node"}, f"{path}: [memory]")
+        memory_node = node_ref(mem, f"{path}: [memory]")
+
+    actions: dict[str, ActionSpec] = {}
+    for name, entry in _table(doc, "actions", path).items():
+        where = f"{path}: [actions.{name}]"
+        if not isinstance(entry, dict):
+            raise LocationError(f"{where} must be a table")
+        _check_keys(entry, {"node", "impl", "local_only", "deadline_s", "params"}, where)
+        if name in MEMORY_ACTIONS:
+            raise LocationError(f"{where}: {name} is reserved for the global memory service")
+        local_only = entry.get("local_only", False)
+        if not isinstance(local_only, bool):
+            raise LocationError(f"{where}: local_only must be true or false")
+        deadline = entry.get("deadline_s")
+        if deadline is not None and (isinstance(deadline, bool) or not isinstance(deadline, (int, float)) or deadline <= 0):
+            raise LocationError(f"{where}: deadline_s must be a positive number")
+        actions[name] = ActionSpec(
+            name=name,
+            node=node_ref(entry, where),
+            impl=impl_ref(entry, where),
+            local_only=local_only,
+            deadline_s=float(deadline) if deadline is not None else None,
+            params=params_of(entry, where),
+        )
+    if memory_node is not None:
+        for name in MEMORY_ACTIONS:
+            actions[name] = ActionSpec(name=name, node=memory_node, impl=MEMORY_IMPL)
+
+    drivers: dict[str, DriverSpec] = {}
+    for name, entry in _table(doc, "drivers", path).items():
+        where = f"{path}: [drivers.{name}]"
+        if not isinstance(entry, dict):
+            raise LocationError(f"{where} must be a table")
+        _check_keys(entry, {"node", "impl", "params"}, where)
+        drivers[name] = DriverSpec(
+            name=name, node=node_ref(entry, where), impl=impl_ref(entry, where), params=params_of(entry, where)
+        )
+
+    events: dict[str, str] = {}
+    for topic, entry in _table(doc, "events", path).items():
+        where = f"{path}: [events.{topic}]"
+        if not isinstance(entry, dict):
+            raise LocationError(f"{where} must be a table")
+        _check_keys(entry, {"node"}, where)
+        events[topic] = node_ref(entry, where)
+
+    return Location(
+        path=path,
+        nodes=MappingProxyType(nodes),
+        actions=MappingProxyType(actions),
+        drivers=MappingProxyType(drivers),
+        events=MappingProxyType(events),
+        memory_node=memory_node,
+    )
