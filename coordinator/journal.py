@@ -260,8 +260,8 @@ class Journal:
 
     def firings(self, run: str) -> list[tuple[int, str, str | None, float]]:
         """``(seq, transition, pulse, t_wall)`` of a run's firings in order."""
-        return [tuple(r) for r in self._db.execute(  # type: ignore[misc]
-            "SELECT seq, transition, pulse, t_wall FROM firing WHERE run=? ORDER BY seq", (run,))]
+        rows = self._db.execute("SELECT seq, transition, pulse, t_wall FROM firing WHERE run=? ORDER BY seq", (run,))
+        return [(int(a), str(b), c, float(d)) for a, b, c, d in rows]
 
     def recover(self, net: PetriNet, run: str) -> Recovered:
         """Rebuild the state of ``run`` by replaying its records in journal order.

@@ -476,8 +476,8 @@ class PetriNet:
                                            f"is a place of primitive task {task!r}"))
         outputs_of_place: dict[str, list[str]] = {p.id: [] for p in self.places}
         for t in self.transitions:
-            for p in inputs[t.id]:
-                outputs_of_place[p].append(t.id)
+            for pid in inputs[t.id]:
+                outputs_of_place[pid].append(t.id)
         for p in self.places:
             if p.kind is not PlaceKind.PRIMITIVE_TASK:
                 continue
@@ -582,7 +582,7 @@ class PetriNet:
     @cached_property
     def incidence(self) -> np.ndarray:
         """Incidence matrix C = Post − Pre, shape (|P|, |T|), int64."""
-        out = self.post - self.pre
+        out: np.ndarray = self.post - self.pre
         out.flags.writeable = False
         return out
 
