@@ -1,0 +1,347 @@
+"""Motion-node side of the PUMA's CAN bus: the six CiA 402 drives and the crossfire module.
+
+Talks to the bus through python-can's ``socketcand`` interface (the sim's gateway in
+:mod:`sim.canbus`, or any socketcand server); on real hardware the same frames would go through
+``interface="socketcan"``. Frame layout and units: :mod:`sim.canframes`.
+
+A receive thread keeps the latest actual positions and statuswords (TPDO1), heartbeat times,
+the crossfire state and the latest SYNC; :meth:`PumaDrives.wait_sync` lets a control loop run
+once per 2 ms bus cycle. Heartbeat supervision: a node whose heartbeat is older than
+``heartbeat_timeout`` seconds (wall clock), or a closed connection, makes :meth:`PumaDrives.check`
+raise :class:`BusError`.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Callable, Sequence
+from typing import Self
+
+import can
+import numpy as np
+from numpy.typing import NDArray
+
+from coordinator.errors import ActionError
+from sim import canframes as cf
+
+__all__ = ["BusError", "PumaDrives"]
+
+# python-can's socketcand client logs every TCP read that splits a frame message as a warning;
+# that is ordinary stream fragmentation, not a fault.
+logging.getLogger("can.interfaces.socketcand.socketcand").setLevel(logging.ERROR)
+
+
+class BusError(ActionError):
+    """The CAN bus or a drive is unusable: connection lost, heartbeat missing, drive fault."""
+
+
+CrossfireCallback = Callable[[bool, float], None]
+
+
+class PumaDrives:
+    """The PUMA joint drives as seen from the motion node.
+
+    Lifecycle: ``PumaDrives(host, port)`` only configures; :meth:`open` connects (or use it as a
+    context manager); :meth:`enable` brings every drive to OPERATION_ENABLED; :meth:`send_targets`
+    once per cycle; :meth:`close` disables and disconnects.
+
+    Args:
+        host, port: the socketcand server (the sim's CAN gateway).
+        channel: bus name on the server.
+        heartbeat_timeout: seconds without a heartbeat after which a node counts as lost.
+        clock: monotonic clock for supervision (seconds).
+    """
+
+    NODES = cf.DRIVE_IDS
+
+    def __init__(
+        self,
+        host: str,
+        port: int,
+        channel: str = "can0",
+        heartbeat_timeout: float = 0.5,
+        clock: Callable[[], float] = time.monotonic,
+    ) -> None:
+        self.host = host
+        self.port = port
+        self.channel = channel
+        self.heartbeat_timeout = heartbeat_timeout
+        self._clock = clock
+        self._bus: can.BusABC | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._cond = threading.Condition()
+        self._positions = np.full(6, np.nan)
+        self._statuswords = [0] * 6
+        self._tpdo_seen = [False] * 6
+        self._heartbeats: dict[int, tuple[float, cf.NmtState]] = {}
+        self._sync_count = 0
+        self._sync_t = float("nan")
+        self._crossfire: bool | None = None
+        self._crossfire_callbacks: list[CrossfireCallback] = []
+        self._dead: str | None = None
+        self._opened_at = 0.0
+        self._send_lock = threading.Lock()
+
+    # --- connection ------------------------------------------------------------------------------
+
+    def open(self, timeout: float = 5.0) -> Self:
+        """Connect to the bus and start the receive thread.
+
+        Raises:
+            BusError: the server cannot be reached or refuses the bus within ``timeout``.
+        """
+        try:
+            self._bus = _connect(self.host, self.port, self.channel, timeout)
+        except (OSError, can.CanError, TimeoutError, BusError) as exc:
+            raise BusError(f"cannot open CAN bus {self.channel} at {self.host}:{self.port}: {exc}") from exc
+        self._opened_at = self._clock()
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._rx_loop, name="puma-drives-rx", daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        """Disable the drives (best effort) and disconnect."""
+        if self._bus is None:
+            return
+        try:
+            if self._dead is None:
+                for node in self.NODES:
+                    self._send(cf.encode_rpdo1(node, cf.Controlword.DISABLE_VOLTAGE, self._pos_or0(node)))
+        except BusError:
+            pass
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        self._bus.shutdown()
+        self._bus = None
+
+    def __enter__(self) -> Self:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- state -----------------------------------------------------------------------------------
+
+    def positions(self) -> NDArray[np.float64]:
+        """Latest actual joint positions, shape (6,), rad (NaN until a drive reported)."""
+        with self._cond:
+            return self._positions.copy()
+
+    def states(self) -> list[cf.DriveState | None]:
+        """Latest CiA 402 state of drives 1..6 (``None`` until reported)."""
+        with self._cond:
+            out: list[cf.DriveState | None] = []
+            for seen, sw in zip(self._tpdo_seen, self._statuswords):
+                out.append(cf.state_from_statusword(sw) if seen else None)
+            return out
+
+    @property
+    def crossfire(self) -> bool | None:
+        """Latest crossfire state (True = beam interrupted), ``None`` before the first report."""
+        return self._crossfire
+
+    @property
+    def sim_time(self) -> float:
+        """Bus time (s) stamped on the latest SYNC."""
+        return self._sync_t
+
+    def on_crossfire(self, callback: CrossfireCallback) -> None:
+        """Call ``callback(blocked, t)`` from the receive thread on every crossfire report."""
+        self._crossfire_callbacks.append(callback)
+
+    def check(self) -> None:
+        """Raise :class:`BusError` if the bus is lost, a heartbeat is missing or a drive faulted."""
+        if self._dead is not None:
+            raise BusError(self._dead)
+        now = self._clock()
+        with self._cond:
+            beats = dict(self._heartbeats)
+            states = [
+                cf.state_from_statusword(sw) if s else None
+                for s, sw in zip(self._tpdo_seen, self._statuswords)
+            ]
+        for node in (*self.NODES, cf.CROSSFIRE_ID):
+            seen = beats.get(node)
+            last = seen[0] if seen else self._opened_at
+            if now - last > self.heartbeat_timeout:
+                raise BusError(f"no heartbeat from CAN node {node} for {now - last:.2f} s: bus or drive lost")
+        for node, state in zip(self.NODES, states):
+            if state is cf.DriveState.FAULT:
+                raise BusError(f"drive {node} is in FAULT (following error)")
+
+    # --- commands --------------------------------------------------------------------------------
+
+    def enable(self, timeout: float = 3.0) -> None:
+        """NMT-start every node, reset faults and walk every drive to OPERATION_ENABLED.
+
+        Each RPDO carries the drive's own actual position as target, so enabling does not move.
+
+        Raises:
+            BusError: a drive did not reach OPERATION_ENABLED within ``timeout`` s, or the bus is lost.
+        """
+        self._send(cf.nmt_frame(cf.NmtCommand.START, 0))
+        deadline = self._clock() + timeout
+        self._wait(lambda: all(self._tpdo_seen), deadline, "no TPDO1 from every drive after NMT start")
+        steps = (
+            cf.Controlword.FAULT_RESET,
+            cf.Controlword.SHUTDOWN,
+            cf.Controlword.SWITCH_ON,
+            cf.Controlword.ENABLE_OPERATION,
+        )
+        wanted = {
+            cf.Controlword.FAULT_RESET: None,
+            cf.Controlword.SHUTDOWN: cf.DriveState.READY_TO_SWITCH_ON,
+            cf.Controlword.SWITCH_ON: cf.DriveState.SWITCHED_ON,
+            cf.Controlword.ENABLE_OPERATION: cf.DriveState.OPERATION_ENABLED,
+        }
+        for cw in steps:
+            for node in self.NODES:
+                self._send(cf.encode_rpdo1(node, cw, self._pos_or0(node)))
+            state = wanted[cw]
+            if state is not None:
+                self._wait(
+                    lambda s=state: all(  # type: ignore[misc]
+                        cf.state_from_statusword(sw) is s for sw in self._statuswords
+                    ),
+                    deadline,
+                    f"drives did not reach '{state.value}'",
+                )
+            else:
+                self._wait_syncs(2, deadline)
+
+    def disable(self) -> None:
+        """Disable voltage on every drive (they hold position, brakes on)."""
+        for node in self.NODES:
+            self._send(cf.encode_rpdo1(node, cf.Controlword.DISABLE_VOLTAGE, self._pos_or0(node)))
+
+    def send_targets(self, q: Sequence[float] | NDArray[np.float64]) -> None:
+        """Send one RPDO1 per drive: enable-operation controlword and target, rad, shape (6,).
+
+        Raises:
+            BusError: the connection is lost.
+        """
+        if len(q) != 6:
+            raise ValueError(f"expected 6 joint targets, got {len(q)}")
+        for node, target in zip(self.NODES, q):
+            self._send(cf.encode_rpdo1(node, cf.Controlword.ENABLE_OPERATION, float(target)))
+
+    def wait_sync(self, timeout: float = 0.1) -> float:
+        """Block until the next SYNC; returns its bus time, s.
+
+        Raises:
+            BusError: no SYNC within ``timeout`` s (wall clock), or the bus is lost.
+        """
+        with self._cond:
+            seen = self._sync_count
+            ok = self._cond.wait_for(lambda: self._sync_count != seen or self._dead is not None, timeout)
+            if self._dead is not None:
+                raise BusError(self._dead)
+            if not ok:
+                raise BusError(f"no SYNC on the CAN bus for {timeout:.3f} s")
+            return self._sync_t
+
+    # --- internals -------------------------------------------------------------------------------
+
+    def _pos_or0(self, node: int) -> float:
+        q = float(self._positions[node - 1])
+        return 0.0 if np.isnan(q) else q
+
+    def _send(self, frame: cf.CanFrame) -> None:
+        if self._bus is None:
+            raise BusError("CAN bus not open")
+        if self._dead is not None:
+            raise BusError(self._dead)
+        msg = can.Message(arbitration_id=frame.can_id, data=frame.data, is_extended_id=False)
+        try:
+            with self._send_lock:
+                self._bus.send(msg)
+        except (OSError, can.CanError) as exc:
+            self._dead = f"CAN bus connection lost while sending: {exc}"
+            raise BusError(self._dead) from exc
+
+    def _wait(self, pred: Callable[[], bool], deadline: float, what: str) -> None:
+        with self._cond:
+            while not pred():
+                if self._dead is not None:
+                    raise BusError(self._dead)
+                left = deadline - self._clock()
+                if left <= 0:
+                    raise BusError(what)
+                self._cond.wait(min(left, 0.05))
+
+    def _wait_syncs(self, n: int, deadline: float) -> None:
+        with self._cond:
+            target = self._sync_count + n
+        self._wait(lambda: self._sync_count >= target, deadline, "no SYNC on the CAN bus")
+
+    def _rx_loop(self) -> None:
+        assert self._bus is not None
+        bus = self._bus
+        while not self._stop.is_set():
+            try:
+                msg = bus.recv(timeout=0.05)
+            except (OSError, can.CanError, ValueError) as exc:
+                self._mark_dead(f"CAN bus connection lost: {exc}")
+                return
+            if msg is None or msg.is_error_frame:
+                continue
+            try:
+                self._handle(cf.CanFrame(msg.arbitration_id, bytes(msg.data), float(msg.timestamp)))
+            except cf.FrameError:
+                continue
+
+    def _mark_dead(self, reason: str) -> None:
+        with self._cond:
+            if self._dead is None:
+                self._dead = reason
+            self._cond.notify_all()
+
+    def _handle(self, frame: cf.CanFrame) -> None:
+        cid = frame.can_id
+        callbacks: list[CrossfireCallback] = []
+        with self._cond:
+            if cid == cf.SYNC_ID:
+                self._sync_count += 1
+                self._sync_t = frame.t
+            elif cf.TPDO1_BASE + 1 <= cid <= cf.TPDO1_BASE + 6:
+                i = cid - cf.TPDO1_BASE - 1
+                sw, q = cf.decode_tpdo1(frame.data)
+                self._statuswords[i] = sw
+                self._positions[i] = q
+                self._tpdo_seen[i] = True
+            elif cid == cf.TPDO1_BASE + cf.CROSSFIRE_ID:
+                self._crossfire = cf.decode_crossfire(frame.data)
+                callbacks = list(self._crossfire_callbacks)
+            elif cf.HEARTBEAT_BASE <= cid <= cf.HEARTBEAT_BASE + 0x7F:
+                self._heartbeats[cid - cf.HEARTBEAT_BASE] = (self._clock(), cf.decode_heartbeat(frame.data))
+            else:
+                return
+            self._cond.notify_all()
+        for cb in callbacks:
+            cb(bool(self._crossfire), frame.t)
+
+
+def _connect(host: str, port: int, channel: str, timeout: float) -> can.BusABC:
+    """Open python-can's socketcand bus, failing fast when nothing listens.
+
+    python-can retries a refused connection for 10 s; probe the port first so that a missing
+    gateway is reported within ``timeout``.
+    """
+    import socket
+
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with socket.create_connection((host, port), timeout=0.5) as probe:
+                probe.recv(16)  # the greeting; the server drops this connection
+            break
+        except OSError as exc:
+            if time.monotonic() > deadline:
+                raise BusError(f"no socketcand server at {host}:{port}: {exc}") from exc
+            time.sleep(0.05)
+    return can.Bus(interface="socketcand", host=host, port=port, channel=channel, tcp_tune=True)

@@ -1,0 +1,545 @@
+"""The PUMA's CAN bus in the sim process: simulated CiA 402 drives, a crossfire I/O module, and
+a socketcand-protocol gateway on loopback so that another process can use the bus with
+python-can (``can.Bus(interface="socketcand", host=..., port=..., channel="can0")``).
+
+Frame layout, units and state machine: :mod:`sim.canframes`.
+
+Threads: the world calls :meth:`SimDrives.step` from its own (simulation) thread every 1 ms of
+simulated time; only that thread touches pybullet. Frames from clients reach the devices through
+a thread-safe queue drained at the start of each step. The gateway runs one accept thread and,
+per connection, a reader and a writer thread.
+
+Drive model (per joint): a target received in RPDO1 is latched at the next SYNC (every 2 ms of
+simulated time) and interpolated linearly over the cycle; the demand goes to pybullet's position
+motor with the joint's speed and torque limits. If ``|demand - actual|`` exceeds
+:data:`FOLLOWING_ERROR_LIMIT` the drive faults (CiA 402 FAULT, statusword bit 13) and holds where it
+is. A drive that is not enabled holds its position (the PUMA's brakes).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import socket
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Self
+
+from sim import canframes as cf
+from sim import puma560
+
+__all__ = [
+    "FOLLOWING_ERROR_LIMIT",
+    "BusPort",
+    "CanGateway",
+    "SimBus",
+    "SimDrives",
+]
+
+log = logging.getLogger(__name__)
+
+FOLLOWING_ERROR_LIMIT = 0.1  # rad
+_RAW_SETTLE_S = 0.2  # gateway: forward bus frames this long after "< ok >" to rawmode at the latest
+
+
+class BusPort:
+    """One attachment to a :class:`SimBus` (an in-process client or a gateway connection).
+
+    Frames sent by one port reach the bus devices and every other port (not the sender), as on a
+    real bus. Received frames wait in a bounded queue; on overflow the newest is dropped and
+    :attr:`overruns` counts it.
+    """
+
+    def __init__(self, bus: SimBus, maxsize: int = 20000) -> None:
+        self._bus = bus
+        self._queue: queue.Queue[cf.CanFrame] = queue.Queue(maxsize=maxsize)
+        self.overruns = 0
+        self.closed = False
+
+    def send(self, frame: cf.CanFrame) -> None:
+        """Put a frame on the bus."""
+        self._bus.transmit(frame, origin=self)
+
+    def recv(self, timeout: float | None = None) -> cf.CanFrame | None:
+        """Next frame from the bus, or ``None`` after ``timeout`` seconds (``None``: wait)."""
+        try:
+            return self._queue.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def recv_all(self) -> list[cf.CanFrame]:
+        """Every frame waiting now (non-blocking)."""
+        out = []
+        while True:
+            try:
+                out.append(self._queue.get_nowait())
+            except queue.Empty:
+                return out
+
+    def _deliver(self, frame: cf.CanFrame) -> None:
+        try:
+            self._queue.put_nowait(frame)
+        except queue.Full:
+            self.overruns += 1
+
+    def close(self) -> None:
+        """Detach from the bus."""
+        self.closed = True
+        self._bus.detach(self)
+
+
+class SimBus:
+    """A simulated CAN bus: fan-out between ports plus an inbound queue for the sim's devices."""
+
+    def __init__(self) -> None:
+        self._ports: list[BusPort] = []
+        self._lock = threading.Lock()
+        self._inbound: queue.SimpleQueue[cf.CanFrame] = queue.SimpleQueue()
+
+    def connect(self) -> BusPort:
+        """A new port on the bus."""
+        port = BusPort(self)
+        with self._lock:
+            self._ports.append(port)
+        return port
+
+    def detach(self, port: BusPort) -> None:
+        """Remove a port (idempotent)."""
+        with self._lock:
+            if port in self._ports:
+                self._ports.remove(port)
+
+    def transmit(self, frame: cf.CanFrame, origin: BusPort | None = None) -> None:
+        """Put a frame on the bus from a port (``origin``) or from a sim device (``None``)."""
+        with self._lock:
+            ports = list(self._ports)
+        for port in ports:
+            if port is not origin:
+                port._deliver(frame)
+        if origin is not None:
+            self._inbound.put(frame)
+
+    def take_inbound(self) -> list[cf.CanFrame]:
+        """Frames sent by ports since the last call (for the sim's devices)."""
+        out = []
+        while True:
+            try:
+                out.append(self._inbound.get_nowait())
+            except queue.Empty:
+                return out
+
+
+@dataclass
+class _Drive:
+    node: int
+    joint: int
+    sm: cf.Cia402StateMachine = field(default_factory=cf.Cia402StateMachine)
+    nmt: cf.NmtState = cf.NmtState.PRE_OPERATIONAL
+    pending: float | None = None
+    start: float = 0.0
+    end: float = 0.0
+    t_latch: float = 0.0
+    hold: float = 0.0
+    commanded: tuple[float, float] | None = None
+
+
+class SimDrives:
+    """Six simulated CiA 402 joint drives and the crossfire I/O module on a :class:`SimBus`.
+
+    Lifecycle: construct; :meth:`attach` to the robot body in a pybullet client; give the crossfire
+    sensor with :meth:`set_crossfire` (or to ``attach``); serve the bus to other processes with a
+    :class:`CanGateway` (or use :meth:`SimBus.connect` in process); call :meth:`step` every 1 ms of
+    simulated time from the simulation thread.
+
+    Args:
+        bus: the bus to sit on (a new one if ``None``).
+        qd_max, tau_max: per-joint speed (rad/s) and torque (N m) limits of the motors, shape (6,).
+        q_min, q_max: joint limits (rad) targets are clamped to, shape (6,).
+    """
+
+    def __init__(
+        self,
+        bus: SimBus | None = None,
+        qd_max: Sequence[float] = tuple(puma560.QD_MAX),
+        tau_max: Sequence[float] = tuple(puma560.TAU_MAX),
+        q_min: Sequence[float] = tuple(puma560.Q_MIN),
+        q_max: Sequence[float] = tuple(puma560.Q_MAX),
+    ) -> None:
+        self.bus = bus if bus is not None else SimBus()
+        self.qd_max = [float(v) for v in qd_max]
+        self.tau_max = [float(v) for v in tau_max]
+        self.q_min = [float(v) for v in q_min]
+        self.q_max = [float(v) for v in q_max]
+        self._client: Any = None
+        self._body = -1
+        self._drives: list[_Drive] = []
+        self._crossfire: Callable[[], bool] | None = None
+        self._crossfire_nmt = cf.NmtState.PRE_OPERATIONAL
+        self._crossfire_state: bool | None = None
+        self._next_sync: float | None = None
+        self._next_heartbeat = 0.0
+        self._booted = False
+
+    # --- set-up ----------------------------------------------------------------------------------
+
+    def attach(
+        self,
+        client: Any,
+        body_id: int,
+        joint_indices: Sequence[int],
+        crossfire: Callable[[], bool] | None = None,
+    ) -> None:
+        """Bind drives 1..6 to the joints of a pybullet body.
+
+        Args:
+            client: the ``pybullet`` module or a ``BulletClient`` (``getJointState``,
+                ``setJointMotorControl2``, ``POSITION_CONTROL`` are used).
+            body_id: the robot body.
+            joint_indices: pybullet joint indices of joints 1..6, length 6.
+            crossfire: optional function returning True while the cup's light beam is interrupted.
+
+        Raises:
+            ValueError: not six joints.
+        """
+        if len(joint_indices) != 6:
+            raise ValueError(f"expected 6 joint indices, got {len(joint_indices)}")
+        self._client = client
+        self._body = body_id
+        self._drives = []
+        for node, joint in zip(cf.DRIVE_IDS, joint_indices):
+            q = float(client.getJointState(body_id, joint)[0])
+            self._drives.append(_Drive(node=node, joint=joint, start=q, end=q, hold=q))
+        if crossfire is not None:
+            self._crossfire = crossfire
+        for d in self._drives:
+            self._command(d, d.hold, 0.0)
+
+    def reset_hold(self) -> None:
+        """Take the joints' present positions as where every drive holds or starts interpolating
+        (call after teleporting the robot with ``resetJointState``)."""
+        for d, q in zip(self._drives, self.positions()):
+            d.hold = d.start = d.end = q
+            d.pending = None
+            d.commanded = None
+            if d.sm.state is not cf.DriveState.OPERATION_ENABLED:
+                self._command(d, q, 0.0)
+
+    def set_crossfire(self, crossfire: Callable[[], bool]) -> None:
+        """Give the function that reads the crossfire sensor (True = beam interrupted)."""
+        self._crossfire = crossfire
+
+    # --- inspection (for tests and the world) ----------------------------------------------------
+
+    def states(self) -> list[cf.DriveState]:
+        """CiA 402 state of drives 1..6."""
+        return [d.sm.state for d in self._drives]
+
+    def fault_reasons(self) -> list[str]:
+        """Fault reason of drives 1..6 (empty strings when not faulted)."""
+        return [d.sm.fault_reason for d in self._drives]
+
+    def positions(self) -> list[float]:
+        """Actual joint positions, rad."""
+        states = self._client.getJointStates(self._body, [d.joint for d in self._drives])
+        return [float(s[0]) for s in states]
+
+    # --- the 1 ms tick ---------------------------------------------------------------------------
+
+    def step(self, t: float) -> None:
+        """Advance the bus devices to simulated time ``t`` (s); call every 1 ms, before stepping
+        the physics. Handles received frames, SYNC (every 2 ms), PDOs, heartbeats, interpolation,
+        following-error supervision and the crossfire module."""
+        if self._client is None:
+            return
+        if not self._booted:
+            self._booted = True
+            for d in self._drives:
+                self.bus.transmit(cf.encode_heartbeat(d.node, cf.NmtState.BOOT_UP, t))
+            self.bus.transmit(cf.encode_heartbeat(cf.CROSSFIRE_ID, cf.NmtState.BOOT_UP, t))
+            self._next_sync = t
+            self._next_heartbeat = t + cf.HEARTBEAT_PERIOD_S
+        for frame in self.bus.take_inbound():
+            self._receive(frame, t)
+        actual = self.positions()
+        assert self._next_sync is not None
+        if t >= self._next_sync - 1e-9:
+            self._next_sync += cf.CYCLE_S
+            if t > self._next_sync:  # the caller skipped cycles: resynchronise
+                self._next_sync = t + cf.CYCLE_S
+            self._sync(t, actual)
+        if t >= self._next_heartbeat - 1e-9:
+            self._next_heartbeat = t + cf.HEARTBEAT_PERIOD_S
+            for d in self._drives:
+                self.bus.transmit(cf.encode_heartbeat(d.node, d.nmt, t))
+            self.bus.transmit(cf.encode_heartbeat(cf.CROSSFIRE_ID, self._crossfire_nmt, t))
+        for d, q in zip(self._drives, actual):
+            self._drive_tick(d, q, t)
+        if self._crossfire is not None and self._crossfire_nmt is cf.NmtState.OPERATIONAL:
+            blocked = bool(self._crossfire())
+            if blocked != self._crossfire_state:
+                self._crossfire_state = blocked
+                self.bus.transmit(cf.encode_crossfire(blocked, t))
+
+    def _receive(self, frame: cf.CanFrame, t: float) -> None:
+        if frame.can_id == cf.NMT_ID and len(frame.data) == 2:
+            try:
+                cmd = cf.NmtCommand(frame.data[0])
+            except ValueError:
+                return
+            node = frame.data[1]
+            new = {
+                cf.NmtCommand.START: cf.NmtState.OPERATIONAL,
+                cf.NmtCommand.STOP: cf.NmtState.STOPPED,
+                cf.NmtCommand.PRE_OPERATIONAL: cf.NmtState.PRE_OPERATIONAL,
+                cf.NmtCommand.RESET_NODE: cf.NmtState.PRE_OPERATIONAL,
+            }[cmd]
+            for d in self._drives:
+                if node in (0, d.node):
+                    d.nmt = new
+                    if new is not cf.NmtState.OPERATIONAL:
+                        d.sm.on_controlword(cf.Controlword.DISABLE_VOLTAGE)
+            if node in (0, cf.CROSSFIRE_ID):
+                self._crossfire_nmt = new
+                if new is cf.NmtState.OPERATIONAL and self._crossfire is not None:
+                    self._crossfire_state = bool(self._crossfire())
+                    self.bus.transmit(cf.encode_crossfire(self._crossfire_state, t))
+            return
+        node = frame.can_id - cf.RPDO1_BASE
+        if 1 <= node <= len(self._drives):
+            d = self._drives[node - 1]
+            if d.nmt is not cf.NmtState.OPERATIONAL:
+                return
+            try:
+                cw, target = cf.decode_rpdo1(frame.data)
+            except cf.FrameError:
+                log.warning("drive %d: bad RPDO1 %s", node, frame.data.hex())
+                return
+            before = d.sm.state
+            after = d.sm.on_controlword(cw)
+            if after is cf.DriveState.OPERATION_ENABLED and before is not after:
+                # Bumpless start: interpolate from where the joint is.
+                q = float(self._client.getJointState(self._body, d.joint)[0])
+                d.start = d.end = q
+            if after is cf.DriveState.OPERATION_ENABLED:
+                j = node - 1
+                d.pending = min(max(target, self.q_min[j]), self.q_max[j])
+
+    def _sync(self, t: float, actual: list[float]) -> None:
+        self.bus.transmit(cf.CanFrame(cf.SYNC_ID, b"", t))
+        for d, q in zip(self._drives, actual):
+            if d.sm.state is cf.DriveState.OPERATION_ENABLED:
+                d.start = self._demand(d, t)
+                if d.pending is not None:
+                    d.end = d.pending
+                    d.pending = None
+                else:
+                    d.end = d.start
+                d.t_latch = t
+            if d.nmt is cf.NmtState.OPERATIONAL:
+                self.bus.transmit(cf.encode_tpdo1(d.node, d.sm.statusword, q, t))
+
+    @staticmethod
+    def _demand(d: _Drive, t: float) -> float:
+        s = min(max((t - d.t_latch) / cf.CYCLE_S, 0.0), 1.0)
+        return d.start + (d.end - d.start) * s
+
+    def _drive_tick(self, d: _Drive, q: float, t: float) -> None:
+        if d.sm.state is cf.DriveState.OPERATION_ENABLED:
+            demand = self._demand(d, t)
+            if abs(demand - q) > FOLLOWING_ERROR_LIMIT:
+                d.sm.fault(f"following error {demand - q:+.3f} rad at t={t:.3f} s")
+                log.warning("drive %d: %s", d.node, d.sm.fault_reason)
+                d.hold = q
+                self._command(d, q, 0.0)
+                return
+            d.hold = demand
+            self._command(d, demand, (d.end - d.start) / cf.CYCLE_S)
+        else:
+            self._command(d, d.hold, 0.0)
+
+    def _command(self, d: _Drive, position: float, velocity: float) -> None:
+        if d.commanded == (position, velocity):
+            return  # the motor keeps its last set point
+        d.commanded = (position, velocity)
+        j = d.node - 1
+        self._client.setJointMotorControl2(
+            self._body,
+            d.joint,
+            self._client.POSITION_CONTROL,
+            targetPosition=position,
+            targetVelocity=velocity,
+            positionGain=0.5,
+            velocityGain=1.0,
+            maxVelocity=self.qd_max[j] * 1.2,
+            force=self.tau_max[j],
+        )
+
+
+class CanGateway:
+    """socketcand-protocol TCP server bridging a :class:`SimBus` to other processes.
+
+    Implements the subset python-can's ``socketcand`` client uses (``open``, ``rawmode``,
+    ``send``, plus ``echo``). Bus frames are forwarded once the connection is in raw mode and the
+    client has sent its first frame, or :data:`_RAW_SETTLE_S` after raw mode at the latest
+    (python-can reads the ``< ok >`` of ``rawmode`` with a single ``recv`` and compares it exactly,
+    so nothing may follow it in the same segment).
+
+    Args:
+        bus: the simulated bus.
+        host: listen address (loopback only by default).
+        port: TCP port, 0 for any free port.
+        channels: bus names served.
+    """
+
+    def __init__(
+        self, bus: SimBus, host: str = "127.0.0.1", port: int = 0, channels: Sequence[str] = ("can0",)
+    ) -> None:
+        self.bus = bus
+        self.host = host
+        self.port = port
+        self.channels = tuple(channels)
+        self._server: socket.socket | None = None
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._conns: list[socket.socket] = []
+        self._lock = threading.Lock()
+
+    def start(self) -> int:
+        """Start listening; returns the TCP port."""
+        srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        srv.bind((self.host, self.port))
+        srv.listen(8)
+        srv.settimeout(0.1)
+        self._server = srv
+        self.port = srv.getsockname()[1]
+        th = threading.Thread(target=self._accept_loop, name="can-gateway-accept", daemon=True)
+        th.start()
+        self._threads.append(th)
+        return self.port
+
+    def stop(self) -> None:
+        """Close the server and every connection; join the threads (bounded)."""
+        self._stop.set()
+        with self._lock:
+            conns = list(self._conns)
+        for c in conns:
+            try:
+                c.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            c.close()
+        if self._server is not None:
+            self._server.close()
+        for th in self._threads:
+            th.join(timeout=2.0)
+
+    def __enter__(self) -> Self:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _accept_loop(self) -> None:
+        assert self._server is not None
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._server.accept()
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+            conn.settimeout(None)
+            with self._lock:
+                self._conns.append(conn)
+            _Connection(self, conn).start()
+
+
+class _Connection:
+    """One client of the gateway: a reader and a writer thread around the sans-IO protocol."""
+
+    def __init__(self, gateway: CanGateway, sock: socket.socket) -> None:
+        self.gw = gateway
+        self.sock = sock
+        self.proto = cf.SocketcandServerProtocol(gateway.channels)
+        self.port = gateway.bus.connect()
+        self.lock = threading.Lock()
+        self.raw_since: float | None = None
+        self.forwarding = False
+        self.done = threading.Event()
+
+    def start(self) -> None:
+        for target, name in ((self._reader, "reader"), (self._writer, "writer")):
+            th = threading.Thread(target=target, name=f"can-gateway-{name}", daemon=True)
+            th.start()
+            self.gw._threads.append(th)
+        self._flush()
+
+    def _flush(self) -> None:
+        with self.lock:
+            out = self.proto.data_to_send()
+            if out:
+                self.sock.sendall(out)
+
+    def _reader(self) -> None:
+        try:
+            while not self.done.is_set():
+                data = self.sock.recv(4096)
+                if not data:
+                    break
+                with self.lock:
+                    frames = self.proto.receive_data(data, time.monotonic())
+                    if self.proto.mode is cf.ServerMode.RAW and self.raw_since is None:
+                        self.raw_since = time.monotonic()
+                    out = self.proto.data_to_send()
+                    if out:
+                        self.sock.sendall(out)
+                if frames:
+                    self.forwarding = self.raw_since is not None
+                for f in frames:
+                    self.port.send(f)
+                if self.proto.mode is cf.ServerMode.CLOSED:
+                    break
+        except OSError:
+            pass
+        finally:
+            self._close()
+
+    def _writer(self) -> None:
+        try:
+            while not self.done.is_set():
+                first = self.port.recv(timeout=0.1)
+                if first is None:
+                    continue
+                frames = [first] + self.port.recv_all()
+                if not self.forwarding:
+                    if self.raw_since is None or time.monotonic() - self.raw_since < _RAW_SETTLE_S:
+                        continue
+                    self.forwarding = True
+                with self.lock:
+                    for f in frames:
+                        self.proto.frame_out(f)
+                    out = self.proto.data_to_send()
+                    if out:
+                        self.sock.sendall(out)
+        except OSError:
+            pass
+        finally:
+            self._close()
+
+    def _close(self) -> None:
+        if self.done.is_set():
+            return
+        self.done.set()
+        self.port.close()
+        try:
+            self.sock.close()
+        except OSError:
+            pass
+        with self.gw._lock:
+            if self.sock in self.gw._conns:
+                self.gw._conns.remove(self.sock)

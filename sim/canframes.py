@@ -1,0 +1,482 @@
+"""CAN frames of the PUMA drives (CiA 301/402 style) and the socketcand ASCII protocol; pure.
+
+No sockets, no clocks: used by the simulated bus (:mod:`sim.canbus`) and by the motion node's
+client (:mod:`services.drives`), and tested without I/O.
+
+Bus layout (11-bit identifiers, CANopen pre-defined connection set):
+
+=========  ==============  ===============================================================
+COB-ID     direction       payload
+=========  ==============  ===============================================================
+0x000      master -> all   NMT: ``[command, node]`` (0x01 start, 0x80 pre-operational,
+                           0x81 reset node; node 0 = all)
+0x080      sim -> all      SYNC, no data, every 2 ms of simulated time (the sim is the
+                           SYNC producer so that its clock paces the bus in both lock-step
+                           and real-time modes)
+0x200+id   master -> id    RPDO1: controlword uint16 LE, target position int32 LE
+0x180+id   id -> master    TPDO1: statusword uint16 LE, actual position int32 LE; sent by
+                           each drive right after every SYNC while operational
+0x190      crossfire       TPDO1 of the crossfire I/O module (node 0x10): 1 byte, bit 0 =
+                           beam interrupted; sent on change and on NMT start
+0x700+id   id -> master    heartbeat: 1 byte NMT state (0x00 boot-up, 0x05 operational,
+                           0x7F pre-operational), every 100 ms of simulated time
+=========  ==============  ===============================================================
+
+Drive node ids 1..6 are joints 1..6. Positions on the bus are int32 in units of 1e-5 rad
+(:data:`POSITION_UNIT`; range +-21474 rad), the drive's user-unit scaling. A target received in an
+RPDO is latched at the next SYNC and interpolated linearly over the following 2 ms cycle.
+
+CiA 402 power state machine (minimal subset, statusword values with the "remote" bit clear):
+``SWITCH_ON_DISABLED (0x0040) -shutdown 0x06-> READY_TO_SWITCH_ON (0x0021) -switch on 0x07->
+SWITCHED_ON (0x0023) -enable operation 0x0F-> OPERATION_ENABLED (0x0027)``; ``disable voltage
+(0x00)`` returns to SWITCH_ON_DISABLED; a following error puts the drive in FAULT (0x0008); a rising
+edge of controlword bit 7 (fault reset, 0x80) leaves FAULT for SWITCH_ON_DISABLED.
+
+socketcand ASCII (linux-can/socketcand doc/protocol.md): server greets ``< hi >``; ``< open can0 >``
+and ``< rawmode >`` are answered ``< ok >``; in raw mode the server sends
+``< frame ID SECS.USECS DATA >`` and the client sends ``< send ID LEN B0 B1 ... >``. ``DATA`` is
+written as contiguous hex bytes (as the socketcand daemon does and python-can's client parses);
+an empty frame has an empty data field.
+"""
+
+from __future__ import annotations
+
+import enum
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+__all__ = [
+    "CROSSFIRE_ID",
+    "CYCLE_S",
+    "DRIVE_IDS",
+    "HEARTBEAT_BASE",
+    "HEARTBEAT_PERIOD_S",
+    "NMT_ID",
+    "POSITION_UNIT",
+    "RPDO1_BASE",
+    "SYNC_ID",
+    "TPDO1_BASE",
+    "CanFrame",
+    "Cia402StateMachine",
+    "Controlword",
+    "DriveState",
+    "FrameError",
+    "NmtCommand",
+    "NmtState",
+    "SocketcandServerProtocol",
+    "decode_crossfire",
+    "decode_heartbeat",
+    "decode_rpdo1",
+    "decode_tpdo1",
+    "encode_crossfire",
+    "encode_heartbeat",
+    "encode_rpdo1",
+    "encode_tpdo1",
+    "format_frame",
+    "format_send",
+    "nmt_frame",
+    "parse_message",
+    "rad_to_units",
+    "state_from_statusword",
+    "statusword",
+    "units_to_rad",
+]
+
+NMT_ID = 0x000
+SYNC_ID = 0x080
+RPDO1_BASE = 0x200
+TPDO1_BASE = 0x180
+HEARTBEAT_BASE = 0x700
+DRIVE_IDS = (1, 2, 3, 4, 5, 6)
+CROSSFIRE_ID = 0x10
+POSITION_UNIT = 1e-5  # rad per bus unit
+CYCLE_S = 0.002
+HEARTBEAT_PERIOD_S = 0.1
+
+_INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
+
+
+class FrameError(ValueError):
+    """A CAN payload or socketcand message is malformed or out of range."""
+
+
+class NmtState(enum.IntEnum):
+    """NMT state of a node as reported in its heartbeat."""
+
+    BOOT_UP = 0x00
+    STOPPED = 0x04
+    OPERATIONAL = 0x05
+    PRE_OPERATIONAL = 0x7F
+
+
+class NmtCommand(enum.IntEnum):
+    """NMT command specifiers (first byte of a frame on COB-ID 0x000)."""
+
+    START = 0x01
+    STOP = 0x02
+    PRE_OPERATIONAL = 0x80
+    RESET_NODE = 0x81
+
+
+class Controlword(enum.IntEnum):
+    """CiA 402 controlword commands used here."""
+
+    DISABLE_VOLTAGE = 0x0000
+    SHUTDOWN = 0x0006
+    SWITCH_ON = 0x0007
+    ENABLE_OPERATION = 0x000F
+    FAULT_RESET = 0x0080
+
+
+class DriveState(enum.Enum):
+    """CiA 402 power states (minimal subset)."""
+
+    SWITCH_ON_DISABLED = "switch on disabled"
+    READY_TO_SWITCH_ON = "ready to switch on"
+    SWITCHED_ON = "switched on"
+    OPERATION_ENABLED = "operation enabled"
+    FAULT = "fault"
+
+
+_STATUSWORDS = {
+    DriveState.SWITCH_ON_DISABLED: 0x0040,
+    DriveState.READY_TO_SWITCH_ON: 0x0021,
+    DriveState.SWITCHED_ON: 0x0023,
+    DriveState.OPERATION_ENABLED: 0x0027,
+    DriveState.FAULT: 0x0008,
+}
+# Masks as in CiA 402: bits 0-3, 5, 6 identify the state.
+_STATE_MASK = 0x006F
+_FOLLOWING_ERROR_BIT = 0x2000  # statusword bit 13 (in position modes: following error)
+
+
+@dataclass(frozen=True, slots=True)
+class CanFrame:
+    """One classic CAN frame.
+
+    Attributes:
+        can_id: 11-bit identifier.
+        data: 0..8 payload bytes.
+        t: timestamp, s (simulated time on the sim side).
+    """
+
+    can_id: int
+    data: bytes = b""
+    t: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.can_id <= 0x7FF:
+            raise FrameError(f"CAN id {self.can_id:#x} is not an 11-bit identifier")
+        if len(self.data) > 8:
+            raise FrameError(f"CAN frame with {len(self.data)} data bytes (max 8)")
+
+
+def rad_to_units(q: float) -> int:
+    """Radians to bus position units (1e-5 rad), rounded.
+
+    Raises:
+        FrameError: the value does not fit an int32.
+    """
+    units = round(q / POSITION_UNIT)
+    if not _INT32_MIN <= units <= _INT32_MAX:
+        raise FrameError(f"position {q} rad does not fit an int32 of 1e-5 rad")
+    return int(units)
+
+
+def units_to_rad(units: int) -> float:
+    """Bus position units (1e-5 rad) to radians."""
+    return units * POSITION_UNIT
+
+
+def encode_rpdo1(node: int, controlword: int, target_rad: float) -> CanFrame:
+    """RPDO1 to a drive: controlword (uint16 LE) and target position (int32 LE, 1e-5 rad)."""
+    return CanFrame(RPDO1_BASE + node, struct.pack("<Hi", controlword & 0xFFFF, rad_to_units(target_rad)))
+
+
+def decode_rpdo1(data: bytes) -> tuple[int, float]:
+    """Inverse of :func:`encode_rpdo1`: ``(controlword, target_rad)``.
+
+    Raises:
+        FrameError: wrong length.
+    """
+    if len(data) != 6:
+        raise FrameError(f"RPDO1 needs 6 bytes, got {len(data)}")
+    cw, units = struct.unpack("<Hi", data)
+    return int(cw), units_to_rad(units)
+
+
+def encode_tpdo1(node: int, status: int, actual_rad: float, t: float = 0.0) -> CanFrame:
+    """TPDO1 from a drive: statusword (uint16 LE) and actual position (int32 LE, 1e-5 rad)."""
+    return CanFrame(TPDO1_BASE + node, struct.pack("<Hi", status & 0xFFFF, rad_to_units(actual_rad)), t)
+
+
+def decode_tpdo1(data: bytes) -> tuple[int, float]:
+    """Inverse of :func:`encode_tpdo1`: ``(statusword, actual_rad)``.
+
+    Raises:
+        FrameError: wrong length.
+    """
+    if len(data) != 6:
+        raise FrameError(f"TPDO1 needs 6 bytes, got {len(data)}")
+    sw, units = struct.unpack("<Hi", data)
+    return int(sw), units_to_rad(units)
+
+
+def encode_heartbeat(node: int, state: NmtState, t: float = 0.0) -> CanFrame:
+    """Heartbeat (0x700 + node) carrying the NMT state."""
+    return CanFrame(HEARTBEAT_BASE + node, bytes([int(state)]), t)
+
+
+def decode_heartbeat(data: bytes) -> NmtState:
+    """NMT state from a heartbeat payload.
+
+    Raises:
+        FrameError: wrong length or unknown state.
+    """
+    if len(data) != 1:
+        raise FrameError(f"heartbeat needs 1 byte, got {len(data)}")
+    try:
+        return NmtState(data[0] & 0x7F)  # bit 7 is the node-guarding toggle bit
+    except ValueError as exc:
+        raise FrameError(f"unknown NMT state {data[0]:#x}") from exc
+
+
+def encode_crossfire(blocked: bool, t: float = 0.0) -> CanFrame:
+    """TPDO1 of the crossfire I/O module: bit 0 set when the light beam is interrupted."""
+    return CanFrame(TPDO1_BASE + CROSSFIRE_ID, bytes([1 if blocked else 0]), t)
+
+
+def decode_crossfire(data: bytes) -> bool:
+    """Beam state from a crossfire TPDO payload.
+
+    Raises:
+        FrameError: wrong length.
+    """
+    if len(data) != 1:
+        raise FrameError(f"crossfire TPDO needs 1 byte, got {len(data)}")
+    return bool(data[0] & 0x01)
+
+
+def nmt_frame(command: NmtCommand, node: int = 0) -> CanFrame:
+    """NMT command frame (node 0 addresses all nodes)."""
+    return CanFrame(NMT_ID, bytes([int(command), node & 0x7F]))
+
+
+def statusword(state: DriveState, following_error: bool = False) -> int:
+    """Statusword for a power state (bit 13 flags a following error)."""
+    return _STATUSWORDS[state] | (_FOLLOWING_ERROR_BIT if following_error else 0)
+
+
+def state_from_statusword(sw: int) -> DriveState:
+    """Power state from a statusword.
+
+    Raises:
+        FrameError: the statusword does not encode a state of the subset.
+    """
+    if sw & 0x004F == 0x0008:
+        return DriveState.FAULT
+    for state, value in _STATUSWORDS.items():
+        if sw & _STATE_MASK == value:
+            return state
+    raise FrameError(f"statusword {sw:#06x} encodes no supported CiA 402 state")
+
+
+@dataclass
+class Cia402StateMachine:
+    """Minimal CiA 402 power state machine of one drive (pure).
+
+    Attributes:
+        state: current power state.
+        fault_reason: why the drive faulted (empty when not in FAULT).
+    """
+
+    state: DriveState = DriveState.SWITCH_ON_DISABLED
+    fault_reason: str = ""
+    _last_cw: int = field(default=0, repr=False)
+
+    def on_controlword(self, cw: int) -> DriveState:
+        """Apply a controlword; returns the new state. Unknown commands are ignored."""
+        rising_reset = bool(cw & 0x80) and not bool(self._last_cw & 0x80)
+        self._last_cw = cw
+        if self.state is DriveState.FAULT:
+            if rising_reset:
+                self.state = DriveState.SWITCH_ON_DISABLED
+                self.fault_reason = ""
+            return self.state
+        cmd = cw & 0x008F
+        if cmd & 0x0002 == 0:  # disable voltage (bit 1 clear)
+            self.state = DriveState.SWITCH_ON_DISABLED
+        elif cmd == Controlword.SHUTDOWN:
+            self.state = DriveState.READY_TO_SWITCH_ON
+        elif cmd == Controlword.SWITCH_ON and self.state in (
+            DriveState.READY_TO_SWITCH_ON,
+            DriveState.OPERATION_ENABLED,
+        ):
+            self.state = DriveState.SWITCHED_ON
+        elif cmd == Controlword.ENABLE_OPERATION and self.state in (
+            DriveState.SWITCHED_ON,
+            DriveState.OPERATION_ENABLED,
+        ):
+            self.state = DriveState.OPERATION_ENABLED
+        return self.state
+
+    def fault(self, reason: str) -> None:
+        """Enter FAULT (e.g. on a following error)."""
+        self.state = DriveState.FAULT
+        self.fault_reason = reason
+
+    @property
+    def statusword(self) -> int:
+        """Statusword of the current state."""
+        return statusword(self.state, following_error=self.state is DriveState.FAULT)
+
+
+# --- socketcand ASCII ---------------------------------------------------------------------------
+
+
+def format_frame(frame: CanFrame) -> bytes:
+    """Server -> client raw-mode frame: ``< frame ID SECS.USECS DATA >``."""
+    secs = max(frame.t, 0.0)
+    whole = int(secs)
+    usecs = round((secs - whole) * 1e6)
+    if usecs >= 1_000_000:
+        whole, usecs = whole + 1, usecs - 1_000_000
+    return f"< frame {frame.can_id:03X} {whole}.{usecs:06d} {frame.data.hex().upper()} >".encode("ascii")
+
+
+def format_send(frame: CanFrame) -> bytes:
+    """Client -> server send command: ``< send ID LEN B0 B1 ... >``."""
+    body = "".join(f" {b:02X}" for b in frame.data)
+    return f"< send {frame.can_id:03X} {len(frame.data)}{body} >".encode("ascii")
+
+
+def parse_message(text: str) -> tuple[str, list[str]]:
+    """Split one ``< ... >`` message into its command word and arguments.
+
+    Raises:
+        FrameError: not delimited by ``<`` and ``>`` or empty.
+    """
+    text = text.strip()
+    if not (text.startswith("<") and text.endswith(">")):
+        raise FrameError(f"socketcand message not in angle brackets: {text!r}")
+    words = text[1:-1].split()
+    if not words:
+        raise FrameError("empty socketcand message")
+    return words[0], words[1:]
+
+
+def _parse_send(args: list[str], t: float) -> CanFrame:
+    if len(args) < 2:
+        raise FrameError("send needs an id and a length")
+    try:
+        can_id = int(args[0], 16)
+        length = int(args[1], 16)
+        data = bytes(int(b, 16) for b in args[2:])
+    except ValueError as exc:
+        raise FrameError(f"bad number in send command: {' '.join(args)}") from exc
+    if length != len(data):
+        raise FrameError(f"send says {length} bytes but carries {len(data)}")
+    if can_id > 0x7FF:
+        raise FrameError("extended identifiers are not supported on this bus")
+    return CanFrame(can_id, data, t)
+
+
+class ServerMode(enum.Enum):
+    """Modes of a socketcand connection, server side."""
+
+    NO_BUS = "no bus"
+    BCM = "bcm"
+    RAW = "raw"
+    CLOSED = "closed"
+
+
+class SocketcandServerProtocol:
+    """Sans-IO server side of one socketcand connection (subset: open, rawmode, send, echo).
+
+    Feed received bytes with :meth:`receive_data`; it returns the CAN frames the client sent.
+    Bytes to write back accumulate in :meth:`data_to_send`. :attr:`mode` tells whether bus frames
+    may be forwarded to the client (only in raw mode). A malformed message is answered with
+    ``< error ... >`` and otherwise ignored; an unknown bus closes the connection.
+
+    Args:
+        channels: bus names this server offers (e.g. ``("can0",)``).
+    """
+
+    MAX_MESSAGE = 256
+
+    def __init__(self, channels: Sequence[str] = ("can0",)) -> None:
+        self.channels = tuple(channels)
+        self.mode = ServerMode.NO_BUS
+        self.channel: str | None = None
+        self._in = bytearray()
+        self._out = bytearray(b"< hi >")
+
+    def receive_data(self, data: bytes, t: float = 0.0) -> list[CanFrame]:
+        """Consume bytes from the client; returns the frames it asked to send (stamped ``t``)."""
+        self._in += data
+        frames: list[CanFrame] = []
+        while self.mode is not ServerMode.CLOSED:
+            start = self._in.find(b"<")
+            if start < 0:
+                self._in.clear()
+                break
+            end = self._in.find(b">", start)
+            if end < 0:
+                del self._in[:start]
+                if len(self._in) > self.MAX_MESSAGE:
+                    self._error("message too long")
+                    self._in.clear()
+                break
+            raw = bytes(self._in[start : end + 1])
+            del self._in[: end + 1]
+            try:
+                cmd, args = parse_message(raw.decode("ascii"))
+            except (FrameError, UnicodeDecodeError) as exc:
+                self._error(str(exc))
+                continue
+            frame = self._command(cmd, args, t)
+            if frame is not None:
+                frames.append(frame)
+        return frames
+
+    def _command(self, cmd: str, args: list[str], t: float) -> CanFrame | None:
+        if cmd == "echo":
+            self._out += b"< echo >"
+        elif cmd == "open" and self.mode is ServerMode.NO_BUS:
+            if len(args) == 1 and args[0] in self.channels:
+                self.channel = args[0]
+                self.mode = ServerMode.BCM
+                self._out += b"< ok >"
+            else:
+                self._error(f"could not open bus {' '.join(args)}")
+                self.mode = ServerMode.CLOSED
+        elif cmd == "rawmode" and self.mode in (ServerMode.BCM, ServerMode.RAW):
+            self.mode = ServerMode.RAW
+            self._out += b"< ok >"
+        elif cmd == "bcmmode" and self.mode in (ServerMode.BCM, ServerMode.RAW):
+            self.mode = ServerMode.BCM
+            self._out += b"< ok >"
+        elif cmd == "send" and self.mode in (ServerMode.BCM, ServerMode.RAW):
+            try:
+                return _parse_send(args, t)
+            except FrameError as exc:
+                self._error(str(exc))
+        else:
+            self._error(f"command {cmd} not supported in mode {self.mode.value}")
+        return None
+
+    def _error(self, text: str) -> None:
+        safe = text.replace("<", "(").replace(">", ")")
+        self._out += f"< error {safe} >".encode("ascii", "replace")
+
+    def frame_out(self, frame: CanFrame) -> None:
+        """Queue a bus frame for the client (dropped unless in raw mode)."""
+        if self.mode is ServerMode.RAW:
+            self._out += format_frame(frame)
+
+    def data_to_send(self) -> bytes:
+        """Bytes to write to the client now (and forget)."""
+        out = bytes(self._out)
+        self._out.clear()
+        return out

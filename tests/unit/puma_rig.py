@@ -1,0 +1,65 @@
+"""Test helper: a pybullet PUMA 560 on its simulated CAN bus, stepped by hand or in real time."""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+import pybullet
+from pybullet_utils import bullet_client
+
+from sim import puma560 as P
+from sim.canbus import SimDrives
+
+
+class SimRig:
+    """A pybullet PUMA with SimDrives, stepped by hand or by a real-time thread."""
+
+    def __init__(self, tmp_path, q0=P.Q_HOME, crossfire: Callable[[], bool] | None = None):
+        self.pb = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+        self.pb.setGravity(0, 0, -9.81)
+        self.pb.setPhysicsEngineParameter(fixedTimeStep=0.001)
+        body, joints, _ = P.load(self.pb, P.write_urdf(tmp_path / "puma.urdf"))
+        for j, q in zip(joints, q0):
+            self.pb.resetJointState(body, j, float(q))
+        self.crossfire_state = False
+        self.drives = SimDrives()
+        self.drives.attach(self.pb, body, joints, crossfire=crossfire or (lambda: self.crossfire_state))
+        self.t = 0.0
+        self.lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self.running = threading.Event()
+
+    def step(self, n=1):
+        with self.lock:
+            for _ in range(n):
+                self.drives.step(self.t)
+                self.pb.stepSimulation()
+                self.t = round(self.t + 0.001, 9)
+
+    def start(self):
+        self.running.set()
+
+        def loop():
+            t0 = time.monotonic()
+            sim0 = self.t
+            while not self._stop.is_set():
+                if not self.running.is_set():
+                    time.sleep(0.005)
+                    t0, sim0 = time.monotonic(), self.t
+                    continue
+                self.step(2)
+                ahead = (self.t - sim0) - (time.monotonic() - t0)
+                if ahead > 0:
+                    time.sleep(ahead)
+
+        self._thread = threading.Thread(target=loop, daemon=True)
+        self._thread.start()
+
+    def close(self):
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5)
+        self.pb.disconnect()

@@ -1,0 +1,366 @@
+"""The PUMA's CAN bus: frame encoding, CiA 402 state machine, socketcand protocol, simulated
+drives, the loopback gateway with python-can's socketcand client, and the motion node's drives."""
+
+from __future__ import annotations
+
+import time
+
+import can
+import numpy as np
+import pytest
+from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_message
+from puma_rig import SimRig
+
+from services.drives import BusError, PumaDrives
+from sim import canframes as cf
+from sim import puma560 as P
+from sim.canbus import CanGateway
+
+# --- pure encoding -------------------------------------------------------------------------------
+
+
+def test_rpdo1_round_trips_controlword_and_target_in_units_of_1e_5_rad():
+    frame = cf.encode_rpdo1(3, cf.Controlword.ENABLE_OPERATION, -1.234567)
+    assert frame.can_id == 0x203
+    assert frame.data == bytes([0x0F, 0x00]) + (-123457).to_bytes(4, "little", signed=True)
+    cw, q = cf.decode_rpdo1(frame.data)
+    assert cw == 0x0F and q == pytest.approx(-1.23457, abs=1e-12)
+
+
+def test_tpdo1_round_trips_statusword_and_actual_position():
+    frame = cf.encode_tpdo1(6, 0x0027, 4.5, t=1.25)
+    assert frame.can_id == 0x186 and frame.t == 1.25
+    assert cf.decode_tpdo1(frame.data) == (0x0027, pytest.approx(4.5))
+
+
+def test_positions_outside_int32_are_refused():
+    with pytest.raises(cf.FrameError):
+        cf.rad_to_units(30000.0)
+
+
+def test_wrong_payload_lengths_are_refused():
+    for decode in (cf.decode_rpdo1, cf.decode_tpdo1, cf.decode_heartbeat, cf.decode_crossfire):
+        with pytest.raises(cf.FrameError):
+            decode(b"\x00" * 7)
+    with pytest.raises(cf.FrameError):
+        cf.CanFrame(0x800, b"")
+    with pytest.raises(cf.FrameError):
+        cf.CanFrame(0x100, bytes(9))
+
+
+def test_heartbeat_crossfire_and_nmt_frames_have_the_cia_301_layout():
+    hb = cf.encode_heartbeat(4, cf.NmtState.OPERATIONAL)
+    assert (hb.can_id, hb.data) == (0x704, b"\x05")
+    assert cf.decode_heartbeat(b"\x85") is cf.NmtState.OPERATIONAL  # toggle bit ignored
+    cross = cf.encode_crossfire(True)
+    assert (cross.can_id, cross.data) == (0x190, b"\x01")
+    assert cf.decode_crossfire(b"\x00") is False
+    nmt = cf.nmt_frame(cf.NmtCommand.START)
+    assert (nmt.can_id, nmt.data) == (0x000, b"\x01\x00")
+
+
+def test_statuswords_map_to_states_and_back():
+    for state in cf.DriveState:
+        assert cf.state_from_statusword(cf.statusword(state)) is state
+    assert cf.state_from_statusword(0x0627) is cf.DriveState.OPERATION_ENABLED  # extra bits ignored
+    with pytest.raises(cf.FrameError):
+        cf.state_from_statusword(0x0000)
+
+
+def test_the_state_machine_walks_to_operation_enabled_and_faults():
+    sm = cf.Cia402StateMachine()
+    assert sm.on_controlword(cf.Controlword.ENABLE_OPERATION) is cf.DriveState.SWITCH_ON_DISABLED
+    assert sm.on_controlword(cf.Controlword.SHUTDOWN) is cf.DriveState.READY_TO_SWITCH_ON
+    assert sm.on_controlword(cf.Controlword.SWITCH_ON) is cf.DriveState.SWITCHED_ON
+    assert sm.on_controlword(cf.Controlword.ENABLE_OPERATION) is cf.DriveState.OPERATION_ENABLED
+    assert sm.statusword == 0x0027
+    sm.fault("following error")
+    assert sm.statusword & 0x2008 == 0x2008
+    assert sm.on_controlword(cf.Controlword.ENABLE_OPERATION) is cf.DriveState.FAULT
+    assert sm.on_controlword(cf.Controlword.FAULT_RESET) is cf.DriveState.SWITCH_ON_DISABLED
+    assert sm.fault_reason == ""
+
+
+def test_fault_reset_needs_a_rising_edge_of_bit_7():
+    sm = cf.Cia402StateMachine()
+    sm.on_controlword(cf.Controlword.FAULT_RESET)
+    sm.fault("x")
+    assert sm.on_controlword(cf.Controlword.FAULT_RESET) is cf.DriveState.FAULT  # bit 7 still high
+    sm.on_controlword(cf.Controlword.DISABLE_VOLTAGE)
+    assert sm.on_controlword(cf.Controlword.FAULT_RESET) is cf.DriveState.SWITCH_ON_DISABLED
+
+
+# --- socketcand protocol (sans-IO) ---------------------------------------------------------------
+
+
+def test_the_server_greets_opens_the_bus_and_enters_raw_mode():
+    proto = cf.SocketcandServerProtocol(("can0",))
+    assert proto.data_to_send() == b"< hi >"
+    assert proto.receive_data(b"< open can0 >") == []
+    assert proto.data_to_send() == b"< ok >"
+    proto.frame_out(cf.CanFrame(0x80))  # not yet in raw mode: dropped
+    assert proto.data_to_send() == b""
+    proto.receive_data(b"< rawm")
+    proto.receive_data(b"ode >")
+    assert proto.data_to_send() == b"< ok >"
+    assert proto.mode is cf.ServerMode.RAW
+
+
+def test_send_commands_become_frames_even_when_split_or_batched():
+    proto = cf.SocketcandServerProtocol()
+    proto.receive_data(b"< open can0 >< rawmode >")
+    proto.data_to_send()
+    frames = proto.receive_data(b"< send 201 6 f 0 1 2 3 4 >< send 0 2 1 0 >< send 8")
+    frames += proto.receive_data(b"0 0 >")
+    assert frames == [
+        cf.CanFrame(0x201, bytes([0x0F, 0, 1, 2, 3, 4])),
+        cf.CanFrame(0x000, b"\x01\x00"),
+        cf.CanFrame(0x080, b""),
+    ]
+    assert proto.data_to_send() == b""
+
+
+def test_a_send_with_a_wrong_length_is_answered_with_an_error():
+    proto = cf.SocketcandServerProtocol()
+    proto.receive_data(b"< open can0 >")
+    proto.data_to_send()
+    assert proto.receive_data(b"< send 201 3 1 2 >") == []
+    assert proto.data_to_send().startswith(b"< error ")
+
+
+def test_an_unknown_bus_closes_the_connection():
+    proto = cf.SocketcandServerProtocol(("can0",))
+    proto.receive_data(b"< open can7 >< rawmode >")
+    assert proto.mode is cf.ServerMode.CLOSED
+
+
+def test_frames_are_formatted_as_python_can_parses_them():
+    for frame in (cf.CanFrame(0x181, bytes([0x27, 0, 1, 2, 3, 4]), 12.5), cf.CanFrame(0x80, b"", 3.000001)):
+        text = cf.format_frame(frame).decode()
+        msg = convert_ascii_message_to_can_message(text)
+        assert msg.arbitration_id == frame.can_id
+        assert bytes(msg.data) == frame.data
+        assert msg.timestamp == pytest.approx(frame.t, abs=1e-6)
+        assert not msg.is_extended_id
+
+
+def test_python_can_send_text_parses_back_to_the_same_frame():
+    from can.interfaces.socketcand.socketcand import (
+        convert_can_message_to_ascii_message,
+    )
+
+    msg = can.Message(arbitration_id=0x205, data=[0x0F, 0, 0xAB, 0xCD, 0xEF, 0x01], is_extended_id=False)
+    proto = cf.SocketcandServerProtocol()
+    proto.receive_data(b"< open can0 >< rawmode >")
+    frames = proto.receive_data(convert_can_message_to_ascii_message(msg).encode())
+    assert frames == [cf.CanFrame(0x205, bytes(msg.data))]
+    assert cf.format_send(frames[0]) == b"< send 205 6 0F 00 AB CD EF 01 >"
+
+
+# --- simulated drives ------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def rig(tmp_path):
+    r = SimRig(tmp_path)
+    yield r
+    r.close()
+
+
+def _enable_in_process(rig, port):
+    q = rig.drives.positions()
+    port.send(cf.nmt_frame(cf.NmtCommand.START))
+    for cw in (cf.Controlword.SHUTDOWN, cf.Controlword.SWITCH_ON, cf.Controlword.ENABLE_OPERATION):
+        for node, qi in zip(cf.DRIVE_IDS, q):
+            port.send(cf.encode_rpdo1(node, cw, qi))
+        rig.step(2)
+
+
+def test_drives_boot_send_heartbeats_and_sync_every_two_milliseconds(rig):
+    port = rig.drives.bus.connect()
+    rig.step(201)
+    frames = port.recv_all()
+    syncs = [f for f in frames if f.can_id == cf.SYNC_ID]
+    assert len(syncs) == 101
+    assert np.allclose(np.diff([f.t for f in syncs]), 0.002)
+    boot = [f for f in frames if f.can_id in range(0x701, 0x707) and f.data == b"\x00"]
+    assert len(boot) == 6
+    beats = [f for f in frames if f.can_id == 0x701]
+    assert [f.data for f in beats] == [b"\x00", b"\x7f", b"\x7f"]
+    assert not [f for f in frames if 0x181 <= f.can_id <= 0x186]  # pre-operational: no PDOs
+
+
+def test_enabled_drives_follow_targets_and_report_them_after_each_sync(rig):
+    port = rig.drives.bus.connect()
+    _enable_in_process(rig, port)
+    assert rig.drives.states() == [cf.DriveState.OPERATION_ENABLED] * 6
+    q = np.asarray(rig.drives.positions())
+    goal = q + np.array([0.05, -0.05, 0.05, 0.1, -0.1, 0.1])
+    # ramp at a speed within the limits, one target per 2 ms cycle
+    for k in range(1, 101):
+        for node in cf.DRIVE_IDS:
+            target = q[node - 1] + (goal[node - 1] - q[node - 1]) * k / 100
+            port.send(cf.encode_rpdo1(node, cf.Controlword.ENABLE_OPERATION, target))
+        rig.step(2)
+    rig.step(300)
+    assert np.allclose(rig.drives.positions(), goal, atol=2e-3)
+    port.recv_all()
+    rig.step(2)
+    tpdos = {f.can_id: cf.decode_tpdo1(f.data) for f in port.recv_all() if 0x181 <= f.can_id <= 0x186}
+    assert sorted(tpdos) == list(range(0x181, 0x187))
+    for node in cf.DRIVE_IDS:
+        sw, qa = tpdos[0x180 + node]
+        assert cf.state_from_statusword(sw) is cf.DriveState.OPERATION_ENABLED
+        assert qa == pytest.approx(goal[node - 1], abs=2e-3)
+
+
+def test_a_target_jump_faults_the_drive_on_following_error_and_it_holds(rig):
+    port = rig.drives.bus.connect()
+    _enable_in_process(rig, port)
+    q = rig.drives.positions()
+    port.send(cf.encode_rpdo1(2, cf.Controlword.ENABLE_OPERATION, q[1] + 1.0))
+    rig.step(100)
+    states = rig.drives.states()
+    assert states[1] is cf.DriveState.FAULT
+    assert "following error" in rig.drives.fault_reasons()[1]
+    held = rig.drives.positions()[1]
+    rig.step(200)
+    assert rig.drives.positions()[1] == pytest.approx(held, abs=5e-3)
+    port.send(cf.encode_rpdo1(2, cf.Controlword.FAULT_RESET, held))
+    rig.step(4)
+    assert rig.drives.states()[1] is cf.DriveState.SWITCH_ON_DISABLED
+
+
+def test_disabled_drives_hold_the_arm_against_gravity(rig):
+    q0 = np.asarray(rig.drives.positions())
+    rig.step(500)
+    assert np.allclose(rig.drives.positions(), q0, atol=5e-3)
+
+
+def test_the_crossfire_module_reports_changes_once_started(rig):
+    port = rig.drives.bus.connect()
+    rig.crossfire_state = True
+    rig.step(10)
+    assert not [f for f in port.recv_all() if f.can_id == 0x190]  # pre-operational: silent
+    port.send(cf.nmt_frame(cf.NmtCommand.START, cf.CROSSFIRE_ID))
+    rig.step(5)
+    reports = [cf.decode_crossfire(f.data) for f in port.recv_all() if f.can_id == 0x190]
+    assert reports == [True]
+    rig.crossfire_state = False
+    rig.step(5)
+    rig.crossfire_state = True
+    rig.step(5)
+    reports = [cf.decode_crossfire(f.data) for f in port.recv_all() if f.can_id == 0x190]
+    assert reports == [False, True]
+
+
+# --- across processes: gateway, python-can, PumaDrives ---------------------------------------------
+
+
+@pytest.fixture
+def served(rig):
+    gw = CanGateway(rig.drives.bus)
+    port = gw.start()
+    rig.start()
+    yield rig, gw, port
+    gw.stop()
+
+
+@pytest.mark.timeout(30)
+def test_python_can_socketcand_client_sees_sync_and_commands_the_drives(served):
+    _rig, _, port = served
+    bus = can.Bus(interface="socketcand", host="127.0.0.1", port=port, channel="can0")
+    try:
+        deadline = time.monotonic() + 3
+        got_sync = False
+        while time.monotonic() < deadline and not got_sync:
+            msg = bus.recv(timeout=0.1)
+            got_sync = msg is not None and msg.arbitration_id == cf.SYNC_ID
+        assert got_sync
+        bus.send(can.Message(arbitration_id=0, data=[1, 0], is_extended_id=False))
+        deadline = time.monotonic() + 3
+        seen_tpdo = False
+        while time.monotonic() < deadline and not seen_tpdo:
+            msg = bus.recv(timeout=0.1)
+            seen_tpdo = msg is not None and msg.arbitration_id == 0x181 and len(msg.data) == 6
+        assert seen_tpdo
+    finally:
+        bus.shutdown()
+
+
+@pytest.mark.timeout(60)
+def test_puma_drives_enable_servo_and_report_crossfire_over_the_gateway(served):
+    rig, _, port = served
+    events: list[tuple[bool, float]] = []
+    with PumaDrives("127.0.0.1", port) as drives:
+        drives.on_crossfire(lambda blocked, t: events.append((blocked, t)))
+        drives.enable()
+        assert drives.states() == [cf.DriveState.OPERATION_ENABLED] * 6
+        q0 = drives.positions()
+        assert np.allclose(q0, P.Q_HOME, atol=5e-3)
+        goal = q0 + 0.05
+        for k in range(1, 151):
+            drives.wait_sync(timeout=1.0)
+            drives.send_targets(q0 + 0.05 * min(k / 100, 1.0))
+        deadline = time.monotonic() + 3
+        while time.monotonic() < deadline and not np.allclose(drives.positions(), goal, atol=3e-3):
+            drives.wait_sync(timeout=1.0)
+            drives.send_targets(goal)
+        assert np.allclose(drives.positions(), goal, atol=3e-3)
+        rig.crossfire_state = True
+        deadline = time.monotonic() + 3
+        while time.monotonic() < deadline and drives.crossfire is not True:
+            time.sleep(0.01)
+        assert drives.crossfire is True
+        assert events[-1][0] is True and events[-1][1] > 0
+        drives.check()
+
+
+@pytest.mark.timeout(30)
+def test_a_silent_bus_is_reported_as_lost_heartbeat(served):
+    rig, _, port = served
+    with PumaDrives("127.0.0.1", port, heartbeat_timeout=0.3) as drives:
+        drives.enable()
+        drives.check()
+        rig.running.clear()  # the sim stops: no SYNC, no heartbeat
+        time.sleep(0.5)
+        with pytest.raises(BusError, match="heartbeat"):
+            drives.check()
+        with pytest.raises(BusError, match="SYNC"):
+            drives.wait_sync(timeout=0.1)
+
+
+@pytest.mark.timeout(30)
+def test_a_closed_gateway_makes_the_drives_report_a_dead_bus(served):
+    _rig, gw, port = served
+    drives = PumaDrives("127.0.0.1", port, heartbeat_timeout=0.3).open()
+    try:
+        drives.enable()
+        gw.stop()
+        time.sleep(0.6)
+        with pytest.raises(BusError):
+            drives.check()
+    finally:
+        drives.close()
+
+
+def test_opening_a_bus_where_nothing_listens_fails_fast():
+    import socket
+
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    free = s.getsockname()[1]
+    s.close()
+    t0 = time.monotonic()
+    with pytest.raises(BusError, match="cannot open"):
+        PumaDrives("127.0.0.1", free).open(timeout=0.3)
+    assert time.monotonic() - t0 < 2.0
+
+
+def test_after_a_teleport_reset_hold_keeps_the_arm_where_it_was_put(rig):
+    q_new = P.Q_HOME + 0.2
+    for j, q in zip(rig.drives._drives, q_new):
+        rig.pb.resetJointState(rig.drives._body, j.joint, float(q))
+    rig.drives.reset_hold()
+    rig.step(300)
+    assert np.allclose(rig.drives.positions(), q_new, atol=5e-3)
