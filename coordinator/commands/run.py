@@ -44,15 +44,14 @@ def add_parser(subparsers: Any) -> None:
 
 
 def build_learner(net: Any, seed: int, journal: Any) -> Any:
-    """One learning automaton per primitive task (section 4), restored from the journal if saved there."""
+    """One learning automaton per primitive task (section 4), restored from the journal if saved there.
+
+    Raises:
+        LearnerConfigError: a task's ``learner`` table or its costs are invalid (names the task).
+    """
     from coordinator.learning import Learner
 
-    learner = Learner(seed)
-    for name, task in net.tasks.items():
-        costs = {a.name: a.cost for a in task.actions}
-        known = {k: v for k, v in costs.items() if v is not None}
-        learner.add_task(name, [a.name for a in task.actions], dict(task.learner) or None,
-                         known if len(known) == len(costs) else None)
+    learner = Learner.from_net(net, seed)
     saved = {task: state for task, (_, state) in journal.load_learner().items()}
     if saved:
         learner.restore(saved, strict=False)

@@ -1,0 +1,328 @@
+"""``petrobot learn NET --journal FILE``: what the learning automata have learned (paper section 4).
+
+Reads two tables of the journal (SQLite), never writing to it:
+
+* ``learner_state(task, scheme, state, updated_wall)``: one saved automaton per primitive task
+  (:meth:`coordinator.learning.LearningAutomaton.state_dict` as JSON);
+* ``action_result(instance, task, action, node, status, outcome, cost, wall_s, cpu_s, t_wall)``:
+  every primitive action's result, in journal order.
+
+The net file gives the primitive tasks and their configured learners, so tasks that have not run
+yet are listed too (uniform probabilities, no trials). For each primitive task it reports the probability of each primitive action, R̂, C and Ĵ
+(eq. 1), and whether one action has reached the convergence threshold. ``--plot`` draws the
+probability of each action over the trials. The history is not stored: it is rebuilt by replaying
+the task's results, in journal (rowid) order, through a fresh automaton of the saved configuration
+and seed; the cost of a result is its ``cost`` column, or ``wall_s`` when that is NULL, as the
+runtime feeds the learner. The learning updates are deterministic in (action, status, cost), so the replay ends on
+the saved probabilities exactly when the journal holds every result the learner saw; the report
+says whether it does. Results with a status other than success/failure/error (e.g. cancelled) are
+not part of learning and are skipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sqlite3
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from coordinator.errors import JournalError, PetrobotError
+from coordinator.learning import (
+    STATUSES,
+    Learner,
+    LearningAutomaton,
+    automaton_from_state,
+    make_learner,
+    state_from_json,
+)
+
+__all__ = ["TaskReport", "add_parser", "build_reports", "read_journal", "run"]
+
+_EPS = 1e-12
+
+
+@dataclass
+class TaskReport:
+    """What is known about one primitive task's learning.
+
+    Attributes:
+        task: primitive task name.
+        automaton: the saved automaton, or one rebuilt from the results (``saved`` False).
+        saved: whether ``learner_state`` holds a state for the task.
+        results: (action, status, cost) of the task's results in journal order, learning statuses only.
+        history: probability vectors after each replayed result, shape (len(results) + 1, r);
+            empty when there is no saved state to replay.
+        replay_matches: replayed probabilities equal the saved ones (``None`` without a state).
+        note: a remark for the reader (e.g. the saved learner no longer matches the net).
+    """
+
+    task: str
+    automaton: LearningAutomaton
+    saved: bool
+    results: list[tuple[str, str, float | None]] = field(default_factory=list)
+    history: list[list[float]] = field(default_factory=list)
+    replay_matches: bool | None = None
+    note: str | None = None
+
+
+def add_parser(subparsers: Any) -> None:
+    """Register ``learn`` on the ``petrobot`` sub-command parser."""
+    parser = subparsers.add_parser(
+        "learn",
+        help="report what the learning automata learned (probabilities, R, C, J per action)",
+        description=(
+            "For every primitive task with a learner, report the probability of choosing each "
+            "primitive action, its estimated reliability R, cost C and J = 1 - R + rho*C "
+            "(paper eq. 1), and whether one action reached the convergence threshold. Reads the "
+            "journal's learner_state and action_result tables; never writes to the journal."),
+    )
+    parser.add_argument("net", metavar="NET", help="the task net file the journal was recorded with")
+    parser.add_argument("--journal", required=True, metavar="FILE",
+                        help="SQLite journal of the runs (read only)")
+    parser.add_argument("--json", action="store_true", help="print a JSON document instead of text")
+    parser.add_argument("--plot", metavar="FILE.png",
+                        help="draw the probability of each action over the trials, one panel per task "
+                             "(rebuilt by replaying the journal's results; PNG written with matplotlib)")
+    parser.add_argument("--threshold", type=float, default=0.95,
+                        help="probability at which a task counts as converged (default 0.95)")
+    parser.add_argument("--task", action="append", metavar="NAME",
+                        help="report only this primitive task (repeatable)")
+
+
+def read_journal(path: str) -> tuple[dict[str, dict[str, Any]], dict[str, list[tuple[str, str, float | None]]]]:
+    """Read saved learner states and learning results from a journal, read only.
+
+    Args:
+        path: SQLite journal file.
+
+    Returns:
+        ({task: state dict}, {task: [(action, status, cost), ...] in rowid order}), where cost is
+        the ``cost`` column or, when it is NULL, ``wall_s`` (as the runtime feeds the learner).
+        A missing ``learner_state`` table gives no states; a missing ``action_result`` table gives
+        no results.
+
+    Raises:
+        JournalError: if the file is absent or not a readable SQLite database, or a state is
+            not valid JSON.
+    """
+    if not Path(path).is_file():
+        raise JournalError(f"{path}: no such journal file")
+    try:
+        con = sqlite3.connect(f"file:{Path(path).resolve()}?mode=ro", uri=True, timeout=5.0)
+    except sqlite3.Error as exc:
+        raise JournalError(f"{path}: cannot open journal: {exc}") from exc
+    try:
+        tables = {row[0] for row in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        states: dict[str, dict[str, Any]] = {}
+        if "learner_state" in tables:
+            for task, scheme, text in con.execute(
+                    "SELECT task, scheme, state FROM learner_state ORDER BY task"):
+                state = state_from_json(text)
+                if state.get("scheme") != scheme:
+                    raise JournalError(f"{path}: learner_state of {task!r}: scheme column {scheme!r} "
+                                       f"disagrees with the state ({state.get('scheme')!r})")
+                states[str(task)] = state
+        results: dict[str, list[tuple[str, str, float | None]]] = {}
+        if "action_result" in tables:
+            for task, action, status, cost, wall_s in con.execute(
+                    "SELECT task, action, status, cost, wall_s FROM action_result ORDER BY rowid"):
+                if status not in STATUSES:
+                    continue
+                if cost is None:
+                    cost = wall_s  # what the runtime feeds the learner when no cost is reported
+                value = None if cost is None else float(cost)
+                if value is not None and (not math.isfinite(value) or value < 0.0):
+                    value = None
+                results.setdefault(str(task), []).append((str(action), str(status), value))
+    except sqlite3.Error as exc:
+        raise JournalError(f"{path}: cannot read journal: {exc}") from exc
+    finally:
+        con.close()
+    return states, results
+
+
+def _replay(state: dict[str, Any], results: list[tuple[str, str, float | None]]) -> tuple[list[list[float]], list[float]]:
+    config = dict(state["config"])
+    config["scheme"] = state["scheme"]
+    fresh = make_learner(config, list(state["actions"]), state["costs"], int(state["seed"]))
+    history = [list(fresh.probabilities.values())]
+    for action, status, cost in results:
+        if action in fresh.actions:
+            fresh.update(action, status, cost)
+            history.append(list(fresh.probabilities.values()))
+    return history, history[-1]
+
+
+def build_reports(states: dict[str, dict[str, Any]],
+                  results: dict[str, list[tuple[str, str, float | None]]],
+                  tasks: Sequence[str] | None = None,
+                  configured: Learner | None = None) -> list[TaskReport]:
+    """Combine saved states and results into one :class:`TaskReport` per primitive task.
+
+    Args:
+        states: {task: saved state dict}.
+        results: {task: [(action, status, cost), ...]} in journal order.
+        tasks: report only these tasks (all when ``None`` or empty).
+        configured: the learners the net configures (:meth:`Learner.from_net`), or ``None``.
+
+    Tasks configured but neither saved nor run are reported fresh. Tasks with results but no saved
+    state get estimates rebuilt from their results (measured costs; no probabilities learned).
+    Pure: no I/O.
+
+    Raises:
+        JournalError: if a saved state is malformed.
+    """
+    known = configured.tasks if configured is not None else ()
+    names = sorted(set(states) | set(results) | set(known))
+    if tasks:
+        names = [t for t in names if t in set(tasks)]
+    reports: list[TaskReport] = []
+    for task in names:
+        rows = results.get(task, [])
+        if task in states:
+            auto = automaton_from_state(states[task])
+            rows = [r for r in rows if r[0] in auto.actions]
+            history, final = _replay(states[task], rows)
+            matches = all(abs(a - b) <= _EPS for a, b in zip(final, auto.probabilities.values()))
+            note = None
+            if configured is not None and task in known:
+                now = configured.automaton(task)
+                if (now.scheme, now.actions) != (auto.scheme, auto.actions):
+                    note = (f"the net now configures {now.scheme} over {', '.join(now.actions)}: "
+                            "the saved learner will not be restored")
+            elif configured is not None:
+                note = "this primitive task is not in the net"
+            reports.append(TaskReport(task, auto, True, rows, history, matches, note))
+        elif not rows and configured is not None:
+            fresh = configured.automaton(task)
+            reports.append(TaskReport(task, fresh, True, [], [list(fresh.probabilities.values())],
+                                      None, "no result yet"))
+        else:
+            actions = list(dict.fromkeys(a for a, _, _ in rows))
+            auto = make_learner({"scheme": "fixed", "cost_source": "measured"}, actions)
+            for action, status, cost in rows:
+                auto.update(action, status, cost)
+            reports.append(TaskReport(task, auto, False, rows))
+    return reports
+
+
+def _fmt(value: float | None, digits: int = 3) -> str:
+    return "-" if value is None else f"{value:.{digits}f}"
+
+
+def report_json(reports: list[TaskReport], threshold: float) -> dict[str, Any]:
+    """The ``--json`` document: {"tasks": {task: {...}}}."""
+    out: dict[str, Any] = {}
+    for rep in reports:
+        auto = rep.automaton
+        est = auto.estimates
+        probs = auto.probabilities
+        js = {a: e.j for a, e in est.items() if e.j is not None}
+        out[rep.task] = {
+            "scheme": auto.scheme if rep.saved else None,
+            "config": auto.state_dict()["config"] if rep.saved else None,
+            "steps": auto.steps,
+            "rho": auto.rho,
+            "converged": auto.converged(threshold) if rep.saved else None,
+            "best_estimated": min(js, key=lambda a: js[a]) if js else None,
+            "actions": {
+                a: {"probability": probs[a] if rep.saved else None, "trials": e.trials,
+                    "successes": e.successes, "reliability": e.reliability, "cost": e.cost,
+                    "measured_cost": e.measured_cost, "j": e.j}
+                for a, e in est.items()
+            },
+            "journal_results": len(rep.results),
+            "replay_matches_state": rep.replay_matches,
+            "note": rep.note,
+        }
+    return {"threshold": threshold, "tasks": out}
+
+
+def report_text(reports: list[TaskReport], threshold: float) -> str:
+    """Human-readable report, one block per primitive task."""
+    if not reports:
+        return "no primitive task has a learner state or a result in this journal\n"
+    lines: list[str] = []
+    for rep in reports:
+        auto = rep.automaton
+        if rep.saved:
+            cfg = auto.state_dict()["config"]
+            extra = ", ".join(f"{k}={v}" for k, v in cfg.items())
+            done = auto.converged(threshold)
+            verdict = f"converged to {done}" if done else f"not converged (threshold {threshold})"
+            lines.append(f"{rep.task}: {auto.scheme} ({extra}), {auto.steps} trials, {verdict}")
+        else:
+            lines.append(f"{rep.task}: no saved learner state; estimates from {len(rep.results)} results")
+        lines.append(f"  rho = {auto.rho:.4g}")
+        lines.append(f"  {'action':20s}{'p':>8s}{'trials':>8s}{'R':>8s}{'C':>10s}{'J':>8s}")
+        probs = auto.probabilities
+        for name, e in auto.estimates.items():
+            p = _fmt(probs[name]) if rep.saved else "-"
+            lines.append(f"  {name:20s}{p:>8s}{e.trials:8d}{_fmt(e.reliability):>8s}"
+                         f"{_fmt(e.cost, 4):>10s}{_fmt(e.j):>8s}")
+        if rep.replay_matches is not None:
+            how = "matches" if rep.replay_matches else "does NOT match"
+            lines.append(f"  replay of {len(rep.results)} journal results {how} the saved state")
+        if rep.note:
+            lines.append(f"  note: {rep.note}")
+    return "\n".join(lines) + "\n"
+
+
+def plot(reports: list[TaskReport], path: str, threshold: float) -> int:
+    """Draw p(action) over trials for every task with a saved state and results; return the panels drawn."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    drawn = [r for r in reports if len(r.history) > 1]
+    if not drawn:
+        return 0
+    fig, axes = plt.subplots(len(drawn), 1, figsize=(7.0, 2.6 * len(drawn)), squeeze=False)
+    for ax, rep in zip(axes[:, 0], drawn):
+        for k, name in enumerate(rep.automaton.actions):
+            ax.plot(range(len(rep.history)), [h[k] for h in rep.history], label=name)
+        ax.axhline(threshold, color="grey", linestyle=":", linewidth=1)
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_ylabel("probability")
+        ax.set_title(f"{rep.task} ({rep.automaton.scheme})")
+        ax.legend(loc="center right", fontsize="small")
+    axes[-1, 0].set_xlabel("trial")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return len(drawn)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``petrobot learn``; return 0, or 2 on an unreadable net or journal or bad option."""
+    if not 0.5 < args.threshold <= 1.0:
+        print("petrobot learn: --threshold must lie in (0.5, 1]", file=sys.stderr)
+        return 2
+    try:
+        from coordinator.netfile import load_any
+
+        configured = Learner.from_net(load_any(args.net))
+        states, results = read_journal(args.journal)
+        reports = build_reports(states, results, args.task, configured)
+    except PetrobotError as exc:
+        print(f"petrobot learn: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(report_json(reports, args.threshold), indent=2))
+    else:
+        sys.stdout.write(report_text(reports, args.threshold))
+    if args.plot:
+        try:
+            n = plot(reports, args.plot, args.threshold)
+        except OSError as exc:
+            print(f"petrobot learn: cannot write {args.plot}: {exc}", file=sys.stderr)
+            return 2
+        if not args.json:
+            print(f"plot: {n} task(s) drawn to {args.plot}")
+    return 0

@@ -1,0 +1,544 @@
+"""Learning automata of coordinator.learning and the `petrobot learn` command (paper section 4)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sqlite3
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from coordinator.commands import learn as learn_cmd
+from coordinator.errors import JournalError, NetError, PetrobotError
+from coordinator.learning import (
+    LEARNER_STATE_DDL,
+    FixedChoice,
+    Learner,
+    LearnerConfigError,
+    LearningAutomaton,
+    LinearRewardInaction,
+    PursuitAutomaton,
+    automaton_from_state,
+    make_learner,
+    state_from_json,
+    state_to_json,
+    task_seed,
+)
+from coordinator.performance import cost_function, rho_for
+
+
+def _run(auto: LearningAutomaton, reliability: dict[str, float], env_seed: int, trials: int,
+         costs: dict[str, float] | None = None, until_converged: bool = True) -> list[str]:
+    """Drive an automaton against a Bernoulli environment; return the actions chosen."""
+    env = np.random.default_rng(env_seed)
+    chosen = []
+    for _ in range(trials):
+        action = auto.choose()
+        chosen.append(action)
+        status = "success" if env.random() < reliability[action] else "failure"
+        auto.update(action, status, None if costs is None else costs[action])
+        if until_converged and auto.converged() is not None:
+            break
+    return chosen
+
+
+# -- convergence ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("scheme, rate", [("pursuit", None), ("lri", 0.02)])
+def test_clear_cut_case_converges_to_the_most_reliable_action_on_every_seed(scheme: str, rate: float | None) -> None:
+    reliability = {"grab": 0.9, "push": 0.55, "poke": 0.4}
+    config: dict[str, Any] = {"scheme": scheme}
+    if rate is not None:
+        config["rate"] = rate
+    for seed in range(20):
+        auto = make_learner(config, list(reliability), seed=seed)
+        _run(auto, reliability, env_seed=1000 + seed, trials=5000)
+        assert auto.converged() == "grab", (seed, auto)
+
+
+def test_pursuit_prefers_a_cheaper_less_reliable_action_when_its_j_is_lower() -> None:
+    reliability = {"careful": 0.95, "quick": 0.80}
+    costs = {"careful": 4.0, "quick": 1.0}  # rho = 1/4: J = 1.0 vs 0.45
+    for seed in range(10):
+        auto = make_learner({"learner": "pursuit"}, list(reliability), costs, seed=seed)
+        _run(auto, reliability, env_seed=seed, trials=3000)
+        assert auto.converged() == "quick"
+
+
+def test_lri_rewards_low_j_not_only_success_when_costs_differ() -> None:
+    reliability = {"careful": 0.95, "quick": 0.80}
+    costs = {"careful": 4.0, "quick": 1.0}
+    for seed in range(10):
+        auto = make_learner({"scheme": "lri", "rate": 0.02}, list(reliability), costs, seed=seed)
+        _run(auto, reliability, env_seed=seed, trials=20000)
+        assert auto.converged() == "quick"
+
+
+def test_lri_reward_is_a_decreasing_affine_map_of_the_j_sample() -> None:
+    auto = LinearRewardInaction(["a", "b"], costs={"a": 2.0, "b": 1.0})
+    # rho = 1/2; j_lo = 0.5, j_hi = 2.0
+    assert auto.reward(1, True, None) == pytest.approx(1.0)
+    assert auto.reward(0, True, None) == pytest.approx(1.0 - 0.5 / 1.5)
+    assert auto.reward(0, False, None) == pytest.approx(0.0)
+    equal = LinearRewardInaction(["a", "b"], costs={"a": 3.0, "b": 3.0})
+    assert equal.reward(0, True, None) == 1.0 and equal.reward(0, False, None) == 0.0
+
+
+def test_pursuit_warmup_runs_every_action_in_turn_before_learning() -> None:
+    auto = PursuitAutomaton(["a", "b", "c"], warmup=2)
+    seen = []
+    for _ in range(6):
+        action = auto.choose()
+        seen.append(action)
+        auto.update(action, "success")
+    assert sorted(seen) == ["a", "a", "b", "b", "c", "c"]
+    assert auto.probabilities["a"] != pytest.approx(1 / 3)  # the sixth result moved p
+
+
+def test_mean_estimator_is_the_classic_pursuit_update() -> None:
+    auto = PursuitAutomaton(["a", "b"], rate=0.1, warmup=1, estimator="mean")
+    auto.update("a", "failure")
+    auto.update("b", "success")  # warm-up complete: pursue b (R̂ 1 vs 0)
+    assert auto.probabilities == pytest.approx({"a": 0.45, "b": 0.55})
+
+
+# -- error counts as failure ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("scheme", ["pursuit", "lri", "fixed"])
+def test_error_status_counts_as_failure_for_learning(scheme: str) -> None:
+    outcomes = ["success", "failure", "success", "success", "failure"] * 6
+    as_error = make_learner({"scheme": scheme}, ["x", "y"], seed=3)
+    as_failure = make_learner({"scheme": scheme}, ["x", "y"], seed=3)
+    for k, status in enumerate(outcomes):
+        action = "x" if k % 3 else "y"
+        as_error.update(action, "error" if status == "failure" else status, 1.0)
+        as_failure.update(action, status, 1.0)
+    assert as_error.probabilities == as_failure.probabilities
+    assert as_error.estimates == as_failure.estimates
+    assert as_error.estimates["x"].successes < as_error.estimates["x"].trials
+
+
+def test_estimates_give_r_hat_c_and_j_of_equation_1() -> None:
+    auto = make_learner({}, ["a", "b"], {"a": 2.0, "b": 8.0})
+    for status in ("success", "success", "error", "failure"):
+        auto.update("a", status, 2.5)
+    est = auto.estimates["a"]
+    assert (est.trials, est.successes, est.reliability) == (4, 2, 0.5)
+    assert est.cost == 2.0 and est.measured_cost == 2.5
+    assert est.j == pytest.approx(cost_function(0.5, 2.0, rho_for([2.0, 8.0])))
+    assert auto.estimates["b"].reliability is None and auto.estimates["b"].j is None
+
+
+def test_measured_costs_set_rho_from_the_largest_mean_cost() -> None:
+    auto = make_learner({"scheme": "pursuit"}, ["a", "b"])
+    auto.update("a", "success", 0.1)
+    auto.update("a", "success", 0.3)
+    auto.update("b", "failure", 0.8)
+    assert auto.cost_source == "measured"
+    assert auto.rho == pytest.approx(1 / 0.8)
+    assert auto.estimates["a"].j == pytest.approx(0.0 + 0.2 / 0.8)
+
+
+# -- persistence and reproducibility --------------------------------------------------------------
+
+
+@pytest.mark.parametrize("scheme", ["pursuit", "lri", "fixed"])
+def test_state_round_trip_through_json_gives_identical_probabilities_and_draws(scheme: str) -> None:
+    reliability = {"a": 0.7, "b": 0.5, "c": 0.6}
+    auto = make_learner({"scheme": scheme}, list(reliability), {"a": 1.0, "b": 2.0, "c": 3.0}, seed=9)
+    _run(auto, reliability, env_seed=4, trials=137, until_converged=False)
+    text = state_to_json(auto.state_dict())
+    again = automaton_from_state(state_from_json(text))
+    assert type(again) is type(auto)
+    assert again.probabilities == auto.probabilities
+    assert again.estimates == auto.estimates
+    assert again.state_dict() == auto.state_dict()
+    assert [again.choose() for _ in range(50)] == [auto.choose() for _ in range(50)]
+
+
+def test_restart_continues_exactly_where_the_learner_stopped() -> None:
+    reliability = {"a": 0.6, "b": 0.8}
+    straight = Learner(seed=5)
+    straight.add_task("locate", ["a", "b"], {"learner": "pursuit", "learning_rate": 0.05})
+    restarted = Learner(seed=5)
+    restarted.add_task("locate", ["a", "b"], {"learner": "pursuit", "learning_rate": 0.05})
+    env1, env2 = np.random.default_rng(1), np.random.default_rng(1)
+    saved: dict[str, str] = {}
+    for step in range(120):
+        if step == 60:  # "crash": rebuild from the persisted rows only
+            restarted = Learner(seed=5)
+            restarted.add_task("locate", ["a", "b"], {"learner": "pursuit", "learning_rate": 0.05})
+            assert restarted.restore({t: state_from_json(s) for t, s in saved.items()}) == []
+            assert restarted.automaton("locate").probabilities == \
+                straight.automaton("locate").probabilities
+        for learner, env in ((straight, env1), (restarted, env2)):
+            action = learner.choose("locate")
+            status = "success" if env.random() < reliability[action] else "failure"
+            state = learner.update("locate", action, status, 1.0)
+            if learner is restarted:
+                saved["locate"] = state_to_json(state)
+    assert restarted.state_dict() == straight.state_dict()
+
+
+def test_learner_round_trip_rebuilds_every_task() -> None:
+    learner = Learner(seed=2)
+    learner.add_task("locate", ["hsv", "diff"], {"scheme": "lri"})
+    learner.add_task("grasp", ["only"])
+    learner.update("locate", "hsv", "success", 0.01)
+    again = Learner.from_state(json.loads(json.dumps(learner.state_dict())), seed=2)
+    assert again.tasks == ("locate", "grasp")
+    assert again.automaton("locate").probabilities == learner.automaton("locate").probabilities
+    assert isinstance(again.automaton("grasp"), FixedChoice)
+
+
+def test_restore_keeps_the_nets_current_rate_and_the_saved_probabilities() -> None:
+    old = Learner(seed=3)
+    old.add_task("locate", ["a", "b"], {"scheme": "pursuit", "rate": 0.05, "warmup": 1})
+    for status in ("success", "failure", "success", "success"):
+        old.update("locate", "a", status)
+        old.update("locate", "b", "failure")
+    new = Learner(seed=3)
+    new.add_task("locate", ["a", "b"], {"scheme": "pursuit", "rate": 0.2, "warmup": 1})
+    assert new.restore(old.state_dict()) == []
+    restored = new.automaton("locate")
+    assert isinstance(restored, PursuitAutomaton) and restored.rate == 0.2
+    assert restored.probabilities == old.automaton("locate").probabilities
+    assert restored.estimates == old.automaton("locate").estimates
+
+
+def test_restore_refuses_a_state_whose_actions_differ_from_the_net() -> None:
+    old = Learner()
+    old.add_task("locate", ["a", "b"])
+    new = Learner()
+    new.add_task("locate", ["a", "b", "c"])
+    with pytest.raises(JournalError, match="does not match"):
+        new.restore(old.state_dict())
+    assert new.restore(old.state_dict(), strict=False) == ["locate"]
+
+
+def test_malformed_state_raises_journal_error() -> None:
+    state = make_learner({}, ["a", "b"]).state_dict()
+    state["probabilities"] = [0.9, 0.9]
+    with pytest.raises(JournalError):
+        automaton_from_state(state)
+    with pytest.raises(JournalError):
+        state_from_json("not json")
+
+
+def test_same_seed_gives_the_same_choices_and_other_seeds_differ() -> None:
+    reliability = {"a": 0.6, "b": 0.65, "c": 0.5}
+
+    def trace(seed: int) -> list[str]:
+        auto = make_learner({"scheme": "pursuit", "warmup": 0}, list(reliability), seed=seed)
+        return _run(auto, reliability, env_seed=0, trials=200, until_converged=False)
+
+    assert trace(11) == trace(11)
+    assert trace(11) != trace(12)
+    assert task_seed(1, "locate") == task_seed(1, "locate") != task_seed(1, "grasp")
+
+
+def test_fixed_choice_always_runs_the_named_action() -> None:
+    auto = make_learner({"scheme": "fixed", "action": "b"}, ["a", "b"])
+    assert isinstance(auto, FixedChoice)
+    assert {auto.choose() for _ in range(20)} == {"b"}
+    auto.update("b", "failure")
+    assert auto.probabilities == {"a": 0.0, "b": 1.0} and auto.converged() == "b"
+    assert isinstance(make_learner({}, ["only"]), FixedChoice)
+
+
+# -- validation -----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("config, costs, words", [
+    ({"scheme": "qlearning"}, None, "unknown learner 'qlearning'"),
+    ({"scheme": "pursuit", "rate": 0.0}, None, "(0, 1]"),
+    ({"learning_rate": 1.5}, None, "(0, 1]"),
+    ({"rate": "fast"}, None, "learning rate"),
+    ({"learning_rte": 0.1}, None, "unknown learner key"),
+    ({"scheme": "pursuit", "learner": "lri"}, None, "either"),
+    ({"warmup": -1}, None, "warmup"),
+    ({"estimator": "median"}, None, "estimator"),
+    ({"scheme": "lri", "estimator": "mean"}, None, "only to learner 'pursuit'"),
+    ({"scheme": "fixed", "action": "z"}, None, "not one of"),
+    ({"scheme": "fixed", "rate": 0.1}, None, "does not learn"),
+    ({}, {"a": 1.0}, "not for: b"),
+    ({}, {"a": 1.0, "b": 1.0, "zz": 2.0}, "unknown primitive actions: zz"),
+    ({}, {"a": -1.0, "b": 1.0}, ">= 0"),
+    ({"cost_source": "apriori"}, None, "needs costs"),
+])
+def test_invalid_learner_configuration_gets_a_clear_error(config: dict[str, Any], costs: dict[str, float] | None,
+                                                          words: str) -> None:
+    with pytest.raises(LearnerConfigError) as info:
+        make_learner(config, ["a", "b"], costs)
+    assert words in str(info.value)
+    assert isinstance(info.value, NetError) and isinstance(info.value, ValueError)
+    assert isinstance(info.value, PetrobotError) and info.value.problem == str(info.value)
+
+
+def test_bad_action_lists_and_results_are_rejected() -> None:
+    with pytest.raises(LearnerConfigError, match="at least one"):
+        make_learner({}, [])
+    with pytest.raises(LearnerConfigError, match="twice"):
+        make_learner({}, ["a", "a"])
+    auto = make_learner({}, ["a", "b"])
+    with pytest.raises(ValueError, match="status"):
+        auto.update("a", "cancelled")
+    with pytest.raises(ValueError, match="unknown primitive action"):
+        auto.update("c", "success")
+    with pytest.raises(ValueError, match="cost"):
+        auto.update("a", "success", -0.5)
+
+
+# -- `petrobot learn` ------------------------------------------------------------------------------
+
+ACTION_RESULT_DDL = (
+    "CREATE TABLE action_result (instance TEXT, task TEXT, action TEXT, node TEXT, status TEXT, "
+    "outcome TEXT, cost REAL, wall_s REAL, cpu_s REAL, t_wall REAL)"
+)
+
+
+NET = """
+[net]
+name = "locate_and_move"
+format = 1
+
+[[place]]
+id = "idle"
+tokens = 1
+
+[[place]]
+id = "locating"
+kind = "primitive_task"
+task = "locate"
+
+[[place]]
+id = "moving"
+kind = "primitive_task"
+task = "move"
+
+[[place]]
+id = "grasping"
+kind = "primitive_task"
+task = "grasp"
+
+[task.locate]
+actions = [{ name = "hsv", cost = 1.0 }, { name = "avg4", cost = 4.0 }]
+learner = { scheme = "pursuit", rate = 0.05 }
+
+[task.move]
+actions = ["puma"]
+
+[task.grasp]
+actions = ["pinch", "scoop"]
+learner = { scheme = "lri" }
+
+[[transition]]
+id = "start"
+inputs = { idle = 1 }
+outputs = { locating = 1 }
+
+[[transition]]
+id = "located"
+events = ["int:locate.ok"]
+inputs = { locating = 1 }
+outputs = { moving = 1 }
+
+[[transition]]
+id = "moved"
+events = ["int:move.ok"]
+inputs = { moving = 1 }
+outputs = { grasping = 1 }
+
+[[transition]]
+id = "grasped"
+events = ["int:grasp.ok"]
+inputs = { grasping = 1 }
+outputs = { idle = 1 }
+
+[[transition]]
+id = "locate_failed"
+events = ["int:locate.error"]
+hidden = true
+inputs = { locating = 1 }
+outputs = { idle = 1 }
+
+[[transition]]
+id = "move_failed"
+events = ["int:move.error"]
+hidden = true
+inputs = { moving = 1 }
+outputs = { idle = 1 }
+
+[[transition]]
+id = "grasp_failed"
+events = ["int:grasp.error"]
+hidden = true
+inputs = { grasping = 1 }
+outputs = { idle = 1 }
+"""
+
+
+def test_learner_from_net_configures_every_primitive_task(tmp_path: Path) -> None:
+    from coordinator.netfile import loads_net
+
+    learner = Learner.from_net(loads_net(NET), seed=4)
+    assert learner.tasks == ("locate", "move", "grasp")
+    locate = learner.automaton("locate")
+    assert isinstance(locate, PursuitAutomaton) and locate.rate == 0.05
+    assert locate.cost_source == "apriori" and locate.rho == 0.25
+    assert isinstance(learner.automaton("move"), FixedChoice)
+    assert isinstance(learner.automaton("grasp"), LinearRewardInaction)
+    assert learner("grasp", ("pinch", "scoop")) in {"pinch", "scoop"}
+
+
+def test_bad_learner_table_in_a_net_file_names_the_task_and_problem() -> None:
+    from coordinator.netfile import loads_net
+
+    bad = NET.replace('learner = { scheme = "lri" }', 'learner = { scheme = "lri", rate = 2 }')
+    with pytest.raises(LearnerConfigError, match=r"primitive task 'grasp': learning rate must lie in \(0, 1\]"):
+        Learner.from_net(loads_net(bad))
+
+
+def _journal(tmp_path: Path, runs: int = 300) -> tuple[Path, Path, Learner]:
+    """A journal with the two tables, written the way the runtime does: result row, then state."""
+    db = tmp_path / "journal.sqlite"
+    net = tmp_path / "catch.toml"
+    net.write_text(NET)
+    con = sqlite3.connect(db)
+    con.execute(LEARNER_STATE_DDL)
+    con.execute(ACTION_RESULT_DDL)
+    learner = Learner(seed=7)
+    learner.add_task("locate", ["hsv", "avg4"], {"learner": "pursuit", "learning_rate": 0.05},
+                     {"hsv": 1.0, "avg4": 4.0})
+    reliability = {"hsv": 0.9, "avg4": 0.97}
+    env = np.random.default_rng(3)
+    for k in range(runs):
+        action = learner.choose("locate")
+        status = "success" if env.random() < reliability[action] else "error"
+        con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
+                    (f"i{k}", "locate", action, "vision", status, None, 0.02, 0.02, 0.01, float(k)))
+        state = learner.update("locate", action, status, 0.02)
+        con.execute("INSERT OR REPLACE INTO learner_state VALUES (?,?,?,?)",
+                    ("locate", "pursuit", state_to_json(state), float(k)))
+    learner.add_task("grasp", ["pinch", "scoop"], {"scheme": "lri", "rate": 0.05})
+    for k in range(runs // 10):  # no cost reported: the runtime feeds wall_s, the journal keeps NULL
+        action = learner.choose("grasp")
+        wall_s = float(env.uniform(0.5, 1.5)) * (2.0 if action == "scoop" else 1.0)
+        status = "success" if env.random() < 0.8 else "failure"
+        con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
+                    (f"g{k}", "grasp", action, "motion", status, None, None, wall_s, 0.01, float(k)))
+        state = learner.update("grasp", action, status, wall_s)
+        con.execute("INSERT OR REPLACE INTO learner_state VALUES (?,?,?,?)",
+                    ("grasp", "lri", state_to_json(state), float(k)))
+    con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
+                ("m0", "move", "puma", "motion", "success", None, 1.2, 1.2, 0.1, 1.0))
+    con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
+                ("m1", "move", "puma", "motion", "cancelled", None, None, 0.5, 0.1, 2.0))
+    con.commit()
+    con.close()
+    return net, db, learner
+
+
+def _args(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="petrobot")
+    learn_cmd.add_parser(parser.add_subparsers(dest="command"))
+    return parser.parse_args(["learn", *argv])
+
+
+def test_learn_command_reports_probabilities_and_estimates_per_task(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    net, db, learner = _journal(tmp_path)
+    assert learn_cmd.run(_args(str(net), "--journal", str(db), "--json")) == 0
+    doc = json.loads(capsys.readouterr().out)
+    locate = doc["tasks"]["locate"]
+    auto = learner.automaton("locate")
+    assert {a: v["probability"] for a, v in locate["actions"].items()} == auto.probabilities
+    assert locate["converged"] == auto.converged() == "hsv"
+    assert locate["actions"]["avg4"]["j"] == auto.estimates["avg4"].j
+    assert locate["replay_matches_state"] is True and locate["journal_results"] == 300
+    move = doc["tasks"]["move"]
+    assert move["scheme"] is None and move["actions"]["puma"]["trials"] == 1  # cancelled skipped
+    grasp = doc["tasks"]["grasp"]  # measured costs: replayed with wall_s where cost is NULL
+    assert grasp["scheme"] == "lri" and grasp["replay_matches_state"] is True
+    assert grasp["actions"]["scoop"]["cost"] == learner.automaton("grasp").estimates["scoop"].cost
+
+    assert learn_cmd.run(_args(str(net), "--journal", str(db), "--task", "locate")) == 0
+    text = capsys.readouterr().out
+    assert "locate: pursuit" in text and "converged to hsv" in text and "move" not in text
+
+
+def test_learn_command_lists_configured_tasks_that_have_not_run(tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    net, db, _ = _journal(tmp_path, runs=5)
+    con = sqlite3.connect(db)
+    con.execute("DELETE FROM learner_state WHERE task = 'grasp'")
+    con.execute("DELETE FROM action_result WHERE task = 'grasp'")
+    con.commit()
+    con.close()
+    assert learn_cmd.run(_args(str(net), "--journal", str(db), "--json")) == 0
+    grasp = json.loads(capsys.readouterr().out)["tasks"]["grasp"]
+    assert grasp["scheme"] == "lri" and grasp["note"] == "no result yet"
+    assert grasp["actions"]["pinch"]["probability"] == 0.5 and grasp["steps"] == 0
+
+
+def test_learn_command_plots_the_probabilities_over_trials(tmp_path: Path) -> None:
+    net, db, _ = _journal(tmp_path, runs=80)
+    png = tmp_path / "curve.png"
+    assert learn_cmd.run(_args(str(net), "--journal", str(db), "--plot", str(png), "--json")) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_learn_command_flags_a_journal_that_misses_results(tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    net, db, _ = _journal(tmp_path, runs=50)
+    con = sqlite3.connect(db)
+    con.execute("DELETE FROM action_result WHERE instance = 'i10'")
+    con.commit()
+    con.close()
+    assert learn_cmd.run(_args(str(net), "--journal", str(db))) == 0
+    assert "does NOT match" in capsys.readouterr().out
+
+
+def test_learn_command_fails_cleanly_on_a_missing_journal(tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    net = tmp_path / "n.toml"
+    net.write_text(NET)
+    assert learn_cmd.run(_args(str(net), "--journal", str(tmp_path / "none.sqlite"))) == 2
+    assert "no such journal" in capsys.readouterr().err
+
+
+def test_learn_command_fails_cleanly_on_a_bad_net(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _, db, _ = _journal(tmp_path, runs=5)
+    bad = tmp_path / "bad.toml"
+    bad.write_text(NET.replace('learner = { scheme = "lri" }', 'learner = { scheme = "sarsa" }'))
+    assert learn_cmd.run(_args(str(bad), "--journal", str(db))) == 2
+    assert "unknown learner 'sarsa'" in capsys.readouterr().err
+
+
+def test_learn_command_reads_a_journal_written_by_the_runtime_journal(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    from coordinator.journal import Journal
+    from coordinator.netfile import loads_net
+
+    net_path = tmp_path / "net.toml"
+    net_path.write_text(NET)
+    net = loads_net(NET)
+    learner = Learner.from_net(net, seed=1)
+    env = np.random.default_rng(8)
+    with Journal(tmp_path / "j.sqlite") as journal:
+        run = journal.begin_run(net, seed=1)
+        for k in range(60):
+            action = learner.choose("grasp")
+            status = "success" if env.random() < (0.9 if action == "pinch" else 0.6) else "error"
+            wall_s = 0.5 if action == "pinch" else 0.2
+            journal.action_result(run, f"i{k}", "grasp", action, "motion", status, wall_s=wall_s)
+            journal.save_learner("grasp", "lri", learner.update("grasp", action, status, wall_s))
+    assert learn_cmd.run(_args(str(net_path), "--journal", str(tmp_path / "j.sqlite"), "--json")) == 0
+    grasp = json.loads(capsys.readouterr().out)["tasks"]["grasp"]
+    assert grasp["replay_matches_state"] is True and grasp["steps"] == 60
+    assert grasp["actions"]["pinch"]["probability"] == learner.automaton("grasp").probabilities["pinch"]
