@@ -1,0 +1,175 @@
+"""Benchmark: reachability-graph construction, petrobot's vectorised explorer against pm4py's.
+
+For each PNML model, two child processes (so memory peaks do not mix and a slow baseline can be
+killed): one runs :func:`coordinator.analysis.statespace.explore`, the other pm4py's
+``construct_reachability_graph`` on the same net (built in memory from the same PNML import), under
+a time cap. Reported per model: states, edges, seconds, cpu_seconds, peak_rss_bytes,
+bytes_per_marking (peak minus the RSS before exploring, per marking), markings_per_s, and for pm4py
+pm4py_seconds / pm4py_markings_per_s / speedup (wall clock) and speedup_cpu. pm4py runs with its own
+time limit (``max_elab_time``); when it hits the cap, its rate is measured on the part of the graph it
+built (``pm4py_complete`` false, ``pm4py_seconds`` null) and the outer process is killed 120 s later.
+
+Usage::
+
+    python bench/statespace.py [--json] [--pm4py-timeout S] [--no-pm4py] PNML...
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _rss_now() -> int:
+    with open("/proc/self/statm", encoding="ascii") as fh:
+        return int(fh.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+
+
+def _peak_rss() -> int:
+    return int(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss) * 1024
+
+
+def child_ours(path: str, max_states: int) -> dict[str, Any]:
+    sys.path.insert(0, str(ROOT))
+    from coordinator.analysis.statespace import explore
+    from coordinator.pnml import load_pnml
+
+    net = load_pnml(path)
+    before = _rss_now()
+    cpu, wall = time.process_time(), time.perf_counter()
+    space = explore(net, max_states=max_states)
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    peak = _peak_rss()
+    return {"states": space.n_states, "edges": space.n_edges, "complete": space.complete, "seconds": wall,
+            "cpu_seconds": cpu, "peak_rss_bytes": peak, "rss_before_bytes": before,
+            "bytes_per_marking": (peak - before) / max(space.n_states, 1)}
+
+
+def child_pm4py(path: str, cap: float) -> dict[str, Any]:
+    sys.path.insert(0, str(ROOT))
+    from pm4py.objects.petri_net.obj import Marking as PMarking
+    from pm4py.objects.petri_net.obj import PetriNet as PNet
+    from pm4py.objects.petri_net.utils import petri_utils
+    from pm4py.objects.petri_net.utils.reachability_graph import (
+        Parameters,
+        construct_reachability_graph,
+    )
+
+    from coordinator.pnml import load_pnml
+
+    net = load_pnml(path)
+    pnet = PNet(net.name)
+    places = {p.id: PNet.Place(p.id) for p in net.places}
+    trans = {t.id: PNet.Transition(t.id, t.id) for t in net.transitions}
+    for p in places.values():
+        pnet.places.add(p)
+    for t in trans.values():
+        pnet.transitions.add(t)
+    for arc in net.arcs:
+        if arc.inhibitor:
+            raise SystemExit("pm4py baseline: inhibitor arcs are not supported")
+        src = places.get(arc.source) or trans[arc.source]
+        dst = places.get(arc.target) or trans[arc.target]
+        petri_utils.add_arc_from_to(src, dst, pnet, weight=arc.weight)
+    m0 = PMarking()
+    for pid, count in net.initial_marking.items():
+        m0[places[pid]] = count
+    cpu, wall = time.process_time(), time.perf_counter()
+    # pm4py's own time limit: it stops and returns the part of the graph built so far
+    ts = construct_reachability_graph(pnet, m0, parameters={Parameters.MAX_ELAB_TIME: cap})
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    return {"states": len(ts.states), "edges": len(ts.transitions), "seconds": wall, "cpu_seconds": cpu,
+            "peak_rss_bytes": _peak_rss()}
+
+
+def run_child(kind: str, path: str, timeout: float, max_states: int, cap: float = 60.0) -> dict[str, Any] | None:
+    cmd = [sys.executable, __file__, "--child", kind, "--max-states", str(max_states), "--pm4py-timeout", str(cap),
+           path]
+    try:
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=True)
+    except subprocess.TimeoutExpired:
+        return None
+    except subprocess.CalledProcessError as exc:
+        raise SystemExit(f"{kind} failed on {path}:\n{exc.stderr}") from exc
+    return dict(json.loads(out.stdout.strip().splitlines()[-1]))
+
+
+def bench(path: str, cap: float, with_pm4py: bool, max_states: int) -> dict[str, Any]:
+    ours = run_child("ours", path, 3600.0, max_states)
+    assert ours is not None
+    row: dict[str, Any] = {"model": Path(path).parent.name if Path(path).name == "model.pnml" else Path(path).stem}
+    row.update(ours)
+    row["markings_per_s"] = ours["states"] / max(ours["seconds"], 1e-9)
+    if with_pm4py:
+        base = run_child("pm4py", path, cap + 120.0, max_states, cap)
+        row["pm4py_timeout_s"] = cap
+        if base is None:
+            row["pm4py_seconds"] = None
+        else:
+            row["pm4py_complete"] = base["states"] == ours["states"]
+            row["pm4py_seconds"] = base["seconds"] if row["pm4py_complete"] else None
+            row["pm4py_elapsed_s"] = base["seconds"]
+            row["pm4py_states"] = base["states"]
+            row["pm4py_edges"] = base["edges"]
+            row["pm4py_cpu_seconds"] = base["cpu_seconds"]
+            row["pm4py_peak_rss_bytes"] = base["peak_rss_bytes"]
+            # rates on markings built per second (on a partial graph when pm4py hit its cap)
+            row["pm4py_markings_per_s"] = base["states"] / max(base["seconds"], 1e-9)
+            row["speedup"] = row["markings_per_s"] / row["pm4py_markings_per_s"]
+            row["speedup_cpu"] = (ours["states"] / max(ours["cpu_seconds"], 1e-9)) / (
+                base["states"] / max(base["cpu_seconds"], 1e-9))
+    return row
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("models", nargs="+", metavar="PNML", help="PNML model files")
+    parser.add_argument("--json", action="store_true", help="print one JSON document instead of a table")
+    parser.add_argument("--pm4py-timeout", type=float, default=60.0, metavar="S",
+                        help="time cap of the pm4py baseline per model, seconds (default 60)")
+    parser.add_argument("--no-pm4py", action="store_true", help="skip the pm4py baseline")
+    parser.add_argument("--max-states", type=int, default=10_000_000, help="state limit of our explorer")
+    parser.add_argument("--child", choices=["ours", "pm4py"], help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.child:
+        if args.child == "ours":
+            result = child_ours(args.models[0], args.max_states)
+        else:
+            result = child_pm4py(args.models[0], args.pm4py_timeout)
+        print(json.dumps(result))
+        return 0
+    rows = []
+    for path in args.models:
+        row = bench(path, args.pm4py_timeout, not args.no_pm4py, args.max_states)
+        rows.append(row)
+        if not args.json:
+            _print_row(row)
+    if args.json:
+        print(json.dumps({"date": time.strftime("%Y-%m-%d"), "python": sys.version.split()[0],
+                          "cpus": os.cpu_count(), "models": rows}, indent=2))
+    return 0
+
+
+def _print_row(row: dict[str, Any]) -> None:
+    base = ""
+    if "speedup" in row:
+        done = "" if row["pm4py_complete"] else f" (capped: {row['pm4py_states']:,} markings)"
+        base = (f"  pm4py {row['pm4py_elapsed_s']:.2f} s{done} ({row['pm4py_markings_per_s']:,.0f}/s)"
+                f"  speedup {row['speedup']:,.0f}x (cpu {row['speedup_cpu']:,.0f}x)")
+    print(f"{row['model']:<26} {row['states']:>10,} states {row['edges']:>11,} edges "
+          f"{row['seconds']:>7.2f} s (cpu {row['cpu_seconds']:.2f} s) {row['markings_per_s']:>10,.0f}/s "
+          f"peak {row['peak_rss_bytes'] / 2**20:>6.0f} MiB ({row['bytes_per_marking']:.0f} B/marking){base}",
+          flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,228 @@
+"""Karp–Miller coverability graph, and a cheap unboundedness witness from a breadth-first tree.
+
+Pure: no I/O. Karp and Miller (1969), "Parallel program schemata"; Murata (1989), "Petri nets:
+properties, analysis and applications", section V-A. A node is an ω-marking: a count per place, or
+ω ("as many as you like") where a firing sequence can be repeated to pump that place without
+bound. Nodes are expanded breadth-first; a new marking M' that strictly covers an ancestor M on its
+tree path (M' ≥ M, M' ≠ M) gets ω in every place where M' > M; a marking equal to one already in the
+graph is not expanded again. The net is bounded iff no node holds ω; a place is bounded iff no node
+holds ω in it, and then its bound is the largest count any node gives it.
+
+Karp–Miller is only sound for nets without inhibitor arcs (with them boundedness is undecidable);
+:func:`karp_miller` refuses such nets. :func:`covering_witness` works on any net: it needs the pumped
+difference to be zero on every place read by an inhibitor arc, which makes the repetition legal.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from coordinator.analysis.statespace import StateSpace
+from coordinator.errors import AnalysisError
+from coordinator.net import PetriNet
+
+__all__ = ["OMEGA", "Coverability", "CoveringWitness", "covering_witness", "karp_miller"]
+
+#: Value standing for ω in :attr:`Coverability.markings`.
+OMEGA = -1
+
+
+@dataclass(frozen=True)
+class Coverability:
+    """A Karp–Miller coverability graph.
+
+    Attributes:
+        net: the net.
+        markings: ω-markings, shape (K, |P|), int64, :data:`OMEGA` (-1) for ω; row 0 is M0.
+        src: edge sources, shape (F,), int64.
+        dst: edge targets, shape (F,), int64.
+        transition: transition index per edge, shape (F,), int32.
+        parent: tree parent node per node, shape (K,), int64, -1 for the root.
+        parent_transition: transition index fired from the parent, shape (K,), int32, -1 for the root.
+        complete: False if ``max_nodes`` stopped the construction.
+    """
+
+    net: PetriNet
+    markings: np.ndarray
+    src: np.ndarray
+    dst: np.ndarray
+    transition: np.ndarray
+    parent: np.ndarray
+    parent_transition: np.ndarray
+    complete: bool
+
+    @property
+    def bounded(self) -> bool:
+        """True if no node holds ω (meaningful when ``complete``)."""
+        return not bool((self.markings == OMEGA).any())
+
+    def unbounded_places(self) -> list[str]:
+        """Ids of the places that hold ω in some node."""
+        cols = np.flatnonzero((self.markings == OMEGA).any(axis=0))
+        return [self.net.places[int(p)].id for p in cols]
+
+    def place_bounds(self) -> list[int | None]:
+        """Bound per place in ``net.places`` order; ``None`` for unbounded places."""
+        out: list[int | None] = []
+        for p in range(self.markings.shape[1]):
+            col = self.markings[:, p]
+            out.append(None if (col == OMEGA).any() else int(col.max(initial=0)))
+        return out
+
+    def firing_sequence(self, node: int) -> list[str]:
+        """Transition ids along the tree path from M0 to ``node``."""
+        seq: list[str] = []
+        while node > 0:
+            seq.append(self.net.transitions[int(self.parent_transition[node])].id)
+            node = int(self.parent[node])
+        seq.reverse()
+        return seq
+
+    def dead_nodes(self) -> np.ndarray:
+        """Nodes enabling no transition, shape (k,), int64 (each stands for reachable dead markings)."""
+        has_out = np.zeros(self.markings.shape[0], dtype=bool)
+        has_out[self.src] = True
+        return np.flatnonzero(~has_out).astype(np.int64)
+
+    def fireable_transitions(self) -> np.ndarray:
+        """Boolean (|T|,): transitions labelling some edge (quasi-live ones, when ``complete``)."""
+        out = np.zeros(len(self.net.transitions), dtype=bool)
+        out[self.transition] = True
+        return out
+
+
+def karp_miller(net: PetriNet, *, max_nodes: int = 200_000) -> Coverability:
+    """Build the Karp–Miller coverability graph of ``net``.
+
+    Args:
+        net: a net without inhibitor arcs.
+        max_nodes: stop after this many nodes (``complete`` is then False).
+
+    Returns:
+        The :class:`Coverability` graph.
+
+    Raises:
+        AnalysisError: if the net has inhibitor arcs (Karp–Miller is unsound for them).
+    """
+    if np.any(net.inhibitor):
+        raise AnalysisError("Karp–Miller coverability is unsound for nets with inhibitor arcs")
+    pre = np.asarray(net.pre, dtype=np.int64)
+    inc = np.asarray(net.incidence, dtype=np.int64)
+    n_t = pre.shape[1]
+    inputs = [[(int(p), int(pre[p, t])) for p in np.flatnonzero(pre[:, t])] for t in range(n_t)]
+    changes = [[(int(p), int(inc[p, t])) for p in np.flatnonzero(inc[:, t])] for t in range(n_t)]
+    inf = math.inf
+    root = tuple(float(v) for v in net.vector(net.initial_marking))
+    nodes: list[tuple[float, ...]] = [root]
+    index: dict[tuple[float, ...], int] = {root: 0}
+    parent = [-1]
+    ptrans = [-1]
+    src: list[int] = []
+    dst: list[int] = []
+    trs: list[int] = []
+    todo = deque([0])
+    complete = True
+    while todo:
+        i = todo.popleft()
+        m = nodes[i]
+        for t in range(n_t):
+            if any(m[p] < w for p, w in inputs[t]):
+                continue
+            new = list(m)
+            for p, c in changes[t]:
+                if new[p] != inf:
+                    new[p] += c
+            # accelerate against every ancestor on the tree path (the new node's own path)
+            a = i
+            while a >= 0:
+                anc = nodes[a]
+                if all(x >= y for x, y in zip(new, anc)) and any(x > y for x, y in zip(new, anc)):
+                    for p in range(len(new)):
+                        if new[p] > anc[p]:
+                            new[p] = inf
+                a = parent[a]
+            key = tuple(new)
+            j = index.get(key)
+            if j is None:
+                if len(nodes) >= max_nodes:
+                    complete = False
+                    todo.clear()
+                    break
+                j = len(nodes)
+                nodes.append(key)
+                index[key] = j
+                parent.append(i)
+                ptrans.append(t)
+                todo.append(j)
+            src.append(i)
+            dst.append(j)
+            trs.append(t)
+    mat = np.array(nodes, dtype=float).reshape(len(nodes), len(root))
+    markings = np.where(np.isinf(mat), OMEGA, mat).astype(np.int64)
+    return Coverability(
+        net=net, markings=markings, src=np.array(src, dtype=np.int64), dst=np.array(dst, dtype=np.int64),
+        transition=np.array(trs, dtype=np.int32), parent=np.array(parent, dtype=np.int64),
+        parent_transition=np.array(ptrans, dtype=np.int32), complete=complete,
+    )
+
+
+@dataclass(frozen=True)
+class CoveringWitness:
+    """Proof that a net is unbounded: M0 →σ M →τ M' with M' ≥ M, M' ≠ M, so τ can be repeated forever.
+
+    Attributes:
+        prefix: transition ids of σ (a shortest firing sequence from M0 to M).
+        loop: transition ids of τ.
+        growing: ids of the places where M' > M (they grow by at least one token per repetition).
+    """
+
+    prefix: list[str]
+    loop: list[str]
+    growing: list[str]
+
+
+def covering_witness(space: StateSpace, *, max_work: int = 200_000_000) -> CoveringWitness | None:
+    """Look for a state that strictly covers one of its ancestors on the breadth-first tree.
+
+    Vectorised: all states are compared with their k-th tree ancestor for k = 1, 2, ... until no
+    state has one or ``max_work`` element comparisons are spent. Sound on every net: a pair counts
+    only if the difference is zero on the places read by inhibitor arcs. Not complete: None means
+    "no witness found", not "bounded".
+
+    Args:
+        space: a (possibly truncated) state space with its ``parent_edge`` tree.
+        max_work: budget of element comparisons (states × |P| per ancestor level).
+
+    Returns:
+        A :class:`CoveringWitness`, or ``None``.
+    """
+    states = space.states.astype(np.int64)
+    n, n_p = states.shape
+    if n < 2 or space.parent_edge.shape[0] != n:
+        return None
+    par = np.where(space.parent_edge >= 0, space.src[np.maximum(space.parent_edge, 0)], -1)
+    inhibited = np.flatnonzero(np.asarray(space.net.inhibitor).any(axis=1))
+    anc = par.copy()
+    alive = np.flatnonzero(anc >= 0)
+    work = 0
+    while alive.size and work < max_work:
+        a = anc[alive]
+        diff = states[alive] - states[a]
+        ok = (diff >= 0).all(axis=1) & (diff > 0).any(axis=1)
+        if inhibited.size:
+            ok &= (diff[:, inhibited] == 0).all(axis=1)
+        hit = np.flatnonzero(ok)
+        if hit.size:
+            i, j = int(alive[hit[0]]), int(a[hit[0]])
+            full_i = space.firing_sequence(i)
+            full_j = space.firing_sequence(j)
+            grow = [space.net.places[int(p)].id for p in np.flatnonzero(diff[hit[0]] > 0)]
+            return CoveringWitness(prefix=full_j, loop=full_i[len(full_j):], growing=grow)
+        work += alive.size * n_p
+        anc[alive] = par[a]
+        alive = alive[anc[alive] >= 0]
+    return None

@@ -1,0 +1,369 @@
+"""The robotic reading of the qualitative properties of a task net (paper sections 2 and 7).
+
+Pure: no I/O. The paper maps three properties of the ordinary Petri net of a task onto properties
+of the robotic task; this module states each as a verdict with a one-sentence explanation for a
+robot engineer and a witness:
+
+* **stable** ⇐ bounded: no place (a queue of work, a count of resources) grows without limit.
+  Witness: the growing places and a firing sequence that pumps them; or the bound of every place
+  (and places whose bound exceeds their declared capacity).
+* **error recoverable** ⇐ properness (reversibility towards a home marking): from every reachable
+  marking — including every marking reached through an error branch — the task can return home:
+  to the declared home marking (or M0 when none is declared) compared on the places that steer
+  the task, leaving out control places (the operator's, e.g. remaining runs) and record-only places
+  that no transition reads (counts of finished runs), see :func:`home_condition`. Witness: the
+  markings that cannot recover, each with a shortest firing sequence from M0.
+* **controllable** ⇐ liveness: every transition of the task can still fire from every reachable
+  marking. A task that ends (a dead marking) in its home condition is judged with the end
+  restarted (an edge from there to M0), so finishing is not counted against it. Witness: dead
+  transitions, and for each non-live one a marking from which it can never fire again, with its
+  firing sequence.
+
+:func:`report` runs the whole analysis and returns the JSON-ready dictionary of ``petrobot analyze``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from coordinator.analysis.statespace import StateSpace
+from coordinator.analysis.structure import (
+    Analysis,
+    analyse,
+    graph_liveness,
+    record_only_places,
+)
+from coordinator.net import PetriNet, PlaceKind, parse_event
+
+__all__ = [
+    "LEVEL_NAMES",
+    "Verdict",
+    "error_transitions",
+    "home_condition",
+    "record_places",
+    "report",
+    "robotic_reading",
+]
+
+#: Names of the liveness levels used in reports.
+LEVEL_NAMES = {0: "L0", 1: "L1", 3: "L3", 4: "L4"}
+_MAX_WITNESSES = 5
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """One robotic property of a task.
+
+    Attributes:
+        holds: True/False, or ``None`` when the analysis could not decide it.
+        explanation: one sentence for a robot engineer.
+        witness: JSON-ready evidence (place ids, markings, firing sequences).
+    """
+
+    holds: bool | None
+    explanation: str
+    witness: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Return ``{"holds", "explanation", "witness"}``."""
+        return {"holds": self.holds, "explanation": self.explanation, "witness": self.witness}
+
+
+def error_transitions(net: PetriNet) -> list[str]:
+    """Ids of the error branches: transitions linked to ``int:<task>.error`` or marked hidden."""
+    out = []
+    for t in net.transitions:
+        if t.hidden or any(parse_event(e)[2] == "error" for e in t.internal_events):
+            out.append(t.id)
+    return out
+
+
+def _names(ids: list[str], k: int = 6) -> str:
+    if len(ids) <= k:
+        return ", ".join(ids)
+    return ", ".join(ids[:k]) + f" and {len(ids) - k} more"
+
+
+def _seq(seq: list[str]) -> str:
+    return " → ".join(seq) if seq else "(nothing: the initial marking)"
+
+
+def _marking_text(marking: dict[str, int]) -> str:
+    if not marking:
+        return "{} (no tokens)"
+    return "{" + ", ".join(f"{p}: {'ω' if v < 0 else v}" for p, v in marking.items()) + "}"
+
+
+def stability(a: Analysis) -> Verdict:
+    """The *stable* verdict (bounded net)."""
+    caps = {p.id: p.capacity for p in a.net.places if p.capacity is not None}
+    over = [{"place": pid, "bound": b, "capacity": caps[pid]} for pid, b in a.place_bounds.items()
+            if pid in caps and b is not None and b > caps[pid]]
+    if a.bounded is True:
+        top = max((b for b in a.place_bounds.values() if b is not None), default=0)
+        text = (f"Every place stays bounded (no place ever holds more than {top} token{'s' if top != 1 else ''}), "
+                "so no backlog of work, parts or requests can build up while the task runs")
+        if over:
+            text += "; but " + ", ".join(f"{o['place']} can hold {o['bound']} (capacity {o['capacity']})"
+                                        for o in over)
+        return Verdict(True, text + ".", {"place_bounds": a.place_bounds, "over_capacity": over})
+    if a.bounded is False:
+        grow = a.unbounded_places
+        witness: dict[str, Any] = {"growing_places": grow}
+        text = (f"The task is not stable: place{'s' if len(grow) != 1 else ''} {_names(grow)} can gain tokens "
+                "without limit")
+        if a.covering is not None:
+            witness["firing_sequence"] = a.covering.prefix
+            witness["repeatable_loop"] = a.covering.loop
+            start = f"after {_seq(a.covering.prefix)}" if a.covering.prefix else "from the initial marking"
+            text += (f" — {start}, repeating {_seq(a.covering.loop)} adds tokens to "
+                     f"{', '.join(a.covering.growing)} every time")
+        records = [p for p in grow if p in set(record_only_places(a.net))]
+        witness["record_only"] = records
+        if records and len(records) == len(grow):
+            text += (f" ({'they only record' if len(grow) > 1 else 'it only records'} what happened: no transition "
+                     "reads it, so the behaviour is unaffected, but the count grows for ever)")
+        return Verdict(False, text + ".", witness)
+    return Verdict(None, "Stability could not be decided: " + ("; ".join(a.notes) or "the state space is too large")
+                   + ".", {})
+
+
+def record_places(net: PetriNet) -> list[str]:
+    """Places that only record what happened: no transition consumes from or is inhibited by them.
+
+    Their counts (finished runs, caught balls) never change what the task can do next.
+    """
+    return record_only_places(net)
+
+
+def home_condition(net: PetriNet) -> tuple[dict[str, int], list[str]]:
+    """The home condition a task must be able to return to (robotic reading of properness).
+
+    The declared home marking (M0 when none is declared), compared only on the places that steer
+    the task: control places (the operator's, e.g. remaining runs) and record-only places
+    (:func:`record_places`) are left out, so a finished 4-run experiment whose robot and camera are
+    idle again counts as home.
+
+    Returns:
+        ``(expected counts on the compared places, ids of the places left out)``.
+    """
+    ref = net.home_marking if net.home_marking is not None else net.initial_marking
+    skipped = set(record_places(net)) | {p.id for p in net.places if p.kind is PlaceKind.CONTROL}
+    expected = {p.id: ref[p.id] for p in net.places if p.id not in skipped}
+    return expected, [p.id for p in net.places if p.id in skipped]
+
+
+def _home_states(space: StateSpace, expected: dict[str, int]) -> np.ndarray:
+    cols = [space.net.place_index[p] for p in expected]
+    want = np.array([expected[p] for p in expected], dtype=np.int64)
+    if not cols:
+        return np.ones(space.n_states, dtype=bool)
+    return np.asarray((space.states[:, cols].astype(np.int64) == want[None, :]).all(axis=1))
+
+
+def _backward_reach(n: int, src: np.ndarray, dst: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """States from which some target state is reachable (reverse breadth-first search from a super node)."""
+    sources = np.flatnonzero(targets)
+    rows = np.concatenate([dst, np.full(sources.size, n, dtype=np.int64)])
+    cols = np.concatenate([src, sources])
+    rev = sp.csr_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n + 1, n + 1))
+    order = csgraph.breadth_first_order(rev, n, directed=True, return_predecessors=False)
+    mask = np.zeros(n + 1, dtype=bool)
+    mask[order] = True
+    return mask[:n]
+
+
+def _home_text(net: PetriNet, expected: dict[str, int], skipped: list[str]) -> str:
+    what = "its declared home marking" if net.home_marking is not None else "its initial marking"
+    if not skipped:
+        return what
+    return f"{what} (not counting {_names(skipped, 4)})"
+
+
+def _behaviour_space(a: Analysis) -> StateSpace | None:
+    """The complete graph that carries the task's behaviour: its own, or that of its projection."""
+    if a.space is not None and a.space.complete:
+        return a.space
+    if a.projection is not None and a.projection.space is not None and a.projection.space.complete:
+        return a.projection.space
+    return None
+
+
+def recoverability(a: Analysis, original: PetriNet) -> Verdict:
+    """The *error recoverable* verdict: every reachable marking can reach the home condition."""
+    space = _behaviour_space(a)
+    expected, skipped = home_condition(original)
+    home_name = _home_text(original, expected, skipped)
+    if space is None:
+        return Verdict(None, f"Error recovery could not be checked: the reachability graph is "
+                             f"{'infinite' if a.bounded is False else 'too large'}, so it is unknown whether "
+                             f"every marking can return to {home_name}.", {})
+    errors = set(error_transitions(original))
+    err_idx = np.array([space.net.transition_index[t] for t in errors], dtype=np.int64)
+    after_error = np.unique(space.dst[np.isin(space.transition, err_idx)]) if err_idx.size else np.zeros(0, np.int64)
+    home = _home_states(space, expected)
+    witness: dict[str, Any] = {
+        "target": "home_marking" if original.home_marking is not None else "initial_marking",
+        "compared_places": expected, "not_compared": skipped,
+        "home_markings": int(home.sum()),
+        "markings_after_error_branches": int(after_error.size),
+        "not_recovering": 0, "examples": [],
+    }
+    if not home.any():
+        witness["not_recovering"] = space.n_states
+        return Verdict(False, f"The task cannot recover: {home_name} {_marking_text(expected)} is never reached "
+                              "at all.", witness)
+    ok = _backward_reach(space.n_states, space.src, space.dst, home)
+    bad = np.flatnonzero(~ok)
+    witness["not_recovering"] = int(bad.size)
+    if not bad.size:
+        errs = (f", including the {after_error.size} reached through an error branch" if after_error.size else "")
+        every = (f"every one of the {space.n_states} reachable markings" if space.n_states > 1
+                 else "its only reachable marking")
+        if space is not a.space:
+            every += " (counted without the record-only places)"
+        return Verdict(True, f"From {every}{errs}, the task can still return to {home_name}, so no error leaves "
+                             "it stranded.", witness)
+    bad_after_error = np.intersect1d(bad, after_error)
+    witness["not_recovering_after_error_branches"] = int(bad_after_error.size)
+    after = set(after_error.tolist())
+    shown = list(bad_after_error[:_MAX_WITNESSES]) + [i for i in bad[:_MAX_WITNESSES] if i not in after]
+    for i in shown[:_MAX_WITNESSES]:
+        witness["examples"].append({"marking": space.marking(int(i)).to_dict(),
+                                    "firing_sequence": space.firing_sequence(int(i)),
+                                    "after_error_branch": bool(int(i) in after)})
+    first = witness["examples"][0]
+    return Verdict(False, f"{bad.size} of the {space.n_states} reachable markings can never return to {home_name} "
+                          f"(for example after {_seq(first['firing_sequence'])} the task is stuck in "
+                          f"{_marking_text(first['marking'])}); add a recovery branch from there.", witness)
+
+
+def controllability(a: Analysis, original: PetriNet) -> Verdict:
+    """The *controllable* verdict: every transition live, a finished task counted as restarted."""
+    space = _behaviour_space(a)
+    if space is None:
+        dead: list[str] = []
+        if a.coverability is not None and a.coverability.complete:
+            fire = a.coverability.fireable_transitions()
+            dead = [t.id for t, f in zip(a.net.transitions, fire) if not f]
+        if dead:
+            return Verdict(False, f"The task is not controllable: transition{'s' if len(dead) > 1 else ''} "
+                                  f"{_names(dead)} can never fire.", {"dead_transitions": dead})
+        return Verdict(None, "Controllability could not be checked: the reachability graph is "
+                             f"{'infinite' if a.bounded is False else 'too large'}, so liveness is not decided.", {})
+    ids = [t.id for t in space.net.transitions]
+    n_t = len(ids)
+    src, dst, tr = space.src, space.dst, space.transition.astype(np.int64)
+    # a finished task: a dead marking in the home condition; restart it (pseudo transition n_t)
+    expected, _ = home_condition(original)
+    finished = np.intersect1d(space.deadlocks(), np.flatnonzero(_home_states(space, expected)))
+    finished = finished[finished != 0]
+    restarted = bool(finished.size)
+    if restarted:
+        src = np.concatenate([src, finished])
+        dst = np.concatenate([dst, np.zeros(finished.size, dtype=np.int64)])
+        tr = np.concatenate([tr, np.full(finished.size, n_t, dtype=np.int64)])
+    levels, labels, terminal = graph_liveness(space.n_states, n_t + 1, src, dst, tr)
+    levels = levels[:n_t]
+    dead = [ids[j] for j in range(n_t) if levels[j] == 0]
+    not_live = [ids[j] for j in range(n_t) if 0 < levels[j] < 4]
+    witness: dict[str, Any] = {"liveness": {ids[j]: LEVEL_NAMES[int(levels[j])] for j in range(n_t)},
+                               "dead_transitions": dead, "not_live_transitions": not_live,
+                               "finished_task_restarted": restarted, "examples": []}
+    scope = " (a finished task counted as restarted from its initial marking)" if restarted else ""
+    if not dead and not not_live:
+        return Verdict(True, f"Every transition can still fire from every reachable marking{scope}, so the operator "
+                             "can always drive the task through each of its steps again.", witness)
+    # a marking from which each non-live transition can never fire: a terminal component lacking it
+    in_term = terminal[labels]
+    cs = labels[src]
+    for tid in not_live[:_MAX_WITNESSES]:
+        j = ids.index(tid)
+        comps_with = np.unique(cs[(tr == j) & terminal[cs]])
+        cand = np.flatnonzero(in_term & ~np.isin(labels, comps_with))
+        if cand.size:
+            i = int(cand[0])
+            witness["examples"].append({"transition": tid, "marking": space.marking(i).to_dict(),
+                                        "firing_sequence": space.firing_sequence(i)})
+    parts = []
+    if dead:
+        parts.append(f"{_names(dead)} can never fire")
+    if not_live:
+        parts.append(f"{_names(not_live)} can become impossible to fire again")
+    text = "The task is not fully controllable" + scope + ": " + "; ".join(parts)
+    if witness["examples"]:
+        ex = witness["examples"][0]
+        text += f" (e.g. after {_seq(ex['firing_sequence'])}, {ex['transition']} can never fire again)"
+    return Verdict(False, text + ".", witness)
+
+
+def robotic_reading(a: Analysis, original: PetriNet) -> dict[str, Verdict]:
+    """Return the three verdicts ``stable``, ``error_recoverable``, ``controllable`` of a task net.
+
+    Args:
+        a: the :func:`~coordinator.analysis.structure.analyse` result.
+        original: the interpreted net (its events name the error branches; its home marking).
+    """
+    return {"stable": stability(a), "error_recoverable": recoverability(a, original),
+            "controllable": controllability(a, original)}
+
+
+def report(net: PetriNet, *, max_states: int = 10_000_000,
+           progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+    """Analyse a task net and return the JSON-ready report of ``petrobot analyze --json``.
+
+    Keys: ``net``, ``places``, ``transitions``, ``states``, ``edges``, ``complete``, ``bounded``,
+    ``place_bounds``, ``unbounded_places``, ``max_token_in_place``, ``max_token_per_marking``,
+    ``one_safe``, ``deadlock``, ``deadlocks`` (marking + firing sequence each), ``n_deadlocks``,
+    ``liveness`` (transition → "L0".."L4"), ``dead_transitions``, ``live``, ``quasi_live``,
+    ``reversible``, ``home_states``, ``home_marking_is_home``, ``stable_marking``, ``stable_places``,
+    ``p_invariants``, ``t_invariants`` (lists of {id: weight}), ``conservative``, ``consistent``,
+    ``structural_conflicts``, ``interpretation_problems``, ``notes`` and ``robotic``
+    (``stable``, ``error_recoverable``, ``controllable``: each ``{holds, explanation, witness}``).
+    ``None`` (JSON null) means "not decided".
+    """
+    a = analyse(net, max_states=max_states, progress=progress)
+    verdicts = robotic_reading(a, net)
+    return {
+        "net": net.name,
+        "places": len(net.places),
+        "transitions": len(net.transitions),
+        "states": a.states,
+        "edges": a.edges,
+        "complete": a.complete,
+        "bounded": a.bounded,
+        "place_bounds": a.place_bounds,
+        "unbounded_places": a.unbounded_places,
+        "max_token_in_place": a.max_token_in_place,
+        "max_token_per_marking": a.max_token_per_marking,
+        "one_safe": a.one_safe,
+        "deadlock": a.deadlock,
+        "deadlocks": [{"marking": d.marking, "firing_sequence": d.firing_sequence} for d in a.deadlocks],
+        "n_deadlocks": a.n_deadlocks,
+        "liveness": None if a.liveness is None else {t: LEVEL_NAMES[v] for t, v in a.liveness.items()},
+        "dead_transitions": a.dead_transitions,
+        "live": a.live,
+        "quasi_live": a.quasi_live,
+        "reversible": a.reversible,
+        "home_states": a.home_states,
+        "home_marking_is_home": a.home_marking_is_home,
+        "stable_marking": a.stable_marking,
+        "stable_places": a.stable_places,
+        "p_invariants": a.p_invariants.as_dicts(),
+        "p_invariants_complete": a.p_invariants.complete,
+        "t_invariants": a.t_invariants.as_dicts(),
+        "t_invariants_complete": a.t_invariants.complete,
+        "conservative": a.conservative,
+        "consistent": a.consistent,
+        "structural_conflicts": [{"place": c.place, "transitions": c.transitions, "effective": c.effective}
+                                 for c in a.conflicts],
+        "interpretation_problems": [{"element": e, "problem": p} for e, p in net.interpretation_problems()],
+        "notes": a.notes,
+        "robotic": {k: v.to_dict() for k, v in verdicts.items()},
+    }

@@ -1,0 +1,157 @@
+"""``petrobot analyze NET [--json] [--max-states N] [--progress]``: qualitative analysis of a task net.
+
+Thin shell over :func:`coordinator.analysis.robotic.report` (paper section 2, "Qualitative
+Performance Evaluation"): loads the net (TOML or PNML), analyses its ordinary view (events dropped)
+and prints a readable report, or the JSON report with ``--json``. Progress of long state-space
+constructions goes to stderr, on a terminal or with ``--progress``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Callable
+from typing import Any, TextIO
+
+from coordinator.analysis.robotic import report
+from coordinator.errors import PetrobotError
+from coordinator.netfile import load_any
+
+__all__ = ["add_parser", "render", "run"]
+
+DEFAULT_MAX_STATES = 10_000_000
+
+
+def add_parser(subparsers: Any) -> None:
+    """Register ``analyze`` on the ``petrobot`` sub-command parser."""
+    parser = subparsers.add_parser(
+        "analyze",
+        help="qualitative analysis: boundedness, deadlocks, liveness, invariants, robotic reading",
+        description=(
+            "Analyse the ordinary Petri net of a task (events dropped, so every transition fires as "
+            "soon as it is enabled): reachability graph (state count, edges), boundedness and the bound "
+            "of each place (Karp-Miller coverability when the graph is infinite), safeness, deadlocks "
+            "with a shortest firing sequence, liveness level L0-L4 of each transition, reversibility and "
+            "home states, stable places, minimal P- and T-invariants, structural conflicts; then read "
+            "them as robotic properties: stable (bounded), error recoverable (every marking can return "
+            "to the home marking) and controllable (live). Exit status 0 when the analysis ran, 1 on an "
+            "unreadable net."),
+    )
+    parser.add_argument("net", metavar="NET", help="net file (.toml, .pnml or .xml)")
+    parser.add_argument("--json", action="store_true",
+                        help="print the machine-readable report (JSON; null means 'not decided')")
+    parser.add_argument("--max-states", type=int, default=DEFAULT_MAX_STATES, metavar="N",
+                        help=f"stop the reachability graph at N markings (default: {DEFAULT_MAX_STATES:,}); "
+                             "properties that need the whole graph are then left undecided")
+    parser.add_argument("--progress", action="store_true",
+                        help="report state-space progress on stderr even when stderr is not a terminal")
+
+
+def _progress(stream: TextIO) -> Callable[[int, int], None]:
+    start = time.monotonic()
+    last = [0.0]
+
+    def show(states: int, edges: int) -> None:
+        now = time.monotonic()
+        if now - last[0] < 0.5:
+            return
+        last[0] = now
+        rate = states / max(now - start, 1e-9)
+        stream.write(f"\r  {states:>12,} markings  {edges:>14,} edges  {rate:>11,.0f} markings/s")
+        stream.flush()
+
+    return show
+
+
+def _yes(value: Any) -> str:
+    return {True: "yes", False: "no", None: "not decided"}.get(value, str(value))
+
+
+def render(rep: dict[str, Any]) -> str:
+    """Return the readable text of a :func:`~coordinator.analysis.robotic.report` dictionary."""
+    lines = [f"net {rep['net']!r}: {rep['places']} places, {rep['transitions']} transitions (ordinary view)"]
+    full = "" if rep["complete"] else " (graph truncated)"
+    lines.append(f"reachability graph: {rep['states']:,} markings, {rep['edges']:,} edges{full}")
+    lines.append("")
+    lines.append("robotic reading")
+    for key, title in (("stable", "stable"), ("error_recoverable", "error recoverable"),
+                       ("controllable", "controllable")):
+        v = rep["robotic"][key]
+        lines.append(f"  {title + ':':<19}{_yes(v['holds'])}")
+        lines.append(f"    {v['explanation']}")
+    lines.append("")
+    lines.append("properties")
+    lines.append(f"  bounded:            {_yes(rep['bounded'])}")
+    if rep["unbounded_places"]:
+        lines.append(f"    unbounded places: {', '.join(rep['unbounded_places'])}")
+    bounds = rep["place_bounds"]
+    if bounds and rep["bounded"]:
+        lines.append("    bounds: " + ", ".join(f"{p}≤{b}" for p, b in bounds.items()))
+    lines.append(f"  1-safe:             {_yes(rep['one_safe'])}")
+    lines.append(f"  max tokens/place:   {rep['max_token_in_place'] if rep['max_token_in_place'] is not None else '-'}")
+    lines.append(f"  max tokens/marking: {rep['max_token_per_marking'] if rep['max_token_per_marking'] is not None else '-'}")
+    n_dead = rep["n_deadlocks"]
+    lines.append(f"  deadlock:           {_yes(rep['deadlock'])}" + (f" ({n_dead} dead marking{'s' if n_dead != 1 else ''})" if n_dead else ""))
+    for d in rep["deadlocks"]:
+        marking = ", ".join(f"{p}:{c}" for p, c in d["marking"].items()) or "empty"
+        seq = " ".join(d["firing_sequence"]) or "(initial marking)"
+        lines.append(f"    {{{marking}}} after: {seq}")
+    lines.append(f"  quasi-live:         {_yes(rep['quasi_live'])}")
+    lines.append(f"  live:               {_yes(rep['live'])}")
+    if rep["liveness"]:
+        by_level: dict[str, list[str]] = {}
+        for t, lvl in rep["liveness"].items():
+            by_level.setdefault(lvl, []).append(t)
+        for lvl in sorted(by_level, reverse=True):
+            lines.append(f"    {lvl}: {', '.join(by_level[lvl])}")
+    lines.append(f"  reversible:         {_yes(rep['reversible'])}")
+    if rep["home_states"] is not None:
+        lines.append(f"  home states:        {rep['home_states']}")
+    if rep["home_marking_is_home"] is not None:
+        lines.append(f"  declared home marking is a home state: {_yes(rep['home_marking_is_home'])}")
+    stable = rep["stable_places"]
+    lines.append(f"  stable places:      {', '.join(stable) if stable else ('none' if stable is not None else '-')}")
+    lines.append(f"  conservative:       {_yes(rep['conservative'])}   consistent: {_yes(rep['consistent'])}")
+    for key, title in (("p_invariants", "P-invariants"), ("t_invariants", "T-invariants")):
+        inv = rep[key]
+        lines.append(f"  {title}: {len(inv)}" + ("" if rep[f"{key}_complete"] else " (size guard hit)"))
+        for vec in inv[:10]:
+            lines.append("    " + " + ".join(f"{w}·{i}" if w != 1 else i for i, w in vec.items()))
+        if len(inv) > 10:
+            lines.append(f"    ... {len(inv) - 10} more (see --json)")
+    conflicts = rep["structural_conflicts"]
+    lines.append(f"  structural conflicts: {len(conflicts)}")
+    for c in conflicts[:10]:
+        eff = {True: "effective", False: "never effective", None: "?"}[c["effective"]]
+        lines.append(f"    {c['place']}: {', '.join(c['transitions'])} ({eff})")
+    for problem in rep["interpretation_problems"]:
+        lines.append(f"  note: {problem['problem']}")
+    for note in rep["notes"]:
+        lines.append(f"  note: {note}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Analyse the net; print the report; return 0, or 1 if the net cannot be loaded."""
+    try:
+        net = load_any(args.net, interpreted=False)
+    except PetrobotError as exc:
+        print(f"petrobot analyze: {exc}", file=sys.stderr)
+        return 1
+    show = args.progress or sys.stderr.isatty()
+    progress = _progress(sys.stderr) if show else None
+    try:
+        rep = report(net, max_states=args.max_states, progress=progress)
+    except PetrobotError as exc:
+        print(f"petrobot analyze: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        if show:
+            sys.stderr.write("\n")
+    if args.json:
+        print(json.dumps(rep, indent=2))
+    else:
+        print(render(rep))
+    return 0

@@ -1,0 +1,48 @@
+"""Small nets built in code for the analysis tests (tests/unit/test_statespace.py and siblings)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from coordinator.net import Arc, Marking, PetriNet, Place, Transition
+
+
+def make_net(
+    name: str,
+    marking: Mapping[str, int],
+    transitions: Mapping[str, tuple[Mapping[str, int], Mapping[str, int]]],
+    *,
+    places: tuple[str, ...] = (),
+    inhibitors: Mapping[str, Mapping[str, int]] | None = None,
+) -> PetriNet:
+    """Build a plain P/T net: ``transitions[t] = ({input place: weight}, {output place: weight})``.
+
+    Places are those of ``places`` then any other place named, in order of first mention.
+    """
+    order: list[str] = list(places)
+
+    def see(p: str) -> None:
+        if p not in order:
+            order.append(p)
+
+    for p in marking:
+        see(p)
+    arcs: list[Arc] = []
+    for t, (pre, post) in transitions.items():
+        for p, w in pre.items():
+            see(p)
+            arcs.append(Arc(source=p, target=t, weight=w))
+        for p, w in post.items():
+            see(p)
+            arcs.append(Arc(source=t, target=p, weight=w))
+    for t, inh in (inhibitors or {}).items():
+        for p, w in inh.items():
+            see(p)
+            arcs.append(Arc(source=p, target=t, weight=w, inhibitor=True))
+    return PetriNet(
+        name=name,
+        places=tuple(Place(id=p) for p in order),
+        transitions=tuple(Transition(id=t) for t in transitions),
+        arcs=tuple(arcs),
+        initial_marking=Marking(marking),
+    )

@@ -1,0 +1,336 @@
+"""The robotic reading (stable, error recoverable, controllable) and the `petrobot analyze` command."""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import pytest
+
+from coordinator.analysis.robotic import error_transitions, report
+from coordinator.commands import analyze
+from coordinator.netfile import loads_net
+
+HEADER = """
+[net]
+name = "{name}"
+format = 1
+{home}
+
+[[place]]
+id = "idle"
+kind = "resource"
+tokens = 1
+
+[[place]]
+id = "locating"
+kind = "primitive_task"
+task = "locate"
+
+[task.locate]
+actions = [{{ name = "locate_threshold" }}]
+
+[[transition]]
+id = "start"
+events = ["ext:tick"]
+inputs = {{ idle = 1 }}
+outputs = {{ locating = 1 }}
+
+[[transition]]
+id = "located"
+events = ["int:locate.ok"]
+inputs = {{ locating = 1 }}
+outputs = {{ idle = 1 }}
+"""
+
+RECOVERS = """
+[[transition]]
+id = "locate_failed"
+events = ["int:locate.error"]
+hidden = true
+inputs = { locating = 1 }
+outputs = { idle = 1 }
+"""
+
+STRANDS = """
+[[place]]
+id = "broken"
+
+[[transition]]
+id = "locate_failed"
+events = ["int:locate.error"]
+hidden = true
+inputs = { locating = 1 }
+outputs = { broken = 1 }
+"""
+
+LEAKS = """
+[[place]]
+id = "frames"
+
+[[transition]]
+id = "locate_failed"
+events = ["int:locate.error"]
+hidden = true
+inputs = { locating = 1 }
+outputs = { idle = 1, frames = 1 }
+"""
+
+
+def task(body: str, name: str = "locate_task", home: str = "") -> str:
+    return HEADER.format(name=name, home=home) + body
+
+
+def test_task_with_a_recovery_branch_is_stable_recoverable_and_controllable() -> None:
+    net = loads_net(task(RECOVERS))
+    assert error_transitions(net) == ["locate_failed"]
+    rep = report(net)
+    rob = rep["robotic"]
+    assert rob["stable"]["holds"] is True
+    assert rob["error_recoverable"]["holds"] is True
+    assert rob["error_recoverable"]["witness"]["markings_after_error_branches"] == 1
+    assert "error branch" in rob["error_recoverable"]["explanation"]
+    assert rob["controllable"]["holds"] is True
+    assert rep["live"] is True and rep["reversible"] is True
+
+
+def test_error_branch_into_a_dead_end_is_not_recoverable_and_names_the_marking() -> None:
+    rep = report(loads_net(task(STRANDS)))
+    rec = rep["robotic"]["error_recoverable"]
+    assert rec["holds"] is False
+    example = rec["witness"]["examples"][0]
+    assert example == {"marking": {"broken": 1}, "firing_sequence": ["start", "locate_failed"],
+                       "after_error_branch": True}
+    assert "start → locate_failed" in rec["explanation"]
+    ctl = rep["robotic"]["controllable"]
+    assert ctl["holds"] is False
+    assert set(ctl["witness"]["not_live_transitions"]) == {"start", "located", "locate_failed"}
+    assert rep["deadlock"] is True and rep["deadlocks"][0]["firing_sequence"] == ["start", "locate_failed"]
+
+
+def test_error_branch_that_leaks_a_token_is_not_stable_and_names_the_growing_place() -> None:
+    rep = report(loads_net(task(LEAKS)))
+    stable = rep["robotic"]["stable"]
+    assert stable["holds"] is False
+    assert stable["witness"]["growing_places"] == ["frames"]
+    assert stable["witness"]["repeatable_loop"] == ["start", "locate_failed"]
+    assert "frames" in stable["explanation"]
+    assert rep["bounded"] is False and rep["place_bounds"]["frames"] is None
+    # frames is only a record: recovery is decided on the net without it
+    assert rep["robotic"]["error_recoverable"]["holds"] is True
+
+
+TERMINATES = """
+[net]
+name = "locate_once"
+format = 1
+home = { done = 1 }
+
+[[place]]
+id = "idle"
+kind = "resource"
+tokens = 1
+
+[[place]]
+id = "locating"
+kind = "primitive_task"
+task = "locate"
+
+[[place]]
+id = "done"
+
+[task.locate]
+actions = [{ name = "locate_threshold" }]
+
+[[transition]]
+id = "start"
+inputs = { idle = 1 }
+outputs = { locating = 1 }
+
+[[transition]]
+id = "located"
+events = ["int:locate.ok"]
+inputs = { locating = 1 }
+outputs = { done = 1 }
+
+[[transition]]
+id = "locate_failed"
+events = ["int:locate.error"]
+hidden = true
+inputs = { locating = 1 }
+outputs = { done = 1 }
+"""
+
+
+def test_terminating_task_ending_in_its_home_marking_is_controllable_with_the_end_restarted() -> None:
+    rep = report(loads_net(TERMINATES))
+    assert rep["deadlock"] is True and rep["live"] is False
+    assert rep["home_marking_is_home"] is True
+    assert rep["robotic"]["error_recoverable"]["holds"] is True
+    ctl = rep["robotic"]["controllable"]
+    assert ctl["holds"] is True and ctl["witness"]["finished_task_restarted"] is True
+
+
+def test_report_is_json_with_the_required_keys() -> None:
+    rep = report(loads_net(task(RECOVERS)))
+    text = json.dumps(rep)
+    for key in ("states", "edges", "max_token_in_place", "max_token_per_marking", "bounded", "deadlock", "live",
+                "quasi_live", "reversible", "one_safe", "stable_marking", "p_invariants", "t_invariants"):
+        assert key in rep
+    assert set(rep["robotic"]) == {"stable", "error_recoverable", "controllable"}
+    assert json.loads(text)["p_invariants"] == [{"idle": 1, "locating": 1}]
+
+
+def parse(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers(dest="command")
+    analyze.add_parser(sub)
+    return parser.parse_args(["analyze", *argv])
+
+
+def test_analyze_command_prints_json_and_text(tmp_path: pytest.TempPathFactory, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "task.toml"  # type: ignore[operator]
+    path.write_text(task(STRANDS), encoding="utf-8")
+    assert analyze.run(parse([str(path), "--json"])) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["states"] == 3 and rep["robotic"]["error_recoverable"]["holds"] is False
+    assert analyze.run(parse([str(path), "--max-states", "100"])) == 0
+    out = capsys.readouterr().out
+    assert "error recoverable: no" in out and "deadlock:           yes" in out
+
+
+def test_analyze_command_reports_an_unreadable_net(tmp_path: pytest.TempPathFactory,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "bad.toml"  # type: ignore[operator]
+    path.write_text("[net\n", encoding="utf-8")
+    assert analyze.run(parse([str(path)])) == 1
+    assert "petrobot analyze" in capsys.readouterr().err
+
+
+def test_analyze_command_shows_progress_on_request(tmp_path: pytest.TempPathFactory,
+                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "task.toml"  # type: ignore[operator]
+    path.write_text(task(RECOVERS), encoding="utf-8")
+    assert analyze.run(parse([str(path), "--progress"])) == 0
+    assert capsys.readouterr().err.endswith("\n")
+
+
+EXPERIMENT = """
+[net]
+name = "two_runs"
+format = 1
+home = { idle = 1 }
+
+[[place]]
+id = "runs_remaining"
+kind = "control"
+tokens = 2
+
+[[place]]
+id = "idle"
+kind = "resource"
+tokens = 1
+
+[[place]]
+id = "locating"
+kind = "primitive_task"
+task = "locate"
+
+[[place]]
+id = "found"
+
+[[place]]
+id = "aborted"
+
+[task.locate]
+actions = [{ name = "locate_threshold" }]
+
+[[transition]]
+id = "start"
+inputs = { runs_remaining = 1, idle = 1 }
+outputs = { locating = 1 }
+
+[[transition]]
+id = "located"
+events = ["int:locate.ok"]
+inputs = { locating = 1 }
+outputs = { idle = 1, found = 1 }
+
+[[transition]]
+id = "locate_failed"
+events = ["int:locate.error"]
+hidden = true
+inputs = { locating = 1 }
+outputs = { idle = 1, aborted = 1 }
+"""
+
+
+def test_finite_experiment_recovers_when_its_resources_come_back_whatever_the_counters() -> None:
+    from coordinator.analysis.robotic import home_condition, record_places
+
+    net = loads_net(EXPERIMENT)
+    assert record_places(net) == ["found", "aborted"]
+    assert home_condition(net) == ({"idle": 1, "locating": 0}, ["runs_remaining", "found", "aborted"])
+    rep = report(net)
+    assert rep["reversible"] is False and rep["home_marking_is_home"] is False
+    rec = rep["robotic"]["error_recoverable"]
+    assert rec["holds"] is True and "not counting runs_remaining, found, aborted" in rec["explanation"]
+    ctl = rep["robotic"]["controllable"]
+    assert ctl["holds"] is True and ctl["witness"]["finished_task_restarted"] is True
+
+
+def test_task_that_counts_its_runs_for_ever_is_unstable_but_recoverable_and_controllable() -> None:
+    text = EXPERIMENT.replace("tokens = 2\n", "tokens = 1\n").replace(
+        "inputs = { runs_remaining = 1, idle = 1 }\noutputs = { locating = 1 }",
+        "inputs = { runs_remaining = 1, idle = 1 }\noutputs = { locating = 1, runs_remaining = 1 }")
+    rep = report(loads_net(text))
+    stable = rep["robotic"]["stable"]
+    assert stable["holds"] is False
+    assert sorted(stable["witness"]["growing_places"]) == ["aborted", "found"]
+    assert "only record" in stable["explanation"]
+    assert rep["robotic"]["error_recoverable"]["holds"] is True
+    assert rep["robotic"]["controllable"]["holds"] is True
+    assert rep["live"] is True and rep["reversible"] is False
+
+
+def test_unbounded_task_whose_growing_place_is_read_leaves_recovery_undecided() -> None:
+    text = task(LEAKS) + """
+[[transition]]
+id = "discard"
+inputs = { frames = 2 }
+outputs = {}
+"""
+    rep = report(loads_net(text))
+    assert rep["robotic"]["stable"]["holds"] is False
+    assert rep["robotic"]["error_recoverable"]["holds"] is None
+    assert "could not be checked" in rep["robotic"]["error_recoverable"]["explanation"]
+    assert rep["robotic"]["controllable"]["holds"] is None
+
+
+def test_too_large_experiment_is_judged_on_the_net_without_its_counters() -> None:
+    net = loads_net(EXPERIMENT.replace("tokens = 2\n", "tokens = 30\n"))
+    rep = report(net, max_states=100)  # the net has ~1,000 markings, without its counters 61
+    assert rep["complete"] is False and rep["bounded"] is True
+    assert rep["live"] is False and rep["deadlock"] is True and rep["reversible"] is False
+    rec = rep["robotic"]["error_recoverable"]
+    assert rec["holds"] is True and "counted without the record-only places" in rec["explanation"]
+    assert rep["robotic"]["controllable"]["holds"] is True
+
+
+def test_the_catch_net_of_fig_1_is_stable_error_recoverable_and_controllable():
+    from pathlib import Path
+
+    from coordinator.analysis.robotic import report
+    from coordinator.netfile import load_any
+
+    root = Path(__file__).resolve().parents[2]
+    doc = report(load_any(root / "nets" / "catch.toml", interpreted=False))
+    assert (doc["states"], doc["edges"]) == (237, 652)
+    assert doc["bounded"] is True
+    robotic = doc["robotic"]
+    assert robotic["stable"]["holds"] is True
+    assert robotic["error_recoverable"]["holds"] is True
+    assert robotic["controllable"]["holds"] is True
+    # the experiment ends: every dead marking has the robot home and the camera free
+    assert all(d["marking"].get("robot_ready") == 1 and d["marking"].get("camera_free") == 1
+               for d in doc["deadlocks"])

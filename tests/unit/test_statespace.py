@@ -1,0 +1,178 @@
+"""The vectorised explorer against the firing rule of coordinator.net, one marking at a time."""
+
+from __future__ import annotations
+
+import itertools
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+import pytest
+from analysis_nets import make_net
+
+from coordinator.analysis.statespace import StateSpace, enabled_mask, explore
+from coordinator.errors import AnalysisError
+from coordinator.net import Marking, PetriNet
+
+MCC = Path("/work/shared/mcc")
+
+
+def reference_graph(net: PetriNet, limit: int = 100_000) -> tuple[set[Marking], set[tuple[Marking, str, Marking]]]:
+    """Breadth-first search with PetriNet.fire, one marking at a time."""
+    seen = {net.initial_marking}
+    edges: set[tuple[Marking, str, Marking]] = set()
+    todo = deque([net.initial_marking])
+    while todo and len(seen) < limit:
+        m = todo.popleft()
+        for t in net.enabled_transitions(m):
+            m2 = net.fire(m, t)
+            edges.add((m, t, m2))
+            if m2 not in seen:
+                seen.add(m2)
+                todo.append(m2)
+    return seen, edges
+
+
+def graph_of(ss: StateSpace) -> tuple[set[Marking], set[tuple[Marking, str, Marking]]]:
+    marks = [ss.marking(i) for i in range(ss.n_states)]
+    ids = [t.id for t in ss.net.transitions]
+    edges = {(marks[s], ids[t], marks[d]) for s, d, t in zip(ss.src.tolist(), ss.dst.tolist(), ss.transition.tolist())}
+    return set(marks), edges
+
+
+def assert_same_as_reference(net: PetriNet, **kwargs: object) -> StateSpace:
+    ss = explore(net, **kwargs)  # type: ignore[arg-type]
+    ref_states, ref_edges = reference_graph(net)
+    states, edges = graph_of(ss)
+    assert ss.complete
+    assert ss.n_states == len(states) == len(ref_states)
+    assert states == ref_states
+    assert ss.n_edges == len(edges) == len(ref_edges)
+    assert edges == ref_edges
+    return ss
+
+
+def mutex() -> PetriNet:
+    return make_net("mutex", {"idle1": 1, "idle2": 1, "free": 1}, {
+        "enter1": ({"idle1": 1, "free": 1}, {"crit1": 1}),
+        "leave1": ({"crit1": 1}, {"idle1": 1, "free": 1}),
+        "enter2": ({"idle2": 1, "free": 1}, {"crit2": 1}),
+        "leave2": ({"crit2": 1}, {"idle2": 1, "free": 1}),
+    })
+
+
+def test_initial_marking_is_state_zero_and_edges_are_sorted_by_source() -> None:
+    ss = assert_same_as_reference(mutex())
+    assert ss.marking(0) == mutex().initial_marking
+    assert ss.n_states == 3 and ss.n_edges == 4
+    assert np.all(np.diff(ss.src) >= 0)
+    assert ss.src.dtype == np.int64 and ss.dst.dtype == np.int64 and ss.transition.dtype == np.int32
+
+
+def test_weighted_arcs_and_inhibitor_arcs_follow_the_firing_rule() -> None:
+    net = make_net("weighted", {"a": 4}, {
+        "split": ({"a": 2}, {"b": 3}),
+        "merge": ({"b": 3}, {"a": 1, "c": 1}),
+        "guarded": ({"c": 1}, {"a": 1}),
+    }, inhibitors={"guarded": {"b": 2}})
+    assert_same_as_reference(net)
+
+
+def test_counts_above_255_switch_the_storage_to_a_wider_dtype() -> None:
+    net = make_net("counter", {"go": 1}, {"tick": ({"go": 1}, {"go": 1, "n": 1})}, inhibitors={"tick": {"n": 300}})
+    ss = assert_same_as_reference(net)
+    assert ss.n_states == 301
+    assert ss.states.dtype == np.uint16
+    assert int(ss.states[:, ss.net.place_index["n"]].max()) == 300
+
+
+def test_more_than_64_bits_of_marking_uses_the_verified_hash_and_stays_exact() -> None:
+    chain = {f"t{i}": ({f"p{i}": 1}, {f"p{i + 1}": 1}) for i in range(80)}
+    chain["back"] = ({"p80": 1}, {"p0": 1})
+    net = make_net("chain", {"p0": 1, "p40": 1}, chain)
+    ss = assert_same_as_reference(net)
+    assert ss.n_states == 81 * 80 // 2 + 81  # two tokens on a ring of 81 places
+
+
+def test_priority_fires_only_the_highest_enabled_level() -> None:
+    net = make_net("prio", {"a": 1}, {
+        "slow": ({"a": 1}, {"b": 1}),
+        "fast": ({"a": 1}, {"c": 1}),
+        "back": ({"c": 1}, {"a": 1}),
+    })
+    ss = explore(net, priority=np.array([0, 1, 0]))
+    assert ss.n_states == 2
+    assert [net.transitions[int(t)].id for t in ss.transition] == ["fast", "back"]
+    with pytest.raises(AnalysisError):
+        explore(net, priority=np.array([0, 1]))
+
+
+def test_max_states_truncates_and_says_so() -> None:
+    net = make_net("producer", {"go": 1}, {"produce": ({"go": 1}, {"go": 1, "buf": 1})})
+    ss = explore(net, max_states=50)
+    assert not ss.complete
+    assert ss.n_states == 50
+    assert int(ss.dst.max()) < 50
+    assert not ss.expanded.all()
+    assert ss.deadlocks().size == 0
+
+
+def test_index_of_and_firing_sequence_give_a_shortest_path() -> None:
+    net = make_net("line", {"p0": 1}, {f"t{i}": ({f"p{i}": 1}, {f"p{i + 1}": 1}) for i in range(5)}
+                   | {"skip": ({"p0": 1}, {"p4": 1})})
+    ss = explore(net)
+    target = ss.index_of({"p5": 1})
+    assert ss.firing_sequence(target) == ["skip", "t4"]
+    assert ss.deadlocks().tolist() == [target]
+    with pytest.raises(KeyError):
+        ss.index_of({"p5": 2})
+    m = net.initial_marking
+    for t in ss.firing_sequence(target):
+        m = net.fire(m, t)
+    assert m == Marking({"p5": 1})
+
+
+def test_successors_predecessors_and_the_sparse_graph_agree() -> None:
+    ss = explore(mutex())
+    mat = ss.successor_matrix()
+    assert mat.shape == (3, 3) and int(mat.sum()) == ss.n_edges
+    assert (ss.predecessor_matrix() != mat.T).nnz == 0
+    s0 = ss.successors(0)
+    assert sorted(t for t, _ in s0) == ["enter1", "enter2"]
+    for t, j in s0:
+        assert (0, t) in ss.predecessors(j)
+
+
+def test_enabled_mask_matches_the_net_for_every_state() -> None:
+    net = mutex()
+    ss = explore(net)
+    mask = enabled_mask(net, ss.states)
+    for i in range(ss.n_states):
+        expected = [net.enabled(ss.marking(i), t.id) for t in net.transitions]
+        assert mask[i].tolist() == expected
+
+
+@pytest.mark.parametrize("model", ["ERK-PT-000001", "Philosophers-PT-000005", "CircularTrains-PT-012",
+                                   "Eratosthenes-PT-010", "TokenRing-PT-005"])
+def test_mcc_models_give_the_same_graph_as_the_one_marking_at_a_time_search(model: str) -> None:
+    from coordinator.pnml import load_pnml
+
+    assert_same_as_reference(load_pnml(str(MCC / model / "model.pnml")))
+
+
+def test_progress_is_reported_with_growing_counts() -> None:
+    seen: list[tuple[int, int]] = []
+    ss = explore(mutex(), progress=lambda states, edges: seen.append((states, edges)))
+    assert seen and seen[-1] == (ss.n_states, ss.n_edges)
+    assert all(a <= b for a, b in itertools.pairwise(seen))
+
+
+def test_inhibitor_arcs_and_priorities_combine() -> None:
+    net = make_net("both", {"a": 2}, {
+        "low": ({"a": 1}, {"b": 1}),
+        "high": ({"a": 1}, {"c": 1}),
+    }, inhibitors={"high": {"c": 1}})
+    ss = explore(net, priority=np.array([0, 1]))
+    # high fires first, then is inhibited by its own output; low takes the last token
+    assert [ss.marking(i) for i in range(ss.n_states)] == [Marking({"a": 2}), Marking({"a": 1, "c": 1}),
+                                                         Marking({"b": 1, "c": 1})]

@@ -1,0 +1,235 @@
+"""Behavioural properties of the ordinary net: coverability, boundedness, liveness levels, deadlocks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from analysis_nets import make_net
+
+from coordinator.analysis.coverability import OMEGA, covering_witness, karp_miller
+from coordinator.analysis.statespace import explore
+from coordinator.analysis.structure import analyse, ordinary_view
+from coordinator.errors import AnalysisError
+from coordinator.net import Arc, Marking, PetriNet, Place, Transition
+
+
+def producer() -> PetriNet:
+    return make_net("producer", {"go": 1}, {"produce": ({"go": 1}, {"go": 1, "buf": 1})})
+
+
+def pump() -> PetriNet:
+    """p1 →t1 p2 →t2 p1 + p3 (p3 grows); t3 leaves for the dead end p4."""
+    return make_net("pump", {"p1": 1}, {
+        "t1": ({"p1": 1}, {"p2": 1}),
+        "t2": ({"p2": 1}, {"p1": 1, "p3": 1}),
+        "t3": ({"p1": 1}, {"p4": 1}),
+    })
+
+
+def levels_net() -> PetriNet:
+    return make_net("levels", {"a": 1, "x": 1}, {
+        "t_left": ({"a": 1}, {"l": 1}),
+        "l_loop": ({"l": 1}, {"l": 1}),
+        "t_right": ({"a": 1}, {"r": 1}),
+        "r_loop": ({"r": 1}, {"r": 1}),
+        "t_dead": ({"z": 1}, {"a": 1}),
+        "x_go": ({"x": 1}, {"y": 1}),
+        "y_go": ({"y": 1}, {"x": 1}),
+    })
+
+
+def mutex() -> PetriNet:
+    return make_net("mutex", {"idle1": 1, "idle2": 1, "free": 1}, {
+        "enter1": ({"idle1": 1, "free": 1}, {"crit1": 1}),
+        "leave1": ({"crit1": 1}, {"idle1": 1, "free": 1}),
+        "enter2": ({"idle2": 1, "free": 1}, {"crit2": 1}),
+        "leave2": ({"crit2": 1}, {"idle2": 1, "free": 1}),
+    })
+
+
+def test_karp_miller_puts_omega_on_the_buffer_of_a_producer_without_consumer() -> None:
+    cov = karp_miller(producer())
+    assert cov.complete and not cov.bounded
+    assert cov.markings.tolist() == [[1, 0], [1, OMEGA]]
+    assert cov.unbounded_places() == ["buf"]
+    assert cov.place_bounds() == [1, None]
+
+
+def test_karp_miller_textbook_pump_has_the_hand_computed_graph() -> None:
+    cov = karp_miller(pump())
+    nodes = {tuple(int(v) for v in row) for row in cov.markings}
+    w = OMEGA
+    assert nodes == {(1, 0, 0, 0), (0, 1, 0, 0), (1, 0, w, 0), (0, 0, 0, 1), (0, 1, w, 0), (0, 0, w, 1)}
+    assert cov.place_bounds() == [1, 1, None, 1]
+    dead = {tuple(int(v) for v in cov.markings[i]) for i in cov.dead_nodes()}
+    assert dead == {(0, 0, 0, 1), (0, 0, w, 1)}
+    assert cov.fireable_transitions().all()
+    node = next(i for i in cov.dead_nodes() if cov.markings[i, 2] == 0)
+    assert cov.firing_sequence(int(node)) == ["t3"]
+
+
+def test_karp_miller_on_a_bounded_net_is_its_reachability_graph() -> None:
+    cov = karp_miller(mutex())
+    assert cov.complete and cov.bounded
+    assert cov.markings.shape[0] == explore(mutex()).n_states
+
+
+def test_karp_miller_refuses_inhibitor_arcs() -> None:
+    net = make_net("inh", {"a": 1}, {"t": ({"a": 1}, {"a": 1, "b": 1})}, inhibitors={"t": {"c": 1}})
+    with pytest.raises(AnalysisError):
+        karp_miller(net)
+
+
+def test_covering_witness_gives_a_pumping_loop() -> None:
+    ss = explore(pump(), max_states=40)
+    wit = covering_witness(ss)
+    assert wit is not None
+    assert wit.growing == ["p3"]
+    assert wit.prefix == [] and wit.loop == ["t1", "t2"]
+
+
+def test_covering_witness_ignores_pumps_that_change_an_inhibitor_place() -> None:
+    net = make_net("guarded", {"go": 1}, {"t": ({"go": 1}, {"go": 1, "b": 1})}, inhibitors={"t": {"b": 5}})
+    ss = explore(net)
+    assert ss.complete and ss.n_states == 6
+    assert covering_witness(ss) is None
+
+
+def test_unbounded_net_is_decided_with_growing_places_and_bounds_of_the_others() -> None:
+    a = analyse(pump(), max_states=100)
+    assert a.bounded is False
+    assert a.unbounded_places == ["p3"]
+    assert a.place_bounds == {"p1": 1, "p2": 1, "p3": None, "p4": 1}
+    assert a.one_safe is False
+    assert a.quasi_live is True
+    assert a.deadlock is True and a.deadlocks[0].firing_sequence == ["t3"]
+    assert a.covering is not None and a.covering.growing == ["p3"]
+    # p3 is only written: the net without it decides liveness (t3 leads to a dead end)
+    assert a.projection is not None and a.live is False and a.reversible is False
+
+
+def test_unbounded_net_is_found_with_the_default_limit_without_exploring_millions() -> None:
+    a = analyse(producer())
+    assert a.bounded is False and a.unbounded_places == ["buf"]
+    assert a.states <= 50_000
+
+
+def test_unbounded_net_with_an_untouched_inhibitor_is_decided_by_the_witness() -> None:
+    net = make_net("inh", {"a": 1}, {"t": ({"a": 1}, {"a": 1, "b": 1})}, inhibitors={"t": {"c": 1}})
+    a = analyse(net, max_states=100)
+    assert a.bounded is False and a.unbounded_places == ["b"]
+
+
+def test_bounded_net_that_is_too_large_is_decided_by_karp_miller() -> None:
+    net = make_net("drain", {"a": 3}, {"t": ({"a": 1}, {"b": 1}), "u": ({"b": 1}, {})})
+    a = analyse(net, max_states=2)
+    assert not a.complete
+    assert a.bounded is True
+    assert a.place_bounds == {"a": 3, "b": 3}
+    assert a.max_token_in_place == 3
+
+
+def test_structurally_bounded_net_that_is_too_large_uses_the_invariant_bounds() -> None:
+    a = analyse(mutex(), max_states=2)
+    assert not a.complete and a.bounded is True
+    assert a.place_bounds == {"idle1": 1, "idle2": 1, "free": 1, "crit1": 1, "crit2": 1}
+    assert a.one_safe is True
+    assert a.deadlock is None and a.live is None
+
+
+def test_truncated_graph_still_reports_the_deadlocks_it_found() -> None:
+    net = make_net("stop", {"a": 1}, {"end": ({"a": 1}, {}), "u": ({"a": 1}, {"a": 1, "c": 1})},
+                   inhibitors={"u": {"d": 1}})
+    a = analyse(net, max_states=6)
+    assert not a.complete and a.coverability is None
+    assert a.bounded is False and a.unbounded_places == ["c"]
+    assert a.quasi_live is True
+    assert a.deadlock is True and a.deadlocks[0].firing_sequence == ["end"]
+
+
+def test_liveness_levels_follow_the_terminal_components() -> None:
+    a = analyse(levels_net())
+    assert a.liveness == {"t_left": 1, "l_loop": 3, "t_right": 1, "r_loop": 3, "t_dead": 0, "x_go": 4, "y_go": 4}
+    assert a.quasi_live is False and a.live is False
+    assert a.dead_transitions == ["t_dead"]
+    assert a.reversible is False and a.home_states == 0
+    assert a.stable_places == ["z"] and a.stable_marking is True
+    assert a.deadlock is False
+
+
+def test_mutex_is_live_reversible_and_safe_with_an_effective_conflict() -> None:
+    a = analyse(mutex())
+    assert (a.states, a.edges) == (3, 4)
+    assert a.live and a.quasi_live and a.reversible and a.one_safe and a.bounded
+    assert a.home_states == 3
+    assert a.max_token_per_marking == 3
+    assert [(c.place, c.transitions, c.effective) for c in a.conflicts] == [("free", ["enter1", "enter2"], True)]
+    assert a.conservative and a.consistent
+
+
+def test_conflict_that_never_bites_is_not_effective() -> None:
+    net = make_net("readers", {"p": 1}, {"a": ({"p": 1}, {"p": 1, "q": 1}), "b": ({"p": 1}, {"p": 1, "r": 1}),
+                                         "c": ({"q": 1}, {}), "d": ({"r": 1}, {})},
+                   inhibitors={"a": {"q": 1}, "b": {"r": 1}})
+    a = analyse(net)
+    assert [(c.place, c.effective) for c in a.conflicts] == [("p", False)]
+
+
+def test_deadlocks_come_with_shortest_firing_sequences() -> None:
+    net = make_net("paths", {"s": 1}, {
+        "long1": ({"s": 1}, {"m": 1}), "long2": ({"m": 1}, {"n": 1}), "long3": ({"n": 1}, {"end": 1}),
+        "short": ({"s": 1}, {"end": 1}),
+    })
+    a = analyse(net)
+    assert a.deadlock and a.n_deadlocks == 1
+    assert a.deadlocks[0].marking == {"end": 1}
+    assert a.deadlocks[0].firing_sequence == ["short"]
+
+
+def test_declared_home_marking_is_checked_as_a_home_state() -> None:
+    base = make_net("finish", {"todo": 2}, {"work": ({"todo": 1}, {"done": 1})})
+    net = PetriNet(name=base.name, places=base.places, transitions=base.transitions, arcs=base.arcs,
+                   initial_marking=base.initial_marking, home_marking=Marking({"done": 2}))
+    a = analyse(net)
+    assert a.home_marking_is_home is True and a.home_states == 1 and a.reversible is False
+
+
+def test_ordinary_view_drops_events_and_keeps_them_in_labels() -> None:
+    net = PetriNet(
+        name="evt", places=(Place(id="a"), Place(id="b")),
+        transitions=(Transition(id="go", events=("ext:button",)),),
+        arcs=(Arc(source="a", target="go"), Arc(source="go", target="b")),
+        initial_marking=Marking({"a": 1}),
+    )
+    view = ordinary_view(net)
+    assert view.transitions[0].events == ()
+    assert "ext:button" in view.transitions[0].label
+    assert np.array_equal(view.incidence, net.incidence)
+
+
+def test_growing_record_only_place_leaves_liveness_decidable_on_the_rest() -> None:
+    net = make_net("counting", {"idle": 1}, {
+        "start": ({"idle": 1}, {"busy": 1}),
+        "done": ({"busy": 1}, {"idle": 1, "count": 1}),
+    })
+    a = analyse(net, max_states=100)
+    assert a.bounded is False and a.unbounded_places == ["count"]
+    assert a.projection is not None and a.projection.complete
+    assert [p.id for p in a.projection.net.places] == ["idle", "busy"]
+    assert a.live is True and a.deadlock is False and a.quasi_live is True
+    assert a.liveness == {"start": 4, "done": 4}
+    assert a.reversible is False
+
+
+def test_growing_place_that_is_read_keeps_liveness_undecided() -> None:
+    base = pump()
+    net = make_net("pump_read", {"p1": 1}, {
+        "t1": ({"p1": 1}, {"p2": 1}),
+        "t2": ({"p2": 1}, {"p1": 1, "p3": 1}),
+        "t3": ({"p1": 1}, {"p4": 1}),
+        "drain": ({"p3": 1}, {}),
+    })
+    assert [p.id for p in net.places] == [p.id for p in base.places]
+    a = analyse(net, max_states=100)
+    assert a.bounded is False and a.unbounded_places == ["p3"]
+    assert a.projection is None and a.live is None and a.reversible is None
