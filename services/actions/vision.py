@@ -1,0 +1,463 @@
+"""Vision node of the catching testbed: camera driver, locate actions, predict action (paper §6).
+
+* :class:`CameraDriver` (services.toml ``[drivers.camera]``, params ``host``, ``port``,
+  ``tick_every``, ``connect_timeout_s``): the frame-grabber card; after a lost camera the next
+  action call reconnects (a restarted sim is picked up). A thread grabs every frame from the sim's camera server
+  (:class:`sim.camera.FrameServer`), keeps the last few and a background image (per-pixel median of
+  frames at least 0.3 s apart), and publishes the external event ``image_sampling_tick``
+  (``{"seq", "t"}``) for every ``tick_every``-th frame.
+* Three alternative primitive actions of the *locate ball* primitive task, with different cost and
+  reliability (paper §2 and §4): :class:`LocateThreshold`, :class:`LocateBgdiff`,
+  :class:`LocateAverage` (k frames). Each waits for the ball on the table (params ``timeout_s``,
+  default 10) and returns ``success`` with ``{"x", "y", "t", "u", "v", "seq", "frames"}`` (table
+  frame, m) once found and inside the table, ``failure`` when no ball was seen in time, ``error``
+  when the camera is lost. Cost = measured processing time, s (CPU time of the image processing,
+  ``frames`` in the value).
+* :class:`Predict` (primitive task *predict*): tracks the ball frame by frame, predicts where and
+  when it crosses the catch line, and streams each prediction as a set point (table frame, as
+  :class:`services.stream.SetPoint` specifies; the motion node turns it into its base frame) to
+  the motion node over its own TCP connection (params ``stream_host``, ``stream_port``; see
+  :mod:`services.stream`). ``success`` once the ball has crossed, with the last prediction;
+  ``failure`` when the ball stops or vanishes before the line; ``error`` when the camera or the
+  stream is lost. If the node hosts no camera driver (the action was moved to another node in
+  services.toml), it opens its own connection to the camera server (params ``camera_host``,
+  ``camera_port``).
+
+The camera server's info map (:func:`sim.camera.camera_info`) carries the calibration: the
+homography, the robot base pose and the rolling model.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import contextlib
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from coordinator.errors import ActionError
+from services.action import ActionOutcome, CallContext, Driver, NodeContext, PrimitiveAction
+from services.ballvision import (
+    BallTracker,
+    Detection,
+    Homography,
+    PlanarTransform,
+    Roi,
+    RollingModel,
+    RollingPredictor,
+    locate_average,
+    locate_bgdiff,
+    locate_threshold,
+    table_roi,
+)
+from services.stream import SetPointSender
+from sim.camera import Frame, FrameClient
+
+__all__ = [
+    "CameraDriver",
+    "CameraLink",
+    "CameraLostError",
+    "LocateAverage",
+    "LocateBgdiff",
+    "LocateThreshold",
+    "Predict",
+    "VisionConfig",
+]
+
+DEFAULT_CAMERA_PORT = 7210
+DEFAULT_STREAM_PORT = 7220
+
+
+class CameraLostError(ActionError):
+    """The camera server stopped delivering frames (connection lost or no frame in time)."""
+
+
+@dataclass(frozen=True, slots=True)
+class VisionConfig:
+    """Calibration and models the vision node gets from the camera server's info map.
+
+    Attributes:
+        homography: pixel → table map.
+        base: table frame → robot base frame.
+        model: rolling-ball deceleration model.
+        catch_x: x of the catch line in the table frame, m.
+        fps: nominal frame rate, 1/s.
+        roi: the table's region in the image (pixels), searched by the locators.
+    """
+
+    homography: Homography
+    base: PlanarTransform
+    model: RollingModel
+    catch_x: float
+    fps: float
+    roi: Roi | None = None
+
+    @classmethod
+    def from_info(cls, info: dict[str, Any]) -> VisionConfig:
+        """Parse :func:`sim.camera.camera_info`'s map.
+
+        Raises:
+            ActionError: if fields are missing or malformed.
+        """
+        try:
+            hom = Homography(np.asarray(info["homography"], dtype=float).reshape(3, 3),
+                             float(info.get("calibration_rms_m", 0.0)))
+            x, y, z, yaw = (float(v) for v in info["robot_base"])
+            a, b = (float(v) for v in info["rolling_model"])
+            catch_x = float(info.get("catch_x", 0.0))
+            roi = None
+            if "table_size" in info:
+                length, width = (float(v) for v in info["table_size"])
+                size = (int(info["width"]), int(info["height"])) if "width" in info else None
+                roi = table_roi(hom, length, width, catch_x=catch_x, image_size=size)
+            return cls(hom, PlanarTransform(x, y, z, yaw), RollingModel(a, b), catch_x,
+                       float(info.get("fps", 25.0)), roi)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ActionError(f"camera info is malformed: {exc!r}") from exc
+
+
+class CameraLink:
+    """A frame-grabbing thread on a :class:`sim.camera.FrameClient`, awaitable from asyncio.
+
+    Args:
+        host, port: the camera server.
+        on_frame: optional callback run in the event loop for each frame.
+        history: frames kept for multi-frame locators.
+        frame_timeout: s without a frame after which the camera counts as lost.
+    """
+
+    def __init__(
+        self, host: str, port: int, *, on_frame: Callable[[Frame], None] | None = None,
+        history: int = 16, frame_timeout: float = 2.0,
+    ) -> None:
+        self.host = host
+        self.port = port
+        self.on_frame = on_frame
+        self.frame_timeout = frame_timeout
+        self.frames: collections.deque[Frame] = collections.deque(maxlen=history)
+        self.background: np.ndarray | None = None
+        self._bg_samples: collections.deque[np.ndarray] = collections.deque(maxlen=5)
+        self._bg_last_t = -math.inf
+        self.lost: str | None = None
+        self.info: dict[str, Any] = {}
+        self._client: FrameClient | None = None
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._new = asyncio.Event()
+
+    async def start(self, connect_timeout: float = 10.0) -> None:
+        """Connect (retrying until ``connect_timeout`` s), read the info map, start grabbing.
+
+        Raises:
+            CameraLostError: if the camera server cannot be reached.
+        """
+        self._loop = asyncio.get_running_loop()
+        deadline = time.monotonic() + connect_timeout
+        while True:
+            try:
+                self._client = await asyncio.to_thread(FrameClient, self.host, self.port)
+                self.info = await asyncio.to_thread(self._client.info)
+                break
+            except (OSError, ConnectionError) as exc:
+                if time.monotonic() > deadline:
+                    raise CameraLostError(
+                        f"camera server {self.host}:{self.port} unreachable: {exc}"
+                    ) from exc
+                await asyncio.sleep(0.2)
+        self._thread = threading.Thread(target=self._grab_loop, name="camera-grab", daemon=True)
+        self._thread.start()
+
+    def _grab_loop(self) -> None:
+        assert self._client is not None and self._loop is not None
+        seq = -1
+        last = time.monotonic()
+        try:
+            while not self._stop.is_set():
+                frame = self._client.grab(after=seq, timeout=0.5)
+                if frame is None:
+                    if time.monotonic() - last > self.frame_timeout:
+                        raise ConnectionError(f"no frame for {self.frame_timeout} s")
+                    continue
+                last = time.monotonic()
+                seq = frame.seq
+                if frame.t - self._bg_last_t >= 0.3:
+                    self._bg_last_t = frame.t
+                    self._bg_samples.append(frame.image)
+                    if len(self._bg_samples) >= 3:
+                        self.background = np.median(np.stack(self._bg_samples), axis=0).astype(
+                            np.uint8
+                        )
+                self._loop.call_soon_threadsafe(self._deliver, frame)
+        except (ConnectionError, OSError, ValueError) as exc:
+            if not self._stop.is_set():
+                self._loop.call_soon_threadsafe(self._mark_lost, f"camera lost: {exc}")
+
+    def _deliver(self, frame: Frame) -> None:
+        self.frames.append(frame)
+        self._new.set()
+        if self.on_frame is not None:
+            self.on_frame(frame)
+
+    def _mark_lost(self, reason: str) -> None:
+        self.lost = reason
+        self._new.set()
+
+    async def next_frame(self, after: int, timeout: float | None = None) -> Frame:
+        """The oldest kept frame with seq > ``after`` (waiting for one if needed).
+
+        Raises:
+            CameraLostError: if the camera is lost or no frame comes within ``timeout`` s
+                (default: the link's ``frame_timeout``).
+        """
+        limit = self.frame_timeout if timeout is None else timeout
+        try:
+            async with asyncio.timeout(limit):
+                while True:
+                    if self.lost is not None:
+                        raise CameraLostError(self.lost)
+                    for f in self.frames:
+                        if f.seq > after:
+                            return f
+                    self._new.clear()
+                    await self._new.wait()
+        except TimeoutError:
+            raise CameraLostError(f"no camera frame within {limit} s") from None
+
+    async def close(self) -> None:
+        """Stop the grabbing thread and close the connection."""
+        self._stop.set()
+        if self._client is not None:
+            self._client.close()
+        if self._thread is not None:
+            await asyncio.to_thread(self._thread.join, 2.0)
+
+
+class CameraDriver(Driver):
+    """The vision node's frame grabber (see module docstring); publishes ``image_sampling_tick``."""
+
+    def __init__(self, name: str, params: dict[str, Any]) -> None:
+        super().__init__(name, params)
+        self.link: CameraLink | None = None
+        self.config: VisionConfig | None = None
+        self.tick_every = max(1, int(self.params.get("tick_every", 1)))
+
+    async def setup(self, node: NodeContext) -> None:
+        self.link = CameraLink(
+            str(self.params.get("host", "127.0.0.1")),
+            int(self.params.get("port", DEFAULT_CAMERA_PORT)),
+            on_frame=self._tick,
+        )
+        await self.link.start(float(self.params.get("connect_timeout_s", 10.0)))
+        self.config = VisionConfig.from_info(self.link.info)
+
+    def _tick(self, frame: Frame) -> None:
+        if frame.seq % self.tick_every == 0 and self.node is not None:
+            self.publish("image_sampling_tick", {"seq": frame.seq, "t": frame.t})
+
+    async def reconnect_if_lost(self, timeout: float = 2.0) -> None:
+        """Reconnect to the camera server if the link was lost (e.g. the sim restarted).
+
+        Raises:
+            CameraLostError: if the server cannot be reached within ``timeout`` s.
+        """
+        if self.link is None or self.link.lost is None:
+            return
+        await self.link.close()
+        link = CameraLink(self.link.host, self.link.port, on_frame=self._tick)
+        self.link = link
+        await link.start(timeout)
+        self.config = VisionConfig.from_info(link.info)
+
+    async def teardown(self) -> None:
+        if self.link is not None:
+            await self.link.close()
+
+
+def _camera_of(ctx: CallContext) -> CameraDriver:
+    for d in ctx.drivers.values():
+        if isinstance(d, CameraDriver) and d.link is not None and d.config is not None:
+            return d
+    raise ActionError("no camera driver on this node")
+
+
+# --------------------------------------------------------------------------------------------------
+# locate
+# --------------------------------------------------------------------------------------------------
+class _Locate(PrimitiveAction):
+    """Common loop of the locate actions: wait for frames until the ball is found on the table."""
+
+    frames_needed = 1
+
+    def locate(self, frames: list[Frame], cam: CameraDriver) -> Detection | None:
+        raise NotImplementedError
+
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+        cam = _camera_of(ctx)
+        try:
+            await cam.reconnect_if_lost()
+        except CameraLostError as exc:
+            return ActionOutcome("error", outcome="camera_lost", value={"reason": str(exc)})
+        assert cam.link is not None and cam.config is not None
+        timeout = float(params.get("timeout_s", 10.0))
+        k = max(1, int(params.get("k", self.frames_needed)))
+        loop = asyncio.get_running_loop()
+        end = loop.time() + timeout
+        seq = cam.link.frames[-1].seq if cam.link.frames else -1
+        cpu = 0.0
+        frames_used = 0
+        try:
+            while loop.time() < end:
+                batch: list[Frame] = []
+                while len(batch) < k:
+                    f = await cam.link.next_frame(seq)
+                    seq = f.seq
+                    batch.append(f)
+                frames_used += len(batch)
+                c0 = time.thread_time()
+                det = self.locate(batch, cam)
+                cpu += time.thread_time() - c0
+                if det is None:
+                    continue
+                x, y = (float(v) for v in cam.config.homography.to_table([det.u, det.v]))
+                if x >= cam.config.catch_x:
+                    continue
+                return ActionOutcome(
+                    "success",
+                    value={"x": x, "y": y, "t": det.t, "u": det.u, "v": det.v, "seq": seq,
+                           "frames": frames_used, "cpu_s": cpu},
+                    cost=cpu,
+                )
+        except CameraLostError as exc:
+            return ActionOutcome("error", outcome="camera_lost", value={"reason": str(exc)}, cost=cpu)
+        return ActionOutcome("failure", outcome="no_ball", value={"frames": frames_used}, cost=cpu)
+
+
+class LocateThreshold(_Locate):
+    """Locate the ball by HSV threshold + contour centroid in one frame (cheap, ~1–3 mm)."""
+
+    def locate(self, frames: list[Frame], cam: CameraDriver) -> Detection | None:
+        assert cam.config is not None
+        return locate_threshold(frames[-1].image, frames[-1].t, roi=cam.config.roi)
+
+
+class LocateBgdiff(_Locate):
+    """Locate the ball by difference to the background image (cheapest; needs a background)."""
+
+    def locate(self, frames: list[Frame], cam: CameraDriver) -> Detection | None:
+        assert cam.link is not None
+        bg = cam.link.background
+        if bg is None or bg.shape != frames[-1].image.shape:
+            return None
+        assert cam.config is not None
+        return locate_bgdiff(frames[-1].image, bg, frames[-1].t, roi=cam.config.roi)
+
+
+class LocateAverage(_Locate):
+    """Locate the ball in k frames (param ``k``, default 4) and average (costlier, less noisy)."""
+
+    frames_needed = 4
+
+    def locate(self, frames: list[Frame], cam: CameraDriver) -> Detection | None:
+        assert cam.config is not None
+        return locate_average([(f.image, f.t) for f in frames], roi=cam.config.roi)
+
+
+# --------------------------------------------------------------------------------------------------
+# predict
+# --------------------------------------------------------------------------------------------------
+class Predict(PrimitiveAction):
+    """Track the ball, predict its catch-line crossing, stream set points to motion (see module)."""
+
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+        own_link: CameraLink | None = None
+        try:
+            cam = _camera_of(ctx)
+            try:
+                await cam.reconnect_if_lost()
+            except CameraLostError as exc:
+                return ActionOutcome("error", outcome="camera_lost", value={"reason": str(exc)})
+            link, config = cam.link, cam.config
+            assert link is not None and config is not None
+        except ActionError:
+            own_link = CameraLink(str(params.get("camera_host", "127.0.0.1")),
+                                  int(params.get("camera_port", DEFAULT_CAMERA_PORT)))
+            try:
+                await own_link.start(float(params.get("connect_timeout_s", 5.0)))
+            except CameraLostError as exc:
+                return ActionOutcome("error", outcome="camera_lost", value={"reason": str(exc)})
+            link, config = own_link, VisionConfig.from_info(own_link.info)
+        try:
+            return await self._track(params, link, config)
+        finally:
+            if own_link is not None:
+                await own_link.close()
+
+    async def _track(
+        self, params: dict[str, Any], link: CameraLink, config: VisionConfig
+    ) -> ActionOutcome:
+        host = str(params.get("stream_host", "127.0.0.1"))
+        port = int(params.get("stream_port", DEFAULT_STREAM_PORT))
+        try:
+            sender = await asyncio.to_thread(SetPointSender, host, port)
+        except OSError as exc:
+            return ActionOutcome("error", outcome="stream_lost",
+                                 value={"reason": f"set-point receiver {host}:{port}: {exc}"})
+        tracker = BallTracker(config.homography, RollingPredictor(config.model, catch_x=config.catch_x))
+        timeout = float(params.get("timeout_s", 10.0))
+        loop = asyncio.get_running_loop()
+        start = loop.time()
+        seq = link.frames[-1].seq if link.frames else -1
+        frames = sent = 0
+        first: float | None = None
+        last = None
+        cpu = 0.0
+        try:
+            while True:
+                frame = await link.next_frame(seq)
+                seq = frame.seq
+                frames += 1
+                c0 = time.thread_time()
+                det = locate_threshold(frame.image, frame.t, roi=config.roi)
+                pred = tracker.observe(det, frame.t)
+                cpu += time.thread_time() - c0
+                if pred is not None:
+                    sender.send(t_frame=frame.t, t_capture=frame.t_wall, x=pred.x, y=pred.y,
+                                t=pred.t, vx=pred.vx, vy=pred.vy, sigma_y=pred.sigma_y,
+                                sigma_t=pred.sigma_t)
+                    sent += 1
+                    last = pred
+                    if first is None:
+                        first = frame.t
+                seen = tracker.last_position
+                past = det is None or (seen is not None and seen[1] >= config.catch_x - 0.01)
+                if last is not None and past and frame.t >= last.t - 0.05:
+                    xb, yb, _ = config.base.point(last.x, last.y)
+                    return ActionOutcome(
+                        "success",
+                        value={"y": last.y, "t": last.t, "x_base": xb, "y_base": yb,
+                               "sigma_y": last.sigma_y, "sigma_t": last.sigma_t,
+                               "setpoints": sent, "frames": frames,
+                               "lead_s": last.t - first if first is not None else 0.0,
+                               "cpu_s": cpu},
+                        cost=cpu,
+                    )
+                if last is not None and det is None and tracker.last_position is None:
+                    return ActionOutcome("failure", outcome="ball_lost",
+                                         value={"setpoints": sent, "frames": frames}, cost=cpu)
+                if loop.time() - start > timeout:
+                    return ActionOutcome("failure", outcome="no_crossing",
+                                         value={"setpoints": sent, "frames": frames}, cost=cpu)
+        except CameraLostError as exc:
+            return ActionOutcome("error", outcome="camera_lost", value={"reason": str(exc)}, cost=cpu)
+        except OSError as exc:
+            return ActionOutcome("error", outcome="stream_lost", value={"reason": str(exc)}, cost=cpu)
+        finally:
+            with contextlib.suppress(OSError):
+                sender.close()

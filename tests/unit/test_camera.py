@@ -1,0 +1,86 @@
+"""Camera back ends (TinyRenderer, analytic) and the TCP frame server on 127.0.0.1."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+
+from services.ballvision import calibration_points, locate_threshold
+from sim.camera import (
+    AnalyticRenderer,
+    Frame,
+    FrameClient,
+    FrameServer,
+    TinyRenderer,
+    calibrate,
+    overhead_camera,
+)
+from sim.catching import CatchingWorld
+from sim.world import World
+
+
+def test_tiny_renderer_sees_the_ball_where_the_calibrated_map_says_at_320_by_240():
+    world = World()
+    try:
+        cw = CatchingWorld(world)
+        cam = overhead_camera(width=320, height=240)
+        tiny = TinyRenderer(cam, world.client, intensity_sigma=2.0)
+        z = cw.ball_plane_z
+
+        def render_at(x: float, y: float) -> np.ndarray:
+            cw.pb.resetBasePositionAndOrientation(cw.ball_id, [x, y, z], [0, 0, 0, 1])
+            return tiny.render()
+
+        hom = calibrate(render_at, calibration_points(1.5, 0.76, nx=4, ny=3))
+        assert hom.rms_m < 0.003
+        img = render_at(-0.42, -0.17)
+        assert img.shape == (240, 320, 3) and img.dtype == np.uint8
+        d = locate_threshold(img, 0.0)
+        assert d is not None
+        assert np.hypot(*(hom.to_table([d.u, d.v]) - [-0.42, -0.17])) < 0.004
+    finally:
+        world.close()
+
+
+def test_analytic_renderer_noise_has_the_configured_sigma():
+    r = AnalyticRenderer(overhead_camera(width=320, height=240), intensity_sigma=3.0)
+    diff = r.render(None).astype(float) - r.noiseless_background().astype(float)
+    assert float(diff.std()) == pytest.approx(3.0, rel=0.15)
+
+
+def test_frame_server_hands_out_the_latest_frame_and_waits_for_a_newer_one():
+    server = FrameServer()
+    port = server.start()
+    client = FrameClient("127.0.0.1", port)
+    try:
+        assert client.grab(after=-1, timeout=0.05) is None
+        img = np.arange(4 * 5 * 3, dtype=np.uint8).reshape(4, 5, 3)
+        server.publish(Frame(0, 0.00, img))
+        server.publish(Frame(1, 0.02, img + 1))
+        f = client.grab(after=-1, timeout=1.0)
+        assert f is not None and f.seq == 1 and f.t == 0.02
+        np.testing.assert_array_equal(f.image, img + 1)
+        timer = threading.Timer(0.05, server.publish, args=(Frame(2, 0.04, img),))
+        timer.start()
+        t0 = time.monotonic()
+        f2 = client.grab(after=1, timeout=2.0)
+        assert f2 is not None and f2.seq == 2
+        assert time.monotonic() - t0 < 1.0
+        timer.join()
+    finally:
+        client.close()
+        server.close()
+
+
+def test_frame_client_sees_a_closed_server_as_a_connection_error():
+    server = FrameServer()
+    port = server.start()
+    client = FrameClient("127.0.0.1", port)
+    server.close()
+    with pytest.raises((ConnectionError, OSError)):
+        for _ in range(3):
+            client.grab(timeout=0.1)
+    client.close()
