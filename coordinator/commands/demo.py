@@ -1,15 +1,25 @@
 """``petrobot demo``: the project's main job on one machine, in one command.
 
-``petrobot demo foundation`` starts every node of services.toml on localhost, runs
-``nets/demo.toml`` (a small task net whose primitive actions live on two nodes) with the token
-flow visible, prints the summary and stops the nodes. Everything is journaled.
+``petrobot demo`` (``catching``) recreates the paper's visual servoing and catching testbed
+(section 6, Fig. 1) on localhost: the simulated world (``petrobot sim catching``: table, thrower,
+ball, PUMA 560 with its cup, overhead camera, CAN bus), the vision and motion nodes placed by
+services.toml, and the coordinator running ``nets/catch.toml`` with the token flow visible. It
+prints, per run, the outcome, the prediction error at the catch line (against the simulator's
+ground truth) and the time of each primitive task. ``petrobot demo foundation`` runs the small
+two-node net ``nets/demo.toml`` instead.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
+import json
+import subprocess
 import sys
+import threading
+import time
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -18,29 +28,209 @@ from coordinator.errors import PetrobotError
 ROOT = Path(__file__).resolve().parents[2]
 
 DESCRIPTION = """\
-Run a demonstration on this machine: start the nodes of services.toml as local processes,
-execute the task net with the token flow visible, print the summary, stop everything.
+Run a demonstration on this machine: start the simulated world and the nodes of services.toml
+as local processes, execute the task net with the token flow visible, print a report, stop
+everything.
 
-  foundation   nets/demo.toml: sense on node alpha, compute on alpha or beta (learnt), three
-               runs, error recovery hidden. Needs only the two demo nodes.
+  catching     (default) the paper's Fig. 1: a PUMA 560 catches ping-pong balls rolled across a
+               table, guided by an overhead camera. Vision node: locate (three alternative
+               primitive actions, chosen by a learning automaton) and predict, which streams
+               catching set points to the motion node over TCP; motion node: catch and move home
+               over the CAN drives. A 4-run experiment by default (--runs). While it runs, type
+               "+ runs_remaining", "- runs_remaining", "pause", "step", "resume" or "abort".
+  foundation   nets/demo.toml: sense on node alpha, compute on alpha or beta, three runs.
 
 Every firing, action start and result goes to the journal (--journal)."""
 
 
 def add_parser(subparsers: Any) -> None:
-    p = subparsers.add_parser("demo", help="run a demonstration on localhost (nodes + coordinator)",
+    p = subparsers.add_parser("demo", help="run a demonstration on localhost (sim + nodes + coordinator)",
                               description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("which", nargs="?", default="foundation", choices=["foundation"],
+    p.add_argument("which", nargs="?", default="catching", choices=["catching", "foundation"],
                    help="which demonstration (default: %(default)s)")
+    p.add_argument("--runs", type=int, default=None,
+                   help="tokens in runs_remaining at the start (default: the net's own, 4 for catching)")
     p.add_argument("--services", default=str(ROOT / "services.toml"), help="location file (default: the project's)")
-    p.add_argument("--journal", default="runs/demo.sqlite", help="SQLite journal (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="seed of random switches and learners")
+    p.add_argument("--journal", default=None,
+                   help="SQLite journal (default: runs/catching.sqlite or runs/demo.sqlite)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the thrower, random switches and learners")
+    p.add_argument("--renderer", choices=["tiny", "analytic"], default="tiny",
+                   help="camera back end: pybullet's TinyRenderer (default) or the fast analytic one")
     p.add_argument("--key-file", default=None, help="shared key file (default: $PETROBOT_KEY, then "
                    "~/.config/petrobot/key, created if missing)")
-    p.add_argument("--live", dest="live", action="store_true", default=None,
-                   help="redraw a live screen (default on a terminal)")
-    p.add_argument("--lines", dest="live", action="store_false", help="print one line per event")
+    p.add_argument("--max-seconds", type=float, default=300.0,
+                   help="abort the run after this many seconds (default: %(default)s)")
+    view = p.add_mutually_exclusive_group()
+    view.add_argument("--live", dest="live", action="store_true", default=None,
+                      help="redraw a live screen (default on a terminal)")
+    view.add_argument("--lines", dest="live", action="store_false", help="print one line per event")
     p.set_defaults(func=run)
+
+
+# --------------------------------------------------------------------------------------- the world
+class SimWorld:
+    """The ``petrobot sim catching`` process, its JSON event lines read by a thread."""
+
+    def __init__(self, args: list[str]) -> None:
+        self.proc = subprocess.Popen([sys.executable, "-m", "coordinator.commands.sim", "catching", *args],
+                                     cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        self.events: list[dict[str, Any]] = []
+        self._ready = threading.Event()
+        threading.Thread(target=self._read, name="sim-events", daemon=True).start()
+
+    def _read(self) -> None:
+        assert self.proc.stdout is not None
+        for line in self.proc.stdout:
+            if line.startswith("{"):
+                try:
+                    event = json.loads(line)
+                except ValueError:
+                    continue
+                event["t_wall"] = time.time()
+                self.events.append(event)
+                if event.get("event") == "ready":
+                    self._ready.set()
+
+    def wait_ready(self, timeout_s: float) -> None:
+        end = time.monotonic() + timeout_s
+        while not self._ready.wait(0.1):
+            if self.proc.poll() is not None:
+                raise PetrobotError(f"the simulator exited with status {self.proc.returncode} before it was ready")
+            if time.monotonic() > end:
+                raise PetrobotError(f"the simulator was not ready after {timeout_s:.0f} s")
+
+    def stop(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(timeout=5)
+
+
+# --------------------------------------------------------------------------------------- the report
+@dataclass
+class RunRecord:
+    """What happened in one run of the catching net."""
+
+    n: int
+    outcome: str = "running"
+    times: dict[str, float] = field(default_factory=dict)
+    locate_action: str = ""
+    predicted: dict[str, Any] | None = None
+    truth: dict[str, Any] | None = None
+
+    @property
+    def error_mm(self) -> float | None:
+        """|predicted − actual| lateral position at the catch line, millimetres."""
+        if not self.predicted or not self.truth:
+            return None
+        return abs(float(self.predicted["y"]) - float(self.truth["y"])) * 1000.0
+
+
+class CatchReport:
+    """A runtime observer that groups events into runs (each starts with ``start_run``)."""
+
+    OUTCOMES = {"ball_caught": "caught", "ball_missed": "missed", "ball_bounced_out": "bounced out",
+                "catch_failed": "error", "catch_failed_after_sensor": "error", "locate_failed": "error",
+                "no_ball_seen": "no ball"}
+
+    def __init__(self, forward: Any) -> None:
+        self.forward = forward
+        self.runs: list[RunRecord] = []
+
+    def __call__(self, kind: str, info: dict[str, Any]) -> None:
+        if kind == "fire":
+            tid = info["transition"]
+            if tid == "start_run":
+                self.runs.append(RunRecord(len(self.runs) + 1))
+            elif self.runs and tid in self.OUTCOMES:
+                self.runs[-1].outcome = self.OUTCOMES[tid]
+        elif kind == "result" and self.runs:
+            run = self.runs[-1]
+            run.times[info["task"]] = float(info.get("wall_s") or 0.0)
+            if info["task"] == "locate":
+                run.locate_action = info["action"]
+            if info["task"] == "predict" and info["status"] == "success" and isinstance(info.get("value"), dict):
+                run.predicted = info["value"]
+        self.forward(kind, info)
+
+    def match_truth(self, crossings: list[dict[str, Any]]) -> None:
+        """Pair each run's final prediction with the simulator's crossing nearest in time."""
+        for run in self.runs:
+            if run.predicted is None:
+                continue
+            t = float(run.predicted.get("t", 0.0))
+            near = min(crossings, key=lambda c: abs(float(c["t"]) - t), default=None)
+            if near is not None and abs(float(near["t"]) - t) < 1.0:
+                run.truth = near
+
+    def format(self) -> str:
+        head = (f"{'run':>3}  {'outcome':<12}{'locate with':<18}{'pred. error':>12}{'lead':>7}"
+                f"{'locate':>8}{'predict':>9}{'catch':>7}{'home':>7}")
+        lines = ["", "catching experiment (times in seconds; prediction error at the catch line, final set point)",
+                 head]
+        for r in self.runs:
+            err = f"{r.error_mm:9.2f} mm" if r.error_mm is not None else f"{'-':>12}"
+            lead = f"{float(r.predicted.get('lead_s', 0.0)):6.2f}s" if r.predicted else f"{'-':>7}"
+            times = "".join(f"{r.times[k]:>{w}.2f}" if k in r.times else f"{'-':>{w}}"
+                            for k, w in (("locate", 8), ("predict", 9), ("catch", 7), ("home", 7)))
+            lines.append(f"{r.n:>3}  {r.outcome:<12}{r.locate_action:<18}{err}{lead}{times}")
+        caught = sum(r.outcome == "caught" for r in self.runs)
+        lines.append(f"caught {caught} of {len(self.runs)} balls")
+        return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------- demos
+async def _catching(args: argparse.Namespace) -> int:
+    from coordinator.commands.run import execute
+    from coordinator.commands.up import NodeGroup
+    from coordinator.console import Console
+    from coordinator.journal import Journal
+    from coordinator.netfile import load_net
+    from services.keys import load_key
+    from services.location import load_location
+
+    net_path = ROOT / "nets" / "catch.toml"
+    net = load_net(net_path)
+    if args.runs is not None:
+        net = net.with_initial_marking({**net.initial_marking, "runs_remaining": args.runs})
+    location = load_location(args.services)
+    key = load_key(args.key_file)
+    nodes = sorted({location.node_of(a.name) for t in net.tasks.values() for a in t.actions}
+                   | {location.publisher_of(e[4:]) for t in net.transitions for e in t.external_events})
+    camera = location.drivers_on(location.node_of("locate_threshold"))
+    camera_port = next((int(d.params["port"]) for d in camera if "port" in d.params), 7210)
+    puma = [d for n in nodes for d in location.drivers_on(n) if "can_port" in d.params]
+    can_port = int(puma[0].params["can_port"]) if puma else 7211
+    journal_path = Path(args.journal or "runs/catching.sqlite")
+    journal_path.parent.mkdir(parents=True, exist_ok=True)
+
+    say = lambda text: print(f"demo: {text}", file=sys.stderr, flush=True)  # noqa: E731
+    say(f"starting the simulated world (renderer {args.renderer}, camera :{camera_port}, CAN :{can_port})")
+    sim = SimWorld(["--realtime", "--seed", str(args.seed), "--renderer", args.renderer, "--throws", "0",
+                    "--interval", "0", "--throw-when-home", "1.0", "--first-throw", "6",
+                    "--camera-port", str(camera_port), "--can-port", str(can_port)])
+    try:
+        await asyncio.to_thread(sim.wait_ready, 90.0)
+        say(f"starting nodes {', '.join(nodes)}")
+        async with NodeGroup(args.services, nodes, key_file=args.key_file, log_level="WARNING"):
+            console = Console(net, live=args.live)
+            report = CatchReport(console)
+            with Journal(journal_path) as journal:
+                say(f"running {net_path.relative_to(ROOT)}: {net.initial_marking['runs_remaining']} runs")
+                summary = await execute(net, location=location, key=key, journal=journal, seed=args.seed,
+                                        net_text=net_path.read_text(encoding="utf-8"), observer=report,
+                                        read_input=sys.stdin.isatty(), max_seconds=args.max_seconds,
+                                        console=console)
+    finally:
+        sim.stop()
+    report.match_truth([e for e in sim.events if e.get("event") == "crossing"])
+    print(summary.format())
+    print(report.format())
+    print(f"journal: {journal_path}")
+    return 0 if summary.end_state == "dead" else 1
 
 
 async def _foundation(args: argparse.Namespace) -> int:
@@ -53,25 +243,32 @@ async def _foundation(args: argparse.Namespace) -> int:
 
     net_path = ROOT / "nets" / "demo.toml"
     net = load_net(net_path)
+    if args.runs is not None:
+        net = net.with_initial_marking({**net.initial_marking, "runs_remaining": args.runs})
     location = load_location(args.services)
     key = load_key(args.key_file)
-    Path(args.journal).parent.mkdir(parents=True, exist_ok=True)
-    print(f"demo: starting nodes {', '.join(location.nodes)} on this machine", file=sys.stderr, flush=True)
-    async with NodeGroup(args.services, key_file=args.key_file, log_level="WARNING"):
-        with Journal(args.journal) as journal:
+    nodes = sorted({location.node_of(a.name) for t in net.tasks.values() for a in t.actions})
+    journal_path = Path(args.journal or "runs/demo.sqlite")
+    journal_path.parent.mkdir(parents=True, exist_ok=True)
+    print(f"demo: starting nodes {', '.join(nodes)} on this machine", file=sys.stderr, flush=True)
+    async with NodeGroup(args.services, nodes, key_file=args.key_file, log_level="WARNING"):
+        with Journal(journal_path) as journal:
             summary = await execute(net, location=location, key=key, journal=journal, seed=args.seed,
                                     net_text=net_path.read_text(encoding="utf-8"), live=args.live,
-                                    read_input=sys.stdin.isatty(), max_seconds=120)
+                                    read_input=sys.stdin.isatty(), max_seconds=args.max_seconds)
     print(summary.format())
-    print(f"journal: {args.journal}")
+    print(f"journal: {journal_path}")
     return 0 if summary.end_state == "dead" else 1
 
 
 def run(args: argparse.Namespace) -> int:
+    demo = _catching if args.which == "catching" else _foundation
     try:
-        return asyncio.run(_foundation(args))
+        return asyncio.run(demo(args))
     except PetrobotError as exc:
         print(f"petrobot demo: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
+        with contextlib.suppress(Exception):
+            print("petrobot demo: interrupted", file=sys.stderr)
         return 130

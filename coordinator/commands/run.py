@@ -61,8 +61,12 @@ def build_learner(net: Any, seed: int, journal: Any) -> Any:
 async def execute(net: Any, *, location: Any, key: bytes, journal: Any, seed: int = 0, resume: bool = False,
                   net_text: str | None = None, live: bool | None = None, quiet: bool = False,
                   read_input: bool = False, max_seconds: float | None = None,
-                  observer: Any = None) -> Any:
-    """Run ``net`` to its end and return the :class:`~coordinator.runtime.RunSummary`."""
+                  observer: Any = None, console: Any = None) -> Any:
+    """Run ``net`` to its end and return the :class:`~coordinator.runtime.RunSummary`.
+
+    ``console`` (a :class:`~coordinator.console.Console`, made from ``live``/``quiet`` if not given)
+    shows the run; ``observer``, if given, receives the runtime's events instead and is expected
+    to forward them to the console."""
     from coordinator.console import Console, read_operator_commands
     from coordinator.runtime import Runtime
     from services.client import ServiceClient
@@ -77,10 +81,10 @@ async def execute(net: Any, *, location: Any, key: bytes, journal: Any, seed: in
     async with ServiceClient(location, key) as client:
         runtime = Runtime(net, client, journal, seed=seed, learner=learner, recovered=recovered,
                           net_text=net_text)
+        console = console or Console(net, live=live, quiet=quiet)
+        console.attach(runtime)
         if observer is not None:
             runtime.observer = observer
-        else:
-            Console(net, live=live, quiet=quiet).attach(runtime)
         if read_input:
             read_operator_commands(runtime)
         return await runtime.run(max_seconds=max_seconds)
