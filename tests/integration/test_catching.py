@@ -1,0 +1,136 @@
+"""The catching task net end to end: simulator, vision node, motion node and coordinator, each a
+separate process on 127.0.0.1 (the README's main job, `petrobot demo catching`)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
+
+ROOT = Path(__file__).resolve().parents[2]
+
+SERVICES = """
+[nodes.vision]
+host = "127.0.0.1"
+port = {port[vision]}
+
+[nodes.motion]
+host = "127.0.0.1"
+port = {port[motion]}
+
+[drivers.camera]
+node = "vision"
+impl = "services.actions.vision:CameraDriver"
+params = {{ port = {port[camera]} }}
+
+[actions.locate_threshold]
+node = "vision"
+impl = "services.actions.vision:LocateThreshold"
+
+[actions.locate_bgdiff]
+node = "vision"
+impl = "services.actions.vision:LocateBgdiff"
+
+[actions.locate_average]
+node = "vision"
+impl = "services.actions.vision:LocateAverage"
+
+[actions.predict]
+node = "PREDICT_NODE"
+impl = "services.actions.vision:Predict"
+params = {{ stream_port = {port[stream]}, camera_port = {port[camera]} }}
+
+[events.image_sampling_tick]
+node = "vision"
+
+[drivers.puma]
+node = "motion"
+impl = "services.actions.motion:PumaDriver"
+params = {{ can_port = {port[can]}, setpoint_port = {port[stream]} }}
+
+[actions.move_home]
+node = "motion"
+impl = "services.actions.motion:MoveHome"
+
+[actions.catch]
+node = "motion"
+impl = "services.actions.motion:Catch"
+deadline_s = 20.0
+
+[events.ball_caught]
+node = "motion"
+"""
+
+
+def demo(cluster: Any, tmp_path: Path, runs: int, predict_node: str = "vision") -> subprocess.Popen[str]:
+    cluster.write_services(SERVICES.replace("PREDICT_NODE", predict_node))
+    cmd = [sys.executable, "-m", "coordinator.cli", "demo", "catching", "--runs", str(runs),
+           "--renderer", "analytic", "--services", str(cluster.services_path), "--journal",
+           str(tmp_path / "j.sqlite"), "--key-file", str(cluster.key_file), "--lines", "--max-seconds", "150"]
+    return subprocess.Popen(cmd, cwd=ROOT, env=cluster.env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, stdin=subprocess.DEVNULL)
+
+
+def journal_rows(path: Path, sql: str) -> list[tuple[Any, ...]]:
+    with sqlite3.connect(path) as db:
+        return db.execute(sql).fetchall()
+
+
+def test_a_two_run_catch_net_catches_both_balls_across_processes(cluster: Any, tmp_path: Path):
+    proc = demo(cluster, tmp_path, runs=2)
+    out, _ = proc.communicate(timeout=200)
+    assert proc.returncode == 0, out
+    assert "caught 2 of 2 balls" in out, out
+    journal = tmp_path / "j.sqlite"
+    placed = dict(journal_rows(journal, "SELECT DISTINCT task, node FROM action_result"))
+    assert placed == {"locate": "vision", "predict": "vision", "catch": "motion", "home": "motion"}
+    fired = [t for (t,) in journal_rows(journal, "SELECT transition FROM firing ORDER BY seq")]
+    assert fired.count("ball_caught") == 2
+    assert fired.count("crossfire") == 2  # ext:ball_caught from the motion node's crossfire sensor
+
+
+def test_moving_the_prediction_to_the_motion_node_is_an_edit_of_services_toml_only(cluster: Any, tmp_path: Path):
+    proc = demo(cluster, tmp_path, runs=1, predict_node="motion")
+    out, _ = proc.communicate(timeout=200)
+    assert proc.returncode == 0, out
+    assert "caught 1 of 1 balls" in out, out
+    placed = dict(journal_rows(tmp_path / "j.sqlite", "SELECT DISTINCT task, node FROM action_result"))
+    assert placed["predict"] == "motion"
+
+
+def test_a_vision_node_killed_mid_run_turns_the_catch_into_an_error_and_takes_the_error_branch(
+        cluster: Any, tmp_path: Path):
+    proc = demo(cluster, tmp_path, runs=1)
+    assert proc.stdout is not None
+    lines: list[str] = []
+    end = time.monotonic() + 120
+    for line in proc.stdout:
+        lines.append(line)
+        if "start catch -> catch on motion" in line:
+            break
+        assert time.monotonic() < end, "".join(lines)
+    time.sleep(0.3)
+    found = subprocess.run(["pgrep", "-f", f"services.node vision --services {cluster.services_path}"],
+                           capture_output=True, text=True)
+    pids = [int(p) for p in found.stdout.split()]
+    assert pids, "".join(lines)
+    for pid in pids:
+        os.kill(pid, signal.SIGKILL)
+    rest, _ = proc.communicate(timeout=120)
+    out = "".join(lines) + rest
+    journal = tmp_path / "j.sqlite"
+    catch = journal_rows(journal, "SELECT status, outcome FROM action_result WHERE task='catch'")
+    assert catch == [("error", "stream_lost")], out
+    fired = [t for (t,) in journal_rows(journal, "SELECT transition FROM firing ORDER BY seq")]
+    assert "catch_failed" in fired, out
+    assert fired[-1] == "at_home", out  # the error branch returns the robot home; no token is lost
+    assert "final marking: {'aborted_runs': 1, 'camera_free': 1, 'robot_ready': 1}" in out, out
