@@ -325,7 +325,7 @@ def test_the_catch_net_of_fig_1_is_stable_error_recoverable_and_controllable():
 
     root = Path(__file__).resolve().parents[2]
     doc = report(load_any(root / "nets" / "catch.toml", interpreted=False))
-    assert (doc["states"], doc["edges"]) == (237, 652)
+    assert (doc["states"], doc["edges"]) == (237, 672)
     assert doc["bounded"] is True
     robotic = doc["robotic"]
     assert robotic["stable"]["holds"] is True
