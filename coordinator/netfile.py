@@ -488,6 +488,12 @@ class _Loader:
                 raise self.fail(f"{key} of {what} is {value}; it must be {wanted}", self.smap.key("task", name, key))
             values[key] = None if value is None else float(value)
         learner = self.get(table, "learner", "table", what, "task", name, {})
+        if learner:  # section 4: reject a bad learner configuration here, with its line
+            from coordinator.learning import make_learner
+
+            costs = {a.name: a.cost for a in actions if a.cost is not None}
+            self.build(self.smap.key("task", name, "learner") or line,
+                       lambda: make_learner(learner, [a.name for a in actions], costs or None))
         return self.build(line, lambda: PrimitiveTask(name=name, actions=tuple(actions), learner=learner, **values))
 
     # ---------------------------------------------------------------- places

@@ -399,9 +399,20 @@ def test_learner_from_net_configures_every_primitive_task(tmp_path: Path) -> Non
 def test_bad_learner_table_in_a_net_file_names_the_task_and_problem() -> None:
     from coordinator.netfile import loads_net
 
+    from coordinator.errors import NetError
+
     bad = NET.replace('learner = { scheme = "lri" }', 'learner = { scheme = "lri", rate = 2 }')
+    with pytest.raises(NetError, match=r"learning rate must lie in \(0, 1\]") as info:  # caught at load time
+        loads_net(bad, path="grasp.toml")
+    assert info.value.line is not None and str(info.value).startswith(f"grasp.toml:{info.value.line}:")
+    good = loads_net(NET)
+    task = good.tasks["grasp"]
+    broken = good.__class__(name=good.name, places=good.places, transitions=good.transitions, arcs=good.arcs,
+                            initial_marking=good.initial_marking,
+                            tasks={**good.tasks, "grasp": task.__class__(
+                                name="grasp", actions=task.actions, learner={"scheme": "lri", "rate": 2})})
     with pytest.raises(LearnerConfigError, match=r"primitive task 'grasp': learning rate must lie in \(0, 1\]"):
-        Learner.from_net(loads_net(bad))
+        Learner.from_net(broken)  # a net built in code
 
 
 def _journal(tmp_path: Path, runs: int = 300) -> tuple[Path, Path, Learner]:

@@ -449,7 +449,7 @@ def test_net_built_in_code_round_trips_with_awkward_values() -> None:
         initial_marking={"a.b": 7},
         tasks={"do_it": PrimitiveTask(name="do_it", actions=(
             ActionSpec(name="x", params={"when": dt.datetime(2026, 11, 21, 12, 0), "v": [1, 2.5, "s"],
-                                         "nested": {"k y": True}}),
+                                         "nested": {"k y": True}}, cost=2.5),
             ActionSpec(name="y", cost=0.0)), deadline_s=1.5, learner={"scheme": "lri", "rate": 0.1},
             reliability=1.0)},
         home_marking={},
@@ -583,3 +583,36 @@ def test_demo_net_terminates_at_home_under_the_engine_whatever_the_statuses(seed
         engine.complete(start.instance, rng.choice(["success", "failure", "error"]))
     assert not pending and engine.running_instances() == []
     assert engine.marking == net.home_marking
+
+
+def test_a_bad_learner_configuration_is_reported_with_its_line():
+    from coordinator.errors import NetError
+
+    text = """
+[net]
+name = "l"
+
+[[place]]
+id = "w"
+kind = "primitive_task"
+task = "locate"
+tokens = 0
+
+[task.locate]
+actions = ["a", "b"]
+learner = { scheme = "pursuit", rate = 7.0 }
+
+[[transition]]
+id = "ok"
+events = ["int:locate.ok"]
+inputs = { w = 1 }
+
+[[transition]]
+id = "err"
+events = ["int:locate.error"]
+inputs = { w = 1 }
+"""
+    with pytest.raises(NetError) as info:
+        loads_net(text, path="nets/l.toml")
+    assert info.value.line == 13
+    assert "rate" in info.value.problem and "nets/l.toml:13" in str(info.value)
