@@ -290,3 +290,30 @@ def test_a_killed_coordinator_resumes_from_the_journal_without_running_an_action
     with Journal(journal) as j:
         values = [r for r in j.results() if r.action == "tally"]
     assert len(values) == 2
+
+
+async def test_the_learner_continues_where_it_stopped_after_a_restart_of_the_coordinator(cluster: Cluster,
+                                                                                        tmp_path: Path):
+    from coordinator.commands.run import build_learner, execute
+
+    cluster.write_services()
+    cluster.start("alpha", "beta")
+    text = TWO_NODE_NET.replace(
+        '[task.compute]\nactions = [{ name = "SLOW_ACTION", params = { seconds = SECONDS } }]',
+        '[task.compute]\nactions = [{ name = "echo", cost = 1.0 }, { name = "slow", params = { seconds = 0.01 }, '
+        'cost = 2.0 }]\nlearner = { scheme = "pursuit", rate = 0.2, warmup = 1 }')
+    net = loads_net(text).with_initial_marking({"runs": 3, "robot": 1})
+    path = tmp_path / "j.sqlite"
+    quiet = lambda kind, info: None  # noqa: E731
+    with Journal(path) as journal:
+        await execute(net, location=cluster.location, key=cluster.key, journal=journal, seed=1, observer=quiet)
+        scheme, saved = journal.load_learner()["compute"]
+        reloaded = build_learner(net, 1, journal).automaton("compute")
+    assert scheme == "pursuit"
+    assert reloaded.state_dict() == saved
+    assert reloaded.steps == 3
+    with Journal(path) as journal:
+        await execute(net, location=cluster.location, key=cluster.key, journal=journal, seed=1, observer=quiet)
+        _, after = journal.load_learner()["compute"]
+        assert build_learner(net, 1, journal).automaton("compute").steps == 6
+    assert after != saved
