@@ -17,7 +17,6 @@ import asyncio
 import contextlib
 import itertools
 import logging
-import socket
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -46,6 +45,7 @@ from services.protocol import (
     Unsubscribe,
     Welcome,
 )
+from services.wire import FramedConnection
 
 __all__ = ["CallResult", "EventCallback", "FeedbackCallback", "NodeLink", "ServiceClient"]
 
@@ -103,27 +103,17 @@ class _Pending:
         self.accepted = False
 
 
-class _Wire(asyncio.Protocol):
+class _Wire(FramedConnection):
     """One TCP connection of a NodeLink."""
 
     def __init__(self, link: NodeLink) -> None:
+        super().__init__(Connection(Role.CLIENT, link._key, name=link.name, max_frame=link.max_frame),
+                         asyncio.get_running_loop())
         self.link = link
-        self.conn = Connection(Role.CLIENT, link._key, name=link.name, max_frame=link.max_frame)
-        self.loop = asyncio.get_running_loop()
-        self.transport: asyncio.Transport | None = None
         self.opened: asyncio.Future[None] = self.loop.create_future()
         self.closed = False
-        self.last_rx = self.loop.time()
-        self._flush_scheduled = False
 
     # ---- asyncio callbacks
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
-        sock = transport.get_extra_info("socket")
-        if sock is not None:
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
 
     def data_received(self, data: bytes) -> None:
         self.last_rx = self.loop.time()
@@ -141,20 +131,6 @@ class _Wire(asyncio.Protocol):
 
     def connection_lost(self, exc: Exception | None) -> None:
         self._dead(ConnectionError(f"connection lost{': ' + str(exc) if exc else ''}"))
-
-    # ---- output
-
-    def send(self, msg: Message) -> None:
-        self.conn.send(msg)
-        if not self._flush_scheduled:
-            self._flush_scheduled = True
-            self.loop.call_soon(self._flush)
-
-    def _flush(self) -> None:
-        self._flush_scheduled = False
-        data = self.conn.data_to_send()
-        if data and self.transport is not None and not self.transport.is_closing():
-            self.transport.write(data)
 
     # ---- input
 

@@ -30,7 +30,6 @@ import collections
 import gc
 import logging
 import signal
-import socket
 import sys
 import time
 from collections.abc import Awaitable, Callable, Sequence
@@ -72,6 +71,7 @@ from services.protocol import (
     Subscribe,
     Unsubscribe,
 )
+from services.wire import FramedConnection
 
 __all__ = ["Node", "build_parser", "main"]
 
@@ -96,23 +96,19 @@ class _Running:
         self.ctx: CallContext | None = None
 
 
-class _Peer(asyncio.Protocol):
+class _Peer(FramedConnection):
     """One accepted connection."""
 
     def __init__(self, node: Node) -> None:
+        super().__init__(Connection(Role.SERVER, node._key, name=node.name, max_frame=node.max_frame), node._loop)
         self.node = node
-        self.loop = node._loop
-        self.conn = Connection(Role.SERVER, node._key, name=node.name, max_frame=node.max_frame)
-        self.transport: asyncio.Transport | None = None
         self.peer_host = "?"
         self.local = False
-        self.last_rx = self.loop.time()
         self.topics: set[str] = set()
         self.paused = False
         self.backlog: collections.deque[Event] = collections.deque(maxlen=_EVENT_BACKLOG)
         self.dropped = 0
         self.closed = False
-        self._flush_scheduled = False
 
     def __repr__(self) -> str:
         return f"{self.conn.peer or '?'}@{self.peer_host}"
@@ -120,11 +116,8 @@ class _Peer(asyncio.Protocol):
     # ---- asyncio callbacks
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        super().connection_made(transport)
         assert isinstance(transport, asyncio.Transport)
-        self.transport = transport
-        sock = transport.get_extra_info("socket")
-        if sock is not None:
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         transport.set_write_buffer_limits(high=_WRITE_HIGH_WATER)
         peer = transport.get_extra_info("peername")
         here = transport.get_extra_info("sockname")
@@ -176,8 +169,7 @@ class _Peer(asyncio.Protocol):
     def send(self, msg: Message) -> None:
         if self.closed:
             return
-        self.conn.send(msg)
-        self._schedule_flush()
+        super().send(msg)
 
     def send_event(self, ev: Event) -> None:
         if self.closed or self.conn.state is not State.OPEN:
@@ -188,17 +180,6 @@ class _Peer(asyncio.Protocol):
             self.backlog.append(ev)
             return
         self.send(ev)
-
-    def _schedule_flush(self) -> None:
-        if not self._flush_scheduled:
-            self._flush_scheduled = True
-            self.loop.call_soon(self._flush)
-
-    def _flush(self) -> None:
-        self._flush_scheduled = False
-        data = self.conn.data_to_send()
-        if data and self.transport is not None and not self.transport.is_closing():
-            self.transport.write(data)
 
     def close(self, reason: str) -> None:
         """Send ``bye`` with ``reason`` and close this connection only."""
