@@ -1,18 +1,58 @@
-"""Performance function of a robotic task (paper section 3, equation 1).
+"""Performance function of a robotic task (paper section 3, equation 1); pure, no I/O.
 
 J = 1 − R + ρ·C, where R is the reliability of a primitive action (probability that it meets its
 specifications), C its cost (CPU time, actual execution time or any a-priori unit), and ρ a weight
 such that ρ·C ∈ [0, 1]; the paper's typical choice is ρ = 1 / max_{a ∈ A} C(a) over the primitive
-actions A of a primitive task.
+actions A of a primitive task. The function comes from P. U. Lima and G. N. Saridis, *Design of
+Intelligent Control Systems Based on Hierarchical Stochastic Automata*, World Scientific, 1996
+(reference [3] of the paper).
 
-This module is pure: no I/O.
+Formulas used here, each with its source:
+
+* primitive action (paper section 3): ``R(a) = n_success(a) / n(a)`` over the journal's results
+  (``failure`` and ``error`` both fail the specifications, section 4); ``C(a)`` the a-priori cost of
+  the action in the net file or, when measured, the mean of ``wall_s``, ``cpu_s`` or ``cost`` over its
+  results; ``ρ = 1 / max_a C(a)`` per primitive task; ``J(a) = 1 − R(a) + ρ C(a)``.
+* primitive task: with a probability ``p(a)`` of choosing each action, ``R = Σ p(a) R(a)``,
+  ``C = Σ p(a) C(a)`` and ``J = 1 − R + ρ C = Σ p(a) J(a)`` (J is linear in R and C). By default
+  ``p`` puts all its mass on the action of least J: the estimator automaton of section 4 converges
+  to that action with probability one, so this is the task's performance once learning is done.
+  A learner's current probabilities (or the journal's frequencies of use) can be passed instead.
+* task (paper section 2, through the GSPN view): R = probability of reaching the goal marking
+  (absorption probability), C = mean time to absorption (task execution time), computed by
+  :mod:`coordinator.analysis.gspn` on the P-timed net of :mod:`coordinator.analysis.ptimed`
+  (M. Ajmone Marsan et al., *Modelling with Generalized Stochastic Petri Nets*, Wiley, 1995);
+  ρ = 1 / C_max with C_max the mean time to absorption when every primitive task uses its costliest
+  action — the same normalisation as for a primitive task, one level up.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 
-__all__ = ["cost_function", "rho_for"]
+import numpy as np
+
+from coordinator.net import PetriNet
+
+__all__ = [
+    "COST_MEASURES",
+    "ActionPerformance",
+    "ActionRecord",
+    "TaskPerformance",
+    "action_performance",
+    "cost_function",
+    "error_sink_places",
+    "gspn_task_performance",
+    "is_goal",
+    "rho_for",
+    "task_performance",
+    "usage_frequencies",
+]
+
+#: Cost measures: ``wall`` (``wall_s``), ``cpu`` (``cpu_s``), ``cost`` (the action's reported cost),
+#: ``apriori`` (the net file's ``cost`` of each action).
+COST_MEASURES = ("wall", "cpu", "cost", "apriori")
 
 
 def cost_function(reliability: float, cost: float, rho: float) -> float:
@@ -55,3 +95,243 @@ def rho_for(costs: Iterable[float]) -> float:
         raise ValueError(f"costs must be non-negative, got {min(values)}")
     top = max(values)
     return 0.0 if top == 0.0 else 1.0 / top
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ActionRecord:
+    """One result of a primitive action, as the journal's ``action_result`` table holds it.
+
+    Attributes:
+        task: primitive task name.
+        action: primitive action name.
+        status: ``success``, ``failure`` or ``error``.
+        outcome: the outcome named in the ``int:`` event (``ok``, ``error`` or a named one), or None.
+        cost: cost reported by the action, or None.
+        wall_s: actual execution time in s, or None.
+        cpu_s: CPU time in s, or None.
+    """
+
+    task: str
+    action: str
+    status: str
+    outcome: str | None = None
+    cost: float | None = None
+    wall_s: float | None = None
+    cpu_s: float | None = None
+
+    def measure(self, which: str) -> float | None:
+        """The cost measure ``which`` (``wall``, ``cpu`` or ``cost``) of this result, or None."""
+        return {"wall": self.wall_s, "cpu": self.cpu_s, "cost": self.cost}.get(which)
+
+
+@dataclass(frozen=True, slots=True)
+class ActionPerformance:
+    """R, C, ρ and J of one primitive action (paper section 3).
+
+    Attributes:
+        task, action: names.
+        runs: results in the journal; successes, failures, errors: their split by status.
+        reliability: R, or None when there is neither a result nor an a-priori value.
+        cost: C in the task's cost unit, or None when unknown.
+        rho: ρ of the primitive task (1/cost-unit).
+        j: J = 1 − R + ρC, or None when R or C is unknown.
+        source: where R and C come from (``journal``, ``apriori``).
+    """
+
+    task: str
+    action: str
+    runs: int
+    successes: int
+    failures: int
+    errors: int
+    reliability: float | None
+    cost: float | None
+    rho: float
+    j: float | None
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
+class TaskPerformance:
+    """R, C, ρ and J of a primitive task or a task.
+
+    Attributes:
+        name: primitive task name, or the net's name for the task.
+        reliability: R; cost: C; rho: ρ; j: J (None when unknown).
+        basis: how it was propagated (``best action a``, ``mixture``, ``gspn``).
+    """
+
+    name: str
+    reliability: float | None
+    cost: float | None
+    rho: float
+    j: float | None
+    basis: str
+
+
+def action_performance(
+    net: PetriNet, records: Iterable[ActionRecord], *, measure: str = "wall"
+) -> dict[str, dict[str, ActionPerformance]]:
+    """R, C, ρ, J of every primitive action of ``net`` from journal results.
+
+    C is the mean of ``measure`` over the action's results when it has some, else the a-priori
+    ``cost`` of the action (always with ``measure="apriori"``). R is the relative frequency of
+    success; without results it falls back on the primitive task's a-priori ``reliability``.
+
+    Args:
+        net: the task net (its primitive tasks and their actions).
+        records: the journal's results; results of unknown tasks or actions are ignored.
+        measure: one of :data:`COST_MEASURES`.
+
+    Returns:
+        ``{task: {action: ActionPerformance}}``.
+
+    Raises:
+        ValueError: on an unknown measure.
+    """
+    if measure not in COST_MEASURES:
+        raise ValueError(f"unknown cost measure {measure!r}: use one of {', '.join(COST_MEASURES)}")
+    grouped: dict[tuple[str, str], list[ActionRecord]] = {}
+    for rec in records:
+        grouped.setdefault((rec.task, rec.action), []).append(rec)
+    out: dict[str, dict[str, ActionPerformance]] = {}
+    for name, task in net.tasks.items():
+        rows = []
+        for spec in task.actions:
+            recs = grouped.get((name, spec.name), [])
+            counts = {s: sum(1 for r in recs if r.status == s) for s in ("success", "failure", "error")}
+            values = [v for r in recs if (v := r.measure(measure)) is not None] if measure != "apriori" else []
+            cost = float(np.mean(values)) if values else spec.cost
+            rel = counts["success"] / len(recs) if recs else task.reliability
+            source = ("journal" if recs else "apriori") + "/" + ("journal" if values else "apriori")
+            rows.append((spec.name, len(recs), counts, rel, cost, source))
+        known = [c for *_, c, _ in rows if c is not None]
+        rho = rho_for(known) if known else 0.0
+        out[name] = {
+            a: ActionPerformance(
+                task=name, action=a, runs=n, successes=c["success"], failures=c["failure"],
+                errors=c["error"], reliability=r, cost=cost, rho=rho,
+                j=cost_function(r, cost, rho) if r is not None and cost is not None else None, source=src,
+            )
+            for a, n, c, r, cost, src in rows
+        }
+    return out
+
+
+def usage_frequencies(records: Iterable[ActionRecord]) -> dict[str, dict[str, float]]:
+    """Relative frequency with which each action of each primitive task was run: ``{task: {action: p}}``."""
+    counts: dict[str, dict[str, int]] = {}
+    for rec in records:
+        counts.setdefault(rec.task, {}).setdefault(rec.action, 0)
+        counts[rec.task][rec.action] += 1
+    return {t: {a: n / sum(c.values()) for a, n in c.items()} for t, c in counts.items()}
+
+
+def task_performance(
+    actions: Mapping[str, ActionPerformance], *, probabilities: Mapping[str, float] | None = None
+) -> TaskPerformance:
+    """Propagate the actions' R, C, J to their primitive task (see the module docstring).
+
+    Args:
+        actions: ``{action: ActionPerformance}`` of one primitive task.
+        probabilities: probability of choosing each action (e.g. the learner's current ones);
+            None picks the action of least J (where the learning automaton converges).
+
+    Returns:
+        :class:`TaskPerformance` (R, C, J None when no action has them).
+
+    Raises:
+        ValueError: if no action is given or the probabilities do not sum to 1.
+    """
+    if not actions:
+        raise ValueError("task_performance needs at least one action")
+    first = next(iter(actions.values()))
+    rho = first.rho
+    if probabilities is None:
+        scored = [a for a in actions.values() if a.j is not None]
+        if not scored:
+            return TaskPerformance(first.task, None, None, rho, None, "no action has both R and C")
+        best = min(scored, key=lambda a: (a.j, a.action))
+        return TaskPerformance(first.task, best.reliability, best.cost, rho, best.j, f"best action {best.action}")
+    total = sum(probabilities.values())
+    if abs(total - 1.0) > 1e-6:
+        raise ValueError(f"action probabilities must sum to 1, got {total}")
+    used = [(p, actions[a]) for a, p in probabilities.items() if p > 0 and a in actions]
+    if any(a.reliability is None or a.cost is None for _, a in used):
+        return TaskPerformance(first.task, None, None, rho, None, "mixture with an unknown R or C")
+    rel = sum(p * (a.reliability or 0.0) for p, a in used)
+    cost = sum(p * (a.cost or 0.0) for p, a in used)
+    return TaskPerformance(first.task, rel, cost, rho, cost_function(min(max(rel, 0.0), 1.0), cost, rho), "mixture")
+
+
+def error_sink_places(net: PetriNet) -> set[str]:
+    """Places whose only input transitions are error exits (``int:<task>.error``), e.g. a count of
+    aborted runs: a dead marking that marks one is not the task's goal."""
+    feeders: dict[str, list[bool]] = {}
+    for t in net.transitions:
+        is_error = any(e.endswith(".error") for e in t.internal_events)
+        for pid in net.output_places[t.id]:
+            feeders.setdefault(pid, []).append(is_error)
+    return {p for p, flags in feeders.items() if flags and all(flags)}
+
+
+def is_goal(marking: Mapping[str, int], goal: Mapping[str, int] | None, sinks: set[str]) -> bool:
+    """Tell whether a dead marking is a goal: it holds at least ``goal[p]`` tokens in each place of
+    ``goal`` when given, else it marks no error-sink place (:func:`error_sink_places`)."""
+    if goal:
+        return all(marking.get(p, 0) >= n for p, n in goal.items())
+    return not any(marking.get(p, 0) for p in sinks)
+
+
+def gspn_task_performance(
+    net: PetriNet,
+    records: Iterable[ActionRecord] = (),
+    *,
+    ext_rates: Mapping[str, float] | None = None,
+    goal: Mapping[str, int] | None = None,
+) -> tuple[TaskPerformance, dict[str, object]]:
+    """R, C, ρ, J of the whole task through its P-timed GSPN (see the module docstring).
+
+    Args:
+        net: the interpreted task net; it must terminate (e.g. a finite number of runs).
+        records: journal results (times and reliabilities; a-priori values otherwise).
+        ext_rates: rate in 1/s per external topic.
+        goal: minimum tokens per place of a goal marking; default: a dead marking that marks no
+            place fed only by error exits.
+
+    Returns:
+        ``(TaskPerformance, details)`` with ``details`` holding ``goal_markings`` (each with its
+        probability), ``c_max`` (s) and the P-timed model's ``warnings``. R, C and J are None when
+        the GSPN does not terminate.
+
+    Raises:
+        AnalysisError: as :func:`coordinator.analysis.gspn.analyse`.
+    """
+    from coordinator.analysis.gspn import analyse
+    from coordinator.analysis.ptimed import task_stats, to_gspn
+
+    recs = list(records)
+    stats = task_stats(recs)
+    model = to_gspn(net, stats=stats, ext_rates=ext_rates)
+    result = analyse(model.net)
+    details: dict[str, object] = {"warnings": model.warnings, "means_s": model.means, "normal": model.normal}
+    if not result.terminates or result.mean_time_to_absorption is None:
+        return TaskPerformance(net.name, None, None, 0.0, None, "gspn does not terminate"), details
+    sinks = error_sink_places(net)
+    goals = [a for a in result.absorption if is_goal(a["marking"], goal, sinks)]
+    rel = min(1.0, sum(float(a["probability"]) for a in goals))
+    cost = float(result.mean_time_to_absorption)
+    # Worst case: each primitive task at the mean time of its slowest action.
+    worst: dict[str, float] = {}
+    for name in net.tasks:
+        per_action: dict[str, list[float]] = {}
+        for r in recs:
+            if r.task == name and r.wall_s is not None:
+                per_action.setdefault(r.action, []).append(r.wall_s)
+        means = [float(np.mean(v)) for v in per_action.values()]
+        worst[name] = max(means) if means else model.means[name]
+    c_max = float(analyse(to_gspn(net, stats=stats, ext_rates=ext_rates, means=worst).net).mean_time_to_absorption
+                  or cost)
+    rho = 1.0 / c_max if c_max > 0 else 0.0
+    details.update(goal_markings=goals, c_max=c_max)
+    return TaskPerformance(net.name, rel, cost, rho, 1.0 - rel + rho * cost, "gspn"), details

@@ -1,0 +1,162 @@
+"""``petrobot gspn``: the quantitative (GSPN) view of a net — CTMC measures, bottlenecks, task time."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Any
+
+from coordinator.analysis.gspn import analyse
+from coordinator.analysis.ptimed import empirical_delays, task_stats, to_gspn
+from coordinator.analysis.simulate import Delay, simulate_absorption, simulate_steady
+from coordinator.commands.perf import parse_pairs, read_records
+from coordinator.errors import AnalysisError, JournalError, NetError, PetrobotError
+from coordinator.net import PetriNet, PlaceKind
+from coordinator.netfile import dump_net, load_any
+
+__all__ = ["add_parser", "report", "run"]
+
+
+def add_parser(subparsers: Any) -> None:
+    """Register ``gspn`` on the ``petrobot`` sub-command parser."""
+    parser = subparsers.add_parser(
+        "gspn",
+        help="quantitative analysis: GSPN view, CTMC, throughputs, bottlenecks, task time and reliability",
+        description=(
+            "Turn a task net into its generalized stochastic Petri net (section 2 of the paper: each "
+            "primitive-task place gets an exponential delay with the mean measured in the journal or its "
+            "a-priori mean_time_s; its normal and error exits become a random switch with the measured or "
+            "a-priori reliability; external events become exponential transitions) and solve it: tangible "
+            "reachability graph with vanishing markings eliminated, CTMC steady state, mean tokens and "
+            "probability of a token per place, throughput per transition, utilisation and bottlenecks, and "
+            "for nets that terminate the mean time to absorption (task execution time, s) and the "
+            "probability of each final marking. A net that is already a GSPN (no primitive-task place, no "
+            "event) is solved as it is. Exit status 0 on success, 1 on an unreadable net or journal, 2 if "
+            "the analysis fails (state limit, timeless trap)."),
+    )
+    parser.add_argument("net", metavar="NET", help="net file (.toml, .pnml or .xml)")
+    parser.add_argument("--journal", metavar="FILE",
+                        help="SQLite journal of real runs: mean times and reliabilities of primitive tasks")
+    parser.add_argument("--ext-rate", action="append", metavar="TOPIC=RATE",
+                        help="rate (1/s) of external event ext:TOPIC (default 1/s, with a warning); repeatable")
+    parser.add_argument("--max-states", type=int, default=2_000_000, metavar="N",
+                        help="stop with an error past N reachable markings (default 2,000,000)")
+    parser.add_argument("--method", choices=["auto", "dense", "direct", "bicgstab"], default="auto",
+                        help="steady-state solver: direct (SuperLU), bicgstab (iterative), dense (numpy), or "
+                             "auto (direct up to 2,000 tangible markings); default auto")
+    parser.add_argument("--write-gspn", metavar="FILE",
+                        help="also write the GSPN view as a TOML net file, to inspect or edit")
+    parser.add_argument("--simulate", type=int, default=0, metavar="RUNS",
+                        help="also simulate the GSPN: RUNS independent runs to the end for a net that "
+                             "terminates, else RUNS batches of 100 s after a 100 s warm-up; primitive tasks "
+                             "take their durations from the journal's samples when --journal is given "
+                             "(exponential otherwise); 95%% confidence intervals")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the simulation (default 0)")
+    parser.add_argument("--json", action="store_true", help="print the report as JSON")
+
+
+def _is_interpreted(net: PetriNet) -> bool:
+    return any(p.kind is PlaceKind.PRIMITIVE_TASK for p in net.places) or any(t.events for t in net.transitions)
+
+
+def report(args: argparse.Namespace) -> dict[str, Any]:
+    """Compute the ``gspn`` report as a JSON-ready dict (raises PetrobotError subclasses)."""
+    net = load_any(args.net, interpreted=False)
+    warnings: list[str] = []
+    sources: dict[str, str] = {}
+    delays: dict[str, Delay] = {}
+    if _is_interpreted(net):
+        records = read_records(args.journal) if args.journal else []
+        stats = task_stats(records)
+        model = to_gspn(net, stats=stats, ext_rates=parse_pairs(args.ext_rate, "--ext-rate"))
+        gspn, warnings, sources = model.net, model.warnings, model.sources
+        delays = empirical_delays(model, stats)
+    else:
+        gspn = net
+    if args.write_gspn:
+        with open(args.write_gspn, "w", encoding="utf-8") as fh:
+            fh.write(dump_net(gspn))
+    result = analyse(gspn, method=args.method, max_states=args.max_states)
+    rep = {"net": net.name, **result.to_json(), "warnings": warnings, "sources": sources}
+    if args.simulate > 0:
+        rep["simulation"] = _simulate(gspn, delays, result.terminates, args.simulate, args.seed)
+    return rep
+
+
+def _simulate(net: PetriNet, delays: dict[str, Delay], terminates: bool, runs: int, seed: int) -> dict[str, Any]:
+    """Simulation estimates (mean and 95 % half-width) beside the CTMC figures."""
+    laws = {tid: d.kind for tid, d in delays.items()}
+    if terminates:
+        est = simulate_absorption(net, delays, seed=seed, replications=max(2, runs))
+        return {
+            "replications": est.replications, "delays": laws,
+            "mean_time_to_absorption": est.mean_time_to_absorption.to_json(),
+            "absorption": [{"marking": dict(k), **v.to_json()} for k, v in est.absorption.items()],
+        }
+    steady = simulate_steady(net, delays, seed=seed, batches=max(2, runs))
+    return {
+        "batches": steady.batches, "delays": laws,
+        "mean_tokens": {p: e.to_json() for p, e in steady.mean_tokens.items()},
+        "throughput": {t: e.to_json() for t, e in steady.throughput.items()},
+    }
+
+
+def render(rep: dict[str, Any]) -> str:
+    """Return the readable text of a :func:`report` dict."""
+    lines = [(f"net {rep['net']!r}: {rep['tangible_markings']:,} tangible and {rep['vanishing_markings']:,} "
+              f"vanishing markings; steady state by {rep['method']}, residual {rep['residual']:.1e}")]
+    if rep["terminates"]:
+        lines.append(f"the net terminates: mean time to absorption {rep['mean_time_to_absorption']:.6g} s")
+        for a in sorted(rep["absorption"], key=lambda a: -a["probability"])[:15]:
+            marking = ", ".join(f"{p}:{n}" for p, n in a["marking"].items()) or "empty"
+            lines.append(f"  {a['probability']:.6f}  {{{marking}}}")
+        if len(rep["absorption"]) > 15:
+            lines.append(f"  ... {len(rep['absorption']) - 15} more final markings (see --json)")
+    elif rep["absorption"]:
+        lines.append(f"the chain is reducible: mean time to reach a closed class {rep['mean_time_to_absorption']:.6g} s")
+    lines += ["", f"{'place':28} {'mean tokens':>12} {'P(nonempty)':>12}"]
+    for p, v in rep["mean_tokens"].items():
+        lines.append(f"{p:28} {v:12.6g} {rep['probability_nonempty'][p]:12.6g}")
+    key = "expected_firings" if rep["terminates"] else "throughput"
+    title = "expected firings" if rep["terminates"] else "throughput 1/s"
+    lines += ["", f"{'transition':28} {title:>16} {'utilisation':>12}"]
+    for t, v in rep[key].items():
+        u = rep["utilisation"].get(t)
+        lines.append(f"{t:28} {v:16.6g} {'' if u is None else f'{u:12.6g}'}")
+    lines += ["", "bottlenecks (" + ("share of the task time each timed transition is enabled" if rep["terminates"]
+                                      else "utilisation of finite-server timed transitions") + ")"]
+    for b in rep["bottlenecks"][:10]:
+        score = b.get("share", b.get("utilisation"))
+        lines.append(f"  {b['transition']:28} {score:.4f}")
+    sim = rep.get("simulation")
+    if sim:
+        laws = ", ".join(f"{t}: {k}" for t, k in sim["delays"].items()) or "all exponential"
+        lines += ["", f"simulation ({laws}; 95% intervals)"]
+        if "mean_time_to_absorption" in sim:
+            m = sim["mean_time_to_absorption"]
+            lines.append(f"  mean time to absorption {m['mean']:.6g} ± {m['half_width']:.2g} s "
+                         f"over {sim['replications']} runs")
+            for a in sorted(sim["absorption"], key=lambda a: -a["mean"])[:10]:
+                marking = ", ".join(f"{p}:{n}" for p, n in a["marking"].items()) or "empty"
+                lines.append(f"  {a['mean']:.4f} ± {a['half_width']:.2g}  {{{marking}}}")
+        else:
+            for t, e in sim["throughput"].items():
+                lines.append(f"  throughput {t:24} {e['mean']:.6g} ± {e['half_width']:.2g} /s")
+    for w in rep["warnings"]:
+        lines.append(f"warning: {w}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the report; 0 on success, 1 on an unreadable net or journal, 2 if the analysis fails."""
+    try:
+        rep = report(args)
+    except (NetError, JournalError, OSError) as exc:
+        print(f"petrobot gspn: {exc}", file=sys.stderr)
+        return 1
+    except (AnalysisError, PetrobotError) as exc:
+        print(f"petrobot gspn: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(rep, indent=2) if args.json else render(rep))
+    return 0

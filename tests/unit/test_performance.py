@@ -1,0 +1,115 @@
+"""J = 1 - R + rho C (paper section 3) per primitive action, primitive task and task."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from coordinator.commands import gspn as gspn_cmd
+from coordinator.commands import perf as perf_cmd
+from coordinator.performance import (
+    ActionRecord,
+    action_performance,
+    cost_function,
+    error_sink_places,
+    gspn_task_performance,
+    rho_for,
+    task_performance,
+)
+from tests.unit.test_ptimed import two_step_task
+
+
+def records() -> list[ActionRecord]:
+    out = []
+    for i in range(10):  # a1: 8/10 success, 1 s; a2: 5/10 success, 0.5 s
+        out.append(ActionRecord(task="a", action="a1", status="success" if i < 8 else "failure", wall_s=1.0, cpu_s=0.2))
+        out.append(ActionRecord(task="a", action="a2", status="success" if i < 5 else "error", wall_s=0.5, cpu_s=0.1))
+    out.append(ActionRecord(task="b", action="b1", status="success", wall_s=0.4))
+    return out
+
+
+def test_cost_function_follows_equation_one() -> None:
+    assert cost_function(0.9, 2.0, 0.25) == pytest.approx(0.6)
+    assert rho_for([1.0, 4.0, 2.0]) == pytest.approx(0.25)
+
+
+def test_action_reliability_is_the_frequency_of_success_and_error_counts_as_failure() -> None:
+    perf = action_performance(two_step_task(), records())
+    a1, a2 = perf["a"]["a1"], perf["a"]["a2"]
+    assert (a1.reliability, a2.reliability) == (0.8, 0.5)
+    assert a1.rho == pytest.approx(1.0) and a1.cost == pytest.approx(1.0)
+    assert a1.j == pytest.approx(1 - 0.8 + 1.0)
+    assert a2.j == pytest.approx(1 - 0.5 + 0.5)
+    assert a2.errors == 5
+
+
+def test_cpu_measure_and_a_priori_fallback() -> None:
+    perf = action_performance(two_step_task(), records(), measure="cpu")
+    assert perf["a"]["a1"].rho == pytest.approx(5.0)
+    assert perf["b"]["b1"].cost is None and perf["b"]["b1"].j is None
+
+
+def test_primitive_task_takes_its_best_action_or_a_given_mix() -> None:
+    acts = action_performance(two_step_task(), records())["a"]
+    best = task_performance(acts)
+    assert best.basis == "best action a2" and best.j == pytest.approx(1.0)
+    mix = task_performance(acts, probabilities={"a1": 0.5, "a2": 0.5})
+    assert mix.j == pytest.approx(0.5 * acts["a1"].j + 0.5 * acts["a2"].j)
+
+
+def test_task_performance_comes_from_the_gspn_absorption() -> None:
+    net = two_step_task()
+    task, details = gspn_task_performance(net, records(), ext_rates={"tick": 4.0})
+    # a: mean 0.75 s, normal branch 15/20; b: 0.4 s, always normal (journal).
+    assert task.reliability == pytest.approx(0.75)
+    assert task.cost == pytest.approx(0.25 + 0.75 + 0.75 * 0.4)
+    assert details["c_max"] == pytest.approx(0.25 + 1.0 + 0.75 * 0.4)
+    assert task.j == pytest.approx(1 - task.reliability + task.cost / details["c_max"])
+    assert error_sink_places(net) == {"failed"}
+
+
+def make_journal(path: Path) -> None:
+    con = sqlite3.connect(path)
+    con.execute("CREATE TABLE action_result(instance TEXT, task TEXT, action TEXT, node TEXT, status TEXT, "
+                "outcome TEXT, cost REAL, wall_s REAL, cpu_s REAL, t_wall REAL)")
+    for i, r in enumerate(records()):
+        con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
+                    (str(i), r.task, r.action, "n", r.status, None, None, r.wall_s, r.cpu_s, float(i)))
+    con.commit()
+    con.close()
+
+
+def test_perf_and_gspn_commands_report_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from coordinator.netfile import dump_net
+
+    net_file = tmp_path / "two.toml"
+    net_file.write_text(dump_net(two_step_task()))
+    journal = tmp_path / "j.sqlite"
+    make_journal(journal)
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    perf_cmd.add_parser(sub)
+    gspn_cmd.add_parser(sub)
+    args = parser.parse_args(["perf", str(net_file), "--journal", str(journal), "--ext-rate", "tick=4", "--json"])
+    assert perf_cmd.run(args) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["actions"]["a"]["a1"]["reliability"] == 0.8
+    assert rep["task"]["reliability"] == pytest.approx(0.75)
+    args = parser.parse_args(["gspn", str(net_file), "--journal", str(journal), "--ext-rate", "tick=4", "--json",
+                              "--write-gspn", str(tmp_path / "view.toml"), "--simulate", "200"])
+    assert gspn_cmd.run(args) == 0
+    rep = json.loads(capsys.readouterr().out)
+    for key in ("tangible_markings", "vanishing_markings", "mean_tokens", "probability_nonempty", "throughput",
+                "mean_time_to_absorption", "absorption"):
+        assert key in rep
+    assert rep["mean_time_to_absorption"] == pytest.approx(0.25 + 0.75 + 0.75 * 0.4)
+    assert (tmp_path / "view.toml").exists()
+    sim = rep["simulation"]
+    assert sim["delays"]["run_a.run"] == "empirical"
+    assert abs(sim["mean_time_to_absorption"]["mean"] - rep["mean_time_to_absorption"]) < 0.2
+    args = parser.parse_args(["perf", str(net_file), "--journal", str(tmp_path / "missing.sqlite")])
+    assert perf_cmd.run(args) == 1
