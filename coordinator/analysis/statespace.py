@@ -1,11 +1,17 @@
-"""Explicit state space (reachability graph) of a Petri net, built by a vectorised frontier search.
+"""Explicit state space (reachability graph) of a Petri net: a breadth-first search that starts one
+marking at a time and hands over to a vectorised frontier search once levels grow.
 
-Pure: no I/O. The search is breadth-first by levels; each level (the *frontier*) is processed in
-blocks of rows with numpy, never one marking at a time:
+Pure: no I/O. The search is breadth-first by levels (a level is the set of markings at one distance
+from M0), in two stages that produce the same numbering and edge order:
 
+0. Small levels: a plain loop over markings held as tuples, with a ``dict`` of known markings and
+   per-transition (place, weight) arc lists; a transition is tested only if its first input place is
+   marked. It costs 1–4 µs per firing and nothing per level, so it wins while levels are small.
+   Before the first level predicted to have more than ``_SMALL_EDGES`` edges, the states, edges and
+   parent edges found so far are handed to the vectorised search, which continues.
 1. Enabling: one vectorised comparison per input arc and per inhibitor arc over the whole block
-   (or, for small blocks, one broadcast comparison against the whole Pre matrix) gives a
-   (rows, |T|) mask; with a ``priority`` vector only the enabled
+   (or, for small blocks, per distinct arc weight one matrix product that counts the satisfied arcs
+   of every transition) gives a (rows, |T|) mask; with a ``priority`` vector only the enabled
    transitions of the highest enabled level survive (GSPN rule, Ajmone Marsan et al. 1995).
 2. Keys: every marking has a 64-bit key that is *linear* in the marking,
    ``key(M) = sum_p M(p) * R[p] (mod 2**64)``, so the successor's key is
@@ -30,6 +36,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -42,6 +49,13 @@ __all__ = ["StateSpace", "enabled_mask", "explore"]
 
 _BLOCK_ROWS = 1 << 16
 _MAX_RESTARTS = 3
+#: largest n·|P|·|T| for which enabling is computed by matrix products (see _enabled)
+_MAX_PRODUCT = 500_000
+#: a level whose predicted number of edges (its size times the mean out-degree so far) is at most
+#: this is expanded one marking at a time; the first larger level goes to the vectorised search.
+#: Chosen by measurement on the MCC models (docs/analysis.md): one numpy level costs ~0.1–0.3 ms
+#: fixed, one edge in pure Python ~1–3 µs.
+_SMALL_EDGES = 200
 
 
 @dataclass(frozen=True, eq=False)
@@ -235,27 +249,66 @@ def _dedupe(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return uniq, first, inverse
 
 
+def _arcs_by_transition(matrix: np.ndarray) -> list[tuple[tuple[int, int], ...]]:
+    """Non-zero entries of a (|P|, |T|) matrix as ``(place, value)`` pairs per transition."""
+    ts, ps = np.nonzero(matrix.T)
+    vals = matrix.T[ts, ps].tolist()
+    out: list[list[tuple[int, int]]] = [[] for _ in range(matrix.shape[1])]
+    for t, p, v in zip(ts.tolist(), ps.tolist(), vals):
+        out[t].append((p, v))
+    return [tuple(arcs) for arcs in out]
+
+
 class _NetTables:
-    """Per-net arc lists used by the vectorised enabling test."""
+    """Per-net arc lists (plain tuples, built first) and the dense arrays of the vectorised
+    enabling test (built on first use, so small searches never pay for them)."""
 
     def __init__(self, net: PetriNet, priority: np.ndarray | None) -> None:
-        pre, inh = net.pre, net.inhibitor
-        self.n_p, self.n_t = pre.shape
-        self.inputs = [[(int(p), int(pre[p, t])) for p in np.flatnonzero(pre[:, t])] for t in range(self.n_t)]
-        self.inhib = [[(int(p), int(inh[p, t])) for p in np.flatnonzero(inh[:, t])] for t in range(self.n_t)]
-        self.n_arcs = sum(len(a) for a in self.inputs) + sum(len(a) for a in self.inhib)
-        self.pre_dense = np.asarray(pre, dtype=np.int64)
-        self.has_inhibitors = bool(np.any(inh))
-        #: inhibitor thresholds with "no arc" as a threshold nothing reaches
-        self.inh_dense = np.where(inh > 0, inh, np.iinfo(np.int64).max).astype(np.int64)
-        self.incidence = np.asarray(net.incidence, dtype=np.int64)
-        self.inc_t = np.ascontiguousarray(self.incidence.T)
-        #: per place whose count can grow: (place, transitions that add to it, their increases)
-        self.growth_by_place = [(p, np.flatnonzero(self.incidence[p] > 0), self.incidence[p][self.incidence[p] > 0])
-                                for p in range(self.n_p) if (self.incidence[p] > 0).any()]
+        self.net = net
+        self.n_p, self.n_t = net.pre.shape
+        #: per transition: input arcs, inhibitor arcs, non-zero incidence entries, as (place, value)
+        self.inputs = _arcs_by_transition(net.pre)
+        self.inhib = _arcs_by_transition(net.inhibitor)
+        self.deltas = _arcs_by_transition(net.incidence)
         self.priority = None if priority is None else np.asarray(priority, dtype=np.int64)
         if self.priority is not None and self.priority.shape != (self.n_t,):
             raise AnalysisError(f"priority has shape {self.priority.shape}; expected ({self.n_t},)")
+
+    @cached_property
+    def n_arcs(self) -> int:
+        return sum(len(a) for a in self.inputs) + sum(len(a) for a in self.inhib)
+
+    @cached_property
+    def has_inhibitors(self) -> bool:
+        return any(self.inhib)
+
+    @cached_property
+    def incidence(self) -> np.ndarray:
+        return np.asarray(self.net.incidence, dtype=np.int64)
+
+    @cached_property
+    def inc_t(self) -> np.ndarray:
+        return np.ascontiguousarray(self.incidence.T)
+
+    @cached_property
+    def threshold_tables(self) -> tuple[list[tuple[int, np.ndarray | None, np.ndarray | None]], np.ndarray]:
+        """Per distinct arc weight w: w, then (|P|, |T|) float32 0/1 matrices of the input arcs and
+        of the inhibitor arcs of weight w (None if there are none); and the number of input arcs of
+        each transition, (|T|,) float32."""
+        pre, inh = self.net.pre, self.net.inhibitor
+        tables = []
+        for w in sorted(set(np.unique(pre[pre > 0]).tolist()) | set(np.unique(inh[inh > 0]).tolist())):
+            tables.append((int(w), (pre == w).astype(np.float32) if (pre == w).any() else None,
+                           (inh == w).astype(np.float32) if (inh == w).any() else None))
+        return tables, (pre > 0).sum(axis=0).astype(np.float32)
+
+    @cached_property
+    def growth_bound(self) -> tuple[np.ndarray, np.ndarray]:
+        """The places whose count some transition increases, and the largest increase of each:
+        two (k,) int64 arrays."""
+        gain = self.incidence.max(axis=1)
+        growing = np.flatnonzero(gain > 0)
+        return growing, gain[growing]
 
 
 def enabled_mask(net: PetriNet, rows: np.ndarray, priority: np.ndarray | None = None) -> np.ndarray:
@@ -277,17 +330,31 @@ def _enabled(tab: _NetTables, cols: np.ndarray) -> np.ndarray:
     """cols: (|P|, n) marking columns. Returns (n, |T|) bool.
 
     Two equivalent ways: one comparison per arc over the n columns (cheap per element, one numpy
-    call per arc), or one broadcast comparison of every place against every transition (one call,
-    |P|·|T| elements per column); the cheaper is chosen from the sizes.
+    call per arc), or, per distinct arc weight w, one matrix product of the indicator ``M >= w``
+    (n, |P|) with the 0/1 matrix of the arcs of weight w, which counts the satisfied input arcs and
+    the violated inhibitor arcs of every transition (a few calls, n·|P|·|T| multiply-adds in BLAS;
+    float32 counts are exact up to 2**24 arcs); the cheaper is chosen from the sizes.
     """
     n = cols.shape[1]
     per_arc = tab.n_arcs * (3000 + n)
-    broadcast = 3 * n * tab.n_p * tab.n_t + 10_000
-    if broadcast < per_arc:
-        rows = cols.T[:, :, None]
-        out = (rows >= tab.pre_dense[None]).all(axis=1)
-        if tab.has_inhibitors:
-            out &= (rows < tab.inh_dense[None]).all(axis=1)
+    tables, n_inputs = tab.threshold_tables
+    macs = n * tab.n_p * tab.n_t
+    counting = len(tables) * (8000 + 2 * n * tab.n_p + macs // 8) + 5000
+    # above ~5e5 multiply-adds per product BLAS goes multi-threaded, which on a shared machine was
+    # measured 50-200x slower than single-threaded; the per-arc way is cheap there anyway
+    if counting < per_arc and macs <= _MAX_PRODUCT:
+        rows = cols.T
+        met = np.zeros((n, tab.n_t), dtype=np.float32)
+        blocked = np.zeros((n, tab.n_t), dtype=np.float32) if tab.has_inhibitors else None
+        for w, pre_w, inh_w in tables:
+            reached = (rows >= w).astype(np.float32)
+            if pre_w is not None:
+                met += reached @ pre_w
+            if inh_w is not None and blocked is not None:
+                blocked += reached @ inh_w
+        out = met == n_inputs[None, :]
+        if blocked is not None:
+            out &= blocked == 0
     else:
         mask = np.ones((tab.n_t, n), dtype=bool)
         for t in range(tab.n_t):
@@ -304,31 +371,143 @@ def _enabled(tab: _NetTables, cols: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(out)
 
 
-class _Explorer:
-    """Mutable state of one search (internal)."""
+@dataclass
+class _Prefix:
+    """The part of the breadth-first search done so far (internal).
 
-    def __init__(self, net: PetriNet, tab: _NetTables, max_states: int, seed: int) -> None:
+    States ``0 .. expanded - 1`` have been expanded; states ``expanded .. n - 1`` are the next level.
+    """
+
+    states: np.ndarray  #: (n, |P|) int64
+    src: np.ndarray  #: (e,) int64
+    dst: np.ndarray  #: (e,) int64
+    tr: np.ndarray  #: (e,) int32
+    parent: np.ndarray  #: (n,) int64
+    expanded: int
+    stopped: bool = False  #: max_states was hit (the search is over)
+    truncated_src: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+
+    @property
+    def finished(self) -> bool:
+        return self.stopped or self.expanded == self.states.shape[0]
+
+
+#: (transition, input arcs, inhibitor arcs, incidence entries); arcs are (place, weight) pairs
+_Rule = tuple[int, tuple[tuple[int, int], ...], tuple[tuple[int, int], ...], tuple[tuple[int, int], ...]]
+
+
+def _small_bfs(tab: _NetTables, m0: np.ndarray, max_states: int, edge_limit: int,
+               progress: Callable[[int, int], None] | None) -> _Prefix:
+    """Breadth-first search one marking at a time over tuples and a dict, while levels are small.
+
+    Stops before the first level predicted to have more than ``edge_limit`` edges (its size times
+    the mean out-degree so far; such a level has at most ``edge_limit`` markings, as every marking
+    found has an edge to it), when the graph is complete, or at ``max_states``; the vectorised
+    search then takes over from the returned prefix. The
+    numbering, edge order, parent edges and truncation are those of the vectorised search: states in
+    order of first appearance, edges by source then transition, a level processed as one block.
+    Only the transitions whose first input place is marked are tested (those without input places
+    always are), so the cost per marking follows its marked places rather than |T|.
+    """
+    by_place: dict[int, list[_Rule]] = {}
+    always: list[_Rule] = []
+    for t in range(tab.n_t):
+        rule = (t, tab.inputs[t], tab.inhib[t], tab.deltas[t])
+        if rule[1]:
+            by_place.setdefault(rule[1][0][0], []).append(rule)
+        else:
+            always.append(rule)
+    triggers = sorted(by_place.items())
+    prio = None if tab.priority is None else tab.priority.tolist()
+    first = tuple(m0.tolist())
+    states: list[tuple[int, ...]] = [first]
+    seen: dict[tuple[int, ...], int] = {first: 0}
+    src: list[int] = []
+    dst: list[int] = []
+    tr: list[int] = []
+    parent: list[int] = [-1]
+    truncated: set[int] = set()
+    lo, hi = 0, 1
+    # the next level's edges, predicted from the mean out-degree so far
+    while lo < hi and (hi - lo) * len(src) <= edge_limit * max(lo, 1):
+        for i in range(lo, hi):
+            m = states[i]
+            enabled: list[_Rule] = []
+            for p, rules in triggers:
+                if m[p]:
+                    for rule in rules:
+                        for q, w in rule[1]:
+                            if m[q] < w:
+                                break
+                        else:
+                            for q, w in rule[2]:
+                                if m[q] >= w:
+                                    break
+                            else:
+                                enabled.append(rule)
+            for rule in always:
+                for q, w in rule[2]:
+                    if m[q] >= w:
+                        break
+                else:
+                    enabled.append(rule)
+            if len(enabled) > 1:
+                enabled.sort()
+                if prio is not None:
+                    top = max(prio[rule[0]] for rule in enabled)
+                    enabled = [rule for rule in enabled if prio[rule[0]] == top]
+            for t, _, _, delta in enabled:
+                succ = list(m)
+                for q, d in delta:
+                    succ[q] += d
+                key = tuple(succ)
+                j = seen.get(key)
+                if j is None:
+                    j = len(states)
+                    if j == max_states:
+                        truncated.add(i)
+                        continue
+                    seen[key] = j
+                    states.append(key)
+                    parent.append(len(src))
+                src.append(i)
+                dst.append(j)
+                tr.append(t)
+        if truncated:
+            lo = hi
+            break
+        if progress is not None:
+            progress(len(states), len(src))
+        lo, hi = hi, len(states)
+    return _Prefix(states=np.array(states, dtype=np.int64).reshape(len(states), tab.n_p),
+                   src=np.array(src, dtype=np.int64), dst=np.array(dst, dtype=np.int64),
+                   tr=np.array(tr, dtype=np.int32), parent=np.array(parent, dtype=np.int64), expanded=lo,
+                   stopped=bool(truncated), truncated_src=np.array(sorted(truncated), dtype=np.int64))
+
+
+class _Explorer:
+    """Mutable state of one vectorised search, continuing from a prefix (internal)."""
+
+    def __init__(self, net: PetriNet, tab: _NetTables, max_states: int, seed: int, prefix: _Prefix) -> None:
         self.net, self.tab, self.max_states = net, tab, max_states
         self.seed = seed
-        m0 = net.vector(net.initial_marking)
-        self.width = np.array([max(1, int(v).bit_length()) for v in m0], dtype=np.int64)
+        known = prefix.states
+        self.n = known.shape[0]
+        top = known.max(axis=0) if self.n else np.zeros(tab.n_p, np.int64)
+        self.width = np.array([max(1, int(v).bit_length()) for v in top], dtype=np.int64)
         packing = self._packing()
         self.exact = packing is not None
         self.mult: np.ndarray = packing if packing is not None else _multipliers(tab.n_p, seed)
-        self.dkey = _delta_keys(tab.incidence, self.mult)
-        cap = 1024
-        self.states = np.zeros((cap, tab.n_p), dtype=_storage_dtype(int(m0.max(initial=0))))
-        self.states[0] = m0
-        self.n = 1
-        k0 = _keys(m0[None, :], self.mult)
-        self.known_keys = k0.copy()
-        self.known_idx = np.zeros(1, dtype=np.int64)
-        self.parent = [np.full(1, -1, dtype=np.int64)]
-        self.src: list[np.ndarray] = []
-        self.dst: list[np.ndarray] = []
-        self.tr: list[np.ndarray] = []
-        self.n_edges = 0
-        self.expanded_upto = 0
+        self.states = np.zeros((max(1024, 2 * self.n), tab.n_p), dtype=_storage_dtype(int(known.max(initial=0))))
+        self.states[: self.n] = known
+        self._rekey()  # keys of the known markings, sorted, and the per-transition key deltas
+        small = np.int32 if self.max_states < 2**31 else np.int64
+        self.parent = [prefix.parent]
+        self.src: list[np.ndarray] = [prefix.src.astype(small)]
+        self.dst: list[np.ndarray] = [prefix.dst.astype(small)]
+        self.tr: list[np.ndarray] = [prefix.tr]
+        self.n_edges = int(prefix.src.shape[0])
+        self.expanded_upto = prefix.expanded
         self.truncated_src = np.zeros(0, dtype=np.int64)
 
     def _packing(self) -> np.ndarray | None:
@@ -361,21 +540,28 @@ class _Explorer:
         self.known_keys = keys[order]
         self.known_idx = order.astype(np.int64)
 
-    def _widen(self, block: np.ndarray, en: np.ndarray) -> None:
-        """Make sure every successor count of this block fits the current packing widths."""
-        if not self.exact:
+    def _widen(self, block: np.ndarray, rows_local: np.ndarray, trans: np.ndarray) -> None:
+        """Make sure every successor count of this block fits the current packing widths.
+
+        block: (|P|, n) markings; rows_local, trans: (E,) the block's edges (row, transition).
+        """
+        growing, most = self.tab.growth_bound
+        if not self.exact or not rows_local.shape[0] or not growing.shape[0]:
             return
+        # quick bound, one vectorised test: the largest count plus the largest increase fits
+        doubtful = growing[block.max(axis=1)[growing] + most >= np.left_shift(1, np.minimum(self.width[growing], 62))]
+        if not doubtful.shape[0]:
+            return
+        # exact largest successor count of each doubtful place, in chunks of about 2**20 values
+        counts, inc = block[doubtful], self.tab.incidence[doubtful]
+        top = np.zeros(doubtful.shape[0], dtype=np.int64)
+        step = max(1, (1 << 20) // doubtful.shape[0])
+        for a in range(0, rows_local.shape[0], step):
+            r, t = rows_local[a : a + step], trans[a : a + step]
+            np.maximum(top, (counts[:, r] + inc[:, t]).max(axis=1), out=top)
         grow = False
-        top_now = block.max(axis=1) if block.shape[1] else np.zeros(self.tab.n_p, np.int64)
-        for p, ts, incs in self.tab.growth_by_place:
-            # quick bound: the largest count plus the largest increase fits
-            if int(top_now[p]) + int(incs.max()) < (1 << int(self.width[p])):
-                continue
-            sel = en[:, ts]
-            if not sel.any():
-                continue
-            vals = np.where(sel, block[p][:, None] + incs[None, :], 0)
-            need = int(vals.max()).bit_length()
+        for p, value in zip(doubtful.tolist(), top.tolist()):
+            need = int(value).bit_length()
             if need > self.width[p]:
                 self.width[p] = need
                 grow = True
@@ -394,8 +580,8 @@ class _Explorer:
         """Expand states lo..hi-1; return False if max_states stopped the search."""
         block = np.ascontiguousarray(self.states[lo:hi].T.astype(np.int64))
         en = _enabled(self.tab, block)
-        self._widen(block, en)
         rows_local, trans = np.nonzero(en)
+        self._widen(block, rows_local, trans)
         src = rows_local.astype(np.int64) + lo
         trans = trans.astype(np.int64)
         frontier_keys = _keys(block.T, self.mult)
@@ -464,7 +650,8 @@ class _Collision(Exception):
 
 def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray | None = None,
             progress: Callable[[int, int], None] | None = None) -> StateSpace:
-    """Build the reachability graph of ``net`` by a vectorised breadth-first frontier search.
+    """Build the reachability graph of ``net`` by breadth-first search (small levels one marking at a
+    time, then a vectorised frontier).
 
     The ordinary firing rule of :mod:`coordinator.net` is used (inhibitor arcs honoured; events,
     weights and rates ignored). Technique and cost: module docstring and docs/analysis.md;
@@ -476,7 +663,8 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         priority: optional (|T|,) integer levels; in each marking only the enabled transitions of the
             highest enabled level fire (the GSPN helper passes 0 for timed transitions and
             1 + priority for immediate ones).
-        progress: called as ``progress(states_found, edges_found)`` after each block of the frontier.
+        progress: called as ``progress(states_found, edges_found)`` after each small level and each
+            block of the vectorised frontier.
 
     Returns:
         The :class:`StateSpace`.
@@ -488,18 +676,22 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     if max_states < 1:
         raise AnalysisError(f"max_states must be >= 1, got {max_states}")
     tab = _NetTables(net, priority)
+    prefix = _small_bfs(tab, net.vector(net.initial_marking), max_states, _SMALL_EDGES, progress)
+    if prefix.finished:
+        return _space(net, prefix.states, prefix.src, prefix.dst, prefix.tr, prefix.parent,
+                      not prefix.stopped, prefix.expanded, prefix.truncated_src)
     for attempt in range(_MAX_RESTARTS):
         try:
-            return _run(net, tab, max_states, progress, _HASH_SEED + 7919 * attempt)
+            return _run(net, tab, max_states, progress, _HASH_SEED + 7919 * attempt, prefix)
         except _Collision:
             continue
     raise AnalysisError("the 64-bit marking hash collided on every seed tried; cannot build the state space")
 
 
 def _run(net: PetriNet, tab: _NetTables, max_states: int, progress: Callable[[int, int], None] | None,
-         seed: int) -> StateSpace:
-    ex = _Explorer(net, tab, max_states, seed)
-    level_lo, level_hi = 0, 1
+         seed: int, prefix: _Prefix) -> StateSpace:
+    ex = _Explorer(net, tab, max_states, seed, prefix)
+    level_lo, level_hi = prefix.expanded, ex.n
     complete = True
     while level_lo < level_hi:
         lo = level_lo
@@ -514,15 +706,8 @@ def _run(net: PetriNet, tab: _NetTables, max_states: int, progress: Callable[[in
         if not complete:
             break
         level_lo, level_hi = level_hi, ex.n
-    expanded = np.zeros(ex.n, dtype=bool)
-    expanded[: ex.expanded_upto] = True
-    expanded[ex.truncated_src] = False
-    if complete:
-        expanded[:] = True
 
     def cat(parts: list[np.ndarray], dtype: Any) -> np.ndarray:
-        if not parts:
-            return np.zeros(0, dtype=dtype)
         out = np.concatenate(parts).astype(dtype, copy=False)
         parts.clear()
         return out
@@ -530,7 +715,18 @@ def _run(net: PetriNet, tab: _NetTables, max_states: int, progress: Callable[[in
     src = cat(ex.src, np.int64)
     dst = cat(ex.dst, np.int64)
     tr = cat(ex.tr, np.int32)
-    states = ex.states[: ex.n].copy()
     parent = np.concatenate(ex.parent)[: ex.n]
-    return StateSpace(net=net, states=states, src=src, dst=dst, transition=tr, complete=complete,
-                      parent_edge=parent, expanded=expanded)
+    return _space(net, ex.states[: ex.n], src, dst, tr, parent, complete, ex.expanded_upto, ex.truncated_src)
+
+
+def _space(net: PetriNet, states: np.ndarray, src: np.ndarray, dst: np.ndarray, tr: np.ndarray,
+           parent: np.ndarray, complete: bool, expanded_upto: int, truncated_src: np.ndarray) -> StateSpace:
+    """Assemble the result; states in the smallest dtype that holds the largest count."""
+    expanded = np.zeros(states.shape[0], dtype=bool)
+    expanded[:expanded_upto] = True
+    expanded[truncated_src] = False
+    if complete:
+        expanded[:] = True
+    dtype = _storage_dtype(int(states.max(initial=0)))
+    return StateSpace(net=net, states=states.astype(dtype, copy=True), src=src, dst=dst, transition=tr,
+                      complete=complete, parent_edge=parent, expanded=expanded)

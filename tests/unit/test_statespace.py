@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from analysis_nets import make_net
 
+from coordinator.analysis import statespace
 from coordinator.analysis.statespace import StateSpace, enabled_mask, explore
 from coordinator.errors import AnalysisError
 from coordinator.net import Marking, PetriNet
@@ -78,19 +79,21 @@ def test_weighted_arcs_and_inhibitor_arcs_follow_the_firing_rule() -> None:
     assert_same_as_reference(net)
 
 
-def test_counts_above_255_switch_the_storage_to_a_wider_dtype() -> None:
+def test_counts_above_255_switch_the_storage_to_a_wider_dtype(monkeypatch: pytest.MonkeyPatch) -> None:
     net = make_net("counter", {"go": 1}, {"tick": ({"go": 1}, {"go": 1, "n": 1})}, inhibitors={"tick": {"n": 300}})
     ss = assert_same_as_reference(net)
+    assert_identical(assert_every_stage_split_agrees(monkeypatch, net), ss)
     assert ss.n_states == 301
     assert ss.states.dtype == np.uint16
     assert int(ss.states[:, ss.net.place_index["n"]].max()) == 300
 
 
-def test_more_than_64_bits_of_marking_uses_the_verified_hash_and_stays_exact() -> None:
+def test_more_than_64_bits_of_marking_uses_the_verified_hash_and_stays_exact(monkeypatch: pytest.MonkeyPatch) -> None:
     chain = {f"t{i}": ({f"p{i}": 1}, {f"p{i + 1}": 1}) for i in range(80)}
     chain["back"] = ({"p80": 1}, {"p0": 1})
     net = make_net("chain", {"p0": 1, "p40": 1}, chain)
     ss = assert_same_as_reference(net)
+    assert_identical(assert_every_stage_split_agrees(monkeypatch, net), ss)
     assert ss.n_states == 81 * 80 // 2 + 81  # two tokens on a ring of 81 places
 
 
@@ -176,3 +179,80 @@ def test_inhibitor_arcs_and_priorities_combine() -> None:
     # high fires first, then is inhibited by its own output; low takes the last token
     assert [ss.marking(i) for i in range(ss.n_states)] == [Marking({"a": 2}), Marking({"a": 1, "c": 1}),
                                                          Marking({"b": 1, "c": 1})]
+
+
+# ------------------------------------------------------------ small-level stage against the vectorised one
+MCC_MODELS = sorted(p.name for p in MCC.iterdir() if (p / "model.pnml").exists() and p.name != "Kanban-PT-00005")
+#: 0: vectorised from M0 on; 10**12: one marking at a time to the end; the others hand over midway
+THRESHOLDS = (0, 1, 40, statespace._SMALL_EDGES, 10**12)
+
+
+def explore_with(monkeypatch: pytest.MonkeyPatch, threshold: int, net: PetriNet, **kwargs: object) -> StateSpace:
+    monkeypatch.setattr(statespace, "_SMALL_EDGES", threshold)
+    return explore(net, **kwargs)  # type: ignore[arg-type]
+
+
+def assert_identical(a: StateSpace, b: StateSpace) -> None:
+    assert a.complete == b.complete
+    for name in ("states", "src", "dst", "transition", "parent_edge", "expanded"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert x.dtype == y.dtype, name
+        assert np.array_equal(x, y), name
+
+
+def assert_every_stage_split_agrees(monkeypatch: pytest.MonkeyPatch, net: PetriNet, **kwargs: object) -> StateSpace:
+    reference = explore_with(monkeypatch, 0, net, **kwargs)
+    for threshold in THRESHOLDS[1:]:
+        assert_identical(explore_with(monkeypatch, threshold, net, **kwargs), reference)
+    return reference
+
+
+@pytest.mark.parametrize("model", MCC_MODELS)
+def test_the_hybrid_and_the_pure_vectorised_search_give_identical_state_spaces_on_mcc_models(
+        monkeypatch: pytest.MonkeyPatch, model: str) -> None:
+    from coordinator.pnml import load_pnml
+
+    net = load_pnml(str(MCC / model / "model.pnml"))
+    full = assert_every_stage_split_agrees(monkeypatch, net)
+    assert full.complete
+    # truncation: same states kept, same edges dropped, same unexpanded states, whichever stage stops
+    for limit in (1, 2, 17, full.n_states // 3, full.n_states - 1, full.n_states):
+        if limit >= 1:
+            assert_every_stage_split_agrees(monkeypatch, net, max_states=limit)
+
+
+def random_net(rng: np.random.Generator, n_places: int, n_transitions: int) -> PetriNet:
+    """A random net with weighted arcs, inhibitor arcs and transitions without input places."""
+    places = [f"p{i}" for i in range(n_places)]
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    inhibitors: dict[str, dict[str, int]] = {}
+    for t in range(n_transitions):
+        ins = rng.choice(places, size=int(rng.integers(0, 3)), replace=False)
+        outs = rng.choice(places, size=int(rng.integers(0, 3)), replace=False)
+        transitions[f"t{t}"] = ({p: int(rng.integers(1, 3)) for p in ins}, {p: int(rng.integers(1, 3)) for p in outs})
+        if rng.random() < 0.4:
+            inhibitors[f"t{t}"] = {str(rng.choice(places)): int(rng.integers(1, 4))}
+    marking = {p: int(rng.integers(0, 3)) for p in places}
+    return make_net("random", marking, transitions, places=tuple(places), inhibitors=inhibitors)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_hybrid_and_the_pure_vectorised_search_agree_with_inhibitor_arcs_and_priorities(
+        monkeypatch: pytest.MonkeyPatch, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    net = random_net(rng, n_places=int(rng.integers(3, 7)), n_transitions=int(rng.integers(3, 9)))
+    levels = rng.integers(0, 3, size=len(net.transitions))
+    for priority in (None, levels):
+        for limit in (1, 7, 60, 400):
+            assert_every_stage_split_agrees(monkeypatch, net, max_states=limit, priority=priority)
+
+
+def test_a_small_stage_that_finishes_the_graph_matches_the_firing_rule(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(statespace, "_SMALL_EDGES", 10**12)
+    net = make_net("weighted", {"a": 4}, {
+        "split": ({"a": 2}, {"b": 3}),
+        "merge": ({"b": 3}, {"a": 1, "c": 1}),
+        "guarded": ({"c": 1}, {"a": 1}),
+        "source": ({}, {"d": 1}),
+    }, inhibitors={"guarded": {"b": 2}, "source": {"d": 2}})
+    assert_same_as_reference(net)
