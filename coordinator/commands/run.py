@@ -87,7 +87,19 @@ async def execute(net: Any, *, location: Any, key: bytes, journal: Any, seed: in
             runtime.observer = observer
         if read_input:
             read_operator_commands(runtime)
-        return await runtime.run(max_seconds=max_seconds)
+        refresher = asyncio.get_running_loop().create_task(_redraw(console)) if console.live else None
+        try:
+            return await runtime.run(max_seconds=max_seconds)
+        finally:
+            if refresher is not None:
+                refresher.cancel()
+
+
+async def _redraw(console: Any, period_s: float = 0.25) -> None:
+    """Redraw the live screen so running actions' elapsed times advance between events."""
+    while True:
+        await asyncio.sleep(period_s)
+        console.draw()
 
 
 def run(args: argparse.Namespace) -> int:
