@@ -12,7 +12,8 @@
   default 10) and returns ``success`` with ``{"x", "y", "t", "u", "v", "seq", "frames"}`` (table
   frame, m) once found and inside the table, ``failure`` when no ball was seen in time, ``error``
   when the camera is lost. Cost = measured processing time, s (CPU time of the image processing,
-  ``frames`` in the value).
+  ``frames`` in the value). With param ``spec_m`` the result is judged against a specification
+  (see *Location within specification* below); without it any detection on the table is a success.
 * :class:`Predict` (primitive task *predict*): tracks the ball frame by frame, predicts where and
   when it crosses the catch line, and streams each prediction as a set point (table frame, as
   :class:`services.stream.SetPoint` specifies; the motion node turns it into its base frame) to
@@ -22,6 +23,18 @@
   stream is lost. If the node hosts no camera driver (the action was moved to another node in
   services.toml), it opens its own connection to the camera server (params ``camera_host``,
   ``camera_port``).
+
+Location within specification. The node has no ground truth, so a location is judged by its
+consistency with the ball's track over the next frames: after a detection at time t, the action
+locates the ball in the next ``verify_frames`` frames (param, default 10) with the threshold locator,
+fits x(t) and y(t) each by a least-squares straight line (constant velocity: over 0.2 s at 50
+frames/s the ball's deceleration moves it by under 1 mm) and evaluates the fit at t
+(:func:`track_residual`). The location is within specification when this residual is at most
+``spec_m`` (param, m). Otherwise, or when the ball is seen in fewer than 3 of those frames, the action
+returns ``failure`` with the outcome ``no_ball`` (the name the catching net's *no ball seen* transition
+expects) and ``{"reason": "out_of_spec" | "track_lost", "residual_m"}`` in the value; a success carries
+``residual_m`` too. The verification's own processing time is not part of the cost (it judges the
+locator, it is not the locator).
 
 The camera server's info map (:func:`sim.camera.camera_info`) carries the calibration: the
 homography, the robot base pose and the rolling model.
@@ -60,6 +73,7 @@ from services.stream import SetPointSender
 from sim.camera import Frame, FrameClient
 
 __all__ = [
+    "VERIFY_FRAMES",
     "CameraDriver",
     "CameraLink",
     "CameraLostError",
@@ -68,10 +82,48 @@ __all__ = [
     "LocateThreshold",
     "Predict",
     "VisionConfig",
+    "track_residual",
 ]
 
 DEFAULT_CAMERA_PORT = 7210
 DEFAULT_STREAM_PORT = 7220
+
+
+VERIFY_FRAMES = 10
+"""Default number of frames after a detection used to judge it against ``spec_m``."""
+
+
+def track_residual(location: tuple[float, float, float],
+                   track: list[tuple[float, float, float]]) -> float:
+    """Distance between a located ball position and the ball's track fitted over other frames.
+
+    The track's x(t) and y(t) are each fitted by a least-squares straight line and evaluated at the
+    location's time (linear regression; over a few tenths of a second a rolling ball's path is a
+    constant-velocity line to well under a millimetre, see :mod:`sim.catching`). Pure.
+
+    Args:
+        location: (t, x, y) of the located ball: s, and table-frame m.
+        track: (N, 3) list of (t, x, y) detections of the ball in other frames, N >= 3, with at
+            least two distinct times.
+
+    Returns:
+        The residual, m (Euclidean, in the table plane).
+
+    Raises:
+        ValueError: with fewer than 3 track points or a single distinct time.
+    """
+    pts = np.asarray(track, dtype=float).reshape(-1, 3)
+    if len(pts) < 3:
+        raise ValueError(f"track_residual needs >= 3 track points, got {len(pts)}")
+    t = pts[:, 0]
+    if float(np.ptp(t)) <= 0.0:
+        raise ValueError("track_residual needs track points at two different times at least")
+    t0, x0, y0 = (float(v) for v in location)
+    tm = float(t.mean())
+    design = np.column_stack([np.ones_like(t), t - tm])
+    coef, *_ = np.linalg.lstsq(design, pts[:, 1:], rcond=None)
+    fit = coef[0] + coef[1] * (t0 - tm)
+    return float(math.hypot(x0 - float(fit[0]), y0 - float(fit[1])))
 
 
 class CameraLostError(ActionError):
@@ -328,12 +380,29 @@ class _Locate(PrimitiveAction):
                 x, y = (float(v) for v in cam.config.homography.to_table([det.u, det.v]))
                 if x >= cam.config.catch_x:
                     continue
-                return ActionOutcome(
-                    "success",
-                    value={"x": x, "y": y, "t": det.t, "u": det.u, "v": det.v, "seq": seq,
-                           "frames": frames_used, "cpu_s": cpu},
-                    cost=cpu,
-                )
+                value: dict[str, Any] = {"x": x, "y": y, "t": det.t, "u": det.u, "v": det.v,
+                                         "seq": seq, "frames": frames_used, "cpu_s": cpu}
+                spec = params.get("spec_m")
+                if spec is not None:
+                    n_verify = max(3, int(params.get("verify_frames", VERIFY_FRAMES)))
+                    track: list[tuple[float, float, float]] = []
+                    for _ in range(n_verify):
+                        f = await cam.link.next_frame(seq)
+                        seq = f.seq
+                        d = locate_threshold(f.image, f.t, roi=cam.config.roi)
+                        if d is not None:
+                            xv, yv = cam.config.homography.to_table([d.u, d.v])
+                            if float(xv) < cam.config.catch_x:
+                                track.append((f.t, float(xv), float(yv)))
+                    if len(track) < 3:
+                        value.update(reason="track_lost", residual_m=None)
+                        return ActionOutcome("failure", outcome="no_ball", value=value, cost=cpu)
+                    residual = track_residual((det.t, x, y), track)
+                    value["residual_m"] = residual
+                    if residual > float(spec):
+                        value["reason"] = "out_of_spec"
+                        return ActionOutcome("failure", outcome="no_ball", value=value, cost=cpu)
+                return ActionOutcome("success", value=value, cost=cpu)
         except CameraLostError as exc:
             return ActionOutcome("error", outcome="camera_lost", value={"reason": str(exc)}, cost=cpu)
         return ActionOutcome("failure", outcome="no_ball", value={"frames": frames_used}, cost=cpu)
