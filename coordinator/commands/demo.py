@@ -178,7 +178,11 @@ class CatchReport:
                             for k, w in (("locate", 8), ("predict", 9), ("catch", 7), ("home", 7)))
             lines.append(f"{r.n:>3}  {r.outcome:<12}{r.locate_action:<18}{err}{lead}{times}")
         caught = sum(r.outcome == "caught" for r in self.runs)
-        lines.append(f"caught {caught} of {len(self.runs)} balls")
+        restarted = sum(r.outcome == "no ball" for r in self.runs)
+        attempts = len(self.runs) - restarted
+        note = (f" ({restarted} run{'s' * (restarted != 1)} restarted: no ball located within specification)"
+                if restarted else "")
+        lines.append(f"caught {caught} of {attempts} balls{note}")
         return "\n".join(lines)
 
 
