@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from dataclasses import replace
@@ -33,7 +34,10 @@ from coordinator.analysis.gspn import tangible_chain
 from coordinator.net import PetriNet, TransitionKind
 from coordinator.pnml import load_pnml
 
-MCC = Path("/work/shared/mcc")
+#: the Model Checking Contest models: $PETROBOT_MCC, else shared/mcc beside the project
+MCC = Path(os.environ.get("PETROBOT_MCC") or Path(__file__).resolve().parents[2] / "shared" / "mcc")
+if not MCC.is_dir():
+    MCC = Path("/work/shared/mcc")
 FMS_IMMEDIATE = frozenset({"tM1", "tM2", "tM3", "tx", "tP1e", "tP1j", "tP2e", "tP2j"})
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 from coordinator.net import Arc, PetriNet, Place, Transition, TransitionKind
 from coordinator.pnml import load_pnml
@@ -73,7 +72,7 @@ def vanishing_loop(lam: float, mu: float, trap: bool = False) -> PetriNet:
     )
 
 
-MCC = Path("/work/shared/mcc")
+from tests.unit.mcc_models import MCC
 
 #: Immediate transitions of the FMS GSPN of G. Ciardo and K. S. Trivedi ("A decomposition approach
 #: for stochastic reward net models", Performance Evaluation 18, 1993): machine grabs, the join of

@@ -4,17 +4,14 @@ from __future__ import annotations
 
 import csv
 import json
-from pathlib import Path
 
 import pytest
 
 from coordinator.analysis.robotic import report
 from coordinator.analysis.structure import analyse
 from coordinator.pnml import load_pnml
+from tests.unit.mcc_models import MCC
 
-MCC = Path(__file__).resolve().parents[3] / "shared" / "mcc"
-if not MCC.is_dir():
-    MCC = Path("/work/shared/mcc")
 ORACLE = MCC / "oracle.tsv"
 
 

@@ -22,7 +22,8 @@ from coordinator.pnml import (
 
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "tests" / "data"
-MCC = Path("/work/shared/mcc")
+from tests.unit.mcc_models import MCC
+
 TOML_NETS = [ROOT / "nets" / "demo.toml", *sorted((ROOT / "nets" / "examples").glob("*.toml"))]
 
 #: model -> (places, transitions, arcs, initial tokens), counted in the model files.
