@@ -586,6 +586,13 @@ class PetriNet:
         out.flags.writeable = False
         return out
 
+    @cached_property
+    def initial_vector(self) -> np.ndarray:
+        """The initial marking M0 as a read-only vector of shape (|P|,), int64, in :attr:`places` order."""
+        out = self.vector(self.initial_marking)
+        out.flags.writeable = False
+        return out
+
     def _matrix(self, table: Mapping[str, Mapping[str, int]]) -> np.ndarray:
         out = np.zeros((len(self.places), len(self.transitions)), dtype=np.int64)
         for tid, places in table.items():

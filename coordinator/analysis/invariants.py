@@ -210,7 +210,7 @@ def structural_bounds(net: PetriNet, pinv: Invariants) -> np.ndarray:
     Returns:
         Shape (|P|,), int64: the smallest such bound per place, -1 where no invariant covers the place.
     """
-    m0 = net.vector(net.initial_marking)
+    m0 = net.initial_vector
     bounds = np.full(len(net.places), -1, dtype=np.int64)
     for y in pinv.vectors:
         total = int(np.dot(y, m0))

@@ -167,7 +167,7 @@ class _Sim:
                 self.delay.append(delays.get(t.id) or Delay.exponential(float(t.rate or 0.0)))
             else:
                 self.delay.append(None)
-        self.marking = [int(v) for v in net.vector(net.initial_marking)]
+        self.marking = [int(v) for v in net.initial_vector]
         self.clocks: list[list[float]] = [[] for _ in range(n_t)]
         self.heap: list[tuple[float, int, int]] = []
         self.seq = 0
