@@ -6,7 +6,7 @@ is enabled, only the immediate transitions of the highest priority level may fir
 *vanishing*); otherwise every enabled exponential transition may fire (the marking is *tangible*).
 Inhibitor arcs hold transitions back as in :mod:`coordinator.net`.
 
-The search is the vectorised breadth-first explorer of :mod:`coordinator.analysis.statespace`
+The search is the compiled breadth-first explorer of :mod:`coordinator.analysis.statespace`
 run with GSPN priority levels; this module only classifies its markings.
 """
 

@@ -1,21 +1,18 @@
-"""The vectorised explorer against the firing rule of coordinator.net, one marking at a time."""
+"""The compiled explorer against the firing rule of coordinator.net and against a plain reference search."""
 
 from __future__ import annotations
 
 import itertools
 from collections import deque
-from pathlib import Path
 
 import numpy as np
 import pytest
 from analysis_nets import make_net
 
-from coordinator.analysis import statespace
 from coordinator.analysis.statespace import StateSpace, enabled_mask, explore
 from coordinator.errors import AnalysisError
 from coordinator.net import Marking, PetriNet
-
-MCC = Path("/work/shared/mcc")
+from tests.unit.mcc_models import MCC
 
 
 def reference_graph(net: PetriNet, limit: int = 100_000) -> tuple[set[Marking], set[tuple[Marking, str, Marking]]]:
@@ -79,21 +76,21 @@ def test_weighted_arcs_and_inhibitor_arcs_follow_the_firing_rule() -> None:
     assert_same_as_reference(net)
 
 
-def test_counts_above_255_switch_the_storage_to_a_wider_dtype(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_counts_above_255_switch_the_storage_to_a_wider_dtype() -> None:
     net = make_net("counter", {"go": 1}, {"tick": ({"go": 1}, {"go": 1, "n": 1})}, inhibitors={"tick": {"n": 300}})
     ss = assert_same_as_reference(net)
-    assert_identical(assert_every_stage_split_agrees(monkeypatch, net), ss)
+    assert_matches_reference(net)
     assert ss.n_states == 301
     assert ss.states.dtype == np.uint16
     assert int(ss.states[:, ss.net.place_index["n"]].max()) == 300
 
 
-def test_more_than_64_bits_of_marking_uses_the_verified_hash_and_stays_exact(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_more_than_64_bits_of_marking_uses_the_verified_hash_and_stays_exact() -> None:
     chain = {f"t{i}": ({f"p{i}": 1}, {f"p{i + 1}": 1}) for i in range(80)}
     chain["back"] = ({"p80": 1}, {"p0": 1})
     net = make_net("chain", {"p0": 1, "p40": 1}, chain)
     ss = assert_same_as_reference(net)
-    assert_identical(assert_every_stage_split_agrees(monkeypatch, net), ss)
+    assert_matches_reference(net)
     assert ss.n_states == 81 * 80 // 2 + 81  # two tokens on a ring of 81 places
 
 
@@ -181,44 +178,76 @@ def test_inhibitor_arcs_and_priorities_combine() -> None:
                                                          Marking({"b": 1, "c": 1})]
 
 
-# ------------------------------------------------------------ small-level stage against the vectorised one
+# ------------------------------------------------------------ array for array against a plain search
 MCC_MODELS = sorted(p.name for p in MCC.iterdir() if (p / "model.pnml").exists() and p.name != "Kanban-PT-00005")
-#: 0: vectorised from M0 on; 10**12: one marking at a time to the end; the others hand over midway
-THRESHOLDS = (0, 1, 40, statespace._SMALL_EDGES, 10**12)
 
 
-def explore_with(monkeypatch: pytest.MonkeyPatch, threshold: int, net: PetriNet, **kwargs: object) -> StateSpace:
-    monkeypatch.setattr(statespace, "_SMALL_EDGES", threshold)
-    return explore(net, **kwargs)  # type: ignore[arg-type]
+def reference_space(net: PetriNet, max_states: int = 10**9, priority: np.ndarray | None = None) -> dict[str, object]:
+    """Breadth-first search over tuples and a dict with explore's numbering, edge order, parent
+    edges and truncation (the level in progress is finished, edges to new markings dropped)."""
+    pre, inh, inc = net.pre.T.tolist(), net.inhibitor.T.tolist(), net.incidence.T.tolist()
+    states = [tuple(net.initial_vector.tolist())]
+    seen = {states[0]: 0}
+    src: list[int] = []
+    dst: list[int] = []
+    tr: list[int] = []
+    parent = [-1]
+    truncated: set[int] = set()
+    lo, hi = 0, 1
+    while lo < hi:
+        for i in range(lo, hi):
+            m = states[i]
+            enabled = [t for t in range(len(pre))
+                       if all(m[p] >= w for p, w in enumerate(pre[t]) if w)
+                       and all(m[p] < w for p, w in enumerate(inh[t]) if w)]
+            if priority is not None and enabled:
+                top = max(int(priority[t]) for t in enabled)
+                enabled = [t for t in enabled if int(priority[t]) == top]
+            for t in enabled:
+                succ = tuple(a + d for a, d in zip(m, inc[t]))
+                j = seen.get(succ)
+                if j is None:
+                    if len(states) == max_states:
+                        truncated.add(i)
+                        continue
+                    j = seen[succ] = len(states)
+                    states.append(succ)
+                    parent.append(len(src))
+                src.append(i)
+                dst.append(j)
+                tr.append(t)
+        lo, hi = hi, len(states)
+        if truncated:
+            break
+    complete = not truncated
+    expanded = [complete or (i < lo and i not in truncated) for i in range(len(states))]
+    return {"states": np.array(states, dtype=np.int64).reshape(len(states), len(net.places)),
+            "src": src, "dst": dst, "transition": tr, "parent_edge": parent, "expanded": expanded,
+            "complete": complete}
 
 
-def assert_identical(a: StateSpace, b: StateSpace) -> None:
-    assert a.complete == b.complete
-    for name in ("states", "src", "dst", "transition", "parent_edge", "expanded"):
-        x, y = getattr(a, name), getattr(b, name)
-        assert x.dtype == y.dtype, name
-        assert np.array_equal(x, y), name
-
-
-def assert_every_stage_split_agrees(monkeypatch: pytest.MonkeyPatch, net: PetriNet, **kwargs: object) -> StateSpace:
-    reference = explore_with(monkeypatch, 0, net, **kwargs)
-    for threshold in THRESHOLDS[1:]:
-        assert_identical(explore_with(monkeypatch, threshold, net, **kwargs), reference)
-    return reference
+def assert_matches_reference(net: PetriNet, **kwargs: object) -> StateSpace:
+    ss = explore(net, **kwargs)  # type: ignore[arg-type]
+    ref = reference_space(net, **kwargs)  # type: ignore[arg-type]
+    assert ss.complete == ref["complete"]
+    assert np.array_equal(ss.states.astype(np.int64), ref["states"])
+    for name in ("src", "dst", "transition", "parent_edge", "expanded"):
+        assert getattr(ss, name).tolist() == ref[name], name
+    assert ss.src.dtype == ss.dst.dtype == ss.parent_edge.dtype == np.int64 and ss.transition.dtype == np.int32
+    assert ss.out_ptr.tolist() == np.searchsorted(ss.src, np.arange(ss.n_states + 1)).tolist()
+    return ss
 
 
 @pytest.mark.parametrize("model", MCC_MODELS)
-def test_the_hybrid_and_the_pure_vectorised_search_give_identical_state_spaces_on_mcc_models(
-        monkeypatch: pytest.MonkeyPatch, model: str) -> None:
+def test_mcc_models_match_the_reference_search_array_for_array_also_when_truncated(model: str) -> None:
     from coordinator.pnml import load_pnml
 
     net = load_pnml(str(MCC / model / "model.pnml"))
-    full = assert_every_stage_split_agrees(monkeypatch, net)
+    full = assert_matches_reference(net)
     assert full.complete
-    # truncation: same states kept, same edges dropped, same unexpanded states, whichever stage stops
     for limit in (1, 2, 17, full.n_states // 3, full.n_states - 1, full.n_states):
         if limit >= 1:
-            assert_every_stage_split_agrees(monkeypatch, net, max_states=limit)
+            assert_matches_reference(net, max_states=limit)
 
 
 def random_net(rng: np.random.Generator, n_places: int, n_transitions: int) -> PetriNet:
@@ -237,18 +266,16 @@ def random_net(rng: np.random.Generator, n_places: int, n_transitions: int) -> P
 
 
 @pytest.mark.parametrize("seed", range(12))
-def test_the_hybrid_and_the_pure_vectorised_search_agree_with_inhibitor_arcs_and_priorities(
-        monkeypatch: pytest.MonkeyPatch, seed: int) -> None:
+def test_random_nets_with_inhibitor_arcs_and_priorities_match_the_reference_search(seed: int) -> None:
     rng = np.random.default_rng(seed)
     net = random_net(rng, n_places=int(rng.integers(3, 7)), n_transitions=int(rng.integers(3, 9)))
     levels = rng.integers(0, 3, size=len(net.transitions))
     for priority in (None, levels):
         for limit in (1, 7, 60, 400):
-            assert_every_stage_split_agrees(monkeypatch, net, max_states=limit, priority=priority)
+            assert_matches_reference(net, max_states=limit, priority=priority)
 
 
-def test_a_small_stage_that_finishes_the_graph_matches_the_firing_rule(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(statespace, "_SMALL_EDGES", 10**12)
+def test_source_transitions_weights_and_inhibitors_follow_the_firing_rule() -> None:
     net = make_net("weighted", {"a": 4}, {
         "split": ({"a": 2}, {"b": 3}),
         "merge": ({"b": 3}, {"a": 1, "c": 1}),
@@ -256,3 +283,27 @@ def test_a_small_stage_that_finishes_the_graph_matches_the_firing_rule(monkeypat
         "source": ({}, {"d": 1}),
     }, inhibitors={"guarded": {"b": 2}, "source": {"d": 2}})
     assert_same_as_reference(net)
+    assert_matches_reference(net)
+
+
+
+def test_a_count_beyond_int32_is_a_clear_error_not_a_wrong_graph() -> None:
+    net = make_net("huge", {"go": 1}, {"t": ({"go": 1}, {"go": 1, "n": 2**30})})
+    with pytest.raises(AnalysisError, match="2\\*\\*31 - 1"):
+        explore(net)
+    edge = make_net("edge", {"go": 1, "n": 2**30 - 1}, {"t": ({"go": 1}, {"n": 2**30})})
+    assert int(explore(edge).states.max()) == 2**31 - 1  # the largest count an int32 holds is fine
+
+
+def test_progress_can_stop_a_long_search() -> None:
+    net = make_net("producer", {"go": 1}, {"produce": ({"go": 1}, {"go": 1, "buf": 1})})
+    calls: list[int] = []
+
+    def stop(states: int, edges: int) -> None:
+        calls.append(states)
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        explore(net, max_states=200_000, progress=stop)
+    assert calls == [65_537]
+    assert explore(net, max_states=10).n_states == 10  # the hook is cleared after an interrupted search
