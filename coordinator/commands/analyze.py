@@ -16,6 +16,7 @@ from collections.abc import Callable
 from typing import Any, TextIO
 
 from coordinator.analysis.robotic import report
+from coordinator.analysis.statespace import load_search
 from coordinator.errors import PetrobotError
 from coordinator.netfile import load_any
 
@@ -141,6 +142,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"petrobot analyze: {exc}", file=sys.stderr)
         return 1
     show = args.progress or sys.stderr.isatty()
+    if show:
+        sys.stderr.write("  loading the compiled state-space search ...")
+        sys.stderr.flush()
+        sys.stderr.write(f" {load_search():.1f} s\n")
     progress = _progress(sys.stderr) if show else None
     try:
         rep = report(net, max_states=args.max_states, progress=progress)

@@ -212,7 +212,10 @@ def test_analyze_command_shows_progress_on_request(tmp_path: pytest.TempPathFact
     path = tmp_path / "task.toml"  # type: ignore[operator]
     path.write_text(task(RECOVERS), encoding="utf-8")
     assert analyze.run(parse([str(path), "--progress"])) == 0
-    assert capsys.readouterr().err.endswith("\n")
+    err = capsys.readouterr().err
+    assert err.endswith("\n")
+    # the compiled search is loaded before the clock of the markings/s figure starts
+    assert err.startswith("  loading the compiled state-space search ... ") and "markings/s" in err
 
 
 EXPERIMENT = """
