@@ -279,6 +279,9 @@ async def test_up_starts_every_node_and_stops_them_all_on_sigterm(cluster: Clust
         assert proc.returncode == 0
         assert "up: all nodes stopped" in rest and "[beta ]" in rest
         with socket.socket() as s:  # the nodes are gone: their ports are free again
+            # as a server binds: connections the node closed may sit in TIME_WAIT on its port, which
+            # only a live listener, not SO_REUSEADDR, would make a bind fail on
+            s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
             s.bind(cluster.location.address("alpha"))
     finally:
         if proc.poll() is None:
