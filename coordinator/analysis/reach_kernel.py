@@ -97,7 +97,8 @@ def tables(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray) -> np.
         out[k] = pos
         pos += sizes[k]
     out[11] = pos
-    # CSR by counting sort: places ascending within a transition, as the row-major pass meets them
+    # CSR by counting sort: places ascending within a transition, as the row-major pass meets them;
+    # once copied into the pointers, count[m, t] serves as transition t's next free slot
     for m in range(3):
         out[out[3 * m]:out[3 * m] + n_t + 1] = count[m]
     for p in range(n_p):

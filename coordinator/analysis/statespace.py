@@ -194,8 +194,9 @@ def _random_key(rows: np.ndarray) -> np.ndarray:
 
 
 def _storage_dtype(max_value: int) -> Any:
-    for dt in (np.uint8, np.uint16, np.uint32):
-        if max_value <= np.iinfo(dt).max:
+    """The smallest unsigned dtype that holds counts up to ``max_value`` (int64 beyond uint32)."""
+    for dt, top in ((np.uint8, 0xFF), (np.uint16, 0xFFFF), (np.uint32, 0xFFFF_FFFF)):
+        if max_value <= top:
             return dt
     return np.int64
 
@@ -348,7 +349,7 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     if status == rk.OVERFLOW:
         raise AnalysisError(f"a token count reached {top}, above 2**31 - 1 (the search stores int32 counts), "
                             f"after {states.shape[0]} markings; petrobot analyze decides boundedness by coverability")
-    space = StateSpace(net=net, states=states.astype(np.uint8 if top < 256 else _storage_dtype(top)), src=src,
+    space = StateSpace(net=net, states=states.astype(_storage_dtype(top)), src=src,
                        dst=dst, transition=tr, complete=bool(complete), parent_edge=parent, expanded=expanded)
     object.__setattr__(space, "_out_ptr", out_ptr)
     return space
