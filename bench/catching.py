@@ -9,7 +9,7 @@ Phase 1 (one process, lock-step simulated time, 1 kHz): for every throw of a see
 pybullet world rolls the ball; the analytic camera renders it at ``--fps`` twice, without noise and
 with 0.5 px position noise plus grey-level noise; each image goes through the locator, the
 calibrated pixel → table map and the rolling-ball predictor (services.ballvision); the noisy
-pipeline's set points (in the robot base frame) drive services.motion_control's servo, whose joint
+pipeline's set points (in the robot base frame) drive services.robots.motion_control's servo, whose joint
 targets go as CiA 402 RPDOs over the simulated CAN bus to the simulated drives (sim.canbus), stepped
 in-process every 1 ms.
 
@@ -53,7 +53,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from services import motion_control
+from services.robots import motion_control
 from services.ballvision import (
     BallTracker,
     RollingModel,
@@ -63,12 +63,11 @@ from services.ballvision import (
     locate_threshold,
 )
 from services.stream import SetPointReceiver, SetPointSender
-from sim import canframes as cf
-from sim import puma560
+from services.devices import cia402 as cf
+from services.robots import puma560
+from services.devices.framegrabber import Frame, FrameClient
 from sim.camera import (
     AnalyticRenderer,
-    Frame,
-    FrameClient,
     FrameServer,
     calibrate,
     overhead_camera,

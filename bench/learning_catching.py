@@ -51,7 +51,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from bench.catching import InProcessDrives, rim_position
 from coordinator.learning import Learner, LearningAutomaton
 from coordinator.netfile import load_net
-from services import motion_control
+from services.robots import motion_control
 from services.actions.vision import VERIFY_FRAMES, track_residual
 from services.ballvision import (
     BallTracker,
@@ -64,7 +64,7 @@ from services.ballvision import (
     locate_bgdiff,
     locate_threshold,
 )
-from sim import puma560
+from services.robots import puma560
 from sim.camera import AnalyticRenderer, calibrate, overhead_camera
 from sim.canbus import SimDrives
 from sim.catching import CatchingWorld, Thrower

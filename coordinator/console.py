@@ -14,14 +14,26 @@ import collections
 import sys
 import threading
 import time
-from typing import Any, TextIO
+from typing import TextIO
 
 from coordinator.net import PetriNet, PlaceKind
-from coordinator.runtime import Runtime, parse_operator_command
+from coordinator.events import (
+    ActionEnded,
+    ActionStarted,
+    OperatorApplied,
+    OperatorRefused,
+    PulseDelivered,
+    RunEvent,
+    RunStateChanged,
+    TransitionFired,
+)
+from coordinator.operator import USAGE, parse_operator_command
+from coordinator.runtime import Runtime
+from services.results import Status
 
 __all__ = ["Console", "read_operator_commands", "HELP"]
 
-HELP = "operator: + PLACE [N] | - PLACE [N] | pause | step | resume | abort   (then Enter)"
+HELP = f"operator: {USAGE}   (then Enter)"
 
 _KIND_MARK = {PlaceKind.RESOURCE: "R", PlaceKind.PRIMITIVE_TASK: "T", PlaceKind.CONTROL: "C", PlaceKind.PLAIN: " "}
 
@@ -53,39 +65,42 @@ class Console:
         self.runtime = runtime
         runtime.observer = self
 
-    def __call__(self, kind: str, info: dict[str, Any]) -> None:
+    def __call__(self, event: RunEvent) -> None:
         t = time.monotonic() - self._t0
-        line = self._describe(kind, info)
+        line = self._describe(event)
         if line is None:
             return
         stamped = f"{t:8.3f}s  {line}"
         self._recent.append(stamped)
+        urgent = isinstance(event, (RunStateChanged, OperatorApplied, OperatorRefused))
         if self.live:
-            if time.monotonic() - self._last_draw > 0.1 or kind in ("state", "operator"):
+            if time.monotonic() - self._last_draw > 0.1 or urgent:
                 self.draw()
-        elif not self.quiet or kind == "state" or info.get("status") == "error" or info.get("error"):
+        elif (not self.quiet or urgent
+              or (isinstance(event, ActionEnded) and event.result.status is Status.ERROR)):
             print(stamped, file=self.stream, flush=True)
 
-    def _describe(self, kind: str, info: dict[str, Any]) -> str | None:
-        if kind == "fire":
-            via = f" on {info['pulse']}" if info.get("pulse") else ""
-            return f"fire  #{info['seq']:<5} {info['transition']}{via}   {self._marking_text()}"
-        if kind == "start":
-            return f"start {info['task']} -> {info['action']} on {info['node']} [{info['instance']}]"
-        if kind == "result":
-            extra = f" ({info['outcome']})" if info.get("outcome") else ""
-            why = f": {info['reason']}" if info.get("reason") and info["status"] == "error" else ""
-            return (f"done  {info['task']}/{info['action']} on {info['node']}: {info['status']}{extra}"
-                    f" in {info['wall_s']:.3f} s{why}")
-        if kind == "operator":
-            if info.get("error"):
-                return f"operator {info['command']} refused: {info['error']}"
-            target = f" {info['place']} x{info['count']}" if info.get("place") else ""
-            return f"operator {info['command']}{target}"
-        if kind == "state":
-            return f"run {info['run']} {info['state']}"
-        if kind == "pulse":
-            return None if self.live else f"pulse {info['event']}"
+    def _describe(self, event: RunEvent) -> str | None:
+        if isinstance(event, TransitionFired):
+            f = event.firing
+            via = f" on {f.pulse}" if f.pulse else ""
+            return f"fire  #{f.seq:<5} {f.transition}{via}   {self._marking_text()}"
+        if isinstance(event, ActionStarted):
+            return f"start {event.task} -> {event.action} on {event.node or '?'} [{event.instance}]"
+        if isinstance(event, ActionEnded):
+            r = event.result
+            extra = f" ({r.outcome})" if r.outcome else ""
+            why = f": {r.reason}" if r.reason and r.status is Status.ERROR else ""
+            return (f"done  {event.task}/{event.action} on {event.node or '?'}: {r.status.value}{extra}"
+                    f" in {r.wall_s:.3f} s{why}")
+        if isinstance(event, OperatorRefused):
+            return f"operator {event.command} refused: {event.reason}"
+        if isinstance(event, OperatorApplied):
+            return f"operator {event.command}"
+        if isinstance(event, RunStateChanged):
+            return f"run {event.run} {event.state}"
+        if isinstance(event, PulseDelivered):
+            return None if self.live else f"pulse {event.event}"
         return None
 
     def _marking_text(self) -> str:
@@ -112,7 +127,8 @@ class Console:
         out.append("running primitive actions:")
         running = self.runtime.running()
         for r in running:
-            out.append(f"  {r['task']:<14} {r['action']:<22} on {r['node']:<10} {r['elapsed_s']:7.2f} s")
+            s = r.start
+            out.append(f"  {s.task:<14} {s.action:<22} on {r.node or '?':<10} {r.elapsed_s:7.2f} s")
         if not running:
             out.append("  (none)")
         waiting = engine.waiting_for()

@@ -43,9 +43,9 @@ from typing import Any
 
 from coordinator.errors import EngineError, NetError, NotEnabledError
 from coordinator.net import Marking, PetriNet, PlaceKind, parse_event
+from services.results import ActionResult, Status
 
 __all__ = [
-    "Status",
     "EngineState",
     "Instance",
     "Firing",
@@ -54,19 +54,7 @@ __all__ = [
     "Effect",
     "Engine",
     "Chooser",
-    "outcome_events",
 ]
-
-
-class Status(enum.Enum):
-    """Status a primitive action returns on completion (section 4)."""
-
-    #: The specifications were fully met.
-    SUCCESS = "success"
-    #: The specifications were not fully met, but execution proceeds along the normal branch.
-    FAILURE = "failure"
-    #: The specifications were not met and error recovery is required (timeout, node lost...).
-    ERROR = "error"
 
 
 class EngineState(enum.Enum):
@@ -83,24 +71,6 @@ class EngineState(enum.Enum):
     ABORTED = "aborted"
 
 
-def outcome_events(status: Status, outcome: str | None = None) -> frozenset[str]:
-    """Return the outcome names latched on a token when an instance ends (DESIGN.md §3).
-
-    Args:
-        status: the status the primitive action returned.
-        outcome: an optional named outcome (an identifier) reported by the action.
-
-    Returns:
-        ``{"ok", "success"}``, ``{"ok", "failure"}`` or ``{"error"}``, plus ``outcome`` if given.
-    """
-    base = {
-        Status.SUCCESS: {"ok", "success"},
-        Status.FAILURE: {"ok", "failure"},
-        Status.ERROR: {"error"},
-    }[status]
-    return frozenset(base | ({outcome} if outcome else set()))
-
-
 @dataclass(slots=True)
 class Instance:
     """One running (or ended, not yet consumed) instance of a primitive task.
@@ -111,7 +81,7 @@ class Instance:
         place: id of the primitive-task place holding its token.
         action: the primitive action chosen to translate the task.
         status: ``None`` while running, then the returned status.
-        outcomes: outcome names latched on the token once ended (see :func:`outcome_events`).
+        outcomes: outcome names latched on the token once ended (:attr:`ActionResult.events`).
     """
 
     id: str
@@ -566,31 +536,25 @@ class Engine:
         return effects
 
     # ------------------------------------------------------------------ inputs
-    def complete(self, instance_id: str, status: Status | str, outcome: str | None = None) -> Instance:
+    def complete(self, instance_id: str, result: ActionResult) -> Instance:
         """Record that a primitive action returned; latch its events on the token.
 
         Args:
             instance_id: the instance (call id).
-            status: success, failure or error.
-            outcome: optional named outcome, an identifier (raises ``int:<task>.<outcome>``).
+            result: how the action ended; its status and named outcome give the latched events
+                (:attr:`ActionResult.events`).
 
         Returns:
             The ended instance.
 
         Raises:
-            EngineError: unknown instance, instance already ended, bad status or outcome name.
+            EngineError: unknown instance, or instance already ended.
         """
         inst = self.instance(instance_id)
-        if not inst.running:
-            raise EngineError(f"instance {instance_id!r} has already ended with {inst.status.value}")  # type: ignore[union-attr]
-        try:
-            st = status if isinstance(status, Status) else Status(status)
-        except ValueError:
-            raise EngineError(f"bad status {status!r}: expected success, failure or error") from None
-        if outcome is not None and not outcome.isidentifier():
-            raise EngineError(f"bad outcome name {outcome!r}: must be an identifier")
-        inst.status = st
-        inst.outcomes = outcome_events(st, outcome)
+        if inst.status is not None:
+            raise EngineError(f"instance {instance_id!r} has already ended with {inst.status.value}")
+        inst.status = result.status
+        inst.outcomes = result.events
         self._decided = None
         self._ended[inst.place].append(inst)
         self._dirty.update(self._dependents[inst.place])

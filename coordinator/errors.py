@@ -1,44 +1,22 @@
-"""Exceptions raised by petrobot.
+"""The coordinator's exceptions: net files, the engine, the journal and the analyses.
 
-Every error the project raises derives from :class:`PetrobotError`, so a caller
-can catch the whole family at once::
-
-    PetrobotError
-    ├── NetError                  a net is malformed (file, line and problem named)
-    │   └── NetFileError          a net file cannot be read or parsed
-    ├── NotEnabledError           fire() on a transition that is not enabled
-    ├── EngineError               an engine command is illegal in the current state
-    ├── ProtocolError             the coordinator↔node protocol was broken
-    │   ├── LocalProtocolError    we did something illegal (bug on our side)
-    │   └── RemoteProtocolError   the peer sent something illegal
-    │       └── AuthenticationError   the handshake failed (wrong shared key)
-    ├── ActionError               a primitive action could not be called or failed
-    ├── LocationError             services.toml is malformed or names an unknown action/node
-    ├── JournalError              the SQLite journal is unusable or inconsistent
-    └── AnalysisError             an analysis cannot be carried out (state limit, vanishing loop...)
+They derive from the project's root :class:`services.errors.PetrobotError`; the module docstring
+of :mod:`services.errors` draws the whole tree. Errors a node can raise (protocol, actions,
+services.toml) are defined there, in the base layer.
 """
 
 from __future__ import annotations
 
+from services.errors import PetrobotError
+
 __all__ = [
-    "PetrobotError",
+    "AnalysisError",
+    "EngineError",
+    "JournalError",
     "NetError",
     "NetFileError",
     "NotEnabledError",
-    "EngineError",
-    "ProtocolError",
-    "LocalProtocolError",
-    "RemoteProtocolError",
-    "AuthenticationError",
-    "ActionError",
-    "LocationError",
-    "JournalError",
-    "AnalysisError",
 ]
-
-
-class PetrobotError(Exception):
-    """Root of every exception petrobot raises."""
 
 
 class NetError(PetrobotError):
@@ -70,30 +48,6 @@ class NotEnabledError(PetrobotError):
 
 class EngineError(PetrobotError):
     """An engine input is illegal in the engine's current state (e.g. unknown instance)."""
-
-
-class ProtocolError(PetrobotError):
-    """The coordinator↔node protocol (docs/protocol.md) was violated."""
-
-
-class LocalProtocolError(ProtocolError):
-    """This endpoint tried to do something the protocol forbids."""
-
-
-class RemoteProtocolError(ProtocolError):
-    """The peer sent something the protocol forbids (bad frame, oversize, bad state)."""
-
-
-class AuthenticationError(RemoteProtocolError):
-    """The HMAC handshake failed: the peer does not hold the shared key."""
-
-
-class ActionError(PetrobotError):
-    """A primitive action could not be called, or failed in a way that is not a status."""
-
-
-class LocationError(PetrobotError):
-    """services.toml is malformed, or names an action or node that does not exist."""
 
 
 class JournalError(PetrobotError):

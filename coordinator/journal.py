@@ -35,9 +35,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from coordinator.engine import Firing, Instance, Status, outcome_events
+from coordinator.engine import Firing, Instance
 from coordinator.errors import JournalError
 from coordinator.net import Marking, PetriNet
+from services.results import ActionResult, Status, latched_events
 
 __all__ = ["Journal", "Recovered", "ResultRow"]
 
@@ -202,15 +203,13 @@ class Journal:
         )
 
     def action_result(self, run: str, instance: str, task: str, action: str, node: str | None,
-                      status: str, *, outcome: str | None = None, cost: float | None = None,
-                      wall_s: float | None = None, cpu_s: float | None = None,
-                      reason: str | None = None, value: Any = None) -> None:
+                      result: ActionResult) -> None:
         """Record the result of a primitive action, before the engine latches it."""
         self._write(
             "INSERT INTO action_result(run, instance, task, action, node, status, outcome, cost, wall_s, "
             "cpu_s, t_wall, reason, value) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
-            (run, instance, task, action, node, status, outcome, cost, wall_s, cpu_s, time.time(),
-             reason, _json(value)),
+            (run, instance, task, action, node, result.status.value, result.outcome, result.cost, result.wall_s,
+             result.cpu_s, time.time(), result.reason, _json(result.value)),
         )
 
     def operator(self, run: str, command: str, place: str | None = None, count: int | None = None) -> None:
@@ -307,7 +306,7 @@ class Journal:
                 inst = live.get(a)
                 if inst is not None and inst.running:
                     inst.status = Status(b)
-                    inst.outcomes = outcome_events(inst.status, c)
+                    inst.outcomes = latched_events(inst.status, c)
             elif kind == "operator" and a in ("insert", "remove") and b is not None:
                 counts[b] = counts.get(b, 0) + (c if a == "insert" else -c)
         try:

@@ -52,6 +52,7 @@ from scipy.special import betaincinv
 
 from coordinator.errors import JournalError, NetError
 from coordinator.performance import cost_function, rho_for
+from services.results import ActionResult, Status
 
 __all__ = [
     "DEFAULT_RATES",
@@ -60,7 +61,6 @@ __all__ = [
     "LEARNER_STATE_DDL",
     "OPTIMISTIC_QUANTILE",
     "SCHEMES",
-    "STATUSES",
     "ActionEstimate",
     "FixedChoice",
     "Learner",
@@ -75,8 +75,6 @@ __all__ = [
     "task_seed",
 ]
 
-#: Statuses a primitive action returns (section 4). ``"error"`` is a failure for learning.
-STATUSES: tuple[str, ...] = ("success", "failure", "error")
 
 #: Learning schemes accepted in a net file's ``learner`` key.
 SCHEMES: tuple[str, ...] = ("pursuit", "lri", "fixed")
@@ -338,29 +336,27 @@ class LearningAutomaton(ABC):
                     return i
         return last  # rounding: the sum of p fell just short of u
 
-    def update(self, action: str, status: str, cost: float | None = None) -> None:
+    def update(self, action: str, status: Status, cost: float | None = None) -> None:
         """Feed back the result of one run of ``action``.
 
         Args:
             action: the primitive action that ran.
-            status: ``"success"``, ``"failure"`` or ``"error"`` (error = failure for learning).
+            status: how it ended (error counts as failure for learning).
             cost: measured cost of this run (≥ 0, the task's cost unit), or ``None`` if not measured.
 
         Raises:
-            ValueError: on an unknown action or status, or a negative or non-finite cost.
+            ValueError: on an unknown action, or a negative or non-finite cost.
         """
         try:
             i = self._actions.index(action)
         except ValueError:
             raise ValueError(f"unknown primitive action {action!r}; "
                              f"known: {', '.join(self._actions)}") from None
-        if status not in STATUSES:
-            raise ValueError(f"status must be one of {', '.join(STATUSES)}, got {status!r}")
         if cost is not None:
             cost = float(cost)
             if not math.isfinite(cost) or cost < 0.0:
                 raise ValueError(f"cost must be finite and >= 0, got {cost}")
-        success = status == "success"
+        success = status == Status.SUCCESS
         self._trials[i] += 1
         self._successes[i] += int(success)
         if cost is not None:
@@ -920,15 +916,18 @@ class Learner:
                 raise LearnerConfigError(f"primitive task {name!r}: {exc.problem}") from None
         return learner
 
-    def update(self, task: str, action: str, status: str, cost: float | None = None) -> dict[str, Any]:
+    def update(self, task: str, action: str, result: ActionResult) -> dict[str, Any]:
         """Feed back one result and return the task's new state dict (to persist at once).
+
+        The cost of the run is the action's own cost figure, else its measured duration on the
+        node (``wall_s``).
 
         Raises:
             KeyError: if the task has no automaton.
-            ValueError: on an unknown action or status or a bad cost.
+            ValueError: on an unknown action.
         """
         auto = self._automata[task]
-        auto.update(action, status, cost)
+        auto.update(action, result.status, result.cost if result.cost is not None else result.wall_s)
         return auto.state_dict()
 
     def state_dict(self) -> dict[str, dict[str, Any]]:

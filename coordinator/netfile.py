@@ -28,7 +28,8 @@ from functools import partial
 from pathlib import Path
 from typing import Any, Protocol, TypeVar
 
-from coordinator.errors import LocationError, NetError, NetFileError
+from coordinator.errors import NetError, NetFileError
+from services.errors import LocationError
 from coordinator.net import (
     EVENT_RE,
     ActionSpec,

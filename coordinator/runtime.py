@@ -21,11 +21,26 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from coordinator.engine import CancelAction, Effect, Engine, EngineState, Firing, StartAction
-from coordinator.errors import EngineError, LocationError
+from coordinator.errors import EngineError
+from coordinator.events import (
+    ActionEnded,
+    ActionStarted,
+    LearnerUpdated,
+    Observer,
+    OperatorApplied,
+    OperatorRefused,
+    PulseDelivered,
+    RunEvent,
+    RunStateChanged,
+    TransitionFired,
+)
 from coordinator.journal import Journal, Recovered
 from coordinator.net import PetriNet
+from coordinator.operator import Command, OperatorCommand
+from services.errors import LocationError
+from services.results import ActionResult, Status
 
-__all__ = ["Runtime", "RunSummary", "ActionStats", "Learner", "OperatorCommand", "parse_operator_command"]
+__all__ = ["ActionStats", "InFlight", "Learner", "RunSummary", "Runtime"]
 
 log = logging.getLogger("petrobot.runtime")
 
@@ -35,7 +50,7 @@ class Learner(Protocol):
 
     def choose(self, task: str) -> str: ...
 
-    def update(self, task: str, action: str, status: str, cost: float | None) -> Any:
+    def update(self, task: str, action: str, result: ActionResult) -> Any:
         """Feed back a result; may return the task's new state dict, which is journaled."""
 
 
@@ -51,6 +66,12 @@ class ActionStats:
     failure: int = 0
     error: int = 0
     wall_s: list[float] = field(default_factory=list)
+
+    def record(self, result: ActionResult) -> None:
+        """Count one result."""
+        self.calls += 1
+        setattr(self, result.status.value, getattr(self, result.status.value) + 1)
+        self.wall_s.append(result.wall_s)
 
     @property
     def mean_wall_s(self) -> float:
@@ -85,42 +106,37 @@ class RunSummary:
         return "\n".join(lines)
 
 
-@dataclass(frozen=True)
-class OperatorCommand:
-    """An operator command (section 5): ``insert``/``remove`` tokens, ``pause``, ``step``,
-    ``resume``, ``abort``."""
+@dataclass(slots=True)
+class InFlight:
+    """One running primitive action (one per running instance).
 
-    command: str
-    place: str | None = None
-    count: int = 1
-
-
-def parse_operator_command(text: str) -> OperatorCommand:
-    """Parse a typed command: ``+ PLACE [N]``, ``- PLACE [N]``, ``insert PLACE [N]``,
-    ``remove PLACE [N]``, ``pause``, ``step``, ``resume``, ``abort``.
-
-    Raises:
-        ValueError: with a usage hint, on anything else.
+    Attributes:
+        start: the engine's request that started it.
+        node: the node the call went to (``None`` if the action is not placed).
+        started: :func:`time.monotonic` when the call left, seconds.
+        call: the task awaiting the node's result.
     """
-    words = text.split()
-    if not words:
-        raise ValueError("empty command")
-    head = {"+": "insert", "-": "remove", "p": "pause", "s": "step", "r": "resume", "q": "abort"}.get(
-        words[0], words[0])
-    if head in ("insert", "remove"):
-        if len(words) not in (2, 3):
-            raise ValueError(f"usage: {head} PLACE [COUNT]")
-        try:
-            count = int(words[2]) if len(words) == 3 else 1
-        except ValueError:
-            raise ValueError(f"count must be an integer, got {words[2]!r}") from None
-        return OperatorCommand(head, words[1], count)
-    if head in ("pause", "step", "resume", "abort") and len(words) == 1:
-        return OperatorCommand(head)
-    raise ValueError("commands: + PLACE [N] | - PLACE [N] | pause | step | resume | abort")
+
+    start: StartAction
+    node: str | None
+    started: float
+    call: asyncio.Task[None] | None = None
+
+    @property
+    def elapsed_s(self) -> float:
+        """Seconds since the call left."""
+        return time.monotonic() - self.started
 
 
-Observer = Callable[[str, dict[str, Any]], None]
+@dataclass(frozen=True, slots=True)
+class _Completed:
+    instance: str
+    result: ActionResult
+
+
+@dataclass(frozen=True, slots=True)
+class _Pulse:
+    topic: str
 
 
 class Runtime:
@@ -134,8 +150,7 @@ class Runtime:
         learner: chooses actions and learns from results; ``None`` means the first action.
         recovered: state rebuilt by :meth:`Journal.recover` to resume an interrupted run.
         net_text: source text of the net, stored in the journal with the run.
-        observer: called as ``observer(kind, info)`` for ``fire``, ``start``, ``result``, ``pulse``,
-            ``operator`` and ``state`` (for displays); must not block.
+        observer: called with each :mod:`coordinator.events` record (for displays); must not block.
         max_firings_per_tick: firings between two visits of the event loop.
     """
 
@@ -169,11 +184,8 @@ class Runtime:
         if recovered is not None:
             self.engine.restore(recovered.marking, recovered.instances, fired=recovered.fired,
                                 next_instance=recovered.next_instance)
-        self._queue: asyncio.Queue[tuple[str, Any]] = asyncio.Queue()
-        self._calls: dict[str, asyncio.Task[None]] = {}
-        self._nodes: dict[str, str] = {}
-        self._starts: dict[str, StartAction] = {}
-        self._started_at: dict[str, float] = {}
+        self._queue: asyncio.Queue[_Completed | _Pulse | OperatorCommand] = asyncio.Queue()
+        self._inflight: dict[str, InFlight] = {}
         self.stats: dict[tuple[str, str], ActionStats] = {}
         self.errors: list[str] = []
         self._t0 = time.monotonic()
@@ -181,13 +193,11 @@ class Runtime:
     # ------------------------------------------------------------------ public controls
     def command(self, cmd: OperatorCommand) -> None:
         """Queue an operator command (safe from any coroutine of the loop)."""
-        self._queue.put_nowait(("operator", cmd))
+        self._queue.put_nowait(cmd)
 
-    def running(self) -> list[dict[str, Any]]:
-        """Running primitive actions: instance, task, action, node, elapsed seconds."""
-        now = time.monotonic()
-        return [{"instance": i.id, "task": i.task, "action": i.action, "node": self._nodes.get(i.id, "?"),
-                 "elapsed_s": now - self._started_at.get(i.id, now)} for i in self.engine.running_instances()]
+    def running(self) -> list[InFlight]:
+        """The running primitive actions, in start order."""
+        return list(self._inflight.values())
 
     # ------------------------------------------------------------------ main loop
     async def run(self, *, max_seconds: float | None = None) -> RunSummary:
@@ -200,7 +210,7 @@ class Runtime:
             The run summary; the journal holds every detail.
         """
         self._subscribe()
-        self._emit("state", {"state": "started", "run": self.run_id})
+        self._emit(RunStateChanged(self.run_id, "resumed" if self._recovered is not None else "started"))
         if self._recovered is not None:
             for inst in self.engine.running_instances():
                 task = self.net.tasks[inst.task]
@@ -214,10 +224,10 @@ class Runtime:
             while True:
                 self._advance()
                 state = self.engine.state
-                if state is EngineState.ABORTED and not self._calls:
+                if state is EngineState.ABORTED and not self._inflight:
                     end_state = "aborted"
                     break
-                if state is EngineState.DEAD and not self._calls and self._queue.empty():
+                if state is EngineState.DEAD and not self._inflight and self._queue.empty():
                     end_state = "dead"
                     break
                 if self.engine.next_firing() is not None:
@@ -227,22 +237,23 @@ class Runtime:
                 try:
                     item = await asyncio.wait_for(self._queue.get(), timeout)
                 except TimeoutError:
-                    self._apply_operator(OperatorCommand("abort"), reason="max_seconds reached")
+                    self._apply_operator(OperatorCommand(Command.ABORT), reason="max_seconds reached")
                     deadline = None
                     continue
                 self._process(item)
         except (asyncio.CancelledError, KeyboardInterrupt):
             end_state = "interrupted"
-            for cid in list(self._calls):
+            for cid in list(self._inflight):
                 with contextlib.suppress(Exception):
                     await asyncio.wait_for(self.client.cancel(cid), 1.0)
             raise
         finally:
-            for task in list(self._calls.values()):
-                task.cancel()
+            for flight in list(self._inflight.values()):
+                if flight.call is not None:
+                    flight.call.cancel()
             note = "; ".join(self.errors[-3:])
             self.journal.end_run(self.run_id, end_state, note)
-            self._emit("state", {"state": end_state, "run": self.run_id})
+            self._emit(RunStateChanged(self.run_id, end_state, note))
         return RunSummary(self.run_id, end_state, self.engine.marking.to_dict(), self.engine.fired,
                           time.monotonic() - self._t0, self.stats, self.errors)
 
@@ -258,50 +269,51 @@ class Runtime:
 
     def _on_event(self, topic: str) -> Callable[..., None]:
         def deliver(*_: Any) -> None:
-            self._queue.put_nowait(("pulse", topic))
+            self._queue.put_nowait(_Pulse(topic))
         return deliver
 
-    def _process(self, item: tuple[str, Any]) -> None:
-        kind, payload = item
-        if kind == "result":
-            self._on_result(*payload)
-        elif kind == "pulse":
-            self._emit("pulse", {"event": f"ext:{payload}"})
-            self.engine.pulse(payload, self._journal_firing, max_firings=self._max_firings,
+    def _process(self, item: _Completed | _Pulse | OperatorCommand) -> None:
+        if isinstance(item, _Completed):
+            self._on_result(item.instance, item.result)
+        elif isinstance(item, _Pulse):
+            before = self.engine.fired
+            self.engine.pulse(item.topic, self._journal_firing, max_firings=self._max_firings,
                               after_fire=self._handle)
-        elif kind == "operator":
+            self._emit(PulseDelivered(self.run_id, f"ext:{item.topic}", self.engine.fired - before))
+        else:
             try:
-                self._apply_operator(payload)
+                self._apply_operator(item)
             except EngineError as exc:
-                self._emit("operator", {"command": payload.command, "error": str(exc)})
+                self._emit(OperatorRefused(self.run_id, item, str(exc)))
 
     def _apply_operator(self, cmd: OperatorCommand, reason: str = "aborted by the operator") -> None:
         engine = self.engine
-        if cmd.command in ("insert", "remove"):
+        command = cmd.command
+        if command in (Command.INSERT, Command.REMOVE):
             place = cmd.place or ""
-            engine.check_tokens(cmd.command, place, cmd.count)  # validate, journal, then apply
-            self.journal.operator(self.run_id, cmd.command, place, cmd.count)
-            if cmd.command == "insert":
+            engine.check_tokens(command.value, place, cmd.count)  # validate, journal, then apply
+            self.journal.operator(self.run_id, command.value, place, cmd.count)
+            if command is Command.INSERT:
                 engine.insert_tokens(place, cmd.count)
             else:
                 engine.remove_tokens(place, cmd.count)
-        elif cmd.command == "pause":
+        elif command is Command.PAUSE:
             self.journal.operator(self.run_id, "pause")
             engine.pause()
-        elif cmd.command == "resume":
+        elif command is Command.RESUME:
             self.journal.operator(self.run_id, "resume")
             engine.resume()
-        elif cmd.command == "step":
+        elif command is Command.STEP:
             self.journal.operator(self.run_id, "step")
             engine.step(self._journal_firing, self._handle)
-        elif cmd.command == "abort":
+        elif command is Command.ABORT:
             self.journal.operator(self.run_id, "abort")
             if reason != "aborted by the operator":
                 self.errors.append(reason)
             self._handle(engine.abort(reason))
         else:
-            raise EngineError(f"unknown operator command {cmd.command!r}")
-        self._emit("operator", {"command": cmd.command, "place": cmd.place, "count": cmd.count})
+            raise EngineError(f"unknown operator command {command!r}")
+        self._emit(OperatorApplied(self.run_id, cmd))
 
     def _advance(self) -> None:
         """Fire what can fire now: decide, journal, apply, act — one firing at a time."""
@@ -313,13 +325,12 @@ class Runtime:
     def _handle(self, effects: list[Effect]) -> None:
         for effect in effects:
             if isinstance(effect, Firing):
-                self._emit("fire", {"transition": effect.transition, "seq": effect.seq, "pulse": effect.pulse})
+                self._emit(TransitionFired(self.run_id, effect))
             elif isinstance(effect, StartAction):
                 self._dispatch(effect)
             elif isinstance(effect, CancelAction):
-                cid = effect.instance
-                if cid in self._calls:
-                    asyncio.get_running_loop().create_task(self._cancel(cid))
+                if effect.instance in self._inflight:
+                    asyncio.get_running_loop().create_task(self._cancel(effect.instance))
 
     async def _cancel(self, cid: str) -> None:
         with contextlib.suppress(Exception):
@@ -327,69 +338,57 @@ class Runtime:
 
     def _dispatch(self, start: StartAction, *, journal: bool = True) -> None:
         try:
-            node = self.client.location.node_of(start.action)
+            node: str | None = self.client.location.node_of(start.action)
         except LocationError:
             node = None
         if journal:
             self.journal.action_start(self.run_id, start.instance, start.task, start.place, start.action,
                                       node, start.params)
-        self._nodes[start.instance] = node or "?"
-        self._starts[start.instance] = start
-        self._started_at[start.instance] = time.monotonic()
-        self._emit("start", {"instance": start.instance, "task": start.task, "action": start.action,
-                             "node": node or "?"})
-        self._calls[start.instance] = asyncio.get_running_loop().create_task(self._call(start))
+        flight = InFlight(start, node, time.monotonic())
+        self._inflight[start.instance] = flight
+        self._emit(ActionStarted(self.run_id, start.instance, start.task, start.place, start.action, node))
+        flight.call = asyncio.get_running_loop().create_task(self._call(start))
 
     async def _call(self, start: StartAction) -> None:
         try:
-            result = await self.client.call(start.action, dict(start.params), call_id=start.instance,
-                                            deadline_s=start.deadline_s)
-            payload: Any = (start, result.status, result.outcome, result.cost, result.wall_s, result.cpu_s,
-                            result.reason, result.value, result.node)
+            result: ActionResult = await self.client.call(start.action, dict(start.params), call_id=start.instance,
+                                                          deadline_s=start.deadline_s)
         except asyncio.CancelledError:
             raise
         except Exception as exc:  # a configuration error (action not placed): an error status
-            payload = (start, "error", None, None, 0.0, 0.0, f"{type(exc).__name__}: {exc}", None, None)
-        self._queue.put_nowait(("result", payload))
+            result = ActionResult.error(f"{type(exc).__name__}: {exc}")
+        self._queue.put_nowait(_Completed(start.instance, result))
 
-    def _on_result(self, start: StartAction, status: str, outcome: str | None, cost: float | None,
-                   wall_s: float, cpu_s: float, reason: str | None, value: Any, node: str | None) -> None:
-        self._calls.pop(start.instance, None)
-        node = node or self._nodes.get(start.instance)
-        self.journal.action_result(self.run_id, start.instance, start.task, start.action, node, status,
-                                   outcome=outcome, cost=cost, wall_s=wall_s, cpu_s=cpu_s, reason=reason,
-                                   value=value)
+    def _on_result(self, instance: str, result: ActionResult) -> None:
+        flight = self._inflight.pop(instance, None)
+        if flight is None:
+            return
+        start, node = flight.start, flight.node
+        self.journal.action_result(self.run_id, instance, start.task, start.action, node, result)
         key = (start.task, start.action)
-        st = self.stats.setdefault(key, ActionStats(start.task, start.action, node or "?"))
-        st.calls += 1
-        if status in ("success", "failure", "error"):
-            setattr(st, status, getattr(st, status) + 1)
-        st.wall_s.append(wall_s)
-        if status == "error":
-            self.errors.append(f"{start.task}/{start.action} on {node}: {reason or 'error status'}")
+        self.stats.setdefault(key, ActionStats(start.task, start.action, node or "?")).record(result)
+        if result.status is Status.ERROR:
+            self.errors.append(f"{start.task}/{start.action} on {node}: {result.reason or 'error status'}")
         if self.learner is not None:
             try:
-                state = self.learner.update(start.task, start.action, status,
-                                            cost if cost is not None else wall_s)
+                state = self.learner.update(start.task, start.action, result)
             except (KeyError, ValueError) as exc:
                 self.errors.append(f"learner: {exc}")
             else:
                 if isinstance(state, dict):
                     self.journal.save_learner(start.task, str(state.get("scheme", "")), state)
-        self._emit("result", {"instance": start.instance, "task": start.task, "action": start.action,
-                              "node": node, "status": status, "outcome": outcome, "wall_s": wall_s,
-                              "reason": reason, "value": value})
+                    self._emit(LearnerUpdated(self.run_id, start.task, state))
+        self._emit(ActionEnded(self.run_id, instance, start.task, start.action, node, result))
         if self.engine.state is EngineState.ABORTED:
             return
         try:
-            self.engine.complete(start.instance, status if status in ("success", "failure", "error") else "error",
-                                 outcome if outcome and outcome.isidentifier() else None)
+            self.engine.complete(instance, result)
         except EngineError as exc:
             self.errors.append(str(exc))
 
-    def _emit(self, kind: str, info: dict[str, Any]) -> None:
+    def _emit(self, event: RunEvent) -> None:
         if self.observer is not None:
             try:
-                self.observer(kind, info)
+                self.observer(event)
             except Exception:  # a display must never stop the run
-                log.exception("observer failed on %s", kind)
+                log.exception("observer failed on %s", type(event).__name__)

@@ -5,13 +5,13 @@ node and called over the network. Its lifecycle follows py_trees' behaviours:
 
 * ``__init__`` only configures (no hardware, no sockets);
 * ``async setup(node)`` once when the node starts: connect to drivers, load models;
-* ``async run(params, ctx)`` once per call, returning an :class:`ActionOutcome`. The node runs it as
+* ``async run(params, ctx)`` once per call, returning an :class:`ActionResult`. The node runs it as
   its own task and *cancels* that task on a cancel request or at the deadline: ``run`` must let
   :class:`asyncio.CancelledError` propagate (clean up in ``finally``);
 * ``async teardown()`` once when the node stops.
 
 A plain ``async def f(params, ctx)`` is an action too (wrapped by :func:`as_action`); it may return an
-:class:`ActionOutcome` or any msgpack value (then the status is ``"success"``).
+:class:`ActionResult` or any msgpack value (then the status is ``"success"``).
 
 A :class:`Driver` is a background component (a camera card, a CAN bus) started with the node before
 the actions; actions reach it as ``ctx.drivers[name]`` and it may :meth:`Driver.publish` external
@@ -24,18 +24,16 @@ import asyncio
 import importlib
 import inspect
 from collections.abc import Awaitable, Callable, Mapping
-from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
-from coordinator.errors import ActionError
-from services.protocol import STATUSES
+from services.errors import ActionError
+from services.results import ActionResult
 
 if TYPE_CHECKING:
     from services.client import NodeLink
     from services.location import Location
 
 __all__ = [
-    "ActionOutcome",
     "CallContext",
     "Driver",
     "FunctionAction",
@@ -46,30 +44,6 @@ __all__ = [
     "import_impl",
     "make_action",
 ]
-
-
-@dataclass(frozen=True, slots=True)
-class ActionOutcome:
-    """What one run of a primitive action ended with.
-
-    Attributes:
-        status: ``"success"`` (specifications met), ``"failure"`` (not met, the normal branch goes
-            on) or ``"error"`` (error recovery needed) — DESIGN.md §3.
-        outcome: optional named outcome, raised as ``int:<task>.<outcome>`` (Fig. 3 conflicts).
-        value: any msgpack-able value.
-        cost: the action's cost C(a) for J = 1 - R + rho*C (paper §4), or ``None``.
-    """
-
-    status: str
-    outcome: str | None = None
-    value: Any = None
-    cost: float | None = None
-
-    def __post_init__(self) -> None:
-        if self.status not in STATUSES:
-            raise ActionError(f"status must be one of {sorted(STATUSES)}, got {self.status!r}")
-        if self.outcome is not None and not isinstance(self.outcome, str):
-            raise ActionError(f"outcome must be a string or None, got {self.outcome!r}")
 
 
 class MemoryAPI(Protocol):
@@ -193,7 +167,7 @@ class PrimitiveAction:
     async def setup(self, node: NodeContext) -> None:
         """Prepare once at node start (drivers are already set up)."""
 
-    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         """Carry out one call.
 
         Args:
@@ -221,9 +195,9 @@ class FunctionAction(PrimitiveAction):
         self.fn = fn
         self.name = getattr(fn, "__name__", "")
 
-    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         out = await self.fn(params, ctx)
-        return out if isinstance(out, ActionOutcome) else ActionOutcome("success", value=out)
+        return out if isinstance(out, ActionResult) else ActionResult.success(out)
 
 
 def as_action(fn: ActionFunction) -> FunctionAction:

@@ -5,7 +5,7 @@ action runs comes only from services.toml (:class:`services.location.Location`).
 
 Failure model: :meth:`NodeLink.call` never raises for node trouble. A node that cannot be reached,
 dies during a call, rejects the call or stops answering heartbeats turns the call into a
-:class:`CallResult` with ``status="error"`` and a ``reason``. A silent node is declared dead after
+:class:`~services.results.ActionResult` with status ``error`` and a ``reason``. A silent node is declared dead after
 three heartbeat periods without any frame (0.75 s with the default 0.25 s), so every running call on
 it ends within about 1 s. The next call reconnects, retrying with exponential backoff
 (50 ms doubling to 0.5 s) for at most ``connect_timeout_s``.
@@ -19,10 +19,9 @@ import itertools
 import logging
 import uuid
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any, Self
 
-from coordinator.errors import AuthenticationError, ProtocolError, RemoteProtocolError
+from services.errors import AuthenticationError, ProtocolError, RemoteProtocolError
 from services.location import Location
 from services.protocol import (
     DEFAULT_MAX_FRAME,
@@ -45,9 +44,10 @@ from services.protocol import (
     Unsubscribe,
     Welcome,
 )
+from services.results import ActionResult
 from services.wire import FramedConnection
 
-__all__ = ["CallResult", "EventCallback", "FeedbackCallback", "NodeLink", "ServiceClient"]
+__all__ = ["EventCallback", "FeedbackCallback", "NodeLink", "ServiceClient"]
 
 log = logging.getLogger("petrobot.client")
 
@@ -59,44 +59,10 @@ FeedbackCallback = Callable[[Any], None]
 _DEADLINE_GRACE_S = 1.0
 
 
-@dataclass(frozen=True, slots=True, kw_only=True)
-class CallResult:
-    """The end of one call, as seen by the caller.
-
-    Attributes:
-        call_id: the call id (client-made).
-        action: action name.
-        node: node the call went to.
-        status: ``"success"``, ``"failure"`` or ``"error"``.
-        outcome: named outcome or ``None``.
-        value: the action's value (any msgpack value).
-        cost: the action's cost figure or ``None``.
-        wall_s: wall-clock duration on the node, seconds (0 if it never ran).
-        cpu_s: node CPU time during the call, seconds.
-        reason: why an error happened (node text, ``"busy"``, ``"connection lost"``...), else ``None``.
-    """
-
-    call_id: str
-    action: str
-    node: str
-    status: str
-    outcome: str | None = None
-    value: Any = None
-    cost: float | None = None
-    wall_s: float = 0.0
-    cpu_s: float = 0.0
-    reason: str | None = None
-
-    @property
-    def ok(self) -> bool:
-        """True unless the status is ``"error"`` (success and failure both take the normal branch)."""
-        return self.status != "error"
-
-
 class _Pending:
     __slots__ = ("accepted", "action", "future", "on_feedback")
 
-    def __init__(self, future: asyncio.Future[CallResult], action: str, on_feedback: FeedbackCallback | None) -> None:
+    def __init__(self, future: asyncio.Future[ActionResult], action: str, on_feedback: FeedbackCallback | None) -> None:
         self.future = future
         self.action = action
         self.on_feedback = on_feedback
@@ -141,11 +107,7 @@ class _Wire(FramedConnection):
             assert isinstance(msg, Result)
             p = link._pending.pop(msg.id, None)
             if p is not None and not p.future.done():
-                p.future.set_result(CallResult(
-                    call_id=msg.id, action=p.action, node=link.node, status=msg.status,
-                    outcome=msg.outcome, value=msg.value, cost=msg.cost, wall_s=msg.wall_s,
-                    cpu_s=msg.cpu_s, reason=msg.reason,
-                ))
+                p.future.set_result(msg.result)
         elif kind is Accepted:
             p = link._pending.get(msg.id)  # type: ignore[attr-defined]
             if p is not None:
@@ -162,7 +124,7 @@ class _Wire(FramedConnection):
             assert isinstance(msg, Rejected)
             p = link._pending.pop(msg.id, None)
             if p is not None and not p.future.done():
-                p.future.set_result(link._error(msg.id, p.action, msg.reason))
+                p.future.set_result(ActionResult.error(msg.reason))
         elif kind is Event:
             assert isinstance(msg, Event)
             for cb in list(link._topics.get(msg.topic, ())):
@@ -279,7 +241,7 @@ class NodeLink:
         call_id: str | None = None,
         deadline_s: float | None = None,
         on_feedback: FeedbackCallback | None = None,
-    ) -> CallResult:
+    ) -> ActionResult:
         """Call ``action`` on this node and wait for its result.
 
         Args:
@@ -302,20 +264,20 @@ class NodeLink:
             try:
                 wire = await self._ensure_connected()
             except AuthenticationError as exc:
-                return self._error(cid, action, f"authentication failed: {exc}")
+                return ActionResult.error(f"authentication failed: {exc}")
             except (TimeoutError, OSError, ProtocolError) as exc:
-                return self._error(cid, action, f"node {self.node} unreachable: {_describe(exc)}")
+                return ActionResult.error(f"node {self.node} unreachable: {_describe(exc)}")
         if cid in self._pending:
-            return self._error(cid, action, f"call id {cid} is already waiting on this link")
+            return ActionResult.error(f"call id {cid} is already waiting on this link")
         loop = asyncio.get_running_loop()
-        fut: asyncio.Future[CallResult] = loop.create_future()
+        fut: asyncio.Future[ActionResult] = loop.create_future()
         self._pending[cid] = _Pending(fut, action, on_feedback)
         deadline_ms = None if deadline_s is None else max(0, int(deadline_s * 1000))
         try:
             wire.send(Call(id=cid, action=action, params=params or {}, deadline_ms=deadline_ms))
         except ProtocolError as exc:
             self._pending.pop(cid, None)
-            return self._error(cid, action, f"cannot send call: {exc}")
+            return ActionResult.error(f"cannot send call: {exc}")
         try:
             if deadline_s is None:
                 return await fut
@@ -325,7 +287,7 @@ class NodeLink:
             except TimeoutError:
                 self._pending.pop(cid, None)
                 self._send_cancel(cid)
-                return self._error(cid, action, "deadline (no answer from node)")
+                return ActionResult.error("deadline (no answer from node)")
         except asyncio.CancelledError:
             if self._pending.pop(cid, None) is not None:
                 self._send_cancel(cid)
@@ -393,9 +355,6 @@ class NodeLink:
         self._fail_all("client closed")
 
     # ---- internals
-
-    def _error(self, cid: str, action: str, reason: str) -> CallResult:
-        return CallResult(call_id=cid, action=action, node=self.node, status="error", reason=reason)
 
     def _send_cancel(self, cid: str) -> bool:
         w = self._wire
@@ -503,7 +462,7 @@ class NodeLink:
         pending, self._pending = self._pending, {}
         for cid, p in pending.items():
             if not p.future.done():
-                p.future.set_result(self._error(cid, p.action, reason))
+                p.future.set_result(ActionResult.error(reason))
 
 
 def _describe(exc: BaseException) -> str:
@@ -577,7 +536,7 @@ class ServiceClient:
         call_id: str | None = None,
         deadline_s: float | None = None,
         on_feedback: FeedbackCallback | None = None,
-    ) -> CallResult:
+    ) -> ActionResult:
         """Call ``action`` on the node services.toml places it on (see :meth:`NodeLink.call`).
 
         ``deadline_s`` defaults to the action's ``deadline_s`` in services.toml.

@@ -21,7 +21,7 @@ import secrets
 import string
 from pathlib import Path
 
-from coordinator.errors import PetrobotError
+from services.errors import PetrobotError
 
 __all__ = ["DEFAULT_KEY_FILE", "SharedKeyError", "decode_key", "default_key_path", "load_key"]
 

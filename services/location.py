@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
-from coordinator.errors import LocationError
+from services.errors import LocationError
 
 __all__ = [
     "MEMORY_ACTIONS",

@@ -33,11 +33,11 @@ import signal
 import sys
 import time
 from collections.abc import Awaitable, Callable, Sequence
+from dataclasses import replace
 from typing import Any
 
-from coordinator.errors import AuthenticationError, PetrobotError, ProtocolError
+from services.errors import AuthenticationError, PetrobotError, ProtocolError
 from services.action import (
-    ActionOutcome,
     CallContext,
     Driver,
     FunctionAction,
@@ -47,6 +47,7 @@ from services.action import (
     import_impl,
     make_action,
 )
+from services.results import ActionResult, Status
 from services.actions.memory import MemoryStore, NoMemory, RemoteMemory, memory_actions
 from services.client import NodeLink
 from services.keys import load_key
@@ -447,7 +448,6 @@ class Node:
         rec.ctx = ctx
         t0 = time.perf_counter()
         c0 = time.process_time()
-        status, outcome, value, cost, reason = "error", None, None, None, None
         try:
             if deadline is None:
                 out = await run(params, ctx)
@@ -459,21 +459,15 @@ class Node:
                 except TimeoutError:
                     if not cm.expired():
                         raise
-                    out = ActionOutcome("error")
-                    reason = "deadline"
-            if not isinstance(out, ActionOutcome):
-                out = ActionOutcome("success", value=out)
-            status, outcome, value, cost = out.status, out.outcome, out.value, out.cost
+                    out = ActionResult.error("deadline")
+            record = out if isinstance(out, ActionResult) else ActionResult.success(out)
         except asyncio.CancelledError:
-            reason = "cancelled" if rec.cancel_requested else "node shutdown"
+            record = ActionResult.error("cancelled" if rec.cancel_requested else "node shutdown")
         except Exception as exc:  # noqa: BLE001 - any action failure becomes an error result
-            reason = f"{exc.__class__.__name__}: {exc}"
-            log.warning("call %s %s raised %s", call.id, call.action, reason)
-        result = Result(
-            id=call.id, status=status, outcome=outcome, value=value,
-            cost=None if cost is None else float(cost),
-            wall_s=time.perf_counter() - t0, cpu_s=time.process_time() - c0, reason=reason,
-        )
+            record = ActionResult.error(f"{exc.__class__.__name__}: {exc}")
+            log.warning("call %s %s raised %s", call.id, call.action, record.reason)
+        record = replace(record, wall_s=time.perf_counter() - t0, cpu_s=max(0.0, time.process_time() - c0))
+        result = Result(id=call.id, result=record)
         self._finish(rec, result, info)
 
     def _finish(self, rec: _Running, result: Result, info: bool) -> None:
@@ -490,13 +484,14 @@ class Node:
             try:
                 peer.send(result)
             except ProtocolError as exc:  # value not msgpack-able, too big...
-                err = Result(id=cid, status="error", wall_s=result.wall_s, cpu_s=result.cpu_s,
-                             reason=f"result not sendable: {exc}")
+                err = Result(id=cid, result=replace(result.result, status=Status.ERROR, outcome=None, value=None,
+                                                    reason=f"result not sendable: {exc}"))
                 results[cid] = (err, now, rec.call.action)
                 peer.send(err)
         if info:
-            log.info("result %s %s: %s%s (%.3f s)", cid, rec.call.action, result.status,
-                     f" ({result.reason})" if result.reason else "", result.wall_s)
+            r = result.result
+            log.info("result %s %s: %s%s (%.3f s)", cid, rec.call.action, r.status.value,
+                     f" ({r.reason})" if r.reason else "", r.wall_s)
 
     def _feedback(self, rec: _Running, data: Any) -> None:
         msg = Feedback(id=rec.call.id, data=data)

@@ -22,15 +22,14 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import socket
-import struct
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, fields
 from typing import Any
 
-import msgpack
 
-from coordinator.errors import ActionError, RemoteProtocolError
+from services.errors import ActionError, RemoteProtocolError
+from services.protocol.framing import FrameReader, pack_map, unpack_map
 
 __all__ = [
     "MAX_MESSAGE",
@@ -46,7 +45,6 @@ __all__ = [
 MAX_MESSAGE = 4096
 """Largest accepted set-point message body, bytes."""
 
-_LEN = struct.Struct(">I")
 
 
 class StreamLostError(ActionError):
@@ -107,8 +105,7 @@ class SetPoint:
 
 def encode(sp: SetPoint) -> bytes:
     """Bytes of one set-point message (length prefix + msgpack map)."""
-    body = bytes(msgpack.packb(sp.to_dict(), use_bin_type=True))
-    return _LEN.pack(len(body)) + body
+    return pack_map(sp.to_dict(), MAX_MESSAGE)
 
 
 class SetPointDecoder:
@@ -123,27 +120,14 @@ class SetPointDecoder:
 
     def __init__(self, max_message: int = MAX_MESSAGE) -> None:
         self.max_message = max_message
-        self._buf = bytearray()
+        self._reader = FrameReader(max_message)
 
     def feed(self, data: bytes) -> list[SetPoint]:
         """Add received bytes; return the set points completed by them, in order."""
-        self._buf += data
+        self._reader.feed(data)
         out: list[SetPoint] = []
-        while len(self._buf) >= 4:
-            (n,) = _LEN.unpack_from(self._buf)
-            if n > self.max_message:
-                raise RemoteProtocolError(f"set point of {n} bytes exceeds {self.max_message}")
-            if len(self._buf) < 4 + n:
-                break
-            body = bytes(self._buf[4 : 4 + n])
-            del self._buf[: 4 + n]
-            try:
-                msg = msgpack.unpackb(body, raw=False)
-            except (ValueError, msgpack.ExtraData, msgpack.FormatError, msgpack.StackError) as e:
-                raise RemoteProtocolError(f"undecodable set point: {e!r}") from e
-            if not isinstance(msg, dict):
-                raise RemoteProtocolError("set point is not a map")
-            out.append(SetPoint.from_dict(msg))
+        while (body := self._reader.next_body()) is not None:
+            out.append(SetPoint.from_dict(unpack_map(body)))
         return out
 
 

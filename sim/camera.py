@@ -14,11 +14,8 @@ so that a frame costs no random-number generation) and, for the analytic rendere
 of the drawn ball's position (``position_sigma_px``), the "0.5 px noise" of the benchmarks.
 
 :class:`FrameServer` serves frames over TCP on 127.0.0.1 like a GigE camera with grab-latest
-semantics. Wire format (each message one write): a 4-byte big-endian length, a msgpack header, then
-for frames the raw image bytes. Request ``{"op": "grab", "after": seq, "timeout": s}`` (or ``{"op": "info"}``, answered
-``{"info": {...}}`` with the camera's data sheet and calibration); reply header
-``{"seq", "t", "t_wall", "width", "height", "channels", "nbytes"}`` followed by ``nbytes`` of BGR uint8
-(row-major), or ``{"error": "timeout"}`` when no frame newer than ``after`` arrived in time.
+semantics; the vision node's frame grabber (:class:`services.devices.framegrabber.FrameClient`)
+reads them. The wire format is documented there.
 """
 
 from __future__ import annotations
@@ -26,23 +23,22 @@ from __future__ import annotations
 import functools
 import math
 import socket
-import struct
 import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import cv2
-import msgpack
 import numpy as np
 
 from services.ballvision import Homography, Roi, fit_homography, locate_threshold
+from services.devices.framegrabber import MAX_HEADER, Frame
+from services.errors import ProtocolError
+from services.protocol.framing import pack_map, recv_frame, unpack_map
 
 __all__ = [
     "AnalyticRenderer",
     "CameraModel",
-    "Frame",
-    "FrameClient",
     "FrameServer",
     "TinyRenderer",
     "calibrate",
@@ -164,24 +160,6 @@ def overhead_camera(
         width=width, height=height, fov_y=fov_y, eye=(cx, 0.0, table_height + distance),
         target=(cx, 0.0, table_height), up=(0.0, 1.0, 0.0),
     )
-
-
-@dataclass(frozen=True, slots=True)
-class Frame:
-    """A camera frame.
-
-    Attributes:
-        seq: frame number, from 0.
-        t: simulated time of the exposure, s.
-        image: (H, W, 3) uint8 BGR.
-        t_wall: wall-clock time (:func:`time.time`) the frame was captured, s (0 if not stamped);
-            used to measure frame-to-set-point latency across processes.
-    """
-
-    seq: int
-    t: float
-    image: np.ndarray
-    t_wall: float = 0.0
 
 
 class _NoiseBank:
@@ -356,35 +334,6 @@ def calibrate(
 # --------------------------------------------------------------------------------------------------
 # Frame server (sim process) and client (vision node's camera driver)
 # --------------------------------------------------------------------------------------------------
-_LEN = struct.Struct(">I")
-MAX_HEADER = 64 * 1024
-
-
-def _recv_exact(sock: socket.socket, n: int) -> bytes:
-    buf = bytearray()
-    while len(buf) < n:
-        chunk = sock.recv(n - len(buf))
-        if not chunk:
-            raise ConnectionError("camera connection closed")
-        buf += chunk
-    return bytes(buf)
-
-
-def _recv_msg(sock: socket.socket) -> dict[str, Any]:
-    (n,) = _LEN.unpack(_recv_exact(sock, 4))
-    if n > MAX_HEADER:
-        raise ConnectionError(f"camera header of {n} bytes exceeds {MAX_HEADER}")
-    msg = msgpack.unpackb(_recv_exact(sock, n), raw=False)
-    if not isinstance(msg, dict):
-        raise ConnectionError("camera header is not a map")
-    return msg
-
-
-def _pack(msg: dict[str, Any]) -> bytes:
-    body = msgpack.packb(msg, use_bin_type=True)
-    return _LEN.pack(len(body)) + body
-
-
 class FrameServer:
     """Serves the latest camera frame over TCP (grab-latest), one thread per client.
 
@@ -476,12 +425,12 @@ class FrameServer:
     def _serve(self, conn: socket.socket) -> None:
         try:
             while not self._closed:
-                req = _recv_msg(conn)
+                req = unpack_map(recv_frame(conn, MAX_HEADER))
                 if req.get("op") == "info":
-                    conn.sendall(_pack({"info": self.info}))
+                    conn.sendall(pack_map({"info": self.info}, MAX_HEADER))
                     continue
                 if req.get("op") != "grab":
-                    conn.sendall(_pack({"error": f"unknown op {req.get('op')!r}"}))
+                    conn.sendall(pack_map({"error": f"unknown op {req.get('op')!r}"}, MAX_HEADER))
                     continue
                 after = int(req.get("after", -1))
                 timeout = min(float(req.get("timeout", 1.0)), 10.0)
@@ -489,79 +438,23 @@ class FrameServer:
                     self._cond.wait_for(functools.partial(self._newer, after), timeout=timeout)
                     frame = self._latest
                 if frame is None or frame.seq <= after:
-                    conn.sendall(_pack({"error": "timeout"}))
+                    conn.sendall(pack_map({"error": "timeout"}, MAX_HEADER))
                     continue
                 img = np.ascontiguousarray(frame.image)
                 h, w = img.shape[:2]
                 ch = img.shape[2] if img.ndim == 3 else 1
                 header = {"seq": frame.seq, "t": frame.t, "t_wall": frame.t_wall, "width": w, "height": h,
                           "channels": ch, "nbytes": img.nbytes}
-                conn.sendall(_pack(header) + img.tobytes())
+                conn.sendall(pack_map(header, MAX_HEADER) + img.tobytes())
                 with self._cond:
                     self._last_sent = max(self._last_sent, frame.seq)
                     self._cond.notify_all()
-        except (ConnectionError, OSError, ValueError, msgpack.ExtraData, msgpack.FormatError):
+        except (ConnectionError, OSError, ValueError, ProtocolError):
             pass
         finally:
             conn.close()
             if conn in self._clients:
                 self._clients.remove(conn)
-
-
-class FrameClient:
-    """The vision node's camera driver side: grabs the latest frame from a :class:`FrameServer`.
-
-    Args:
-        host, port: address of the frame server.
-        connect_timeout: s.
-    """
-
-    def __init__(self, host: str, port: int, *, connect_timeout: float = 2.0) -> None:
-        self._sock = socket.create_connection((host, port), timeout=connect_timeout)
-        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-
-    def grab(self, after: int = -1, timeout: float = 1.0) -> Frame | None:
-        """Return the latest frame newer than seq ``after``, waiting up to ``timeout`` s.
-
-        Returns:
-            The frame, or None if none newer arrived in time.
-
-        Raises:
-            ConnectionError: if the server closed the connection or sent something malformed.
-        """
-        self._sock.settimeout(timeout + 2.0)
-        self._sock.sendall(_pack({"op": "grab", "after": after, "timeout": timeout}))
-        hdr = _recv_msg(self._sock)
-        if "error" in hdr:
-            if hdr["error"] == "timeout":
-                return None
-            raise ConnectionError(f"camera server: {hdr['error']}")
-        h, w, ch, n = int(hdr["height"]), int(hdr["width"]), int(hdr["channels"]), int(hdr["nbytes"])
-        if n != h * w * ch or n > 64 * 1024 * 1024:
-            raise ConnectionError(f"camera frame of {n} bytes does not match {w}x{h}x{ch}")
-        data = _recv_exact(self._sock, n)
-        img = np.frombuffer(data, dtype=np.uint8).reshape(h, w, ch)
-        return Frame(
-            seq=int(hdr["seq"]), t=float(hdr["t"]), image=img, t_wall=float(hdr.get("t_wall", 0.0))
-        )
-
-    def info(self, timeout: float = 2.0) -> dict[str, Any]:
-        """The server's info map (camera data sheet and calibration).
-
-        Raises:
-            ConnectionError: if the server closed the connection or sent something malformed.
-        """
-        self._sock.settimeout(timeout)
-        self._sock.sendall(_pack({"op": "info"}))
-        msg = _recv_msg(self._sock)
-        info = msg.get("info")
-        if not isinstance(info, dict):
-            raise ConnectionError(f"camera server: no info in {msg!r}")
-        return info
-
-    def close(self) -> None:
-        """Close the connection."""
-        self._sock.close()
 
 
 def camera_info(

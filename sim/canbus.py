@@ -27,8 +27,9 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Self
 
-from sim import canframes as cf
-from sim import puma560
+from services.devices import cia402 as cf
+from sim import socketcand
+from services.robots import puma560
 
 __all__ = [
     "FOLLOWING_ERROR_LIMIT",
@@ -465,7 +466,7 @@ class _Connection:
     def __init__(self, gateway: CanGateway, sock: socket.socket) -> None:
         self.gw = gateway
         self.sock = sock
-        self.proto = cf.SocketcandServerProtocol(gateway.channels)
+        self.proto = socketcand.SocketcandServerProtocol(gateway.channels)
         self.port = gateway.bus.connect()
         self.lock = threading.Lock()
         self.raw_since: float | None = None
@@ -493,7 +494,7 @@ class _Connection:
                     break
                 with self.lock:
                     frames = self.proto.receive_data(data, time.monotonic())
-                    if self.proto.mode is cf.ServerMode.RAW and self.raw_since is None:
+                    if self.proto.mode is socketcand.ServerMode.RAW and self.raw_since is None:
                         self.raw_since = time.monotonic()
                     out = self.proto.data_to_send()
                     if out:
@@ -502,7 +503,7 @@ class _Connection:
                     self.forwarding = self.raw_since is not None
                 for f in frames:
                     self.port.send(f)
-                if self.proto.mode is cf.ServerMode.CLOSED:
+                if self.proto.mode is socketcand.ServerMode.CLOSED:
                     break
         except OSError:
             pass

@@ -218,7 +218,7 @@ class CatchingWorld:
         robot_base: (x, y, z, yaw) of the robot base frame (DH frame 0, on the shoulder) in the table
             frame (m, rad). The default faces the robot towards the table, its catch line 0.75 m in
             front of the shoulder and the table top 0.30 m above it, as
-            :class:`services.motion_control.CatchGeometry` assumes.
+            :class:`services.robots.motion_control.CatchGeometry` assumes.
         record_history: keep (t, x, y, z) of the ball at every step of a throw.
 
     Attributes:

@@ -17,7 +17,7 @@ from typing import Any, TextIO
 
 from coordinator.analysis.robotic import report
 from coordinator.analysis.statespace import load_search
-from coordinator.errors import PetrobotError
+from services.errors import PetrobotError
 from coordinator.netfile import load_any
 
 __all__ = ["add_parser", "render", "run"]

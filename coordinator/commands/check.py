@@ -13,7 +13,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from coordinator.errors import LocationError, NetError
+from coordinator.errors import NetError
+from services.errors import LocationError
 from coordinator.net import PetriNet
 from coordinator.netfile import SourceMap, check_net, lint_net, load_any
 

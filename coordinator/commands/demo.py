@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from coordinator.errors import PetrobotError
+from services.errors import PetrobotError
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -140,21 +140,25 @@ class CatchReport:
         self.forward = forward
         self.runs: list[RunRecord] = []
 
-    def __call__(self, kind: str, info: dict[str, Any]) -> None:
-        if kind == "fire":
-            tid = info["transition"]
+    def __call__(self, event: Any) -> None:
+        from coordinator.events import ActionEnded, TransitionFired
+        from services.results import Status
+
+        if isinstance(event, TransitionFired):
+            tid = event.firing.transition
             if tid == "start_run":
                 self.runs.append(RunRecord(len(self.runs) + 1))
             elif self.runs and tid in self.OUTCOMES:
                 self.runs[-1].outcome = self.OUTCOMES[tid]
-        elif kind == "result" and self.runs:
+        elif isinstance(event, ActionEnded) and self.runs:
             run = self.runs[-1]
-            run.times[info["task"]] = float(info.get("wall_s") or 0.0)
-            if info["task"] == "locate":
-                run.locate_action = info["action"]
-            if info["task"] == "predict" and info["status"] == "success" and isinstance(info.get("value"), dict):
-                run.predicted = info["value"]
-        self.forward(kind, info)
+            result = event.result
+            run.times[event.task] = result.wall_s
+            if event.task == "locate":
+                run.locate_action = event.action
+            if event.task == "predict" and result.status is Status.SUCCESS and isinstance(result.value, dict):
+                run.predicted = result.value
+        self.forward(event)
 
     def match_truth(self, crossings: list[dict[str, Any]]) -> None:
         """Pair each run's final prediction with the simulator's crossing nearest in time."""

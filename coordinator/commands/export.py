@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from coordinator.dot import to_dot
-from coordinator.errors import PetrobotError
+from services.errors import PetrobotError
 from coordinator.netfile import dump_net, load_any
 from coordinator.pnml import dump_pnml
 

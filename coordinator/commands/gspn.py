@@ -11,7 +11,8 @@ from coordinator.analysis.gspn import analyse
 from coordinator.analysis.ptimed import empirical_delays, task_stats, to_gspn
 from coordinator.analysis.simulate import Delay, simulate_absorption, simulate_steady
 from coordinator.commands.perf import parse_pairs, read_records
-from coordinator.errors import AnalysisError, JournalError, NetError, PetrobotError
+from coordinator.errors import AnalysisError, JournalError, NetError
+from services.errors import PetrobotError
 from coordinator.net import PetriNet, PlaceKind
 from coordinator.netfile import dump_net, load_any
 

@@ -31,9 +31,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from coordinator.errors import JournalError, PetrobotError
+from coordinator.errors import JournalError
+from services.errors import PetrobotError
 from coordinator.learning import (
-    STATUSES,
     Learner,
     LearningAutomaton,
     automaton_from_state,
@@ -44,6 +44,9 @@ from coordinator.learning import (
 __all__ = ["TaskReport", "add_parser", "build_reports", "read_journal", "run"]
 
 _EPS = 1e-12
+from services.results import Status
+
+_STATUSES = frozenset(s.value for s in Status)
 
 
 @dataclass
@@ -131,14 +134,14 @@ def read_journal(path: str) -> tuple[dict[str, dict[str, Any]], dict[str, list[t
         if "action_result" in tables:
             for task, action, status, cost, wall_s in con.execute(
                     "SELECT task, action, status, cost, wall_s FROM action_result ORDER BY rowid"):
-                if status not in STATUSES:
+                if status not in _STATUSES:
                     continue
                 if cost is None:
                     cost = wall_s  # what the runtime feeds the learner when no cost is reported
                 value = None if cost is None else float(cost)
                 if value is not None and (not math.isfinite(value) or value < 0.0):
                     value = None
-                results.setdefault(str(task), []).append((str(action), str(status), value))
+                results.setdefault(str(task), []).append((str(action), Status(status), value))
     except sqlite3.Error as exc:
         raise JournalError(f"{path}: cannot read journal: {exc}") from exc
     finally:

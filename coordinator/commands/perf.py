@@ -9,7 +9,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from coordinator.errors import JournalError, PetrobotError
+from coordinator.errors import JournalError
+from services.errors import PetrobotError
 from coordinator.netfile import load_any
 from coordinator.performance import (
     COST_MEASURES,

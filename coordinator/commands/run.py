@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from coordinator.errors import PetrobotError
+from services.errors import PetrobotError
 
 DESCRIPTION = """\
 Execute a task net. Every primitive action is called on the node that services.toml places it

@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     import numpy as np
 
-    from services import motion_control
+    from services.robots import motion_control
     from services.ballvision import calibration_points
     from sim.camera import (
         AnalyticRenderer,

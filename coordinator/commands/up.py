@@ -18,7 +18,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Self
 
-from coordinator.errors import PetrobotError
+from services.errors import PetrobotError
 
 __all__ = ["NodeGroup", "add_parser", "run"]
 
@@ -196,7 +196,7 @@ async def _up(args: argparse.Namespace) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """Start the nodes and block until Ctrl-C/SIGTERM; return the exit code."""
-    from coordinator.errors import LocationError
+    from services.errors import LocationError
 
     try:
         return asyncio.run(_up(args))

@@ -21,24 +21,24 @@ import time
 from typing import Any
 
 from services.action import (
-    ActionOutcome,
     CallContext,
     Driver,
     NodeContext,
     PrimitiveAction,
 )
+from services.results import ActionResult, Status
 
 __all__ = [
     "ComputePrimes", "Ticker", "announce", "coin", "count_primes_below", "echo", "fail", "remember", "tally", "wait",
 ]
 
 
-async def echo(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+async def echo(params: dict[str, Any], ctx: CallContext) -> ActionResult:
     """Return ``params`` unchanged as the value; status success."""
-    return ActionOutcome("success", value=params)
+    return ActionResult(status=Status.SUCCESS, value=params)
 
 
-async def wait(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+async def wait(params: dict[str, Any], ctx: CallContext) -> ActionResult:
     """Wait ``params["seconds"]`` (default 1.0 s), reporting progress ``{"fraction": f}`` every ``step`` s.
 
     Cancellation and the deadline cut the wait short (the CancelledError propagates).
@@ -51,7 +51,7 @@ async def wait(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
     while (now := loop.time()) < end:
         await asyncio.sleep(min(step, end - now))
         ctx.feedback({"fraction": min(1.0, (loop.time() - start) / seconds) if seconds > 0 else 1.0})
-    return ActionOutcome("success", value={"waited_s": loop.time() - start}, cost=seconds)
+    return ActionResult(status=Status.SUCCESS, value={"waited_s": loop.time() - start}, cost=seconds)
 
 
 def count_primes_below(n: int) -> int:
@@ -75,10 +75,10 @@ class ComputePrimes(PrimitiveAction):
     the sieve (thread CPU time).
     """
 
-    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         n = int(params.get("n", 1_000_000))
         if n < 0 or n > 200_000_000:
-            return ActionOutcome("failure", outcome="bad_n", value={"n": n})
+            return ActionResult(status=Status.FAILURE, outcome="bad_n", value={"n": n})
 
         def work() -> tuple[int, float]:
             c0 = time.thread_time()
@@ -86,10 +86,10 @@ class ComputePrimes(PrimitiveAction):
             return k, time.thread_time() - c0
 
         count, cpu = await asyncio.to_thread(work)
-        return ActionOutcome("success", value={"n": n, "count": count}, cost=cpu)
+        return ActionResult(status=Status.SUCCESS, value={"n": n, "count": count}, cost=cpu)
 
 
-async def coin(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+async def coin(params: dict[str, Any], ctx: CallContext) -> ActionResult:
     """A seeded draw: success with ``p_success``, error with ``p_error``, else failure.
 
     Params: ``seed`` (int, default: the call id's hash), ``p_success`` (default 0.5), ``p_error``
@@ -101,36 +101,36 @@ async def coin(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
     p_s = float(params.get("p_success", 0.5))
     p_e = float(params.get("p_error", 0.0))
     if u < p_s:
-        return ActionOutcome("success", outcome="heads", value=u)
+        return ActionResult(status=Status.SUCCESS, outcome="heads", value=u)
     if u < p_s + p_e:
-        return ActionOutcome("error", outcome="tails", value=u)
-    return ActionOutcome("failure", outcome="tails", value=u)
+        return ActionResult(status=Status.ERROR, outcome="tails", value=u)
+    return ActionResult(status=Status.FAILURE, outcome="tails", value=u)
 
 
-async def fail(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+async def fail(params: dict[str, Any], ctx: CallContext) -> ActionResult:
     """Raise RuntimeError(params["message"]) (the node turns it into status error)."""
     raise RuntimeError(str(params.get("message", "deliberate failure")))
 
 
-async def remember(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+async def remember(params: dict[str, Any], ctx: CallContext) -> ActionResult:
     """Store ``params["value"]`` under ``params["key"]`` in the global memory and read it back."""
     key = str(params.get("key", "demo"))
     await ctx.memory.set(key, params.get("value"))
-    return ActionOutcome("success", value=await ctx.memory.get(key))
+    return ActionResult(status=Status.SUCCESS, value=await ctx.memory.get(key))
 
 
-async def tally(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+async def tally(params: dict[str, Any], ctx: CallContext) -> ActionResult:
     """Add 1 to the global-memory counter ``params["key"]`` (default ``"tally"``); value = new count."""
     key = str(params.get("key", "tally"))
     count = int(await ctx.memory.get(key, 0)) + 1
     await ctx.memory.set(key, count)
-    return ActionOutcome("success", value=count)
+    return ActionResult(status=Status.SUCCESS, value=count)
 
 
-async def announce(params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+async def announce(params: dict[str, Any], ctx: CallContext) -> ActionResult:
     """Publish external event ``params["topic"]`` with ``params.get("data")`` from this node."""
     ctx.publish(str(params["topic"]), params.get("data"))
-    return ActionOutcome("success")
+    return ActionResult(status=Status.SUCCESS)
 
 
 class Ticker(Driver):

@@ -20,8 +20,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Any
 
-from coordinator.errors import ActionError
-from services.action import ActionOutcome, CallContext, PrimitiveAction
+from services.errors import ActionError
+from services.action import CallContext, PrimitiveAction
+from services.results import ActionResult, Status
 
 if TYPE_CHECKING:
     from services.client import NodeLink
@@ -58,18 +59,18 @@ class MemoryAction(PrimitiveAction):
         self.store = store
         self.name = f"memory.{op}"
 
-    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         if self.op == "keys":
-            return ActionOutcome("success", value=await self.store.keys())
+            return ActionResult(status=Status.SUCCESS, value=await self.store.keys())
         key = params.get("key")
         if not isinstance(key, str):
             raise ActionError(f"{self.name} needs a string 'key' parameter")
         if self.op == "get":
-            return ActionOutcome("success", value=await self.store.get(key, params.get("default")))
+            return ActionResult(status=Status.SUCCESS, value=await self.store.get(key, params.get("default")))
         if "value" not in params:
             raise ActionError("memory.set needs a 'value' parameter")
         await self.store.set(key, params["value"])
-        return ActionOutcome("success")
+        return ActionResult(status=Status.SUCCESS)
 
 
 def memory_actions(store: MemoryStore) -> dict[str, MemoryAction]:
@@ -90,8 +91,8 @@ class RemoteMemory:
 
     async def _call(self, action: str, params: dict[str, Any]) -> Any:
         res = await self._link.call(action, params, deadline_s=self._deadline_s)
-        if res.status != "success":
-            raise ActionError(f"{action} failed on node {res.node!r}: {res.reason}")
+        if res.status is not Status.SUCCESS:
+            raise ActionError(f"{action} failed on node {self._link.node!r}: {res.reason}")
         return res.value
 
     async def get(self, key: str, default: Any = None) -> Any:

@@ -28,11 +28,11 @@ services.toml (example)::
 * ``robot_base`` ([0.75, 0.0, 0.46, pi]): x, y, z (m), yaw (rad) of the robot base frame in the
   table frame of the set points;
 * ``edge_x``, ``table_z``, ``rim_drop``, ``tilt_deg``, ``y_min``, ``y_max``: override
-  :class:`services.motion_control.CatchGeometry` (base frame);
+  :class:`services.robots.motion_control.CatchGeometry` (base frame);
 * ``heartbeat_timeout_s`` (0.5), ``connect_timeout_s`` (5.0).
 
 The driver owns a control thread that runs once per CAN SYNC (2 ms of simulated time): one
-:meth:`services.motion_control.CatchServo.step` and one set of RPDO targets. The crossfire sensor's
+:meth:`services.robots.motion_control.CatchServo.step` and one set of RPDO targets. The crossfire sensor's
 rising edge publishes the external event ``ball_caught`` with ``{"t": bus time}``.
 
 Outcomes of ``catch``: success when the crossfire sensor fires; failure when the ball is missed
@@ -52,17 +52,17 @@ from typing import Any
 
 import numpy as np
 
-from services import motion_control as mc
+from services.robots import motion_control as mc
 from services.action import (
-    ActionOutcome,
     CallContext,
     Driver,
     NodeContext,
     PrimitiveAction,
 )
-from services.drives import BusError, PumaDrives
+from services.results import ActionResult, Status
+from services.devices.drives import BusError, PumaDrives
 from services.stream import SetPoint, SetPointReceiver, StreamLostError
-from sim.puma560 import UnreachableError
+from services.robots.puma560 import UnreachableError
 
 __all__ = ["Catch", "MoveHome", "PumaDriver", "table_to_base"]
 
@@ -263,7 +263,7 @@ class MoveHome(PrimitiveAction):
     Params: ``timeout_s`` (5.0), ``tolerance_rad`` (0.01, on the actual joint positions).
     """
 
-    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         t0 = time.monotonic()
         drv = _driver(ctx)
         timeout = float(params.get("timeout_s", 5.0))
@@ -282,21 +282,13 @@ class MoveHome(PrimitiveAction):
                 with drv.lock:
                     done = drv.servo.at_goal() and bool(np.all(np.abs(actual - home) <= tol))
                 if done:
-                    return ActionOutcome(
-                        "success", value={"q": [float(v) for v in actual]}, cost=time.monotonic() - t0
-                    )
+                    return ActionResult.success({"q": [float(v) for v in actual]}, cost=time.monotonic() - t0)
                 if time.monotonic() > deadline:
-                    return ActionOutcome(
-                        "error",
-                        outcome="timeout",
-                        value={"reason": f"not home after {timeout} s"},
-                        cost=time.monotonic() - t0,
-                    )
+                    return ActionResult.error(f"not home after {timeout} s", outcome="timeout",
+                                              cost=time.monotonic() - t0)
                 await asyncio.sleep(0.01)
         except BusError as exc:
-            return ActionOutcome(
-                "error", outcome="bus", value={"reason": str(exc)}, cost=time.monotonic() - t0
-            )
+            return ActionResult.error(str(exc), outcome="bus", cost=time.monotonic() - t0)
 
 
 class Catch(PrimitiveAction):
@@ -313,7 +305,7 @@ class Catch(PrimitiveAction):
     frame, bus time). Cost: wall seconds.
     """
 
-    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         t0 = time.monotonic()
         drv = _driver(ctx)
         timeout = float(params.get("timeout_s", 5.0))
@@ -329,10 +321,9 @@ class Catch(PrimitiveAction):
             "t_caught": None,
         }
 
-        def done(status: str, outcome: str | None = None, reason: str | None = None) -> ActionOutcome:
-            if reason is not None:
-                info["reason"] = reason
-            return ActionOutcome(status, outcome=outcome, value=info, cost=time.monotonic() - t0)
+        def done(status: Status, outcome: str | None = None, reason: str | None = None) -> ActionResult:
+            return ActionResult(status=status, outcome=outcome, value=info, cost=time.monotonic() - t0,
+                                reason=reason)
 
         try:
             await drv.ensure_ready()
@@ -346,7 +337,7 @@ class Catch(PrimitiveAction):
                 if drv.caught:
                     info["caught"] = True
                     info["t_caught"] = drv._caught_t
-                    return done("success", "caught")
+                    return done(Status.SUCCESS, "caught")
                 if sp is not used:  # a new set point (latest wins)
                     used = sp
                     info["set_points"] += 1
@@ -355,9 +346,9 @@ class Catch(PrimitiveAction):
                         t_rim = aimed
                 now_bus = drv.bus_time()
                 if t_rim is not None and now_bus > t_rim + grace:
-                    return done("failure", "missed", f"ball passed at t={t_rim:.3f} s without a catch")
+                    return done(Status.FAILURE, "missed", f"ball passed at t={t_rim:.3f} s without a catch")
                 if time.monotonic() > deadline:
-                    return done("error", "timeout", f"no catch and no miss within {timeout} s")
+                    return done(Status.ERROR, "timeout", f"no catch and no miss within {timeout} s")
                 try:
                     sp = drv.receiver.latest()
                 except StreamLostError:
@@ -370,9 +361,9 @@ class Catch(PrimitiveAction):
                     raise
                 await asyncio.sleep(0.002)
         except StreamLostError as exc:
-            return done("error", "stream_lost", str(exc))
+            return done(Status.ERROR, "stream_lost", str(exc))
         except BusError as exc:
-            return done("error", "bus", str(exc))
+            return done(Status.ERROR, "bus", str(exc))
 
     @staticmethod
     async def _first_set_point(drv: PumaDriver, timeout: float) -> SetPoint:

@@ -54,8 +54,9 @@ from typing import Any
 
 import numpy as np
 
-from coordinator.errors import ActionError
-from services.action import ActionOutcome, CallContext, Driver, NodeContext, PrimitiveAction
+from services.errors import ActionError
+from services.action import CallContext, Driver, NodeContext, PrimitiveAction
+from services.results import ActionResult, Status
 from services.ballvision import (
     BallTracker,
     Detection,
@@ -70,7 +71,7 @@ from services.ballvision import (
     table_roi,
 )
 from services.stream import SetPointSender
-from sim.camera import Frame, FrameClient
+from services.devices.framegrabber import Frame, FrameClient
 
 __all__ = [
     "VERIFY_FRAMES",
@@ -175,7 +176,7 @@ class VisionConfig:
 
 
 class CameraLink:
-    """A frame-grabbing thread on a :class:`sim.camera.FrameClient`, awaitable from asyncio.
+    """A frame-grabbing thread on a :class:`services.devices.framegrabber.FrameClient`, awaitable from asyncio.
 
     Args:
         host, port: the camera server.
@@ -350,12 +351,12 @@ class _Locate(PrimitiveAction):
     def locate(self, frames: list[Frame], cam: CameraDriver) -> Detection | None:
         raise NotImplementedError
 
-    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         cam = _camera_of(ctx)
         try:
             await cam.reconnect_if_lost()
         except CameraLostError as exc:
-            return ActionOutcome("error", outcome="camera_lost", value={"reason": str(exc)})
+            return ActionResult.error(str(exc), outcome="camera_lost")
         assert cam.link is not None and cam.config is not None
         timeout = float(params.get("timeout_s", 10.0))
         k = max(1, int(params.get("k", self.frames_needed)))
@@ -396,16 +397,16 @@ class _Locate(PrimitiveAction):
                                 track.append((f.t, float(xv), float(yv)))
                     if len(track) < 3:
                         value.update(reason="track_lost", residual_m=None)
-                        return ActionOutcome("failure", outcome="no_ball", value=value, cost=cpu)
+                        return ActionResult(status=Status.FAILURE, outcome="no_ball", value=value, cost=cpu)
                     residual = track_residual((det.t, x, y), track)
                     value["residual_m"] = residual
                     if residual > float(spec):
                         value["reason"] = "out_of_spec"
-                        return ActionOutcome("failure", outcome="no_ball", value=value, cost=cpu)
-                return ActionOutcome("success", value=value, cost=cpu)
+                        return ActionResult(status=Status.FAILURE, outcome="no_ball", value=value, cost=cpu)
+                return ActionResult(status=Status.SUCCESS, value=value, cost=cpu)
         except CameraLostError as exc:
-            return ActionOutcome("error", outcome="camera_lost", value={"reason": str(exc)}, cost=cpu)
-        return ActionOutcome("failure", outcome="no_ball", value={"frames": frames_used}, cost=cpu)
+            return ActionResult.error(str(exc), outcome="camera_lost", cost=cpu)
+        return ActionResult(status=Status.FAILURE, outcome="no_ball", value={"frames": frames_used}, cost=cpu)
 
 
 class LocateThreshold(_Locate):
@@ -444,14 +445,14 @@ class LocateAverage(_Locate):
 class Predict(PrimitiveAction):
     """Track the ball, predict its catch-line crossing, stream set points to motion (see module)."""
 
-    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionOutcome:
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         own_link: CameraLink | None = None
         try:
             cam = _camera_of(ctx)
             try:
                 await cam.reconnect_if_lost()
             except CameraLostError as exc:
-                return ActionOutcome("error", outcome="camera_lost", value={"reason": str(exc)})
+                return ActionResult.error(str(exc), outcome="camera_lost")
             link, config = cam.link, cam.config
             assert link is not None and config is not None
         except ActionError:
@@ -460,7 +461,7 @@ class Predict(PrimitiveAction):
             try:
                 await own_link.start(float(params.get("connect_timeout_s", 5.0)))
             except CameraLostError as exc:
-                return ActionOutcome("error", outcome="camera_lost", value={"reason": str(exc)})
+                return ActionResult.error(str(exc), outcome="camera_lost")
             link, config = own_link, VisionConfig.from_info(own_link.info)
         try:
             return await self._track(params, link, config)
@@ -470,14 +471,13 @@ class Predict(PrimitiveAction):
 
     async def _track(
         self, params: dict[str, Any], link: CameraLink, config: VisionConfig
-    ) -> ActionOutcome:
+    ) -> ActionResult:
         host = str(params.get("stream_host", "127.0.0.1"))
         port = int(params.get("stream_port", DEFAULT_STREAM_PORT))
         try:
             sender = await asyncio.to_thread(SetPointSender, host, port)
         except OSError as exc:
-            return ActionOutcome("error", outcome="stream_lost",
-                                 value={"reason": f"set-point receiver {host}:{port}: {exc}"})
+            return ActionResult.error(f"set-point receiver {host}:{port}: {exc}", outcome="stream_lost")
         tracker = BallTracker(config.homography, RollingPredictor(config.model, catch_x=config.catch_x))
         timeout = float(params.get("timeout_s", 10.0))
         loop = asyncio.get_running_loop()
@@ -508,9 +508,7 @@ class Predict(PrimitiveAction):
                 past = det is None or (seen is not None and seen[1] >= config.catch_x - 0.01)
                 if last is not None and past and frame.t >= last.t - 0.05:
                     xb, yb, _ = config.base.point(last.x, last.y)
-                    return ActionOutcome(
-                        "success",
-                        value={"y": last.y, "t": last.t, "x_base": xb, "y_base": yb,
+                    return ActionResult(status=Status.SUCCESS, value={"y": last.y, "t": last.t, "x_base": xb, "y_base": yb,
                                "sigma_y": last.sigma_y, "sigma_t": last.sigma_t,
                                "setpoints": sent, "frames": frames,
                                "lead_s": last.t - first if first is not None else 0.0,
@@ -518,15 +516,15 @@ class Predict(PrimitiveAction):
                         cost=cpu,
                     )
                 if last is not None and det is None and tracker.last_position is None:
-                    return ActionOutcome("failure", outcome="ball_lost",
+                    return ActionResult(status=Status.FAILURE, outcome="ball_lost",
                                          value={"setpoints": sent, "frames": frames}, cost=cpu)
                 if loop.time() - start > timeout:
-                    return ActionOutcome("failure", outcome="no_crossing",
+                    return ActionResult(status=Status.FAILURE, outcome="no_crossing",
                                          value={"setpoints": sent, "frames": frames}, cost=cpu)
         except CameraLostError as exc:
-            return ActionOutcome("error", outcome="camera_lost", value={"reason": str(exc)}, cost=cpu)
+            return ActionResult.error(str(exc), outcome="camera_lost", cost=cpu)
         except OSError as exc:
-            return ActionOutcome("error", outcome="stream_lost", value={"reason": str(exc)}, cost=cpu)
+            return ActionResult.error(str(exc), outcome="stream_lost", cost=cpu)
         finally:
             with contextlib.suppress(OSError):
                 sender.close()

@@ -16,7 +16,10 @@ import pytest
 
 from coordinator.journal import Journal
 from coordinator.netfile import loads_net
-from coordinator.runtime import OperatorCommand, Runtime
+from coordinator.events import ActionEnded, ActionStarted, TransitionFired
+from services.results import Status
+from coordinator.operator import Command, OperatorCommand
+from coordinator.runtime import Runtime
 from services.client import ServiceClient
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -101,10 +104,10 @@ def two_node_net(action: str = "wait", seconds: float = 0.05):
 
 async def run_net(cluster: Cluster, net, journal_path: Path, *, key: bytes | None = None,
                   commands=(), max_seconds: float = 30.0):
-    events: list[tuple[str, dict]] = []
+    events: list = []
     with Journal(journal_path) as journal:
         async with ServiceClient(cluster.location, key or cluster.key) as client:
-            runtime = Runtime(net, client, journal, seed=3, observer=lambda k, i: events.append((k, i)))
+            runtime = Runtime(net, client, journal, seed=3, observer=events.append)
             for cmd in commands:
                 runtime.command(cmd)
             summary = await runtime.run(max_seconds=max_seconds)
@@ -127,7 +130,7 @@ async def test_a_net_runs_with_its_actions_on_two_nodes(cluster: Cluster, tmp_pa
     assert summary.end_state == "dead"
     assert summary.final_marking == {"robot": 1, "done": 2}
     assert nodes_of(tmp_path / "j.sqlite") == {"echo": {"alpha"}, "slow": {"beta"}}
-    fired = [i["transition"] for k, i in events if k == "fire"]
+    fired = [e.firing.transition for e in events if isinstance(e, TransitionFired)]
     assert fired == ["start", "sensed", "computed", "start", "sensed", "computed"]
 
 
@@ -155,25 +158,25 @@ async def test_a_node_killed_mid_action_takes_the_error_branch_and_loses_no_toke
     killed_at: list[float] = []
 
     async def killer():
-        while not any(k == "start" and i["action"] == "slow" for k, i in seen):
+        while not any(isinstance(e, ActionStarted) and e.action == "slow" for e in seen):
             await asyncio.sleep(0.02)
         await asyncio.sleep(0.2)
         cluster.kill("beta")
         killed_at.append(time.monotonic())
 
-    seen: list[tuple[str, dict]] = []
+    seen: list = []
     with Journal(tmp_path / "j.sqlite") as journal:
         async with ServiceClient(cluster.location, cluster.key) as client:
-            runtime = Runtime(net, client, journal, observer=lambda k, i: seen.append((k, i)))
+            runtime = Runtime(net, client, journal, observer=seen.append)
             kill_task = asyncio.create_task(killer())
             summary = await runtime.run(max_seconds=30)
             await kill_task
-    results = [i for k, i in seen if k == "result" and i["action"] == "slow"]
-    assert results and results[0]["status"] == "error"
+    results = [e.result for e in seen if isinstance(e, ActionEnded) and e.action == "slow"]
+    assert results and results[0].status is Status.ERROR
     ended_at = time.monotonic()
     assert ended_at - killed_at[0] < 5.0
     assert summary.final_marking == {"robot": 1, "failed": 1}
-    fired = [i["transition"] for k, i in seen if k == "fire"]
+    fired = [e.firing.transition for e in seen if isinstance(e, TransitionFired)]
     assert fired[-1] == "compute_error"
 
 
@@ -197,9 +200,9 @@ async def test_a_coordinator_with_a_wrong_key_is_refused_and_takes_the_error_bra
     cluster.start("alpha", "beta")
     net = two_node_net("slow").with_initial_marking({"runs": 1, "robot": 1})
     summary, events = await run_net(cluster, net, tmp_path / "j.sqlite", key=b"not the key" * 3)
-    results = [i for k, i in events if k == "result"]
-    assert results[0]["status"] == "error"
-    assert "auth" in (results[0]["reason"] or "").lower() or "key" in (results[0]["reason"] or "").lower()
+    results = [e.result for e in events if isinstance(e, ActionEnded)]
+    assert results[0].status is Status.ERROR
+    assert "auth" in (results[0].reason or "").lower() or "key" in (results[0].reason or "").lower()
     assert summary.final_marking == {"robot": 1, "failed": 1}
     assert "auth" in cluster.log("alpha").lower() or "refus" in cluster.log("alpha").lower()
 
@@ -209,7 +212,7 @@ async def test_operator_removing_runs_stops_the_experiment_early(cluster: Cluste
     cluster.start("alpha", "beta")
     net = two_node_net("slow", seconds=0.3).with_initial_marking({"runs": 4, "robot": 1})
     summary, _ = await run_net(cluster, net, tmp_path / "j.sqlite",
-                               commands=[OperatorCommand("remove", "runs", 3)])
+                               commands=[OperatorCommand(Command.REMOVE, "runs", 3)])
     assert summary.final_marking == {"robot": 1, "done": 1}
     with sqlite3.connect(tmp_path / "j.sqlite") as db:
         assert db.execute("SELECT command, place, count FROM operator").fetchall() == [("remove", "runs", 3)]
@@ -248,7 +251,7 @@ async def test_external_events_from_a_node_driver_fire_transitions_as_pulses(clu
     cluster.start("alpha", "beta")
     summary, events = await run_net(cluster, loads_net(TICK_NET), tmp_path / "j.sqlite", max_seconds=20)
     assert summary.final_marking == {"shots": 3}
-    pulses = [i["pulse"] for k, i in events if k == "fire" and i["transition"] == "shoot"]
+    pulses = [e.firing.pulse for e in events if isinstance(e, TransitionFired) and e.firing.transition == "shoot"]
     assert pulses == ["ext:tick"] * 3
 
 

@@ -21,8 +21,10 @@ async def test_calls_reach_actions_on_two_nodes(cluster: Cluster) -> None:
     cluster.start("alpha", "beta")
     async with cluster.client() as client:
         a, b = await asyncio.gather(client.call("echo", {"x": [1, 2]}), client.call("compute_primes"))
-    assert (a.status, a.node, a.value) == ("success", "alpha", {"x": [1, 2]})
-    assert (b.status, b.node, b.value) == ("success", "beta", {"n": 100000, "count": 9592})
+    assert (a.status, a.value) == ("success", {"x": [1, 2]})
+    assert (b.status, b.value) == ("success", {"n": 100000, "count": 9592})
+    assert " echo from " in cluster.log("alpha") and " echo from " not in cluster.log("beta")
+    assert " compute_primes from " in cluster.log("beta") and " compute_primes from " not in cluster.log("alpha")
     assert b.cost is not None and b.cost > 0 and b.wall_s > 0
 
 
@@ -32,7 +34,7 @@ async def test_global_memory_is_shared_across_nodes(cluster: Cluster) -> None:
         res = await client.call("remember", {"key": "ball", "value": [0.1, 0.2]})  # runs on beta
         assert (res.status, res.value) == ("success", [0.1, 0.2])
         got = await client.call("memory.get", {"key": "ball"})  # served by alpha
-        assert got.value == [0.1, 0.2] and got.node == "alpha"
+        assert got.value == [0.1, 0.2] and " memory.get from " in cluster.log("alpha")
         keys = await client.call("memory.keys")
         assert keys.value == ["ball"]
 
@@ -146,7 +148,7 @@ async def test_a_node_killed_mid_call_gives_an_error_within_1_5_s(cluster: Clust
         cluster.kill("beta")
         res = await asyncio.wait_for(task, 3)
         elapsed = time.monotonic() - t0
-        assert res.status == "error" and res.node == "beta"
+        assert res.status == "error" and res.reason is not None
         assert elapsed < 1.5
         assert (await client.call("echo")).status == "success"  # the other node is untouched
 

@@ -9,6 +9,7 @@ from collections.abc import Callable
 import pybullet
 from pybullet_utils import bullet_client
 
+from services.robots import puma560 as K
 from sim import puma560 as P
 from sim.canbus import SimDrives
 
@@ -16,7 +17,7 @@ from sim.canbus import SimDrives
 class SimRig:
     """A pybullet PUMA with SimDrives, stepped by hand or by a real-time thread."""
 
-    def __init__(self, tmp_path, q0=P.Q_HOME, crossfire: Callable[[], bool] | None = None):
+    def __init__(self, tmp_path, q0=K.Q_HOME, crossfire: Callable[[], bool] | None = None):
         self.pb = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
         self.pb.setGravity(0, 0, -9.81)
         self.pb.setPhysicsEngineParameter(fixedTimeStep=0.001)

@@ -4,22 +4,36 @@ from __future__ import annotations
 
 import pytest
 
-from coordinator.errors import ActionError
+from services.errors import ActionError
 from services.action import (
-    ActionOutcome,
     FunctionAction,
     PrimitiveAction,
     import_impl,
     make_action,
 )
+from services.results import ActionResult, Status
 from services.actions.demo import ComputePrimes, count_primes_below
 from services.actions.memory import MemoryStore, memory_actions
 
 
-def test_an_outcome_refuses_an_unknown_status() -> None:
-    assert ActionOutcome("failure", outcome="missed").status == "failure"
+def test_a_result_refuses_an_unknown_status_a_bad_outcome_and_a_negative_duration() -> None:
+    assert ActionResult.failure(outcome="missed").status is Status.FAILURE
+    assert ActionResult(status="success").status is Status.SUCCESS  # type: ignore[arg-type]
     with pytest.raises(ActionError, match="status"):
-        ActionOutcome("maybe")
+        ActionResult(status="maybe")  # type: ignore[arg-type]
+    with pytest.raises(ActionError, match="identifier"):
+        ActionResult.success(outcome="not an identifier")
+    with pytest.raises(ActionError, match="durations"):
+        ActionResult(status=Status.SUCCESS, wall_s=-1.0)
+    with pytest.raises(ActionError, match="cost"):
+        ActionResult.success(cost=float("nan"))
+
+
+def test_a_result_latches_ok_and_its_status_and_its_named_outcome() -> None:
+    assert ActionResult.success().events == {"ok", "success"}
+    assert ActionResult.failure(outcome="tails").events == {"ok", "failure", "tails"}
+    assert ActionResult.error("node lost").events == {"error"}
+    assert not ActionResult.error("x").ok and ActionResult.failure().ok
 
 
 def test_make_action_accepts_a_class_an_instance_and_an_async_function() -> None:

@@ -9,10 +9,9 @@ import numpy as np
 import pytest
 
 from services.ballvision import calibration_points, locate_threshold
+from services.devices.framegrabber import Frame, FrameClient
 from sim.camera import (
     AnalyticRenderer,
-    Frame,
-    FrameClient,
     FrameServer,
     TinyRenderer,
     calibrate,

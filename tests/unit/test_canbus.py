@@ -11,9 +11,10 @@ import pytest
 from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_message
 from puma_rig import SimRig
 
-from services.drives import BusError, PumaDrives
-from sim import canframes as cf
-from sim import puma560 as P
+from services.devices.drives import BusError, PumaDrives
+from services.devices import cia402 as cf
+from sim import socketcand
+from services.robots import puma560 as P
 from sim.canbus import CanGateway
 
 # --- pure encoding -------------------------------------------------------------------------------
@@ -94,7 +95,7 @@ def test_fault_reset_needs_a_rising_edge_of_bit_7():
 
 
 def test_the_server_greets_opens_the_bus_and_enters_raw_mode():
-    proto = cf.SocketcandServerProtocol(("can0",))
+    proto = socketcand.SocketcandServerProtocol(("can0",))
     assert proto.data_to_send() == b"< hi >"
     assert proto.receive_data(b"< open can0 >") == []
     assert proto.data_to_send() == b"< ok >"
@@ -103,11 +104,11 @@ def test_the_server_greets_opens_the_bus_and_enters_raw_mode():
     proto.receive_data(b"< rawm")
     proto.receive_data(b"ode >")
     assert proto.data_to_send() == b"< ok >"
-    assert proto.mode is cf.ServerMode.RAW
+    assert proto.mode is socketcand.ServerMode.RAW
 
 
 def test_send_commands_become_frames_even_when_split_or_batched():
-    proto = cf.SocketcandServerProtocol()
+    proto = socketcand.SocketcandServerProtocol()
     proto.receive_data(b"< open can0 >< rawmode >")
     proto.data_to_send()
     frames = proto.receive_data(b"< send 201 6 f 0 1 2 3 4 >< send 0 2 1 0 >< send 8")
@@ -121,7 +122,7 @@ def test_send_commands_become_frames_even_when_split_or_batched():
 
 
 def test_a_send_with_a_wrong_length_is_answered_with_an_error():
-    proto = cf.SocketcandServerProtocol()
+    proto = socketcand.SocketcandServerProtocol()
     proto.receive_data(b"< open can0 >")
     proto.data_to_send()
     assert proto.receive_data(b"< send 201 3 1 2 >") == []
@@ -129,14 +130,14 @@ def test_a_send_with_a_wrong_length_is_answered_with_an_error():
 
 
 def test_an_unknown_bus_closes_the_connection():
-    proto = cf.SocketcandServerProtocol(("can0",))
+    proto = socketcand.SocketcandServerProtocol(("can0",))
     proto.receive_data(b"< open can7 >< rawmode >")
-    assert proto.mode is cf.ServerMode.CLOSED
+    assert proto.mode is socketcand.ServerMode.CLOSED
 
 
 def test_frames_are_formatted_as_python_can_parses_them():
     for frame in (cf.CanFrame(0x181, bytes([0x27, 0, 1, 2, 3, 4]), 12.5), cf.CanFrame(0x80, b"", 3.000001)):
-        text = cf.format_frame(frame).decode()
+        text = socketcand.format_frame(frame).decode()
         msg = convert_ascii_message_to_can_message(text)
         assert msg.arbitration_id == frame.can_id
         assert bytes(msg.data) == frame.data
@@ -150,11 +151,11 @@ def test_python_can_send_text_parses_back_to_the_same_frame():
     )
 
     msg = can.Message(arbitration_id=0x205, data=[0x0F, 0, 0xAB, 0xCD, 0xEF, 0x01], is_extended_id=False)
-    proto = cf.SocketcandServerProtocol()
+    proto = socketcand.SocketcandServerProtocol()
     proto.receive_data(b"< open can0 >< rawmode >")
     frames = proto.receive_data(convert_can_message_to_ascii_message(msg).encode())
     assert frames == [cf.CanFrame(0x205, bytes(msg.data))]
-    assert cf.format_send(frames[0]) == b"< send 205 6 0F 00 AB CD EF 01 >"
+    assert socketcand.format_send(frames[0]) == b"< send 205 6 0F 00 AB CD EF 01 >"
 
 
 # --- simulated drives ------------------------------------------------------------------------------

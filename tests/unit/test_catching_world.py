@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from services import motion_control
+from services.robots import motion_control
 from services.ballvision import RollingModel
 from sim.catching import BallSpec, CatchingWorld, TableSpec, Thrower, ThrowSpec
 from sim.world import ClockMode, World

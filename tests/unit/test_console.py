@@ -8,7 +8,10 @@ import pytest
 
 from coordinator.console import Console
 from coordinator.netfile import loads_net
-from coordinator.runtime import OperatorCommand, parse_operator_command
+from coordinator.engine import Firing
+from coordinator.events import ActionEnded, ActionStarted, TransitionFired
+from services.results import ActionResult, Status
+from coordinator.operator import Command, OperatorCommand, parse_operator_command
 
 NET = """
 [net]
@@ -30,14 +33,14 @@ outputs = { out = 1 }
 
 
 @pytest.mark.parametrize("text, command", [
-    ("+ runs_remaining", OperatorCommand("insert", "runs_remaining", 1)),
-    ("+ runs_remaining 3", OperatorCommand("insert", "runs_remaining", 3)),
-    ("- runs_remaining 2", OperatorCommand("remove", "runs_remaining", 2)),
-    ("remove runs 1", OperatorCommand("remove", "runs", 1)),
-    ("pause", OperatorCommand("pause")),
-    ("  step ", OperatorCommand("step")),
-    ("resume", OperatorCommand("resume")),
-    ("abort", OperatorCommand("abort")),
+    ("+ runs_remaining", OperatorCommand(Command.INSERT, "runs_remaining", 1)),
+    ("+ runs_remaining 3", OperatorCommand(Command.INSERT, "runs_remaining", 3)),
+    ("- runs_remaining 2", OperatorCommand(Command.REMOVE, "runs_remaining", 2)),
+    ("remove runs 1", OperatorCommand(Command.REMOVE, "runs", 1)),
+    ("pause", OperatorCommand(Command.PAUSE)),
+    ("  step ", OperatorCommand(Command.STEP)),
+    ("resume", OperatorCommand(Command.RESUME)),
+    ("abort", OperatorCommand(Command.ABORT)),
 ])
 def test_typed_operator_commands_are_understood(text, command):
     assert parse_operator_command(text) == command
@@ -54,17 +57,17 @@ def test_a_bad_operator_command_gets_a_hint(text, hint):
 def test_the_line_view_prints_one_line_per_event_and_errors_even_when_quiet():
     out = io.StringIO()
     console = Console(loads_net(NET), stream=out, live=False)
-    console("fire", {"transition": "go", "seq": 1, "pulse": None})
-    console("start", {"task": "t", "action": "a", "node": "alpha", "instance": "r-1"})
-    console("result", {"task": "t", "action": "a", "node": "alpha", "status": "error", "outcome": None,
-                       "wall_s": 0.5, "reason": "node lost"})
+    fire = TransitionFired("r", Firing(1, "go", {}, {}))
+    console(fire)
+    console(ActionStarted("r", "r-1", "t", "t", "a", "alpha"))
+    lost = ActionEnded("r", "r-1", "t", "a", "alpha", ActionResult(status=Status.ERROR, wall_s=0.5, reason="node lost"))
+    console(lost)
     lines = out.getvalue().splitlines()
     assert len(lines) == 3
     assert "fire  #1     go" in lines[0] and "start t -> a on alpha" in lines[1]
     assert lines[2].endswith("done  t/a on alpha: error in 0.500 s: node lost")
     quiet_out = io.StringIO()
     quiet = Console(loads_net(NET), stream=quiet_out, live=False, quiet=True)
-    quiet("fire", {"transition": "go", "seq": 1, "pulse": None})
-    quiet("result", {"task": "t", "action": "a", "node": "alpha", "status": "error", "outcome": None,
-                     "wall_s": 0.5, "reason": "node lost"})
+    quiet(fire)
+    quiet(lost)
     assert len(quiet_out.getvalue().splitlines()) == 1

@@ -6,7 +6,8 @@ from collections import Counter
 
 import pytest
 
-from coordinator.engine import CancelAction, Engine, EngineState, Firing, Instance, StartAction, Status
+from coordinator.engine import CancelAction, Engine, EngineState, Firing, Instance, StartAction
+from services.results import ActionResult, Status
 from coordinator.errors import EngineError, NotEnabledError
 from coordinator.net import ActionSpec, Arc, PetriNet, Place, PlaceKind, PrimitiveTask, Transition
 
@@ -72,7 +73,7 @@ def test_busy_token_does_not_enable_the_output_transitions():
 def test_success_takes_the_normal_branch():
     engine = Engine(task_net())
     (start,) = [e for e in engine.advance() if isinstance(e, StartAction)]
-    engine.complete(start.instance, "success")
+    engine.complete(start.instance, ActionResult(status=Status.SUCCESS))
     fired = [e.transition for e in engine.advance() if isinstance(e, Firing)]
     assert fired == ["done"]
     assert engine.marking == {"finished": 1}
@@ -81,14 +82,14 @@ def test_success_takes_the_normal_branch():
 def test_failure_still_takes_the_normal_branch():
     engine = Engine(task_net())
     (start,) = [e for e in engine.advance() if isinstance(e, StartAction)]
-    engine.complete(start.instance, Status.FAILURE)
+    engine.complete(start.instance, ActionResult(status=Status.FAILURE))
     assert [e.transition for e in engine.advance() if isinstance(e, Firing)] == ["done"]
 
 
 def test_error_status_takes_the_error_branch():
     engine = Engine(task_net())
     (start,) = [e for e in engine.advance() if isinstance(e, StartAction)]
-    engine.complete(start.instance, "error")
+    engine.complete(start.instance, ActionResult(status=Status.ERROR))
     effects = engine.advance()
     assert [e.transition for e in effects if isinstance(e, Firing)] == ["fail"]
     assert effects[0].instances == (start.instance,)
@@ -102,7 +103,7 @@ def test_named_outcome_branches_on_the_result_of_the_primitive_task():
     )
     engine = Engine(net)
     (start,) = [e for e in engine.advance() if isinstance(e, StartAction)]
-    engine.complete(start.instance, "failure", outcome="missed")
+    engine.complete(start.instance, ActionResult(status=Status.FAILURE, outcome="missed"))
     fired = [e.transition for e in engine.advance() if isinstance(e, Firing)]
     assert fired[:2] == ["missed", "start"]
 
@@ -118,7 +119,7 @@ def test_internal_event_stays_latched_until_the_transition_can_consume_it():
     )
     engine = Engine(net)
     (start,) = [e for e in engine.advance() if isinstance(e, StartAction)]
-    engine.complete(start.instance, "success")
+    engine.complete(start.instance, ActionResult(status=Status.SUCCESS))
     assert engine.advance() == []
     assert [i.id for i in engine.ended_instances()] == [start.instance]
     net_gate = net.place("gate")
@@ -276,12 +277,10 @@ def test_completing_an_unknown_or_ended_instance_is_an_error():
     engine = Engine(task_net())
     (start,) = [e for e in engine.advance() if isinstance(e, StartAction)]
     with pytest.raises(EngineError, match="no instance"):
-        engine.complete("nope", "success")
-    with pytest.raises(EngineError, match="bad status"):
-        engine.complete(start.instance, "great")
-    engine.complete(start.instance, "success")
+        engine.complete("nope", ActionResult(status=Status.SUCCESS))
+    engine.complete(start.instance, ActionResult(status=Status.SUCCESS))
     with pytest.raises(EngineError, match="already ended"):
-        engine.complete(start.instance, "success")
+        engine.complete(start.instance, ActionResult(status=Status.SUCCESS))
 
 
 def test_max_firings_bounds_a_net_that_cycles_without_events():
@@ -308,7 +307,7 @@ def test_restore_rebuilds_marking_and_instances_from_a_journal():
     other = Engine(task_net(), instance_prefix="run7-")
     other.restore({"working": 1}, [Instance(start.instance, "work", "working", start.action)],
                   fired=1, next_instance=2)
-    other.complete("run7-1", "error")
+    other.complete("run7-1", ActionResult(status=Status.ERROR))
     assert [e.transition for e in other.advance() if isinstance(e, Firing)] == ["fail"]
     assert other.fired == 2
     with pytest.raises(EngineError):

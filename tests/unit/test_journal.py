@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from services.results import ActionResult, Status
 from coordinator.engine import Engine, Firing, StartAction
 from coordinator.errors import JournalError
 from coordinator.journal import Journal
@@ -72,8 +73,8 @@ def test_recovery_rebuilds_marking_and_running_instances(tmp_path: Path):
         engine, starts = journaled_engine(journal, net, run)
         assert len(starts) == 2
         first, second = starts
-        journal.action_result(run, first.instance, "w", first.action, "alpha", "success", wall_s=0.1)
-        engine.complete(first.instance, "success")
+        journal.action_result(run, first.instance, "w", first.action, "alpha", ActionResult(status=Status.SUCCESS, wall_s=0.1))
+        engine.complete(first.instance, ActionResult(status=Status.SUCCESS, wall_s=0.1))
         journal.operator(run, "insert", "runs", 1)
         engine.insert_tokens("runs", 1)
         # crash here: 'second' is still running; the operator's token is not yet used
@@ -119,8 +120,8 @@ def test_learner_state_is_replaced_not_appended(tmp_path: Path):
 
 def test_values_that_json_cannot_hold_are_not_a_crash(tmp_path: Path):
     with Journal(tmp_path / "j.sqlite") as journal:
-        journal.action_result("r", "i", "w", "a", None, "success", value=object())
-        journal.action_result("r", "i2", "w", "a", None, "success", value={"img": b"\x00" * 10})
+        journal.action_result("r", "i", "w", "a", None, ActionResult.success(object()))
+        journal.action_result("r", "i2", "w", "a", None, ActionResult.success({"img": b"\x00" * 10}))
         rows = list(journal.results("r"))
     assert [r.instance for r in rows] == ["i", "i2"]
 

@@ -11,8 +11,10 @@ from typing import Any
 import numpy as np
 import pytest
 
+from services.results import ActionResult, Status
 from coordinator.commands import learn as learn_cmd
-from coordinator.errors import JournalError, NetError, PetrobotError
+from coordinator.errors import JournalError, NetError
+from services.errors import PetrobotError
 from coordinator.learning import (
     LEARNER_STATE_DDL,
     FixedChoice,
@@ -179,7 +181,7 @@ def test_restart_continues_exactly_where_the_learner_stopped() -> None:
         for learner, env in ((straight, env1), (restarted, env2)):
             action = learner.choose("locate")
             status = "success" if env.random() < reliability[action] else "failure"
-            state = learner.update("locate", action, status, 1.0)
+            state = learner.update("locate", action, ActionResult(status=Status(status), cost=1.0))
             if learner is restarted:
                 saved["locate"] = state_to_json(state)
     assert restarted.state_dict() == straight.state_dict()
@@ -189,7 +191,7 @@ def test_learner_round_trip_rebuilds_every_task() -> None:
     learner = Learner(seed=2)
     learner.add_task("locate", ["hsv", "diff"], {"scheme": "lri"})
     learner.add_task("grasp", ["only"])
-    learner.update("locate", "hsv", "success", 0.01)
+    learner.update("locate", "hsv", ActionResult(status=Status.SUCCESS, cost=0.01))
     again = Learner.from_state(json.loads(json.dumps(learner.state_dict())), seed=2)
     assert again.tasks == ("locate", "grasp")
     assert again.automaton("locate").probabilities == learner.automaton("locate").probabilities
@@ -200,8 +202,8 @@ def test_restore_keeps_the_nets_current_rate_and_the_saved_probabilities() -> No
     old = Learner(seed=3)
     old.add_task("locate", ["a", "b"], {"scheme": "pursuit", "rate": 0.05, "warmup": 1})
     for status in ("success", "failure", "success", "success"):
-        old.update("locate", "a", status)
-        old.update("locate", "b", "failure")
+        old.update("locate", "a", ActionResult(status=Status(status)))
+        old.update("locate", "b", ActionResult(status=Status.FAILURE))
     new = Learner(seed=3)
     new.add_task("locate", ["a", "b"], {"scheme": "pursuit", "rate": 0.2, "warmup": 1})
     assert new.restore(old.state_dict()) == []
@@ -286,8 +288,6 @@ def test_bad_action_lists_and_results_are_rejected() -> None:
     with pytest.raises(LearnerConfigError, match="twice"):
         make_learner({}, ["a", "a"])
     auto = make_learner({}, ["a", "b"])
-    with pytest.raises(ValueError, match="status"):
-        auto.update("a", "cancelled")
     with pytest.raises(ValueError, match="unknown primitive action"):
         auto.update("c", "success")
     with pytest.raises(ValueError, match="cost"):
@@ -433,7 +433,7 @@ def _journal(tmp_path: Path, runs: int = 300) -> tuple[Path, Path, Learner]:
         status = "success" if env.random() < reliability[action] else "error"
         con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
                     (f"i{k}", "locate", action, "vision", status, None, 0.02, 0.02, 0.01, float(k)))
-        state = learner.update("locate", action, status, 0.02)
+        state = learner.update("locate", action, ActionResult(status=Status(status), cost=0.02))
         con.execute("INSERT OR REPLACE INTO learner_state VALUES (?,?,?,?)",
                     ("locate", "pursuit", state_to_json(state), float(k)))
     learner.add_task("grasp", ["pinch", "scoop"], {"scheme": "lri", "rate": 0.05})
@@ -443,7 +443,7 @@ def _journal(tmp_path: Path, runs: int = 300) -> tuple[Path, Path, Learner]:
         status = "success" if env.random() < 0.8 else "failure"
         con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
                     (f"g{k}", "grasp", action, "motion", status, None, None, wall_s, 0.01, float(k)))
-        state = learner.update("grasp", action, status, wall_s)
+        state = learner.update("grasp", action, ActionResult(status=Status(status), cost=wall_s))
         con.execute("INSERT OR REPLACE INTO learner_state VALUES (?,?,?,?)",
                     ("grasp", "lri", state_to_json(state), float(k)))
     con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
@@ -547,8 +547,9 @@ def test_learn_command_reads_a_journal_written_by_the_runtime_journal(tmp_path: 
             action = learner.choose("grasp")
             status = "success" if env.random() < (0.9 if action == "pinch" else 0.6) else "error"
             wall_s = 0.5 if action == "pinch" else 0.2
-            journal.action_result(run, f"i{k}", "grasp", action, "motion", status, wall_s=wall_s)
-            journal.save_learner("grasp", "lri", learner.update("grasp", action, status, wall_s))
+            result = ActionResult(status=Status(status), wall_s=wall_s)
+            journal.action_result(run, f"i{k}", "grasp", action, "motion", result)
+            journal.save_learner("grasp", "lri", learner.update("grasp", action, result))
     assert learn_cmd.run(_args(str(net_path), "--journal", str(tmp_path / "j.sqlite"), "--json")) == 0
     grasp = json.loads(capsys.readouterr().out)["tasks"]["grasp"]
     assert grasp["replay_matches_state"] is True and grasp["steps"] == 60

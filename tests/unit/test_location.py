@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from coordinator.errors import LocationError
+from services.errors import LocationError
 from services.location import MEMORY_ACTIONS, load_location, parse_location
 
 ROOT = Path(__file__).resolve().parents[2]

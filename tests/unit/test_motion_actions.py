@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 from puma_rig import SimRig
 
-from services import motion_control as mc
+from services.robots import motion_control as mc
 from services.action import CallContext, NodeContext
 from services.actions.motion import Catch, MoveHome, PumaDriver, table_to_base
 from services.location import parse_location
 from services.stream import SetPointSender
-from sim import puma560 as P
+from services.robots import puma560 as P
 from sim.canbus import CanGateway
 
 ROBOT_BASE = (0.75, 0.0, 0.46, math.pi)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+from services.results import ActionResult, Status
 from coordinator.commands import check as check_cmd
 from coordinator.commands import export as export_cmd
 from coordinator.errors import NetError, NetFileError
@@ -580,7 +581,7 @@ def test_demo_net_terminates_at_home_under_the_engine_whatever_the_statuses(seed
         if not pending:
             break
         start = pending.pop(0)
-        engine.complete(start.instance, rng.choice(["success", "failure", "error"]))
+        engine.complete(start.instance, ActionResult(status=rng.choice(list(Status))))
     assert not pending and engine.running_instances() == []
     assert engine.marking == net.home_marking
 

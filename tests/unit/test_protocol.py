@@ -8,12 +8,9 @@ import struct
 import msgpack
 import pytest
 
-from coordinator.errors import (
-    AuthenticationError,
-    LocalProtocolError,
-    RemoteProtocolError,
-)
+from services.errors import AuthenticationError, LocalProtocolError, RemoteProtocolError
 from services import protocol
+from services.results import ActionResult, Status
 from services.protocol import (
     PROTOCOL_VERSION,
     Accepted,
@@ -150,12 +147,13 @@ def test_full_call_exchange_survives_byte_at_a_time_delivery() -> None:
     pair.server.send(Accepted(id="c1"))
     pair.server.send(Pong(seq=7))
     pair.server.send(Feedback(id="c1", data={"fraction": 0.5}))
-    pair.server.send(Result(id="c1", status="failure", outcome="missed", value=b"\x01", cost=2.0, wall_s=1.0, cpu_s=0.1))
+    pair.server.send(Result(id="c1", result=ActionResult(status=Status.FAILURE, outcome="missed", value=b"\x01", cost=2.0, wall_s=1.0, cpu_s=0.1)))
     got = pair.to_client(byte_at_a_time=True)
     assert [type(m) for m in got] == [Accepted, Pong, Feedback, Result]
     res = got[-1]
     assert isinstance(res, Result)
-    assert (res.status, res.outcome, res.value, res.cost, res.reason) == ("failure", "missed", b"\x01", 2.0, None)
+    r = res.result
+    assert (r.status, r.outcome, r.value, r.cost, r.reason) == ("failure", "missed", b"\x01", 2.0, None)
 
 
 def test_every_message_type_round_trips_in_its_direction() -> None:
@@ -167,7 +165,7 @@ def test_every_message_type_round_trips_in_its_direction() -> None:
     ]
     from_server: list[Message] = [
         Accepted(id="a"), Rejected(id="b", reason="busy"), Feedback(id="a", data=None),
-        Result(id="a", status="error", reason="deadline"), Ping(seq=3), Pong(seq=4),
+        Result(id="a", result=ActionResult(status=Status.ERROR, reason="deadline")), Ping(seq=3), Pong(seq=4),
         Event(topic="tick", t=1.5, seq=9, data={"frame": 3}),
     ]
     for m in from_client:
@@ -193,7 +191,7 @@ def test_a_server_may_not_send_a_call_and_a_client_may_not_send_a_result() -> No
     with pytest.raises(LocalProtocolError):
         pair.server.send(Call(id="1", action="x"))
     with pytest.raises(LocalProtocolError):
-        pair.client.send(Result(id="1", status="success"))
+        pair.client.send(Result(id="1", result=ActionResult(status=Status.SUCCESS)))
     pair.client.receive_data(encode_frame(Call(id="1", action="x")))
     with pytest.raises(RemoteProtocolError, match="may not send call"):
         pair.client.next_event()
@@ -308,7 +306,7 @@ def test_public_names_are_exported() -> None:
 def test_an_unencodable_value_is_a_local_error_and_the_connection_goes_on() -> None:
     pair = ConnectionPair()
     pair.handshake()
-    with pytest.raises(LocalProtocolError, match="cannot encode result"):
-        pair.server.send(Result(id="1", status="success", value={1, 2}))
-    pair.server.send(Result(id="1", status="error", reason="result not sendable"))
-    assert pair.to_client() == [Result(id="1", status="error", reason="result not sendable")]
+    with pytest.raises(LocalProtocolError, match="result: cannot encode"):
+        pair.server.send(Result(id="1", result=ActionResult(status=Status.SUCCESS, value={1, 2})))
+    pair.server.send(Result(id="1", result=ActionResult(status=Status.ERROR, reason="result not sendable")))
+    assert pair.to_client() == [Result(id="1", result=ActionResult(status=Status.ERROR, reason="result not sendable"))]

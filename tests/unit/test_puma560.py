@@ -10,11 +10,12 @@ import pybullet
 import pytest
 from pybullet_utils import bullet_client
 
+from services.robots import puma560 as K
 from sim import puma560 as P
 
 
 def _random_q(rng: np.random.Generator, n: int) -> np.ndarray:
-    return rng.uniform(P.Q_MIN, P.Q_MAX, size=(n, 6))
+    return rng.uniform(K.Q_MIN, K.Q_MAX, size=(n, 6))
 
 
 @pytest.fixture
@@ -27,11 +28,11 @@ def pb(tmp_path):
 
 
 def test_the_dh_table_is_the_published_puma_560_table():
-    assert DH_matches(P.DH_A, [0, 0.4318, 0.0203, 0, 0, 0])
-    assert DH_matches(P.DH_D, [0, 0, 0.15005, 0.4318, 0, 0])
-    assert DH_matches(P.DH_ALPHA, [math.pi / 2, 0, -math.pi / 2, math.pi / 2, -math.pi / 2, 0])
-    assert DH_matches(np.degrees(P.Q_MIN), [-160, -45, -225, -110, -100, -266])
-    assert DH_matches(np.degrees(P.Q_MAX), [160, 225, 45, 170, 100, 266])
+    assert DH_matches(K.DH_A, [0, 0.4318, 0.0203, 0, 0, 0])
+    assert DH_matches(K.DH_D, [0, 0, 0.15005, 0.4318, 0, 0])
+    assert DH_matches(K.DH_ALPHA, [math.pi / 2, 0, -math.pi / 2, math.pi / 2, -math.pi / 2, 0])
+    assert DH_matches(np.degrees(K.Q_MIN), [-160, -45, -225, -110, -100, -266])
+    assert DH_matches(np.degrees(K.Q_MAX), [160, 225, 45, 170, 100, 266])
 
 
 def DH_matches(a, b) -> bool:
@@ -40,7 +41,7 @@ def DH_matches(a, b) -> bool:
 
 def test_fk_at_zero_puts_the_flange_at_the_known_ready_position():
     # Corke's toolbox gives p560.fkine(qz) translation (0.4521, -0.1500, 0.4318).
-    t = P.fk(np.zeros(6))
+    t = K.fk(np.zeros(6))
     assert np.allclose(t[:3, 3], [0.4521, -0.15005, 0.4318], atol=1e-9)
     assert np.allclose(t[:3, :3], np.eye(3), atol=1e-12)
 
@@ -53,13 +54,13 @@ def test_fk_is_the_product_of_the_dh_rows():
             ct, st = math.cos(q[i]), math.sin(q[i])
             rz = np.array([[ct, -st, 0, 0], [st, ct, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1.0]])
             tz = np.eye(4)
-            tz[2, 3] = P.DH_D[i]
+            tz[2, 3] = K.DH_D[i]
             tx = np.eye(4)
-            tx[0, 3] = P.DH_A[i]
-            ca, sa = math.cos(P.DH_ALPHA[i]), math.sin(P.DH_ALPHA[i])
+            tx[0, 3] = K.DH_A[i]
+            ca, sa = math.cos(K.DH_ALPHA[i]), math.sin(K.DH_ALPHA[i])
             rx = np.array([[1, 0, 0, 0], [0, ca, -sa, 0], [0, sa, ca, 0], [0, 0, 0, 1.0]])
             t = t @ rz @ tz @ tx @ rx
-        assert np.allclose(P.fk(q), t, atol=1e-12)
+        assert np.allclose(K.fk(q), t, atol=1e-12)
 
 
 def test_fk_agrees_with_pybullet_link_frames_of_the_urdf(pb):
@@ -68,14 +69,14 @@ def test_fk_agrees_with_pybullet_link_frames_of_the_urdf(pb):
     for q in _random_q(rng, 10):
         for j, qi in zip(joints, q):
             client.resetJointState(body, j, qi)
-        frames = P.fk_all(q)
+        frames = K.fk_all(q)
         for n in range(1, 7):
             state = client.getLinkState(body, links[f"link{n}"], computeForwardKinematics=True)
             rot = np.asarray(client.getMatrixFromQuaternion(state[5])).reshape(3, 3)
             assert np.allclose(state[4], frames[n][:3, 3], atol=1e-6)
             assert np.allclose(rot, frames[n][:3, :3], atol=1e-6)
         cup = client.getLinkState(body, links["cup"], computeForwardKinematics=True)
-        assert np.allclose(cup[4], frames[6][:3, 3] + P.CUP_MOUNT * frames[6][:3, 2], atol=1e-6)
+        assert np.allclose(cup[4], frames[6][:3, 3] + K.CUP_MOUNT * frames[6][:3, 2], atol=1e-6)
 
 
 def test_ik_of_fk_returns_q_over_random_configurations_within_limits():
@@ -83,10 +84,10 @@ def test_ik_of_fk_returns_q_over_random_configurations_within_limits():
     checked = 0
     for q in _random_q(rng, 300):
         q_near = q + rng.normal(0.0, 0.05, 6)
-        sol = P.ik(P.fk(q), q_near)
-        assert np.allclose(P.fk(sol), P.fk(q), atol=1e-9)
+        sol = K.ik(K.fk(q), q_near)
+        assert np.allclose(K.fk(sol), K.fk(q), atol=1e-9)
         # Near the elbow or wrist singularities the angles are ill-conditioned; compare them elsewhere.
-        if abs(np.linalg.det(P.jacobian(q))) > 1e-3:
+        if abs(np.linalg.det(K.jacobian(q))) > 1e-3:
             assert np.allclose(sol, q, atol=1e-7), (q, sol)
             checked += 1
     assert checked > 250
@@ -94,47 +95,47 @@ def test_ik_of_fk_returns_q_over_random_configurations_within_limits():
 
 def test_ik_gives_up_to_eight_solutions_that_all_reach_the_pose():
     q = np.radians([10, 40, -150, 20, 50, 30])
-    target = P.fk(q)
-    sols = P.ik_all(target, q)
+    target = K.fk(q)
+    sols = K.ik_all(target, q)
     assert 1 <= len(sols) <= 8
     assert np.allclose(sols[0], q, atol=1e-9)
     for s in sols:
-        assert P.within_limits(s)
-        assert np.allclose(P.fk(s), target, atol=1e-9)
+        assert K.within_limits(s)
+        assert np.allclose(K.fk(s), target, atol=1e-9)
     branches = {(round(s[0], 3), round(s[2], 3), round(s[4], 3)) for s in sols}
     assert len(branches) == len(sols)
 
 
 def test_ik_picks_the_solution_nearest_to_the_current_configuration():
     q = np.radians([10, 40, -150, 20, 50, 30])
-    target = P.fk(q)
-    for s in P.ik_all(target, q):
-        assert np.allclose(P.ik(target, s + 0.01), s, atol=1e-9)
+    target = K.fk(q)
+    for s in K.ik_all(target, q):
+        assert np.allclose(K.ik(target, s + 0.01), s, atol=1e-9)
 
 
 def test_an_out_of_reach_target_raises_a_clear_error():
     target = np.eye(4)
     target[:3, 3] = (2.0, 0.0, 0.0)
-    with pytest.raises(P.UnreachableError, match="not reachable"):
-        P.ik(target)
+    with pytest.raises(K.UnreachableError, match="not reachable"):
+        K.ik(target)
 
 
 def test_a_pose_reachable_only_outside_the_joint_limits_raises():
     # Reached by joint angles beyond the limits of joints 2 and 5, on every branch.
-    target = P.fk([0.861, -1.446, -2.884, -3.038, 1.968, 2.593])
-    assert P._raw_solutions(target, 0.0)  # geometrically reachable
-    with pytest.raises(P.UnreachableError, match="joint limits"):
-        P.ik(target)
+    target = K.fk([0.861, -1.446, -2.884, -3.038, 1.968, 2.593])
+    assert K._raw_solutions(target, 0.0)  # geometrically reachable
+    with pytest.raises(K.UnreachableError, match="joint limits"):
+        K.ik(target)
 
 
 def test_the_jacobian_matches_finite_differences_of_fk():
     q = np.radians([20, 30, -120, 40, 60, -30])
-    jac = P.jacobian(q)
+    jac = K.jacobian(q)
     eps = 1e-7
     for i in range(6):
         dq = np.zeros(6)
         dq[i] = eps
-        dp = (P.fk(q + dq)[:3, 3] - P.fk(q - dq)[:3, 3]) / (2 * eps)
+        dp = (K.fk(q + dq)[:3, 3] - K.fk(q - dq)[:3, 3]) / (2 * eps)
         assert np.allclose(jac[:3, i], dp, atol=1e-6)
 
 
@@ -160,9 +161,9 @@ def test_the_urdf_carries_limits_masses_cup_and_crossfire_link():
     for n in range(1, 7):
         lim = joints[f"joint{n}"].find("limit")
         assert lim is not None
-        assert float(lim.get("lower")) == pytest.approx(P.Q_MIN[n - 1], abs=1e-5)
-        assert float(lim.get("upper")) == pytest.approx(P.Q_MAX[n - 1], abs=1e-5)
-        assert float(lim.get("velocity")) == pytest.approx(P.QD_MAX[n - 1])
+        assert float(lim.get("lower")) == pytest.approx(K.Q_MIN[n - 1], abs=1e-5)
+        assert float(lim.get("upper")) == pytest.approx(K.Q_MAX[n - 1], abs=1e-5)
+        assert float(lim.get("velocity")) == pytest.approx(K.QD_MAX[n - 1])
     links = {lk.get("name"): lk for lk in root.iter("link")}
     assert P.CROSSFIRE_LINK in links and "cup" in links
     restitution = links["cup"].find("contact/restitution")
@@ -173,7 +174,7 @@ def test_the_urdf_carries_limits_masses_cup_and_crossfire_link():
 def test_a_ball_on_the_beam_blocks_it_and_a_ball_beside_it_does_not():
     pose = np.eye(4)
     a, b = P.crossfire_beam(pose)
-    assert np.allclose(b - a, [2 * P.CUP_INNER_RADIUS, 0, 0])
+    assert np.allclose(b - a, [2 * K.CUP_INNER_RADIUS, 0, 0])
     assert P.beam_blocked((0.01, 0.0, 0.015), 0.02, a, b)
     assert not P.beam_blocked((0.0, 0.0, 0.025), 0.02, a, b)
 
@@ -182,12 +183,12 @@ def test_a_ball_dropped_into_the_held_cup_comes_to_rest_across_the_beam(pb):
     client, body, joints, links = pb
     client.setGravity(0, 0, -9.81)
     client.setPhysicsEngineParameter(fixedTimeStep=0.001)
-    for j, qi in zip(joints, P.Q_HOME):
+    for j, qi in zip(joints, K.Q_HOME):
         client.resetJointState(body, j, qi)
         client.setJointMotorControl2(body, j, client.POSITION_CONTROL, targetPosition=qi, force=500)
-    rim = P.fk(P.Q_HOME)
+    rim = K.fk(K.Q_HOME)
     axis = rim[:3, 2]
-    centre = rim[:3, 3] + (P.CUP_RIM_OFFSET + 0.03) * axis
+    centre = rim[:3, 3] + (K.CUP_RIM_OFFSET + 0.03) * axis
     radius, mass = 0.02, 0.0027
     col = client.createCollisionShape(client.GEOM_SPHERE, radius=radius)
     ball = client.createMultiBody(mass, col, -1, list(centre))

@@ -8,7 +8,7 @@ import struct
 import msgpack
 import pytest
 
-from coordinator.errors import RemoteProtocolError
+from services.errors import RemoteProtocolError
 from services.stream import (
     LatestSetPoint,
     SetPoint,

@@ -23,8 +23,8 @@ import can
 import numpy as np
 from numpy.typing import NDArray
 
-from coordinator.errors import ActionError
-from sim import canframes as cf
+from services.errors import ActionError
+from services.devices import cia402 as cf
 
 __all__ = ["BusError", "PumaDrives"]
 

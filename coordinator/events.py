@@ -1,0 +1,147 @@
+"""What a run tells its observers: typed events, one class per kind (paper section 5).
+
+The runtime (:mod:`coordinator.runtime`) calls its observer with one of these records, right after
+the journal has recorded what it describes; displays (the terminal console, the web console, the
+catching demo's report) follow the token flow from them. Events are frozen; ``t_wall`` is the Unix
+time in seconds at which the runtime emitted the event.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from coordinator.engine import Firing
+from coordinator.operator import OperatorCommand
+from services.results import ActionResult
+
+__all__ = [
+    "ActionEnded",
+    "ActionStarted",
+    "LearnerUpdated",
+    "Observer",
+    "OperatorApplied",
+    "OperatorRefused",
+    "PulseDelivered",
+    "RunEvent",
+    "RunStateChanged",
+    "TransitionFired",
+]
+
+
+def _now() -> float:
+    return time.time()
+
+
+@dataclass(frozen=True, slots=True)
+class RunStateChanged:
+    """The run started, resumed, paused, resumed firing, or ended.
+
+    Attributes:
+        run: run id.
+        state: ``started``, ``resumed``, ``paused``, ``running``, ``waiting`` or an end state
+            (``dead``, ``aborted``, ``interrupted``...).
+        reason: why, in words, or ``""``.
+    """
+
+    run: str
+    state: str
+    reason: str = ""
+    t_wall: float = field(default_factory=_now)
+
+
+@dataclass(frozen=True, slots=True)
+class TransitionFired:
+    """A transition fired (already journaled); the engine's marking is the one it produced."""
+
+    run: str
+    firing: Firing
+    t_wall: float = field(default_factory=_now)
+
+
+@dataclass(frozen=True, slots=True)
+class ActionStarted:
+    """A primitive action was sent to its node for a new instance of a primitive task.
+
+    Attributes:
+        instance: instance id (also the call id on the node).
+        task: primitive task.
+        place: its primitive-task place.
+        action: the primitive action chosen (by the learner, section 4).
+        node: the node services.toml places it on, or ``None`` if it is not placed.
+    """
+
+    run: str
+    instance: str
+    task: str
+    place: str
+    action: str
+    node: str | None
+    t_wall: float = field(default_factory=_now)
+
+
+@dataclass(frozen=True, slots=True)
+class ActionEnded:
+    """A primitive action returned (already journaled, not yet latched in the engine)."""
+
+    run: str
+    instance: str
+    task: str
+    action: str
+    node: str | None
+    result: ActionResult
+    t_wall: float = field(default_factory=_now)
+
+
+@dataclass(frozen=True, slots=True)
+class PulseDelivered:
+    """An external event arrived as a pulse; ``fired`` transitions fired on it."""
+
+    run: str
+    event: str
+    fired: int
+    t_wall: float = field(default_factory=_now)
+
+
+@dataclass(frozen=True, slots=True)
+class OperatorApplied:
+    """An operator command was journaled and applied."""
+
+    run: str
+    command: OperatorCommand
+    t_wall: float = field(default_factory=_now)
+
+
+@dataclass(frozen=True, slots=True)
+class OperatorRefused:
+    """An operator command was refused (journaled with the reason); the run is unchanged."""
+
+    run: str
+    command: OperatorCommand
+    reason: str
+    t_wall: float = field(default_factory=_now)
+
+
+@dataclass(frozen=True, slots=True)
+class LearnerUpdated:
+    """A primitive task's learning automaton took in a result (section 4).
+
+    Attributes:
+        task: primitive task.
+        state: the automaton's state dict (probabilities, estimates; see coordinator.learning).
+    """
+
+    run: str
+    task: str
+    state: Mapping[str, Any]
+    t_wall: float = field(default_factory=_now)
+
+
+RunEvent = (RunStateChanged | TransitionFired | ActionStarted | ActionEnded | PulseDelivered
+            | OperatorApplied | OperatorRefused | LearnerUpdated)
+"""Any event of a run."""
+
+Observer = Callable[[RunEvent], None]
+"""Called with each event; must not block (a display that fails is logged, never stops the run)."""

@@ -1,0 +1,228 @@
+"""One endpoint of a node-protocol connection: a state machine fed with bytes (sans-IO).
+
+:class:`Connection` turns received bytes into message objects (:meth:`Connection.receive_data`,
+:meth:`Connection.next_event`) and message objects into bytes (:meth:`Connection.send`,
+:meth:`Connection.data_to_send`), as h11 and websockets do; it opens no socket and reads no clock.
+The asyncio shell is :mod:`services.wire`.
+
+Rules of this file:
+
+* Nothing but the handshake (and ``bye``) may pass before the connection is OPEN. The handshake's
+  legal moves are the table :data:`HANDSHAKE`: ``(state, message received) → next state``; any
+  other message before OPEN is a :class:`~services.errors.RemoteProtocolError`.
+* Once OPEN, each message type may travel in one direction only
+  (:data:`~services.protocol.messages.CLIENT_SENDS`, :data:`~services.protocol.messages.SERVER_SENDS`).
+* ``bye`` may be sent once in any state and moves the connection to CLOSED; so does receiving it,
+  the end of the stream, or any protocol error.
+"""
+
+from __future__ import annotations
+
+import enum
+import os
+from collections.abc import Iterator
+from typing import Final
+
+import msgpack
+
+from services.errors import AuthenticationError, LocalProtocolError, RemoteProtocolError
+from services.protocol.framing import FrameReader, pack_map, unpack_map
+from services.protocol.handshake import PROTOCOL_VERSION, Role, handshake_mac, macs_equal
+from services.protocol.messages import (
+    CLIENT_SENDS,
+    NONCE_BYTES,
+    SERVER_SENDS,
+    Auth,
+    Bye,
+    Hello,
+    Message,
+    Welcome,
+    from_map,
+    to_map,
+)
+
+__all__ = ["DEFAULT_MAX_FRAME", "HANDSHAKE", "Connection", "State"]
+
+DEFAULT_MAX_FRAME: Final = 16 * 1024 * 1024
+"""Default cap on a frame body, in bytes (16 MiB)."""
+
+
+class State(enum.Enum):
+    """Connection states (docs/protocol.md, "States")."""
+
+    AWAIT_HELLO = "await_hello"
+    """Client: connected, waiting for the server's ``hello``."""
+    AWAIT_AUTH = "await_auth"
+    """Server: ``hello`` sent, waiting for the client's ``auth``."""
+    AWAIT_WELCOME = "await_welcome"
+    """Client: ``auth`` sent, waiting for the server's ``welcome``."""
+    OPEN = "open"
+    """Both sides authenticated; calls, events and heartbeats may flow."""
+    CLOSED = "closed"
+    """``bye`` sent or received, end of stream seen, or a protocol error happened."""
+
+
+HANDSHAKE: Final[dict[tuple[State, type[Message]], State]] = {
+    (State.AWAIT_HELLO, Hello): State.AWAIT_WELCOME,  # client: verify version, answer with auth
+    (State.AWAIT_AUTH, Auth): State.OPEN,  # server: verify the client's MAC, answer with welcome
+    (State.AWAIT_WELCOME, Welcome): State.OPEN,  # client: verify the server's MAC
+}
+"""The handshake: ``(state, message received) → next state``; anything else before OPEN is illegal."""
+
+
+class Connection:
+    """One endpoint of a connection: a state machine fed with bytes, producing messages.
+
+    The server queues its ``hello`` at construction; the client answers ``hello`` with ``auth``
+    and the server answers a valid ``auth`` with ``welcome`` by themselves (fetch these bytes with
+    :meth:`data_to_send`). Handshake messages are still returned by :meth:`next_event`, after
+    verification, so the shell learns the peer's name.
+
+    Args:
+        role: which end this is.
+        key: the shared key (bytes; 32 random bytes recommended).
+        name: this endpoint's name (node name for a server, client name for a client).
+        max_frame: cap on received and sent frame bodies, bytes.
+        nonce: this side's 16-byte nonce; fresh random bytes when ``None`` (pass one in tests).
+
+    Raises:
+        LocalProtocolError: the nonce is not 16 bytes.
+    """
+
+    def __init__(
+        self,
+        role: Role,
+        key: bytes,
+        *,
+        name: str,
+        max_frame: int = DEFAULT_MAX_FRAME,
+        nonce: bytes | None = None,
+    ) -> None:
+        self.role = role
+        self.name = name
+        self.max_frame = max_frame
+        self.peer: str | None = None
+        """The peer's name once known (from ``hello`` or ``auth``)."""
+        self._key = key
+        self._nonce = nonce if nonce is not None else os.urandom(NONCE_BYTES)
+        if len(self._nonce) != NONCE_BYTES:
+            raise LocalProtocolError(f"nonce must be {NONCE_BYTES} bytes")
+        self._server_nonce = b""
+        self._reader = FrameReader(max_frame)
+        self._out: list[bytes] = []
+        self._packer = msgpack.Packer(use_bin_type=True)
+        self._bye_sent = False
+        self._may_send = CLIENT_SENDS if role is Role.CLIENT else SERVER_SENDS
+        self._may_receive = SERVER_SENDS if role is Role.CLIENT else CLIENT_SENDS
+        self.state: State
+        if role is Role.SERVER:
+            self.state = State.AWAIT_AUTH
+            self._server_nonce = self._nonce
+            self._queue(Hello(node=name, version=PROTOCOL_VERSION, nonce=self._nonce))
+        else:
+            self.state = State.AWAIT_HELLO
+
+    # ---- output
+
+    def _queue(self, msg: Message) -> None:
+        try:
+            self._out.append(pack_map(to_map(msg), self.max_frame, self._packer))
+        except LocalProtocolError as exc:
+            raise LocalProtocolError(f"{msg.TYPE}: {exc}") from None
+
+    def send(self, msg: Message) -> None:
+        """Queue ``msg`` for sending; collect the bytes with :meth:`data_to_send`.
+
+        A :class:`Bye` may be sent once in any state (also after a protocol error, to tell the
+        peer why); it moves the connection to CLOSED.
+
+        Raises:
+            LocalProtocolError: the state or direction forbids ``msg``, or it cannot be encoded.
+        """
+        if type(msg) is Bye:
+            if self._bye_sent:
+                raise LocalProtocolError("bye already sent")
+            self._bye_sent = True
+            self._queue(msg)
+            self.state = State.CLOSED
+            return
+        if self.state is not State.OPEN:
+            raise LocalProtocolError(f"cannot send {msg.TYPE} in state {self.state.name}")
+        if type(msg) not in self._may_send:
+            raise LocalProtocolError(f"a {self.role.value} may not send {msg.TYPE}")
+        self._queue(msg)
+
+    def data_to_send(self) -> bytes:
+        """Return and forget all bytes queued for the peer (``b""`` if none)."""
+        if not self._out:
+            return b""
+        out = self._out[0] if len(self._out) == 1 else b"".join(self._out)
+        self._out.clear()
+        return out
+
+    # ---- input
+
+    def receive_data(self, data: bytes) -> None:
+        """Feed bytes received from the peer; ``b""`` means end of stream."""
+        self._reader.feed(data)
+
+    def next_event(self) -> Message | None:
+        """Parse and return the next complete message, or ``None`` if more bytes are needed.
+
+        Raises:
+            RemoteProtocolError: oversize header, bad msgpack, unknown or misplaced message, end
+                of stream inside a frame.
+            AuthenticationError: the peer's MAC does not verify (wrong key).
+        """
+        try:
+            body = self._reader.next_body()
+            if body is None:
+                if self._reader.eof:
+                    self.state = State.CLOSED
+                return None
+            msg = from_map(unpack_map(body))
+            self._on_receive(msg)
+        except RemoteProtocolError:
+            self.state = State.CLOSED
+            raise
+        return msg
+
+    def events(self) -> Iterator[Message]:
+        """Iterate over every complete message buffered so far (see :meth:`next_event`)."""
+        while (msg := self.next_event()) is not None:
+            yield msg
+
+    def _on_receive(self, msg: Message) -> None:
+        kind = type(msg)
+        state = self.state
+        if state is State.OPEN:
+            if kind not in self._may_receive:
+                sender = "server" if self.role is Role.CLIENT else "client"
+                raise RemoteProtocolError(f"a {sender} may not send {msg.TYPE}")
+            if kind is Bye:
+                self.state = State.CLOSED
+            return
+        if kind is Bye:
+            self.state = State.CLOSED
+            return
+        after = HANDSHAKE.get((state, kind))
+        if after is None:
+            raise RemoteProtocolError(f"unexpected {msg.TYPE} in state {state.name}")
+        if isinstance(msg, Hello):
+            if msg.version != PROTOCOL_VERSION:
+                raise RemoteProtocolError(f"server speaks protocol version {msg.version}, we speak {PROTOCOL_VERSION}")
+            self.peer = msg.node
+            self._server_nonce = msg.nonce
+            mac = handshake_mac(self._key, Role.CLIENT, msg.nonce, self._nonce)
+            self._queue(Auth(client=self.name, nonce=self._nonce, mac=mac))
+        elif isinstance(msg, Auth):
+            expect = handshake_mac(self._key, Role.CLIENT, self._nonce, msg.nonce)
+            if not macs_equal(expect, msg.mac):
+                raise AuthenticationError(f"client {msg.client!r} failed authentication (wrong key?)")
+            self.peer = msg.client
+            self._queue(Welcome(mac=handshake_mac(self._key, Role.SERVER, self._nonce, msg.nonce)))
+        elif isinstance(msg, Welcome):
+            expect = handshake_mac(self._key, Role.SERVER, self._server_nonce, self._nonce)
+            if not macs_equal(expect, msg.mac):
+                raise AuthenticationError(f"node {self.peer!r} failed authentication (wrong key?)")
+        self.state = after
