@@ -1,6 +1,6 @@
 """Benchmark: build and solve the tangible CTMC of scaled Kanban and FMS GSPNs.
 
-Models, from the Model Checking Contest's PNML in ``/work/shared/mcc``:
+Models, from the Model Checking Contest's PNML in ``tests/data/mcc``:
 
 * Kanban of G. Ciardo and M. Tilgner (ICASE report 96-35, 1996), every transition exponential of
   rate 1/s, N kanbans per cell: N = 2, 3, 4, 5 give 4,600, 58,400, 454,475 and 2,546,432 tangible
@@ -34,10 +34,8 @@ from coordinator.analysis.gspn import tangible_chain
 from coordinator.net import PetriNet, TransitionKind
 from coordinator.pnml import load_pnml
 
-#: the Model Checking Contest models: $PETROBOT_MCC, else shared/mcc beside the project
-MCC = Path(os.environ.get("PETROBOT_MCC") or Path(__file__).resolve().parents[2] / "shared" / "mcc")
-if not MCC.is_dir():
-    MCC = Path("/work/shared/mcc")
+#: the Model Checking Contest models: $PETROBOT_MCC, else tests/data/mcc in this repository
+MCC = Path(os.environ.get("PETROBOT_MCC") or Path(__file__).resolve().parents[1] / "tests" / "data" / "mcc")
 FMS_IMMEDIATE = frozenset({"tM1", "tM2", "tM3", "tx", "tP1e", "tP1j", "tP2e", "tP2j"})
 
 

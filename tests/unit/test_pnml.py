@@ -40,7 +40,6 @@ MCC_COUNTS = {
     "TokenRing-PT-005": (36, 156, 624, 6),
 }
 
-needs_mcc = pytest.mark.skipif(not MCC.is_dir(), reason="MCC models not present")
 
 
 def pnml(body: str, net_type: str = PTNET_TYPE) -> str:
@@ -49,7 +48,6 @@ def pnml(body: str, net_type: str = PTNET_TYPE) -> str:
 
 
 # ----------------------------------------------------------------------------------- MCC models
-@needs_mcc
 @pytest.mark.parametrize("model", sorted(MCC_COUNTS))
 def test_every_mcc_model_loads_as_a_plain_net_with_its_counts(model: str) -> None:
     path = MCC / model / "model.pnml"
@@ -69,7 +67,6 @@ def test_every_mcc_model_loads_as_a_plain_net_with_its_counts(model: str) -> Non
     assert net.interpretation_problems() == []
 
 
-@needs_mcc
 @pytest.mark.parametrize("model", sorted(MCC_COUNTS))
 def test_mcc_models_round_trip_through_pnml_and_toml(model: str) -> None:
     net = load_pnml(MCC / model / "model.pnml")
@@ -77,7 +74,6 @@ def test_mcc_models_round_trip_through_pnml_and_toml(model: str) -> None:
     assert loads_net(dump_net(net)) == net
 
 
-@needs_mcc
 def test_kanban_matrices_match_its_arcs() -> None:
     net = load_pnml(MCC / "Kanban-PT-00005" / "model.pnml")
     assert int(net.pre.sum() + net.post.sum()) == sum(a.weight for a in net.arcs)
