@@ -86,7 +86,7 @@ class _Wire(FramedConnection):
         conn = self.conn
         conn.receive_data(data)
         try:
-            while (msg := conn.next_event()) is not None:
+            while (msg := conn.next_message()) is not None:
                 self._handle(msg)
         except ProtocolError as exc:
             reason = "auth_failed" if isinstance(exc, AuthenticationError) else f"protocol_error: {exc}"

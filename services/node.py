@@ -134,7 +134,7 @@ class _Peer(FramedConnection):
         conn = self.conn
         conn.receive_data(data)
         try:
-            while (msg := conn.next_event()) is not None:
+            while (msg := conn.next_message()) is not None:
                 self._handle(msg)
         except ProtocolError as exc:
             if isinstance(exc, AuthenticationError):

@@ -1,4 +1,4 @@
-"""The asyncio shell around one sans-IO protocol connection (DESIGN.md §2, docs/protocol.md §2).
+"""The asyncio shell around one sans-IO protocol connection (docs/protocol.md §1).
 
 :class:`FramedConnection` is what the node's accepted connections and the client's node links have
 in common: ``TCP_NODELAY`` on the socket, and every frame produced during one event-loop iteration

@@ -1,7 +1,7 @@
 """One endpoint of a node-protocol connection: a state machine fed with bytes (sans-IO).
 
 :class:`Connection` turns received bytes into message objects (:meth:`Connection.receive_data`,
-:meth:`Connection.next_event`) and message objects into bytes (:meth:`Connection.send`,
+:meth:`Connection.next_message`) and message objects into bytes (:meth:`Connection.send`,
 :meth:`Connection.data_to_send`), as h11 and websockets do; it opens no socket and reads no clock.
 The asyncio shell is :mod:`services.wire`.
 
@@ -75,7 +75,7 @@ class Connection:
 
     The server queues its ``hello`` at construction; the client answers ``hello`` with ``auth``
     and the server answers a valid ``auth`` with ``welcome`` by themselves (fetch these bytes with
-    :meth:`data_to_send`). Handshake messages are still returned by :meth:`next_event`, after
+    :meth:`data_to_send`). Handshake messages are still returned by :meth:`next_message`, after
     verification, so the shell learns the peer's name.
 
     Args:
@@ -166,7 +166,7 @@ class Connection:
         """Feed bytes received from the peer; ``b""`` means end of stream."""
         self._reader.feed(data)
 
-    def next_event(self) -> Message | None:
+    def next_message(self) -> Message | None:
         """Parse and return the next complete message, or ``None`` if more bytes are needed.
 
         Raises:
@@ -187,9 +187,9 @@ class Connection:
             raise
         return msg
 
-    def events(self) -> Iterator[Message]:
-        """Iterate over every complete message buffered so far (see :meth:`next_event`)."""
-        while (msg := self.next_event()) is not None:
+    def messages(self) -> Iterator[Message]:
+        """Iterate over every complete message buffered so far (see :meth:`next_message`)."""
+        while (msg := self.next_message()) is not None:
             yield msg
 
     def _on_receive(self, msg: Message) -> None:

@@ -192,17 +192,17 @@ async def test_a_bad_frame_closes_only_that_connection(cluster: Cluster) -> None
         reader, writer = await asyncio.open_connection(host, port)
         try:
             conn.receive_data(await reader.read(4096))
-            conn.next_event()  # hello
+            conn.next_message()  # hello
             writer.write(conn.data_to_send())  # auth
             conn.receive_data(await reader.read(4096))
-            conn.next_event()  # welcome: open
+            conn.next_message()  # welcome: open
             writer.write(struct.pack(">I", 4) + b"\xc1\xc1\xc1\xc1")  # not msgpack
             await writer.drain()
             data = await asyncio.wait_for(reader.read(), 3)  # until EOF: the node closed it
         finally:
             writer.close()
         conn.receive_data(data)
-        bye = conn.next_event()
+        bye = conn.next_message()
         assert isinstance(bye, Bye) and bye.reason.startswith("protocol_error")
         # an oversize header on yet another connection: refused before the body is sent
         with socket.create_connection((host, port), timeout=3) as raw:

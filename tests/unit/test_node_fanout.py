@@ -44,12 +44,12 @@ async def _subscribed_peer(node: Node, topic: str) -> tuple[_Peer, FakeTransport
     client = Connection(Role.CLIENT, KEY, name="slow")
     client.receive_data(bytes(transport.data))
     transport.data.clear()
-    list(client.events())
+    list(client.messages())
     peer.data_received(client.data_to_send())
     await asyncio.sleep(0)
     client.receive_data(bytes(transport.data))
     transport.data.clear()
-    list(client.events())
+    list(client.messages())
     client.send(Subscribe(topic=topic))
     peer.data_received(client.data_to_send())
     await asyncio.sleep(0)
@@ -67,7 +67,7 @@ async def test_a_slow_subscriber_loses_its_oldest_events_and_never_blocks_the_no
     peer.resume_writing()
     await asyncio.sleep(0)
     client.receive_data(bytes(transport.data))
-    got = [m for m in client.events() if isinstance(m, Event)]
+    got = [m for m in client.messages() if isinstance(m, Event)]
     assert [e.seq for e in got] == list(range(1000 - 256 + 1, 1001))  # the newest 256, in order
     assert peer.dropped == 1000 - 256
 
@@ -80,5 +80,5 @@ async def test_events_flow_straight_through_to_a_subscriber_that_keeps_up() -> N
     node.publish("tick", 3)
     await asyncio.sleep(0)
     client.receive_data(bytes(transport.data))
-    got = [(m.topic, m.seq, m.data) for m in client.events() if isinstance(m, Event)]
+    got = [(m.topic, m.seq, m.data) for m in client.messages() if isinstance(m, Event)]
     assert got == [("tick", 1, 1), ("tick", 2, 3)]

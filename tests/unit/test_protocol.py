@@ -61,10 +61,10 @@ class ConnectionPair:
         if byte_at_a_time:
             for i in range(len(data)):
                 dst.receive_data(data[i:i + 1])
-                out.extend(dst.events())
+                out.extend(dst.messages())
         else:
             dst.receive_data(data)
-            out.extend(dst.events())
+            out.extend(dst.messages())
         return out
 
     def handshake(self, byte_at_a_time: bool = False) -> None:
@@ -97,23 +97,23 @@ def test_wrong_key_raises_authentication_error_on_the_server() -> None:
 def test_a_server_without_the_key_is_caught_by_the_client() -> None:
     client = Connection(Role.CLIENT, KEY, name="coord", nonce=CLIENT_NONCE)
     client.receive_data(encode_frame(Hello(node="evil", version=PROTOCOL_VERSION, nonce=SERVER_NONCE)))
-    assert isinstance(client.next_event(), Hello)
+    assert isinstance(client.next_message(), Hello)
     client.data_to_send()
     client.receive_data(encode_frame(Welcome(mac=b"\0" * 32)))
     with pytest.raises(AuthenticationError):
-        client.next_event()
+        client.next_message()
 
 
 def test_a_reflected_client_mac_does_not_pass_as_the_server_mac() -> None:
     client = Connection(Role.CLIENT, KEY, name="coord", nonce=CLIENT_NONCE)
     client.receive_data(encode_frame(Hello(node="mirror", version=PROTOCOL_VERSION, nonce=SERVER_NONCE)))
-    client.next_event()
+    client.next_message()
     client.data_to_send()
     # a peer without the key bounces the client's own MAC back as its welcome
     reflected = handshake_mac(KEY, Role.CLIENT, SERVER_NONCE, CLIENT_NONCE)
     client.receive_data(encode_frame(Welcome(mac=reflected)))
     with pytest.raises(AuthenticationError):
-        client.next_event()
+        client.next_message()
 
 
 def test_mac_covers_role_and_both_nonces() -> None:
@@ -128,7 +128,7 @@ def test_a_call_before_authentication_is_refused() -> None:
     server = Connection(Role.SERVER, KEY, name="alpha")
     server.receive_data(encode_frame(Call(id="1", action="echo")))
     with pytest.raises(RemoteProtocolError, match="unexpected call"):
-        server.next_event()
+        server.next_message()
 
 
 def test_sending_a_call_before_the_handshake_is_a_local_error() -> None:
@@ -194,7 +194,7 @@ def test_a_server_may_not_send_a_call_and_a_client_may_not_send_a_result() -> No
         pair.client.send(Result(id="1", result=ActionResult(status=Status.SUCCESS)))
     pair.client.receive_data(encode_frame(Call(id="1", action="x")))
     with pytest.raises(RemoteProtocolError, match="may not send call"):
-        pair.client.next_event()
+        pair.client.next_message()
 
 
 def test_oversize_header_is_rejected_before_the_body_arrives() -> None:
@@ -202,7 +202,7 @@ def test_oversize_header_is_rejected_before_the_body_arrives() -> None:
     pair.handshake()
     pair.server.receive_data(struct.pack(">I", 1001))  # header only: no body bytes at all
     with pytest.raises(RemoteProtocolError, match="oversize"):
-        pair.server.next_event()
+        pair.server.next_message()
 
 
 def test_a_frame_at_the_cap_is_accepted() -> None:
@@ -210,7 +210,7 @@ def test_a_frame_at_the_cap_is_accepted() -> None:
     pair.handshake()
     body = msgpack.packb({"type": "ping", "seq": 1, "pad": "x" * 150})
     pair.server.receive_data(struct.pack(">I", len(body)) + body)
-    assert pair.server.next_event() == Ping(seq=1)
+    assert pair.server.next_message() == Ping(seq=1)
 
 
 def test_sending_an_oversize_frame_is_a_local_error() -> None:
@@ -225,7 +225,7 @@ def test_bad_msgpack_is_a_remote_protocol_error() -> None:
     pair.handshake()
     pair.server.receive_data(struct.pack(">I", 3) + b"\xc1\xc1\xc1")
     with pytest.raises(RemoteProtocolError, match="bad msgpack"):
-        pair.server.next_event()
+        pair.server.next_message()
 
 
 @pytest.mark.parametrize(
@@ -245,7 +245,7 @@ def test_malformed_messages_name_the_problem(body: object, match: str) -> None:
     data = msgpack.packb(body)
     pair.server.receive_data(struct.pack(">I", len(data)) + data)
     with pytest.raises(RemoteProtocolError, match=match):
-        pair.server.next_event()
+        pair.server.next_message()
 
 
 def test_unknown_extra_fields_are_ignored() -> None:
@@ -253,21 +253,21 @@ def test_unknown_extra_fields_are_ignored() -> None:
     pair.handshake()
     data = msgpack.packb({"type": "cancel", "id": "9", "future_field": True})
     pair.server.receive_data(struct.pack(">I", len(data)) + data)
-    assert pair.server.next_event() == Cancel(id="9")
+    assert pair.server.next_message() == Cancel(id="9")
 
 
 def test_end_of_stream_inside_a_frame_is_an_error_and_between_frames_is_not() -> None:
     pair = ConnectionPair()
     pair.handshake()
     pair.server.receive_data(b"")
-    assert pair.server.next_event() is None
+    assert pair.server.next_message() is None
     assert pair.server.state is State.CLOSED
     other = ConnectionPair()
     other.handshake()
     other.server.receive_data(b"\x00\x00\x00\x09abc")
     other.server.receive_data(b"")
     with pytest.raises(RemoteProtocolError, match="inside a frame"):
-        other.server.next_event()
+        other.server.next_message()
 
 
 def test_bye_closes_and_may_be_sent_after_a_protocol_error() -> None:
@@ -275,7 +275,7 @@ def test_bye_closes_and_may_be_sent_after_a_protocol_error() -> None:
     pair.handshake()
     pair.server.receive_data(struct.pack(">I", 1) + b"\xc1")
     with pytest.raises(RemoteProtocolError):
-        pair.server.next_event()
+        pair.server.next_message()
     pair.server.send(Bye(reason="protocol_error: bad msgpack"))
     assert pair.to_client() == [Bye(reason="protocol_error: bad msgpack")]
     assert pair.client.state is State.CLOSED
@@ -287,7 +287,7 @@ def test_a_version_mismatch_is_refused_by_the_client() -> None:
     client = Connection(Role.CLIENT, KEY, name="c")
     client.receive_data(encode_frame(Hello(node="n", version=PROTOCOL_VERSION + 1, nonce=SERVER_NONCE)))
     with pytest.raises(RemoteProtocolError, match="version"):
-        client.next_event()
+        client.next_message()
 
 
 def test_many_frames_in_one_chunk_are_all_returned_in_order() -> None:
