@@ -47,7 +47,7 @@ from services.errors import LocationError
 
 __all__ = [
     "MEMORY_ACTIONS",
-    "ActionSpec",
+    "ActionPlacement",
     "DriverSpec",
     "Location",
     "NodeSpec",
@@ -82,8 +82,11 @@ class NodeSpec:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ActionSpec:
-    """Where and how a primitive action runs.
+class ActionPlacement:
+    """Where and how a primitive action runs: its node, its implementation and its call defaults.
+
+    Not to be confused with the net's own ``coordinator.net.ActionSpec`` (an action of a primitive
+    task, with its parameters and cost): a placement says where that action is served.
 
     Attributes:
         name: action name, as called.
@@ -126,7 +129,7 @@ class Location:
     Attributes:
         path: file it came from (``"<string>"`` when parsed from text).
         nodes: node specs by name.
-        actions: action specs by name (memory actions included when ``[memory]`` is set).
+        actions: action placements by name (memory actions included when ``[memory]`` is set).
         drivers: driver specs by name.
         events: publishing node by event topic.
         memory_node: node hosting the global memory, or ``None``.
@@ -134,7 +137,7 @@ class Location:
 
     path: str
     nodes: Mapping[str, NodeSpec]
-    actions: Mapping[str, ActionSpec]
+    actions: Mapping[str, ActionPlacement]
     drivers: Mapping[str, DriverSpec]
     events: Mapping[str, str]
     memory_node: str | None = None
@@ -150,8 +153,8 @@ class Location:
             raise LocationError(f"{self.path}: no action named {action!r}")
         return spec.node
 
-    def action(self, action: str) -> ActionSpec:
-        """The spec of ``action``.
+    def action(self, action: str) -> ActionPlacement:
+        """The placement of ``action``.
 
         Raises:
             LocationError: unknown action.
@@ -172,8 +175,8 @@ class Location:
             raise LocationError(f"{self.path}: no node named {node!r}")
         return spec.host, spec.port
 
-    def actions_on(self, node: str) -> tuple[ActionSpec, ...]:
-        """Specs of every action hosted by ``node``, in file order."""
+    def actions_on(self, node: str) -> tuple[ActionPlacement, ...]:
+        """Placements of every action hosted by ``node``, in file order."""
         return tuple(a for a in self.actions.values() if a.node == node)
 
     def drivers_on(self, node: str) -> tuple[DriverSpec, ...]:
@@ -288,7 +291,7 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         _check_keys(mem, {"node"}, f"{path}: [memory]")
         memory_node = node_ref(mem, f"{path}: [memory]")
 
-    actions: dict[str, ActionSpec] = {}
+    actions: dict[str, ActionPlacement] = {}
     for name, entry in _table(doc, "actions", path).items():
         where = f"{path}: [actions.{name}]"
         if not isinstance(entry, dict):
@@ -302,7 +305,7 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         deadline = entry.get("deadline_s")
         if deadline is not None and (isinstance(deadline, bool) or not isinstance(deadline, (int, float)) or deadline <= 0):
             raise LocationError(f"{where}: deadline_s must be a positive number")
-        actions[name] = ActionSpec(
+        actions[name] = ActionPlacement(
             name=name,
             node=node_ref(entry, where),
             impl=impl_ref(entry, where),
@@ -312,7 +315,7 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         )
     if memory_node is not None:
         for name in MEMORY_ACTIONS:
-            actions[name] = ActionSpec(name=name, node=memory_node, impl=MEMORY_IMPL)
+            actions[name] = ActionPlacement(name=name, node=memory_node, impl=MEMORY_IMPL)
 
     drivers: dict[str, DriverSpec] = {}
     for name, entry in _table(doc, "drivers", path).items():

@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from services.errors import LocationError
-from services.location import MEMORY_ACTIONS, load_location, parse_location
+from services.location import MEMORY_ACTIONS, ActionPlacement, load_location, parse_location
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -50,8 +50,9 @@ def test_a_good_file_gives_nodes_actions_drivers_events_and_memory() -> None:
     assert loc.address("motion") == ("127.0.0.1", 7102)
     assert loc.nodes["vision"].max_in_flight == 4
     assert loc.nodes["motion"].max_in_flight == 16
-    spec = loc.action("locate")
-    assert spec.local_only and spec.deadline_s == 2.0 and dict(spec.params) == {"k": 1}
+    placement = loc.action("locate")
+    assert isinstance(placement, ActionPlacement)
+    assert placement.local_only and placement.deadline_s == 2.0 and dict(placement.params) == {"k": 1}
     assert [a.name for a in loc.actions_on("vision")] == ["locate"]
     assert [d.name for d in loc.drivers_on("vision")] == ["camera"]
     assert loc.publisher_of("ext:image_sampling_tick") == "vision"
