@@ -35,6 +35,7 @@ class FramedConnection(asyncio.Protocol):
         self.transport: asyncio.Transport | None = None
         self.last_rx = loop.time()
         self._flush_scheduled = False
+        self._held: list[bytes] = []
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
         assert isinstance(transport, asyncio.Transport)
@@ -48,6 +49,23 @@ class FramedConnection(asyncio.Protocol):
         self.conn.send(msg)
         self._schedule_flush()
 
+    def send_counted(self, msg: Message) -> int:
+        """Queue ``msg`` like :meth:`send` and return the length of its frame, bytes.
+
+        Raises:
+            LocalProtocolError: as :meth:`services.protocol.Connection.send` (the state or
+                direction forbids ``msg``, or it cannot be encoded); nothing is queued then.
+        """
+        conn = self.conn
+        before = conn.data_to_send()
+        if before:
+            self._held.append(before)
+        conn.send(msg)
+        data = conn.data_to_send()
+        self._held.append(data)
+        self._schedule_flush()
+        return len(data)
+
     def _schedule_flush(self) -> None:
         if not self._flush_scheduled:
             self._flush_scheduled = True
@@ -56,5 +74,9 @@ class FramedConnection(asyncio.Protocol):
     def _flush(self) -> None:
         self._flush_scheduled = False
         data = self.conn.data_to_send()
+        if self._held:
+            self._held.append(data)
+            data = b"".join(self._held)
+            self._held.clear()
         if data and self.transport is not None and not self.transport.is_closing():
             self.transport.write(data)

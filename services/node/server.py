@@ -1,42 +1,40 @@
-"""A node: the asyncio server that hosts the primitive actions services.toml places on it.
+"""The node's asyncio shell: the :class:`Node` server, its connections and its actions' lifecycle.
 
-Run as ``python -m services.node NAME [--services services.toml] [--key-file F] [--log-level L]``
-(or ``petrobot node NAME``). The protocol itself lives in :mod:`services.protocol`; this module is
-the thin I/O shell around it plus the call machinery (docs/protocol.md, "Node behaviour"):
+A node hosts the primitive actions services.toml places on it (docs/protocol.md, "Calls"). This
+module does the I/O only; the decisions are made by the sans-IO cores beside it:
 
-* each call runs as its own task; the deadline (``deadline_ms``) cuts it off with status ``error``
-  and reason ``"deadline"``; a ``cancel`` cuts it off with reason ``"cancelled"``;
-* at most ``max_in_flight`` calls run at once, more are rejected with ``"busy"``;
-* a ``local_only`` action is rejected with ``"local_only"`` unless the peer is local. Rule: a peer is
-  local when its IP address equals the IP address on which this node accepted the connection (a
-  process on the same host connecting to that address gets it as its source address);
-* a repeated call id gets the first result (kept in a bounded LRU: 10,000 results, 10 minutes)
-  without running again; while the first is still running, the repeat joins it;
+* :class:`services.node.calls.CallTable` admits or rejects each call, joins repeats and keeps
+  results (bounded by bytes and by age);
+* :class:`services.node.fanout.Fanout` numbers published events and fans them out, holding a
+  bounded backlog for a subscriber whose writes are paused;
+* :class:`services.protocol.Connection` parses and encodes the frames of each connection.
+
+What the shell adds:
+
+* each admitted call runs as its own task; the deadline (``deadline_ms``) cuts it off with status
+  ``error`` and reason ``"deadline"``; a ``cancel`` cuts it off with reason ``"cancelled"``;
+  stopping the node with ``"node shutdown"``;
+* a peer is local when its IP address equals the IP address on which this node accepted the
+  connection (a process on the same host connecting to that address gets it as its source address);
 * an action that raises gives status ``error`` with the exception text; the node keeps running;
-* a peer silent for ``peer_timeout_s`` (default 2 s; clients ping every 0.25 s) is dropped;
-* events published by drivers and actions go to every subscriber; a subscriber that cannot keep up
-  loses its oldest pending events, the node never waits for it;
+  a result that cannot be encoded (not msgpack-able, over the frame cap) becomes an ``error``
+  result saying so;
+* a peer silent for ``peer_timeout_s`` (default 2 s; clients ping every 0.25 s) is dropped; kept
+  results past their age are dropped by the same periodic task;
 * a bad frame closes that one connection with ``bye``; the node goes on.
 
-Logs (stderr): one INFO line per connection, call and result; "node NAME listening on HOST:PORT"
-when ready.
+Logs (stderr): one INFO line per connection, call and result.
 """
 
 from __future__ import annotations
 
-import argparse
 import asyncio
-import collections
-import gc
 import logging
-import signal
-import sys
 import time
-from collections.abc import Awaitable, Callable, Sequence
+from collections.abc import Awaitable, Callable
 from dataclasses import replace
 from typing import Any
 
-from services.errors import AuthenticationError, PetrobotError, ProtocolError
 from services.action import (
     CallContext,
     Driver,
@@ -47,11 +45,22 @@ from services.action import (
     import_impl,
     make_action,
 )
-from services.results import ActionResult, Status
 from services.actions.memory import MemoryStore, NoMemory, RemoteMemory, memory_actions
 from services.client import NodeLink
-from services.keys import load_key
-from services.location import MEMORY_ACTIONS, Location, load_location
+from services.errors import AuthenticationError, PetrobotError, ProtocolError
+from services.location import MEMORY_ACTIONS, Location
+from services.node.calls import (
+    DEFAULT_MAX_AGE_S,
+    DEFAULT_MAX_BYTES,
+    Answer,
+    CallTable,
+    MemoryResultCache,
+    Reject,
+    ResultCache,
+    RunningCall,
+    Start,
+)
+from services.node.fanout import Fanout
 from services.protocol import (
     DEFAULT_MAX_FRAME,
     Accepted,
@@ -60,7 +69,6 @@ from services.protocol import (
     Call,
     Cancel,
     Connection,
-    Event,
     Feedback,
     Message,
     Ping,
@@ -71,30 +79,18 @@ from services.protocol import (
     State,
     Subscribe,
     Unsubscribe,
+    encode_frame,
 )
+from services.results import ActionResult, Status
 from services.wire import FramedConnection
 
-__all__ = ["Node", "build_parser", "main"]
+__all__ = ["Node"]
 
 log = logging.getLogger("petrobot.node")
 
 ActionRun = Callable[[dict[str, Any], CallContext], Awaitable[Any]]
 
-_EVENT_BACKLOG = 256
 _WRITE_HIGH_WATER = 256 * 1024
-
-
-class _Running:
-    """A call in flight."""
-
-    __slots__ = ("call", "cancel_requested", "ctx", "task", "waiters")
-
-    def __init__(self, call: Call) -> None:
-        self.call = call
-        self.task: asyncio.Task[None] | None = None
-        self.waiters: list[_Peer] = []
-        self.cancel_requested = False
-        self.ctx: CallContext | None = None
 
 
 class _Peer(FramedConnection):
@@ -105,10 +101,6 @@ class _Peer(FramedConnection):
         self.node = node
         self.peer_host = "?"
         self.local = False
-        self.topics: set[str] = set()
-        self.paused = False
-        self.backlog: collections.deque[Event] = collections.deque(maxlen=_EVENT_BACKLOG)
-        self.dropped = 0
         self.closed = False
 
     def __repr__(self) -> str:
@@ -151,36 +143,26 @@ class _Peer(FramedConnection):
             self.closed = True
             log.info("connection from %r closed%s", self, f": {exc}" if exc else "")
         self.node._peers.discard(self)
-        for topic in self.topics:
-            self.node._subscribers[topic].discard(self)
-        self.topics.clear()
-        self.backlog.clear()
+        self.node._fanout.remove(self)
 
     def pause_writing(self) -> None:
-        self.paused = True
+        self.node._fanout.pause(self)
 
     def resume_writing(self) -> None:
-        self.paused = False
-        backlog, self.backlog = self.backlog, collections.deque(maxlen=_EVENT_BACKLOG)
-        for ev in backlog:
+        for ev in self.node._fanout.resume(self):
             self.send(ev)
 
     # ---- output
+
+    @property
+    def open(self) -> bool:
+        """Messages other than ``bye`` may be sent: not closed, handshake done."""
+        return not self.closed and self.conn.state is State.OPEN
 
     def send(self, msg: Message) -> None:
         if self.closed:
             return
         super().send(msg)
-
-    def send_event(self, ev: Event) -> None:
-        if self.closed or self.conn.state is not State.OPEN:
-            return
-        if self.paused:
-            if len(self.backlog) == self.backlog.maxlen:
-                self.dropped += 1
-            self.backlog.append(ev)
-            return
-        self.send(ev)
 
     def close(self, reason: str) -> None:
         """Send ``bye`` with ``reason`` and close this connection only."""
@@ -200,18 +182,20 @@ class _Peer(FramedConnection):
 
     def _handle(self, msg: Message) -> None:
         kind = type(msg)
+        node = self.node
         if kind is Call:
-            self.node._on_call(self, msg)  # type: ignore[arg-type]
+            node._on_call(self, msg)  # type: ignore[arg-type]
         elif kind is Cancel:
-            self.node._on_cancel(msg.id)  # type: ignore[attr-defined]
+            node._on_cancel(msg.id)  # type: ignore[attr-defined]
         elif kind is Ping:
             self.send(Pong(seq=msg.seq))  # type: ignore[attr-defined]
         elif kind is Subscribe:
-            self.topics.add(msg.topic)  # type: ignore[attr-defined]
-            self.node._subscribers[msg.topic].add(self)  # type: ignore[attr-defined]
+            topic: str = msg.topic  # type: ignore[attr-defined]
+            refusal = node._fanout.subscribe(self, topic)
+            if refusal is not None:
+                log.warning("subscription of %r to %.64r refused: %s", self, topic, refusal.value)
         elif kind is Unsubscribe:
-            self.topics.discard(msg.topic)  # type: ignore[attr-defined]
-            self.node._subscribers[msg.topic].discard(self)  # type: ignore[attr-defined]
+            node._fanout.unsubscribe(self, msg.topic)  # type: ignore[attr-defined]
         elif kind is Bye:
             log.info("%r said bye: %s", self, msg.reason)  # type: ignore[attr-defined]
             self.closed = True
@@ -229,8 +213,12 @@ class Node:
         location: the parsed services.toml.
         key: shared key.
         peer_timeout_s: drop a peer silent for this long, seconds.
-        result_cache: number of recent results kept for repeated call ids.
+        result_bytes: cap on the bytes of kept results (frames plus bookkeeping), bytes.
         result_ttl_s: how long a result is kept, seconds.
+        results: where results are kept; a :class:`~services.node.calls.MemoryResultCache` with
+            ``result_bytes`` and ``result_ttl_s`` if ``None`` (the two are then ignored).
+        fanout: the event fan-out; a :class:`~services.node.fanout.Fanout` with its defaults
+            (backlog 256 events, 256 topics per subscriber, topic names up to 256 bytes) if ``None``.
         max_frame: frame size cap, bytes.
 
     Raises:
@@ -244,8 +232,10 @@ class Node:
         key: bytes,
         *,
         peer_timeout_s: float = 2.0,
-        result_cache: int = 10_000,
-        result_ttl_s: float = 600.0,
+        result_bytes: int = DEFAULT_MAX_BYTES,
+        result_ttl_s: float = DEFAULT_MAX_AGE_S,
+        results: ResultCache | None = None,
+        fanout: Fanout[_Peer] | None = None,
         max_frame: int = DEFAULT_MAX_FRAME,
     ) -> None:
         self.name = name
@@ -255,20 +245,22 @@ class Node:
         self.host, self.port = self.spec.host, self.spec.port
         self.max_in_flight = self.spec.max_in_flight
         self.peer_timeout_s = peer_timeout_s
-        self.result_cache = result_cache
-        self.result_ttl_s = result_ttl_s
         self.max_frame = max_frame
         self._key = key
         self._loop: asyncio.AbstractEventLoop = None  # type: ignore[assignment]
         self._server: asyncio.Server | None = None
         self._peers: set[_Peer] = set()
         self._actions: dict[str, PrimitiveAction] = {}
-        self._specs = {a.name: a for a in location.actions_on(name)}
+        self._placements = {a.name: a for a in location.actions_on(name)}
         self._drivers: dict[str, Driver] = {}
-        self._running: dict[str, _Running] = {}
-        self._results: collections.OrderedDict[str, tuple[Result, float, str]] = collections.OrderedDict()
-        self._subscribers: collections.defaultdict[str, set[_Peer]] = collections.defaultdict(set)
-        self._seq: dict[str, int] = {}
+        if results is None:
+            results = MemoryResultCache(max_bytes=result_bytes, max_age_s=result_ttl_s)
+        self._calls: CallTable[_Peer] = CallTable(
+            self._placements, local_only=[a for a, p in self._placements.items() if p.local_only],
+            max_in_flight=self.max_in_flight, cache=results,
+        )
+        self._tasks: dict[str, asyncio.Task[None]] = {}
+        self._fanout: Fanout[_Peer] = fanout if fanout is not None else Fanout()
         self._links: dict[str, NodeLink] = {}
         self._reaper: asyncio.Task[None] | None = None
         self._stopping = False
@@ -305,18 +297,18 @@ class Node:
             drv.bind(self.context)
             await drv.setup(self.context)
             self._drivers[dspec.name] = drv
-        for aname in self._specs:
+        for aname in self._placements:
             if aname in MEMORY_ACTIONS:
                 assert store is not None
                 self._actions[aname] = memory_actions(store)[aname]
             else:
-                self._actions[aname] = make_action(self._specs[aname].impl, aname)
+                self._actions[aname] = make_action(self._placements[aname].impl, aname)
         for action in self._actions.values():
             await action.setup(self.context)
         self._server = await self._loop.create_server(lambda: _Peer(self), self.host, self.port, reuse_address=True)
         sock = self._server.sockets[0]
         self.port = sock.getsockname()[1]
-        self._reaper = self._loop.create_task(self._reap_silent_peers())
+        self._reaper = self._loop.create_task(self._reap())
         log.info("node %s hosts actions: %s; drivers: %s", self.name,
                  ", ".join(sorted(self._actions)) or "none", ", ".join(sorted(self._drivers)) or "none")
 
@@ -325,11 +317,12 @@ class Node:
         if self._stopping:
             return
         self._stopping = True
+        self._calls.stop()
         if self._server is not None:
             self._server.close()
         if self._reaper is not None:
             self._reaper.cancel()
-        tasks = [r.task for r in self._running.values() if r.task is not None]
+        tasks = list(self._tasks.values())
         for t in tasks:
             t.cancel("node shutdown")
         if tasks:
@@ -355,16 +348,16 @@ class Node:
     # ---- node services for actions and drivers
 
     def publish(self, topic: str, data: Any = None) -> None:
-        """Publish external event ``topic`` to every subscriber (drops the oldest for slow ones)."""
-        seq = self._seq.get(topic, 0) + 1
-        self._seq[topic] = seq
-        subs = self._subscribers.get(topic)
-        if not subs:
+        """Publish external event ``topic`` to every subscriber (never waits for a slow one)."""
+        delivery = self._fanout.publish(topic, data, time.time())
+        if delivery is None:
             return
-        ev = Event(topic=topic, t=time.time(), seq=seq, data=data)
-        for peer in list(subs):
+        ev, ready = delivery
+        for peer in ready:
+            if not peer.open:
+                continue
             try:
-                peer.send_event(ev)
+                peer.send(ev)
             except ProtocolError as exc:
                 log.warning("cannot send event %s to %r: %s", topic, peer, exc)
 
@@ -380,58 +373,33 @@ class Node:
 
     def _on_call(self, peer: _Peer, call: Call) -> None:
         cid = call.id
-        action = self._actions.get(call.action)
-        if action is None:
-            self._reject(peer, call, "unknown_action")
-            return
-        spec = self._specs[call.action]
-        if spec.local_only and not peer.local:
-            self._reject(peer, call, "local_only")
-            return
-        cached = self._results.get(cid)
-        if cached is not None:
-            result, _, cached_action = cached
-            if cached_action != call.action:
-                self._reject(peer, call, "duplicate_id")
-                return
+        verdict = self._calls.admit(call, peer, local=peer.local)
+        if type(verdict) is Start:
+            action = self._actions[call.action]
+            run = action.fn if type(action) is FunctionAction else action.run
+            task = self._loop.create_task(self._run(verdict.running, run, self._placements[call.action].params, peer))
+            self._tasks[cid] = task
             peer.send(Accepted(id=cid))
-            peer.send(result)
+        elif type(verdict) is Reject:
+            reason = verdict.reason.value
+            log.info("call %s (%s) from %r rejected: %s", cid, call.action, peer, reason)
+            peer.send(Rejected(id=cid, reason=reason))
+        elif type(verdict) is Answer:
+            peer.send(Accepted(id=cid))
+            peer.send(verdict.kept.result)
             log.info("call %s (%s) from %r: repeated, answered with the first result", cid, call.action, peer)
-            return
-        running = self._running.get(cid)
-        if running is not None:
-            if running.call.action != call.action:
-                self._reject(peer, call, "duplicate_id")
-                return
-            running.waiters.append(peer)
+        else:  # Join: the peer now waits for the running call's result too
             peer.send(Accepted(id=cid))
             log.info("call %s (%s) from %r: repeated while running, joined", cid, call.action, peer)
-            return
-        if len(self._running) >= self.max_in_flight:
-            self._reject(peer, call, "busy")
-            return
-        if self._stopping:
-            self._reject(peer, call, "shutdown")
-            return
-        rec = _Running(call)
-        rec.waiters.append(peer)
-        self._running[cid] = rec
-        run = action.fn if type(action) is FunctionAction else action.run
-        rec.task = self._loop.create_task(self._run(rec, run, spec.params, peer))
-        peer.send(Accepted(id=cid))
-
-    def _reject(self, peer: _Peer, call: Call, reason: str) -> None:
-        log.info("call %s (%s) from %r rejected: %s", call.id, call.action, peer, reason)
-        peer.send(Rejected(id=call.id, reason=reason))
 
     def _on_cancel(self, cid: str) -> None:
-        rec = self._running.get(cid)
-        if rec is not None and rec.task is not None and not rec.task.done():
-            rec.cancel_requested = True
-            rec.task.cancel("cancelled")
+        task = self._tasks.get(cid)
+        if task is not None and not task.done():
+            self._calls.cancel(cid)
+            task.cancel("cancelled")
             log.info("call %s: cancel requested", cid)
 
-    async def _run(self, rec: _Running, run: ActionRun, defaults: Any, peer: _Peer) -> None:
+    async def _run(self, rec: RunningCall[_Peer], run: ActionRun, defaults: Any, peer: _Peer) -> None:
         call = rec.call
         loop = self._loop
         info = log.isEnabledFor(logging.INFO)
@@ -444,8 +412,7 @@ class Node:
             call_id=call.id, action=call.action, deadline=deadline, peer=peer.conn.peer or "?",
             node=self.context, feedback=lambda data: self._feedback(rec, data),
         )
-        ctx._task = rec.task
-        rec.ctx = ctx
+        ctx._task = self._tasks.get(call.id)
         t0 = time.perf_counter()
         c0 = time.process_time()
         try:
@@ -467,53 +434,50 @@ class Node:
             record = ActionResult.error(f"{exc.__class__.__name__}: {exc}")
             log.warning("call %s %s raised %s", call.id, call.action, record.reason)
         record = replace(record, wall_s=time.perf_counter() - t0, cpu_s=max(0.0, time.process_time() - c0))
-        result = Result(id=call.id, result=record)
-        self._finish(rec, result, info)
+        self._finish(rec, Result(id=call.id, result=record), info)
 
-    def _finish(self, rec: _Running, result: Result, info: bool) -> None:
+    def _finish(self, rec: RunningCall[_Peer], result: Result, info: bool) -> None:
+        """Send ``result`` to every waiter still connected, then keep it, charged its frame length."""
         cid = result.id
-        self._running.pop(cid, None)
-        now = self._loop.time()
-        results = self._results
-        results[cid] = (result, now, rec.call.action)
-        if len(results) > self.result_cache:  # expired ones are dropped by the reaper
-            results.popitem(last=False)
+        self._tasks.pop(cid, None)
+        size = 0
         for peer in rec.waiters:
-            if peer.closed:
+            if not peer.open:
                 continue
             try:
-                peer.send(result)
+                n = peer.send_counted(result)
             except ProtocolError as exc:  # value not msgpack-able, too big...
-                err = Result(id=cid, result=replace(result.result, status=Status.ERROR, outcome=None, value=None,
-                                                    reason=f"result not sendable: {exc}"))
-                results[cid] = (err, now, rec.call.action)
-                peer.send(err)
+                result = _unsendable(result, exc)
+                n = peer.send_counted(result)
+            size = size or n
+        if not size:  # nobody left to tell: measure it for the cache all the same
+            try:
+                size = len(encode_frame(result, self.max_frame))
+            except ProtocolError as exc:
+                result = _unsendable(result, exc)
+                size = len(encode_frame(result, self.max_frame))
+        self._calls.finish(result, size=size, now=self._loop.time())
         if info:
             r = result.result
             log.info("result %s %s: %s%s (%.3f s)", cid, rec.call.action, r.status.value,
                      f" ({r.reason})" if r.reason else "", r.wall_s)
 
-    def _feedback(self, rec: _Running, data: Any) -> None:
+    def _feedback(self, rec: RunningCall[_Peer], data: Any) -> None:
         msg = Feedback(id=rec.call.id, data=data)
         for peer in rec.waiters:
-            if not peer.closed and peer.conn.state is State.OPEN:
+            if peer.open:
                 peer.send(msg)
 
-    def _expire_results(self) -> None:
-        results = self._results
-        too_old = self._loop.time() - self.result_ttl_s
-        while results and next(iter(results.values()))[1] < too_old:
-            results.popitem(last=False)
+    # ---- peers and kept results
 
-    # ---- peers
-
-    async def _reap_silent_peers(self) -> None:
+    async def _reap(self) -> None:
+        """Every ``peer_timeout_s / 4`` (at most 0.5 s): expire kept results, drop silent peers."""
         period = min(0.5, self.peer_timeout_s / 4)
         while True:
             before = self._loop.time()
             await asyncio.sleep(period)
-            self._expire_results()
             now = self._loop.time()
+            self._calls.expire(now)
             if now - before > 2 * period:
                 continue  # our loop was blocked: peers' frames may be waiting unread
             cutoff = now - self.peer_timeout_s
@@ -524,68 +488,7 @@ class Node:
                     self._peers.discard(peer)
 
 
-# --------------------------------------------------------------------------- command line
-
-
-def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
-    """Options of ``python -m services.node`` / ``petrobot node``."""
-    p = parser or argparse.ArgumentParser(
-        prog="python -m services.node", description="Run one petrobot node: host the primitive actions "
-        "services.toml places on it and serve them over TCP (docs/protocol.md).")
-    p.add_argument("name", help="node name, a [nodes.NAME] table of the services file")
-    p.add_argument("--services", default="services.toml", metavar="FILE",
-                   help="location file naming nodes, actions, drivers and events (default: services.toml)")
-    p.add_argument("--key-file", default=None, metavar="FILE",
-                   help="shared key file (default: $PETROBOT_KEY, else $PETROBOT_KEY_FILE, "
-                        "else ~/.config/petrobot/key, created if missing)")
-    p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"],
-                   help="log level of the stderr log (default: INFO: one line per connection, call, result)")
-    return p
-
-
-async def _serve(node: Node) -> None:
-    loop = asyncio.get_running_loop()
-    stop = asyncio.Event()
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        loop.add_signal_handler(sig, stop.set)
-    await node.start()
-    # Long-lived objects made during start-up need no more collection; and a larger first-generation
-    # threshold spares the per-call allocations most collector runs (fewer multi-ms pauses at p99).
-    gc.freeze()
-    gc.set_threshold(20_000, 50, 100)
-    print(f"node {node.name} listening on {node.host}:{node.port}", file=sys.stderr, flush=True)
-    try:
-        await stop.wait()
-    finally:
-        await node.stop()
-
-
-def run_node(args: argparse.Namespace) -> int:
-    """Run a node from parsed arguments until SIGTERM/SIGINT; return the exit code."""
-    logging.basicConfig(level=args.log_level, stream=sys.stderr, force=True,
-                        format=f"%(asctime)s {args.name} %(levelname)s %(message)s")
-    try:
-        location = load_location(args.services)
-        key = load_key(args.key_file)
-        node = Node(args.name, location, key)
-    except PetrobotError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    try:
-        asyncio.run(_serve(node))
-    except OSError as exc:
-        print(f"error: node {args.name}: {exc}", file=sys.stderr)
-        return 1
-    except PetrobotError as exc:
-        print(f"error: node {args.name}: {exc}", file=sys.stderr)
-        return 1
-    return 0
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of ``python -m services.node``."""
-    return run_node(build_parser().parse_args(argv))
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+def _unsendable(result: Result, exc: Exception) -> Result:
+    """The error result that replaces ``result`` when it cannot be encoded."""
+    return Result(id=result.id, result=replace(result.result, status=Status.ERROR, outcome=None, value=None,
+                                               reason=f"result not sendable: {exc}"))

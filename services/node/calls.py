@@ -1,0 +1,359 @@
+"""The call table of a node, sans-IO: which calls run, which results are kept, who waits for what.
+
+Pure logic, as :mod:`services.protocol` is: no asyncio, no sockets, no clock (the caller passes the
+time in). The node's asyncio shell (:mod:`services.node.server`) asks :meth:`CallTable.admit` what
+to do with each ``call`` message, runs the action when told to :class:`Start` it, and hands the
+ending to :meth:`CallTable.finish`. The rules are those of docs/protocol.md §5 ("Calls") and §7:
+
+* an action not hosted here → :class:`Reject` ``unknown_action``;
+* a ``local_only`` action from a peer that is not local → ``local_only``;
+* an id with a kept result → :class:`Answer` with that result, if the action is the same, else
+  ``duplicate_id``;
+* an id still running → :class:`Join` it (the caller is one more waiter for its result), if the
+  action is the same, else ``duplicate_id``;
+* ``max_in_flight`` calls already running → ``busy``; the node stopping → ``shutdown``;
+* otherwise → :class:`Start`.
+
+The checks run in that order (a repeat is answered even when the node is busy or stopping).
+
+Kept results live behind the small :class:`ResultCache` interface (``get``, ``put``, ``expire``)
+so that a store which survives node restarts can replace the in-memory :class:`MemoryResultCache`.
+The in-memory cache is bounded by **bytes** and by **age**, not by count: each kept result is
+charged the length of its encoded ``result`` frame plus :data:`ENTRY_OVERHEAD` (the objects that
+hold it in memory); the oldest results are dropped when the charge exceeds ``max_bytes`` (default
+64 MiB), and results older than ``max_age_s`` (default 600 s) when :meth:`CallTable.expire` runs.
+There is no count cap: the per-entry overhead makes the byte cap bound the count too (at most
+``max_bytes / ENTRY_OVERHEAD`` results, about 131,000 with the defaults).
+"""
+
+from __future__ import annotations
+
+import collections
+import enum
+from collections.abc import Collection, Iterable
+from dataclasses import dataclass
+from typing import Final, Generic, Protocol, TypeAlias, TypeVar
+
+from services.protocol import Call, Result
+
+__all__ = [
+    "DEFAULT_MAX_AGE_S",
+    "DEFAULT_MAX_BYTES",
+    "ENTRY_OVERHEAD",
+    "Admission",
+    "Answer",
+    "CallTable",
+    "Join",
+    "KeptResult",
+    "MemoryResultCache",
+    "Reject",
+    "RejectReason",
+    "ResultCache",
+    "RunningCall",
+    "Start",
+]
+
+W = TypeVar("W")
+"""Whoever waits for a call's result (the node's shell uses its connection objects)."""
+
+DEFAULT_MAX_BYTES: Final = 64 * 1024 * 1024
+"""Default cap on the bytes charged for kept results (64 MiB)."""
+DEFAULT_MAX_AGE_S: Final = 600.0
+"""Default age after which a kept result expires, seconds (10 minutes)."""
+ENTRY_OVERHEAD: Final = 512
+"""Bytes charged per kept result on top of its frame: the Python objects and the map slot that hold
+it (a small result held about 520 bytes beyond its frame length, measured on CPython 3.11)."""
+
+
+class RejectReason(enum.StrEnum):
+    """Why a call was not started: the ``reason`` of ``rejected{id, reason}`` (docs/protocol.md §5)."""
+
+    UNKNOWN_ACTION = "unknown_action"
+    """The action is not hosted by this node."""
+    LOCAL_ONLY = "local_only"
+    """The action serves callers on the node's own host only (docs/protocol.md §7)."""
+    DUPLICATE_ID = "duplicate_id"
+    """The id is kept or running for a different action."""
+    BUSY = "busy"
+    """``max_in_flight`` calls are running."""
+    SHUTDOWN = "shutdown"
+    """The node is stopping."""
+
+
+# --------------------------------------------------------------------------- kept results
+
+
+@dataclass(frozen=True, slots=True)
+class KeptResult:
+    """A finished call's result, kept to answer a repeat of its id.
+
+    Attributes:
+        call_id: the call's id.
+        action: the action that ran (a repeat naming another action is a ``duplicate_id``).
+        result: the ``result`` message sent to the callers.
+        size: length of its encoded frame, bytes.
+        stored_at: when it was kept, seconds on the clock the caller passes to the cache.
+    """
+
+    call_id: str
+    action: str
+    result: Result
+    size: int
+    stored_at: float
+
+
+class ResultCache(Protocol):
+    """Where a node keeps finished calls' results (docs/protocol.md §5, "Idempotency").
+
+    Implementations decide their own bounds; :meth:`put` may drop older results to stay within
+    them and :meth:`expire` drops results too old to keep. Times are seconds on one clock the
+    caller chooses and keeps (the node passes its event loop's monotonic clock; a store that
+    outlives the process needs a clock that does too).
+    """
+
+    def get(self, call_id: str) -> KeptResult | None:
+        """The kept result of ``call_id``, or ``None``."""
+        ...
+
+    def put(self, kept: KeptResult) -> None:
+        """Keep ``kept`` (replacing a result kept under the same id)."""
+        ...
+
+    def expire(self, now: float) -> int:
+        """Drop the results too old at time ``now`` (s); return how many were dropped."""
+        ...
+
+
+class MemoryResultCache:
+    """Kept results in memory, oldest first, bounded by bytes and by age (see the module docstring).
+
+    Args:
+        max_bytes: cap on the bytes charged (frame length + ``entry_overhead`` per result); the
+            oldest results are dropped to stay under it, except the newest, which is kept even if
+            it alone exceeds the cap.
+        max_age_s: results older than this, seconds, are dropped by :meth:`expire`.
+        entry_overhead: bytes charged per result on top of its frame.
+
+    Raises:
+        ValueError: a bound is not positive, or the overhead is negative.
+    """
+
+    __slots__ = ("_kept", "entry_overhead", "max_age_s", "max_bytes", "nbytes")
+
+    def __init__(
+        self,
+        *,
+        max_bytes: int = DEFAULT_MAX_BYTES,
+        max_age_s: float = DEFAULT_MAX_AGE_S,
+        entry_overhead: int = ENTRY_OVERHEAD,
+    ) -> None:
+        if max_bytes <= 0 or max_age_s <= 0 or entry_overhead < 0:
+            raise ValueError("max_bytes and max_age_s must be positive, entry_overhead non-negative")
+        self.max_bytes = max_bytes
+        self.max_age_s = max_age_s
+        self.entry_overhead = entry_overhead
+        self.nbytes = 0
+        """Bytes charged for the results kept now."""
+        self._kept: collections.OrderedDict[str, KeptResult] = collections.OrderedDict()
+
+    def __len__(self) -> int:
+        return len(self._kept)
+
+    def __contains__(self, call_id: object) -> bool:
+        return call_id in self._kept
+
+    def get(self, call_id: str) -> KeptResult | None:
+        """The kept result of ``call_id``, or ``None``."""
+        return self._kept.get(call_id)
+
+    def put(self, kept: KeptResult) -> None:
+        """Keep ``kept`` as the newest result, then drop the oldest while over ``max_bytes``."""
+        results = self._kept
+        old = results.pop(kept.call_id, None)
+        if old is not None:
+            self.nbytes -= old.size + self.entry_overhead
+        results[kept.call_id] = kept
+        self.nbytes += kept.size + self.entry_overhead
+        while self.nbytes > self.max_bytes and len(results) > 1:
+            _, dropped = results.popitem(last=False)
+            self.nbytes -= dropped.size + self.entry_overhead
+
+    def expire(self, now: float) -> int:
+        """Drop the results kept before ``now - max_age_s`` (s); return how many were dropped."""
+        results = self._kept
+        too_old = now - self.max_age_s
+        n = 0
+        while results:
+            first = next(iter(results.values()))
+            if first.stored_at >= too_old:
+                break
+            del results[first.call_id]
+            self.nbytes -= first.size + self.entry_overhead
+            n += 1
+        return n
+
+
+# --------------------------------------------------------------------------- the table
+
+
+class RunningCall(Generic[W]):
+    """A call in flight.
+
+    Attributes:
+        call: the ``call`` message that started it.
+        waiters: who gets its result: the first caller, then every caller that joined it.
+        cancel_requested: a ``cancel`` for it arrived (its ending is then ``"cancelled"``).
+    """
+
+    __slots__ = ("call", "cancel_requested", "waiters")
+
+    def __init__(self, call: Call, first: W) -> None:
+        self.call = call
+        self.waiters: list[W] = [first]
+        self.cancel_requested = False
+
+    def __repr__(self) -> str:
+        return f"RunningCall({self.call.id!r}, {self.call.action!r}, waiters={len(self.waiters)})"
+
+
+@dataclass(frozen=True, slots=True)
+class Start(Generic[W]):
+    """Run the action: the call is now in the table (answer ``accepted``)."""
+
+    running: RunningCall[W]
+
+
+@dataclass(frozen=True, slots=True)
+class Join(Generic[W]):
+    """The id is running: the caller was added to its waiters (answer ``accepted``)."""
+
+    running: RunningCall[W]
+
+
+@dataclass(frozen=True, slots=True)
+class Answer:
+    """The id already ran: answer ``accepted`` and this kept result, without running it again."""
+
+    kept: KeptResult
+
+
+@dataclass(frozen=True, slots=True)
+class Reject:
+    """Do not start the call: answer ``rejected`` with this reason."""
+
+    reason: RejectReason
+
+
+Admission: TypeAlias = Start[W] | Join[W] | Answer | Reject
+"""What :meth:`CallTable.admit` decides for one ``call``."""
+
+_REJECT: Final = {reason: Reject(reason) for reason in RejectReason}
+
+
+class CallTable(Generic[W]):
+    """Admits calls, tracks the running ones and keeps their results (see the module docstring).
+
+    Args:
+        actions: names of the actions hosted here.
+        local_only: those of them served only to local peers.
+        max_in_flight: cap on calls running at once (>= 1).
+        cache: where results are kept; a :class:`MemoryResultCache` with its defaults if ``None``.
+
+    Attributes:
+        cache: the result cache.
+        max_in_flight: the cap on running calls.
+        stopping: set by :meth:`stop`; new calls are then rejected with ``shutdown``.
+
+    Raises:
+        ValueError: ``max_in_flight`` < 1, or a ``local_only`` action is not in ``actions``.
+    """
+
+    __slots__ = ("_actions", "_local_only", "_running", "cache", "max_in_flight", "stopping")
+
+    def __init__(
+        self,
+        actions: Iterable[str],
+        *,
+        local_only: Collection[str] = (),
+        max_in_flight: int = 16,
+        cache: ResultCache | None = None,
+    ) -> None:
+        self._actions = frozenset(actions)
+        self._local_only = frozenset(local_only)
+        if max_in_flight < 1:
+            raise ValueError("max_in_flight must be >= 1")
+        if not self._local_only <= self._actions:
+            raise ValueError(f"local_only names unknown actions: {sorted(self._local_only - self._actions)}")
+        self.max_in_flight = max_in_flight
+        self.cache: ResultCache = cache if cache is not None else MemoryResultCache()
+        self.stopping = False
+        self._running: dict[str, RunningCall[W]] = {}
+
+    @property
+    def in_flight(self) -> int:
+        """Calls running now."""
+        return len(self._running)
+
+    def admit(self, call: Call, waiter: W, *, local: bool) -> Admission[W]:
+        """Decide what to do with ``call`` from ``waiter`` (a local peer if ``local``).
+
+        :class:`Start` and :class:`Join` change the table (the call runs, or ``waiter`` now waits
+        for it); :class:`Answer` and :class:`Reject` do not.
+        """
+        action = call.action
+        if action not in self._actions:
+            return _REJECT[RejectReason.UNKNOWN_ACTION]
+        if not local and action in self._local_only:
+            return _REJECT[RejectReason.LOCAL_ONLY]
+        cid = call.id
+        kept = self.cache.get(cid)
+        if kept is not None:
+            return Answer(kept) if kept.action == action else _REJECT[RejectReason.DUPLICATE_ID]
+        running = self._running.get(cid)
+        if running is not None:
+            if running.call.action != action:
+                return _REJECT[RejectReason.DUPLICATE_ID]
+            running.waiters.append(waiter)
+            return Join(running)
+        if len(self._running) >= self.max_in_flight:
+            return _REJECT[RejectReason.BUSY]
+        if self.stopping:
+            return _REJECT[RejectReason.SHUTDOWN]
+        running = RunningCall(call, waiter)
+        self._running[cid] = running
+        return Start(running)
+
+    def running(self, call_id: str) -> RunningCall[W] | None:
+        """The running call ``call_id``, or ``None``."""
+        return self._running.get(call_id)
+
+    def cancel(self, call_id: str) -> RunningCall[W] | None:
+        """Mark the running call ``call_id`` as cancelled and return it (``None`` if not running)."""
+        running = self._running.get(call_id)
+        if running is not None:
+            running.cancel_requested = True
+        return running
+
+    def finish(self, result: Result, *, size: int, now: float) -> RunningCall[W]:
+        """End the running call ``result.id``: keep ``result`` and return the call (its waiters).
+
+        Args:
+            result: the ``result`` message sent to the waiters.
+            size: length of its encoded frame, bytes.
+            now: the time, seconds on the cache's clock.
+
+        Raises:
+            KeyError: ``result.id`` is not running.
+        """
+        running = self._running.pop(result.id)
+        self.cache.put(KeptResult(result.id, running.call.action, result, size, now))
+        return running
+
+    def expire(self, now: float) -> int:
+        """Drop kept results too old at ``now`` (s, the cache's clock); return how many."""
+        return self.cache.expire(now)
+
+    def stop(self) -> list[RunningCall[W]]:
+        """Refuse new calls from now on (``shutdown``); return the calls still running."""
+        self.stopping = True
+        return list(self._running.values())

@@ -1,0 +1,230 @@
+"""The node's call table (services.node.calls), driven as pure logic: no sockets, no event loop."""
+
+from __future__ import annotations
+
+import pytest
+
+from services.node.calls import (
+    ENTRY_OVERHEAD,
+    Answer,
+    CallTable,
+    Join,
+    KeptResult,
+    MemoryResultCache,
+    Reject,
+    RejectReason,
+    Start,
+)
+from services.protocol import Call, Result, encode_frame
+from services.results import ActionResult
+
+
+def table(max_in_flight: int = 2, cache: MemoryResultCache | None = None) -> CallTable[str]:
+    """A table hosting ``echo``, ``wait`` and the local-only ``private``; waiters are peer names."""
+    return CallTable(["echo", "wait", "private"], local_only=["private"], max_in_flight=max_in_flight, cache=cache)
+
+
+def call(cid: str, action: str = "echo") -> Call:
+    return Call(id=cid, action=action)
+
+
+def result(cid: str, value: object = None) -> Result:
+    return Result(id=cid, result=ActionResult.success(value))
+
+
+def finish(t: CallTable[str], cid: str, now: float = 0.0, value: object = None) -> list[str]:
+    res = result(cid, value)
+    return t.finish(res, size=len(encode_frame(res)), now=now).waiters
+
+
+def test_a_new_call_starts_and_its_caller_waits_for_it() -> None:
+    t = table()
+    verdict = t.admit(call("c1"), "p1", local=True)
+    assert isinstance(verdict, Start)
+    assert verdict.running.call == call("c1") and verdict.running.waiters == ["p1"]
+    assert t.in_flight == 1 and t.running("c1") is verdict.running
+
+
+def test_an_action_not_hosted_here_is_rejected_unknown_action() -> None:
+    assert table().admit(call("c1", "fly"), "p1", local=True) == Reject(RejectReason.UNKNOWN_ACTION)
+
+
+def test_a_local_only_action_is_served_to_a_local_peer_only() -> None:
+    t = table()
+    assert t.admit(call("c1", "private"), "far", local=False) == Reject(RejectReason.LOCAL_ONLY)
+    assert isinstance(t.admit(call("c2", "private"), "near", local=True), Start)
+    assert isinstance(t.admit(call("c3", "echo"), "far", local=False), Start)
+
+
+def test_a_repeat_of_a_running_id_joins_it_and_both_callers_get_the_result() -> None:
+    t = table()
+    first = t.admit(call("c1"), "p1", local=True)
+    again = t.admit(call("c1"), "p2", local=True)
+    assert isinstance(first, Start) and isinstance(again, Join)
+    assert again.running is first.running and t.in_flight == 1
+    assert finish(t, "c1") == ["p1", "p2"]
+
+
+def test_a_repeat_of_a_finished_id_is_answered_with_the_kept_result_without_running_again() -> None:
+    t = table()
+    t.admit(call("c1"), "p1", local=True)
+    finish(t, "c1", now=5.0, value={"x": 1})
+    verdict = t.admit(call("c1"), "p2", local=True)
+    assert isinstance(verdict, Answer)
+    assert verdict.kept.result == result("c1", {"x": 1})
+    assert (verdict.kept.action, verdict.kept.stored_at) == ("echo", 5.0)
+    assert t.in_flight == 0
+
+
+def test_the_same_id_for_another_action_is_a_duplicate_id_while_running_and_once_kept() -> None:
+    t = table()
+    t.admit(call("c1", "wait"), "p1", local=True)
+    assert t.admit(call("c1", "echo"), "p2", local=True) == Reject(RejectReason.DUPLICATE_ID)
+    finish(t, "c1")
+    assert t.admit(call("c1", "echo"), "p2", local=True) == Reject(RejectReason.DUPLICATE_ID)
+
+
+def test_calls_beyond_max_in_flight_are_rejected_busy_until_one_ends() -> None:
+    t = table(max_in_flight=2)
+    t.admit(call("c1"), "p", local=True)
+    t.admit(call("c2"), "p", local=True)
+    assert t.admit(call("c3"), "p", local=True) == Reject(RejectReason.BUSY)
+    finish(t, "c1")
+    assert isinstance(t.admit(call("c3"), "p", local=True), Start)
+
+
+def test_a_stopping_table_rejects_new_calls_shutdown_but_answers_repeats() -> None:
+    t = table()
+    t.admit(call("done"), "p", local=True)
+    finish(t, "done")
+    t.admit(call("busy"), "p", local=True)
+    still_running = t.stop()
+    assert [r.call.id for r in still_running] == ["busy"]
+    assert t.admit(call("new"), "p", local=True) == Reject(RejectReason.SHUTDOWN)
+    assert isinstance(t.admit(call("done"), "p", local=True), Answer)
+    assert isinstance(t.admit(call("busy"), "q", local=True), Join)
+
+
+def test_a_repeat_is_answered_even_when_the_table_is_full() -> None:
+    t = table(max_in_flight=1)
+    t.admit(call("c1"), "p", local=True)
+    finish(t, "c1")
+    t.admit(call("c2"), "p", local=True)
+    assert isinstance(t.admit(call("c1"), "p", local=True), Answer)
+    assert isinstance(t.admit(call("c2"), "q", local=True), Join)
+
+
+def test_cancel_marks_a_running_call_and_ignores_an_unknown_id() -> None:
+    t = table()
+    t.admit(call("c1"), "p", local=True)
+    running = t.cancel("c1")
+    assert running is not None and running.cancel_requested
+    assert t.cancel("nope") is None
+
+
+def test_finishing_an_id_that_is_not_running_is_a_key_error() -> None:
+    with pytest.raises(KeyError):
+        finish(table(), "never")
+
+
+def test_rejection_reasons_are_the_wire_strings() -> None:
+    assert [r.value for r in RejectReason] == ["unknown_action", "local_only", "duplicate_id", "busy", "shutdown"]
+
+
+def test_a_local_only_action_that_is_not_hosted_is_a_value_error() -> None:
+    with pytest.raises(ValueError):
+        CallTable(["echo"], local_only=["private"])
+    with pytest.raises(ValueError):
+        CallTable(["echo"], max_in_flight=0)
+
+
+# --------------------------------------------------------------------------- the result cache
+
+
+def kept(cid: str, size: int, at: float) -> KeptResult:
+    return KeptResult(cid, "echo", result(cid), size, at)
+
+
+def test_kept_results_older_than_the_age_cap_expire_oldest_first() -> None:
+    cache = MemoryResultCache(max_age_s=600.0)
+    t = table(cache=cache)
+    for i, at in enumerate([0.0, 100.0, 700.0]):
+        t.admit(call(f"c{i}"), "p", local=True)
+        finish(t, f"c{i}", now=at)
+    assert t.expire(650.0) == 1
+    assert "c0" not in cache and "c1" in cache
+    assert t.expire(699.0) == 0
+    assert t.expire(701.0) == 1 and len(cache) == 1 and "c2" in cache
+    assert isinstance(t.admit(call("c0"), "p", local=True), Start)  # forgotten: runs again
+
+
+def test_each_kept_result_is_charged_its_frame_length_plus_the_overhead() -> None:
+    cache = MemoryResultCache()
+    t = table(cache=cache)
+    t.admit(call("c1"), "p", local=True)
+    finish(t, "c1", value="x" * 1000)
+    frame = len(encode_frame(result("c1", "x" * 1000)))
+    assert cache.nbytes == frame + ENTRY_OVERHEAD
+    got = cache.get("c1")
+    assert got is not None and got.size == frame
+
+
+def test_the_byte_cap_drops_the_oldest_results_first() -> None:
+    cache = MemoryResultCache(max_bytes=3 * (100 + 512), entry_overhead=512)
+    for i in range(5):
+        cache.put(kept(f"c{i}", 100, float(i)))
+    assert len(cache) == 3 and "c1" not in cache and "c2" in cache and "c4" in cache
+    assert cache.nbytes == 3 * 612
+    cache.put(kept("big", 600, 9.0))  # 1112 bytes: two of the three older ones make room
+    assert [c for c in ("c2", "c3", "c4", "big") if c in cache] == ["c4", "big"]
+    assert cache.nbytes == 612 + 1112
+
+
+def test_the_newest_result_is_kept_even_when_it_alone_exceeds_the_byte_cap() -> None:
+    cache = MemoryResultCache(max_bytes=1000, entry_overhead=0)
+    cache.put(kept("small", 10, 0.0))
+    cache.put(kept("huge", 5000, 1.0))
+    assert "huge" in cache and "small" not in cache and cache.nbytes == 5000
+
+
+def test_putting_an_id_again_replaces_its_result_and_its_charge() -> None:
+    cache = MemoryResultCache(entry_overhead=0)
+    cache.put(kept("c1", 10, 0.0))
+    cache.put(kept("c1", 30, 1.0))
+    assert len(cache) == 1 and cache.nbytes == 30
+
+
+def test_the_cache_bounds_must_be_positive() -> None:
+    with pytest.raises(ValueError):
+        MemoryResultCache(max_bytes=0)
+    with pytest.raises(ValueError):
+        MemoryResultCache(max_age_s=0.0)
+
+
+def test_any_store_with_get_put_and_expire_can_keep_the_results() -> None:
+    class DictStore:
+        """A stand-in for a store that outlives the node (as an SQLite one would)."""
+
+        def __init__(self) -> None:
+            self.rows: dict[str, KeptResult] = {}
+            self.expired_at: list[float] = []
+
+        def get(self, call_id: str) -> KeptResult | None:
+            return self.rows.get(call_id)
+
+        def put(self, kept: KeptResult) -> None:
+            self.rows[kept.call_id] = kept
+
+        def expire(self, now: float) -> int:
+            self.expired_at.append(now)
+            return 0
+
+    store = DictStore()
+    before_restart = CallTable[str](["echo"], cache=store)
+    before_restart.admit(call("c1"), "p", local=True)
+    before_restart.finish(result("c1", 7), size=40, now=1.0)
+    after_restart = CallTable[str](["echo"], cache=store)  # a new node process, the same store
+    verdict = after_restart.admit(call("c1"), "p", local=True)
+    assert isinstance(verdict, Answer) and verdict.kept.result.result.value == 7
+    after_restart.expire(2.0)
+    assert store.expired_at == [2.0]
