@@ -8,7 +8,7 @@ Usage::
 Phase 1 (one process, lock-step simulated time, 1 kHz): for every throw of a seeded thrower the
 pybullet world rolls the ball; the analytic camera renders it at ``--fps`` twice, without noise and
 with 0.5 px position noise plus grey-level noise; each image goes through the locator, the
-calibrated pixel → table map and the rolling-ball predictor (services.ballvision); the noisy
+calibrated pixel → table map and the rolling-ball predictor (services.vision); the noisy
 pipeline's set points (in the robot base frame) drive services.robots.motion_control's servo, whose joint
 targets go as CiA 402 RPDOs over the simulated CAN bus to the simulated drives (sim.canbus), stepped
 in-process every 1 ms.
@@ -54,7 +54,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from services.robots import motion_control
-from services.ballvision import (
+from services.vision import (
     BallTracker,
     RollingModel,
     RollingPredictor,

@@ -53,7 +53,7 @@ from coordinator.learning import Learner, LearningAutomaton
 from coordinator.netfile import load_net
 from services.robots import motion_control
 from services.actions.vision import VERIFY_FRAMES, track_residual
-from services.ballvision import (
+from services.vision import (
     BallTracker,
     Detection,
     Homography,

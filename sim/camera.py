@@ -31,7 +31,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from services.ballvision import Homography, Roi, fit_homography, locate_threshold
+from services.vision import Homography, Roi, fit_homography, locate_threshold
 from services.devices.framegrabber import MAX_HEADER, Frame
 from services.errors import ProtocolError
 from services.protocol.framing import pack_map, recv_frame, unpack_map
@@ -305,7 +305,7 @@ def calibrate(
     Args:
         render_at: function placing the ball's centre at table point (x, y) (on the table) and
             returning the frame, (H, W, 3) uint8 BGR.
-        points: (N, 2) known table points, m (e.g. :func:`services.ballvision.calibration_points`).
+        points: (N, 2) known table points, m (e.g. :func:`services.vision.calibration_points`).
         frames_per_point: frames taken at each point; their detections are averaged (reduces the
             effect of pixel noise on the calibration).
         roi: search only this region of the frames (e.g. :meth:`CameraModel.table_roi`).
@@ -315,7 +315,7 @@ def calibrate(
 
     Raises:
         RuntimeError: if the ball is not found at some calibration point.
-        ValueError: from :func:`services.ballvision.fit_homography` on degenerate points.
+        ValueError: from :func:`services.vision.fit_homography` on degenerate points.
     """
     pixels = []
     for x, y in np.asarray(points, dtype=float):

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from services.ballvision import PlanarTransform
+from services.vision import PlanarTransform
 
 from .world import World
 

@@ -100,7 +100,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from services.robots import motion_control
-    from services.ballvision import calibration_points
+    from services.vision import calibration_points
     from sim.camera import (
         AnalyticRenderer,
         Frame,

@@ -57,7 +57,7 @@ import numpy as np
 from services.errors import ActionError
 from services.action import CallContext, Driver, NodeContext, PrimitiveAction
 from services.results import ActionResult, Status
-from services.ballvision import (
+from services.vision import (
     BallTracker,
     Detection,
     Homography,

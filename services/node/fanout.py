@@ -106,7 +106,8 @@ class Fanout(Generic[S]):
 
     def subscribe(self, sub: S, topic: str) -> Refusal | None:
         """Subscribe ``sub`` to ``topic`` (again is harmless); ``None``, or why it was refused."""
-        if len(topic) > self.max_topic_bytes or len(topic.encode("utf-8", "surrogatepass")) > self.max_topic_bytes:
+        cap = self.max_topic_bytes
+        if len(topic) > cap or len(topic.encode("utf-8", "surrogatepass")) > cap:
             return Refusal.TOPIC_TOO_LONG
         state = self._state(sub)
         if topic in state.topics:

@@ -377,8 +377,8 @@ class Node:
         if type(verdict) is Start:
             action = self._actions[call.action]
             run = action.fn if type(action) is FunctionAction else action.run
-            task = self._loop.create_task(self._run(verdict.running, run, self._placements[call.action].params, peer))
-            self._tasks[cid] = task
+            defaults = self._placements[call.action].params
+            self._tasks[cid] = self._loop.create_task(self._run(verdict.running, run, defaults, peer))
             peer.send(Accepted(id=cid))
         elif type(verdict) is Reject:
             reason = verdict.reason.value

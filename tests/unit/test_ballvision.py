@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from services.ballvision import (
+from services.vision import (
     BallTracker,
     Homography,
     PlanarTransform,

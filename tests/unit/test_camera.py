@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from services.ballvision import calibration_points, locate_threshold
+from services.vision import calibration_points, locate_threshold
 from services.devices.framegrabber import Frame, FrameClient
 from sim.camera import (
     AnalyticRenderer,

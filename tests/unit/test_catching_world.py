@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from services.robots import motion_control
-from services.ballvision import RollingModel
+from services.vision import RollingModel
 from sim.catching import BallSpec, CatchingWorld, TableSpec, Thrower, ThrowSpec
 from sim.world import ClockMode, World
 
