@@ -20,7 +20,7 @@ Format (every section optional except ``[nodes.*]``)::
 
     [drivers.camera]              # optional background components started with the node
     node = "alpha"
-    impl = "services.actions.vision:CameraDriver"
+    impl = "services.actions.camera:CameraDriver"
     params = {}
 
     [events.image_sampling_tick]  # which node publishes each external event topic

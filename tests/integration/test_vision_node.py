@@ -26,7 +26,7 @@ port = {port[vision]}
 
 [drivers.camera]
 node = "vision"
-impl = "services.actions.vision:CameraDriver"
+impl = "services.actions.camera:CameraDriver"
 params = {{ port = {port[camera]} }}
 
 [actions.locate_threshold]
