@@ -60,7 +60,12 @@ from services.node.calls import (
     RunningCall,
     Start,
 )
-from services.node.fanout import Fanout
+from services.node.fanout import (
+    DEFAULT_BACKLOG,
+    DEFAULT_MAX_TOPIC_BYTES,
+    DEFAULT_MAX_TOPICS,
+    Fanout,
+)
 from services.protocol import (
     DEFAULT_MAX_FRAME,
     Accepted,
@@ -181,27 +186,25 @@ class _Peer(FramedConnection):
     # ---- input
 
     def _handle(self, msg: Message) -> None:
-        kind = type(msg)
         node = self.node
-        if kind is Call:
-            node._on_call(self, msg)  # type: ignore[arg-type]
-        elif kind is Cancel:
-            node._on_cancel(msg.id)  # type: ignore[attr-defined]
-        elif kind is Ping:
-            self.send(Pong(seq=msg.seq))  # type: ignore[attr-defined]
-        elif kind is Subscribe:
-            topic: str = msg.topic  # type: ignore[attr-defined]
-            refusal = node._fanout.subscribe(self, topic)
+        if type(msg) is Call:
+            node._on_call(self, msg)
+        elif type(msg) is Cancel:
+            node._on_cancel(msg.id)
+        elif type(msg) is Ping:
+            self.send(Pong(seq=msg.seq))
+        elif type(msg) is Subscribe:
+            refusal = node._fanout.subscribe(self, msg.topic)
             if refusal is not None:
-                log.warning("subscription of %r to %.64r refused: %s", self, topic, refusal.value)
-        elif kind is Unsubscribe:
-            node._fanout.unsubscribe(self, msg.topic)  # type: ignore[attr-defined]
-        elif kind is Bye:
-            log.info("%r said bye: %s", self, msg.reason)  # type: ignore[attr-defined]
+                log.warning("subscription of %r to %.64r refused: %s", self, msg.topic, refusal.value)
+        elif type(msg) is Unsubscribe:
+            node._fanout.unsubscribe(self, msg.topic)
+        elif type(msg) is Bye:
+            log.info("%r said bye: %s", self, msg.reason)
             self.closed = True
             if self.transport is not None:
                 self.transport.close()
-        elif kind is Auth:
+        elif type(msg) is Auth:
             log.info("connection from %r authenticated", self)
 
 
@@ -216,9 +219,10 @@ class Node:
         result_bytes: cap on the bytes of kept results (frames plus bookkeeping), bytes.
         result_ttl_s: how long a result is kept, seconds.
         results: where results are kept; a :class:`~services.node.calls.MemoryResultCache` with
-            ``result_bytes`` and ``result_ttl_s`` if ``None`` (the two are then ignored).
-        fanout: the event fan-out; a :class:`~services.node.fanout.Fanout` with its defaults
-            (backlog 256 events, 256 topics per subscriber, topic names up to 256 bytes) if ``None``.
+            ``result_bytes`` and ``result_ttl_s`` if ``None`` (else the two are ignored).
+        event_backlog: events held for a subscriber whose writes are paused (older ones dropped).
+        max_topics: topics one connection may subscribe to.
+        max_topic_bytes: longest topic name a connection may subscribe to, bytes of UTF-8.
         max_frame: frame size cap, bytes.
 
     Raises:
@@ -235,7 +239,9 @@ class Node:
         result_bytes: int = DEFAULT_MAX_BYTES,
         result_ttl_s: float = DEFAULT_MAX_AGE_S,
         results: ResultCache | None = None,
-        fanout: Fanout[_Peer] | None = None,
+        event_backlog: int = DEFAULT_BACKLOG,
+        max_topics: int = DEFAULT_MAX_TOPICS,
+        max_topic_bytes: int = DEFAULT_MAX_TOPIC_BYTES,
         max_frame: int = DEFAULT_MAX_FRAME,
     ) -> None:
         self.name = name
@@ -260,7 +266,8 @@ class Node:
             max_in_flight=self.max_in_flight, cache=results,
         )
         self._tasks: dict[str, asyncio.Task[None]] = {}
-        self._fanout: Fanout[_Peer] = fanout if fanout is not None else Fanout()
+        self._fanout: Fanout[_Peer] = Fanout(backlog=event_backlog, max_topics=max_topics,
+                                             max_topic_bytes=max_topic_bytes)
         self._links: dict[str, NodeLink] = {}
         self._reaper: asyncio.Task[None] | None = None
         self._stopping = False
