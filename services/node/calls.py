@@ -32,7 +32,7 @@ import collections
 import enum
 from collections.abc import Collection, Iterable
 from dataclasses import dataclass
-from typing import Final, Generic, Protocol, TypeAlias, TypeVar
+from typing import Final, Generic, NamedTuple, Protocol, TypeAlias, TypeVar
 
 from services.protocol import Call, Result
 
@@ -83,9 +83,8 @@ class RejectReason(enum.StrEnum):
 # --------------------------------------------------------------------------- kept results
 
 
-@dataclass(frozen=True, slots=True)
-class KeptResult:
-    """A finished call's result, kept to answer a repeat of its id.
+class KeptResult(NamedTuple):
+    """A finished call's result, kept to answer a repeat of its id (an immutable record).
 
     Attributes:
         call_id: the call's id.
@@ -169,14 +168,15 @@ class MemoryResultCache:
     def put(self, kept: KeptResult) -> None:
         """Keep ``kept`` as the newest result, then drop the oldest while over ``max_bytes``."""
         results = self._kept
-        old = results.pop(kept.call_id, None)
-        if old is not None:
-            self.nbytes -= old.size + self.entry_overhead
-        results[kept.call_id] = kept
+        cid = kept.call_id
+        if cid in results:
+            self.nbytes -= results.pop(cid).size + self.entry_overhead
+        results[cid] = kept
         self.nbytes += kept.size + self.entry_overhead
-        while self.nbytes > self.max_bytes and len(results) > 1:
-            _, dropped = results.popitem(last=False)
-            self.nbytes -= dropped.size + self.entry_overhead
+        if self.nbytes > self.max_bytes:
+            while self.nbytes > self.max_bytes and len(results) > 1:
+                _, dropped = results.popitem(last=False)
+                self.nbytes -= dropped.size + self.entry_overhead
 
     def expire(self, now: float) -> int:
         """Drop the results kept before ``now - max_age_s`` (s); return how many were dropped."""
@@ -216,21 +216,21 @@ class RunningCall(Generic[W]):
         return f"RunningCall({self.call.id!r}, {self.call.action!r}, waiters={len(self.waiters)})"
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Start(Generic[W]):
     """Run the action: the call is now in the table (answer ``accepted``)."""
 
     running: RunningCall[W]
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Join(Generic[W]):
     """The id is running: the caller was added to its waiters (answer ``accepted``)."""
 
     running: RunningCall[W]
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(slots=True)
 class Answer:
     """The id already ran: answer ``accepted`` and this kept result, without running it again."""
 
