@@ -19,7 +19,7 @@ slipping then decelerates at
 
     dv/dt = -(3/5) (g μ_r / r + k v²),   k = ½ ρ C_d π r² / m,
 
-the model :mod:`services.ballvision` predicts with (tests check pybullet against it).
+the model :mod:`services.vision.rolling` predicts with (tests check pybullet against it).
 """
 
 from __future__ import annotations
