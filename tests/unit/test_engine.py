@@ -70,6 +70,17 @@ def test_busy_token_does_not_enable_the_output_transitions():
     assert engine.state is EngineState.RUNNING
 
 
+def test_fireable_transitions_are_enabled_ones_whose_events_are_latched():
+    net = task_net()
+    engine = Engine(net)
+    (start,) = [e for e in engine.advance() if isinstance(e, StartAction)]
+    # the token in 'working' is busy: the net's firing rule enables both exits, the engine fires neither
+    assert net.enabled_transitions(engine.marking) == ("done", "fail")
+    assert engine.fireable() == ()
+    engine.complete(start.instance, ActionResult(status=Status.ERROR, reason="x"))
+    assert engine.fireable() == ("fail",)
+
+
 def test_success_takes_the_normal_branch():
     engine = Engine(task_net())
     (start,) = [e for e in engine.advance() if isinstance(e, StartAction)]
