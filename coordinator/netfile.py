@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any, Protocol, TypeVar
 
 from coordinator.errors import NetError, NetFileError
+from coordinator.learning.validation import learner_spec
 from services.errors import LocationError
 from coordinator.net import (
     EVENT_RE,
@@ -490,11 +491,9 @@ class _Loader:
             values[key] = None if value is None else float(value)
         learner = self.get(table, "learner", "table", what, "task", name, {})
         if learner:  # section 4: reject a bad learner configuration here, with its line
-            from coordinator.learning import make_learner
-
             costs = {a.name: a.cost for a in actions if a.cost is not None}
             self.build(self.smap.key("task", name, "learner") or line,
-                       lambda: make_learner(learner, [a.name for a in actions], costs or None))
+                       lambda: learner_spec(learner, [a.name for a in actions], costs or None))
         return self.build(line, lambda: PrimitiveTask(name=name, actions=tuple(actions), learner=learner, **values))
 
     # ---------------------------------------------------------------- places

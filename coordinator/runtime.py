@@ -40,15 +40,19 @@ from coordinator.operator import Command, OperatorCommand
 from services.errors import LocationError
 from services.results import ActionResult, Status
 
-__all__ = ["ActionStats", "InFlight", "Learner", "RunSummary", "Runtime"]
+__all__ = ["ActionChooser", "ActionStats", "InFlight", "RunSummary", "Runtime"]
 
 log = logging.getLogger("petrobot.runtime")
 
 
-class Learner(Protocol):
-    """What the runtime needs from a learner (coordinator.learning, section 4)."""
+class ActionChooser(Protocol):
+    """What the runtime needs to choose primitive actions and learn from their results (section 4).
 
-    def choose(self, task: str) -> str: ...
+    :class:`coordinator.learning.Learner` is one.
+    """
+
+    def choose(self, task: str) -> str:
+        """The primitive action to run for a new instance of primitive task ``task``."""
 
     def update(self, task: str, action: str, result: ActionResult) -> Any:
         """Feed back a result; may return the task's new state dict, which is journaled."""
@@ -161,7 +165,7 @@ class Runtime:
         journal: Journal,
         *,
         seed: int = 0,
-        learner: Learner | None = None,
+        learner: ActionChooser | None = None,
         recovered: Recovered | None = None,
         net_text: str | None = None,
         observer: Observer | None = None,
