@@ -7,7 +7,15 @@
 * :mod:`coordinator.engine.engine` — :class:`Engine`, the executor.
 """
 
-from coordinator.engine.effects import CancelAction, Chooser, Effect, EngineState, Firing, Instance, StartAction
+from coordinator.engine.effects import (
+    CancelAction,
+    Chooser,
+    Effect,
+    EngineState,
+    Firing,
+    Instance,
+    StartAction,
+)
 from coordinator.engine.engine import Engine
 from coordinator.engine.tables import EngineTables
 

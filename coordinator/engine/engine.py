@@ -41,7 +41,15 @@ from __future__ import annotations
 import random
 from collections.abc import Callable, Iterable, Mapping
 
-from coordinator.engine.effects import CancelAction, Chooser, Effect, EngineState, Firing, Instance, StartAction
+from coordinator.engine.effects import (
+    CancelAction,
+    Chooser,
+    Effect,
+    EngineState,
+    Firing,
+    Instance,
+    StartAction,
+)
 from coordinator.engine.tables import EngineTables
 from coordinator.errors import EngineError, NetError, NotEnabledError
 from coordinator.net import Marking, PetriNet, parse_event

@@ -31,13 +31,23 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from coordinator.learning.base import STATE_FORMAT, ActionEstimate, LearningAutomaton, RateAutomaton
+    from coordinator.learning.base import (
+        STATE_FORMAT,
+        ActionEstimate,
+        LearningAutomaton,
+        RateAutomaton,
+    )
     from coordinator.learning.config import make_learner
     from coordinator.learning.fixed import FixedChoice
     from coordinator.learning.lri import LinearRewardInaction
     from coordinator.learning.pursuit import OPTIMISTIC_QUANTILE, PursuitAutomaton
     from coordinator.learning.registry import Learner
-    from coordinator.learning.state import automaton_from_state, state_from_json, state_to_json, task_seed
+    from coordinator.learning.state import (
+        automaton_from_state,
+        state_from_json,
+        state_to_json,
+        task_seed,
+    )
     from coordinator.learning.validation import (
         DEFAULT_RATES,
         DEFAULT_WARMUP,
@@ -72,7 +82,29 @@ _HOMES = {
     "learner_spec": "validation",
 }
 
-__all__ = sorted(_HOMES)
+__all__ = [
+    "DEFAULT_RATES",
+    "DEFAULT_WARMUP",
+    "ESTIMATORS",
+    "OPTIMISTIC_QUANTILE",
+    "SCHEMES",
+    "STATE_FORMAT",
+    "ActionEstimate",
+    "FixedChoice",
+    "Learner",
+    "LearnerConfigError",
+    "LearnerSpec",
+    "LearningAutomaton",
+    "LinearRewardInaction",
+    "PursuitAutomaton",
+    "RateAutomaton",
+    "automaton_from_state",
+    "learner_spec",
+    "make_learner",
+    "state_from_json",
+    "state_to_json",
+    "task_seed",
+]
 
 
 def __getattr__(name: str) -> Any:

@@ -13,7 +13,11 @@ from coordinator.learning.base import LearningAutomaton
 from coordinator.learning.fixed import FixedChoice
 from coordinator.learning.lri import LinearRewardInaction
 from coordinator.learning.pursuit import PursuitAutomaton
-from coordinator.learning.validation import LearnerConfigError, LearnerSpec, learner_spec
+from coordinator.learning.validation import (
+    LearnerConfigError,
+    LearnerSpec,
+    learner_spec,
+)
 
 __all__ = ["LearnerConfigError", "automaton_for", "make_learner"]
 

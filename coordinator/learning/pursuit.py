@@ -17,7 +17,11 @@ from typing import Any, ClassVar
 from scipy.special import betaincinv
 
 from coordinator.learning.base import RateAutomaton
-from coordinator.learning.validation import DEFAULT_RATES, DEFAULT_WARMUP, check_estimator
+from coordinator.learning.validation import (
+    DEFAULT_RATES,
+    DEFAULT_WARMUP,
+    check_estimator,
+)
 
 __all__ = ["OPTIMISTIC_QUANTILE", "PursuitAutomaton"]
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from coordinator.dot import to_dot
+from coordinator.netfile.dot import to_dot
 from coordinator.net import Arc, PetriNet, Place, PlaceKind, Transition, TransitionKind
 from coordinator.netfile import load_net
 

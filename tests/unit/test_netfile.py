@@ -481,7 +481,7 @@ def test_save_and_load_any_dispatch_on_suffix(tmp_path: Path) -> None:
     net = load_net(DEMO)
     save_net(net, tmp_path / "n.toml")
     assert load_any(tmp_path / "n.toml") == net
-    from coordinator.pnml import save_pnml
+    from coordinator.netfile.pnml import save_pnml
 
     save_pnml(net, tmp_path / "n.pnml")
     save_pnml(net, tmp_path / "n.xml")
