@@ -536,3 +536,31 @@ def test_learn_command_reads_a_journal_written_by_the_runtime_journal(tmp_path: 
     grasp = json.loads(capsys.readouterr().out)["tasks"]["grasp"]
     assert grasp["replay_matches_state"] is True and grasp["steps"] == 60
     assert grasp["actions"]["pinch"]["probability"] == learner.automaton("grasp").probabilities["pinch"]
+
+
+def test_learn_command_replays_one_run_from_a_fresh_learner_with_run(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    net_path = tmp_path / "net.toml"
+    net_path.write_text(NET)
+    net = loads_net(NET)
+    learner = Learner.from_net(net, seed=1)
+    env = np.random.default_rng(8)
+    runs = []
+    with Journal(tmp_path / "j.sqlite") as journal:
+        for trials in (40, 20):
+            run = journal.begin_run(net, seed=1)
+            for k in range(trials):
+                action = learner.choose("grasp")
+                status = Status.SUCCESS if env.random() < (0.9 if action == "pinch" else 0.6) else Status.ERROR
+                result = ActionResult(status=status, wall_s=0.5 if action == "pinch" else 0.2)
+                journal.action_result(run, f"{run}-{k}", "grasp", action, "motion", result)
+                journal.save_learner("grasp", "lri", learner.update("grasp", action, result))
+            journal.end_run(run, "dead")
+            runs.append(run)
+    db = str(tmp_path / "j.sqlite")
+    assert learn_cmd.run(_args(str(net_path), "--journal", db, "--run", runs[1], "--json")) == 0
+    grasp = json.loads(capsys.readouterr().out)["tasks"]["grasp"]
+    assert grasp["steps"] == grasp["journal_results"] == 20 and grasp["replay_matches_state"] is None
+    assert grasp["note"] == f"a fresh learner over the 20 results of run {runs[1]}"
+    assert learn_cmd.run(_args(str(net_path), "--journal", db, "--run", "nope")) == 2
+    assert "no run 'nope'" in capsys.readouterr().err
