@@ -12,7 +12,6 @@ two-node net ``nets/demo.toml`` instead.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
 import json
 import subprocess
@@ -108,6 +107,8 @@ class SimWorld:
 
 # --------------------------------------------------------------------------------------- demos
 async def _catching(args: argparse.Namespace) -> int:
+    import asyncio
+
     from coordinator.catching_report import CatchReport
     from coordinator.console import Console
     from coordinator.journal import Journal
@@ -187,6 +188,9 @@ async def _foundation(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the chosen demonstration; 0 when the net ended dead, 1 otherwise, 2 on an error."""
+    import asyncio
+
     demo = _catching if args.which == "catching" else _foundation
     try:
         return asyncio.run(demo(args))

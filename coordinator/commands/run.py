@@ -6,7 +6,6 @@ A thin command over :func:`coordinator.session.execute`.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import logging
 import sys
 from pathlib import Path
@@ -47,6 +46,8 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the net to its end; 0 when it ended dead, 1 otherwise, 2 on an error, 130 on Ctrl-C."""
+    import asyncio
+
     from coordinator.journal import Journal
     from coordinator.netfile import load_any
     from coordinator.session import execute

@@ -9,8 +9,6 @@ the foreground until Ctrl-C or SIGTERM (or until a node dies), and stops them al
 from __future__ import annotations
 
 import argparse
-import asyncio
-import signal
 import sys
 from typing import Any
 
@@ -40,6 +38,9 @@ def add_parser(subparsers: Any) -> None:
 
 
 async def _up(args: argparse.Namespace) -> int:
+    import asyncio
+    import signal
+
     from coordinator.nodegroup import NodeGroup
 
     group = NodeGroup(args.services, args.nodes, key_file=args.key_file, log_level=args.node_log_level)
@@ -74,6 +75,8 @@ async def _up(args: argparse.Namespace) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """Start the nodes and block until Ctrl-C/SIGTERM; return the exit code."""
+    import asyncio
+
     from services.errors import LocationError
 
     try:
