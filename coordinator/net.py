@@ -16,6 +16,10 @@ when ``M(p) >= W(p, t)`` for every input place *p* and ``M(q) < I(q, t)`` for ev
 of weight ``I(q, t)``; firing gives ``M' = M - Pre[:, t] + Post[:, t]``. The interpreted-net
 execution semantics (events, busy tokens of running primitive actions) are in
 :mod:`coordinator.engine`; this module is the structure they share with the analyses.
+
+The module is longer than most: it is one concept, the frozen model, whose classes refer to each
+other and which every layer imports whole. ``numpy`` is imported on the first use of a matrix
+(:attr:`PetriNet.incidence`...), so that loading and checking a net does not pay for it.
 """
 
 from __future__ import annotations
@@ -306,7 +310,7 @@ class Marking(Mapping[str, int]):
         items = tokens.items() if isinstance(tokens, Mapping) else tokens
         data: dict[str, int] = {}
         for place, count in items:
-            if isinstance(count, bool) or not (isinstance(count, int) or isinstance(count, numbers.Integral)):
+            if isinstance(count, bool) or not isinstance(count, (int, numbers.Integral)):
                 raise NetError(f"token count of {place!r} must be an integer, got {count!r}")
             if count < 0:
                 raise NetError(f"token count of {place!r} is negative ({count})")

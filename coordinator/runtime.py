@@ -1,4 +1,4 @@
-"""The coordinator's asyncio shell around the engine (DESIGN.md §2–3, paper section 5).
+"""The coordinator's asyncio shell around the engine (paper sections 2 and 5).
 
 :class:`Runtime` drives a :class:`~coordinator.engine.Engine`: it calls each primitive action on
 the node that ``services.toml`` places it on (through :class:`services.client.ServiceClient`),
@@ -20,7 +20,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from coordinator.engine import CancelAction, Effect, Engine, EngineState, Firing, StartAction
+from coordinator.engine import (
+    CancelAction,
+    Effect,
+    Engine,
+    EngineState,
+    Firing,
+    StartAction,
+)
 from coordinator.errors import EngineError
 from coordinator.events import (
     ActionEnded,

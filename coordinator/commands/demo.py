@@ -133,7 +133,9 @@ async def _catching(args: argparse.Namespace) -> int:
     journal_path = Path(args.journal or "runs/catching.sqlite")
     journal_path.parent.mkdir(parents=True, exist_ok=True)
 
-    say = lambda text: print(f"demo: {text}", file=sys.stderr, flush=True)  # noqa: E731
+    def say(text: str) -> None:
+        print(f"demo: {text}", file=sys.stderr, flush=True)
+
     say(f"starting the simulated world (renderer {args.renderer}, camera :{camera_port}, CAN :{can_port})")
     sim = SimWorld(["--realtime", "--seed", str(args.seed), "--renderer", args.renderer, "--throws", "0",
                     "--interval", "0", "--throw-when-home", "1.0", "--first-throw", "6",

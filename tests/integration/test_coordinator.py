@@ -14,13 +14,13 @@ from typing import Any
 import pytest
 
 from coordinator.errors import JournalError
+from coordinator.events import ActionEnded, ActionStarted, TransitionFired
 from coordinator.journal import Journal, JournalReader
 from coordinator.netfile import loads_net
-from coordinator.events import ActionEnded, ActionStarted, TransitionFired
-from services.results import Status
 from coordinator.operator import Command, OperatorCommand
 from coordinator.runtime import Runtime
 from services.client import ServiceClient
+from services.results import Status
 
 ROOT = Path(__file__).resolve().parents[2]
 Cluster = Any  # the `cluster` fixture of conftest.py

@@ -6,10 +6,25 @@ from collections import Counter
 
 import pytest
 
-from coordinator.engine import CancelAction, Engine, EngineState, Firing, Instance, StartAction
-from services.results import ActionResult, Status
+from coordinator.engine import (
+    CancelAction,
+    Engine,
+    EngineState,
+    Firing,
+    Instance,
+    StartAction,
+)
 from coordinator.errors import EngineError, NotEnabledError
-from coordinator.net import ActionSpec, Arc, PetriNet, Place, PlaceKind, PrimitiveTask, Transition
+from coordinator.net import (
+    ActionSpec,
+    Arc,
+    PetriNet,
+    Place,
+    PlaceKind,
+    PrimitiveTask,
+    Transition,
+)
+from services.results import ActionResult, Status
 
 
 def make_net(places, transitions, arcs, marking, tasks=()) -> PetriNet:

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from services.results import ActionResult, Status
 from coordinator.engine import Engine, Firing, StartAction
 from coordinator.errors import JournalError
 from coordinator.journal import Journal, JournalReader
 from coordinator.netfile import loads_net
+from services.results import ActionResult, Status
 
 NET = """
 [net]
@@ -145,7 +145,7 @@ def test_the_read_api_gives_typed_records_of_one_run_or_of_all(tmp_path: Path):
     net = loads_net(NET)
     with Journal(tmp_path / "j.sqlite") as journal:
         first = journal.begin_run(net, seed=1)
-        engine, starts = journaled_engine(journal, net, first)
+        _, starts = journaled_engine(journal, net, first)
         journal.action_result(first, starts[0].instance, "w", starts[0].action, "alpha",
                               ActionResult.failure({"seen": 2}, outcome="nothing"))
         journal.operator(first, "remove", "runs", 1)

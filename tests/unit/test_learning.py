@@ -10,10 +10,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from services.results import ActionResult, Status
 from coordinator.commands import learn as learn_cmd
 from coordinator.errors import JournalError, NetError
-from services.errors import PetrobotError
+from coordinator.journal import Journal
 from coordinator.learning import (
     FixedChoice,
     Learner,
@@ -27,9 +26,10 @@ from coordinator.learning import (
     state_to_json,
     task_seed,
 )
-from coordinator.journal import Journal
 from coordinator.netfile import loads_net
 from coordinator.performance import cost_function, rho_for
+from services.errors import PetrobotError
+from services.results import ActionResult, Status
 
 
 def _run(auto: LearningAutomaton, reliability: dict[str, float], env_seed: int, trials: int,
@@ -391,9 +391,8 @@ def test_learner_from_net_configures_every_primitive_task(tmp_path: Path) -> Non
 
 
 def test_bad_learner_table_in_a_net_file_names_the_task_and_problem() -> None:
-    from coordinator.netfile import loads_net
-
     from coordinator.errors import NetError
+    from coordinator.netfile import loads_net
 
     bad = NET.replace('learner = { scheme = "lri" }', 'learner = { scheme = "lri", rate = 2 }')
     with pytest.raises(NetError, match=r"learning rate must lie in \(0, 1\]") as info:  # caught at load time

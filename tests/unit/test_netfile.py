@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-from services.results import ActionResult, Status
 from coordinator.commands import check as check_cmd
 from coordinator.commands import export as export_cmd
 from coordinator.errors import NetError, NetFileError
@@ -35,6 +34,7 @@ from coordinator.netfile import (
     save_net,
 )
 from services.location import parse_location
+from services.results import ActionResult, Status
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "nets" / "demo.toml"
