@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from coordinator.analysis import ctmc
 from coordinator.analysis.gspn import tangible_chain
 from coordinator.net import PetriNet, TransitionKind
-from coordinator.pnml import load_pnml
+from coordinator.netfile.pnml import load_pnml
 
 #: the Model Checking Contest models: $PETROBOT_MCC, else tests/data/mcc in this repository
 MCC = Path(os.environ.get("PETROBOT_MCC") or Path(__file__).resolve().parents[1] / "tests" / "data" / "mcc")

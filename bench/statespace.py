@@ -69,7 +69,7 @@ def child_ours(path: str, max_states: int, budget: float) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
     from coordinator.analysis.statespace import explore, load_search
     from coordinator.net import PetriNet
-    from coordinator.pnml import load_pnml
+    from coordinator.netfile.pnml import load_pnml
 
     # numba's import and the compiled search's load from its cache, once per process: reported on
     # their own (load_seconds), outside the runs and below the RSS baseline of bytes_per_marking
@@ -107,7 +107,7 @@ def child_pm4py(path: str, cap: float, budget: float) -> dict[str, Any]:
         construct_reachability_graph,
     )
 
-    from coordinator.pnml import load_pnml
+    from coordinator.netfile.pnml import load_pnml
 
     def build() -> tuple[Any, Any]:
         net = load_pnml(path)

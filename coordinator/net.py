@@ -16,21 +16,27 @@ when ``M(p) >= W(p, t)`` for every input place *p* and ``M(q) < I(q, t)`` for ev
 of weight ``I(q, t)``; firing gives ``M' = M - Pre[:, t] + Post[:, t]``. The interpreted-net
 execution semantics (events, busy tokens of running primitive actions) are in
 :mod:`coordinator.engine`; this module is the structure they share with the analyses.
+
+The module is longer than most: it is one concept, the frozen model, whose classes refer to each
+other and which every layer imports whole. ``numpy`` is imported on the first use of a matrix
+(:attr:`PetriNet.incidence`...), so that loading and checking a net does not pay for it.
 """
 
 from __future__ import annotations
 
 import enum
+import numbers
 import re
 from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from types import MappingProxyType
-from typing import Any
-
-import numpy as np
+from typing import TYPE_CHECKING, Any
 
 from coordinator.errors import NetError, NotEnabledError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = [
     "PlaceKind",
@@ -304,7 +310,7 @@ class Marking(Mapping[str, int]):
         items = tokens.items() if isinstance(tokens, Mapping) else tokens
         data: dict[str, int] = {}
         for place, count in items:
-            if isinstance(count, bool) or not isinstance(count, (int, np.integer)):
+            if isinstance(count, bool) or not isinstance(count, (int, numbers.Integral)):
                 raise NetError(f"token count of {place!r} must be an integer, got {count!r}")
             if count < 0:
                 raise NetError(f"token count of {place!r} is negative ({count})")
@@ -594,6 +600,8 @@ class PetriNet:
         return out
 
     def _matrix(self, table: Mapping[str, Mapping[str, int]]) -> np.ndarray:
+        import numpy as np  # on first use: loading and checking a net does not need numpy
+
         out = np.zeros((len(self.places), len(self.transitions)), dtype=np.int64)
         for tid, places in table.items():
             j = self.transition_index[tid]
@@ -608,6 +616,8 @@ class PetriNet:
         Raises:
             KeyError: if the marking names an unknown place.
         """
+        import numpy as np  # on first use, as in _matrix
+
         vec = np.zeros(len(self.places), dtype=np.int64)
         for pid, count in marking.items():
             if count:

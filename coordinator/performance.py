@@ -23,17 +23,22 @@ Formulas used here, each with its source:
   :mod:`coordinator.analysis.gspn` on the P-timed net of :mod:`coordinator.analysis.ptimed`
   (M. Ajmone Marsan et al., *Modelling with Generalized Stochastic Petri Nets*, Wiley, 1995);
   ρ = 1 / C_max with C_max the mean time to absorption when every primitive task uses its costliest
-  action — the same normalisation as for a primitive task, one level up.
+  action — the same normalisation as for a primitive task, one level up. That propagation is an
+  analysis: :func:`coordinator.analysis.gspn_performance.gspn_task_performance` (the analysis
+  imports this module, never the other way).
+
+Records: :class:`ActionRecord` is one result of a primitive action, what these formulas need; the
+journal's :class:`coordinator.journal.ResultRow` is one (it adds where the result came from), so
+the journal's rows are passed here as they are read. This module opens no file.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
-import numpy as np
-
 from coordinator.net import PetriNet
+from services.results import Status
 
 __all__ = [
     "COST_MEASURES",
@@ -43,7 +48,6 @@ __all__ = [
     "action_performance",
     "cost_function",
     "error_sink_places",
-    "gspn_task_performance",
     "is_goal",
     "rho_for",
     "task_performance",
@@ -99,29 +103,47 @@ def rho_for(costs: Iterable[float]) -> float:
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class ActionRecord:
-    """One result of a primitive action, as the journal's ``action_result`` table holds it.
+    """One result of a primitive action: what the performance function needs of it.
 
     Attributes:
         task: primitive task name.
         action: primitive action name.
-        status: ``success``, ``failure`` or ``error``.
-        outcome: the outcome named in the ``int:`` event (``ok``, ``error`` or a named one), or None.
+        status: success, failure or error (a string is converted to :class:`Status`).
+        outcome: the named outcome the action reported, or None.
         cost: cost reported by the action, or None.
         wall_s: actual execution time in s, or None.
         cpu_s: CPU time in s, or None.
+
+    Raises:
+        ValueError: a status that is not success, failure or error.
     """
 
     task: str
     action: str
-    status: str
+    status: Status
     outcome: str | None = None
     cost: float | None = None
     wall_s: float | None = None
     cpu_s: float | None = None
 
+    def __post_init__(self) -> None:
+        if type(self.status) is not Status:
+            object.__setattr__(self, "status", Status(self.status))
+
     def measure(self, which: str) -> float | None:
         """The cost measure ``which`` (``wall``, ``cpu`` or ``cost``) of this result, or None."""
         return {"wall": self.wall_s, "cpu": self.cpu_s, "cost": self.cost}.get(which)
+
+
+def _mean(values: Sequence[float]) -> float:
+    """Arithmetic mean of a non-empty sequence, as ``numpy.mean`` computes it (pairwise sums).
+
+    ``numpy`` is imported on the first call: loading a net for ``petrobot check`` or building the
+    command line's parser does not pay for it.
+    """
+    import numpy as np
+
+    return float(np.mean(values))
 
 
 @dataclass(frozen=True, slots=True)
@@ -201,7 +223,7 @@ def action_performance(
             recs = grouped.get((name, spec.name), [])
             counts = {s: sum(1 for r in recs if r.status == s) for s in ("success", "failure", "error")}
             values = [v for r in recs if (v := r.measure(measure)) is not None] if measure != "apriori" else []
-            cost = float(np.mean(values)) if values else spec.cost
+            cost = _mean(values) if values else spec.cost
             rel = counts["success"] / len(recs) if recs else task.reliability
             source = ("journal" if recs else "apriori") + "/" + ("journal" if values else "apriori")
             rows.append((spec.name, len(recs), counts, rel, cost, source))
@@ -281,57 +303,3 @@ def is_goal(marking: Mapping[str, int], goal: Mapping[str, int] | None, sinks: s
     if goal:
         return all(marking.get(p, 0) >= n for p, n in goal.items())
     return not any(marking.get(p, 0) for p in sinks)
-
-
-def gspn_task_performance(
-    net: PetriNet,
-    records: Iterable[ActionRecord] = (),
-    *,
-    ext_rates: Mapping[str, float] | None = None,
-    goal: Mapping[str, int] | None = None,
-) -> tuple[TaskPerformance, dict[str, object]]:
-    """R, C, ρ, J of the whole task through its P-timed GSPN (see the module docstring).
-
-    Args:
-        net: the interpreted task net; it must terminate (e.g. a finite number of runs).
-        records: journal results (times and reliabilities; a-priori values otherwise).
-        ext_rates: rate in 1/s per external topic.
-        goal: minimum tokens per place of a goal marking; default: a dead marking that marks no
-            place fed only by error exits.
-
-    Returns:
-        ``(TaskPerformance, details)`` with ``details`` holding ``goal_markings`` (each with its
-        probability), ``c_max`` (s) and the P-timed model's ``warnings``. R, C and J are None when
-        the GSPN does not terminate.
-
-    Raises:
-        AnalysisError: as :func:`coordinator.analysis.gspn.analyse`.
-    """
-    from coordinator.analysis.gspn import analyse
-    from coordinator.analysis.ptimed import task_stats, to_gspn
-
-    recs = list(records)
-    stats = task_stats(recs)
-    model = to_gspn(net, stats=stats, ext_rates=ext_rates)
-    result = analyse(model.net)
-    details: dict[str, object] = {"warnings": model.warnings, "means_s": model.means, "normal": model.normal}
-    if not result.terminates or result.mean_time_to_absorption is None:
-        return TaskPerformance(net.name, None, None, 0.0, None, "gspn does not terminate"), details
-    sinks = error_sink_places(net)
-    goals = [a for a in result.absorption if is_goal(a["marking"], goal, sinks)]
-    rel = min(1.0, sum(float(a["probability"]) for a in goals))
-    cost = float(result.mean_time_to_absorption)
-    # Worst case: each primitive task at the mean time of its slowest action.
-    worst: dict[str, float] = {}
-    for name in net.tasks:
-        per_action: dict[str, list[float]] = {}
-        for r in recs:
-            if r.task == name and r.wall_s is not None:
-                per_action.setdefault(r.action, []).append(r.wall_s)
-        means = [float(np.mean(v)) for v in per_action.values()]
-        worst[name] = max(means) if means else model.means[name]
-    c_max = float(analyse(to_gspn(net, stats=stats, ext_rates=ext_rates, means=worst).net).mean_time_to_absorption
-                  or cost)
-    rho = 1.0 / c_max if c_max > 0 else 0.0
-    details.update(goal_markings=goals, c_max=c_max)
-    return TaskPerformance(net.name, rel, cost, rho, 1.0 - rel + rho * cost, "gspn"), details

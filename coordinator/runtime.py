@@ -1,4 +1,4 @@
-"""The coordinator's asyncio shell around the engine (DESIGN.md §2–3, paper section 5).
+"""The coordinator's asyncio shell around the engine (paper sections 2 and 5).
 
 :class:`Runtime` drives a :class:`~coordinator.engine.Engine`: it calls each primitive action on
 the node that ``services.toml`` places it on (through :class:`services.client.ServiceClient`),
@@ -20,7 +20,14 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from coordinator.engine import CancelAction, Effect, Engine, EngineState, Firing, StartAction
+from coordinator.engine import (
+    CancelAction,
+    Effect,
+    Engine,
+    EngineState,
+    Firing,
+    StartAction,
+)
 from coordinator.errors import EngineError
 from coordinator.events import (
     ActionEnded,
@@ -40,15 +47,19 @@ from coordinator.operator import Command, OperatorCommand
 from services.errors import LocationError
 from services.results import ActionResult, Status
 
-__all__ = ["ActionStats", "InFlight", "Learner", "RunSummary", "Runtime"]
+__all__ = ["ActionChooser", "ActionStats", "InFlight", "RunSummary", "Runtime"]
 
 log = logging.getLogger("petrobot.runtime")
 
 
-class Learner(Protocol):
-    """What the runtime needs from a learner (coordinator.learning, section 4)."""
+class ActionChooser(Protocol):
+    """What the runtime needs to choose primitive actions and learn from their results (section 4).
 
-    def choose(self, task: str) -> str: ...
+    :class:`coordinator.learning.Learner` is one.
+    """
+
+    def choose(self, task: str) -> str:
+        """The primitive action to run for a new instance of primitive task ``task``."""
 
     def update(self, task: str, action: str, result: ActionResult) -> Any:
         """Feed back a result; may return the task's new state dict, which is journaled."""
@@ -161,7 +172,7 @@ class Runtime:
         journal: Journal,
         *,
         seed: int = 0,
-        learner: Learner | None = None,
+        learner: ActionChooser | None = None,
         recovered: Recovered | None = None,
         net_text: str | None = None,
         observer: Observer | None = None,

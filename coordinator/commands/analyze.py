@@ -15,10 +15,7 @@ import time
 from collections.abc import Callable
 from typing import Any, TextIO
 
-from coordinator.analysis.robotic import report
-from coordinator.analysis.statespace import load_search
 from services.errors import PetrobotError
-from coordinator.netfile import load_any
 
 __all__ = ["add_parser", "render", "run"]
 
@@ -136,6 +133,10 @@ def render(rep: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Analyse the net; print the report; return 0, or 1 if the net cannot be loaded."""
+    from coordinator.analysis.robotic import report
+    from coordinator.analysis.statespace import load_search
+    from coordinator.netfile import load_any
+
     try:
         net = load_any(args.net, interpreted=False)
     except PetrobotError as exc:

@@ -11,17 +11,15 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from coordinator.errors import NetError
-from services.errors import LocationError
-from coordinator.net import PetriNet
-from coordinator.netfile import SourceMap, check_net, lint_net, load_any
+from coordinator.commands.options import DEFAULT_SERVICES
+
+if TYPE_CHECKING:
+    from coordinator.net import PetriNet
+    from coordinator.netfile import SourceMap
 
 __all__ = ["add_parser", "run", "summary"]
-
-DEFAULT_SERVICES = "services.toml"
-
 
 def add_parser(subparsers: Any) -> None:
     """Register ``check`` on the ``petrobot`` sub-command parser."""
@@ -52,6 +50,11 @@ def summary(net: PetriNet) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Check a net; return 0 when it is valid, 1 after printing its problems."""
+    from coordinator.errors import NetError
+    from coordinator.netfile import SourceMap, check_net, lint_net, load_any
+    from services.errors import LocationError
+    from services.location import load_location
+
     path = str(args.net)
     smap: SourceMap | None = None
     problems: list[str] = []
@@ -74,8 +77,6 @@ def run(args: argparse.Namespace) -> int:
         services = DEFAULT_SERVICES
     placed = ""
     if net is not None and services is not None:
-        from services.location import load_location
-
         try:
             location = load_location(services)
         except LocationError as exc:

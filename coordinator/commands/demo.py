@@ -12,18 +12,19 @@ two-node net ``nets/demo.toml`` instead.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
 import json
 import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from coordinator.commands import options
 from services.errors import PetrobotError
+
+__all__ = ["SimWorld", "add_parser", "run"]
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -44,26 +45,21 @@ Every firing, action start and result goes to the journal (--journal)."""
 
 
 def add_parser(subparsers: Any) -> None:
+    """Register ``demo`` on the ``petrobot`` sub-command parser."""
     p = subparsers.add_parser("demo", help="run a demonstration on localhost (sim + nodes + coordinator)",
                               description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("which", nargs="?", default="catching", choices=["catching", "foundation"],
                    help="which demonstration (default: %(default)s)")
     p.add_argument("--runs", type=int, default=None,
                    help="tokens in runs_remaining at the start (default: the net's own, 4 for catching)")
-    p.add_argument("--services", default=str(ROOT / "services.toml"), help="location file (default: the project's)")
-    p.add_argument("--journal", default=None,
-                   help="SQLite journal (default: runs/catching.sqlite or runs/demo.sqlite)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the thrower, random switches and learners")
+    options.add_services(p, default=str(ROOT / "services.toml"), help="location file (default: the project's)")
+    options.add_journal(p, help="SQLite journal (default: runs/catching.sqlite or runs/demo.sqlite)")
+    options.add_seed(p, help="seed of the thrower, random switches and learners")
     p.add_argument("--renderer", choices=["tiny", "analytic"], default="tiny",
                    help="camera back end: pybullet's TinyRenderer (default) or the fast analytic one")
-    p.add_argument("--key-file", default=None, help="shared key file (default: $PETROBOT_KEY, then "
-                   "~/.config/petrobot/key, created if missing)")
-    p.add_argument("--max-seconds", type=float, default=300.0,
-                   help="abort the run after this many seconds (default: %(default)s)")
-    view = p.add_mutually_exclusive_group()
-    view.add_argument("--live", dest="live", action="store_true", default=None,
-                      help="redraw a live screen (default on a terminal)")
-    view.add_argument("--lines", dest="live", action="store_false", help="print one line per event")
+    options.add_key_file(p)
+    options.add_max_seconds(p, default=300.0)
+    options.add_view(p)
     p.set_defaults(func=run)
 
 
@@ -109,94 +105,16 @@ class SimWorld:
                 self.proc.wait(timeout=5)
 
 
-# --------------------------------------------------------------------------------------- the report
-@dataclass
-class RunRecord:
-    """What happened in one run of the catching net."""
-
-    n: int
-    outcome: str = "running"
-    times: dict[str, float] = field(default_factory=dict)
-    locate_action: str = ""
-    predicted: dict[str, Any] | None = None
-    truth: dict[str, Any] | None = None
-
-    @property
-    def error_mm(self) -> float | None:
-        """|predicted − actual| lateral position at the catch line, millimetres."""
-        if not self.predicted or not self.truth:
-            return None
-        return abs(float(self.predicted["y"]) - float(self.truth["y"])) * 1000.0
-
-
-class CatchReport:
-    """A runtime observer that groups events into runs (each starts with ``start_run``)."""
-
-    OUTCOMES = {"ball_caught": "caught", "ball_missed": "missed", "ball_bounced_out": "bounced out",
-                "catch_failed": "error", "catch_failed_after_sensor": "error", "locate_failed": "error",
-                "no_ball_seen": "no ball"}
-
-    def __init__(self, forward: Any) -> None:
-        self.forward = forward
-        self.runs: list[RunRecord] = []
-
-    def __call__(self, event: Any) -> None:
-        from coordinator.events import ActionEnded, TransitionFired
-        from services.results import Status
-
-        if isinstance(event, TransitionFired):
-            tid = event.firing.transition
-            if tid == "start_run":
-                self.runs.append(RunRecord(len(self.runs) + 1))
-            elif self.runs and tid in self.OUTCOMES:
-                self.runs[-1].outcome = self.OUTCOMES[tid]
-        elif isinstance(event, ActionEnded) and self.runs:
-            run = self.runs[-1]
-            result = event.result
-            run.times[event.task] = result.wall_s
-            if event.task == "locate":
-                run.locate_action = event.action
-            if event.task == "predict" and result.status is Status.SUCCESS and isinstance(result.value, dict):
-                run.predicted = result.value
-        self.forward(event)
-
-    def match_truth(self, crossings: list[dict[str, Any]]) -> None:
-        """Pair each run's final prediction with the simulator's crossing nearest in time."""
-        for run in self.runs:
-            if run.predicted is None:
-                continue
-            t = float(run.predicted.get("t", 0.0))
-            near = min(crossings, key=lambda c: abs(float(c["t"]) - t), default=None)
-            if near is not None and abs(float(near["t"]) - t) < 1.0:
-                run.truth = near
-
-    def format(self) -> str:
-        head = (f"{'run':>3}  {'outcome':<12}{'locate with':<18}{'pred. error':>12}{'lead':>7}"
-                f"{'locate':>8}{'predict':>9}{'catch':>7}{'home':>7}")
-        lines = ["", "catching experiment (times in seconds; prediction error at the catch line, final set point)",
-                 head]
-        for r in self.runs:
-            err = f"{r.error_mm:9.2f} mm" if r.error_mm is not None else f"{'-':>12}"
-            lead = f"{float(r.predicted.get('lead_s', 0.0)):6.2f}s" if r.predicted else f"{'-':>7}"
-            times = "".join(f"{r.times[k]:>{w}.2f}" if k in r.times else f"{'-':>{w}}"
-                            for k, w in (("locate", 8), ("predict", 9), ("catch", 7), ("home", 7)))
-            lines.append(f"{r.n:>3}  {r.outcome:<12}{r.locate_action:<18}{err}{lead}{times}")
-        caught = sum(r.outcome == "caught" for r in self.runs)
-        restarted = sum(r.outcome == "no ball" for r in self.runs)
-        attempts = len(self.runs) - restarted
-        note = (f" ({restarted} run{'s' * (restarted != 1)} restarted: no ball located within specification)"
-                if restarted else "")
-        lines.append(f"caught {caught} of {attempts} balls{note}")
-        return "\n".join(lines)
-
-
 # --------------------------------------------------------------------------------------- demos
 async def _catching(args: argparse.Namespace) -> int:
-    from coordinator.commands.run import execute
-    from coordinator.commands.up import NodeGroup
+    import asyncio
+
+    from coordinator.catching_report import CatchReport
     from coordinator.console import Console
     from coordinator.journal import Journal
     from coordinator.netfile import load_net
+    from coordinator.nodegroup import NodeGroup
+    from coordinator.session import execute
     from services.keys import load_key
     from services.location import load_location
 
@@ -215,7 +133,9 @@ async def _catching(args: argparse.Namespace) -> int:
     journal_path = Path(args.journal or "runs/catching.sqlite")
     journal_path.parent.mkdir(parents=True, exist_ok=True)
 
-    say = lambda text: print(f"demo: {text}", file=sys.stderr, flush=True)  # noqa: E731
+    def say(text: str) -> None:
+        print(f"demo: {text}", file=sys.stderr, flush=True)
+
     say(f"starting the simulated world (renderer {args.renderer}, camera :{camera_port}, CAN :{can_port})")
     sim = SimWorld(["--realtime", "--seed", str(args.seed), "--renderer", args.renderer, "--throws", "0",
                     "--interval", "0", "--throw-when-home", "1.0", "--first-throw", "6",
@@ -242,10 +162,10 @@ async def _catching(args: argparse.Namespace) -> int:
 
 
 async def _foundation(args: argparse.Namespace) -> int:
-    from coordinator.commands.run import execute
-    from coordinator.commands.up import NodeGroup
     from coordinator.journal import Journal
     from coordinator.netfile import load_net
+    from coordinator.nodegroup import NodeGroup
+    from coordinator.session import execute
     from services.keys import load_key
     from services.location import load_location
 
@@ -270,6 +190,9 @@ async def _foundation(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    """Run the chosen demonstration; 0 when the net ended dead, 1 otherwise, 2 on an error."""
+    import asyncio
+
     demo = _catching if args.which == "catching" else _foundation
     try:
         return asyncio.run(demo(args))

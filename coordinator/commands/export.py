@@ -2,7 +2,7 @@
 
 Reads any net file :func:`coordinator.netfile.load_any` reads (``.toml``, ``.pnml``, ``.xml``) and
 writes canonical TOML (docs/netfile.md), PNML 2009 with petrobot tool-specific data
-(:mod:`coordinator.pnml`) or a Graphviz picture (:mod:`coordinator.dot`), to stdout by default.
+(:mod:`coordinator.netfile.pnml`) or a Graphviz picture (:mod:`coordinator.netfile.dot`), to stdout by default.
 """
 
 from __future__ import annotations
@@ -13,10 +13,7 @@ import textwrap
 from pathlib import Path
 from typing import Any
 
-from coordinator.dot import to_dot
 from services.errors import PetrobotError
-from coordinator.netfile import dump_net, load_any
-from coordinator.pnml import dump_pnml
 
 __all__ = ["FORMATS", "add_parser", "run"]
 
@@ -54,6 +51,10 @@ def add_parser(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Export a net; return 0, or 1 after printing the problem on stderr."""
+    from coordinator.netfile import dump_net, load_any
+    from coordinator.netfile.dot import to_dot
+    from coordinator.netfile.pnml import dump_pnml
+
     try:
         net = load_any(args.net, interpreted=not args.no_check)
         if args.to == "toml":

@@ -5,16 +5,16 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from coordinator.analysis.gspn import analyse
-from coordinator.analysis.ptimed import empirical_delays, task_stats, to_gspn
-from coordinator.analysis.simulate import Delay, simulate_absorption, simulate_steady
-from coordinator.commands.perf import parse_pairs, read_records
+from coordinator.commands import options
+from coordinator.commands.options import parse_pairs
 from coordinator.errors import AnalysisError, JournalError, NetError
-from services.errors import PetrobotError
 from coordinator.net import PetriNet, PlaceKind
-from coordinator.netfile import dump_net, load_any
+from services.errors import PetrobotError
+
+if TYPE_CHECKING:
+    from coordinator.analysis.simulate import Delay
 
 __all__ = ["add_parser", "report", "run"]
 
@@ -37,10 +37,10 @@ def add_parser(subparsers: Any) -> None:
             "the analysis fails (state limit, timeless trap)."),
     )
     parser.add_argument("net", metavar="NET", help="net file (.toml, .pnml or .xml)")
-    parser.add_argument("--journal", metavar="FILE",
-                        help="SQLite journal of real runs: mean times and reliabilities of primitive tasks")
-    parser.add_argument("--ext-rate", action="append", metavar="TOPIC=RATE",
-                        help="rate (1/s) of external event ext:TOPIC (default 1/s, with a warning); repeatable")
+    options.add_journal(parser, help="SQLite journal of real runs: mean times and reliabilities of primitive tasks")
+    options.add_run(parser)
+    options.add_ext_rate(parser, help="rate (1/s) of external event ext:TOPIC (default 1/s, with a warning); "
+                                      "repeatable")
     parser.add_argument("--max-states", type=int, default=2_000_000, metavar="N",
                         help="stop with an error past N reachable markings (default 2,000,000)")
     parser.add_argument("--method", choices=["auto", "dense", "direct", "bicgstab"], default="auto",
@@ -53,8 +53,8 @@ def add_parser(subparsers: Any) -> None:
                              "terminates, else RUNS batches of 100 s after a 100 s warm-up; primitive tasks "
                              "take their durations from the journal's samples when --journal is given "
                              "(exponential otherwise); 95%% confidence intervals")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the simulation (default 0)")
-    parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    options.add_seed(parser, help="seed of the simulation (default 0)")
+    options.add_json(parser)
 
 
 def _is_interpreted(net: PetriNet) -> bool:
@@ -63,12 +63,17 @@ def _is_interpreted(net: PetriNet) -> bool:
 
 def report(args: argparse.Namespace) -> dict[str, Any]:
     """Compute the ``gspn`` report as a JSON-ready dict (raises PetrobotError subclasses)."""
+    from coordinator.analysis.gspn import analyse
+    from coordinator.analysis.ptimed import empirical_delays, task_stats, to_gspn
+    from coordinator.journal import read_results
+    from coordinator.netfile import dump_net, load_any
+
     net = load_any(args.net, interpreted=False)
     warnings: list[str] = []
     sources: dict[str, str] = {}
     delays: dict[str, Delay] = {}
     if _is_interpreted(net):
-        records = read_records(args.journal) if args.journal else []
+        records = read_results(args.journal, args.run) if args.journal else []
         stats = task_stats(records)
         model = to_gspn(net, stats=stats, ext_rates=parse_pairs(args.ext_rate, "--ext-rate"))
         gspn, warnings, sources = model.net, model.warnings, model.sources
@@ -87,6 +92,8 @@ def report(args: argparse.Namespace) -> dict[str, Any]:
 
 def _simulate(net: PetriNet, delays: dict[str, Delay], terminates: bool, runs: int, seed: int) -> dict[str, Any]:
     """Simulation estimates (mean and 95 % half-width) beside the CTMC figures."""
+    from coordinator.analysis.simulate import simulate_absorption, simulate_steady
+
     laws = {tid: d.kind for tid, d in delays.items()}
     if terminates:
         est = simulate_absorption(net, delays, seed=seed, replications=max(2, runs))

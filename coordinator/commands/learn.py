@@ -1,22 +1,22 @@
 """``petrobot learn NET --journal FILE``: what the learning automata have learned (paper section 4).
 
-Reads two tables of the journal (SQLite), never writing to it:
-
-* ``learner_state(task, scheme, state, updated_wall)``: one saved automaton per primitive task
-  (:meth:`coordinator.learning.LearningAutomaton.state_dict` as JSON);
-* ``action_result(instance, task, action, node, status, outcome, cost, wall_s, cpu_s, t_wall)``:
-  every primitive action's result, in journal order.
+Reads the journal read-only (:class:`coordinator.journal.JournalReader`): the saved learner state
+of each primitive task (:meth:`coordinator.learning.LearningAutomaton.state_dict`) and every
+primitive action's result, in journal order.
 
 The net file gives the primitive tasks and their configured learners, so tasks that have not run
-yet are listed too (uniform probabilities, no trials). For each primitive task it reports the probability of each primitive action, R̂, C and Ĵ
-(eq. 1), and whether one action has reached the convergence threshold. ``--plot`` draws the
-probability of each action over the trials. The history is not stored: it is rebuilt by replaying
-the task's results, in journal (rowid) order, through a fresh automaton of the saved configuration
-and seed; the cost of a result is its ``cost`` column, or ``wall_s`` when that is NULL, as the
-runtime feeds the learner. The learning updates are deterministic in (action, status, cost), so the replay ends on
-the saved probabilities exactly when the journal holds every result the learner saw; the report
-says whether it does. Results with a status other than success/failure/error (e.g. cancelled) are
-not part of learning and are skipped.
+yet are listed too (uniform probabilities, no trials). For each primitive task it reports the
+probability of each primitive action, R̂, C and Ĵ (eq. 1), and whether one action has reached the
+convergence threshold. ``--plot`` draws the probability of each action over the trials. The
+history is not stored: it is rebuilt by replaying the task's results, in journal order, through a
+fresh automaton of the saved configuration and seed; the cost of a result is its ``cost``, or
+``wall_s`` when the action reported none, as the runtime feeds the learner. The learning updates
+are deterministic in (action, status, cost), so the replay ends on the saved probabilities exactly
+when the journal holds every result the learner saw; the report says whether it does.
+
+``--run RUN_ID`` takes the results of that run only. The journal saves one learner state per
+primitive task across runs, not per run, so each task is then reported as a fresh automaton of its
+saved configuration that has seen that run's results (no comparison with the saved state).
 """
 
 from __future__ import annotations
@@ -24,29 +24,25 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sqlite3
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from coordinator.errors import JournalError
+from coordinator.commands import options
 from services.errors import PetrobotError
-from coordinator.learning import (
-    Learner,
-    LearningAutomaton,
-    automaton_from_state,
-    make_learner,
-    state_from_json,
-)
+from services.results import Status
+
+if TYPE_CHECKING:
+    from coordinator.learning import Learner, LearningAutomaton
 
 __all__ = ["TaskReport", "add_parser", "build_reports", "read_journal", "run"]
 
 _EPS = 1e-12
-from services.results import Status
 
-_STATUSES = frozenset(s.value for s in Status)
+Trial = tuple[str, Status, float | None]
+"""One result as the learner took it in: (action, status, cost)."""
 
 
 @dataclass
@@ -57,7 +53,7 @@ class TaskReport:
         task: primitive task name.
         automaton: the saved automaton, or one rebuilt from the results (``saved`` False).
         saved: whether ``learner_state`` holds a state for the task.
-        results: (action, status, cost) of the task's results in journal order, learning statuses only.
+        results: (action, status, cost) of the task's results in journal order.
         history: probability vectors after each replayed result, shape (len(results) + 1, r);
             empty when there is no saved state to replay.
         replay_matches: replayed probabilities equal the saved ones (``None`` without a state).
@@ -67,7 +63,7 @@ class TaskReport:
     task: str
     automaton: LearningAutomaton
     saved: bool
-    results: list[tuple[str, str, float | None]] = field(default_factory=list)
+    results: list[Trial] = field(default_factory=list)
     history: list[list[float]] = field(default_factory=list)
     replay_matches: bool | None = None
     note: str | None = None
@@ -82,12 +78,12 @@ def add_parser(subparsers: Any) -> None:
             "For every primitive task with a learner, report the probability of choosing each "
             "primitive action, its estimated reliability R, cost C and J = 1 - R + rho*C "
             "(paper eq. 1), and whether one action reached the convergence threshold. Reads the "
-            "journal's learner_state and action_result tables; never writes to the journal."),
+            "journal's saved learner states and results; never writes to the journal."),
     )
     parser.add_argument("net", metavar="NET", help="the task net file the journal was recorded with")
-    parser.add_argument("--journal", required=True, metavar="FILE",
-                        help="SQLite journal of the runs (read only)")
-    parser.add_argument("--json", action="store_true", help="print a JSON document instead of text")
+    options.add_journal(parser, required=True, help="SQLite journal of the runs (read only)")
+    options.add_run(parser)
+    options.add_json(parser, help="print a JSON document instead of text")
     parser.add_argument("--plot", metavar="FILE.png",
                         help="draw the probability of each action over the trials, one panel per task "
                              "(rebuilt by replaying the journal's results; PNG written with matplotlib)")
@@ -97,59 +93,42 @@ def add_parser(subparsers: Any) -> None:
                         help="report only this primitive task (repeatable)")
 
 
-def read_journal(path: str) -> tuple[dict[str, dict[str, Any]], dict[str, list[tuple[str, str, float | None]]]]:
-    """Read saved learner states and learning results from a journal, read only.
+def read_journal(path: str | Path, run: str | None = None) -> tuple[dict[str, dict[str, Any]], dict[str, list[Trial]]]:
+    """Read saved learner states and learning results from a journal, read-only.
 
     Args:
-        path: SQLite journal file.
+        path: the journal file.
+        run: take the results of this run only (``None``: every run).
 
     Returns:
-        ({task: state dict}, {task: [(action, status, cost), ...] in rowid order}), where cost is
-        the ``cost`` column or, when it is NULL, ``wall_s`` (as the runtime feeds the learner).
-        A missing ``learner_state`` table gives no states; a missing ``action_result`` table gives
-        no results.
+        ({task: state dict}, {task: [(action, status, cost), ...] in journal order}), where cost is
+        the result's ``cost`` or, when the action reported none, its ``wall_s`` (as the runtime
+        feeds the learner); a cost that is not finite and ≥ 0 is ``None``.
 
     Raises:
-        JournalError: if the file is absent or not a readable SQLite database, or a state is
-            not valid JSON.
+        JournalError: if the file is missing or not a journal, has no run ``run``, or a saved
+            state is not a JSON object of its scheme.
     """
-    if not Path(path).is_file():
-        raise JournalError(f"{path}: no such journal file")
-    try:
-        con = sqlite3.connect(f"file:{Path(path).resolve()}?mode=ro", uri=True, timeout=5.0)
-    except sqlite3.Error as exc:
-        raise JournalError(f"{path}: cannot open journal: {exc}") from exc
-    try:
-        tables = {row[0] for row in con.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-        states: dict[str, dict[str, Any]] = {}
-        if "learner_state" in tables:
-            for task, scheme, text in con.execute(
-                    "SELECT task, scheme, state FROM learner_state ORDER BY task"):
-                state = state_from_json(text)
-                if state.get("scheme") != scheme:
-                    raise JournalError(f"{path}: learner_state of {task!r}: scheme column {scheme!r} "
-                                       f"disagrees with the state ({state.get('scheme')!r})")
-                states[str(task)] = state
-        results: dict[str, list[tuple[str, str, float | None]]] = {}
-        if "action_result" in tables:
-            for task, action, status, cost, wall_s in con.execute(
-                    "SELECT task, action, status, cost, wall_s FROM action_result ORDER BY rowid"):
-                if status not in _STATUSES:
-                    continue
-                if cost is None:
-                    cost = wall_s  # what the runtime feeds the learner when no cost is reported
-                value = None if cost is None else float(cost)
-                if value is not None and (not math.isfinite(value) or value < 0.0):
-                    value = None
-                results.setdefault(str(task), []).append((str(action), Status(status), value))
-    except sqlite3.Error as exc:
-        raise JournalError(f"{path}: cannot read journal: {exc}") from exc
-    finally:
-        con.close()
+    from coordinator.journal import JournalReader
+
+    with JournalReader.open(path) as journal:
+        if run is not None:
+            journal.run(run)
+        states = {task: dict(saved.state) for task, saved in journal.learner_states().items()}
+        results: dict[str, list[Trial]] = {}
+        for row in journal.results(run):
+            cost = row.cost if row.cost is not None else row.wall_s  # what the runtime feeds the learner
+            value = None if cost is None else float(cost)
+            if value is not None and (not math.isfinite(value) or value < 0.0):
+                value = None
+            results.setdefault(row.task, []).append((row.action, row.status, value))
     return states, results
 
 
-def _replay(state: dict[str, Any], results: list[tuple[str, str, float | None]]) -> tuple[list[list[float]], list[float]]:
+def _replay(state: Mapping[str, Any], results: list[Trial]) -> tuple[list[list[float]], LearningAutomaton]:
+    """Probability vectors of a fresh automaton of ``state``'s configuration over ``results``."""
+    from coordinator.learning import make_learner
+
     config = dict(state["config"])
     config["scheme"] = state["scheme"]
     fresh = make_learner(config, list(state["actions"]), state["costs"], int(state["seed"]))
@@ -158,13 +137,15 @@ def _replay(state: dict[str, Any], results: list[tuple[str, str, float | None]])
         if action in fresh.actions:
             fresh.update(action, status, cost)
             history.append(list(fresh.probabilities.values()))
-    return history, history[-1]
+    return history, fresh
 
 
 def build_reports(states: dict[str, dict[str, Any]],
-                  results: dict[str, list[tuple[str, str, float | None]]],
+                  results: dict[str, list[Trial]],
                   tasks: Sequence[str] | None = None,
-                  configured: Learner | None = None) -> list[TaskReport]:
+                  configured: Learner | None = None,
+                  *,
+                  fresh_from: str | None = None) -> list[TaskReport]:
     """Combine saved states and results into one :class:`TaskReport` per primitive task.
 
     Args:
@@ -172,6 +153,9 @@ def build_reports(states: dict[str, dict[str, Any]],
         results: {task: [(action, status, cost), ...]} in journal order.
         tasks: report only these tasks (all when ``None`` or empty).
         configured: the learners the net configures (:meth:`Learner.from_net`), or ``None``.
+        fresh_from: the run ``results`` come from, when they are one run's only: each saved
+            task is then reported as a fresh automaton of its saved configuration that took in
+            ``results`` (the saved state is the journal's latest, not that run's).
 
     Tasks configured but neither saved nor run are reported fresh. Tasks with results but no saved
     state get estimates rebuilt from their results (measured costs; no probabilities learned).
@@ -180,6 +164,8 @@ def build_reports(states: dict[str, dict[str, Any]],
     Raises:
         JournalError: if a saved state is malformed.
     """
+    from coordinator.learning import automaton_from_state, make_learner
+
     known = configured.tasks if configured is not None else ()
     names = sorted(set(states) | set(results) | set(known))
     if tasks:
@@ -190,7 +176,12 @@ def build_reports(states: dict[str, dict[str, Any]],
         if task in states:
             auto = automaton_from_state(states[task])
             rows = [r for r in rows if r[0] in auto.actions]
-            history, final = _replay(states[task], rows)
+            history, replayed = _replay(states[task], rows)
+            if fresh_from is not None:
+                reports.append(TaskReport(task, replayed, True, rows, history, None,
+                                          f"a fresh learner over the {len(rows)} results of run {fresh_from}"))
+                continue
+            final = replayed.probabilities.values()
             matches = all(abs(a - b) <= _EPS for a, b in zip(final, auto.probabilities.values()))
             note = None
             if configured is not None and task in known:
@@ -308,11 +299,12 @@ def run(args: argparse.Namespace) -> int:
         print("petrobot learn: --threshold must lie in (0.5, 1]", file=sys.stderr)
         return 2
     try:
+        from coordinator.learning import Learner
         from coordinator.netfile import load_any
 
         configured = Learner.from_net(load_any(args.net))
-        states, results = read_journal(args.journal)
-        reports = build_reports(states, results, args.task, configured)
+        states, results = read_journal(args.journal, args.run)
+        reports = build_reports(states, results, args.task, configured, fresh_from=args.run)
     except PetrobotError as exc:
         print(f"petrobot learn: {exc}", file=sys.stderr)
         return 2

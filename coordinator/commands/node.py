@@ -19,15 +19,32 @@ connection, call and result to stderr; prints "node NAME listening on HOST:PORT"
 
 
 def add_parser(subparsers: Any) -> None:
-    """Register ``node`` on the ``petrobot`` sub-command parser."""
-    from services.node import build_parser
+    """Register ``node`` on the ``petrobot`` sub-command parser.
 
+    The options are :func:`services.node.build_parser`'s own, added when the ``node`` command is
+    parsed (:func:`_options_on_first_use`): ``petrobot --help`` and the other commands do not
+    import the node.
+    """
     parser = subparsers.add_parser(
         "node", help="run one node (a host's primitive-action server)", description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    build_parser(parser)
     parser.set_defaults(func=run)
+    _options_on_first_use(parser)
+
+
+def _options_on_first_use(parser: argparse.ArgumentParser) -> None:
+    """Add the node's options to ``parser`` the first time it parses arguments (``--help`` too)."""
+    parse = parser.parse_known_args
+
+    def parse_known_args(args: Any = None, namespace: Any = None) -> Any:
+        from services.node import build_parser
+
+        del parser.parse_known_args  # back to the class's method, now that the options are there
+        build_parser(parser)
+        return parse(args, namespace)
+
+    parser.parse_known_args = parse_known_args  # type: ignore[method-assign]
 
 
 def run(args: argparse.Namespace) -> int:

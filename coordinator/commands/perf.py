@@ -4,63 +4,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import sqlite3
 import sys
-from pathlib import Path
 from typing import Any
 
-from coordinator.errors import JournalError
+from coordinator.commands import options
+from coordinator.commands.options import parse_pairs
+from coordinator.performance import COST_MEASURES
 from services.errors import PetrobotError
-from coordinator.netfile import load_any
-from coordinator.performance import (
-    COST_MEASURES,
-    ActionRecord,
-    action_performance,
-    gspn_task_performance,
-    task_performance,
-    usage_frequencies,
-)
 
-__all__ = ["add_parser", "parse_pairs", "read_records", "run"]
-
-
-def read_records(path: str | Path) -> list[ActionRecord]:
-    """Read every row of the journal's ``action_result`` table (read-only).
-
-    Raises:
-        JournalError: if the file is missing or has no usable ``action_result`` table.
-    """
-    if not Path(path).is_file():
-        raise JournalError(f"journal {path} does not exist")
-    try:
-        con = sqlite3.connect(f"file:{path}?mode=ro", uri=True)
-        try:
-            rows = con.execute(
-                "SELECT task, action, status, outcome, cost, wall_s, cpu_s FROM action_result").fetchall()
-        finally:
-            con.close()
-    except sqlite3.Error as exc:
-        raise JournalError(f"journal {path}: {exc}") from exc
-    return [ActionRecord(task=r[0], action=r[1], status=r[2], outcome=r[3], cost=r[4], wall_s=r[5], cpu_s=r[6])
-            for r in rows]
-
-
-def parse_pairs(items: list[str] | None, what: str, cast: type = float) -> dict[str, Any]:
-    """Parse ``NAME=VALUE`` arguments into a dict.
-
-    Raises:
-        PetrobotError: on an item without ``=`` or a bad value.
-    """
-    out: dict[str, Any] = {}
-    for item in items or []:
-        name, sep, value = item.partition("=")
-        try:
-            if not sep:
-                raise ValueError
-            out[name.strip()] = cast(value)
-        except ValueError:
-            raise PetrobotError(f"bad {what} {item!r}: expected NAME=VALUE") from None
-    return out
+__all__ = ["add_parser", "render", "report", "run"]
 
 
 def add_parser(subparsers: Any) -> None:
@@ -79,17 +31,17 @@ def add_parser(subparsers: Any) -> None:
             "0 on success, 1 on an unreadable net or journal, 2 if the analysis fails."),
     )
     parser.add_argument("net", metavar="NET", help="task net file (.toml, .pnml or .xml)")
-    parser.add_argument("--journal", metavar="FILE", required=True,
-                        help="SQLite journal of real runs (table action_result)")
+    options.add_journal(parser, required=True, help="SQLite journal of real runs (read only)")
+    options.add_run(parser)
     parser.add_argument("--cost", choices=COST_MEASURES, default="wall",
                         help="cost measure C of an action: wall (actual time, s), cpu (CPU time, s), cost "
                              "(the cost the action reports) or apriori (the net file); default wall")
-    parser.add_argument("--ext-rate", action="append", metavar="TOPIC=RATE",
-                        help="rate (1/s) of an external event ext:TOPIC in the GSPN view; repeat as needed")
+    options.add_ext_rate(parser, help="rate (1/s) of an external event ext:TOPIC in the GSPN view; repeat as "
+                                      "needed")
     parser.add_argument("--goal", action="append", metavar="PLACE=N",
                         help="a goal marking holds at least N tokens in PLACE (repeatable); default: a dead "
                              "marking with no token in a place fed only by error exits")
-    parser.add_argument("--json", action="store_true", help="print the report as JSON")
+    options.add_json(parser)
 
 
 def _fmt(v: float | None) -> str:
@@ -98,8 +50,17 @@ def _fmt(v: float | None) -> str:
 
 def report(args: argparse.Namespace) -> dict[str, Any]:
     """Compute the ``perf`` report as a JSON-ready dict (raises PetrobotError subclasses)."""
+    from coordinator.analysis.gspn_performance import gspn_task_performance
+    from coordinator.journal import read_results
+    from coordinator.netfile import load_any
+    from coordinator.performance import (
+        action_performance,
+        task_performance,
+        usage_frequencies,
+    )
+
     net = load_any(args.net, interpreted=False)
-    records = read_records(args.journal)
+    records = read_results(args.journal, args.run)
     per_action = action_performance(net, records, measure=args.cost)
     usage = usage_frequencies(records)
     tasks: dict[str, Any] = {}
@@ -113,7 +74,7 @@ def report(args: argparse.Namespace) -> dict[str, Any]:
     task, details = gspn_task_performance(net, records, ext_rates=parse_pairs(args.ext_rate, "--ext-rate"),
                                           goal=parse_pairs(args.goal, "--goal", int) or None)
     return {
-        "net": net.name, "cost_measure": args.cost, "results": len(records),
+        "net": net.name, "run": args.run, "cost_measure": args.cost, "results": len(records),
         "actions": {t: {a: _row(p) for a, p in acts.items()} for t, acts in per_action.items()},
         "primitive_tasks": tasks,
         "task": _row(task) | {k: v for k, v in details.items()},
@@ -126,7 +87,8 @@ def _row(obj: Any) -> dict[str, Any]:
 
 def render(rep: dict[str, Any]) -> str:
     """Return the readable text of a :func:`report` dict."""
-    lines = [f"net {rep['net']!r}: {rep['results']} journal results, cost measure {rep['cost_measure']}", "",
+    scope = f"run {rep['run']}" if rep.get("run") else "journal"
+    lines = [f"net {rep['net']!r}: {rep['results']} {scope} results, cost measure {rep['cost_measure']}", "",
              f"{'primitive action':32} {'runs':>5} {'R':>7} {'C':>9} {'rho':>8} {'J':>7}  source"]
     for task, acts in rep["actions"].items():
         for a, p in acts.items():

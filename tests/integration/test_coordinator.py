@@ -5,7 +5,6 @@ from __future__ import annotations
 import asyncio
 import os
 import signal
-import sqlite3
 import subprocess
 import sys
 import time
@@ -14,13 +13,14 @@ from typing import Any
 
 import pytest
 
-from coordinator.journal import Journal
-from coordinator.netfile import loads_net
+from coordinator.errors import JournalError
 from coordinator.events import ActionEnded, ActionStarted, TransitionFired
-from services.results import Status
+from coordinator.journal import Journal, JournalReader
+from coordinator.netfile import loads_net
 from coordinator.operator import Command, OperatorCommand
 from coordinator.runtime import Runtime
 from services.client import ServiceClient
+from services.results import Status
 
 ROOT = Path(__file__).resolve().parents[2]
 Cluster = Any  # the `cluster` fixture of conftest.py
@@ -115,11 +115,11 @@ async def run_net(cluster: Cluster, net, journal_path: Path, *, key: bytes | Non
 
 
 def nodes_of(journal_path: Path) -> dict[str, set[str]]:
-    with sqlite3.connect(journal_path) as db:
-        rows = db.execute("SELECT action, node FROM action_result").fetchall()
+    with JournalReader.open(journal_path) as journal:
+        rows = journal.results()
     out: dict[str, set[str]] = {}
-    for action, node in rows:
-        out.setdefault(action, set()).add(node)
+    for row in rows:
+        out.setdefault(row.action, set()).add(row.node)
     return out
 
 
@@ -214,8 +214,9 @@ async def test_operator_removing_runs_stops_the_experiment_early(cluster: Cluste
     summary, _ = await run_net(cluster, net, tmp_path / "j.sqlite",
                                commands=[OperatorCommand(Command.REMOVE, "runs", 3)])
     assert summary.final_marking == {"robot": 1, "done": 1}
-    with sqlite3.connect(tmp_path / "j.sqlite") as db:
-        assert db.execute("SELECT command, place, count FROM operator").fetchall() == [("remove", "runs", 3)]
+    with JournalReader.open(tmp_path / "j.sqlite") as journal:
+        commands = journal.operator_commands()
+    assert [(c.command, c.place, c.count) for c in commands] == [("remove", "runs", 3)]
 
 
 TICK_NET = """
@@ -274,19 +275,19 @@ def test_a_killed_coordinator_resumes_from_the_journal_without_running_an_action
         time.sleep(0.1)
         if journal.exists():
             try:
-                with sqlite3.connect(journal) as db:
-                    if db.execute("SELECT count(*) FROM action_start WHERE action='slow'").fetchone()[0]:
+                with JournalReader.open(journal) as reader:
+                    if any(s.action == "slow" for s in reader.starts()):
                         break
-            except sqlite3.OperationalError:  # the coordinator has not created its tables yet
+            except JournalError:  # the coordinator has not created its tables yet
                 continue
     os.kill(proc.pid, signal.SIGKILL)
     proc.wait(timeout=10)
     done = subprocess.run(cmd + ["--resume"], cwd=ROOT, env=env, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stdout + done.stderr
-    with sqlite3.connect(journal) as db:
-        runs = db.execute("SELECT id, end_state FROM run").fetchall()
-        assert len(runs) == 1 and runs[0][1] == "dead"
-        starts = db.execute("SELECT instance FROM action_start WHERE action='slow'").fetchall()
+    with JournalReader.open(journal) as reader:
+        runs = reader.runs()
+        assert len(runs) == 1 and runs[0].end_state == "dead"
+        starts = [s for s in reader.starts() if s.action == "slow"]
         assert len(starts) == 2  # two runs; the interrupted call was re-issued, not started anew
     assert "{'robot': 1, 'done': 2}" in done.stdout or "'done': 2" in done.stdout
     # tally counts in global memory how often the compute action really ran: once per run
@@ -297,7 +298,7 @@ def test_a_killed_coordinator_resumes_from_the_journal_without_running_an_action
 
 async def test_the_learner_continues_where_it_stopped_after_a_restart_of_the_coordinator(cluster: Cluster,
                                                                                         tmp_path: Path):
-    from coordinator.commands.run import build_learner, execute
+    from coordinator.session import build_learner, execute
 
     cluster.write_services()
     cluster.start("alpha", "beta")
@@ -310,13 +311,14 @@ async def test_the_learner_continues_where_it_stopped_after_a_restart_of_the_coo
     quiet = lambda kind, info: None  # noqa: E731
     with Journal(path) as journal:
         await execute(net, location=cluster.location, key=cluster.key, journal=journal, seed=1, observer=quiet)
-        scheme, saved = journal.load_learner()["compute"]
+        stored = journal.learner_states()["compute"]
+        scheme, saved = stored.scheme, stored.state
         reloaded = build_learner(net, 1, journal).automaton("compute")
     assert scheme == "pursuit"
     assert reloaded.state_dict() == saved
     assert reloaded.steps == 3
     with Journal(path) as journal:
         await execute(net, location=cluster.location, key=cluster.key, journal=journal, seed=1, observer=quiet)
-        _, after = journal.load_learner()["compute"]
+        after = journal.learner_states()["compute"].state
         assert build_learner(net, 1, journal).automaton("compute").steps == 6
     assert after != saved

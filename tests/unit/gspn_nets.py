@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from coordinator.net import Arc, PetriNet, Place, Transition, TransitionKind
-from coordinator.pnml import load_pnml
+from coordinator.netfile.pnml import load_pnml
 
 EXP = TransitionKind.EXPONENTIAL
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from coordinator.dot import to_dot
 from coordinator.net import Arc, PetriNet, Place, PlaceKind, Transition, TransitionKind
 from coordinator.netfile import load_net
+from coordinator.netfile.dot import to_dot
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "nets" / "demo.toml"

@@ -6,10 +6,25 @@ from collections import Counter
 
 import pytest
 
-from coordinator.engine import CancelAction, Engine, EngineState, Firing, Instance, StartAction
-from services.results import ActionResult, Status
+from coordinator.engine import (
+    CancelAction,
+    Engine,
+    EngineState,
+    Firing,
+    Instance,
+    StartAction,
+)
 from coordinator.errors import EngineError, NotEnabledError
-from coordinator.net import ActionSpec, Arc, PetriNet, Place, PlaceKind, PrimitiveTask, Transition
+from coordinator.net import (
+    ActionSpec,
+    Arc,
+    PetriNet,
+    Place,
+    PlaceKind,
+    PrimitiveTask,
+    Transition,
+)
+from services.results import ActionResult, Status
 
 
 def make_net(places, transitions, arcs, marking, tasks=()) -> PetriNet:
@@ -68,6 +83,17 @@ def test_busy_token_does_not_enable_the_output_transitions():
     engine.advance()
     assert engine.next_firing() is None
     assert engine.state is EngineState.RUNNING
+
+
+def test_fireable_transitions_are_enabled_ones_whose_events_are_latched():
+    net = task_net()
+    engine = Engine(net)
+    (start,) = [e for e in engine.advance() if isinstance(e, StartAction)]
+    # the token in 'working' is busy: the net's firing rule enables both exits, the engine fires neither
+    assert net.enabled_transitions(engine.marking) == ("done", "fail")
+    assert engine.fireable() == ()
+    engine.complete(start.instance, ActionResult(status=Status.ERROR, reason="x"))
+    assert engine.fireable() == ("fail",)
 
 
 def test_success_takes_the_normal_branch():

@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
+import sqlite3
 from pathlib import Path
 
 import pytest
 
-from services.results import ActionResult, Status
 from coordinator.engine import Engine, Firing, StartAction
 from coordinator.errors import JournalError
-from coordinator.journal import Journal
+from coordinator.journal import Journal, JournalReader
 from coordinator.netfile import loads_net
+from services.results import ActionResult, Status
 
 NET = """
 [net]
@@ -102,20 +103,22 @@ def test_firings_are_journaled_before_they_are_applied(tmp_path: Path):
         seen = []
 
         def before(firing: Firing) -> None:
-            seen.append((journal.firings(run)[-1][0] if journal.firings(run) else 0, dict(engine.marking)))
+            seen.append((journal.firings(run)[-1].seq if journal.firings(run) else 0, dict(engine.marking)))
             journal.firing(run, firing)
 
         engine.advance(before)
         assert [m for _, m in seen] == [{"runs": 2}, {"runs": 1, "work": 1}]
         rows = journal.firings(run)
-        assert [r[1] for r in rows] == ["go", "go"]
+        assert [r.transition for r in rows] == ["go", "go"]
 
 
 def test_learner_state_is_replaced_not_appended(tmp_path: Path):
     with Journal(tmp_path / "j.sqlite") as journal:
         journal.save_learner("w", "pursuit", {"p": [0.5, 0.5]})
         journal.save_learner("w", "pursuit", {"p": [0.9, 0.1]})
-        assert journal.load_learner() == {"w": ("pursuit", {"p": [0.9, 0.1]})}
+        saved = journal.learner_states()
+    assert list(saved) == ["w"]
+    assert (saved["w"].scheme, saved["w"].state) == ("pursuit", {"p": [0.9, 0.1]})
 
 
 def test_values_that_json_cannot_hold_are_not_a_crash(tmp_path: Path):
@@ -136,3 +139,58 @@ def test_a_file_that_is_not_a_journal_is_refused(tmp_path: Path):
 def test_recovering_an_unknown_run_is_an_error(tmp_path: Path):
     with Journal(tmp_path / "j.sqlite") as journal, pytest.raises(JournalError, match="no run"):
         journal.recover(loads_net(NET), "nope")
+
+
+def test_the_read_api_gives_typed_records_of_one_run_or_of_all(tmp_path: Path):
+    net = loads_net(NET)
+    with Journal(tmp_path / "j.sqlite") as journal:
+        first = journal.begin_run(net, seed=1)
+        _, starts = journaled_engine(journal, net, first)
+        journal.action_result(first, starts[0].instance, "w", starts[0].action, "alpha",
+                              ActionResult.failure({"seen": 2}, outcome="nothing"))
+        journal.operator(first, "remove", "runs", 1)
+        journal.end_run(first, "aborted", "by hand")
+        second = journal.begin_run(net, seed=2)
+        journal.action_result(second, "x-1", "w", "b", None, ActionResult.error("deadline"))
+    with JournalReader.open(tmp_path / "j.sqlite") as reader:
+        runs = reader.runs()
+        assert [(r.id, r.seed, r.end_state, r.finished) for r in runs] == [
+            (first, 1, "aborted", True), (second, 2, None, False)]
+        assert reader.run(first).note == "by hand"
+        (result,) = reader.results(first)
+        assert result.status is Status.FAILURE and result.outcome == "nothing"
+        assert result.value == {"seen": 2} and result.node == "alpha" and result.run == first
+        assert [r.status for r in reader.results()] == [Status.FAILURE, Status.ERROR]
+        assert reader.results(second)[0].reason == "deadline"
+        assert [s.instance for s in reader.starts(first)] == [s.instance for s in starts]
+        assert [f.transition for f in reader.firings(first)] == ["go", "go"]
+        assert reader.firings(first)[0].produced == {"work": 1}
+        assert [(c.command, c.place, c.count) for c in reader.operator_commands()] == [("remove", "runs", 1)]
+        assert reader.firings(second) == []
+        with pytest.raises(JournalError, match="no run 'nope'"):
+            reader.run("nope")
+
+
+def test_a_journal_opened_for_reading_cannot_be_written(tmp_path: Path):
+    with Journal(tmp_path / "j.sqlite") as journal:
+        journal.begin_run(loads_net(NET))
+    with JournalReader.open(tmp_path / "j.sqlite") as reader:
+        with pytest.raises(sqlite3.OperationalError, match="readonly"):
+            reader._db.execute("DELETE FROM run")
+        assert len(reader.runs()) == 1
+
+
+def test_reading_a_missing_or_foreign_file_names_it(tmp_path: Path):
+    with pytest.raises(JournalError, match="none.sqlite: no such journal file"):
+        JournalReader.open(tmp_path / "none.sqlite")
+    other = tmp_path / "other.sqlite"
+    with sqlite3.connect(other) as db:
+        db.execute("CREATE TABLE run (id TEXT)")
+    with pytest.raises(JournalError, match="other.sqlite: not a petrobot journal"):
+        JournalReader.open(other)
+    with pytest.raises(JournalError, match="other.sqlite: not a petrobot journal"):
+        Journal(other)
+    bad = tmp_path / "bad.sqlite"
+    bad.write_bytes(b"this is not sqlite" * 100)
+    with pytest.raises(JournalError, match="bad.sqlite"):
+        JournalReader.open(bad)

@@ -4,19 +4,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import sqlite3
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pytest
 
-from services.results import ActionResult, Status
 from coordinator.commands import learn as learn_cmd
 from coordinator.errors import JournalError, NetError
-from services.errors import PetrobotError
+from coordinator.journal import Journal
 from coordinator.learning import (
-    LEARNER_STATE_DDL,
     FixedChoice,
     Learner,
     LearnerConfigError,
@@ -29,7 +26,10 @@ from coordinator.learning import (
     state_to_json,
     task_seed,
 )
+from coordinator.netfile import loads_net
 from coordinator.performance import cost_function, rho_for
+from services.errors import PetrobotError
+from services.results import ActionResult, Status
 
 
 def _run(auto: LearningAutomaton, reliability: dict[str, float], env_seed: int, trials: int,
@@ -296,12 +296,6 @@ def test_bad_action_lists_and_results_are_rejected() -> None:
 
 # -- `petrobot learn` ------------------------------------------------------------------------------
 
-ACTION_RESULT_DDL = (
-    "CREATE TABLE action_result (instance TEXT, task TEXT, action TEXT, node TEXT, status TEXT, "
-    "outcome TEXT, cost REAL, wall_s REAL, cpu_s REAL, t_wall REAL)"
-)
-
-
 NET = """
 [net]
 name = "locate_and_move"
@@ -397,9 +391,8 @@ def test_learner_from_net_configures_every_primitive_task(tmp_path: Path) -> Non
 
 
 def test_bad_learner_table_in_a_net_file_names_the_task_and_problem() -> None:
-    from coordinator.netfile import loads_net
-
     from coordinator.errors import NetError
+    from coordinator.netfile import loads_net
 
     bad = NET.replace('learner = { scheme = "lri" }', 'learner = { scheme = "lri", rate = 2 }')
     with pytest.raises(NetError, match=r"learning rate must lie in \(0, 1\]") as info:  # caught at load time
@@ -415,43 +408,43 @@ def test_bad_learner_table_in_a_net_file_names_the_task_and_problem() -> None:
         Learner.from_net(broken)  # a net built in code
 
 
-def _journal(tmp_path: Path, runs: int = 300) -> tuple[Path, Path, Learner]:
-    """A journal with the two tables, written the way the runtime does: result row, then state."""
+def _journal(tmp_path: Path, runs: int = 300, *, grasp: bool = True,
+             skip: str | None = None) -> tuple[Path, Path, Learner]:
+    """A journal written through the runtime's journal API, as the runtime does: result, then state.
+
+    ``grasp``: run the grasp task too; ``skip``: an instance whose result is not journaled (the
+    learner still saw it).
+    """
     db = tmp_path / "journal.sqlite"
     net = tmp_path / "catch.toml"
     net.write_text(NET)
-    con = sqlite3.connect(db)
-    con.execute(LEARNER_STATE_DDL)
-    con.execute(ACTION_RESULT_DDL)
     learner = Learner(seed=7)
     learner.add_task("locate", ["hsv", "avg4"], {"learner": "pursuit", "learning_rate": 0.05},
                      {"hsv": 1.0, "avg4": 4.0})
     reliability = {"hsv": 0.9, "avg4": 0.97}
     env = np.random.default_rng(3)
-    for k in range(runs):
-        action = learner.choose("locate")
-        status = "success" if env.random() < reliability[action] else "error"
-        con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
-                    (f"i{k}", "locate", action, "vision", status, None, 0.02, 0.02, 0.01, float(k)))
-        state = learner.update("locate", action, ActionResult(status=Status(status), cost=0.02))
-        con.execute("INSERT OR REPLACE INTO learner_state VALUES (?,?,?,?)",
-                    ("locate", "pursuit", state_to_json(state), float(k)))
-    learner.add_task("grasp", ["pinch", "scoop"], {"scheme": "lri", "rate": 0.05})
-    for k in range(runs // 10):  # no cost reported: the runtime feeds wall_s, the journal keeps NULL
-        action = learner.choose("grasp")
-        wall_s = float(env.uniform(0.5, 1.5)) * (2.0 if action == "scoop" else 1.0)
-        status = "success" if env.random() < 0.8 else "failure"
-        con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
-                    (f"g{k}", "grasp", action, "motion", status, None, None, wall_s, 0.01, float(k)))
-        state = learner.update("grasp", action, ActionResult(status=Status(status), cost=wall_s))
-        con.execute("INSERT OR REPLACE INTO learner_state VALUES (?,?,?,?)",
-                    ("grasp", "lri", state_to_json(state), float(k)))
-    con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
-                ("m0", "move", "puma", "motion", "success", None, 1.2, 1.2, 0.1, 1.0))
-    con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
-                ("m1", "move", "puma", "motion", "cancelled", None, None, 0.5, 0.1, 2.0))
-    con.commit()
-    con.close()
+    with Journal(db) as journal:
+        run = journal.begin_run(loads_net(NET), seed=7)
+        for k in range(runs):
+            action = learner.choose("locate")
+            status = Status.SUCCESS if env.random() < reliability[action] else Status.ERROR
+            result = ActionResult(status=status, cost=0.02, wall_s=0.02, cpu_s=0.01)
+            if f"i{k}" != skip:
+                journal.action_result(run, f"i{k}", "locate", action, "vision", result)
+            journal.save_learner("locate", "pursuit", learner.update("locate", action, result))
+        if grasp:
+            learner.add_task("grasp", ["pinch", "scoop"], {"scheme": "lri", "rate": 0.05})
+            for k in range(runs // 10):  # no cost reported: the runtime feeds wall_s, the journal keeps NULL
+                action = learner.choose("grasp")
+                wall_s = float(env.uniform(0.5, 1.5)) * (2.0 if action == "scoop" else 1.0)
+                status = Status.SUCCESS if env.random() < 0.8 else Status.FAILURE
+                result = ActionResult(status=status, wall_s=wall_s, cpu_s=0.01)
+                journal.action_result(run, f"g{k}", "grasp", action, "motion", result)
+                journal.save_learner("grasp", "lri", learner.update("grasp", action, result))
+        # move runs without a saved learner state: its estimates come from its results alone
+        journal.action_result(run, "m0", "move", "puma", "motion",
+                              ActionResult(status=Status.SUCCESS, cost=1.2, wall_s=1.2, cpu_s=0.1))
+        journal.end_run(run, "dead")
     return net, db, learner
 
 
@@ -473,7 +466,7 @@ def test_learn_command_reports_probabilities_and_estimates_per_task(tmp_path: Pa
     assert locate["actions"]["avg4"]["j"] == auto.estimates["avg4"].j
     assert locate["replay_matches_state"] is True and locate["journal_results"] == 300
     move = doc["tasks"]["move"]
-    assert move["scheme"] is None and move["actions"]["puma"]["trials"] == 1  # cancelled skipped
+    assert move["scheme"] is None and move["actions"]["puma"]["trials"] == 1
     grasp = doc["tasks"]["grasp"]  # measured costs: replayed with wall_s where cost is NULL
     assert grasp["scheme"] == "lri" and grasp["replay_matches_state"] is True
     assert grasp["actions"]["scoop"]["cost"] == learner.automaton("grasp").estimates["scoop"].cost
@@ -485,12 +478,7 @@ def test_learn_command_reports_probabilities_and_estimates_per_task(tmp_path: Pa
 
 def test_learn_command_lists_configured_tasks_that_have_not_run(tmp_path: Path,
                                                                 capsys: pytest.CaptureFixture[str]) -> None:
-    net, db, _ = _journal(tmp_path, runs=5)
-    con = sqlite3.connect(db)
-    con.execute("DELETE FROM learner_state WHERE task = 'grasp'")
-    con.execute("DELETE FROM action_result WHERE task = 'grasp'")
-    con.commit()
-    con.close()
+    net, db, _ = _journal(tmp_path, runs=5, grasp=False)
     assert learn_cmd.run(_args(str(net), "--journal", str(db), "--json")) == 0
     grasp = json.loads(capsys.readouterr().out)["tasks"]["grasp"]
     assert grasp["scheme"] == "lri" and grasp["note"] == "no result yet"
@@ -506,11 +494,7 @@ def test_learn_command_plots_the_probabilities_over_trials(tmp_path: Path) -> No
 
 def test_learn_command_flags_a_journal_that_misses_results(tmp_path: Path,
                                                            capsys: pytest.CaptureFixture[str]) -> None:
-    net, db, _ = _journal(tmp_path, runs=50)
-    con = sqlite3.connect(db)
-    con.execute("DELETE FROM action_result WHERE instance = 'i10'")
-    con.commit()
-    con.close()
+    net, db, _ = _journal(tmp_path, runs=50, skip="i10")
     assert learn_cmd.run(_args(str(net), "--journal", str(db))) == 0
     assert "does NOT match" in capsys.readouterr().out
 
@@ -533,9 +517,6 @@ def test_learn_command_fails_cleanly_on_a_bad_net(tmp_path: Path, capsys: pytest
 
 def test_learn_command_reads_a_journal_written_by_the_runtime_journal(tmp_path: Path,
                                                                       capsys: pytest.CaptureFixture[str]) -> None:
-    from coordinator.journal import Journal
-    from coordinator.netfile import loads_net
-
     net_path = tmp_path / "net.toml"
     net_path.write_text(NET)
     net = loads_net(NET)
@@ -554,3 +535,31 @@ def test_learn_command_reads_a_journal_written_by_the_runtime_journal(tmp_path: 
     grasp = json.loads(capsys.readouterr().out)["tasks"]["grasp"]
     assert grasp["replay_matches_state"] is True and grasp["steps"] == 60
     assert grasp["actions"]["pinch"]["probability"] == learner.automaton("grasp").probabilities["pinch"]
+
+
+def test_learn_command_replays_one_run_from_a_fresh_learner_with_run(tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    net_path = tmp_path / "net.toml"
+    net_path.write_text(NET)
+    net = loads_net(NET)
+    learner = Learner.from_net(net, seed=1)
+    env = np.random.default_rng(8)
+    runs = []
+    with Journal(tmp_path / "j.sqlite") as journal:
+        for trials in (40, 20):
+            run = journal.begin_run(net, seed=1)
+            for k in range(trials):
+                action = learner.choose("grasp")
+                status = Status.SUCCESS if env.random() < (0.9 if action == "pinch" else 0.6) else Status.ERROR
+                result = ActionResult(status=status, wall_s=0.5 if action == "pinch" else 0.2)
+                journal.action_result(run, f"{run}-{k}", "grasp", action, "motion", result)
+                journal.save_learner("grasp", "lri", learner.update("grasp", action, result))
+            journal.end_run(run, "dead")
+            runs.append(run)
+    db = str(tmp_path / "j.sqlite")
+    assert learn_cmd.run(_args(str(net_path), "--journal", db, "--run", runs[1], "--json")) == 0
+    grasp = json.loads(capsys.readouterr().out)["tasks"]["grasp"]
+    assert grasp["steps"] == grasp["journal_results"] == 20 and grasp["replay_matches_state"] is None
+    assert grasp["note"] == f"a fresh learner over the 20 results of run {runs[1]}"
+    assert learn_cmd.run(_args(str(net_path), "--journal", db, "--run", "nope")) == 2
+    assert "no run 'nope'" in capsys.readouterr().err

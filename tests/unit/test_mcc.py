@@ -9,7 +9,7 @@ import pytest
 
 from coordinator.analysis.robotic import report
 from coordinator.analysis.structure import analyse
-from coordinator.pnml import load_pnml
+from coordinator.netfile.pnml import load_pnml
 from tests.unit.mcc_models import MCC
 
 ORACLE = MCC / "oracle.tsv"

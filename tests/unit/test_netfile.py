@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-from services.results import ActionResult, Status
 from coordinator.commands import check as check_cmd
 from coordinator.commands import export as export_cmd
 from coordinator.errors import NetError, NetFileError
@@ -35,6 +34,7 @@ from coordinator.netfile import (
     save_net,
 )
 from services.location import parse_location
+from services.results import ActionResult, Status
 
 ROOT = Path(__file__).resolve().parents[2]
 DEMO = ROOT / "nets" / "demo.toml"
@@ -481,7 +481,7 @@ def test_save_and_load_any_dispatch_on_suffix(tmp_path: Path) -> None:
     net = load_net(DEMO)
     save_net(net, tmp_path / "n.toml")
     assert load_any(tmp_path / "n.toml") == net
-    from coordinator.pnml import save_pnml
+    from coordinator.netfile.pnml import save_pnml
 
     save_pnml(net, tmp_path / "n.pnml")
     save_pnml(net, tmp_path / "n.xml")

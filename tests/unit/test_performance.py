@@ -4,22 +4,23 @@ from __future__ import annotations
 
 import argparse
 import json
-import sqlite3
 from pathlib import Path
 
 import pytest
 
+from coordinator.analysis.gspn_performance import gspn_task_performance
 from coordinator.commands import gspn as gspn_cmd
 from coordinator.commands import perf as perf_cmd
+from coordinator.journal import Journal
 from coordinator.performance import (
     ActionRecord,
     action_performance,
     cost_function,
     error_sink_places,
-    gspn_task_performance,
     rho_for,
     task_performance,
 )
+from services.results import ActionResult, Status
 from tests.unit.test_ptimed import two_step_task
 
 
@@ -72,15 +73,18 @@ def test_task_performance_comes_from_the_gspn_absorption() -> None:
     assert error_sink_places(net) == {"failed"}
 
 
-def make_journal(path: Path) -> None:
-    con = sqlite3.connect(path)
-    con.execute("CREATE TABLE action_result(instance TEXT, task TEXT, action TEXT, node TEXT, status TEXT, "
-                "outcome TEXT, cost REAL, wall_s REAL, cpu_s REAL, t_wall REAL)")
-    for i, r in enumerate(records()):
-        con.execute("INSERT INTO action_result VALUES (?,?,?,?,?,?,?,?,?,?)",
-                    (str(i), r.task, r.action, "n", r.status, None, None, r.wall_s, r.cpu_s, float(i)))
-    con.commit()
-    con.close()
+def make_journal(path: Path, *, runs: int = 1) -> list[str]:
+    """A journal written through its API: the results of :func:`records` once per run; the run ids."""
+    ids = []
+    with Journal(path) as journal:
+        for _ in range(runs):
+            run = journal.begin_run(two_step_task())
+            for i, r in enumerate(records()):
+                result = ActionResult(status=r.status, wall_s=r.wall_s or 0.0, cpu_s=r.cpu_s or 0.0)
+                journal.action_result(run, str(i), r.task, r.action, "n", result)
+            journal.end_run(run, "dead")
+            ids.append(run)
+    return ids
 
 
 def test_perf_and_gspn_commands_report_json(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -113,3 +117,36 @@ def test_perf_and_gspn_commands_report_json(tmp_path: Path, capsys: pytest.Captu
     assert abs(sim["mean_time_to_absorption"]["mean"] - rep["mean_time_to_absorption"]) < 0.2
     args = parser.parse_args(["perf", str(net_file), "--journal", str(tmp_path / "missing.sqlite")])
     assert perf_cmd.run(args) == 1
+
+
+def test_a_record_takes_its_status_as_the_result_vocabulary() -> None:
+    assert ActionRecord(task="a", action="a1", status="failure").status is Status.FAILURE
+    with pytest.raises(ValueError):
+        ActionRecord(task="a", action="a1", status="cancelled")
+
+
+def test_perf_and_gspn_take_one_run_of_the_journal_with_run(tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    from coordinator.netfile import dump_net
+
+    net_file = tmp_path / "two.toml"
+    net_file.write_text(dump_net(two_step_task()))
+    journal = tmp_path / "j.sqlite"
+    first, _ = make_journal(journal, runs=2)
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    perf_cmd.add_parser(sub)
+    gspn_cmd.add_parser(sub)
+    assert perf_cmd.run(parser.parse_args(["perf", str(net_file), "--journal", str(journal), "--json"])) == 0
+    assert json.loads(capsys.readouterr().out)["results"] == 2 * len(records())
+    args = parser.parse_args(["perf", str(net_file), "--journal", str(journal), "--run", first, "--json"])
+    assert perf_cmd.run(args) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert (rep["run"], rep["results"]) == (first, len(records()))
+    assert rep["actions"]["a"]["a1"]["reliability"] == 0.8
+    args = parser.parse_args(["gspn", str(net_file), "--journal", str(journal), "--run", first, "--json"])
+    assert gspn_cmd.run(args) == 0
+    assert json.loads(capsys.readouterr().out)["mean_time_to_absorption"] > 0
+    args = parser.parse_args(["perf", str(net_file), "--journal", str(journal), "--run", "nope"])
+    assert perf_cmd.run(args) == 1
+    assert "no run 'nope'" in capsys.readouterr().err

@@ -11,7 +11,7 @@ import pytest
 from coordinator.errors import NetError, NetFileError
 from coordinator.net import Arc, PetriNet, Place, PlaceKind, Transition, TransitionKind
 from coordinator.netfile import dump_net, load_net, loads_net
-from coordinator.pnml import (
+from coordinator.netfile.pnml import (
     PNML_NS,
     PTNET_TYPE,
     dump_pnml,

@@ -155,7 +155,7 @@ def test_enabled_mask_matches_the_net_for_every_state() -> None:
 @pytest.mark.parametrize("model", ["ERK-PT-000001", "Philosophers-PT-000005", "CircularTrains-PT-012",
                                    "Eratosthenes-PT-010", "TokenRing-PT-005"])
 def test_mcc_models_give_the_same_graph_as_the_one_marking_at_a_time_search(model: str) -> None:
-    from coordinator.pnml import load_pnml
+    from coordinator.netfile.pnml import load_pnml
 
     assert_same_as_reference(load_pnml(str(MCC / model / "model.pnml")))
 
@@ -240,7 +240,7 @@ def assert_matches_reference(net: PetriNet, **kwargs: object) -> StateSpace:
 
 @pytest.mark.parametrize("model", MCC_MODELS)
 def test_mcc_models_match_the_reference_search_array_for_array_also_when_truncated(model: str) -> None:
-    from coordinator.pnml import load_pnml
+    from coordinator.netfile.pnml import load_pnml
 
     net = load_pnml(str(MCC / model / "model.pnml"))
     full = assert_matches_reference(net)

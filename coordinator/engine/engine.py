@@ -1,4 +1,4 @@
-"""Execution semantics of an interpreted Petri net (paper section 2; DESIGN.md §3), sans-IO.
+"""Execution semantics of an interpreted Petri net (paper section 2), sans-IO.
 
 The engine holds the marking of a task net and the instances of its primitive tasks. It does no
 I/O and never looks at a clock: inputs are method calls, outputs are effect records that the
@@ -30,132 +30,32 @@ Write-ahead use (the journal is written before a firing is applied)::
     effects = engine.apply(firing)     # change the marking, start instances
 
 :meth:`Engine.advance` runs that loop with a ``before_fire`` hook.
+
+The module is longer than most: :class:`Engine` is one state machine (marking, instances, the
+incremental fireable set) whose firing loop reads its own attributes directly; its vocabulary and
+its compiled tables live in :mod:`~coordinator.engine.effects` and :mod:`~coordinator.engine.tables`.
 """
 
 from __future__ import annotations
 
-import enum
 import random
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
-from types import MappingProxyType
-from typing import Any
 
+from coordinator.engine.effects import (
+    CancelAction,
+    Chooser,
+    Effect,
+    EngineState,
+    Firing,
+    Instance,
+    StartAction,
+)
+from coordinator.engine.tables import EngineTables
 from coordinator.errors import EngineError, NetError, NotEnabledError
-from coordinator.net import Marking, PetriNet, PlaceKind, parse_event
-from services.results import ActionResult, Status
+from coordinator.net import Marking, PetriNet, parse_event
+from services.results import ActionResult
 
-__all__ = [
-    "EngineState",
-    "Instance",
-    "Firing",
-    "StartAction",
-    "CancelAction",
-    "Effect",
-    "Engine",
-    "Chooser",
-]
-
-
-class EngineState(enum.Enum):
-    """Where a run stands."""
-
-    #: Transitions can fire, instances are running, or the net waits for an external event.
-    RUNNING = "running"
-    #: The operator paused the run: nothing fires except by :meth:`Engine.step`.
-    PAUSED = "paused"
-    #: Nothing can ever happen again without an operator: no transition can fire, no instance
-    #: runs and no transition waits for an external event.
-    DEAD = "dead"
-    #: The operator aborted the run.
-    ABORTED = "aborted"
-
-
-@dataclass(slots=True)
-class Instance:
-    """One running (or ended, not yet consumed) instance of a primitive task.
-
-    Attributes:
-        id: unique id within the run (also used as the call id towards the node).
-        task: primitive task name.
-        place: id of the primitive-task place holding its token.
-        action: the primitive action chosen to translate the task.
-        status: ``None`` while running, then the returned status.
-        outcomes: outcome names latched on the token once ended (:attr:`ActionResult.events`).
-    """
-
-    id: str
-    task: str
-    place: str
-    action: str
-    status: Status | None = None
-    outcomes: frozenset[str] = frozenset()
-
-    @property
-    def running(self) -> bool:
-        """True while the primitive action has not returned."""
-        return self.status is None
-
-
-@dataclass(frozen=True, slots=True)
-class Firing:
-    """A decided firing, journaled before it is applied.
-
-    Attributes:
-        seq: 1-based firing number in the run.
-        transition: id of the transition.
-        consumed: place id → tokens removed.
-        produced: place id → tokens added.
-        instances: ids of the ended instances whose tokens are consumed.
-        pulse: the external event that let it fire, or ``None``.
-    """
-
-    seq: int
-    transition: str
-    consumed: Mapping[str, int]
-    produced: Mapping[str, int]
-    instances: tuple[str, ...] = ()
-    pulse: str | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class StartAction:
-    """Request to start a primitive action for a new instance.
-
-    Attributes:
-        instance: instance id (use it as the call id: nodes deduplicate repeated ids).
-        task: primitive task name.
-        place: primitive-task place id.
-        action: primitive action name (placed on a node by ``services.toml``).
-        params: parameters for the call.
-        deadline_s: deadline in seconds, or ``None``.
-    """
-
-    instance: str
-    task: str
-    place: str
-    action: str
-    params: Mapping[str, Any] = field(default_factory=dict)
-    deadline_s: float | None = None
-
-
-@dataclass(frozen=True, slots=True)
-class CancelAction:
-    """Request to cancel a running primitive action.
-
-    Attributes:
-        instance: instance id.
-        reason: why, in words.
-    """
-
-    instance: str
-    reason: str
-
-
-Effect = Firing | StartAction | CancelAction
-
-#: Chooses the primitive action of a primitive task: ``(task name, action names) -> action name``.
-Chooser = Callable[[str, tuple[str, ...]], str]
+__all__ = ["Engine"]
 
 
 def _first(task: str, actions: tuple[str, ...]) -> str:
@@ -201,57 +101,38 @@ class Engine:
                 raise EngineError(f"marking names unknown place {pid!r}")
         self._counts: dict[str, int] = {p.id: start[p.id] for p in net.places}
         self._instances: dict[str, Instance] = {}
-        self._ended: dict[str, list[Instance]] = {pid: [] for pid in self._task_place_ids()}
-        self._started = False
-        # static tables
-        self._inputs = {t.id: tuple(net.input_places[t.id].items()) for t in net.transitions}
-        self._outputs = {t.id: tuple(net.output_places[t.id].items()) for t in net.transitions}
-        self._inhib = {t.id: tuple(net.inhibitor_places[t.id].items()) for t in net.transitions}
-        self._priority = {t.id: t.priority for t in net.transitions}
-        self._weight = {t.id: t.weight for t in net.transitions}
-        self._ext = {t.id: (t.external_events[0][4:] if t.external_events else None) for t in net.transitions}
-        self._needs: dict[str, dict[str, frozenset[str]]] = {}
-        for t in net.transitions:
-            per_task: dict[str, set[str]] = {}
-            for event in t.internal_events:
-                _, task, outcome = parse_event(event)
-                per_task.setdefault(task, set()).add(outcome)
-            self._needs[t.id] = {k: frozenset(v) for k, v in per_task.items()}
-        self._task_of = {p.id: p.task for p in net.places if p.kind is PlaceKind.PRIMITIVE_TASK}
-        self._control = {p.id for p in net.places if p.kind is PlaceKind.CONTROL}
-        deps: dict[str, set[str]] = {p.id: set() for p in net.places}
-        for t in net.transitions:
-            for pid, _ in self._inputs[t.id] + self._inhib[t.id]:
-                deps[pid].add(t.id)
-        self._order = {t.id: j for j, t in enumerate(net.transitions)}
-        self._tids = tuple(t.id for t in net.transitions)
-        # transition *indices*: a set of ints iterates in the same order in every process
-        self._dependents = {pid: tuple(sorted(self._order[t] for t in ts)) for pid, ts in deps.items()}
-        self._by_topic: dict[str, tuple[str, ...]] = {}
-        for t in net.transitions:
-            topic = self._ext[t.id]
-            if topic is not None:
-                self._by_topic[topic] = self._by_topic.get(topic, ()) + (t.id,)
-        self._touch = {t.id: frozenset(j for pid, _ in self._inputs[t.id] + self._outputs[t.id]
-                                       for j in self._dependents[pid]) for t in net.transitions}
-        self._task_outputs = {t.id: tuple((pid, w) for pid, w in self._outputs[t.id] if pid in self._task_of)
-                              for t in net.transitions}
-        self._consumed_map = {t.id: MappingProxyType(dict(self._inputs[t.id])) for t in net.transitions}
-        self._produced_map = {t.id: MappingProxyType(dict(self._outputs[t.id])) for t in net.transitions}
-        self._task_inputs = {t.id: any(pid in self._task_of for pid, _ in self._inputs[t.id])
-                             for t in net.transitions}
-        self._pulse_of = {t.id: (f"ext:{self._ext[t.id]}" if self._ext[t.id] else None) for t in net.transitions}
+        tables = EngineTables.compile(net)
+        self.tables = tables
+        # the tables, as attributes: the firing loop reads them without one more indirection
+        self._inputs = tables.inputs
+        self._outputs = tables.outputs
+        self._inhib = tables.inhib
+        self._priority = tables.priority
+        self._weight = tables.weight
+        self._ext = tables.ext
+        self._needs = tables.needs
+        self._task_of = tables.task_of
+        self._control = tables.control
+        self._order = tables.order
+        self._tids = tables.tids
+        self._dependents = tables.dependents
+        self._by_topic = tables.by_topic
+        self._touch = tables.touch
+        self._task_outputs = tables.task_outputs
+        self._consumed_map = tables.consumed_map
+        self._produced_map = tables.produced_map
+        self._task_inputs = tables.task_inputs
+        self._pulse_of = tables.pulse_of
         #: every transition has the same priority and weight: a conflict is a uniform draw
-        self._uniform = len({(t.priority, t.weight) for t in net.transitions}) <= 1
+        self._uniform = tables.uniform
+        self._ended: dict[str, list[Instance]] = {pid: [] for pid in tables.task_place_ids}
+        self._started = False
         # incremental set of transitions without external event that can fire now: a list for O(1)
         # uniform draws plus the position of each member
         self._fireable: list[str] = []
         self._fpos: dict[str, int] = {}
         self._dirty: set[int] = set(range(len(self._tids)))
         self._decided: Firing | None = None
-
-    def _task_place_ids(self) -> list[str]:
-        return [p.id for p in self.net.places if p.kind is PlaceKind.PRIMITIVE_TASK]
 
     # ------------------------------------------------------------------ views
     @property
@@ -359,8 +240,13 @@ class Engine:
             self._dirty.clear()
         return bool(self._fireable)
 
-    def enabled(self) -> tuple[str, ...]:
-        """Transitions that could fire now, ignoring pause (external ones only during their pulse)."""
+    def fireable(self) -> tuple[str, ...]:
+        """Transitions that can fire now, in net order, ignoring pause.
+
+        Fireable is more than enabled (:meth:`PetriNet.enabled`): the input tokens must be
+        available (not busy with a running instance) and every linked ``int:`` event latched; a
+        transition linked to ``ext:<topic>`` is fireable only during a pulse of that topic.
+        """
         self._refresh()
         cands = set(self._fireable)
         if self._pulse is not None:
@@ -568,7 +454,7 @@ class Engine:
         max_firings: int = 10_000,
         after_fire: Callable[[list[Effect]], None] | None = None,
     ) -> list[Effect]:
-        """Deliver an external event as a pulse and fire what it allows (DESIGN.md §3).
+        """Deliver an external event as a pulse and fire what it allows (paper section 2).
 
         During the pulse each transition linked to ``event`` may fire once, interleaved with the
         other firings by priority; when no more can fire the pulse is dropped. A paused or aborted
@@ -710,7 +596,7 @@ class Engine:
             counts[pid] = c
         self._counts = counts
         self._instances = {}
-        self._ended = {pid: [] for pid in self._task_place_ids()}
+        self._ended = {pid: [] for pid in self.tables.task_place_ids}
         per_place: dict[str, int] = {}
         for inst in instances:
             if self._task_of.get(inst.place) != inst.task:

@@ -44,6 +44,7 @@ from coordinator.net import (
     Transition,
     TransitionKind,
 )
+from coordinator.netfile.writer import format_value
 
 __all__ = ["PNML_NS", "PTNET_TYPE", "TOOL", "TOOL_VERSION", "dump_pnml", "load_pnml", "loads_pnml", "save_pnml"]
 
@@ -407,10 +408,6 @@ def dump_pnml(net: PetriNet) -> str:
     Raises:
         NetError: if a number to write is not finite.
     """
-    from coordinator.netfile import (
-        format_value,  # TOML writer; imported here, netfile imports us
-    )
-
     out: list[str] = ['<?xml version="1.0" encoding="utf-8"?>', f'<pnml xmlns="{PNML_NS}">',
                       f'  <net id="net" type="{PTNET_TYPE}">',
                       f"    <name><text>{escape(net.name)}</text></name>"]

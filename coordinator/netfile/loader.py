@@ -1,35 +1,30 @@
-"""The TOML net file format: load, validate with file:line errors, save (docs/netfile.md).
+"""Loading a TOML net file, with every problem at its file and line (docs/netfile.md).
 
 A net file describes an interpreted Petri net of a robotic task (paper section 2): ``[net]``,
 ``[[place]]`` tables, ``[task.<name>]`` tables mapping each primitive task to its alternative
 primitive actions, ``[[transition]]`` tables whose ``inputs``/``outputs``/``inhibitors`` tables
 give the arcs, and optionally ``[[arc]]`` tables (``from``/``to``/``weight``/``inhibitor``).
-:func:`dump_net` writes one canonical form (arcs inside the transitions) that
-:func:`loads_net` reads back equal.
 
-Every problem is a :class:`~coordinator.errors.NetError` naming the file, the 1-based line and the
-problem. :mod:`tomllib` reports positions of syntax errors only, so :class:`SourceMap` scans the
-source text for table headers and keys to find the line of each element and key.
+Every problem is a :class:`~coordinator.errors.NetError` naming the file, the 1-based line
+(:class:`~coordinator.netfile.source_map.SourceMap`) and the problem. A primitive task's
+``learner`` table is checked here too (section 4, :func:`coordinator.learning.validation.learner_spec`).
 
-:func:`check_net` validates a net against the location file (``services.toml``): every primitive
-action is placed on a node, every external event has a publisher.
+The module is longer than most: one loader walks the whole document so that every problem is
+collected with its line, instead of stopping at the first.
 """
 
 from __future__ import annotations
 
-import datetime as _dt
 import difflib
-import math
 import re
 import tomllib
-from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
 from functools import partial
 from pathlib import Path
-from typing import Any, Protocol, TypeVar
+from typing import Any, TypeVar
 
 from coordinator.errors import NetError, NetFileError
-from services.errors import LocationError
+from coordinator.learning.validation import learner_spec
 from coordinator.net import (
     EVENT_RE,
     ActionSpec,
@@ -42,259 +37,23 @@ from coordinator.net import (
     Transition,
     TransitionKind,
 )
+from coordinator.netfile.schema import (
+    ACTION_KEYS,
+    ARC_KEYS,
+    FORMAT_VERSION,
+    NET_KEYS,
+    PLACE_KEYS,
+    TASK_KEYS,
+    TOP_KEYS,
+    TRANSITION_KEYS,
+)
+from coordinator.netfile.source_map import SourceMap
 
-__all__ = [
-    "FORMAT_VERSION",
-    "SourceMap",
-    "check_net",
-    "dump_net",
-    "format_key",
-    "format_value",
-    "lint_net",
-    "load_any",
-    "load_net",
-    "loads_net",
-    "save_net",
-]
+__all__ = ["lint_net", "load_net", "loads_net", "read_text"]
 
-#: Version written in ``[net] format``; files of a higher version are refused.
-FORMAT_VERSION = 1
-
-_TOP_KEYS = ("net", "place", "task", "transition", "arc")
-_NET_KEYS = ("name", "description", "format", "home")
-_PLACE_KEYS = ("id", "kind", "tokens", "label", "capacity", "task")
-_TASK_KEYS = ("actions", "deadline_s", "learner", "mean_time_s", "reliability", "params")
-_ACTION_KEYS = ("name", "params", "cost")
-_TRANSITION_KEYS = ("id", "label", "events", "priority", "weight", "kind", "rate", "servers", "hidden",
-                    "inputs", "outputs", "inhibitors")
-_ARC_KEYS = ("from", "to", "weight", "inhibitor")
-_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
 _T = TypeVar("_T")
 
 
-# ============================================================================ TOML writing
-def format_key(key: str) -> str:
-    """Write a TOML key: bare when it may be, else a quoted basic string."""
-    return key if _BARE_KEY.match(key) else _format_string(key)
-
-
-def _format_string(text: str) -> str:
-    out = ['"']
-    for ch in text:
-        if ch == '"':
-            out.append('\\"')
-        elif ch == "\\":
-            out.append("\\\\")
-        elif ch == "\n":
-            out.append("\\n")
-        elif ch == "\t":
-            out.append("\\t")
-        elif ch == "\r":
-            out.append("\\r")
-        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
-            out.append(f"\\u{ord(ch):04X}")
-        else:
-            out.append(ch)
-    out.append('"')
-    return "".join(out)
-
-
-def _format_float(value: float) -> str:
-    if math.isnan(value):
-        return "nan"
-    if math.isinf(value):
-        return "inf" if value > 0 else "-inf"
-    return repr(float(value))
-
-
-def format_value(value: Any) -> str:
-    """Write a value as one-line TOML (strings, booleans, integers, floats, dates, arrays, tables).
-
-    Tables become inline tables; ``tomllib.loads("v = " + format_value(x))["v"] == x``.
-
-    Raises:
-        NetError: on a value TOML cannot hold (``None``, an object).
-    """
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        return _format_float(value)
-    if isinstance(value, str):
-        return _format_string(value)
-    if isinstance(value, (_dt.datetime, _dt.date, _dt.time)):
-        return value.isoformat()
-    if isinstance(value, Mapping):
-        if not value:
-            return "{}"
-        return "{ " + ", ".join(f"{format_key(str(k))} = {format_value(v)}" for k, v in value.items()) + " }"
-    if isinstance(value, (list, tuple)):
-        return "[" + ", ".join(format_value(v) for v in value) + "]"
-    raise NetError(f"cannot write {value!r} ({type(value).__name__}) in TOML")
-
-
-# ============================================================================ source positions
-def _split_key(text: str) -> list[str]:
-    """Split a dotted TOML key (``a."b.c".d``) into its parts."""
-    parts: list[str] = []
-    i, n = 0, len(text)
-    while i < n:
-        while i < n and text[i] in " \t":
-            i += 1
-        if i >= n:
-            break
-        if text[i] in "\"'":
-            quote = text[i]
-            j = i + 1
-            buf: list[str] = []
-            while j < n and text[j] != quote:
-                if quote == '"' and text[j] == "\\" and j + 1 < n:
-                    buf.append(text[j + 1])
-                    j += 2
-                    continue
-                buf.append(text[j])
-                j += 1
-            parts.append("".join(buf))
-            i = j + 1
-        else:
-            j = i
-            while j < n and text[j] not in ". \t":
-                j += 1
-            parts.append(text[i:j])
-            i = j
-        while i < n and text[i] in " \t":
-            i += 1
-        if i < n and text[i] == ".":
-            i += 1
-    return parts
-
-
-def _scan_line(line: str, state: dict[str, Any]) -> None:
-    """Update bracket depth and multi-line string state over one source line."""
-    i, n = 0, len(line)
-    while i < n:
-        ml = state["ml"]
-        if ml:
-            end = line.find(ml, i)
-            if end < 0:
-                return
-            i = end + 3
-            state["ml"] = None
-            continue
-        ch = line[i]
-        if ch == "#":
-            return
-        if line.startswith('"""', i) or line.startswith("'''", i):
-            state["ml"] = line[i:i + 3]
-            i += 3
-            continue
-        if ch in "\"'":
-            j = i + 1
-            while j < n and line[j] != ch:
-                j += 2 if ch == '"' and line[j] == "\\" else 1
-            i = j + 1
-            continue
-        if ch in "[{":
-            state["depth"] += 1
-        elif ch in "]}":
-            state["depth"] = max(0, state["depth"] - 1)
-        i += 1
-
-
-_HEADER = re.compile(r"^\s*(\[\[?)\s*(.*?)\s*\]\]?\s*(?:#.*)?$")
-_KEY = re.compile(r"^\s*((?:[A-Za-z0-9_-]+|\"(?:[^\"\\]|\\.)*\"|'[^']*')"
-                  r"(?:\s*\.\s*(?:[A-Za-z0-9_-]+|\"(?:[^\"\\]|\\.)*\"|'[^']*'))*)\s*=")
-
-
-@dataclass
-class SourceMap:
-    """Lines of the elements and keys of a net file, found by scanning its text.
-
-    Elements are ``("net", None)``, ``("place", i)``, ``("transition", i)``, ``("arc", i)`` (0-based
-    index among the tables of that array) and ``("task", name)``. Lines are 1-based.
-    """
-
-    elements: dict[tuple[str, Any], int] = field(default_factory=dict)
-    keys: dict[tuple[str, Any, str], int] = field(default_factory=dict)
-    ids: dict[tuple[str, str], int] = field(default_factory=dict)
-    last_line: int = 1
-
-    @classmethod
-    def scan(cls, text: str) -> SourceMap:
-        """Build the map of ``text`` (a best effort on text that is not valid TOML)."""
-        smap = cls()
-        counters = {"place": -1, "transition": -1, "arc": -1}
-        header: list[str] = []
-        state: dict[str, Any] = {"ml": None, "depth": 0}
-        lines = text.splitlines()
-        smap.last_line = max(1, len(lines))
-        for number, line in enumerate(lines, start=1):
-            if state["ml"] is None and state["depth"] == 0:
-                head = _HEADER.match(line)
-                if head and not _KEY.match(line):
-                    header = _split_key(head.group(2))
-                    if head.group(1) == "[[" and len(header) == 1 and header[0] in counters:
-                        counters[header[0]] += 1
-                    smap._record(header, number, counters)
-                    continue
-                key = _KEY.match(line)
-                if key:
-                    smap._record(header + _split_key(key.group(1)), number, counters, line[key.end():])
-            _scan_line(line, state)
-        return smap
-
-    def _record(self, path: list[str], number: int, counters: dict[str, int],
-                value_text: str | None = None) -> None:
-        if not path:
-            return
-        section = path[0]
-        ident: Any
-        if section in counters:
-            ident, rest = counters[section], path[1:]
-            if ident < 0:
-                return
-        elif section == "task":
-            if len(path) < 2:
-                return
-            ident, rest = path[1], path[2:]
-        elif section == "net":
-            ident, rest = None, path[1:]
-        else:
-            self.elements.setdefault((section, None), number)
-            return
-        self.elements.setdefault((section, ident), number)
-        if section == "task":
-            self.ids.setdefault(("task", ident), number)
-        if rest:
-            self.keys.setdefault((section, ident, rest[0]), number)
-            if rest == ["id"] and section in counters and value_text is not None:
-                try:
-                    value = tomllib.loads("id = " + value_text)["id"]
-                except tomllib.TOMLDecodeError:
-                    return
-                if isinstance(value, str):
-                    self.ids.setdefault((section, value), number)
-
-    def element(self, section: str, ident: Any) -> int | None:
-        """Line of an element: its ``id`` key if present, else its header, else ``None``."""
-        line = self.keys.get((section, ident, "id"))
-        return line if line is not None else self.elements.get((section, ident))
-
-    def key(self, section: str, ident: Any, key: str) -> int | None:
-        """Line of a key of an element, falling back to :meth:`element`."""
-        line = self.keys.get((section, ident, key))
-        return line if line is not None else self.element(section, ident)
-
-    def of_id(self, ident: str) -> int | None:
-        """Line of the place, transition or task with this id or name, or ``None``."""
-        for section in ("place", "transition", "task"):
-            if (section, ident) in self.ids:
-                return self.ids[(section, ident)]
-        return None
-
-
-# ============================================================================ loading
 def _is_int(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
@@ -364,9 +123,9 @@ class _Loader:
     def load(self, default_name: str, interpreted: bool) -> PetriNet | None:
         doc = self.doc
         for key in doc:
-            if key not in _TOP_KEYS:
-                close = difflib.get_close_matches(key, _TOP_KEYS, n=1)
-                hint = f"; did you mean {close[0]!r}?" if close else f" (known: {', '.join(_TOP_KEYS)})"
+            if key not in TOP_KEYS:
+                close = difflib.get_close_matches(key, TOP_KEYS, n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else f" (known: {', '.join(TOP_KEYS)})"
                 line = self.smap.elements.get((key, None))
                 self.report(f"unknown section {key!r}{hint}", line or self._find_header(key))
         for key, kind in (("net", dict), ("task", dict), ("place", list), ("transition", list), ("arc", list)):
@@ -411,7 +170,7 @@ class _Loader:
 
     def load_header(self, default_name: str) -> tuple[str, str, Marking | None]:
         table = self.doc.get("net", {})
-        self.check_keys(table, _NET_KEYS, "[net]", "net", None)
+        self.check_keys(table, NET_KEYS, "[net]", "net", None)
         name, description, home = default_name, "", None
         try:
             name = self.get(table, "name", "str", "[net]", "net", None, default_name)
@@ -449,7 +208,7 @@ class _Loader:
         line = self.smap.elements.get(("task", name))
         if not isinstance(table, dict):
             raise self.fail(f"{what} must be a table", line)
-        self.check_keys(table, _TASK_KEYS, what, "task", name)
+        self.check_keys(table, TASK_KEYS, what, "task", name)
         if "actions" not in table:
             raise self.fail(f"{what} has no actions: list its alternative primitive actions", line)
         actions_value = self.get(table, "actions", "array", what, "task", name)
@@ -462,8 +221,8 @@ class _Loader:
             elif isinstance(item, dict):
                 spec = item
                 for key in item:
-                    if key not in _ACTION_KEYS:
-                        close = difflib.get_close_matches(key, _ACTION_KEYS, n=1)
+                    if key not in ACTION_KEYS:
+                        close = difflib.get_close_matches(key, ACTION_KEYS, n=1)
                         hint = f"; did you mean {close[0]!r}?" if close else ""
                         raise self.fail(f"unknown key {key!r} in an action of {what}{hint}", actions_line)
             else:
@@ -490,11 +249,9 @@ class _Loader:
             values[key] = None if value is None else float(value)
         learner = self.get(table, "learner", "table", what, "task", name, {})
         if learner:  # section 4: reject a bad learner configuration here, with its line
-            from coordinator.learning import make_learner
-
             costs = {a.name: a.cost for a in actions if a.cost is not None}
             self.build(self.smap.key("task", name, "learner") or line,
-                       lambda: make_learner(learner, [a.name for a in actions], costs or None))
+                       lambda: learner_spec(learner, [a.name for a in actions], costs or None))
         return self.build(line, lambda: PrimitiveTask(name=name, actions=tuple(actions), learner=learner, **values))
 
     # ---------------------------------------------------------------- places
@@ -528,7 +285,7 @@ class _Loader:
             raise self.fail("a [[place]] must be a table", self.smap.elements.get(("place", index)))
         pid = self.element_id("place", index, table, places)
         what = f"place {pid!r}"
-        self.check_keys(table, _PLACE_KEYS, what, "place", index)
+        self.check_keys(table, PLACE_KEYS, what, "place", index)
         task = self.get(table, "task", "str", what, "place", index)
         kind_text = self.get(table, "kind", "str", what, "place", index,
                              "primitive_task" if task is not None else "plain")
@@ -585,7 +342,7 @@ class _Loader:
         tid = self.element_id("transition", index, table, transitions)
         what = f"transition {tid!r}"
         sec = "transition"
-        self.check_keys(table, _TRANSITION_KEYS, what, sec, index)
+        self.check_keys(table, TRANSITION_KEYS, what, sec, index)
         events = self.get(table, "events", "array", what, sec, index, [])
         for event in events:
             if not isinstance(event, str) or not EVENT_RE.match(event):
@@ -685,7 +442,7 @@ class _Loader:
         header = self.smap.elements.get(("arc", index))
         if not isinstance(table, dict):
             raise self.fail("an [[arc]] must be a table", header)
-        self.check_keys(table, _ARC_KEYS, "an [[arc]]", "arc", index)
+        self.check_keys(table, ARC_KEYS, "an [[arc]]", "arc", index)
         ends = []
         for key in ("from", "to"):
             if key not in table:
@@ -774,7 +531,7 @@ def loads_net(text: str, path: str = "<string>", *, interpreted: bool = True) ->
     return net
 
 
-def _read_text(path: str | Path) -> str:
+def read_text(path: str | Path) -> str:
     try:
         return Path(path).read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
@@ -789,171 +546,4 @@ def load_net(path: str | Path, *, interpreted: bool = True) -> PetriNet:
         NetFileError: if the file cannot be read, or on a syntax error.
         NetError: as :func:`loads_net`.
     """
-    return loads_net(_read_text(path), str(path), interpreted=interpreted)
-
-
-def load_any(path: str | Path, *, interpreted: bool = True) -> PetriNet:
-    """Load a net file of any supported format, chosen by suffix: ``.toml``, ``.pnml`` or ``.xml``.
-
-    Raises:
-        NetFileError: unknown suffix, unreadable file, syntax error.
-        NetError: as :func:`load_net` and :func:`coordinator.pnml.load_pnml`.
-    """
-    suffix = Path(path).suffix.lower()
-    if suffix == ".toml":
-        return load_net(path, interpreted=interpreted)
-    if suffix in (".pnml", ".xml"):
-        from coordinator.pnml import load_pnml
-
-        net = load_pnml(path)
-        if interpreted:
-            problems = net.interpretation_problems()
-            if problems:
-                raise NetError(problems[0][1], path=str(path))
-        return net
-    raise NetFileError(f"unknown net file type {suffix or '(no suffix)'!r}: use .toml, .pnml or .xml", path=str(path))
-
-
-# ============================================================================ saving
-def _place_order(net: PetriNet, table: Mapping[str, int]) -> list[tuple[str, int]]:
-    return sorted(table.items(), key=lambda kv: net.place_index[kv[0]])
-
-
-def _inline(items: Iterable[tuple[str, Any]]) -> str:
-    pairs = [f"{format_key(k)} = {format_value(v)}" for k, v in items]
-    return "{ " + ", ".join(pairs) + " }" if pairs else "{}"
-
-
-def dump_net(net: PetriNet) -> str:
-    """Write a net as canonical TOML (docs/netfile.md, "Canonical form").
-
-    Sections in the order ``[net]``, ``[[place]]`` (net order), ``[task.*]`` (definition order),
-    ``[[transition]]`` (net order) with their arcs as ``inputs``/``outputs``/``inhibitors`` tables
-    (keys in place order); keys equal to their default are left out. ``loads_net(dump_net(n)) == n``.
-
-    Raises:
-        NetError: if a parameter value cannot be written in TOML.
-    """
-    out: list[str] = [f"# petrobot net file, format {FORMAT_VERSION} (see docs/netfile.md)", "", "[net]",
-                      f"name = {format_value(net.name)}"]
-    if net.description:
-        out.append(f"description = {format_value(net.description)}")
-    out.append(f"format = {FORMAT_VERSION}")
-    if net.home_marking is not None:
-        out.append(f"home = {_inline(net.home_marking.items())}")
-    for place in net.places:
-        out += ["", "[[place]]", f"id = {format_value(place.id)}"]
-        if place.kind is not PlaceKind.PLAIN:
-            out.append(f"kind = {format_value(place.kind.value)}")
-        if place.task is not None:
-            out.append(f"task = {format_value(place.task)}")
-        tokens = net.initial_marking[place.id]
-        if tokens:
-            out.append(f"tokens = {tokens}")
-        if place.label:
-            out.append(f"label = {format_value(place.label)}")
-        if place.capacity is not None:
-            out.append(f"capacity = {place.capacity}")
-    for task in net.tasks.values():
-        out += ["", f"[task.{format_key(task.name)}]"]
-        if all(not a.params and a.cost is None for a in task.actions):
-            out.append("actions = " + format_value([a.name for a in task.actions]))
-        else:
-            out.append("actions = [")
-            for action in task.actions:
-                items: list[tuple[str, Any]] = [("name", action.name)]
-                if action.params:
-                    items.append(("params", dict(action.params)))
-                if action.cost is not None:
-                    items.append(("cost", float(action.cost)))
-                out.append(f"    {_inline(items)},")
-            out.append("]")
-        for key in ("deadline_s", "mean_time_s", "reliability"):
-            value = getattr(task, key)
-            if value is not None:
-                out.append(f"{key} = {format_value(float(value))}")
-        if task.learner:
-            out.append(f"learner = {format_value(dict(task.learner))}")
-    inputs, outputs, inhibitors = net.input_places, net.output_places, net.inhibitor_places
-    for t in net.transitions:
-        out += ["", "[[transition]]", f"id = {format_value(t.id)}"]
-        if t.label:
-            out.append(f"label = {format_value(t.label)}")
-        if t.events:
-            out.append(f"events = {format_value(list(t.events))}")
-        if t.priority:
-            out.append(f"priority = {t.priority}")
-        if t.weight != 1.0:
-            out.append(f"weight = {format_value(float(t.weight))}")
-        if t.kind is not TransitionKind.IMMEDIATE:
-            out.append(f"kind = {format_value(t.kind.value)}")
-        if t.rate is not None:
-            out.append(f"rate = {format_value(float(t.rate))}")
-        if t.servers != 1:
-            out.append("servers = " + ('"infinite"' if t.servers is None else str(t.servers)))
-        if t.hidden:
-            out.append("hidden = true")
-        for key, table in (("inputs", inputs), ("outputs", outputs), ("inhibitors", inhibitors)):
-            if table[t.id] or key != "inhibitors":
-                out.append(f"{key} = {_inline(_place_order(net, table[t.id]))}")
-    return "\n".join(out) + "\n"
-
-
-def save_net(net: PetriNet, path: str | Path) -> None:
-    """Write :func:`dump_net` of ``net`` to ``path`` (UTF-8).
-
-    Raises:
-        NetFileError: if the file cannot be written.
-        NetError: as :func:`dump_net`.
-    """
-    text = dump_net(net)
-    try:
-        Path(path).write_text(text, encoding="utf-8")
-    except OSError as exc:
-        raise NetFileError(f"cannot write net file: {exc.strerror or exc}", path=str(path)) from None
-
-
-# ============================================================================ against services.toml
-class _Placement(Protocol):
-    def node_of(self, action: str) -> str: ...
-
-    def publisher_of(self, topic: str) -> str: ...
-
-
-def check_net(net: PetriNet, location: _Placement) -> list[tuple[str, str]]:
-    """Check that a net can run with a location file (paper section 5).
-
-    Every primitive action of every primitive task must be placed on a node, and every ``ext:``
-    event linked to a transition must have a publishing node.
-
-    Args:
-        net: the task net.
-        location: a :class:`services.location.Location` (anything with ``node_of(action)`` and
-            ``publisher_of(topic)`` raising :class:`LocationError`).
-
-    Returns:
-        ``(element, problem)`` pairs, empty when the net can run; ``element`` is a task name or a
-        transition id.
-    """
-    problems: list[tuple[str, str]] = []
-    for task in net.tasks.values():
-        for action in task.actions:
-            try:
-                location.node_of(action.name)
-            except LocationError:
-                problem = (f"primitive action {action.name!r} of task {task.name!r} is not placed on "
-                           f"any node (add [actions.{action.name}] to services.toml)")
-                problems.append((task.name, problem))
-    reported: set[str] = set()
-    for t in net.transitions:
-        for event in t.external_events:
-            topic = event.removeprefix("ext:")
-            try:
-                location.publisher_of(topic)
-            except LocationError:
-                if topic not in reported:
-                    reported.add(topic)
-                    problem = (f"external event {event!r} of transition {t.id!r} has no publisher "
-                               f"(add [events.{topic}] to services.toml)")
-                    problems.append((t.id, problem))
-    return problems
+    return loads_net(read_text(path), str(path), interpreted=interpreted)

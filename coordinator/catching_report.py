@@ -1,0 +1,104 @@
+"""The catching experiment's report: one line per run of ``nets/catch.toml`` (paper section 6).
+
+:class:`CatchReport` observes a run of the catching net (:mod:`coordinator.events`): it groups the
+events into runs of the experiment (each starts with the transition ``start_run``), keeps the
+outcome, the locate action the learner chose, the final prediction of the catch point and the time
+of each primitive task, and pairs each prediction with the simulator's ground truth.
+``petrobot demo`` prints it. Pure: it only reads events.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from coordinator.events import ActionEnded, Observer, RunEvent, TransitionFired
+from services.results import Status
+
+__all__ = ["CatchReport", "RunRecord"]
+
+
+@dataclass
+class RunRecord:
+    """What happened in one run of the catching net."""
+
+    n: int
+    outcome: str = "running"
+    times: dict[str, float] = field(default_factory=dict)
+    locate_action: str = ""
+    predicted: dict[str, Any] | None = None
+    truth: dict[str, Any] | None = None
+
+    @property
+    def error_mm(self) -> float | None:
+        """|predicted − actual| lateral position at the catch line, millimetres."""
+        if not self.predicted or not self.truth:
+            return None
+        return abs(float(self.predicted["y"]) - float(self.truth["y"])) * 1000.0
+
+
+class CatchReport:
+    """A runtime observer that groups events into runs (each starts with ``start_run``).
+
+    Args:
+        forward: the observer every event is passed on to (the console).
+    """
+
+    #: Final transition of a run → its outcome in the report.
+    OUTCOMES: ClassVar[Mapping[str, str]] = {
+        "ball_caught": "caught", "ball_missed": "missed", "ball_bounced_out": "bounced out",
+        "catch_failed": "error", "catch_failed_after_sensor": "error", "locate_failed": "error",
+        "no_ball_seen": "no ball"}
+
+    def __init__(self, forward: Observer) -> None:
+        self.forward = forward
+        self.runs: list[RunRecord] = []
+
+    def __call__(self, event: RunEvent) -> None:
+        """Take in one event of the run, then pass it on to ``forward``."""
+        if isinstance(event, TransitionFired):
+            tid = event.firing.transition
+            if tid == "start_run":
+                self.runs.append(RunRecord(len(self.runs) + 1))
+            elif self.runs and tid in self.OUTCOMES:
+                self.runs[-1].outcome = self.OUTCOMES[tid]
+        elif isinstance(event, ActionEnded) and self.runs:
+            run = self.runs[-1]
+            result = event.result
+            run.times[event.task] = result.wall_s
+            if event.task == "locate":
+                run.locate_action = event.action
+            if event.task == "predict" and result.status is Status.SUCCESS and isinstance(result.value, dict):
+                run.predicted = result.value
+        self.forward(event)
+
+    def match_truth(self, crossings: list[dict[str, Any]]) -> None:
+        """Pair each run's final prediction with the simulator's crossing nearest in time."""
+        for run in self.runs:
+            if run.predicted is None:
+                continue
+            t = float(run.predicted.get("t", 0.0))
+            near = min(crossings, key=lambda c: abs(float(c["t"]) - t), default=None)
+            if near is not None and abs(float(near["t"]) - t) < 1.0:
+                run.truth = near
+
+    def format(self) -> str:
+        """The table of runs: outcome, locate action, prediction error, lead and task times."""
+        head = (f"{'run':>3}  {'outcome':<12}{'locate with':<18}{'pred. error':>12}{'lead':>7}"
+                f"{'locate':>8}{'predict':>9}{'catch':>7}{'home':>7}")
+        lines = ["", "catching experiment (times in seconds; prediction error at the catch line, final set point)",
+                 head]
+        for r in self.runs:
+            err = f"{r.error_mm:9.2f} mm" if r.error_mm is not None else f"{'-':>12}"
+            lead = f"{float(r.predicted.get('lead_s', 0.0)):6.2f}s" if r.predicted else f"{'-':>7}"
+            times = "".join(f"{r.times[k]:>{w}.2f}" if k in r.times else f"{'-':>{w}}"
+                            for k, w in (("locate", 8), ("predict", 9), ("catch", 7), ("home", 7)))
+            lines.append(f"{r.n:>3}  {r.outcome:<12}{r.locate_action:<18}{err}{lead}{times}")
+        caught = sum(r.outcome == "caught" for r in self.runs)
+        restarted = sum(r.outcome == "no ball" for r in self.runs)
+        attempts = len(self.runs) - restarted
+        note = (f" ({restarted} run{'s' * (restarted != 1)} restarted: no ball located within specification)"
+                if restarted else "")
+        lines.append(f"caught {caught} of {attempts} balls{note}")
+        return "\n".join(lines)

@@ -1,0 +1,33 @@
+"""The journal: an SQLite log of every run of a task net, and the one owner of its schema.
+
+* :mod:`~coordinator.journal.schema` — the tables (the only DDL of the project);
+* :mod:`~coordinator.journal.records` — the typed records the journal gives back;
+* :mod:`~coordinator.journal.reader` — :class:`JournalReader`, every query (read-only with
+  :meth:`JournalReader.open`);
+* :mod:`~coordinator.journal.writer` — :class:`Journal`, the write-ahead log the runtime writes.
+"""
+
+from coordinator.journal.reader import JournalReader, read_results
+from coordinator.journal.records import (
+    FiringRow,
+    LearnerState,
+    OperatorRow,
+    Recovered,
+    ResultRow,
+    RunRow,
+    StartRow,
+)
+from coordinator.journal.writer import Journal
+
+__all__ = [
+    "FiringRow",
+    "Journal",
+    "JournalReader",
+    "LearnerState",
+    "OperatorRow",
+    "Recovered",
+    "ResultRow",
+    "RunRow",
+    "StartRow",
+    "read_results",
+]

@@ -1,0 +1,152 @@
+"""What the journal gives back: one frozen record per row, typed (paper sections 3 to 5).
+
+The readers of the journal — ``petrobot perf``, ``gspn`` and ``learn``, the resume of an
+interrupted run, a replay of a run — get these records from
+:class:`~coordinator.journal.reader.JournalReader`, never SQL rows. Times are Unix times in seconds
+(``*_wall``) and durations in seconds (``wall_s``, ``cpu_s``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from coordinator.engine import Instance
+from coordinator.net import Marking
+from coordinator.performance import ActionRecord
+
+__all__ = ["FiringRow", "LearnerState", "OperatorRow", "Recovered", "ResultRow", "RunRow", "StartRow"]
+
+
+@dataclass(frozen=True, slots=True)
+class RunRow:
+    """One run of a net.
+
+    Attributes:
+        id: run id.
+        net_name: the net's name.
+        net_text: source text of the net file, when the run stored it.
+        seed: seed of the engine's random switches and of the learners.
+        started_wall, ended_wall: when it started and ended (``None`` while unfinished).
+        end_state: ``dead``, ``aborted``, ``interrupted``... or ``None`` while unfinished.
+        note: the last errors of the run, in words.
+    """
+
+    id: str
+    net_name: str
+    net_text: str | None
+    seed: int
+    started_wall: float
+    ended_wall: float | None
+    end_state: str | None
+    note: str | None
+
+    @property
+    def finished(self) -> bool:
+        """True once the run's end is recorded."""
+        return self.ended_wall is not None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class ResultRow(ActionRecord):
+    """One primitive-action result: an :class:`~coordinator.performance.ActionRecord` and where it
+    came from.
+
+    Attributes:
+        run: run id.
+        instance: instance id (the call id).
+        node: the node that ran the action, or ``None``.
+        t_wall: when the coordinator received the result.
+        reason: why an error happened, or ``None``.
+        value: the returned value, decoded from JSON (``None`` when JSON could not hold it).
+    """
+
+    run: str
+    instance: str
+    node: str | None = None
+    t_wall: float = 0.0
+    reason: str | None = None
+    value: Any = None
+
+
+@dataclass(frozen=True, slots=True)
+class StartRow:
+    """A primitive action sent to its node for a new instance (before the call left)."""
+
+    run: str
+    instance: str
+    task: str
+    place: str
+    action: str
+    node: str | None
+    params: Mapping[str, Any]
+    t_wall: float
+
+
+@dataclass(frozen=True, slots=True)
+class FiringRow:
+    """A firing, journaled before it was applied (the fields of :class:`coordinator.engine.Firing`)."""
+
+    run: str
+    seq: int
+    transition: str
+    consumed: Mapping[str, int]
+    produced: Mapping[str, int]
+    instances: tuple[str, ...]
+    pulse: str | None
+    t_wall: float
+
+
+@dataclass(frozen=True, slots=True)
+class OperatorRow:
+    """An operator command (section 5): ``insert``/``remove`` (with place and count), ``pause``,
+    ``step``, ``resume`` or ``abort``."""
+
+    run: str
+    command: str
+    place: str | None
+    count: int | None
+    t_wall: float
+
+
+@dataclass(frozen=True, slots=True)
+class LearnerState:
+    """The latest saved state of one primitive task's learning automaton (section 4).
+
+    Attributes:
+        task: primitive task.
+        scheme: its scheme (``pursuit``, ``lri``, ``fixed``).
+        state: :meth:`coordinator.learning.LearningAutomaton.state_dict` output.
+        updated_wall: when it was saved.
+    """
+
+    task: str
+    scheme: str
+    state: Mapping[str, Any]
+    updated_wall: float
+
+
+@dataclass(frozen=True, slots=True)
+class Recovered:
+    """What :meth:`JournalReader.recover` rebuilt for an interrupted run.
+
+    Attributes:
+        run: the run id.
+        seed: the seed the run was started with.
+        marking: marking after the last journaled record.
+        instances: live instances (running, or ended but not consumed), in start order.
+        nodes: instance id → node the action was sent to.
+        params: instance id → parameters of the call (for re-issuing it with the same call id).
+        fired: number of firings journaled.
+        next_instance: next free instance number.
+    """
+
+    run: str
+    seed: int
+    marking: Marking
+    instances: tuple[Instance, ...]
+    nodes: Mapping[str, str | None]
+    params: Mapping[str, Any]
+    fired: int
+    next_instance: int

@@ -1,0 +1,39 @@
+"""Loading a net file of any supported format, chosen by its suffix.
+
+``.toml`` is the petrobot net file (:mod:`~coordinator.netfile.loader`); ``.pnml`` and ``.xml``
+are PNML (:mod:`~coordinator.netfile.pnml`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from coordinator.errors import NetError, NetFileError
+from coordinator.net import PetriNet
+from coordinator.netfile.loader import load_net
+from coordinator.netfile.pnml import load_pnml
+
+__all__ = ["SUFFIXES", "load_any"]
+
+#: Net-file suffixes :func:`load_any` reads.
+SUFFIXES = (".toml", ".pnml", ".xml")
+
+
+def load_any(path: str | Path, *, interpreted: bool = True) -> PetriNet:
+    """Load a net file of any supported format, chosen by suffix: ``.toml``, ``.pnml`` or ``.xml``.
+
+    Raises:
+        NetFileError: unknown suffix, unreadable file, syntax error.
+        NetError: as :func:`load_net` and :func:`coordinator.netfile.pnml.load_pnml`.
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix == ".toml":
+        return load_net(path, interpreted=interpreted)
+    if suffix in (".pnml", ".xml"):
+        net = load_pnml(path)
+        if interpreted:
+            problems = net.interpretation_problems()
+            if problems:
+                raise NetError(problems[0][1], path=str(path))
+        return net
+    raise NetFileError(f"unknown net file type {suffix or '(no suffix)'!r}: use .toml, .pnml or .xml", path=str(path))

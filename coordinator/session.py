@@ -1,0 +1,84 @@
+"""A session: a task net run to its end on the nodes of a location file (paper sections 2, 4, 5).
+
+* :func:`execute` runs a net: the learners (section 4, restored from the journal), the runtime, the
+  console and the operator's commands;
+* :func:`build_learner` makes the learners of a net, restored from the journal.
+
+``petrobot run`` and ``demo`` are thin commands over these (the nodes themselves:
+:mod:`coordinator.nodegroup`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+
+from coordinator.console import Console, read_operator_commands
+from coordinator.events import Observer
+from coordinator.journal import Journal, JournalReader
+from coordinator.learning import Learner
+from coordinator.net import PetriNet
+from coordinator.runtime import RunSummary, Runtime
+from services.client import ServiceClient
+from services.errors import PetrobotError
+from services.location import Location
+
+__all__ = ["build_learner", "execute"]
+
+
+def build_learner(net: PetriNet, seed: int, journal: JournalReader) -> Learner:
+    """One learning automaton per primitive task (section 4), restored from the journal if saved there.
+
+    Raises:
+        LearnerConfigError: a task's ``learner`` table or its costs are invalid (names the task).
+        JournalError: a saved state is malformed.
+    """
+    learner = Learner.from_net(net, seed)
+    saved = {task: saved.state for task, saved in journal.learner_states().items()}
+    if saved:
+        learner.restore(saved, strict=False)
+    return learner
+
+
+async def execute(net: PetriNet, *, location: Location, key: bytes, journal: Journal, seed: int = 0,
+                  resume: bool = False, net_text: str | None = None, live: bool | None = None,
+                  quiet: bool = False, read_input: bool = False, max_seconds: float | None = None,
+                  observer: Observer | None = None, console: Console | None = None) -> RunSummary:
+    """Run ``net`` to its end and return the :class:`~coordinator.runtime.RunSummary`.
+
+    ``console`` (a :class:`~coordinator.console.Console`, made from ``live``/``quiet`` if not given)
+    shows the run; ``observer``, if given, receives the runtime's events instead and is expected
+    to forward them to the console. ``resume`` continues the last unfinished run of the net in the
+    journal.
+
+    Raises:
+        PetrobotError: nothing to resume; a bad learner configuration; the nodes cannot be reached.
+    """
+    recovered = None
+    if resume:
+        run_id = journal.last_unfinished_run(net.name)
+        if run_id is None:
+            raise PetrobotError(f"{journal.path}: no unfinished run of net {net.name!r} to resume")
+        recovered = journal.recover(net, run_id)
+    learner = build_learner(net, recovered.seed if recovered else seed, journal)
+    async with ServiceClient(location, key) as client:
+        runtime = Runtime(net, client, journal, seed=seed, learner=learner, recovered=recovered,
+                          net_text=net_text)
+        console = console or Console(net, live=live, quiet=quiet)
+        console.attach(runtime)
+        if observer is not None:
+            runtime.observer = observer
+        if read_input:
+            read_operator_commands(runtime)
+        refresher = asyncio.get_running_loop().create_task(_redraw(console)) if console.live else None
+        try:
+            return await runtime.run(max_seconds=max_seconds)
+        finally:
+            if refresher is not None:
+                refresher.cancel()
+
+
+async def _redraw(console: Console, period_s: float = 0.25) -> None:
+    """Redraw the live screen so running actions' elapsed times advance between events."""
+    while True:
+        await asyncio.sleep(period_s)
+        console.draw()
