@@ -7,7 +7,7 @@
 * :mod:`~coordinator.journal.writer` — :class:`Journal`, the write-ahead log the runtime writes.
 """
 
-from coordinator.journal.reader import JournalReader, read_results
+from coordinator.journal.reader import JournalReader, Record, read_results
 from coordinator.journal.records import (
     FiringRow,
     LearnerState,
@@ -15,6 +15,7 @@ from coordinator.journal.records import (
     Recovered,
     ResultRow,
     RunRow,
+    RunStats,
     StartRow,
 )
 from coordinator.journal.writer import Journal
@@ -27,7 +28,9 @@ __all__ = [
     "OperatorRow",
     "Recovered",
     "ResultRow",
+    "Record",
     "RunRow",
+    "RunStats",
     "StartRow",
     "read_results",
 ]

@@ -24,13 +24,17 @@ from coordinator.journal.records import (
     Recovered,
     ResultRow,
     RunRow,
+    RunStats,
     StartRow,
 )
 from coordinator.journal.schema import check_schema
 from coordinator.net import Marking, PetriNet
 from services.results import Status, latched_events
 
-__all__ = ["JournalReader", "read_results"]
+__all__ = ["JournalReader", "Record", "read_results"]
+
+Record = FiringRow | StartRow | ResultRow | OperatorRow
+"""Any record of a run, as :meth:`JournalReader.timeline` gives them."""
 
 _STATUSES = frozenset(s.value for s in Status)
 
@@ -55,6 +59,12 @@ class JournalReader:
     def __init__(self, db: sqlite3.Connection, path: str) -> None:
         self._db = db
         self.path = path
+        try:
+            have = {row[1] for row in db.execute("PRAGMA table_info(operator)")}
+        except sqlite3.DatabaseError as exc:
+            raise JournalError(f"{path}: cannot read the journal: {exc}") from exc
+        # a version-1 journal (read-only) has no accepted/reason: every command it holds was applied
+        self._operator_cols = ("accepted, reason" if {"accepted", "reason"} <= have else "1, NULL")
 
     @classmethod
     def open(cls, path: str | Path) -> JournalReader:
@@ -120,10 +130,34 @@ class JournalReader:
         raise JournalError(f"{self.path}: no run {run!r}")
 
     def last_unfinished_run(self, net_name: str) -> str | None:
-        """Id of the most recent run of ``net_name`` that has no end recorded, or ``None``."""
-        rows = self._query("SELECT id FROM run WHERE net_name=? AND ended_wall IS NULL "
-                           "ORDER BY started_wall DESC LIMIT 1", (net_name,))
+        """Id of the most recent resumable run of ``net_name`` — no end recorded (the coordinator
+        died) or ended ``interrupted`` (Ctrl-C) — or ``None``."""
+        rows = self._query("SELECT id FROM run WHERE net_name=? AND (ended_wall IS NULL OR end_state='interrupted') "
+                           "ORDER BY started_wall DESC, rowid DESC LIMIT 1", (net_name,))
         return str(rows[0][0]) if rows else None
+
+    def run_stats(self) -> list[RunStats]:
+        """Every run with its counts of firings, calls, errors and operator commands, oldest first.
+
+        Raises:
+            JournalError: the database cannot be read.
+        """
+        refused = "SUM(accepted=0)" if self._operator_cols.startswith("accepted") else "0"
+        firings = {r: (n, t) for r, n, t in self._query("SELECT run, COUNT(*), MAX(t_wall) FROM firing GROUP BY run")}
+        calls = {r: (n, e, f, t) for r, n, e, f, t in self._query(
+            "SELECT run, COUNT(*), SUM(status='error'), SUM(status='failure'), MAX(t_wall) "
+            "FROM action_result GROUP BY run")}
+        commands = {r: (n, x, t) for r, n, x, t in self._query(
+            f"SELECT run, COUNT(*), {refused}, MAX(t_wall) FROM operator GROUP BY run")}
+        out = []
+        for row in self.runs():
+            nf, tf = firings.get(row.id, (0, None))
+            nc, ne, nfail, tc = calls.get(row.id, (0, 0, 0, None))
+            no, nx, to = commands.get(row.id, (0, 0, None))
+            last = max([row.started_wall] + [float(t) for t in (tf, tc, to) if t is not None])
+            out.append(RunStats(row, firings=int(nf), calls=int(nc), errors=int(ne or 0), failures=int(nfail or 0),
+                                operator_commands=int(no), refused=int(nx or 0), last_wall=last))
+        return out
 
     # ------------------------------------------------------------------ records of runs
     def results(self, run: str | None = None) -> list[ResultRow]:
@@ -137,33 +171,48 @@ class JournalReader:
         """
         where, args = _where_run(run)
         rows = self._query("SELECT run, instance, task, action, node, status, outcome, cost, wall_s, cpu_s, "
-                           f"t_wall, reason, value FROM action_result{where} ORDER BY entry", args)
+                           f"t_wall, reason, value, entry FROM action_result{where} ORDER BY entry", args)
         return [ResultRow(run=r, instance=i, task=t, action=a, node=n, status=Status(s), outcome=o, cost=c,
-                          wall_s=w, cpu_s=cpu, t_wall=float(tw), reason=why, value=_loads(v))
-                for r, i, t, a, n, s, o, c, w, cpu, tw, why, v in rows if s in _STATUSES]
+                          wall_s=w, cpu_s=cpu, t_wall=float(tw), reason=why, value=_loads(v), entry=int(e))
+                for r, i, t, a, n, s, o, c, w, cpu, tw, why, v, e in rows if s in _STATUSES]
 
     def starts(self, run: str | None = None) -> list[StartRow]:
         """Primitive actions sent to their nodes, in journal order."""
         where, args = _where_run(run)
-        rows = self._query("SELECT run, instance, task, place, action, node, params, t_wall "
+        rows = self._query("SELECT run, instance, task, place, action, node, params, t_wall, entry "
                            f"FROM action_start{where} ORDER BY entry", args)
-        return [StartRow(r, i, t, p, a, n, _loads(params) or {}, float(tw))
-                for r, i, t, p, a, n, params, tw in rows]
+        return [StartRow(r, i, t, p, a, n, _loads(params) or {}, float(tw), int(e))
+                for r, i, t, p, a, n, params, tw, e in rows]
 
     def firings(self, run: str | None = None) -> list[FiringRow]:
         """Firings in journal order (by ``seq`` within a run)."""
         where, args = _where_run(run)
-        rows = self._query("SELECT run, seq, transition, consumed, produced, instances, pulse, t_wall "
+        rows = self._query("SELECT run, seq, transition, consumed, produced, instances, pulse, t_wall, entry "
                            f"FROM firing{where} ORDER BY entry", args)
         return [FiringRow(r, int(seq), str(t), json.loads(c), json.loads(p), tuple(json.loads(i)), pulse,
-                          float(tw))
-                for r, seq, t, c, p, i, pulse, tw in rows]
+                          float(tw), int(e))
+                for r, seq, t, c, p, i, pulse, tw, e in rows]
 
     def operator_commands(self, run: str | None = None) -> list[OperatorRow]:
-        """Operator commands (section 5) in journal order."""
+        """Operator commands (section 5) in journal order, refused ones included (``accepted`` False)."""
         where, args = _where_run(run)
-        rows = self._query(f"SELECT run, command, place, count, t_wall FROM operator{where} ORDER BY entry", args)
-        return [OperatorRow(r, str(c), p, n, float(tw)) for r, c, p, n, tw in rows]
+        rows = self._query(f"SELECT run, command, place, count, t_wall, {self._operator_cols}, entry "
+                           f"FROM operator{where} ORDER BY entry", args)
+        return [OperatorRow(r, str(c), p, n, float(tw), bool(ok), why, int(e))
+                for r, c, p, n, tw, ok, why, e in rows]
+
+    def timeline(self, run: str) -> list[Record]:
+        """Every record of ``run`` — firings, action starts, results, operator commands — in the
+        order they were written (``entry``).
+
+        Raises:
+            JournalError: if the journal has no run ``run``.
+        """
+        self.run(run)
+        records: list[Record] = [*self.firings(run), *self.starts(run), *self.results(run),
+                                 *self.operator_commands(run)]
+        records.sort(key=lambda r: (r.entry, r.t_wall))
+        return records
 
     # ------------------------------------------------------------------ learning
     def learner_states(self) -> dict[str, LearnerState]:
@@ -203,8 +252,8 @@ class JournalReader:
             "FROM action_start WHERE run=? "
             "UNION ALL SELECT entry, 'result', instance, status, outcome, NULL, NULL, NULL "
             "FROM action_result WHERE run=? "
-            "UNION ALL SELECT entry, 'operator', command, place, count, NULL, NULL, NULL "
-            "FROM operator WHERE run=? ORDER BY entry",
+            f"UNION ALL SELECT entry, 'operator', command, place, count, {self._operator_cols.split(',')[0]}, "
+            "NULL, NULL FROM operator WHERE run=? ORDER BY entry",
             (run, run, run, run),
         )
         return _replay(self.path, net, run, int(head[0][0] or 0), records)
@@ -249,7 +298,7 @@ def _replay(path: str, net: PetriNet, run: str, seed: int, records: Iterable[tup
             if inst is not None and inst.running:
                 inst.status = Status(b)
                 inst.outcomes = latched_events(inst.status, c)
-        elif kind == "operator" and a in ("insert", "remove") and b is not None:
+        elif kind == "operator" and a in ("insert", "remove") and b is not None and d:
             counts[b] = counts.get(b, 0) + (c if a == "insert" else -c)
     try:
         marking = Marking(counts)

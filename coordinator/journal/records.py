@@ -16,7 +16,7 @@ from coordinator.engine import Instance
 from coordinator.net import Marking
 from coordinator.performance import ActionRecord
 
-__all__ = ["FiringRow", "LearnerState", "OperatorRow", "Recovered", "ResultRow", "RunRow", "StartRow"]
+__all__ = ["FiringRow", "LearnerState", "OperatorRow", "Recovered", "ResultRow", "RunRow", "RunStats", "StartRow"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -29,8 +29,10 @@ class RunRow:
         net_text: source text of the net file, when the run stored it.
         seed: seed of the engine's random switches and of the learners.
         started_wall, ended_wall: when it started and ended (``None`` while unfinished).
-        end_state: ``dead``, ``aborted``, ``interrupted``... or ``None`` while unfinished.
-        note: the last errors of the run, in words.
+        end_state: ``completed``, ``stuck``, ``waiting_for_operator``, ``aborted``, ``deadline``,
+            ``interrupted`` (resumable), or ``None`` while unfinished (journals written before
+            these states say ``dead`` for a run that came to rest); see docs/journal.md.
+        note: why the run ended that way and its last errors, in words.
     """
 
     id: str
@@ -46,6 +48,38 @@ class RunRow:
     def finished(self) -> bool:
         """True once the run's end is recorded."""
         return self.ended_wall is not None
+
+    @property
+    def resumable(self) -> bool:
+        """True while ``petrobot run --resume`` can continue it (unfinished, or interrupted)."""
+        return self.ended_wall is None or self.end_state == "interrupted"
+
+
+@dataclass(frozen=True, slots=True)
+class RunStats:
+    """A run and what it did, for ``petrobot runs``.
+
+    Attributes:
+        run: the run.
+        firings: firings journaled.
+        calls: primitive-action results journaled; errors, failures: those with that status.
+        refused: operator commands refused.
+        last_wall: time of its last record (the start when it has none), Unix s.
+    """
+
+    run: RunRow
+    firings: int
+    calls: int
+    errors: int
+    failures: int
+    operator_commands: int
+    refused: int
+    last_wall: float
+
+    @property
+    def duration_s(self) -> float:
+        """From its start to its end, or to its last record while unfinished, seconds."""
+        return (self.run.ended_wall or self.last_wall) - self.run.started_wall
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -68,11 +102,13 @@ class ResultRow(ActionRecord):
     t_wall: float = 0.0
     reason: str | None = None
     value: Any = None
+    entry: int = 0
 
 
 @dataclass(frozen=True, slots=True)
 class StartRow:
-    """A primitive action sent to its node for a new instance (before the call left)."""
+    """A primitive action sent to its node for a new instance (before the call left); ``entry``
+    orders it among every record of the journal."""
 
     run: str
     instance: str
@@ -82,6 +118,7 @@ class StartRow:
     node: str | None
     params: Mapping[str, Any]
     t_wall: float
+    entry: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -96,18 +133,23 @@ class FiringRow:
     instances: tuple[str, ...]
     pulse: str | None
     t_wall: float
+    entry: int = 0
 
 
 @dataclass(frozen=True, slots=True)
 class OperatorRow:
     """An operator command (section 5): ``insert``/``remove`` (with place and count), ``pause``,
-    ``step``, ``resume`` or ``abort``."""
+    ``step``, ``resume``, ``abort`` or ``end``; ``accepted`` is False for a refused command (a
+    line that is no command is journaled as ``invalid``), with the refusal in ``reason``."""
 
     run: str
     command: str
     place: str | None
     count: int | None
     t_wall: float
+    accepted: bool = True
+    reason: str | None = None
+    entry: int = 0
 
 
 @dataclass(frozen=True, slots=True)

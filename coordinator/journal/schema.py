@@ -1,13 +1,14 @@
 """The journal's SQLite schema: the one definition of its tables (paper sections 3 to 5).
 
-Tables (one row per record; ``entry`` orders records of all tables within the journal)::
+Tables (one row per record; ``entry`` numbers the records of all tables in one sequence, the order
+in which they were written, so a run can be replayed in order)::
 
     run(id, net_name, net_text, seed, started_wall, ended_wall, end_state, note)
     firing(entry, run, seq, transition, consumed, produced, instances, pulse, t_wall)
     action_start(entry, run, instance, task, place, action, node, params, t_wall)
     action_result(entry, run, instance, task, action, node, status, outcome, cost, wall_s, cpu_s,
                   t_wall, reason, value)
-    operator(entry, run, command, place, count, t_wall)
+    operator(entry, run, command, place, count, t_wall, accepted, reason)
     learner_state(task, scheme, state, updated_wall)
 
 JSON columns: ``consumed``/``produced`` (place → tokens), ``instances`` (list of ids), ``params``
@@ -15,7 +16,13 @@ and ``value`` (JSON of the call's parameters and returned value, when JSON can h
 ``state`` (the learner's state dict, :mod:`coordinator.learning.state`). Times: ``t_wall``,
 ``started_wall``, ``ended_wall`` and ``updated_wall`` are Unix times in seconds; ``wall_s`` and
 ``cpu_s`` are durations in seconds measured on the node. ``learner_state`` holds the latest state
-of each primitive task's automaton, across runs.
+of each primitive task's automaton, across runs. ``operator.accepted`` is 1 for a command that was
+applied, 0 for one that was refused, with the refusal in ``reason``.
+
+Schema versions (``PRAGMA user_version``): 1 (no version set) had one ``entry`` sequence per table
+and no ``accepted``/``reason``; 2 (:data:`SCHEMA_VERSION`) is the above. :func:`migrate` brings a
+version-1 journal to version 2 when it is opened for writing (entries renumbered in the order of
+their times); a read-only reader reads both. The user-facing description: ``docs/journal.md``.
 
 Only :mod:`coordinator.journal` reads and writes these tables; every other module goes through
 :class:`~coordinator.journal.reader.JournalReader` and :class:`~coordinator.journal.writer.Journal`.
@@ -27,7 +34,10 @@ import sqlite3
 
 from coordinator.errors import JournalError
 
-__all__ = ["COLUMNS", "DDL", "check_schema"]
+__all__ = ["COLUMNS", "DDL", "SCHEMA_VERSION", "check_schema", "migrate", "schema_version"]
+
+SCHEMA_VERSION = 2
+"""The version this code writes (``PRAGMA user_version``)."""
 
 DDL = """
 CREATE TABLE IF NOT EXISTS run (
@@ -50,7 +60,7 @@ CREATE TABLE IF NOT EXISTS action_result (
 );
 CREATE TABLE IF NOT EXISTS operator (
     entry INTEGER PRIMARY KEY, run TEXT NOT NULL, command TEXT NOT NULL, place TEXT, count INTEGER,
-    t_wall REAL NOT NULL
+    t_wall REAL NOT NULL, accepted INTEGER NOT NULL DEFAULT 1, reason TEXT
 );
 CREATE TABLE IF NOT EXISTS learner_state (
     task TEXT PRIMARY KEY, scheme TEXT, state TEXT NOT NULL, updated_wall REAL NOT NULL
@@ -59,6 +69,7 @@ CREATE INDEX IF NOT EXISTS firing_run ON firing(run, seq);
 CREATE INDEX IF NOT EXISTS start_run ON action_start(run);
 CREATE INDEX IF NOT EXISTS result_run ON action_result(run);
 CREATE INDEX IF NOT EXISTS result_action ON action_result(task, action);
+CREATE INDEX IF NOT EXISTS operator_run ON operator(run);
 """
 """The tables and their indexes (idempotent: ``IF NOT EXISTS``)."""
 
@@ -68,14 +79,83 @@ COLUMNS: dict[str, tuple[str, ...]] = {
     "action_start": ("entry", "run", "instance", "task", "place", "action", "node", "params", "t_wall"),
     "action_result": ("entry", "run", "instance", "task", "action", "node", "status", "outcome", "cost",
                       "wall_s", "cpu_s", "t_wall", "reason", "value"),
-    "operator": ("entry", "run", "command", "place", "count", "t_wall"),
+    "operator": ("entry", "run", "command", "place", "count", "t_wall", "accepted", "reason"),
     "learner_state": ("task", "scheme", "state", "updated_wall"),
 }
 """Table → its columns, as :data:`DDL` creates them."""
 
+ADDED_IN_2: dict[str, tuple[str, ...]] = {"operator": ("accepted", "reason")}
+"""Columns a version-1 journal lacks (a reader of such a journal supplies their defaults)."""
+
+RECORD_TABLES = ("firing", "action_start", "action_result", "operator")
+"""The tables whose rows share the ``entry`` sequence."""
+
+
+def schema_version(db: sqlite3.Connection) -> int:
+    """The journal's schema version: ``PRAGMA user_version``, 1 when it was never set."""
+    return int(db.execute("PRAGMA user_version").fetchone()[0]) or 1
+
+
+def migrate(db: sqlite3.Connection, path: str) -> int:
+    """Bring an open, writable journal to :data:`SCHEMA_VERSION` (call after running :data:`DDL`).
+
+    Version 1 → 2: adds ``operator.accepted`` (1 for every old command: only applied commands were
+    journaled) and ``operator.reason``, and renumbers ``entry`` in one sequence over the record
+    tables, ordered by ``t_wall`` (then firing, start, result, operator, then the old entry), which
+    is the order the records were written in. A fresh journal only gets its version set.
+
+    Returns:
+        The version the journal had.
+
+    Raises:
+        JournalError: naming ``path``, if the journal was written by a newer petrobot, or on an
+            SQLite error (the journal is then unchanged: the migration is one transaction).
+    """
+    try:
+        version = schema_version(db)
+        if version > SCHEMA_VERSION:
+            raise JournalError(f"{path}: journal schema {version} was written by a newer petrobot "
+                               f"(this one reads up to {SCHEMA_VERSION})")
+        if version == SCHEMA_VERSION:
+            return version
+        db.execute("BEGIN IMMEDIATE")
+        try:
+            have = {row[1] for row in db.execute("PRAGMA table_info(operator)")}
+            if "accepted" not in have:
+                db.execute("ALTER TABLE operator ADD COLUMN accepted INTEGER NOT NULL DEFAULT 1")
+            if "reason" not in have:
+                db.execute("ALTER TABLE operator ADD COLUMN reason TEXT")
+            _renumber(db)
+            db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
+            db.execute("COMMIT")
+        except BaseException:
+            db.execute("ROLLBACK")
+            raise
+        return version
+    except sqlite3.DatabaseError as exc:
+        raise JournalError(f"{path}: cannot migrate the journal: {exc}") from exc
+
+
+def _renumber(db: sqlite3.Connection) -> None:
+    """One ``entry`` sequence over the record tables, in the order of the records' times."""
+    union = " UNION ALL ".join(f"SELECT '{t}' AS tbl, {rank} AS rank, entry, t_wall FROM {t}"
+                               for rank, t in enumerate(RECORD_TABLES))
+    db.execute("CREATE TEMP TABLE renumber AS SELECT tbl, entry AS old, "
+               f"ROW_NUMBER() OVER (ORDER BY t_wall, rank, entry) AS new FROM ({union})")
+    try:
+        db.execute("CREATE INDEX temp.renumber_key ON renumber(tbl, old)")
+        top = db.execute("SELECT COALESCE(MAX(old), 0) + COALESCE(MAX(new), 0) + 1 FROM renumber").fetchone()[0]
+        for table in RECORD_TABLES:  # two steps, so that no new number collides with an old one
+            db.execute(f"UPDATE {table} SET entry = ? + (SELECT new FROM renumber "
+                       f"WHERE tbl='{table}' AND old={table}.entry)", (top,))
+            db.execute(f"UPDATE {table} SET entry = entry - ?", (top,))
+    finally:
+        db.execute("DROP TABLE temp.renumber")
+
 
 def check_schema(db: sqlite3.Connection, path: str) -> None:
-    """Check that an open database has every journal table with (at least) its columns.
+    """Check that an open database has every journal table with (at least) its columns (those of
+    version 1 suffice: a reader reads both versions).
 
     Raises:
         JournalError: naming ``path``, if a table or a column is missing, or the file cannot be
@@ -86,7 +166,7 @@ def check_schema(db: sqlite3.Connection, path: str) -> None:
             have = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
             if not have:
                 raise JournalError(f"{path}: not a petrobot journal (no table {table!r})")
-            missing = [c for c in columns if c not in have]
+            missing = [c for c in columns if c not in have and c not in ADDED_IN_2.get(table, ())]
             if missing:
                 raise JournalError(f"{path}: not a petrobot journal (table {table!r} lacks "
                                    f"{', '.join(missing)})")

@@ -8,6 +8,11 @@ quantitative analysis (reliability and durations per primitive action, section 3
 
 Durability: WAL with ``synchronous=NORMAL``: a committed record survives a crash of the
 coordinator process (not a power loss of the host).
+
+Order: every record takes the next number of one ``entry`` sequence shared by the record tables,
+so a run replays in the order it was written (one writer at a time per journal; a second writer's
+collision is retried with a fresh number). Opening a journal written by an older petrobot migrates
+it (:func:`coordinator.journal.schema.migrate`).
 """
 
 from __future__ import annotations
@@ -23,7 +28,7 @@ from typing import Any
 from coordinator.engine import Firing
 from coordinator.errors import JournalError
 from coordinator.journal.reader import JournalReader
-from coordinator.journal.schema import DDL, check_schema
+from coordinator.journal.schema import DDL, RECORD_TABLES, check_schema, migrate
 from coordinator.net import PetriNet
 from services.results import ActionResult
 
@@ -68,6 +73,7 @@ class Journal(JournalReader):
             db.execute("PRAGMA synchronous=NORMAL")
             db.executescript(DDL)
             check_schema(db, name)
+            migrate(db, name)
         except sqlite3.DatabaseError as exc:
             db.close()
             raise JournalError(f"{name}: cannot open the journal: {exc}") from exc
@@ -75,12 +81,32 @@ class Journal(JournalReader):
             db.close()
             raise
         super().__init__(db, name)
+        self._entry = self._last_entry()
+
+    def _last_entry(self) -> int:
+        union = " UNION ALL ".join(f"SELECT MAX(entry) FROM {t}" for t in RECORD_TABLES)
+        return max((int(v) for (v,) in self._query(union) if v is not None), default=0)
 
     def _write(self, sql: str, args: tuple[Any, ...]) -> None:
         try:
             self._db.execute(sql, args)
         except sqlite3.DatabaseError as exc:
             raise JournalError(f"{self.path}: write failed: {exc}") from exc
+
+    def _record(self, table: str, columns: str, values: tuple[Any, ...]) -> None:
+        """Insert a record with the next ``entry`` of the journal's one sequence."""
+        sql = f"INSERT INTO {table}(entry, {columns}) VALUES (?{',?' * len(values)})"
+        for attempt in range(2):
+            self._entry += 1
+            try:
+                self._db.execute(sql, (self._entry, *values))
+                return
+            except sqlite3.IntegrityError as exc:  # another writer took the number: catch up once
+                if attempt:
+                    raise JournalError(f"{self.path}: write failed: {exc}") from exc
+                self._entry = self._last_entry()
+            except sqlite3.DatabaseError as exc:
+                raise JournalError(f"{self.path}: write failed: {exc}") from exc
 
     # ------------------------------------------------------------------ writing
     def begin_run(self, net: PetriNet, *, net_text: str | None = None, seed: int = 0,
@@ -92,15 +118,23 @@ class Journal(JournalReader):
         return rid
 
     def end_run(self, run: str, end_state: str, note: str = "") -> None:
-        """Record how a run ended (``dead``, ``aborted``, ``interrupted``...)."""
+        """Record how a run ended (``completed``, ``stuck``, ``aborted``, ``interrupted``...) and why."""
         self._write("UPDATE run SET ended_wall=?, end_state=?, note=? WHERE id=?",
                     (time.time(), end_state, note, run))
 
+    def reopen_run(self, run: str) -> None:
+        """Mark a resumed run unfinished again (its end is recorded anew when it ends).
+
+        Raises:
+            JournalError: if the journal has no run ``run``.
+        """
+        self.run(run)
+        self._write("UPDATE run SET ended_wall=NULL, end_state=NULL WHERE id=?", (run,))
+
     def firing(self, run: str, firing: Firing) -> None:
         """Record a firing. Call before :meth:`coordinator.engine.Engine.apply` (write-ahead)."""
-        self._write(
-            "INSERT INTO firing(run, seq, transition, consumed, produced, instances, pulse, t_wall) "
-            "VALUES (?,?,?,?,?,?,?,?)",
+        self._record(
+            "firing", "run, seq, transition, consumed, produced, instances, pulse, t_wall",
             (run, firing.seq, firing.transition, _json(dict(firing.consumed)), _json(dict(firing.produced)),
              _json(list(firing.instances)), firing.pulse, time.time()),
         )
@@ -108,26 +142,27 @@ class Journal(JournalReader):
     def action_start(self, run: str, instance: str, task: str, place: str, action: str,
                      node: str | None, params: Mapping[str, Any]) -> None:
         """Record that an action is being sent to a node, before the call leaves."""
-        self._write(
-            "INSERT INTO action_start(run, instance, task, place, action, node, params, t_wall) "
-            "VALUES (?,?,?,?,?,?,?,?)",
+        self._record(
+            "action_start", "run, instance, task, place, action, node, params, t_wall",
             (run, instance, task, place, action, node, _json(dict(params)), time.time()),
         )
 
     def action_result(self, run: str, instance: str, task: str, action: str, node: str | None,
                       result: ActionResult) -> None:
         """Record the result of a primitive action, before the engine latches it."""
-        self._write(
-            "INSERT INTO action_result(run, instance, task, action, node, status, outcome, cost, wall_s, "
-            "cpu_s, t_wall, reason, value) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+        self._record(
+            "action_result", "run, instance, task, action, node, status, outcome, cost, wall_s, cpu_s, t_wall, "
+            "reason, value",
             (run, instance, task, action, node, result.status.value, result.outcome, result.cost, result.wall_s,
              result.cpu_s, time.time(), result.reason, _json(result.value)),
         )
 
-    def operator(self, run: str, command: str, place: str | None = None, count: int | None = None) -> None:
-        """Record an operator command (insert, remove, pause, step, resume, abort)."""
-        self._write("INSERT INTO operator(run, command, place, count, t_wall) VALUES (?,?,?,?,?)",
-                    (run, command, place, count, time.time()))
+    def operator(self, run: str, command: str, place: str | None = None, count: int | None = None, *,
+                 accepted: bool = True, reason: str | None = None) -> None:
+        """Record an operator command (insert, remove, pause, step, resume, abort, end): before it
+        is applied, or with ``accepted=False`` and the ``reason`` when it is refused."""
+        self._record("operator", "run, command, place, count, t_wall, accepted, reason",
+                     (run, command, place, count, time.time(), int(accepted), reason))
 
     def save_learner(self, task: str, scheme: str, state: Mapping[str, Any]) -> None:
         """Store the learner state of a primitive task (replaces the previous one)."""

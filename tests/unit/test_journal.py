@@ -194,3 +194,120 @@ def test_reading_a_missing_or_foreign_file_names_it(tmp_path: Path):
     bad.write_bytes(b"this is not sqlite" * 100)
     with pytest.raises(JournalError, match="bad.sqlite"):
         JournalReader.open(bad)
+
+
+# ---------------------------------------------------------------------- order, versions, resumable runs
+def test_recovery_replays_records_in_the_order_they_were_written_across_tables(tmp_path: Path):
+    """Two instances run at once and the second ends first: its result is the journal's first result
+    but comes after its start; a replay that ordered each table on its own would see the result
+    before the start and think the instance still runs."""
+    net = loads_net(NET)
+    with Journal(tmp_path / "j.sqlite") as journal:
+        run = journal.begin_run(net)
+        engine, starts = journaled_engine(journal, net, run)
+        first, second = starts
+        journal.action_result(run, second.instance, "w", second.action, "alpha", ActionResult.success())
+        engine.complete(second.instance, ActionResult.success())
+    with Journal(tmp_path / "j.sqlite") as journal:
+        rec = journal.recover(net, run)
+        assert [(i.id, i.running) for i in rec.instances] == [(first.instance, True), (second.instance, False)]
+        order = [type(r).__name__ for r in journal.timeline(run)]
+    assert order == ["FiringRow", "StartRow", "FiringRow", "StartRow", "ResultRow"]
+
+
+OLD_SCHEMA = """
+CREATE TABLE run (id TEXT PRIMARY KEY, net_name TEXT NOT NULL, net_text TEXT, seed INTEGER,
+    started_wall REAL NOT NULL, ended_wall REAL, end_state TEXT, note TEXT);
+CREATE TABLE firing (entry INTEGER PRIMARY KEY, run TEXT NOT NULL, seq INTEGER NOT NULL, transition TEXT NOT NULL,
+    consumed TEXT NOT NULL, produced TEXT NOT NULL, instances TEXT NOT NULL, pulse TEXT, t_wall REAL NOT NULL);
+CREATE TABLE action_start (entry INTEGER PRIMARY KEY, run TEXT NOT NULL, instance TEXT NOT NULL, task TEXT NOT NULL,
+    place TEXT NOT NULL, action TEXT NOT NULL, node TEXT, params TEXT, t_wall REAL NOT NULL);
+CREATE TABLE action_result (entry INTEGER PRIMARY KEY, run TEXT NOT NULL, instance TEXT NOT NULL, task TEXT NOT NULL,
+    action TEXT NOT NULL, node TEXT, status TEXT NOT NULL, outcome TEXT, cost REAL, wall_s REAL,
+    cpu_s REAL, t_wall REAL NOT NULL, reason TEXT, value TEXT);
+CREATE TABLE operator (entry INTEGER PRIMARY KEY, run TEXT NOT NULL, command TEXT NOT NULL, place TEXT,
+    count INTEGER, t_wall REAL NOT NULL);
+CREATE TABLE learner_state (task TEXT PRIMARY KEY, scheme TEXT, state TEXT NOT NULL, updated_wall REAL NOT NULL);
+INSERT INTO run VALUES ('r1', 'j', NULL, 0, 100.0, NULL, NULL, NULL);
+INSERT INTO firing VALUES (1, 'r1', 1, 'go', '{"runs": 1}', '{"work": 1}', '[]', NULL, 101.0);
+INSERT INTO firing VALUES (2, 'r1', 2, 'go', '{"runs": 1}', '{"work": 1}', '[]', NULL, 103.0);
+INSERT INTO action_start VALUES (1, 'r1', 'r1-1', 'w', 'work', 'a', 'alpha', '{}', 102.0);
+INSERT INTO action_start VALUES (2, 'r1', 'r1-2', 'w', 'work', 'a', 'alpha', '{}', 104.0);
+INSERT INTO action_result VALUES (1, 'r1', 'r1-2', 'w', 'a', 'alpha', 'success', NULL, NULL, 0.1, NULL, 105.0,
+    NULL, NULL);
+INSERT INTO operator VALUES (1, 'r1', 'insert', 'runs', 1, 106.0);
+"""
+
+
+def old_journal(path: Path) -> Path:
+    with sqlite3.connect(path) as db:
+        db.executescript(OLD_SCHEMA)
+    return path
+
+
+def test_a_journal_of_version_1_is_read_as_it_is_and_migrated_when_opened_for_writing(tmp_path: Path):
+    path = old_journal(tmp_path / "old.sqlite")
+    net = loads_net(NET)
+    with JournalReader.open(path) as reader:  # read-only: nothing changes
+        assert [(c.command, c.accepted, c.reason) for c in reader.operator_commands()] == [("insert", True, None)]
+    with sqlite3.connect(path) as db:
+        assert db.execute("PRAGMA user_version").fetchone()[0] == 0
+    with Journal(path) as journal:
+        assert [type(r).__name__ for r in journal.timeline("r1")] == [
+            "FiringRow", "StartRow", "FiringRow", "StartRow", "ResultRow", "OperatorRow"]
+        assert [r.entry for r in journal.timeline("r1")] == [1, 2, 3, 4, 5, 6]
+        rec = journal.recover(net, "r1")
+        assert [(i.id, i.running) for i in rec.instances] == [("r1-1", True), ("r1-2", False)]
+        assert rec.marking == {"work": 2, "runs": 1}
+        journal.operator("r1", "remove", "nope", 1, accepted=False, reason="no place 'nope'")
+        assert journal.timeline("r1")[-1].entry == 7
+    with sqlite3.connect(path) as db:
+        assert db.execute("PRAGMA user_version").fetchone()[0] == 2
+    with JournalReader.open(path) as reader:
+        refused = reader.operator_commands()[-1]
+        assert (refused.command, refused.accepted, refused.reason) == ("remove", False, "no place 'nope'")
+        assert reader.recover(net, "r1").marking == {"work": 2, "runs": 1}  # a refused command changes nothing
+
+
+def test_a_journal_of_a_newer_version_is_refused_for_writing(tmp_path: Path):
+    path = tmp_path / "new.sqlite"
+    with Journal(path):
+        pass
+    with sqlite3.connect(path) as db:
+        db.execute("PRAGMA user_version=99")
+    with pytest.raises(JournalError, match="newer petrobot"):
+        Journal(path)
+
+
+def test_an_interrupted_run_stays_resumable_until_it_ends_again(tmp_path: Path):
+    net = loads_net(NET)
+    with Journal(tmp_path / "j.sqlite") as journal:
+        done = journal.begin_run(net)
+        journal.end_run(done, "completed")
+        run = journal.begin_run(net)
+        journal.end_run(run, "interrupted", "Ctrl-C")
+        assert journal.last_unfinished_run("j") == run
+        assert journal.run(run).resumable and not journal.run(done).resumable
+        journal.reopen_run(run)
+        assert journal.run(run).end_state is None and not journal.run(run).finished
+        journal.end_run(run, "completed")
+        assert journal.last_unfinished_run("j") is None
+
+
+def test_run_stats_count_what_each_run_did(tmp_path: Path):
+    net = loads_net(NET)
+    with Journal(tmp_path / "j.sqlite") as journal:
+        first = journal.begin_run(net)
+        _, starts = journaled_engine(journal, net, first)
+        journal.action_result(first, starts[0].instance, "w", "a", "alpha", ActionResult.error("drive 1 is in FAULT"))
+        journal.action_result(first, starts[1].instance, "w", "a", "alpha", ActionResult.failure())
+        journal.operator(first, "pause")
+        journal.operator(first, "insert", "work", 1, accepted=False, reason="not a control place")
+        journal.end_run(first, "stuck", "work: 2 tokens")
+        second = journal.begin_run(net)
+    with JournalReader.open(tmp_path / "j.sqlite") as reader:
+        stats = {s.run.id: s for s in reader.run_stats()}
+    a, b = stats[first], stats[second]
+    assert (a.firings, a.calls, a.errors, a.failures, a.operator_commands, a.refused) == (2, 2, 1, 1, 2, 1)
+    assert a.duration_s >= 0 and a.run.end_state == "stuck"
+    assert (b.firings, b.calls, b.errors, b.operator_commands) == (0, 0, 0, 0) and b.duration_s == 0
