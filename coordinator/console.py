@@ -2,9 +2,13 @@
 
 :class:`Console` is a runtime observer. On a terminal it redraws, a few times a second, the
 marking (places with tokens, by kind), the running primitive actions with their node and elapsed
-time, and the last firings; elsewhere (a pipe, CI, a log file) it prints one line per firing,
-action start and result. :func:`read_operator_commands` turns lines typed on standard input into
-operator commands (insert/remove tokens in control places, pause, step, resume, abort).
+time, what the run waits for, the last error with its reason, the last firings, and the fate of
+the operator's last command (a refusal stays on screen until the next command); elsewhere (a
+pipe, CI, a log file) it prints one line per firing (the places it took tokens from and gave
+tokens to), action start and result (with the action's reason), state change and operator
+command, and counts the pulses of external events that fired nothing instead of printing each.
+:func:`read_operator_commands` turns lines typed on standard input into operator commands
+(insert/remove tokens in control places, pause, step, resume, abort, end; end of input is end).
 """
 
 from __future__ import annotations
@@ -14,7 +18,8 @@ import collections
 import sys
 import threading
 import time
-from typing import TextIO
+from collections.abc import Mapping
+from typing import Any, Protocol, TextIO
 
 from coordinator.net import PetriNet, PlaceKind
 from coordinator.events import (
@@ -27,15 +32,22 @@ from coordinator.events import (
     RunStateChanged,
     TransitionFired,
 )
-from coordinator.operator import USAGE, parse_operator_command
+from coordinator.operator import USAGE, Command, OperatorCommand, parse_operator_command
 from coordinator.runtime import Runtime
 from services.results import Status
 
 __all__ = ["Console", "read_operator_commands", "HELP"]
 
-HELP = f"operator: {USAGE}   (then Enter)"
+HELP = f"operator: {USAGE}   (then Enter; Ctrl-D = end)"
+
+#: Seconds after which pulses that fired nothing are reported even if nothing else happened.
+PULSE_REPORT_S = 5.0
 
 _KIND_MARK = {PlaceKind.RESOURCE: "R", PlaceKind.PRIMITIVE_TASK: "T", PlaceKind.CONTROL: "C", PlaceKind.PLAIN: " "}
+
+
+def _places(arcs: Mapping[str, int]) -> str:
+    return ", ".join(p if n == 1 else f"{p}x{n}" for p, n in arcs.items()) or "-"
 
 
 class Console:
@@ -46,7 +58,7 @@ class Console:
         stream: where to write (default standard error, so standard output keeps results).
         live: redraw a screen (``True``), print line by line (``False``), or decide from
             ``stream.isatty()`` (``None``).
-        quiet: print nothing but errors and the end.
+        quiet: print nothing but errors, state changes, operator commands and the end.
     """
 
     def __init__(self, net: PetriNet, *, stream: TextIO | None = None, live: bool | None = None,
@@ -59,6 +71,14 @@ class Console:
         self._recent: collections.deque[str] = collections.deque(maxlen=8)
         self._t0 = time.monotonic()
         self._last_draw = 0.0
+        self._silent: collections.Counter[str] = collections.Counter()
+        self._silent_since = 0.0
+        #: the fate of the operator's last command (shown until the next one)
+        self.operator_note = ""
+        #: the last error reason of a primitive action
+        self.last_error = ""
+        #: what the run waits for (reason and detail), or ``None``
+        self.waiting: tuple[str, tuple[str, ...]] | None = None
 
     def attach(self, runtime: Runtime) -> None:
         """Follow ``runtime`` (set it as its observer)."""
@@ -66,31 +86,73 @@ class Console:
         runtime.observer = self
 
     def __call__(self, event: RunEvent) -> None:
-        t = time.monotonic() - self._t0
+        self._track(event)
+        if isinstance(event, PulseDelivered) and not event.fired:
+            if not self._silent:
+                self._silent_since = time.monotonic()
+            self._silent[event.event] += 1
+            if not self.live and not self.quiet and time.monotonic() - self._silent_since >= PULSE_REPORT_S:
+                self._flush_pulses()
+            return
         line = self._describe(event)
         if line is None:
             return
-        stamped = f"{t:8.3f}s  {line}"
-        self._recent.append(stamped)
         urgent = isinstance(event, (RunStateChanged, OperatorApplied, OperatorRefused))
+        error = isinstance(event, ActionEnded) and event.result.status is Status.ERROR
+        if not self.live and (not self.quiet or urgent or error):
+            self._flush_pulses()
+        stamped = self._stamp(line)
+        self._recent.append(stamped)
         if self.live:
             if time.monotonic() - self._last_draw > 0.1 or urgent:
                 self.draw()
-        elif (not self.quiet or urgent
-              or (isinstance(event, ActionEnded) and event.result.status is Status.ERROR)):
+        elif not self.quiet or urgent or error:
             print(stamped, file=self.stream, flush=True)
+
+    def _stamp(self, line: str) -> str:
+        return f"{time.monotonic() - self._t0:8.3f}s  {line}"
+
+    def _flush_pulses(self) -> None:
+        if not self._silent:
+            return
+        for event, n in self._silent.items():
+            text = self._stamp(f"pulse {event} x{n}: fired nothing")
+            self._recent.append(text)
+            if not self.live:
+                print(text, file=self.stream, flush=True)
+        self._silent.clear()
+
+    def _track(self, event: RunEvent) -> None:
+        if isinstance(event, OperatorRefused):
+            self.operator_note = f"refused: {event.command}: {event.reason}"
+        elif isinstance(event, OperatorApplied):
+            self.operator_note = f"applied: {event.command}"
+        elif isinstance(event, ActionEnded) and event.result.status is Status.ERROR:
+            self.last_error = f"{event.task}/{event.action} on {event.node or '?'}: {event.result.reason or 'error'}"
+        elif isinstance(event, RunStateChanged):
+            self.waiting = (event.reason, event.detail) if event.state == "waiting" else None
+        elif isinstance(event, (TransitionFired, ActionStarted)):
+            self.waiting = None
+
+    def operator_message(self, text: str) -> None:
+        """Show a message about the operator's input (kept on screen until the next command)."""
+        self.operator_note = text
+        if self.live:
+            self.draw()
+        else:
+            print(self._stamp(text), file=self.stream, flush=True)
 
     def _describe(self, event: RunEvent) -> str | None:
         if isinstance(event, TransitionFired):
             f = event.firing
             via = f" on {f.pulse}" if f.pulse else ""
-            return f"fire  #{f.seq:<5} {f.transition}{via}   {self._marking_text()}"
+            return f"fire  #{f.seq:<5} {f.transition}{via}   {_places(f.consumed)} -> {_places(f.produced)}"
         if isinstance(event, ActionStarted):
             return f"start {event.task} -> {event.action} on {event.node or '?'} [{event.instance}]"
         if isinstance(event, ActionEnded):
             r = event.result
             extra = f" ({r.outcome})" if r.outcome else ""
-            why = f": {r.reason}" if r.reason and r.status is Status.ERROR else ""
+            why = f": {r.reason}" if r.reason else ""
             return (f"done  {event.task}/{event.action} on {event.node or '?'}: {r.status.value}{extra}"
                     f" in {r.wall_s:.3f} s{why}")
         if isinstance(event, OperatorRefused):
@@ -98,19 +160,16 @@ class Console:
         if isinstance(event, OperatorApplied):
             return f"operator {event.command}"
         if isinstance(event, RunStateChanged):
-            return f"run {event.run} {event.state}"
+            why = f": {event.reason}" if event.reason else ""
+            more = "".join(f"\n            - {d}" for d in event.detail if d not in event.reason)
+            return f"run {event.run} {event.state}{why}{more}"
         if isinstance(event, PulseDelivered):
-            return None if self.live else f"pulse {event.event}"
+            return f"pulse {event.event}: fired {event.fired}"
         return None
 
-    def _marking_text(self) -> str:
-        if self.runtime is None:
-            return ""
-        marking = self.runtime.engine.marking
-        return "{" + ", ".join(f"{p}: {n}" for p, n in marking.items()) + "}"
-
     def draw(self) -> None:
-        """Redraw the live screen (marking, running actions, recent events)."""
+        """Redraw the live screen (marking, running actions, waiting, last error, recent events,
+        the operator's last command)."""
         if self.runtime is None:
             return
         self._last_draw = time.monotonic()
@@ -131,31 +190,56 @@ class Console:
             out.append(f"  {s.task:<14} {s.action:<22} on {r.node or '?':<10} {r.elapsed_s:7.2f} s")
         if not running:
             out.append("  (none)")
-        waiting = engine.waiting_for()
-        if waiting:
-            out.append(f"waiting for: {', '.join(waiting)}")
+        if self.waiting is not None:
+            reason, detail = self.waiting
+            out.append(f"waiting: {reason}")
+            out.extend(f"  - {d}" for d in detail if d not in reason)
+        if self.last_error:
+            out.append(f"last error: {self.last_error}")
+        if self._silent:
+            out.append("pulses that fired nothing: " + ", ".join(f"{e} x{n}" for e, n in self._silent.items()))
         out.append("")
         out.extend(self._recent)
         out.append("")
         out.append(HELP)
+        if self.operator_note:
+            out.append(f"> {self.operator_note}")
         self.stream.write("\n".join(out) + "\n")
         self.stream.flush()
 
 
-def read_operator_commands(runtime: Runtime, stream: TextIO | None = None,
-                           echo: TextIO | None = None) -> threading.Thread:
-    """Read operator commands, one per line, from ``stream`` (standard input) until EOF.
+class CommandSink(Protocol):
+    """What :func:`read_operator_commands` hands its input to (a :class:`Runtime` is one)."""
+
+    def command(self, cmd: OperatorCommand) -> None:
+        """Take a command."""
+
+    def refuse_input(self, text: str, reason: str) -> None:
+        """Take a line that is no command (journaled as refused)."""
+
+
+def read_operator_commands(runtime: CommandSink, stream: TextIO | None = None, *,
+                           end_on_eof: bool = True, on_error: Any = None) -> threading.Thread:
+    """Read operator commands, one per line, from ``stream`` (standard input) until end of input.
 
     Reading happens in a daemon thread (a blocked read must not keep the program alive at the
-    end of the run); each command is handed to the runtime's event loop. Bad lines are reported
-    on ``echo`` and ignored; the run goes on.
+    end of the run); each command is handed to the runtime's event loop. A line that is no command
+    goes to ``runtime.refuse_input`` (journaled as refused; the console shows why until the next
+    command) and to ``on_error(text, reason)`` if given, in the reader thread; the run goes on.
+    End of input (Ctrl-D) is the ``end`` command when ``end_on_eof``.
 
     Returns:
         The started reader thread.
     """
     src = stream or sys.stdin
-    out = echo or sys.stderr
     loop = asyncio.get_running_loop()
+
+    def hand(fn: Any, *args: Any) -> bool:
+        try:
+            loop.call_soon_threadsafe(fn, *args)
+        except RuntimeError:  # the loop has closed: the run is over
+            return False
+        return True
 
     def reader() -> None:
         for line in src:
@@ -164,12 +248,15 @@ def read_operator_commands(runtime: Runtime, stream: TextIO | None = None,
             try:
                 cmd = parse_operator_command(line)
             except ValueError as exc:
-                print(f"? {exc}", file=out, flush=True)
+                if on_error is not None:
+                    on_error(line.strip(), str(exc))
+                if not hand(runtime.refuse_input, line.strip(), str(exc)):
+                    return
                 continue
-            try:
-                loop.call_soon_threadsafe(runtime.command, cmd)
-            except RuntimeError:  # the loop has closed: the run is over
+            if not hand(runtime.command, cmd):
                 return
+        if end_on_eof:
+            hand(runtime.command, OperatorCommand(Command.END))
 
     thread = threading.Thread(target=reader, name="operator-input", daemon=True)
     thread.start()

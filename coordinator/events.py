@@ -37,19 +37,24 @@ def _now() -> float:
 
 @dataclass(frozen=True, slots=True)
 class RunStateChanged:
-    """The run started, resumed, paused, resumed firing, or ended.
+    """The run started, resumed, paused, resumed firing, waits, or ended.
 
     Attributes:
         run: run id.
-        state: ``started``, ``resumed``, ``paused``, ``running``, ``waiting`` or an end state
-            (``dead``, ``aborted``, ``interrupted``...).
+        state: ``started``, ``resumed``, ``paused``, ``running``, ``waiting`` (nothing can fire
+            now; ``reason`` says what the run waits for) or an end state (``completed``,
+            ``stuck``, ``waiting_for_operator``, ``aborted``, ``deadline``, ``interrupted``; see
+            :data:`coordinator.runtime.END_STATES`).
         reason: why, in words, or ``""``.
+        detail: one line per item behind the reason: the places that are stuck, the operator
+            commands that would let a transition fire, the external events awaited.
     """
 
     run: str
     state: str
     reason: str = ""
     t_wall: float = field(default_factory=_now)
+    detail: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,10 +121,15 @@ class OperatorApplied:
 
 @dataclass(frozen=True, slots=True)
 class OperatorRefused:
-    """An operator command was refused (journaled with the reason); the run is unchanged."""
+    """An operator command was refused (journaled with the reason); the run is unchanged.
+
+    Attributes:
+        command: the command, or the typed line when it was no command.
+        reason: why it was refused.
+    """
 
     run: str
-    command: OperatorCommand
+    command: OperatorCommand | str
     reason: str
     t_wall: float = field(default_factory=_now)
 

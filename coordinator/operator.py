@@ -2,9 +2,10 @@
 
 The operator changes a run's path and timing by inserting or removing tokens in *control* places
 (e.g. emptying ``runs_remaining`` ends an experiment after the current run), and can pause it,
-step it one firing at a time, resume it or abort it. Commands come from the terminal (a typed
-line, :func:`parse_operator_command`) or the web console; the runtime journals each command and
-applies it through the engine, which refuses an illegal one with its reason.
+step it one firing at a time, resume it or abort it, and end a run that waits for them. Commands
+come from the terminal (a typed line, :func:`parse_operator_command`) or a program driving the
+runtime; the runtime journals each command and applies it through the engine, or journals its
+refusal with the reason.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 
 __all__ = ["Command", "OperatorCommand", "parse_operator_command", "USAGE"]
 
-USAGE = "+ PLACE [N] | - PLACE [N] | pause | step | resume | abort"
+USAGE = "+ PLACE [N] | - PLACE [N] | pause | step | resume | abort | end"
 """One-line summary of the typed command syntax."""
 
 
@@ -33,6 +34,9 @@ class Command(enum.StrEnum):
     """Leave the paused state."""
     ABORT = "abort"
     """Cancel every running primitive action and end the run."""
+    END = "end"
+    """Stop waiting: end the run as soon as nothing fires and no primitive action runs, instead of
+    waiting for the operator or an external event (Ctrl-D on the terminal does the same)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,7 +65,8 @@ _ALIASES = {"+": Command.INSERT, "-": Command.REMOVE, "p": Command.PAUSE, "s": C
 
 def parse_operator_command(text: str) -> OperatorCommand:
     """Parse a typed command: ``+ PLACE [N]``, ``- PLACE [N]``, ``insert PLACE [N]``,
-    ``remove PLACE [N]``, ``pause`` (``p``), ``step`` (``s``), ``resume`` (``r``), ``abort`` (``q``).
+    ``remove PLACE [N]``, ``pause`` (``p``), ``step`` (``s``), ``resume`` (``r``), ``abort`` (``q``),
+    ``end``.
 
     Raises:
         ValueError: with a usage hint, on anything else.

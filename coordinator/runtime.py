@@ -4,7 +4,17 @@
 the node that ``services.toml`` places it on (through :class:`services.client.ServiceClient`),
 turns results into engine completions, subscribes to the external events the net uses and
 delivers them as pulses, applies operator commands, and journals every firing, action start,
-action result and operator command *before* it takes effect.
+action result and operator command (refused ones too) *before* it takes effect.
+
+The loop serves its inputs between every two firings: operator commands, the ``max_seconds``
+deadline, results and pulses are looked at before each firing, and the event loop gets a turn
+every ``max_firings_per_tick`` firings, so a net that cycles without events still obeys ``pause``,
+``abort`` and the deadline at once. When nothing can fire the run either waits — for running
+primitive actions, for an external event that would let a transition fire, or for the operator
+(paused, or only a control place holds a transition back, or, with ``linger``, at home) — saying
+what it waits for with a ``RunStateChanged("waiting", ...)`` event, or it ends in one of
+:data:`~coordinator.runsummary.END_STATES` (at home: ``completed``; tokens left away from home:
+``stuck``, naming the places; only an absent operator could help: ``waiting_for_operator``).
 
 The runtime owns no policy: which action translates a primitive task comes from the learner
 (section 4) passed in, or the first action of the task.
@@ -13,21 +23,22 @@ The runtime owns no policy: which action translates a primitive task comes from 
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import logging
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 from coordinator.engine import (
     CancelAction,
     Effect,
     Engine,
-    EngineState,
     Firing,
     StartAction,
 )
+from coordinator.engine.rest import at_rest, home_marking, work_places
 from coordinator.errors import EngineError
 from coordinator.events import (
     ActionEnded,
@@ -44,10 +55,11 @@ from coordinator.events import (
 from coordinator.journal import Journal, Recovered
 from coordinator.net import PetriNet
 from coordinator.operator import Command, OperatorCommand
+from coordinator.runsummary import END_STATES, EXIT_CODES, ActionStats, RunSummary
 from services.errors import LocationError
 from services.results import ActionResult, Status
 
-__all__ = ["ActionChooser", "ActionStats", "InFlight", "RunSummary", "Runtime"]
+__all__ = ["END_STATES", "EXIT_CODES", "ActionChooser", "ActionStats", "InFlight", "RunSummary", "Runtime"]
 
 log = logging.getLogger("petrobot.runtime")
 
@@ -63,58 +75,6 @@ class ActionChooser(Protocol):
 
     def update(self, task: str, action: str, result: ActionResult) -> Any:
         """Feed back a result; may return the task's new state dict, which is journaled."""
-
-
-@dataclass
-class ActionStats:
-    """Results of one primitive action in a run (durations in seconds)."""
-
-    task: str
-    action: str
-    node: str
-    calls: int = 0
-    success: int = 0
-    failure: int = 0
-    error: int = 0
-    wall_s: list[float] = field(default_factory=list)
-
-    def record(self, result: ActionResult) -> None:
-        """Count one result."""
-        self.calls += 1
-        setattr(self, result.status.value, getattr(self, result.status.value) + 1)
-        self.wall_s.append(result.wall_s)
-
-    @property
-    def mean_wall_s(self) -> float:
-        """Mean wall-clock duration on the node, seconds (0 when no call returned)."""
-        return sum(self.wall_s) / len(self.wall_s) if self.wall_s else 0.0
-
-
-@dataclass
-class RunSummary:
-    """How a run went."""
-
-    run_id: str
-    end_state: str
-    final_marking: dict[str, int]
-    firings: int
-    duration_s: float
-    actions: dict[tuple[str, str], ActionStats]
-    errors: list[str]
-
-    def format(self) -> str:
-        """A human-readable multi-line summary."""
-        lines = [f"run {self.run_id}: {self.end_state} after {self.firings} firings in {self.duration_s:.2f} s",
-                 f"final marking: {self.final_marking or '{}'}"]
-        if self.actions:
-            lines.append(f"{'task':<14}{'action':<22}{'node':<10}{'calls':>6}{'ok':>5}{'fail':>5}{'err':>5}"
-                         f"{'mean s':>9}")
-            for st in self.actions.values():
-                lines.append(f"{st.task:<14}{st.action:<22}{st.node:<10}{st.calls:>6}{st.success:>5}"
-                             f"{st.failure:>5}{st.error:>5}{st.mean_wall_s:>9.3f}")
-        for err in self.errors[:10]:
-            lines.append(f"error: {err}")
-        return "\n".join(lines)
 
 
 @dataclass(slots=True)
@@ -150,6 +110,27 @@ class _Pulse:
     topic: str
 
 
+@dataclass(frozen=True, slots=True)
+class _Invalid:
+    text: str
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class _Wait:
+    """The run waits: until a new input, or ``until`` (monotonic s); ``reason``/``detail`` say why."""
+
+    reason: str = ""
+    detail: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class _End:
+    state: str
+    note: str
+    detail: tuple[str, ...] = ()
+
+
 class Runtime:
     """Run one task net on the nodes of ``services.toml``.
 
@@ -162,7 +143,14 @@ class Runtime:
         recovered: state rebuilt by :meth:`Journal.recover` to resume an interrupted run.
         net_text: source text of the net, stored in the journal with the run.
         observer: called with each :mod:`coordinator.events` record (for displays); must not block.
-        max_firings_per_tick: firings between two visits of the event loop.
+        max_firings_per_tick: firings between two turns of the event loop (inputs already queued
+            are served between every two firings regardless).
+        operator: an operator can send commands (:meth:`command`): a run that only an operator
+            command could move on waits for one instead of ending ``waiting_for_operator``.
+        linger: with an operator, a run that has come home waits too while a control place could
+            let a transition fire (to add runs), until ``end``, ``abort`` or the deadline.
+        cancel_grace_s: after an abort or the deadline, how long to wait for the cancelled
+            primitive actions' results before ending anyway, seconds.
     """
 
     def __init__(
@@ -176,14 +164,20 @@ class Runtime:
         recovered: Recovered | None = None,
         net_text: str | None = None,
         observer: Observer | None = None,
-        max_firings_per_tick: int = 1000,
+        max_firings_per_tick: int = 1,
+        operator: bool = False,
+        linger: bool = False,
+        cancel_grace_s: float = 3.0,
     ) -> None:
         self.net = net
         self.client = client
         self.journal = journal
         self.learner = learner
         self.observer = observer
-        self._max_firings = max_firings_per_tick
+        self.operator = operator
+        self.linger = linger
+        self._per_tick = max(1, max_firings_per_tick)
+        self._grace_s = cancel_grace_s
         if recovered is not None:
             self.run_id = recovered.run
             seed = recovered.seed
@@ -195,140 +189,291 @@ class Runtime:
         if recovered is not None:
             self.engine.restore(recovered.marking, recovered.instances, fired=recovered.fired,
                                 next_instance=recovered.next_instance)
-        self._queue: asyncio.Queue[_Completed | _Pulse | OperatorCommand] = asyncio.Queue()
+        self._work = work_places(net)
+        self._home = home_marking(net)
+        self._inbox: collections.deque[_Completed | _Pulse] = collections.deque()
+        self._commands: collections.deque[OperatorCommand | _Invalid] = collections.deque()
+        self._wake = asyncio.Event()
         self._inflight: dict[str, InFlight] = {}
+        self._dead_topics: set[str] = set()
+        self._deadline: float | None = None
+        self._ending: _End | None = None
+        self._ending_until = 0.0
+        self._end_requested = False
+        self._last_wait: _Wait | None = None
         self.stats: dict[tuple[str, str], ActionStats] = {}
         self.errors: list[str] = []
         self._t0 = time.monotonic()
 
     # ------------------------------------------------------------------ public controls
     def command(self, cmd: OperatorCommand) -> None:
-        """Queue an operator command (safe from any coroutine of the loop)."""
-        self._queue.put_nowait(cmd)
+        """Queue an operator command; it is served before the next firing (call it from the loop's
+        thread: another thread uses ``loop.call_soon_threadsafe(runtime.command, cmd)``)."""
+        self._commands.append(cmd)
+        self._wake.set()
+
+    def refuse_input(self, text: str, reason: str) -> None:
+        """Queue a typed line that is no command: it is journaled as refused, with ``reason``."""
+        self._commands.append(_Invalid(text, reason))
+        self._wake.set()
 
     def running(self) -> list[InFlight]:
         """The running primitive actions, in start order."""
         return list(self._inflight.values())
 
+    @property
+    def waiting(self) -> tuple[str, tuple[str, ...]] | None:
+        """What the run waits for now (reason, detail), or ``None`` while it does not wait."""
+        w = self._last_wait
+        return None if w is None else (w.reason, w.detail)
+
     # ------------------------------------------------------------------ main loop
     async def run(self, *, max_seconds: float | None = None) -> RunSummary:
-        """Execute the net until it is dead (nothing more can happen) or aborted.
+        """Execute the net until it comes to rest, is aborted, runs out of time or is interrupted.
 
         Args:
-            max_seconds: abort the run after this many seconds (a safety net for unattended use).
+            max_seconds: end the run after this many seconds (``deadline``; a run waiting at home
+                with ``linger`` ends ``completed``).
 
         Returns:
-            The run summary; the journal holds every detail.
+            The run summary (its :attr:`~RunSummary.end_state` is one of :data:`END_STATES`); the
+            journal holds every detail.
+
+        Raises:
+            asyncio.CancelledError: when cancelled (Ctrl-C); the run is journaled ``interrupted``
+                and stays resumable.
         """
         self._subscribe()
-        self._emit(RunStateChanged(self.run_id, "resumed" if self._recovered is not None else "started"))
         if self._recovered is not None:
+            self.journal.reopen_run(self.run_id)
+            self._emit(RunStateChanged(self.run_id, "resumed"))
             for inst in self.engine.running_instances():
                 task = self.net.tasks[inst.task]
                 params = dict(self._recovered.params.get(inst.id, task.action(inst.action).params))
                 self._dispatch(StartAction(inst.id, inst.task, inst.place, inst.action, params, task.deadline_s),
                                journal=False)
+        else:
+            self._emit(RunStateChanged(self.run_id, "started"))
         self._handle(self.engine.start())
-        deadline = None if max_seconds is None else time.monotonic() + max_seconds
-        end_state = "dead"
+        self._deadline = None if max_seconds is None else time.monotonic() + max_seconds
+        end = _End("interrupted", "the coordinator stopped; petrobot run --resume continues the run")
         try:
-            while True:
-                self._advance()
-                state = self.engine.state
-                if state is EngineState.ABORTED and not self._inflight:
-                    end_state = "aborted"
-                    break
-                if state is EngineState.DEAD and not self._inflight and self._queue.empty():
-                    end_state = "dead"
-                    break
-                if self.engine.next_firing() is not None:
-                    await asyncio.sleep(0)  # a net cycling without events: let I/O in
-                    continue
-                timeout = None if deadline is None else max(0.0, deadline - time.monotonic())
-                try:
-                    item = await asyncio.wait_for(self._queue.get(), timeout)
-                except TimeoutError:
-                    self._apply_operator(OperatorCommand(Command.ABORT), reason="max_seconds reached")
-                    deadline = None
-                    continue
-                self._process(item)
+            end = await self._loop(max_seconds)
         except (asyncio.CancelledError, KeyboardInterrupt):
-            end_state = "interrupted"
-            for cid in list(self._inflight):
-                with contextlib.suppress(Exception):
-                    await asyncio.wait_for(self.client.cancel(cid), 1.0)
+            end = _End("interrupted", "interrupted; petrobot run --resume continues the run")
+            await self._cancel_on_nodes(1.0)
             raise
         finally:
             for flight in list(self._inflight.values()):
                 if flight.call is not None:
                     flight.call.cancel()
-            note = "; ".join(self.errors[-3:])
-            self.journal.end_run(self.run_id, end_state, note)
-            self._emit(RunStateChanged(self.run_id, end_state, note))
-        return RunSummary(self.run_id, end_state, self.engine.marking.to_dict(), self.engine.fired,
-                          time.monotonic() - self._t0, self.stats, self.errors)
+            note = end.note
+            if self.errors:
+                note += f" | last errors: {'; '.join(self.errors[-3:])}"
+            self.journal.end_run(self.run_id, end.state, note)
+            self._emit(RunStateChanged(self.run_id, end.state, end.note, detail=end.detail))
+        return RunSummary(self.run_id, end.state, self.engine.marking.to_dict(), self.engine.fired,
+                          time.monotonic() - self._t0, self.stats, self.errors, end.note, end.detail)
 
-    # ------------------------------------------------------------------ event handling
+    async def _loop(self, max_seconds: float | None) -> _End:
+        engine = self.engine
+        while True:
+            self._serve_commands()
+            if self._ending is not None:
+                if not self._inflight or time.monotonic() >= self._ending_until:
+                    return self._ending
+                self._drain_results()
+                await self._wait_input(self._ending_until)
+                continue
+            if self._deadline is not None and time.monotonic() >= self._deadline:
+                if not self._inflight and not self._inbox and not engine.firing_possible():
+                    verdict = self._at_rest()
+                    if isinstance(verdict, _End) or verdict.reason.startswith("completed"):
+                        return _End("completed", f"at the home marking when --max-seconds {max_seconds:g} ran out")
+                self._begin_ending("deadline", f"--max-seconds {max_seconds:g} ran out")
+                continue
+            if self._inbox:
+                item = self._inbox.popleft()
+                if isinstance(item, _Completed):
+                    self._on_result(item.instance, item.result)
+                else:
+                    await self._pulse(item.topic)
+                continue
+            if await self._fire():
+                continue
+            if self._commands or self._inbox:
+                continue
+            verdict = self._at_rest()
+            if isinstance(verdict, _End):
+                return verdict
+            if verdict != self._last_wait and verdict.reason:
+                self._emit(RunStateChanged(self.run_id, "waiting", verdict.reason, detail=verdict.detail))
+            self._last_wait = verdict if verdict.reason else self._last_wait
+            await self._wait_input(self._deadline)
+
+    async def _fire(self, *, pulse: bool = False) -> int:
+        """Fire while something can, serving operator commands and checking the deadline before
+        each firing; stop at a result or pulse to serve (outside a pulse window). Returns the count."""
+        engine, n = self.engine, 0
+        while True:
+            if self._commands:
+                self._serve_commands()
+            if self._ending is not None or (self._deadline is not None and time.monotonic() >= self._deadline):
+                return n
+            if self._inbox and not pulse:
+                return n
+            firing = engine.next_firing()
+            if firing is None:
+                return n
+            self.journal.firing(self.run_id, firing)
+            self._handle(engine.apply(firing))
+            self._last_wait = None
+            n += 1
+            if n % self._per_tick == 0:
+                await asyncio.sleep(0)  # let results, pulses and typed commands in
+
+    async def _pulse(self, topic: str) -> None:
+        before = self.engine.fired
+        self.engine.begin_pulse(topic)
+        try:
+            await self._fire(pulse=True)
+        finally:
+            self.engine.end_pulse()
+        self._emit(PulseDelivered(self.run_id, f"ext:{topic}", self.engine.fired - before))
+
+    async def _wait_input(self, until: float | None) -> None:
+        if self._inbox or self._commands:
+            return
+        self._wake.clear()
+        timeout = None if until is None else max(0.0, until - time.monotonic())
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self._wake.wait(), timeout)
+
+    def _drain_results(self) -> None:
+        """While ending: journal the results that came back, drop pulses."""
+        while self._inbox:
+            item = self._inbox.popleft()
+            if isinstance(item, _Completed):
+                self._on_result(item.instance, item.result)
+
+    # ------------------------------------------------------------------ coming to rest
+    def _at_rest(self) -> _Wait | _End:
+        """Nothing can fire now and no input is queued: wait (and for what), or end (and how)."""
+        engine = self.engine
+        if self._inflight:
+            return _Wait()  # results will come (a dead node's call ends in an error result)
+        if engine.paused and not self._end_requested:
+            if engine.firing_possible(ignore_pause=True) or self._events_awaited():
+                if self.operator:
+                    return _Wait("paused: type resume, or step to fire one transition")
+                return _End("waiting_for_operator", "paused, and no operator can resume the run")
+        awaited = self._events_awaited()
+        if awaited and not self._end_requested and not engine.paused:
+            return _Wait(f"waiting for {', '.join(awaited)}", awaited)
+        rest = at_rest(engine, self._work, self._home)
+        options = tuple(str(o) for o in rest.options if o.event is None or o.event[4:] not in self._dead_topics)
+        if rest.at_home:
+            if options and self.operator and self.linger and not self._end_requested:
+                return _Wait("completed: at the home marking; waiting for the operator (type end or Ctrl-D "
+                             "to finish)", options)
+            return _End("completed", "at the home marking")
+        if options and not self._end_requested:
+            if self.operator:
+                return _Wait("waiting for the operator: " + "; ".join(options), rest.stuck + options)
+            return _End("waiting_for_operator", "only the operator could move the run on, and no operator "
+                        "is reading (run it on a terminal, or with --wait): " + "; ".join(options),
+                        rest.stuck + options)
+        return _End("stuck", f"tokens stuck away from home in {len(rest.stuck)} place"
+                    f"{'' if len(rest.stuck) == 1 else 's'}: " + "; ".join(rest.stuck), rest.stuck)
+
+    def _events_awaited(self) -> tuple[str, ...]:
+        return tuple(e for e in self.engine.waiting_for() if e[4:] not in self._dead_topics)
+
+    def _begin_ending(self, state: str, note: str) -> None:
+        """Abort (operator) or deadline: cancel the running actions, await their results a while."""
+        self._ending = _End(state, note)
+        self._ending_until = time.monotonic() + self._grace_s
+        self._handle(self.engine.abort(note))
+
+    async def _cancel_on_nodes(self, timeout_s: float) -> None:
+        calls = [self.client.cancel(cid) for cid in self._inflight]
+        if calls:
+            with contextlib.suppress(Exception):
+                await asyncio.wait_for(asyncio.gather(*calls, return_exceptions=True), timeout_s)
+
+    # ------------------------------------------------------------------ operator commands
+    def _serve_commands(self) -> None:
+        while self._commands:
+            cmd = self._commands.popleft()
+            if isinstance(cmd, _Invalid):
+                self.journal.operator(self.run_id, "invalid", accepted=False, reason=f"{cmd.text!r}: {cmd.reason}")
+                self._emit(OperatorRefused(self.run_id, cmd.text, cmd.reason))
+                continue
+            try:
+                self._apply_operator(cmd)
+            except EngineError as exc:
+                counted = cmd.command in (Command.INSERT, Command.REMOVE)
+                self.journal.operator(self.run_id, cmd.command.value, cmd.place, cmd.count if counted else None,
+                                      accepted=False, reason=str(exc))
+                self._emit(OperatorRefused(self.run_id, cmd, str(exc)))
+
+    def _apply_operator(self, cmd: OperatorCommand) -> None:
+        """Check, journal, then apply one command (section 5); raise EngineError to refuse it."""
+        engine, run, command = self.engine, self.run_id, cmd.command
+        if self._ending is not None:
+            raise EngineError(f"the run is ending ({self._ending.state})")
+        if command in (Command.INSERT, Command.REMOVE):
+            place = cmd.place or ""
+            engine.check_tokens(command.value, place, cmd.count)
+            self.journal.operator(run, command.value, place, cmd.count)
+            if command is Command.INSERT:
+                engine.insert_tokens(place, cmd.count)
+            else:
+                engine.remove_tokens(place, cmd.count)
+        elif command is Command.PAUSE:
+            if engine.paused:
+                raise EngineError("the run is already paused")
+            self.journal.operator(run, "pause")
+            engine.pause()
+            self._emit(RunStateChanged(run, "paused", "paused by the operator"))
+        elif command is Command.RESUME:
+            if not engine.paused:
+                raise EngineError("the run is not paused")
+            self.journal.operator(run, "resume")
+            engine.resume()
+            self._emit(RunStateChanged(run, "running", "resumed by the operator"))
+        elif command is Command.STEP:
+            if not engine.firing_possible(ignore_pause=True):
+                raise EngineError("no transition can fire now")
+            self.journal.operator(run, "step")
+            engine.step(self._journal_firing, self._handle)
+        elif command is Command.ABORT:
+            self.journal.operator(run, "abort")
+            self._begin_ending("aborted", "aborted by the operator")
+        elif command is Command.END:
+            self.journal.operator(run, "end")
+            self._end_requested = True
+        else:
+            raise EngineError(f"unknown operator command {command!r}")
+        self._last_wait = None
+        self._emit(OperatorApplied(run, cmd))
+
+    # ------------------------------------------------------------------ actions and events
     def _subscribe(self) -> None:
         topics = sorted({e[4:] for t in self.net.transitions for e in t.external_events})
         for topic in topics:
             try:
                 self.client.subscribe(topic, self._on_event(topic))
             except LocationError as exc:
+                self._dead_topics.add(topic)
                 self.errors.append(str(exc))
                 log.warning("%s: transitions linked to ext:%s will never fire", exc, topic)
 
     def _on_event(self, topic: str) -> Callable[..., None]:
         def deliver(*_: Any) -> None:
-            self._queue.put_nowait(_Pulse(topic))
+            self._inbox.append(_Pulse(topic))
+            self._wake.set()
         return deliver
-
-    def _process(self, item: _Completed | _Pulse | OperatorCommand) -> None:
-        if isinstance(item, _Completed):
-            self._on_result(item.instance, item.result)
-        elif isinstance(item, _Pulse):
-            before = self.engine.fired
-            self.engine.pulse(item.topic, self._journal_firing, max_firings=self._max_firings,
-                              after_fire=self._handle)
-            self._emit(PulseDelivered(self.run_id, f"ext:{item.topic}", self.engine.fired - before))
-        else:
-            try:
-                self._apply_operator(item)
-            except EngineError as exc:
-                self._emit(OperatorRefused(self.run_id, item, str(exc)))
-
-    def _apply_operator(self, cmd: OperatorCommand, reason: str = "aborted by the operator") -> None:
-        engine = self.engine
-        command = cmd.command
-        if command in (Command.INSERT, Command.REMOVE):
-            place = cmd.place or ""
-            engine.check_tokens(command.value, place, cmd.count)  # validate, journal, then apply
-            self.journal.operator(self.run_id, command.value, place, cmd.count)
-            if command is Command.INSERT:
-                engine.insert_tokens(place, cmd.count)
-            else:
-                engine.remove_tokens(place, cmd.count)
-        elif command is Command.PAUSE:
-            self.journal.operator(self.run_id, "pause")
-            engine.pause()
-        elif command is Command.RESUME:
-            self.journal.operator(self.run_id, "resume")
-            engine.resume()
-        elif command is Command.STEP:
-            self.journal.operator(self.run_id, "step")
-            engine.step(self._journal_firing, self._handle)
-        elif command is Command.ABORT:
-            self.journal.operator(self.run_id, "abort")
-            if reason != "aborted by the operator":
-                self.errors.append(reason)
-            self._handle(engine.abort(reason))
-        else:
-            raise EngineError(f"unknown operator command {command!r}")
-        self._emit(OperatorApplied(self.run_id, cmd))
-
-    def _advance(self) -> None:
-        """Fire what can fire now: decide, journal, apply, act — one firing at a time."""
-        self.engine.advance(self._journal_firing, max_firings=self._max_firings, after_fire=self._handle)
 
     def _journal_firing(self, firing: Firing) -> None:
         self.journal.firing(self.run_id, firing)
@@ -368,7 +513,8 @@ class Runtime:
             raise
         except Exception as exc:  # a configuration error (action not placed): an error status
             result = ActionResult.error(f"{type(exc).__name__}: {exc}")
-        self._queue.put_nowait(_Completed(start.instance, result))
+        self._inbox.append(_Completed(start.instance, result))
+        self._wake.set()
 
     def _on_result(self, instance: str, result: ActionResult) -> None:
         flight = self._inflight.pop(instance, None)
@@ -390,7 +536,8 @@ class Runtime:
                     self.journal.save_learner(start.task, str(state.get("scheme", "")), state)
                     self._emit(LearnerUpdated(self.run_id, start.task, state))
         self._emit(ActionEnded(self.run_id, instance, start.task, start.action, node, result))
-        if self.engine.state is EngineState.ABORTED:
+        self._last_wait = None
+        if self._ending is not None:
             return
         try:
             self.engine.complete(instance, result)

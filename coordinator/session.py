@@ -42,13 +42,19 @@ def build_learner(net: PetriNet, seed: int, journal: JournalReader) -> Learner:
 async def execute(net: PetriNet, *, location: Location, key: bytes, journal: Journal, seed: int = 0,
                   resume: bool = False, net_text: str | None = None, live: bool | None = None,
                   quiet: bool = False, read_input: bool = False, max_seconds: float | None = None,
-                  observer: Observer | None = None, console: Console | None = None) -> RunSummary:
+                  observer: Observer | None = None, console: Console | None = None,
+                  wait: bool = False, linger: bool = False) -> RunSummary:
     """Run ``net`` to its end and return the :class:`~coordinator.runtime.RunSummary`.
 
     ``console`` (a :class:`~coordinator.console.Console`, made from ``live``/``quiet`` if not given)
     shows the run; ``observer``, if given, receives the runtime's events instead and is expected
-    to forward them to the console. ``resume`` continues the last unfinished run of the net in the
-    journal.
+    to forward them to the console. ``resume`` continues the last resumable run of the net in the
+    journal (unfinished, or interrupted).
+
+    ``read_input`` reads operator commands from standard input (a terminal); with it, or with
+    ``wait``, the run has an operator: when only an operator command could move it on it waits
+    for one instead of ending ``waiting_for_operator``. ``linger`` (with an operator) also waits at
+    the home marking while a control place could start more, until ``end``/Ctrl-D.
 
     Raises:
         PetrobotError: nothing to resume; a bad learner configuration; the nodes cannot be reached.
@@ -61,8 +67,9 @@ async def execute(net: PetriNet, *, location: Location, key: bytes, journal: Jou
         recovered = journal.recover(net, run_id)
     learner = build_learner(net, recovered.seed if recovered else seed, journal)
     async with ServiceClient(location, key) as client:
+        operator = read_input or wait
         runtime = Runtime(net, client, journal, seed=seed, learner=learner, recovered=recovered,
-                          net_text=net_text)
+                          net_text=net_text, operator=operator, linger=operator and linger)
         console = console or Console(net, live=live, quiet=quiet)
         console.attach(runtime)
         if observer is not None:

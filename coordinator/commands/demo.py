@@ -158,7 +158,7 @@ async def _catching(args: argparse.Namespace) -> int:
     print(summary.format())
     print(report.format())
     print(f"journal: {journal_path}")
-    return 0 if summary.end_state == "dead" else 1
+    return summary.exit_code
 
 
 async def _foundation(args: argparse.Namespace) -> int:
@@ -186,11 +186,11 @@ async def _foundation(args: argparse.Namespace) -> int:
                                     read_input=sys.stdin.isatty(), max_seconds=args.max_seconds)
     print(summary.format())
     print(f"journal: {journal_path}")
-    return 0 if summary.end_state == "dead" else 1
+    return summary.exit_code
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the chosen demonstration; 0 when the net ended dead, 1 otherwise, 2 on an error."""
+    """Run the chosen demonstration; the exit code of the run's end state (0 completed), 2 on an error."""
     import asyncio
 
     demo = _catching if args.which == "catching" else _foundation

@@ -70,9 +70,11 @@ def add_seed(parser: argparse.ArgumentParser, *, default: int = 0, help: str | N
 
 
 def add_max_seconds(parser: argparse.ArgumentParser, *, default: float | None = None) -> None:
-    """``--max-seconds S``: abort a run after S seconds (a safety net for unattended runs)."""
+    """``--max-seconds S``: end a run after S seconds (a safety net for unattended runs): end state
+    ``deadline``, running primitive actions cancelled (a run waiting at home ends ``completed``)."""
     parser.add_argument("--max-seconds", type=float, default=default, metavar="S",
-                        help="abort the run after this many seconds"
+                        help="end the run after this many seconds (end state deadline; running actions are "
+                             "cancelled)"
                              + ("" if default is None else " (default: %(default)s)"))
 
 

@@ -21,31 +21,57 @@ Execute a task net. Every primitive action is called on the node that services.t
 on; start the nodes first (`petrobot up` starts every node of services.toml on this machine).
 The token flow is shown live on a terminal (line by line otherwise); type operator commands
 and Enter:  + PLACE [N] (insert tokens in a control place), - PLACE [N] (remove), pause, step,
-resume, abort. Every firing, action start, result and operator command is journaled in SQLite
-before it takes effect; --resume continues the last unfinished run of the net from the journal.
-The run ends when nothing more can happen (the net is dead) or on abort, with a summary."""
+resume, abort, end. Every firing, action start, result and operator command (refused ones too)
+is journaled in SQLite before it takes effect; --resume continues the last unfinished or
+interrupted run of the net from the journal.
+
+Waiting: when nothing can fire the run waits for its running primitive actions and for external
+events that would let a transition fire. When only the operator could move it on (paused, or a
+transition held back only by a control place) it waits for the operator if one is reading a
+terminal, or with --wait; on a terminal it also waits at the home marking while a control place
+could start more (type `+ runs_remaining 2` to run two more), until `end` or Ctrl-D. Without an
+operator (--no-input, standard input not a terminal) such a run ends at once as
+waiting_for_operator and names the commands it waited for. The live view and the summary say
+what the run waits for and why it ended."""
+
+EPILOG = """\
+end states and exit codes:
+  0    completed             nothing more can happen and the marking is home (declared `home`,
+                             else the initial marking; control places and counters aside)
+  1    stuck                 tokens left away from home (a primitive-task place whose outcome no
+                             transition takes, a resource not returned); the places are named
+  2    (no run)              bad net, services.toml, key or journal; nothing to resume
+  3    waiting_for_operator  only an operator command could go on and nobody can type one
+  4    deadline              --max-seconds ran out while the run was going (a run waiting at home
+                             for the operator ends completed)
+  5    aborted               the operator typed abort
+  6    completed             ... but every primitive-action call ended in error
+  130  interrupted           Ctrl-C; `petrobot run NET --resume` continues the run"""
 
 
 def add_parser(subparsers: Any) -> None:
     """Register ``run`` on the ``petrobot`` sub-command parser."""
     p = subparsers.add_parser("run", help="execute a task net on the nodes", description=DESCRIPTION,
-                              formatter_class=argparse.RawDescriptionHelpFormatter)
+                              epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("net", help="task net file (.toml or .pnml)")
     options.add_services(p)
     options.add_journal(p, default="runs/journal.sqlite",
                         help="SQLite journal, created if missing (default: %(default)s)")
     options.add_seed(p)
     p.add_argument("--resume", action="store_true",
-                   help="continue the last unfinished run of this net recorded in the journal")
+                   help="continue the last unfinished or interrupted run of this net in the journal")
     options.add_key_file(p)
     options.add_max_seconds(p)
     options.add_view(p, quiet=True)
     p.add_argument("--no-input", action="store_true", help="do not read operator commands from stdin")
+    p.add_argument("--wait", action="store_true",
+                   help="wait for the operator even when nobody can type (no terminal, --no-input): the run "
+                        "then ends on --max-seconds or Ctrl-C instead of ending waiting_for_operator")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the net to its end; 0 when it ended dead, 1 otherwise, 2 on an error, 130 on Ctrl-C."""
+    """Run the net to its end; the exit code of its end state (see EPILOG), 2 on an error."""
     import asyncio
 
     from coordinator.journal import Journal
@@ -60,16 +86,17 @@ def run(args: argparse.Namespace) -> int:
         if problems:
             for element, problem in problems:
                 print(f"{args.net}: {element}: {problem}", file=sys.stderr)
-            return 1
+            return 2
         location = load_location(args.services)
         key = load_key(args.key_file)
         Path(args.journal).parent.mkdir(parents=True, exist_ok=True)
         text = Path(args.net).read_text(encoding="utf-8") if args.net.endswith(".toml") else None
+        read_input = not args.no_input and sys.stdin.isatty()
         with Journal(args.journal) as journal:
             summary = asyncio.run(execute(
                 net, location=location, key=key, journal=journal, seed=args.seed, resume=args.resume,
-                net_text=text, live=args.live, quiet=args.quiet,
-                read_input=not args.no_input and sys.stdin.isatty(), max_seconds=args.max_seconds))
+                net_text=text, live=args.live, quiet=args.quiet, read_input=read_input,
+                max_seconds=args.max_seconds, wait=args.wait, linger=True))
     except PetrobotError as exc:
         print(f"petrobot run: {exc}", file=sys.stderr)
         return 2
@@ -77,6 +104,6 @@ def run(args: argparse.Namespace) -> int:
         print("petrobot run: interrupted; resume with --resume", file=sys.stderr)
         return 130
     print(summary.format())
-    print(f"journal: {args.journal}")
+    print(f"journal: {args.journal}   (petrobot show {summary.run_id} --journal {args.journal})")
     logging.getLogger("petrobot").debug("run finished")
-    return 0 if summary.end_state == "dead" else 1
+    return summary.exit_code

@@ -4,7 +4,9 @@
   the effect records :class:`Firing`, :class:`StartAction`, :class:`CancelAction` and the
   :data:`Chooser` of primitive actions;
 * :mod:`coordinator.engine.tables` — :class:`EngineTables`, the lookups compiled from a net once;
-* :mod:`coordinator.engine.engine` — :class:`Engine`, the executor.
+* :mod:`coordinator.engine.engine` — :class:`Engine`, the executor;
+* :mod:`coordinator.engine.rest` — :func:`~coordinator.engine.rest.at_rest`: what a run that has
+  come to rest looks like (home, stuck places, what the operator could do).
 """
 
 from coordinator.engine.effects import (
@@ -14,6 +16,7 @@ from coordinator.engine.effects import (
     EngineState,
     Firing,
     Instance,
+    OperatorOption,
     StartAction,
 )
 from coordinator.engine.engine import Engine
@@ -28,5 +31,6 @@ __all__ = [
     "EngineTables",
     "Firing",
     "Instance",
+    "OperatorOption",
     "StartAction",
 ]

@@ -16,7 +16,7 @@ from typing import Any
 
 from services.results import Status
 
-__all__ = ["CancelAction", "Chooser", "Effect", "EngineState", "Firing", "Instance", "StartAction"]
+__all__ = ["CancelAction", "Chooser", "Effect", "EngineState", "Firing", "Instance", "OperatorOption", "StartAction"]
 
 
 class EngineState(enum.Enum):
@@ -112,6 +112,33 @@ class CancelAction:
 
     instance: str
     reason: str
+
+
+@dataclass(frozen=True, slots=True)
+class OperatorOption:
+    """What the operator could do to a control place to let a transition fire (section 5).
+
+    Attributes:
+        transition: the transition every other condition of which holds now.
+        insert: control place → tokens to insert (an input arc lacks them).
+        remove: control place → tokens to remove (an inhibitor arc holds the transition back).
+        event: the external event the transition would then still wait for, or ``None``.
+    """
+
+    transition: str
+    insert: Mapping[str, int] = field(default_factory=dict)
+    remove: Mapping[str, int] = field(default_factory=dict)
+    event: str | None = None
+
+    @property
+    def commands(self) -> tuple[str, ...]:
+        """The operator commands, as typed: ``("+ runs_remaining 1", "- hold 1")``."""
+        return (tuple(f"+ {p} {n}" for p, n in self.insert.items())
+                + tuple(f"- {p} {n}" for p, n in self.remove.items()))
+
+    def __str__(self) -> str:
+        then = f" (then it waits for {self.event})" if self.event else ""
+        return f"{', '.join(self.commands)} would enable {self.transition}{then}"
 
 
 Effect = Firing | StartAction | CancelAction

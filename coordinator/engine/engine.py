@@ -48,6 +48,7 @@ from coordinator.engine.effects import (
     EngineState,
     Firing,
     Instance,
+    OperatorOption,
     StartAction,
 )
 from coordinator.engine.tables import EngineTables
@@ -181,6 +182,44 @@ class Engine:
                 topics.append(f"ext:{topic}")
         return tuple(topics)
 
+    def operator_options(self) -> tuple[OperatorOption, ...]:
+        """Transitions that an operator command on control places would let fire (section 5).
+
+        A transition qualifies when every condition on its other places holds now (available
+        tokens, latched internal events, inhibitors) and only control places hold it back: an
+        input control place with too few tokens, or an inhibitor control place with too many. Its
+        external event, if any, is not required (it is named in :attr:`OperatorOption.event`).
+        Transitions that can fire now are not listed. O(|T|); meant for a run that has come to rest.
+
+        Returns:
+            One :class:`OperatorOption` per such transition, in net order.
+        """
+        control, counts = self._control, self._counts
+        out: list[OperatorOption] = []
+        for tid in self._tids:
+            insert: dict[str, int] = {}
+            remove: dict[str, int] = {}
+            blocked = False
+            needs = self._needs[tid]
+            for pid, w in self._inputs[tid]:
+                if pid in control:
+                    if counts[pid] < w:
+                        insert[pid] = w - counts[pid]
+                elif self._available(pid, needs.get(self._task_of[pid]) if pid in self._task_of else None) < w:
+                    blocked = True
+                    break
+            if blocked or (needs and not set(needs) <= {self._task_of.get(p) for p, _ in self._inputs[tid]}):
+                continue
+            for pid, w in self._inhib[tid]:
+                if counts[pid] >= w:
+                    if pid not in control:
+                        blocked = True
+                        break
+                    remove[pid] = counts[pid] - w + 1
+            if not blocked and (insert or remove):
+                out.append(OperatorOption(tid, insert, remove, self._pulse_of[tid]))
+        return tuple(out)
+
     # ------------------------------------------------------------------ enabling
     def _available(self, pid: str, need: frozenset[str] | None) -> int:
         if pid not in self._task_of:
@@ -255,6 +294,19 @@ class Engine:
         return tuple(sorted(cands, key=self._order.__getitem__))
 
     # ------------------------------------------------------------------ deciding and firing
+    def firing_possible(self, *, ignore_pause: bool = False) -> bool:
+        """True if :meth:`next_firing` would decide a firing now; draws no random number, so asking
+        does not change the run's sequence of firings."""
+        if self._state is EngineState.ABORTED:
+            return False
+        if self._state is EngineState.PAUSED and not ignore_pause:
+            return False
+        if self._refresh():
+            return True
+        if self._pulse is None:
+            return False
+        return any(t not in self._pulse_fired and self._can_fire(t) for t in self._by_topic.get(self._pulse, ()))
+
     def next_firing(self, *, ignore_pause: bool = False) -> Firing | None:
         """Decide the next firing without applying it.
 
@@ -470,16 +522,31 @@ class Engine:
         Raises:
             EngineError: if the name is not an external event.
         """
+        self.begin_pulse(event)
+        try:
+            return self.advance(before_fire, max_firings=max_firings, after_fire=after_fire)
+        finally:
+            self.end_pulse()
+
+    def begin_pulse(self, event: str) -> None:
+        """Open the window of a pulse of ``event``; fire with :meth:`next_firing`/:meth:`apply`
+        (or :meth:`advance`) as usual, then close it with :meth:`end_pulse`. :meth:`pulse` does all
+        three; a caller that must serve other inputs between the firings of a pulse (the runtime)
+        uses these.
+
+        Raises:
+            EngineError: if the name is not an external event.
+        """
         name = event if event.startswith("ext:") else f"ext:{event}"
         try:
             _, topic, _ = parse_event(name)
         except NetError:
             raise EngineError(f"{event!r} is not an external event name") from None
         self._pulse, self._pulse_fired, self._decided = topic, set(), None
-        try:
-            return self.advance(before_fire, max_firings=max_firings, after_fire=after_fire)
-        finally:
-            self._pulse, self._pulse_fired, self._decided = None, set(), None
+
+    def end_pulse(self) -> None:
+        """Close the window of the current pulse (the pulse is gone); harmless without one."""
+        self._pulse, self._pulse_fired, self._decided = None, set(), None
 
     # ------------------------------------------------------------------ operator commands
     def insert_tokens(self, place: str, count: int = 1) -> None:

@@ -82,6 +82,19 @@ class Journal(JournalReader):
             raise
         super().__init__(db, name)
         self._entry = self._last_entry()
+        # JSON of the engine's per-transition consumed/produced maps (the same objects at every
+        # firing of a transition), by id; each entry holds its map, so that id cannot be reused
+        self._map_json: dict[int, tuple[Mapping[str, int], str | None]] = {}
+
+    def _mapping_json(self, mapping: Mapping[str, int]) -> str | None:
+        hit = self._map_json.get(id(mapping))
+        if hit is not None and hit[0] is mapping:
+            return hit[1]
+        text = _json(dict(mapping))
+        if len(self._map_json) >= 65_536:
+            self._map_json.clear()
+        self._map_json[id(mapping)] = (mapping, text)
+        return text
 
     def _last_entry(self) -> int:
         union = " UNION ALL ".join(f"SELECT MAX(entry) FROM {t}" for t in RECORD_TABLES)
@@ -135,8 +148,9 @@ class Journal(JournalReader):
         """Record a firing. Call before :meth:`coordinator.engine.Engine.apply` (write-ahead)."""
         self._record(
             "firing", "run, seq, transition, consumed, produced, instances, pulse, t_wall",
-            (run, firing.seq, firing.transition, _json(dict(firing.consumed)), _json(dict(firing.produced)),
-             _json(list(firing.instances)), firing.pulse, time.time()),
+            (run, firing.seq, firing.transition, self._mapping_json(firing.consumed),
+             self._mapping_json(firing.produced), _json(list(firing.instances)) if firing.instances else "[]",
+             firing.pulse, time.time()),
         )
 
     def action_start(self, run: str, instance: str, task: str, place: str, action: str,

@@ -127,7 +127,7 @@ async def test_a_net_runs_with_its_actions_on_two_nodes(cluster: Cluster, tmp_pa
     cluster.write_services()
     cluster.start("alpha", "beta")
     summary, events = await run_net(cluster, two_node_net("slow"), tmp_path / "j.sqlite")
-    assert summary.end_state == "dead"
+    assert summary.end_state == "completed"
     assert summary.final_marking == {"robot": 1, "done": 2}
     assert nodes_of(tmp_path / "j.sqlite") == {"echo": {"alpha"}, "slow": {"beta"}}
     fired = [e.firing.transition for e in events if isinstance(e, TransitionFired)]
@@ -286,7 +286,7 @@ def test_a_killed_coordinator_resumes_from_the_journal_without_running_an_action
     assert done.returncode == 0, done.stdout + done.stderr
     with JournalReader.open(journal) as reader:
         runs = reader.runs()
-        assert len(runs) == 1 and runs[0].end_state == "dead"
+        assert len(runs) == 1 and runs[0].end_state == "completed"
         starts = [s for s in reader.starts() if s.action == "slow"]
         assert len(starts) == 2  # two runs; the interrupted call was re-issued, not started anew
     assert "{'robot': 1, 'done': 2}" in done.stdout or "'done': 2" in done.stdout

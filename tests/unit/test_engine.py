@@ -366,3 +366,72 @@ def test_a_seeded_run_fires_the_same_sequence_in_another_process():
         outs.add(subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True,
                                 check=True, timeout=60).stdout)
     assert len(outs) == 1
+
+
+# ---------------------------------------------------------------------- a run at rest
+def test_operator_options_name_the_control_tokens_that_would_let_a_transition_fire():
+    net = make_net(
+        [("runs", "control"), ("hold", "control"), "robot", "busy", "done"],
+        [Transition(id="start", events=("ext:tick",)), "finish"],
+        [("runs", "start", 2), ("robot", "start"), ("hold", "start", 1, True), ("start", "busy"),
+         ("busy", "finish"), ("finish", "robot"), ("finish", "done")],
+        {"runs": 1, "hold": 2, "robot": 1},
+    )
+    engine = Engine(net)
+    (option,) = engine.operator_options()
+    assert (option.transition, dict(option.insert), dict(option.remove), option.event) == (
+        "start", {"runs": 1}, {"hold": 2}, "ext:tick")
+    assert str(option) == "+ runs 1, - hold 2 would enable start (then it waits for ext:tick)"
+    engine.remove_tokens("hold", 2)
+    engine.insert_tokens("runs", 1)
+    assert engine.operator_options() == ()  # nothing is held back by a control place any more
+    engine.remove_tokens("runs", 2)
+    assert [dict(o.insert) for o in engine.operator_options()] == [{"runs": 2}]
+
+
+def test_a_transition_held_back_by_another_place_is_no_operator_option():
+    net = make_net([("runs", "control"), "robot", "x"], ["start"],
+                   [("runs", "start"), ("robot", "start"), ("start", "x")], {"runs": 0, "robot": 0})
+    assert Engine(net).operator_options() == ()
+
+
+def test_a_pulse_window_can_be_fired_one_firing_at_a_time():
+    engine = Engine(tick_net(tokens=2))
+    engine.advance()
+    engine.begin_pulse("ext:tick")
+    firing = engine.next_firing()
+    assert firing is not None and firing.pulse == "ext:tick"
+    engine.apply(firing)
+    assert engine.next_firing() is None  # each linked transition fires once per pulse
+    engine.end_pulse()
+    assert engine.next_firing() is None and engine.marking == {"ready": 1, "done": 1}
+
+
+def test_a_run_at_rest_is_home_on_its_work_places_whatever_its_counters_hold():
+    from coordinator.engine.rest import at_rest, work_places
+
+    net = task_net()
+    assert work_places(net) == ("idle", "working")  # finished and recovered are sinks
+    engine = Engine(net)
+    (start,) = [e for e in engine.advance() if isinstance(e, StartAction)]
+    engine.complete(start.instance, ActionResult.success())
+    engine.advance()
+    rest = at_rest(engine, home={"idle": 0})
+    assert rest.at_home and rest.stuck == () and engine.marking == {"finished": 1}
+    rest = at_rest(engine)  # home is the initial marking: idle 1
+    assert not rest.at_home and rest.stuck == ("idle: 0 tokens (home 1)",)
+
+
+def test_a_token_left_in_a_primitive_task_place_is_named_with_how_its_action_ended():
+    from coordinator.engine.rest import at_rest
+
+    net = make_net(["idle", ("working", "primitive_task", "work"), "finished"],
+                   ["start", Transition(id="done", events=("int:work.caught",))],
+                   [("idle", "start"), ("start", "working"), ("working", "done"), ("done", "finished")],
+                   {"idle": 1}, tasks=[("work", ["a"])])
+    engine = Engine(net)
+    (start,) = [e for e in engine.advance() if isinstance(e, StartAction)]
+    engine.complete(start.instance, ActionResult.failure(outcome="missed"))
+    assert engine.advance() == [] and engine.state is EngineState.DEAD
+    rest = at_rest(engine, home={"idle": 0})
+    assert rest.stuck == ("working: 1 token (work ended failure (missed); no transition takes it)",)
