@@ -13,6 +13,8 @@ __all__ = ["main", "COMMANDS"]
 COMMANDS = (
     "demo",      # the catching demo on localhost (the README's first command)
     "run",       # execute a task net on the nodes
+    "runs",      # the runs of a journal: outcome, duration, firings, errors
+    "show",      # one run of a journal in order
     "node",      # run one node (a host's primitive-action server)
     "up",        # start every node of services.toml on this machine
     "sim",       # the simulated worlds of the testbeds

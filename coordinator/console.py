@@ -79,6 +79,8 @@ class Console:
         self.last_error = ""
         #: what the run waits for (reason and detail), or ``None``
         self.waiting: tuple[str, tuple[str, ...]] | None = None
+        #: the run's state as its events tell it (running, paused, waiting, or its end state)
+        self.run_state = "running"
 
     def attach(self, runtime: Runtime) -> None:
         """Follow ``runtime`` (set it as its observer)."""
@@ -131,8 +133,9 @@ class Console:
             self.last_error = f"{event.task}/{event.action} on {event.node or '?'}: {event.result.reason or 'error'}"
         elif isinstance(event, RunStateChanged):
             self.waiting = (event.reason, event.detail) if event.state == "waiting" else None
-        elif isinstance(event, (TransitionFired, ActionStarted)):
-            self.waiting = None
+            self.run_state = "running" if event.state in ("started", "resumed") else event.state
+        elif isinstance(event, (TransitionFired, ActionStarted)) and self.run_state == "waiting":
+            self.waiting, self.run_state = None, "running"
 
     def operator_message(self, text: str) -> None:
         """Show a message about the operator's input (kept on screen until the next command)."""
@@ -176,7 +179,7 @@ class Console:
         engine = self.runtime.engine
         marking = engine.marking
         out = ["\x1b[H\x1b[2J", f"petrobot  net {self.net.name}  run {self.runtime.run_id}  "
-               f"state {engine.state.value}  firings {engine.fired}", "", "marking (R resource, T primitive task, "
+               f"state {self.run_state}  firings {engine.fired}", "", "marking (R resource, T primitive task, "
                "C control):"]
         for place in self.net.places:
             n = marking[place.id]

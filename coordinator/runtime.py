@@ -268,6 +268,9 @@ class Runtime:
                 if flight.call is not None:
                     flight.call.cancel()
             note = end.note
+            calls = sum(st.calls for st in self.stats.values())
+            if calls and all(st.error == st.calls for st in self.stats.values()):
+                note += f" | every one of the {calls} primitive-action calls ended in error"
             if self.errors:
                 note += f" | last errors: {'; '.join(self.errors[-3:])}"
             self.journal.end_run(self.run_id, end.state, note)
@@ -374,8 +377,8 @@ class Runtime:
         options = tuple(str(o) for o in rest.options if o.event is None or o.event[4:] not in self._dead_topics)
         if rest.at_home:
             if options and self.operator and self.linger and not self._end_requested:
-                return _Wait("completed: at the home marking; waiting for the operator (type end or Ctrl-D "
-                             "to finish)", options)
+                return _Wait(f"completed: at the home marking; waiting for the operator: {'; '.join(options)}; "
+                             "or type end (Ctrl-D) to finish", options)
             return _End("completed", "at the home marking")
         if options and not self._end_requested:
             if self.operator:

@@ -1,0 +1,146 @@
+"""``petrobot show RUN``: one run of a journal in order — firings, calls with their reasons,
+operator commands (refused ones with why) — and how it ended."""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import sys
+import time
+from typing import TYPE_CHECKING, Any
+
+from coordinator.commands import options
+
+if TYPE_CHECKING:
+    from coordinator.journal import JournalReader, Record, RunRow
+
+__all__ = ["add_parser", "describe", "report", "run"]
+
+
+def add_parser(subparsers: Any) -> None:
+    """Register ``show`` on the ``petrobot`` sub-command parser."""
+    p = subparsers.add_parser(
+        "show", help="one run of a journal in order: firings, calls with reasons, operator commands",
+        description="Show one run of a journal: how it ended and why, then every record in the order it was "
+                    "written — firings (places that gave and took tokens), primitive-action starts and results "
+                    "(status, outcome, duration and the action's reason), operator commands (refused ones with "
+                    "the refusal) — and the errors counted by reason. RUN is a run id or a unique prefix of one "
+                    "(`petrobot runs` lists them), or `last`. The journal is opened read-only. Exit status 0, or "
+                    "1 on an unreadable journal or an unknown run.")
+    p.add_argument("run_id", metavar="RUN", help="run id, a unique prefix of one, or 'last'")
+    options.add_journal(p, default="runs/journal.sqlite", help="SQLite journal (default: %(default)s)")
+    p.add_argument("--no-firings", action="store_true", help="leave the firings out (calls and operator commands only)")
+    options.add_json(p)
+    p.set_defaults(func=run)
+
+
+def find_run(journal: JournalReader, wanted: str) -> RunRow:
+    """The run ``wanted`` names: an id, a unique prefix of one, or ``last``.
+
+    Raises:
+        JournalError: no such run, or an ambiguous prefix.
+    """
+    from coordinator.errors import JournalError
+
+    runs = journal.runs()
+    if wanted == "last" and runs:
+        return runs[-1]
+    exact = [r for r in runs if r.id == wanted]
+    matches = exact or [r for r in runs if r.id.startswith(wanted)]
+    if len(matches) == 1:
+        return matches[0]
+    if not matches:
+        raise JournalError(f"{journal.path}: no run {wanted!r} (petrobot runs --journal {journal.path} lists them)")
+    raise JournalError(f"{journal.path}: {wanted!r} names {len(matches)} runs: {', '.join(r.id for r in matches)}")
+
+
+def describe(record: Record, t0: float) -> str:
+    """One line for a record, stamped with its time since the run started (s)."""
+    from coordinator.journal import FiringRow, OperatorRow, ResultRow, StartRow
+
+    stamp = f"{record.t_wall - t0:9.3f}s  "
+    if isinstance(record, FiringRow):
+        via = f" on {record.pulse}" if record.pulse else ""
+        took = ", ".join(p if n == 1 else f"{p}x{n}" for p, n in record.consumed.items()) or "-"
+        gave = ", ".join(p if n == 1 else f"{p}x{n}" for p, n in record.produced.items()) or "-"
+        return f"{stamp}fire     #{record.seq:<5} {record.transition}{via}   {took} -> {gave}"
+    if isinstance(record, StartRow):
+        return f"{stamp}start    {record.task} -> {record.action} on {record.node or '?'} [{record.instance}]"
+    if isinstance(record, ResultRow):
+        extra = f" ({record.outcome})" if record.outcome else ""
+        wall = f" in {record.wall_s:.3f} s" if record.wall_s is not None else ""
+        why = f": {record.reason}" if record.reason else ""
+        return (f"{stamp}result   {record.task}/{record.action} on {record.node or '?'}: "
+                f"{record.status.value}{extra}{wall}{why} [{record.instance}]")
+    if isinstance(record, OperatorRow):
+        what = record.command + (f" {record.place} {record.count}" if record.place is not None else "")
+        if record.accepted:
+            return f"{stamp}operator {what}"
+        return f"{stamp}operator {what} REFUSED: {record.reason or ''}"
+    raise TypeError(type(record).__name__)
+
+
+def report(args: argparse.Namespace) -> dict[str, Any]:
+    """The run and its records as a JSON-ready dict (raises JournalError)."""
+    from coordinator.journal import FiringRow, JournalReader, ResultRow
+
+    with JournalReader.open(args.journal) as journal:
+        row = find_run(journal, args.run_id)
+        records = [r for r in journal.timeline(row.id) if not (args.no_firings and isinstance(r, FiringRow))]
+    reasons = collections.Counter(f"{r.task}/{r.action}: {r.reason or 'no reason given'}"
+                                  for r in records if isinstance(r, ResultRow) and r.status == "error")
+    return {
+        "run": row.id, "net": row.net_name, "seed": row.seed, "started_wall": row.started_wall,
+        "ended_wall": row.ended_wall, "end_state": row.end_state, "note": row.note or "",
+        "records": [{"kind": type(r).__name__.removesuffix("Row").lower(), **_fields(r)} for r in records],
+        "error_reasons": dict(reasons.most_common()),
+        "_lines": [describe(r, row.started_wall) for r in records],
+    }
+
+
+def _fields(record: Any) -> dict[str, Any]:
+    out = {}
+    for name in record.__slots__:
+        value = getattr(record, name)
+        out[name] = value.value if hasattr(value, "value") and not isinstance(value, (int, float, str)) else value
+        if isinstance(out[name], tuple):
+            out[name] = list(out[name])
+        elif hasattr(out[name], "items"):
+            out[name] = dict(out[name])
+    return out
+
+
+def render(rep: dict[str, Any]) -> str:
+    """Readable text of a :func:`report` dict."""
+    started = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(rep["started_wall"]))
+    if rep["ended_wall"] is not None:
+        end = f"{rep['end_state']} after {rep['ended_wall'] - rep['started_wall']:.2f} s"
+    else:
+        end = "unfinished (resumable with petrobot run NET --resume)"
+    lines = [f"run {rep['run']} of net {rep['net']!r}, seed {rep['seed']}, started {started}: {end}"]
+    for part in (rep["note"] or "").split(" | "):
+        if part:
+            lines.append(f"  {part}")
+    lines.append("")
+    lines.extend(rep["_lines"] or ["  (no records)"])
+    if rep["error_reasons"]:
+        lines += ["", "errors by reason:"]
+        lines.extend(f"  {n:5d} x {why}" for why, n in rep["error_reasons"].items())
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print the run; 0, or 1 on an unreadable journal or an unknown run."""
+    from coordinator.errors import JournalError
+
+    try:
+        rep = report(args)
+    except JournalError as exc:
+        print(f"petrobot show: {exc}", file=sys.stderr)
+        return 1
+    if args.json:
+        print(json.dumps({k: v for k, v in rep.items() if not k.startswith("_")}, indent=2, default=str))
+    else:
+        print(render(rep))
+    return 0
