@@ -10,13 +10,16 @@ probabilities are measured as relative frequencies. Here each primitive-task pla
 * ``mean``: mean ``wall_s`` of the task's results in the journal, else the task's a-priori
   ``mean_time_s``, else 1 s with a warning. Infinite-server semantics: every token in ``p`` is one
   running instance, independent of the others.
-* the exits (transitions linked to ``int:<task>.<outcome>``) take their input from ``p.done``, with
-  weights ``R_n * f(outcome)`` for normal exits and ``(1 - R_n) / n_error`` for error exits, where
-  ``R_n`` is the probability of the normal branch — measured as the share of results without
-  ``error`` status (success and failure both take the normal branch, section 4), else the task's
-  a-priori ``reliability`` — and ``f`` the observed share of each normal outcome (equal shares when
-  unknown). The exits of one place get one priority (the highest among them): a priority would
-  otherwise override the switch.
+* the exits (transitions linked to ``int:<task>.<outcome>``) take their input from ``p.done``. With
+  journal results, each exit's weight is the probability that the engine takes it: for each kind
+  of result (status and named outcome, with its share of the task's results) the exits whose
+  events the result latches (``ok`` and ``success``/``failure``, or ``error``, plus the named
+  outcome: :func:`services.results.latched_events`) are enabled, the highest priority among them
+  wins and equal priorities split by weight; results that enable no exit are left out, with a
+  warning. Without results, normal exits get ``R_n / n_outcomes`` per outcome and error exits
+  ``(1 - R_n) / n_error``, ``R_n`` being the task's a-priori ``reliability`` (the probability of the
+  normal branch: success and failure both take it, section 4). The exits of one place get one
+  priority (the highest among them): a priority would otherwise override the switch.
 * transitions linked to an ``ext:<topic>`` event become exponential at the topic's rate
   (``ext_rates``, else 1/s with a warning).
 
@@ -42,6 +45,7 @@ from coordinator.net import (
     parse_event,
 )
 from coordinator.performance import ActionRecord
+from services.results import Status, latched_events
 
 __all__ = ["DEFAULT_EXT_RATE", "DEFAULT_MEAN_S", "PTimedNet", "TaskStats", "task_stats", "to_gspn"]
 
@@ -63,6 +67,7 @@ class TaskStats:
         normal: share of results without ``error`` status (probability of the normal branch).
         outcomes: share of each outcome among the results without ``error`` status.
         samples: the ``wall_s`` values (s), for the simulator's empirical delays.
+        classes: share of each kind of result, ``(status, named outcome or None)``, among all.
     """
 
     runs: int
@@ -70,6 +75,7 @@ class TaskStats:
     normal: float
     outcomes: Mapping[str, float] = field(default_factory=dict)
     samples: tuple[float, ...] = ()
+    classes: Mapping[tuple[str, str | None], float] = field(default_factory=dict)
 
 
 def task_stats(records: Iterable[ActionRecord]) -> dict[str, TaskStats]:
@@ -84,11 +90,16 @@ def task_stats(records: Iterable[ActionRecord]) -> dict[str, TaskStats]:
         outcomes: dict[str, int] = {}
         for r in normal:
             outcomes[r.outcome or "ok"] = outcomes.get(r.outcome or "ok", 0) + 1
+        classes: dict[tuple[str, str | None], int] = {}
+        for r in recs:
+            key = (str(r.status), r.outcome)
+            classes[key] = classes.get(key, 0) + 1
         out[task] = TaskStats(
             runs=len(recs), mean_s=sum(walls) / len(walls) if walls else None,
             normal=len(normal) / len(recs),
             outcomes={k: v / len(normal) for k, v in outcomes.items()} if normal else {},
             samples=walls,
+            classes={k: v / len(recs) for k, v in classes.items()},
         )
     return out
 
@@ -145,8 +156,9 @@ def to_gspn(
     used_ext: dict[str, float] = {}
     for name, task in net.tasks.items():
         st = stats.get(name)
-        if means and name in means:
-            used_mean[name], src = float(means[name]), "given"
+        given = float(means[name]) if means and name in means else None
+        if given is not None and given > 0:
+            used_mean[name], src = given, "given"
         elif st is not None and st.mean_s is not None and st.mean_s > 0:
             used_mean[name], src = st.mean_s, "journal"
         elif task.mean_time_s is not None:
@@ -155,6 +167,9 @@ def to_gspn(
             used_mean[name], src = DEFAULT_MEAN_S, "default"
             warnings.append(f"primitive task {name!r}: no journal time and no mean_time_s; "
                             f"using {DEFAULT_MEAN_S} s")
+        if (given is not None and given <= 0) or (st is not None and st.mean_s == 0 and src != "given"):
+            warnings.append(f"primitive task {name!r}: mean time 0 s (a timed transition needs a positive "
+                            f"mean); using the {src} value {used_mean[name]:g} s")
         if normal and name in normal:
             used_normal[name], rsrc = float(normal[name]), "given"
         elif st is not None and st.runs:
@@ -196,6 +211,20 @@ def to_gspn(
         top = max(u.priority for u in group)
         for u in group:
             exit_priority[u.id] = max(exit_priority.get(u.id, top), top)
+    measured: dict[str, float] = {}  # exit id -> probability the engine takes it (journal results)
+    dropped: set[str] = set()  # exits that no journal result takes, while another exit of their place is taken
+    for pid, group in exits_of.items():
+        tname = net.place(pid).task or ""
+        st = stats.get(tname)
+        if st is not None and st.classes and not (normal and tname in normal):
+            shares, lost = _exit_probabilities(tname, group, st.classes)
+            for tid, p in shares.items():
+                measured[tid] = max(measured.get(tid, 0.0), p)
+            if any(shares.values()):  # an exit no result takes would still fire when it is the only one enabled
+                dropped.update(tid for tid, p in shares.items() if p <= 0)
+            if lost:
+                warnings.append(f"primitive task {tname!r}: {sum(lost.values()):.0%} of its results "
+                                f"({', '.join(lost)}) enable no exit of place {pid!r}; left out of its random switch")
     rewired: dict[tuple[str, str], str] = {}
     for t in net.transitions:
         weight = t.weight
@@ -207,7 +236,15 @@ def to_gspn(
                 if net.place(pid).task == tname and pid in done_of:
                     rewired[(pid, t.id)] = done_of[pid]
                     exits.append((tname, outcome))
-        if exits:
+        if t.id in dropped:
+            warnings.append(f"transition {t.id!r}: no journal result takes this exit; left out of the GSPN")
+            continue
+        if exits and t.id in measured:
+            weight = measured[t.id]
+            if weight <= 0:
+                warnings.append(f"transition {t.id!r}: probability 0 measured; weight {MIN_WEIGHT} kept")
+                weight = MIN_WEIGHT
+        elif exits:
             tname, outcome = exits[0]
             same = [u for u in net.transitions if any(
                 parse_event(e)[1] == tname and (parse_event(e)[2] == "error") == (outcome == "error")
@@ -242,11 +279,36 @@ def to_gspn(
         transitions.append(replace(t, events=(), kind=kind, rate=rate, servers=servers, weight=weight,
                                    label=label, priority=priority))
     arcs = [Arc(source=rewired.get((a.source, a.target), a.source), target=a.target, weight=a.weight,
-                inhibitor=a.inhibitor) if not a.inhibitor else a for a in arcs]
+                inhibitor=a.inhibitor) if not a.inhibitor else a for a in arcs
+            if not ({a.source, a.target} & dropped)]
     gspn = PetriNet(name=f"{net.name}_gspn", places=tuple(places), transitions=tuple(transitions), arcs=tuple(arcs),
                     initial_marking=net.initial_marking, tasks=net.tasks,
                     description=f"GSPN (P-timed) view of {net.name}", home_marking=net.home_marking)
     return PTimedNet(gspn, used_mean, used_normal, used_ext, sources, warnings, timed)
+
+
+def _exit_probabilities(task: str, group: list[Transition], classes: Mapping[tuple[str, str | None], float]
+                        ) -> tuple[dict[str, float], dict[str, float]]:
+    """Probability that the engine takes each exit of one primitive-task place, from the shares of
+    the task's kinds of result (see the module docstring), and the share of each kind no exit takes."""
+    exits = list({t.id: t for t in group}.values())
+    needs = {t.id: frozenset(parse_event(e)[2] for e in t.internal_events if parse_event(e)[1] == task)
+             for t in exits}
+    shares = {t.id: 0.0 for t in exits}
+    lost: dict[str, float] = {}
+    for (status, outcome), share in classes.items():
+        latched = latched_events(Status(status), outcome)
+        enabled = [t for t in exits if needs[t.id] <= latched]
+        if not enabled:
+            key = f"{status} {outcome}" if outcome else status
+            lost[key] = lost.get(key, 0.0) + share
+            continue
+        top = max(t.priority for t in enabled)
+        best = [t for t in enabled if t.priority == top]
+        total = sum(t.weight for t in best)
+        for t in best:
+            shares[t.id] += share * t.weight / total
+    return shares, lost
 
 
 def empirical_delays(model: PTimedNet, stats: Mapping[str, TaskStats]) -> dict[str, Delay]:

@@ -150,3 +150,40 @@ def test_perf_and_gspn_take_one_run_of_the_journal_with_run(tmp_path: Path,
     args = parser.parse_args(["perf", str(net_file), "--journal", str(journal), "--run", "nope"])
     assert perf_cmd.run(args) == 1
     assert "no run 'nope'" in capsys.readouterr().err
+
+
+def catch_journal(path: Path, caught: int = 17, missed: int = 0) -> None:
+    """A journal of the catch net's results as the actions report them: named outcomes on every exit."""
+    with Journal(path) as journal:
+        run = journal.begin_run(two_step_task())
+        rows = [("locate", "locate_threshold", ActionResult(status=Status.SUCCESS, wall_s=1.0))] * (caught + missed)
+        rows += [("predict", "predict", ActionResult(status=Status.SUCCESS, wall_s=1.5))] * (caught + missed)
+        rows += [("catch", "catch", ActionResult(status=Status.SUCCESS, outcome="caught", wall_s=1.2))] * caught
+        rows += [("catch", "catch", ActionResult(status=Status.FAILURE, outcome="missed", wall_s=1.4))] * missed
+        rows += [("home", "move_home", ActionResult(status=Status.SUCCESS, wall_s=0.0))] * (caught + missed)
+        for i, (task, action, result) in enumerate(rows):
+            journal.action_result(run, str(i), task, action, "n", result)
+        journal.end_run(run, "completed")
+
+
+def test_perf_and_gspn_on_a_journal_of_17_caught_balls_give_a_reliable_task(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Every catch succeeded with outcome 'caught': no run can end in aborted_runs, R is 1, and a
+    measured mean time of 0 s (move_home) is no division by zero."""
+    journal = tmp_path / "j.sqlite"
+    catch_journal(journal)
+    net = str(Path(__file__).resolve().parents[2] / "nets" / "catch.toml")
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    perf_cmd.add_parser(sub)
+    gspn_cmd.add_parser(sub)
+    rates = ["--ext-rate", "image_sampling_tick=30", "--ext-rate", "ball_caught=2"]
+    assert perf_cmd.run(parser.parse_args(["perf", net, "--journal", str(journal), "--json", *rates])) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["actions"]["catch"]["catch"]["reliability"] == 1.0
+    assert rep["task"]["reliability"] == pytest.approx(1.0, abs=1e-6)
+    assert gspn_cmd.run(parser.parse_args(["gspn", net, "--journal", str(journal), "--json", *rates])) == 0
+    rep = json.loads(capsys.readouterr().out)
+    aborted = sum(a["probability"] for a in rep["absorption"] if a["marking"].get("aborted_runs"))
+    assert aborted == pytest.approx(0.0, abs=1e-6)
+    assert not [w for w in rep["warnings"] if "ball_caught" in w and "probability 0" in w]

@@ -119,3 +119,71 @@ def test_journal_durations_become_empirical_delays_for_the_simulator() -> None:
     est = simulate_absorption(model.net, delays, seed=4, replications=2000, confidence=0.99)
     # A sequential task: its mean time depends on the mean durations only.
     assert est.mean_time_to_absorption.contains(analyse(model.net).mean_time_to_absorption or 0.0)
+
+
+def catch_like(*, exits: tuple[tuple[str, str, str], ...] | None = None) -> PetriNet:
+    """One primitive task 'catch' whose exits lead to sinks: (transition, event outcome, sink)."""
+    exits = exits or (("got", "success", "caught"), ("lost", "failure", "missed"), ("broke", "error", "aborted"))
+    tasks = {"catch": PrimitiveTask(name="catch", actions=(ActionSpec(name="catch"),), mean_time_s=1.0,
+                                    reliability=0.5)}
+    places = [Place(id="s"), Place(id="run", kind=PlaceKind.PRIMITIVE_TASK, task="catch")]
+    places += [Place(id=sink) for sink in dict.fromkeys(s for _, _, s in exits)]
+    transitions = [Transition(id="go")] + [Transition(id=t, events=(f"int:catch.{o}",)) for t, o, _ in exits]
+    arcs = [Arc(source="s", target="go"), Arc(source="go", target="run")]
+    arcs += [a for t, _, sink in exits for a in (Arc(source="run", target=t), Arc(source=t, target=sink))]
+    return PetriNet(name="catchlike", places=places, transitions=transitions, arcs=arcs, initial_marking={"s": 1},
+                    tasks=tasks)
+
+
+def absorption(net: PetriNet, recs: list[ActionRecord]) -> dict[tuple[str, ...], float]:
+    res = analyse(to_gspn(net, stats=task_stats(recs)).net)
+    return {tuple(a["marking"]): a["probability"] for a in res.absorption}
+
+
+def test_exits_on_status_events_count_the_results_that_also_report_a_named_outcome() -> None:
+    """17 balls caught (success, outcome 'caught') and 3 missed (failure, 'missed'): the exit on
+    int:catch.success is taken 85 % of the time, not 'probability 0 measured'."""
+    recs = ([ActionRecord(task="catch", action="catch", status="success", outcome="caught", wall_s=1.0)] * 17
+            + [ActionRecord(task="catch", action="catch", status="failure", outcome="missed", wall_s=1.0)] * 3)
+    model = to_gspn(catch_like(), stats=task_stats(recs))
+    assert not [w for w in model.warnings if "probability 0" in w and "got" in w]
+    probs = absorption(catch_like(), recs)
+    assert probs[("caught",)] == pytest.approx(0.85)
+    assert probs[("missed",)] == pytest.approx(0.15)
+    assert probs.get(("aborted",), 0.0) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_exits_on_named_outcomes_and_on_ok_follow_the_engine_rules() -> None:
+    """Exits on int:catch.ok and int:catch.caught (priority 2): a 'caught' result latches both and
+    the priority takes 'caught'; the others take 'ok'; errors take the error exit."""
+    net = catch_like(exits=(("any", "ok", "other"), ("got", "caught", "caught"), ("broke", "error", "aborted")))
+    net = PetriNet(name=net.name, places=net.places, arcs=net.arcs, initial_marking=net.initial_marking,
+                   tasks=net.tasks, transitions=tuple(Transition(id=t.id, events=t.events, priority=2)
+                                                      if t.id == "got" else t for t in net.transitions))
+    recs = ([ActionRecord(task="catch", action="catch", status="success", outcome="caught", wall_s=1.0)] * 5
+            + [ActionRecord(task="catch", action="catch", status="success", wall_s=1.0)] * 3
+            + [ActionRecord(task="catch", action="catch", status="failure", outcome="missed", wall_s=1.0)] * 1
+            + [ActionRecord(task="catch", action="catch", status="error", outcome="timeout", wall_s=1.0)] * 1)
+    probs = absorption(net, recs)
+    assert probs[("caught",)] == pytest.approx(0.5)
+    assert probs[("other",)] == pytest.approx(0.4)
+    assert probs[("aborted",)] == pytest.approx(0.1)
+
+
+def test_results_that_no_exit_takes_are_left_out_with_a_warning() -> None:
+    net = catch_like(exits=(("got", "caught", "caught"), ("broke", "error", "aborted")))
+    recs = ([ActionRecord(task="catch", action="catch", status="success", outcome="caught", wall_s=1.0)] * 6
+            + [ActionRecord(task="catch", action="catch", status="failure", outcome="missed", wall_s=1.0)] * 2
+            + [ActionRecord(task="catch", action="catch", status="error", wall_s=1.0)] * 2)
+    model = to_gspn(net, stats=task_stats(recs))
+    assert any("no exit" in w and "20%" in w for w in model.warnings), model.warnings
+    probs = absorption(net, recs)
+    assert probs[("caught",)] == pytest.approx(0.75)
+    assert probs[("aborted",)] == pytest.approx(0.25)
+
+
+def test_a_measured_mean_time_of_zero_falls_back_and_does_not_divide_by_zero() -> None:
+    recs = [ActionRecord(task="catch", action="catch", status="success", wall_s=0.0)] * 4
+    model = to_gspn(catch_like(), stats=task_stats(recs), means={"catch": 0.0})
+    assert model.means["catch"] == pytest.approx(1.0)  # the a-priori mean_time_s
+    assert any("mean time 0" in w for w in model.warnings)
