@@ -7,7 +7,7 @@ import importlib
 import logging
 import sys
 
-__all__ = ["main", "COMMANDS"]
+__all__ = ["COMMANDS", "build_parser", "main"]
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = (
