@@ -218,10 +218,10 @@ def to_gspn(
         st = stats.get(tname)
         if st is not None and st.classes and not (normal and tname in normal):
             shares, lost = _exit_probabilities(tname, group, st.classes)
-            for tid, p in shares.items():
-                measured[tid] = max(measured.get(tid, 0.0), p)
+            for tid, prob in shares.items():
+                measured[tid] = max(measured.get(tid, 0.0), prob)
             if any(shares.values()):  # an exit no result takes would still fire when it is the only one enabled
-                dropped.update(tid for tid, p in shares.items() if p <= 0)
+                dropped.update(tid for tid, prob in shares.items() if prob <= 0)
             if lost:
                 warnings.append(f"primitive task {tname!r}: {sum(lost.values()):.0%} of its results "
                                 f"({', '.join(lost)}) enable no exit of place {pid!r}; left out of its random switch")
