@@ -41,6 +41,7 @@ outputs = { out = 1 }
     ("  step ", OperatorCommand(Command.STEP)),
     ("resume", OperatorCommand(Command.RESUME)),
     ("abort", OperatorCommand(Command.ABORT)),
+    ("end", OperatorCommand(Command.END)),
 ])
 def test_typed_operator_commands_are_understood(text, command):
     assert parse_operator_command(text) == command
@@ -71,3 +72,75 @@ def test_the_line_view_prints_one_line_per_event_and_errors_even_when_quiet():
     quiet(fire)
     quiet(lost)
     assert len(quiet_out.getvalue().splitlines()) == 1
+
+
+def test_pulses_that_fire_nothing_are_counted_not_printed_one_by_one():
+    from coordinator.events import PulseDelivered, RunStateChanged
+
+    out = io.StringIO()
+    console = Console(loads_net(NET), stream=out, live=False)
+    for _ in range(250):
+        console(PulseDelivered("r", "ext:image_sampling_tick", 0))
+    console(PulseDelivered("r", "ext:image_sampling_tick", 1))
+    console(RunStateChanged("r", "completed", "at the home marking"))
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 3
+    assert lines[0].endswith("pulse ext:image_sampling_tick x250: fired nothing")
+    assert lines[1].endswith("pulse ext:image_sampling_tick: fired 1")
+    assert lines[2].endswith("run r completed: at the home marking")
+
+
+def test_the_line_view_gives_reasons_waiting_and_the_places_a_firing_moved():
+    from coordinator.events import RunStateChanged
+
+    out = io.StringIO()
+    console = Console(loads_net(NET), stream=out, live=False)
+    console(TransitionFired("r", Firing(3, "go", {"runs": 1, "robot": 1}, {"out": 2})))
+    console(ActionEnded("r", "r-1", "catch", "catch", "motion",
+                        ActionResult(status=Status.FAILURE, outcome="missed", wall_s=1.25, reason="ball passed")))
+    console(RunStateChanged("r", "waiting", "waiting for the operator: + runs 1 would enable go",
+                            detail=("out: 2 tokens (home 0)", "+ runs 1 would enable go")))
+    lines = out.getvalue().splitlines()
+    assert lines[0].endswith("fire  #3     go   runs, robot -> outx2")
+    assert lines[1].endswith("done  catch/catch on motion: failure (missed) in 1.250 s: ball passed")
+    assert lines[2].endswith("run r waiting: waiting for the operator: + runs 1 would enable go")
+    assert lines[3].strip() == "- out: 2 tokens (home 0)" and len(lines) == 4
+
+
+class _Screen(io.StringIO):
+    def isatty(self) -> bool:
+        return True
+
+
+class _Runtime:
+    """What the live view reads of a runtime."""
+
+    def __init__(self, net) -> None:
+        from coordinator.engine import Engine
+
+        self.engine = Engine(net)
+        self.run_id = "r"
+        self.observer = None
+
+    def running(self) -> list:
+        return []
+
+
+def test_a_refused_command_stays_on_the_live_screen_until_the_next_command():
+    from coordinator.events import OperatorApplied, OperatorRefused, RunStateChanged
+
+    net = loads_net(NET)
+    screen = _Screen()
+    console = Console(net, stream=screen)
+    console.attach(_Runtime(net))  # type: ignore[arg-type]
+    assert console.live
+    console(OperatorRefused("r", "fly", "commands: + PLACE [N] | ..."))
+    console(TransitionFired("r", Firing(1, "go", {"runs": 1}, {"out": 1})))
+    console(RunStateChanged("r", "waiting", "waiting for the operator: + runs 1 would enable go"))
+    console.draw()
+    last = screen.getvalue().split("\x1b[H\x1b[2J")[-1]
+    assert "> refused: fly: commands: + PLACE [N] | ..." in last
+    assert "state waiting" in last and "waiting: waiting for the operator: + runs 1 would enable go" in last
+    console(OperatorApplied("r", OperatorCommand(Command.INSERT, "runs", 1)))
+    last = screen.getvalue().split("\x1b[H\x1b[2J")[-1]
+    assert "refused" not in last.split("operator:")[-1] and "> applied: insert runs 1" in last
