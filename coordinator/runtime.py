@@ -122,6 +122,7 @@ class _Wait:
 
     reason: str = ""
     detail: tuple[str, ...] = ()
+    home: bool = False  # at the home marking (waiting only because ``linger`` asks to)
 
 
 @dataclass(frozen=True, slots=True)
@@ -291,7 +292,9 @@ class Runtime:
             if self._deadline is not None and time.monotonic() >= self._deadline:
                 if not self._inflight and not self._inbox and not engine.firing_possible():
                     verdict = self._at_rest()
-                    if isinstance(verdict, _End) or verdict.reason.startswith("completed"):
+                    if isinstance(verdict, _End):
+                        return verdict
+                    if verdict.home:
                         return _End("completed", f"at the home marking when --max-seconds {max_seconds:g} ran out")
                 self._begin_ending("deadline", f"--max-seconds {max_seconds:g} ran out")
                 continue
@@ -378,7 +381,7 @@ class Runtime:
         if rest.at_home:
             if options and self.operator and self.linger and not self._end_requested:
                 return _Wait(f"completed: at the home marking; waiting for the operator: {'; '.join(options)}; "
-                             "or type end (Ctrl-D) to finish", options)
+                             "or type end (Ctrl-D) to finish", options, home=True)
             return _End("completed", "at the home marking")
         if options and not self._end_requested:
             if self.operator:

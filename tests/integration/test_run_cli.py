@@ -267,3 +267,43 @@ def test_without_a_terminal_a_run_only_the_operator_could_move_on_ends_and_says_
     out = Output(proc)
     assert proc.wait(timeout=TIMEOUT_S) == 3, out.text
     assert "waiting_for_operator" in out.text and "+ gate 1 would enable finish" in out.text
+
+
+STUCK = """
+[net]
+name = "stuck"
+
+[[place]]
+id = "a"
+tokens = 1
+
+[[place]]
+id = "b"
+
+[[place]]
+id = "c"
+
+[[place]]
+id = "out"
+
+[[transition]]
+id = "first"
+inputs = { a = 1 }
+outputs = { b = 1 }
+
+[[transition]]
+id = "second"
+inputs = { b = 1, c = 1 }
+outputs = { out = 1 }
+"""
+
+
+def test_a_run_ending_with_tokens_away_from_home_exits_non_zero_and_names_the_places(cluster: Any, tmp_path: Path):
+    cluster.write_services(SERVICES)
+    net = tmp_path / "stuck.toml"
+    net.write_text(STUCK)
+    proc = petrobot(cluster, "run", str(net), "--journal", str(tmp_path / "j.sqlite"), "--quiet")
+    out = Output(proc)
+    assert proc.wait(timeout=TIMEOUT_S) == 1, out.text
+    assert "stuck after 1 firings" in out.text
+    assert "a: 0 tokens (home 1)" in out.text and "b: 1 token (home 0)" in out.text
