@@ -187,3 +187,19 @@ def test_perf_and_gspn_on_a_journal_of_17_caught_balls_give_a_reliable_task(
     aborted = sum(a["probability"] for a in rep["absorption"] if a["marking"].get("aborted_runs"))
     assert aborted == pytest.approx(0.0, abs=1e-6)
     assert not [w for w in rep["warnings"] if "ball_caught" in w and "probability 0" in w]
+
+
+def test_learn_on_a_journal_of_known_frequencies_counts_named_outcomes_by_their_status(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from coordinator.cli import main
+
+    journal = tmp_path / "j.sqlite"
+    catch_journal(journal, caught=17, missed=3)
+    net = str(Path(__file__).resolve().parents[2] / "nets" / "catch.toml")
+    assert main(["learn", net, "--journal", str(journal), "--json"]) == 0
+    catch = json.loads(capsys.readouterr().out)["tasks"]["catch"]["actions"]["catch"]
+    assert (catch["trials"], catch["successes"]) == (20, 17)
+    assert catch["reliability"] == pytest.approx(0.85)
+    assert main(["perf", net, "--journal", str(journal), "--json", "--ext-rate", "image_sampling_tick=30",
+                 "--ext-rate", "ball_caught=2"]) == 0
+    assert json.loads(capsys.readouterr().out)["actions"]["catch"]["catch"]["reliability"] == pytest.approx(0.85)
