@@ -16,7 +16,7 @@ __all__ = ["ALL_CALLS_FAILED", "END_STATES", "EXIT_CODES", "ActionStats", "RunSu
 
 END_STATES: dict[str, str] = {
     "completed": "nothing more can happen and the marking is home (declared, else the initial marking; "
-                 "control places and sink places such as counters aside)",
+                 "control places and sink places such as counters aside) or meets the run's goal (--goal)",
     "stuck": "nothing more can happen and tokens are left away from home (in primitive-task places, or a "
              "resource not returned); the places are named",
     "waiting_for_operator": "only an operator command could move the run on, and no operator can send one "

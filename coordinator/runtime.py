@@ -27,7 +27,7 @@ import collections
 import contextlib
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -152,6 +152,12 @@ class Runtime:
             let a transition fire (to add runs), until ``end``, ``abort`` or the deadline.
         cancel_grace_s: after an abort or the deadline, how long to wait for the cancelled
             primitive actions' results before ending anyway, seconds.
+        goal: place → tokens: a run at rest whose marking holds at least these tokens has reached
+            the net's goal and ends ``completed`` like one at home (a net that does not come back
+            to its home marking, e.g. one that runs once).
+
+    Raises:
+        EngineError: ``goal`` names a place the net does not have.
     """
 
     def __init__(
@@ -169,6 +175,7 @@ class Runtime:
         operator: bool = False,
         linger: bool = False,
         cancel_grace_s: float = 3.0,
+        goal: Mapping[str, int] | None = None,
     ) -> None:
         self.net = net
         self.client = client
@@ -192,6 +199,10 @@ class Runtime:
                                 next_instance=recovered.next_instance)
         self._work = work_places(net)
         self._home = home_marking(net)
+        self._goal = dict(goal or {})
+        unknown = [pid for pid in self._goal if pid not in net.place_index]
+        if unknown:  # an error now, not a run that never completes
+            raise EngineError(f"the goal names places that net {net.name!r} does not have: {', '.join(unknown)}")
         self._inbox: collections.deque[_Completed | _Pulse] = collections.deque()
         self._commands: collections.deque[OperatorCommand | _Invalid] = collections.deque()
         self._wake = asyncio.Event()
@@ -378,6 +389,14 @@ class Runtime:
             return _Wait(f"waiting for {', '.join(awaited)}", awaited)
         rest = at_rest(engine, self._work, self._home)
         options = tuple(str(o) for o in rest.options if o.event is None or o.event[4:] not in self._dead_topics)
+        marking = engine.marking
+        if self._goal and all(marking[p] >= n for p, n in self._goal.items()):
+            if options and self.operator and self.linger and not self._end_requested:
+                return _Wait(f"completed: the goal is reached; waiting for the operator: {'; '.join(options)}; "
+                             "or type end (Ctrl-D) to finish", options, home=True)
+            return _End("completed", "the goal marking is reached" + ("" if rest.at_home else
+                        f" ({len(rest.stuck)} place{'' if len(rest.stuck) == 1 else 's'} away from home)"),
+                        rest.stuck)
         if rest.at_home:
             if options and self.operator and self.linger and not self._end_requested:
                 return _Wait(f"completed: at the home marking; waiting for the operator: {'; '.join(options)}; "

@@ -43,7 +43,7 @@ async def execute(net: PetriNet, *, location: Location, key: bytes, journal: Jou
                   resume: bool = False, net_text: str | None = None, live: bool | None = None,
                   quiet: bool = False, read_input: bool = False, max_seconds: float | None = None,
                   observer: Observer | None = None, console: Console | None = None,
-                  wait: bool = False, linger: bool = False) -> RunSummary:
+                  wait: bool = False, linger: bool = False, goal: dict[str, int] | None = None) -> RunSummary:
     """Run ``net`` to its end and return the :class:`~coordinator.runtime.RunSummary`.
 
     ``console`` (a :class:`~coordinator.console.Console`, made from ``live``/``quiet`` if not given)
@@ -54,7 +54,8 @@ async def execute(net: PetriNet, *, location: Location, key: bytes, journal: Jou
     ``read_input`` reads operator commands from standard input (a terminal); with it, or with
     ``wait``, the run has an operator: when only an operator command could move it on it waits
     for one instead of ending ``waiting_for_operator``. ``linger`` (with an operator) also waits at
-    the home marking while a control place could start more, until ``end``/Ctrl-D.
+    the home marking while a control place could start more, until ``end``/Ctrl-D. ``goal`` (place →
+    tokens) is a marking that ends the run ``completed`` even away from home.
 
     Raises:
         PetrobotError: nothing to resume; a bad learner configuration; the nodes cannot be reached.
@@ -69,7 +70,7 @@ async def execute(net: PetriNet, *, location: Location, key: bytes, journal: Jou
     async with ServiceClient(location, key) as client:
         operator = read_input or wait
         runtime = Runtime(net, client, journal, seed=seed, learner=learner, recovered=recovered,
-                          net_text=net_text, operator=operator, linger=operator and linger)
+                          net_text=net_text, operator=operator, linger=operator and linger, goal=goal)
         console = console or Console(net, live=live, quiet=quiet)
         console.attach(runtime)
         if observer is not None:

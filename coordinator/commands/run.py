@@ -37,7 +37,8 @@ what the run waits for and why it ended."""
 EPILOG = """\
 end states and exit codes:
   0    completed             nothing more can happen and the marking is home (declared `home`,
-                             else the initial marking; control places and counters aside)
+                             else the initial marking; control places and counters aside),
+                             or meets --goal
   1    stuck                 tokens left away from home (a primitive-task place whose outcome no
                              transition takes, a resource not returned); the places are named
   2    (no run)              bad net, services.toml, key or journal; nothing to resume
@@ -64,6 +65,9 @@ def add_parser(subparsers: Any) -> None:
     options.add_max_seconds(p)
     options.add_view(p, quiet=True)
     p.add_argument("--no-input", action="store_true", help="do not read operator commands from stdin")
+    p.add_argument("--goal", action="append", metavar="PLACE=N",
+                   help="the run has reached its goal when it comes to rest with at least N tokens in PLACE "
+                        "(repeatable): it ends completed even away from home (a net that runs once)")
     p.add_argument("--wait", action="store_true",
                    help="wait for the operator even when nobody can type (no terminal, --no-input): the run "
                         "then ends on --max-seconds or Ctrl-C instead of ending waiting_for_operator")
@@ -92,11 +96,12 @@ def run(args: argparse.Namespace) -> int:
         Path(args.journal).parent.mkdir(parents=True, exist_ok=True)
         text = Path(args.net).read_text(encoding="utf-8") if args.net.endswith(".toml") else None
         read_input = not args.no_input and sys.stdin.isatty()
+        goal = options.parse_pairs(args.goal, "--goal", int) or None
         with Journal(args.journal) as journal:
             summary = asyncio.run(execute(
                 net, location=location, key=key, journal=journal, seed=args.seed, resume=args.resume,
                 net_text=text, live=args.live, quiet=args.quiet, read_input=read_input,
-                max_seconds=args.max_seconds, wait=args.wait, linger=True))
+                max_seconds=args.max_seconds, wait=args.wait, linger=True, goal=goal))
     except PetrobotError as exc:
         print(f"petrobot run: {exc}", file=sys.stderr)
         return 2

@@ -466,3 +466,16 @@ def test_the_reader_thread_turns_end_of_input_into_end(tmp_path: Path):
 
     got = asyncio.run(main())
     assert got == [OperatorCommand(Command.INSERT, "runs", 2), "fly", OperatorCommand(Command.END)]
+
+
+async def test_a_run_that_reaches_its_goal_away_from_home_completes(tmp_path: Path):
+    once = CYCLE.split('[[transition]]\nid = "back"')[0]  # a -> there -> b, and no way back
+    net = loads_net(once)
+    with Journal(tmp_path / "j.sqlite") as journal:
+        away = await asyncio.wait_for(Runtime(net, FakeClient(), journal).run(), TIMEOUT_S)
+        goal = await asyncio.wait_for(Runtime(net, FakeClient(), journal, goal={"b": 1}).run(), TIMEOUT_S)
+        with pytest.raises(Exception, match="does not have: nope"):
+            Runtime(net, FakeClient(), journal, goal={"nope": 1})
+    assert away.end_state == "stuck"  # a runs once: its token is not back in a
+    assert (goal.end_state, goal.exit_code) == ("completed", 0)
+    assert goal.note == "the goal marking is reached (1 place away from home)" and goal.detail == ("a: 0 tokens (home 1)",)
