@@ -305,8 +305,9 @@ class Runtime:
                     verdict = self._at_rest()
                     if isinstance(verdict, _End):
                         return verdict
-                    if verdict.home:
-                        return _End("completed", f"at the home marking when --max-seconds {max_seconds:g} ran out")
+                    if verdict.home:  # waiting only for more runs the operator might start
+                        where = verdict.reason.split(";")[0].removeprefix("completed: ")
+                        return _End("completed", f"{where} when --max-seconds {max_seconds:g} ran out")
                 self._begin_ending("deadline", f"--max-seconds {max_seconds:g} ran out")
                 continue
             if self._inbox:
