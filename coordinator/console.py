@@ -36,7 +36,7 @@ from coordinator.operator import USAGE, Command, OperatorCommand, parse_operator
 from coordinator.runtime import Runtime
 from services.results import Status
 
-__all__ = ["Console", "read_operator_commands", "HELP"]
+__all__ = ["HELP", "CommandSink", "Console", "read_operator_commands"]
 
 HELP = f"operator: {USAGE}   (then Enter; Ctrl-D = end)"
 

@@ -16,7 +16,7 @@ from services.errors import PetrobotError
 if TYPE_CHECKING:
     from coordinator.analysis.simulate import Delay
 
-__all__ = ["add_parser", "report", "run"]
+__all__ = ["add_parser", "render", "report", "run"]
 
 
 def add_parser(subparsers: Any) -> None:

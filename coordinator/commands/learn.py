@@ -37,7 +37,7 @@ from services.results import Status
 if TYPE_CHECKING:
     from coordinator.learning import Learner, LearningAutomaton
 
-__all__ = ["TaskReport", "add_parser", "build_reports", "read_journal", "run"]
+__all__ = ["TaskReport", "add_parser", "build_reports", "plot", "read_journal", "report_json", "report_text", "run"]
 
 _EPS = 1e-12
 

@@ -15,7 +15,7 @@ from coordinator.commands import options
 if TYPE_CHECKING:
     from coordinator.journal import JournalReader, Record, RunRow
 
-__all__ = ["add_parser", "describe", "report", "run"]
+__all__ = ["add_parser", "describe", "find_run", "render", "report", "run"]
 
 
 def add_parser(subparsers: Any) -> None:
