@@ -398,14 +398,37 @@ def _target(cap: int, need: int, unit: int, held: int, max_bytes: int, ceiling: 
 
 #: the one signature :func:`run` is compiled for (read-only matrices, marking and priorities, as a
 #: net holds them; callers pass exactly these types, so a call never goes through numba's slower
-#: type-conversion path and nothing is compiled twice)
+#: type-conversion path and nothing is compiled twice). :func:`load` compiles it, or loads it from
+#: the cache, and then forbids further compilations.
 _RO2 = types.Array(types.int64, 2, "C", readonly=True)
 _RO1 = types.Array(types.int64, 1, "C", readonly=True)
 RUN_SIGNATURE = (_RO2, _RO2, _RO2, types.int64[::1], _RO1, _RO1, types.boolean, types.int64, types.int64,
                  types.int64)
 
 
-@njit(RUN_SIGNATURE, cache=True)
+def cached() -> bool | None:
+    """Load :func:`run` for :data:`RUN_SIGNATURE` from numba's cache if it is there (True), without
+    compiling; False if it is not (the next :func:`load` compiles), None if numba cannot say."""
+    if run.overloads:
+        return True
+    try:
+        result = run._cache.load_overload(RUN_SIGNATURE, run.targetctx)
+    except Exception:  # noqa: BLE001 - numba internals: unknown means "cannot say"
+        return None
+    if result is None:
+        return False
+    run.add_overload(result)
+    return True
+
+
+def load() -> None:
+    """Make :func:`run` ready: loaded from the cache or compiled (and cached) for its signature."""
+    if not run.overloads:
+        run.compile(RUN_SIGNATURE)
+    run.disable_compile()
+
+
+@njit(cache=True)
 def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.ndarray, m0: np.ndarray,
         prio: np.ndarray, use_prio: bool, max_states: int, max_bytes: int,
         report_every: int) -> tuple:  # type: ignore[type-arg]
@@ -452,8 +475,9 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     # buffers; bytes per state: its int32 marking (and the narrowed copy the caller makes), the
     # parent edge, the out-edge pointer (twice: the final copy) and the expanded flag; per edge:
     # int32 target and transition
-    unit_s = 5 * n_p + 25
-    unit_e = 8
+    unit_s = np.int64(5 * n_p + 25)
+    unit_e = np.int64(8)
+    no_ceiling = np.int64(1 << 62)
     cap = min(64, max_states)
     ecap = 4 * cap
     size = 128
@@ -490,7 +514,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     cursor[EXACT] = 1
     parent[0] = -1
     out_ptr[0] = 0
-    _rekey(arcs, width, mult, dkey, states, 1, table, cursor)
+    _rekey(arcs, width, mult, dkey, states, cursor[N], table, cursor)
     status = OVERFLOW
     next_report = report_every if report_every > 0 else 1 << 62  # in expanded markings
     while top <= _INT32_MAX:
@@ -510,7 +534,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
                     held += (new - cap) * unit_s
                     cap = new
             if status == ROOM and e + k > dst.shape[0]:
-                new = _target(dst.shape[0], e + k, unit_e, held, max_bytes, 1 << 62)
+                new = _target(dst.shape[0], e + k, unit_e, held, max_bytes, no_ceiling)
                 if new < 0:
                     status = MEMORY
                 else:

@@ -432,11 +432,16 @@ _RK: Any = None
 
 
 def _kernel() -> Any:
-    """The compiled search module, imported on first use (numba takes ~0.3 s to import)."""
+    """The compiled search module, imported on first use (numba takes ~0.3 s to import) with numba's
+    cache in the user's cache directory (:mod:`.jit`), its search loaded from there or compiled."""
     global _RK
     if _RK is None:
+        from coordinator.analysis import jit
+
+        jit.configure()
         from coordinator.analysis import reach_kernel
 
+        reach_kernel.load()
         _RK = reach_kernel
     return _RK
 
