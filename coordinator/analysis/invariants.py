@@ -170,7 +170,7 @@ def semiflows(matrix: np.ndarray | sp.spmatrix, *, max_rows: int = DEFAULT_MAX_R
     if est.seconds > seconds:
         return (np.zeros((0, n_all), dtype=np.int64), False,
                 f"not started: {m} eliminations over {n} rows of {est.width} entries take about "
-                f"{est.seconds:,.0f} s (budget {seconds:g} s)")
+                f"{est.seconds:,.0f} s (time budget {seconds:g} s)")
     mat = sub.toarray().astype(np.int64)
     table: np.ndarray = np.concatenate([mat, np.eye(n, dtype=np.int64)], axis=1)
     remaining = list(range(m))
