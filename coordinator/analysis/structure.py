@@ -418,9 +418,10 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         net: the (interpreted or plain) net.
         max_states: limit of the reachability graph.
         max_bytes: memory budget of the whole analysis, bytes (default
-            :func:`~coordinator.analysis.statespace.default_max_bytes`): a quarter goes to the
-            reachability graph, up to a quarter (at most 512 MiB) to each invariant enumeration,
-            and the passes over a complete graph run only if their estimated need fits in the rest.
+            :func:`~coordinator.analysis.statespace.default_max_bytes`): half goes to the
+            reachability graph's search, up to a quarter (at most 512 MiB) to each invariant
+            enumeration (before the search, freed after), and the passes over a complete graph
+            (liveness, recovery) run only if their estimated need fits in the budget beside the graph.
         max_coverability_nodes: limit of the Karp–Miller graph (lowered to what the budget holds).
         max_invariant_rows: size guard of the Farkas algorithm.
         invariant_seconds: time budget of each Farkas enumeration.
@@ -459,7 +460,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     by_invariants = bool(pinv.complete and (sbounds >= 0).all())
     structurally_bounded = total is not None or by_invariants
     has_inhibitors = bool(sn.inhibitor.nnz)
-    graph_bytes = budget // 4
+    graph_bytes = budget // 2
 
     space: StateSpace | None = None
     witness: CoveringWitness | None = None
