@@ -171,14 +171,14 @@ class _Parser:
 
     def or_(self) -> Node:
         node = self.and_()
-        while (t := self.take("name", "or")) is not None:
+        while self.take("name", "or") is not None:
             right = self.and_()
             node = Node("or", (self.need(node, "bool", "'or'"), self.need(right, "bool", "'or'")), column=node.column)
         return node
 
     def and_(self) -> Node:
         node = self.not_()
-        while (t := self.take("name", "and")) is not None:
+        while self.take("name", "and") is not None:
             right = self.not_()
             node = Node("and", (self.need(node, "bool", "'and'"), self.need(right, "bool", "'and'")),
                         column=node.column)

@@ -164,13 +164,13 @@ def semiflows(matrix: np.ndarray | sp.spmatrix, *, max_rows: int = DEFAULT_MAX_R
     est = farkas_estimate(sub, max_bytes=max_bytes)
     limit = min(max_rows, est.max_rows)
     if n > limit or est.first_bytes > max_bytes:
-        return (np.zeros((0, n_all), dtype=np.int64), False,
-                f"not started: the table would need about {est.first_bytes / 2**20:,.0f} MiB "
-                f"({n} rows of {est.width} entries; budget {max_bytes / 2**20:,.0f} MiB)")
+        why = (f"not started: the table would need about {est.first_bytes / 2**20:,.0f} MiB "
+               f"({n} rows of {est.width} entries; budget {max_bytes / 2**20:,.0f} MiB)")
+        return np.zeros((0, n_all), dtype=np.int64), False, why
     if est.seconds > seconds:
-        return (np.zeros((0, n_all), dtype=np.int64), False,
-                f"not started: {m} eliminations over {n} rows of {est.width} entries take about "
-                f"{est.seconds:,.0f} s (time budget {seconds:g} s)")
+        why = (f"not started: {m} eliminations over {n} rows of {est.width} entries take about "
+               f"{est.seconds:,.0f} s (time budget {seconds:g} s)")
+        return np.zeros((0, n_all), dtype=np.int64), False, why
     mat = sub.toarray().astype(np.int64)
     table: np.ndarray = np.concatenate([mat, np.eye(n, dtype=np.int64)], axis=1)
     remaining = list(range(m))
@@ -188,18 +188,18 @@ def semiflows(matrix: np.ndarray | sp.spmatrix, *, max_rows: int = DEFAULT_MAX_R
         n_new = pos.size * neg.size
         rows_next = keep.shape[0] + n_new
         if rows_next > 4 * limit or (keep.shape[0] + 2 * n_new) * table.shape[1] * 8 > max_bytes:
-            return (np.zeros((0, n_all), dtype=np.int64), False,
-                    f"stopped: a step would make {rows_next:,} rows (limit {limit:,}, memory budget "
-                    f"{max_bytes / 2**20:,.0f} MiB)")
+            why = (f"stopped: a step would make {rows_next:,} rows (limit {limit:,}, memory budget "
+                   f"{max_bytes / 2**20:,.0f} MiB)")
+            return np.zeros((0, n_all), dtype=np.int64), False, why
         if not n_new:
             table = keep
             continue
         left = seconds - (time.monotonic() - start)
         merge_cost = n_new * (n_new + keep.shape[0]) * n / _PAIRS_PER_SECOND
         if merge_cost > left:
-            return (np.zeros((0, n_all), dtype=np.int64), False,
-                    f"stopped: a step would compare {n_new:,} new rows with {n_new + keep.shape[0]:,} rows, "
-                    f"about {merge_cost:,.0f} s (time budget {seconds:g} s)")
+            why = (f"stopped: a step would compare {n_new:,} new rows with {n_new + keep.shape[0]:,} rows, "
+                   f"about {merge_cost:,.0f} s (time budget {seconds:g} s)")
+            return np.zeros((0, n_all), dtype=np.int64), False, why
         rows_a, rows_b = table[pos], table[neg]
         ka = cj[pos]          # > 0
         kb = -cj[neg]         # > 0
@@ -256,8 +256,10 @@ def _merge(old: np.ndarray, new: np.ndarray, m: int, block: int = 512, deadline:
         drop_new |= _strictly_contains(s_new, size_new, s_old, size_old, block, deadline)
         keep_new = ~drop_new
         drop_old = _strictly_contains(s_old, size_old, s_new[keep_new], size_new[keep_new], block, deadline)
-        return np.concatenate([old[~drop_old], new[keep_new]], axis=0)
-    return new[~drop_new]
+        merged: np.ndarray = np.concatenate([old[~drop_old], new[keep_new]], axis=0)
+        return merged
+    kept: np.ndarray = new[~drop_new]
+    return kept
 
 
 def _strictly_contains(s_a: np.ndarray, size_a: np.ndarray, s_b: np.ndarray, size_b: np.ndarray,
@@ -282,7 +284,9 @@ def _strictly_contains(s_a: np.ndarray, size_a: np.ndarray, s_b: np.ndarray, siz
 def _row_hash(table: np.ndarray) -> np.ndarray:
     mult = np.random.default_rng(12345).integers(1, 2**63, size=table.shape[1], dtype=np.uint64) | np.uint64(1)
     if table.dtype == object:
-        return np.array([hash(tuple(int(x) for x in r)) for r in table], dtype=np.int64).view(np.uint64)
+        hashed = np.array([hash(tuple(int(x) for x in r)) for r in table], dtype=np.int64)
+        viewed: np.ndarray = hashed.view(np.uint64)
+        return viewed
     with np.errstate(over="ignore"):
         out: np.ndarray = (table.astype(np.uint64) * mult).sum(axis=1, dtype=np.uint64)
     return out

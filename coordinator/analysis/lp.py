@@ -30,9 +30,10 @@ proved or reported as resting on floating point (``certified`` False).
 from __future__ import annotations
 
 import time
-from typing import Any
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from math import floor
+from typing import Any
 
 import numpy as np
 import scipy.sparse as sp
@@ -83,7 +84,7 @@ class Support:
 
 
 def _solve(c: np.ndarray, a_ub: sp.spmatrix | None, b_ub: np.ndarray | None, a_eq: sp.spmatrix | None,
-           b_eq: np.ndarray | None, bounds: list[tuple[float | None, float | None]] | tuple[float, None],
+           b_eq: np.ndarray | None, bounds: Sequence[tuple[float | None, float | None]] | tuple[float, None],
            seconds: float) -> Any:
     return linprog(c, A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=b_eq, bounds=bounds, method="highs",
                    options={"time_limit": max(float(seconds), 0.01), "presolve": True})
@@ -228,7 +229,7 @@ def _bound(sn: SparseNet, weights: np.ndarray, seconds: float) -> _Bound:
     res = _solve(obj, -c_mat, m0, None, None, (0.0, None), seconds) if sn.n_transitions else None
     base = float(weights @ m0)
     if res is None:
-        return _Bound(value=int(floor(base + 1e-9)), ok=True, certified=True)
+        return _Bound(value=floor(base + 1e-9), ok=True, certified=True)
     if res.status == 3:
         return _Bound(value=None, ok=True, certified=False)
     if res.status != 0:
@@ -241,7 +242,7 @@ def _bound(sn: SparseNet, weights: np.ndarray, seconds: float) -> _Bound:
         vec, den = y
         num = int(np.dot(vec.astype(object), sn.m0.astype(object)))
         return _Bound(value=num // den, ok=True, certified=True, dual=vec)
-    return _Bound(value=int(floor(value + _TOL * max(1.0, abs(value)))), ok=True, certified=False)
+    return _Bound(value=floor(value + _TOL * max(1.0, abs(value))), ok=True, certified=False)
 
 
 def total_bound(sn: SparseNet, *, seconds: float = LP_SECONDS) -> tuple[int | None, bool, bool]:

@@ -144,7 +144,7 @@ def _bit_length(v: int) -> int:
 
 
 @njit(cache=True)
-def _slot(key: np.uint64, bits: int) -> int:
+def _slot(key: np.uint64, bits: int) -> np.int64:
     return np.int64((key * _GOLDEN) >> np.uint64(64 - bits))
 
 
@@ -162,8 +162,8 @@ def _fill_table(table: np.ndarray, states: np.ndarray, n: int, n_p: int, mult: n
     """(Re)build the hash table, flat (2 * 2**k,) uint64 of (key, index + 1) pairs, from states 0..n-1."""
     size = table.shape[0] // 2
     bits = _bit_length(size) - 1
-    for s in range(table.shape[0]):
-        table[s] = 0
+    for k in range(table.shape[0]):
+        table[k] = 0
     for j in range(n):
         key = _key(states, j, n_p, mult)
         s = _slot(key, bits)
@@ -329,7 +329,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             j = -1
             while table[2 * s + 1] != 0:
                 if table[2 * s] == key:
-                    cand = np.int64(table[2 * s + 1]) - 1
+                    cand = int(table[2 * s + 1]) - 1
                     if exact:
                         j = cand
                         break
@@ -384,16 +384,15 @@ def _grow(a: np.ndarray, size: int, used: int) -> np.ndarray:
 
 
 @njit(cache=True)
-def _target(cap: int, need: int, unit: int, held: int, max_bytes: int, ceiling: int) -> int:
+def _target(cap: int, need: int, unit: int | np.int64, held: int | np.int64, max_bytes: int,
+            ceiling: int | np.int64) -> int:
     """New capacity of a buffer of ``unit`` bytes per entry: the usual growth (×2 up to 2**20
     entries, then ×1.5), cut to what the byte budget leaves while the old buffer is still held,
     and to ``ceiling``; -1 if not even ``need`` entries fit."""
-    want = 2 * cap if cap < (1 << 20) else cap + cap // 2
+    want: int | np.int64 = 2 * cap if cap < (1 << 20) else cap + cap // 2
     want = min(max(want, need), max(ceiling, need))
-    room = (max_bytes - held) // unit
-    if room < want:
-        want = room
-    return want if want >= need else -1
+    want = min(want, (max_bytes - held) // unit)
+    return int(want) if want >= need else -1
 
 
 #: the one signature :func:`run` is compiled for (read-only matrices, marking and priorities, as a
@@ -412,7 +411,7 @@ def cached() -> bool | None:
     if run.overloads:
         return True
     try:
-        result = run._cache.load_overload(RUN_SIGNATURE, run.targetctx)
+        result = run._cache.load_overload(RUN_SIGNATURE, run.targetctx)  # type: ignore[attr-defined]
     except Exception:  # noqa: BLE001 - numba internals: unknown means "cannot say"
         return None
     if result is None:

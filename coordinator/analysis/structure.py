@@ -39,13 +39,13 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
+from coordinator.analysis import lp
 from coordinator.analysis.coverability import (
     Coverability,
     CoveringWitness,
     covering_witness,
     karp_miller,
 )
-from coordinator.analysis import lp
 from coordinator.analysis.invariants import (
     DEFAULT_MAX_BYTES as DEFAULT_INVARIANT_BYTES,
 )
@@ -383,7 +383,7 @@ def _conflicts(net: PetriNet, space: StateSpace | None, *, seconds: float = 10.0
             rows = space.states[lo:lo + block]
             cache: dict[int, np.ndarray] = {}
 
-            def en(t: int) -> np.ndarray:
+            def en(t: int, rows: np.ndarray = rows, cache: dict[int, np.ndarray] = cache) -> np.ndarray:
                 if t not in cache:
                     cache[t] = _enabled_one(sn, rows, t)
                 return cache[t]

@@ -7,6 +7,7 @@ reach 18 GB in a minute (dense |P|×|T| matrices, the Farkas table), and a 500-p
 
 from __future__ import annotations
 
+import argparse
 import importlib.util
 import json
 from pathlib import Path
@@ -93,7 +94,7 @@ def test_memory_sizes_parse_with_units() -> None:
     assert parse_size("4G") == 4 << 30 and parse_size("512M") == 512 << 20 and parse_size("1.5GiB") == 3 << 29
     assert parse_size("2097152") == 2 << 20
     for bad in ("lots", "12X", "100K"):
-        with pytest.raises(Exception):
+        with pytest.raises(argparse.ArgumentTypeError):
             parse_size(bad)
 
 
