@@ -87,17 +87,20 @@ def tables(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray) -> np.
         place indices ascending, values).
     """
     n_p, n_t = pre.shape
-    c0 = 0
-    c1 = 0
-    c2 = 0
+    # entries per transition of each matrix (row-major pass: the matrices are C-ordered)
+    cnt = np.zeros(3 * (n_t + 1), np.int64)
     for p in range(n_p):
         for t in range(n_t):
             if pre[p, t] != 0:
-                c0 += 1
+                cnt[t + 1] += 1
             if inhibitor[p, t] != 0:
-                c1 += 1
+                cnt[n_t + 2 + t] += 1
             if incidence[p, t] != 0:
-                c2 += 1
+                cnt[2 * n_t + 3 + t] += 1
+    for m in range(3):
+        for t in range(n_t):
+            cnt[m * (n_t + 1) + t + 1] += cnt[m * (n_t + 1) + t]
+    c0, c1, c2 = cnt[n_t], cnt[2 * n_t + 1], cnt[3 * n_t + 2]
     out = np.zeros(HEAD + 3 * (n_t + 1) + 2 * (c0 + c1 + c2), np.int64)
     out[0] = HEAD
     out[1] = out[0] + n_t + 1
@@ -109,29 +112,30 @@ def tables(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray) -> np.
     out[7] = out[6] + n_t + 1
     out[8] = out[7] + c2
     out[9] = out[8] + c2
-    k0 = 0
-    k1 = 0
-    k2 = 0
-    for t in range(n_t):
-        for p in range(n_p):
+    for m in range(3):
+        for t in range(n_t + 1):
+            out[out[3 * m] + t] = cnt[m * (n_t + 1) + t]
+    # fill, places ascending within a transition; cnt[m, t] becomes transition t's next free slot
+    for p in range(n_p):
+        for t in range(n_t):
             w = pre[p, t]
             if w != 0:
-                out[out[1] + k0] = p
-                out[out[2] + k0] = w
-                k0 += 1
+                k = cnt[t]
+                out[out[1] + k] = p
+                out[out[2] + k] = w
+                cnt[t] = k + 1
             w = inhibitor[p, t]
             if w != 0:
-                out[out[4] + k1] = p
-                out[out[5] + k1] = w
-                k1 += 1
+                k = cnt[n_t + 1 + t]
+                out[out[4] + k] = p
+                out[out[5] + k] = w
+                cnt[n_t + 1 + t] = k + 1
             w = incidence[p, t]
             if w != 0:
-                out[out[7] + k2] = p
-                out[out[8] + k2] = w
-                k2 += 1
-        out[out[0] + t + 1] = k0
-        out[out[3] + t + 1] = k1
-        out[out[6] + t + 1] = k2
+                k = cnt[2 * n_t + 2 + t]
+                out[out[7] + k] = p
+                out[out[8] + k] = w
+                cnt[2 * n_t + 2 + t] = k + 1
     return out
 
 
@@ -459,14 +463,27 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     n_t = arcs[1] - arcs[0] - 1
     in_ptr, in_p = arcs[arcs[0]:arcs[1]], arcs[arcs[1]:arcs[2]]
     # transitions by trigger place (their first input place; slot n_p: no input place)
-    trig_ptr = np.zeros(n_p + 2, np.int64)
-    trig_t = np.empty(max(n_t, 1), np.int64)
+    # one scratch allocation: the cursor, per place a key width, multiplier and successor count,
+    # per transition a key delta and an enabled slot, the trigger lists and their fill cursor
+    scratch = np.zeros(CURSOR_SIZE + 3 * n_p + 2 * n_t + 2 * (n_p + 2) + n_t, np.int64)
+    cursor = scratch[:CURSOR_SIZE]
+    width = scratch[CURSOR_SIZE:CURSOR_SIZE + n_p]
+    mult = scratch[CURSOR_SIZE + n_p:CURSOR_SIZE + 2 * n_p].view(np.uint64)
+    succ = scratch[CURSOR_SIZE + 2 * n_p:CURSOR_SIZE + 3 * n_p]
+    base = CURSOR_SIZE + 3 * n_p
+    dkey = scratch[base:base + n_t].view(np.uint64)
+    enabled = scratch[base + n_t:base + 2 * n_t]
+    base += 2 * n_t
+    trig_ptr = scratch[base:base + n_p + 2]
+    slot = scratch[base + n_p + 2:base + 2 * (n_p + 2)]
+    trig_t = scratch[base + 2 * (n_p + 2):base + 2 * (n_p + 2) + n_t]
     for t in range(n_t):
         first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
         trig_ptr[first + 1] += 1
     for p in range(n_p + 1):
         trig_ptr[p + 1] += trig_ptr[p]
-    slot = trig_ptr.copy()
+    for p in range(n_p + 2):
+        slot[p] = trig_ptr[p]
     for t in range(n_t):
         first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
         trig_t[slot[first]] = t
@@ -477,9 +494,13 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     unit_s = np.int64(5 * n_p + 25)
     unit_e = np.int64(8)
     no_ceiling = np.int64(1 << 62)
-    cap = min(64, max_states)
+    # first capacity: room for a few levels of a small net without growing, within 1/8 of the budget
+    # and 16 MiB (a wide net's markings are large)
+    cap = max(1, min(max(256, 2 * n_t), max_states, min(max_bytes // 8, 1 << 24) // unit_s))
     ecap = 4 * cap
     size = 128
+    while size < 2 * cap:
+        size *= 2
     states = np.empty(cap * n_p, np.int32)
     parent = np.empty(cap, np.int64)
     out_ptr = np.empty(cap + 1, np.int64)
@@ -487,12 +508,6 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     dst = np.empty(ecap, np.int32)
     tr = np.empty(ecap, np.int32)
     trunc = np.empty(16, np.int64)
-    cursor = np.zeros(CURSOR_SIZE, np.int64)
-    width = np.empty(n_p, np.int64)
-    mult = np.empty(n_p, np.uint64)
-    succ = np.empty(n_p, np.int64)
-    dkey = np.empty(n_t, np.uint64)
-    enabled = np.empty(max(n_t, 1), np.int64)
     held = cap * unit_s + ecap * unit_e + 16 * size
     # state 0 = M0; key widths: the 64 bits shared out evenly (spare bits save repacking), at
     # least what M0 needs; exact packing if they fit

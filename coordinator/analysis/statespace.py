@@ -16,6 +16,8 @@ structural analyses.
 
 from __future__ import annotations
 
+import functools
+import os
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -337,12 +339,11 @@ def arc_table(net: PetriNet) -> np.ndarray:
     return np.concatenate([head, *parts])
 
 
+@functools.cache
 def default_max_bytes() -> int:
     """The default byte budget of one analysis: half the physical memory or 4 GiB, whichever is
-    smaller (4 GiB when the physical memory cannot be read)."""
+    smaller (4 GiB when the physical memory cannot be read). Read once per process."""
     try:
-        import os
-
         total = int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
     except (ValueError, OSError, AttributeError):
         return 4 << 30
@@ -383,7 +384,7 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     if max_states < 1:
         raise AnalysisError(f"max_states must be >= 1, got {max_states}")
     max_states = min(int(max_states), 2**31 - 1)
-    budget = default_max_bytes() if max_bytes is None else int(max_bytes)
+    budget = _DEFAULT_BYTES if max_bytes is None else int(max_bytes)
     n_t = len(net.transitions)
     use_prio = priority is not None
     prio = _NO_PRIORITY
@@ -423,6 +424,7 @@ def load_search() -> float:
     return time.perf_counter() - start
 
 
+_DEFAULT_BYTES = default_max_bytes()
 _NO_PRIORITY = np.zeros(0, np.int64)  # not read when use_prio is False
 _NO_PRIORITY.flags.writeable = False
 _NO_TABLE = np.zeros(0, np.int64)  # run builds the arc lists from the dense matrices
