@@ -462,7 +462,6 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     n_p = m0.shape[0]
     n_t = arcs[1] - arcs[0] - 1
     in_ptr, in_p = arcs[arcs[0]:arcs[1]], arcs[arcs[1]:arcs[2]]
-    # transitions by trigger place (their first input place; slot n_p: no input place)
     # one scratch allocation: the cursor, per place a key width, multiplier and successor count,
     # per transition a key delta and an enabled slot, the trigger lists and their fill cursor
     scratch = np.zeros(CURSOR_SIZE + 3 * n_p + 2 * n_t + 2 * (n_p + 2) + n_t, np.int64)
@@ -477,6 +476,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     trig_ptr = scratch[base:base + n_p + 2]
     slot = scratch[base + n_p + 2:base + 2 * (n_p + 2)]
     trig_t = scratch[base + 2 * (n_p + 2):base + 2 * (n_p + 2) + n_t]
+    # transitions by trigger place (their first input place; slot n_p: no input place)
     for t in range(n_t):
         first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
         trig_ptr[first + 1] += 1
