@@ -15,9 +15,20 @@ against best wall clock) and speedup_cpu. pm4py runs with its own time limit (``
 when it hits the cap, its rate is measured on the part of the graph it built (``pm4py_complete``
 false, ``pm4py_seconds`` null) and the outer process is killed 120 s later.
 
+A model is a PNML path, or ``kanban:N``: the Kanban net of Ciardo and Tilgner with N tokens per
+stage, built from the structure of the contest's Kanban-PT-00005 (found through
+``tests/unit/mcc_models.py``, or ``--mcc DIR``) with its initial marking scaled to N — Kanban-7 has
+41,644,800 markings. ``--max-memory`` is the explorer's byte budget (default 16 GiB): a search that
+reaches it stops and says so (``stopped_by``).
+
+``--structural`` adds, per model, the structural path that needs no state space: the two semiflow
+LPs (conservative, consistent) and the state-equation place bounds (:mod:`coordinator.analysis.lp`),
+with their times and whether they decide boundedness (``structural_bounded``, ``structural_max_bound``).
+
 Usage::
 
-    python bench/statespace.py [--json] [--pm4py-timeout S] [--repeat-budget S] [--no-pm4py] PNML...
+    python bench/statespace.py [--json] [--pm4py-timeout S] [--repeat-budget S] [--no-pm4py]
+                               [--max-memory GIB] [--structural] [--mcc DIR] MODEL...
 """
 
 from __future__ import annotations
@@ -65,11 +76,67 @@ def _best_of(build: Callable[[], Any], run: Callable[[Any], Any], budget: float)
     return result, first, best, best_cpu, runs
 
 
-def child_ours(path: str, max_states: int, budget: float) -> dict[str, Any]:
+def mcc_dir(given: str | None) -> Path:
+    """The MCC models: ``--mcc DIR``, else where the tests find them (tests/unit/mcc_models.py)."""
+    if given:
+        return Path(given)
+    sys.path.insert(0, str(ROOT))
+    from tests.unit.mcc_models import MCC
+
+    return Path(MCC)
+
+
+def load_model(spec: str, mcc: str | None) -> Any:
+    """A PNML path, or ``kanban:N`` (Kanban-PT-00005's structure with N tokens per stage)."""
+    sys.path.insert(0, str(ROOT))
+    from coordinator.net import PetriNet
+    from coordinator.netfile.pnml import load_pnml
+
+    if spec.startswith("kanban:"):
+        n = int(spec.split(":", 1)[1])
+        base = load_pnml(mcc_dir(mcc) / "Kanban-PT-00005" / "model.pnml")
+        return PetriNet(name=f"Kanban-{n}", places=base.places, transitions=base.transitions, arcs=base.arcs,
+                        initial_marking={p: n for p in base.initial_marking})
+    return load_pnml(spec)
+
+
+def model_name(spec: str) -> str:
+    if spec.startswith("kanban:"):
+        return f"Kanban-{spec.split(':', 1)[1]} (generated)"
+    return Path(spec).parent.name if Path(spec).name == "model.pnml" else Path(spec).stem
+
+
+def child_structural(spec: str, mcc: str | None) -> dict[str, Any]:
+    """The LP path: semiflow supports and state-equation bounds, timed, on a fresh net."""
+    sys.path.insert(0, str(ROOT))
+    from coordinator.analysis import lp
+    from coordinator.analysis.matrices import sparse_net
+
+    net = load_model(spec, mcc)
+    start = time.perf_counter()
+    sn = sparse_net(net)
+    t_sparse = time.perf_counter() - start
+    start = time.perf_counter()
+    p_sup, t_sup = lp.conservative(sn), lp.consistent(sn)
+    t_semiflows = time.perf_counter() - start
+    start = time.perf_counter()
+    pb = lp.place_bounds(sn, seconds=60.0)
+    t_bounds = time.perf_counter() - start
+    known = pb.bounds[pb.bounds >= 0]
+    return {"structural_sparse_seconds": t_sparse, "structural_semiflow_seconds": t_semiflows,
+            "structural_bounds_seconds": t_bounds, "conservative": p_sup.all_covered,
+            "consistent": t_sup.all_covered, "semiflows_certified": p_sup.certified and t_sup.certified,
+            "structural_bounded": bool(pb.total is not None or (pb.bounds >= 0).all()),
+            "structural_total_bound": pb.total, "structural_max_bound": int(known.max()) if known.size else None,
+            "structural_bounds_certified": bool(pb.certified[pb.bounds >= 0].all()),
+            "structural_peak_rss_bytes": _peak_rss()}
+
+
+def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None = None,
+               mcc: str | None = None) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
     from coordinator.analysis.statespace import explore, load_search
     from coordinator.net import PetriNet
-    from coordinator.netfile.pnml import load_pnml
 
     # numba's import and the compiled search's load from its cache, once per process: reported on
     # their own (load_seconds), outside the runs and below the RSS baseline of bytes_per_marking
@@ -80,7 +147,7 @@ def child_ours(path: str, max_states: int, budget: float) -> dict[str, Any]:
     def build() -> PetriNet:
         # the net's own cached matrices are part of the net model, as pm4py's arc objects are of
         # its net: built here untimed, their cost reported as net_matrices_seconds
-        net = load_pnml(path)
+        net = load_model(path, mcc)
         start = time.perf_counter()
         for view in (net.pre, net.post, net.inhibitor, net.incidence):
             assert view.shape == (len(net.places), len(net.transitions))
@@ -88,16 +155,18 @@ def child_ours(path: str, max_states: int, budget: float) -> dict[str, Any]:
         return net
 
     before = _rss_now()
-    space, first, wall, cpu, runs = _best_of(build, lambda net: explore(net, max_states=max_states), budget)
+    space, first, wall, cpu, runs = _best_of(
+        build, lambda net: explore(net, max_states=max_states, max_bytes=max_bytes), budget)
     peak = _peak_rss()
-    return {"states": space.n_states, "edges": space.n_edges, "complete": space.complete, "seconds": wall,
+    return {"states": space.n_states, "edges": space.n_edges, "complete": space.complete,
+            "stopped_by": space.stopped_by, "graph_bytes": space.nbytes, "seconds": wall,
             "cpu_seconds": cpu, "first_seconds": first, "runs": runs, "load_seconds": load,
             "net_matrices_seconds": min(matrices),
             "peak_rss_bytes": peak,
             "rss_before_bytes": before, "bytes_per_marking": (peak - before) / max(space.n_states, 1)}
 
 
-def child_pm4py(path: str, cap: float, budget: float) -> dict[str, Any]:
+def child_pm4py(path: str, cap: float, budget: float, mcc: str | None = None) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
     from pm4py.objects.petri_net.obj import Marking as PMarking
     from pm4py.objects.petri_net.obj import PetriNet as PNet
@@ -107,10 +176,8 @@ def child_pm4py(path: str, cap: float, budget: float) -> dict[str, Any]:
         construct_reachability_graph,
     )
 
-    from coordinator.netfile.pnml import load_pnml
-
     def build() -> tuple[Any, Any]:
-        net = load_pnml(path)
+        net = load_model(path, mcc)
         pnet = PNet(net.name)
         places = {p.id: PNet.Place(p.id) for p in net.places}
         trans = {t.id: PNet.Transition(t.id, t.id) for t in net.transitions}
@@ -138,9 +205,9 @@ def child_pm4py(path: str, cap: float, budget: float) -> dict[str, Any]:
 
 
 def run_child(kind: str, path: str, timeout: float, max_states: int, budget: float,
-              cap: float = 60.0) -> dict[str, Any] | None:
+              cap: float = 60.0, extra: list[str] | None = None) -> dict[str, Any] | None:
     cmd = [sys.executable, __file__, "--child", kind, "--max-states", str(max_states), "--pm4py-timeout", str(cap),
-           "--repeat-budget", str(budget), path]
+           "--repeat-budget", str(budget), *(extra or []), path]
     try:
         out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, check=True)
     except subprocess.TimeoutExpired:
@@ -150,14 +217,18 @@ def run_child(kind: str, path: str, timeout: float, max_states: int, budget: flo
     return dict(json.loads(out.stdout.strip().splitlines()[-1]))
 
 
-def bench(path: str, cap: float, with_pm4py: bool, max_states: int, budget: float) -> dict[str, Any]:
-    ours = run_child("ours", path, 3600.0, max_states, budget)
+def bench(path: str, cap: float, with_pm4py: bool, max_states: int, budget: float,
+          extra: list[str] | None = None, structural: bool = False) -> dict[str, Any]:
+    ours = run_child("ours", path, 3600.0, max_states, budget, extra=extra)
     assert ours is not None
-    row: dict[str, Any] = {"model": Path(path).parent.name if Path(path).name == "model.pnml" else Path(path).stem}
+    row: dict[str, Any] = {"model": model_name(path)}
     row.update(ours)
     row["markings_per_s"] = ours["states"] / max(ours["seconds"], 1e-9)
+    if structural:
+        found = run_child("structural", path, 600.0, max_states, budget, extra=extra)
+        row.update(found or {"structural_seconds": None})
     if with_pm4py:
-        base = run_child("pm4py", path, cap + budget + 120.0, max_states, budget, cap)
+        base = run_child("pm4py", path, cap + budget + 120.0, max_states, budget, cap, extra=extra)
         row["pm4py_timeout_s"] = cap
         if base is None:
             row["pm4py_seconds"] = None
@@ -181,27 +252,39 @@ def bench(path: str, cap: float, with_pm4py: bool, max_states: int, budget: floa
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("models", nargs="+", metavar="PNML", help="PNML model files")
+    parser.add_argument("models", nargs="+", metavar="MODEL",
+                        help="PNML model files, or kanban:N (Kanban-PT-00005's structure with N tokens per stage)")
     parser.add_argument("--json", action="store_true", help="print one JSON document instead of a table")
     parser.add_argument("--pm4py-timeout", type=float, default=60.0, metavar="S",
                         help="time cap of the pm4py baseline per model, seconds (default 60)")
     parser.add_argument("--no-pm4py", action="store_true", help="skip the pm4py baseline")
-    parser.add_argument("--max-states", type=int, default=10_000_000, help="state limit of our explorer")
+    parser.add_argument("--max-states", type=int, default=2**31 - 1,
+                        help="state limit of our explorer (default 2**31 - 1: the byte budget decides)")
     parser.add_argument("--repeat-budget", type=float, default=1.0, metavar="S",
                         help="repeat each side (a fresh net each time) while its runs took under S seconds in total "
                              "and report the best run (default 1; 0 = one cold run)")
-    parser.add_argument("--child", choices=["ours", "pm4py"], help=argparse.SUPPRESS)
+    parser.add_argument("--max-memory", type=float, default=16.0, metavar="GIB",
+                        help="byte budget of our explorer in GiB (default 16); the search stops there and says so")
+    parser.add_argument("--structural", action="store_true",
+                        help="also time the structural path: semiflow LPs and state-equation place bounds")
+    parser.add_argument("--mcc", metavar="DIR", help="folder of the MCC models (default: where the tests find them)")
+    parser.add_argument("--child", choices=["ours", "pm4py", "structural"], help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
+    extra = ["--max-memory", str(args.max_memory)] + (["--mcc", args.mcc] if args.mcc else [])
     if args.child:
         if args.child == "ours":
-            result = child_ours(args.models[0], args.max_states, args.repeat_budget)
+            result = child_ours(args.models[0], args.max_states, args.repeat_budget,
+                                int(args.max_memory * 2**30), args.mcc)
+        elif args.child == "structural":
+            result = child_structural(args.models[0], args.mcc)
         else:
-            result = child_pm4py(args.models[0], args.pm4py_timeout, args.repeat_budget)
+            result = child_pm4py(args.models[0], args.pm4py_timeout, args.repeat_budget, args.mcc)
         print(json.dumps(result))
         return 0
     rows = []
     for path in args.models:
-        row = bench(path, args.pm4py_timeout, not args.no_pm4py, args.max_states, args.repeat_budget)
+        row = bench(path, args.pm4py_timeout, not args.no_pm4py, args.max_states, args.repeat_budget, extra,
+                    args.structural)
         rows.append(row)
         if not args.json:
             _print_row(row)
@@ -217,7 +300,13 @@ def _print_row(row: dict[str, Any]) -> None:
         done = "" if row["pm4py_complete"] else f" (capped: {row['pm4py_states']:,} markings)"
         base = (f"  pm4py {row['pm4py_elapsed_s'] * 1e3:,.2f} ms{done} ({row['pm4py_markings_per_s']:,.0f}/s)"
                 f"  speedup {row['speedup']:,.0f}x (cpu {row['speedup_cpu']:,.0f}x)")
-    print(f"{row['model']:<26} {row['states']:>10,} states {row['edges']:>11,} edges "
+    if "structural_semiflow_seconds" in row:
+        base += (f"  structural: LPs {row['structural_semiflow_seconds'] * 1e3:,.1f} ms + bounds "
+                 f"{row['structural_bounds_seconds'] * 1e3:,.1f} ms, bounded={row['structural_bounded']} "
+                 f"(max bound {row['structural_max_bound']}), conservative={row['conservative']}, "
+                 f"consistent={row['consistent']}")
+    stop = "" if row["complete"] else f" [stopped by {row['stopped_by']}]"
+    print(f"{row['model']:<26} {row['states']:>10,} states{stop} {row['edges']:>11,} edges "
           f"{row['seconds'] * 1e3:>10,.2f} ms (best of {row['runs']}; cold {row['first_seconds'] * 1e3:,.2f} ms; "
           f"search load {row['load_seconds']:.2f} s) "
           f"{row['markings_per_s']:>10,.0f}/s peak {row['peak_rss_bytes'] / 2**20:>6.0f} MiB "

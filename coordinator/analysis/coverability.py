@@ -16,11 +16,13 @@ difference to be zero on every place read by an inhibitor arc, which makes the r
 from __future__ import annotations
 
 import math
+import time
 from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 
+from coordinator.analysis.matrices import sparse_net
 from coordinator.analysis.statespace import StateSpace
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet
@@ -43,7 +45,8 @@ class Coverability:
         transition: transition index per edge, shape (F,), int32.
         parent: tree parent node per node, shape (K,), int64, -1 for the root.
         parent_transition: transition index fired from the parent, shape (K,), int32, -1 for the root.
-        complete: False if ``max_nodes`` stopped the construction.
+        complete: False if ``max_nodes`` or the time budget stopped the construction.
+        stopped: why an incomplete construction stopped (a phrase for reports), "" when complete.
     """
 
     net: PetriNet
@@ -54,6 +57,7 @@ class Coverability:
     parent: np.ndarray
     parent_transition: np.ndarray
     complete: bool
+    stopped: str = ""
 
     @property
     def bounded(self) -> bool:
@@ -95,12 +99,13 @@ class Coverability:
         return out
 
 
-def karp_miller(net: PetriNet, *, max_nodes: int = 200_000) -> Coverability:
+def karp_miller(net: PetriNet, *, max_nodes: int = 200_000, seconds: float = 60.0) -> Coverability:
     """Build the Karp–Miller coverability graph of ``net``.
 
     Args:
         net: a net without inhibitor arcs.
         max_nodes: stop after this many nodes (``complete`` is then False).
+        seconds: stop after this much wall-clock time (``complete`` is then False).
 
     Returns:
         The :class:`Coverability` graph.
@@ -108,15 +113,19 @@ def karp_miller(net: PetriNet, *, max_nodes: int = 200_000) -> Coverability:
     Raises:
         AnalysisError: if the net has inhibitor arcs (Karp–Miller is unsound for them).
     """
-    if np.any(net.inhibitor):
+    sn = sparse_net(net)
+    if sn.inhibitor.nnz:
         raise AnalysisError("Karp–Miller coverability is unsound for nets with inhibitor arcs")
-    pre = np.asarray(net.pre, dtype=np.int64)
-    inc = np.asarray(net.incidence, dtype=np.int64)
-    n_t = pre.shape[1]
-    inputs = [[(int(p), int(pre[p, t])) for p in np.flatnonzero(pre[:, t])] for t in range(n_t)]
-    changes = [[(int(p), int(inc[p, t])) for p in np.flatnonzero(inc[:, t])] for t in range(n_t)]
+    n_t = sn.n_transitions
+    pre, inc = sn.pre, sn.incidence
+    inputs = [list(zip(pre.indices[pre.indptr[t]:pre.indptr[t + 1]].tolist(),
+                       pre.data[pre.indptr[t]:pre.indptr[t + 1]].tolist())) for t in range(n_t)]
+    changes = [list(zip(inc.indices[inc.indptr[t]:inc.indptr[t + 1]].tolist(),
+                        inc.data[inc.indptr[t]:inc.indptr[t + 1]].tolist())) for t in range(n_t)]
     inf = math.inf
-    root = tuple(float(v) for v in net.initial_vector)
+    deadline = time.monotonic() + seconds
+    stopped = ""
+    root = tuple(float(v) for v in sn.m0)
     nodes: list[tuple[float, ...]] = [root]
     index: dict[tuple[float, ...], int] = {root: 0}
     parent = [-1]
@@ -127,6 +136,10 @@ def karp_miller(net: PetriNet, *, max_nodes: int = 200_000) -> Coverability:
     todo = deque([0])
     complete = True
     while todo:
+        if len(nodes) & 255 == 0 and time.monotonic() > deadline:
+            complete = False
+            stopped = f"ran out of time ({seconds:g} s, {len(nodes):,} nodes)"
+            break
         i = todo.popleft()
         m = nodes[i]
         for t in range(n_t):
@@ -150,6 +163,7 @@ def karp_miller(net: PetriNet, *, max_nodes: int = 200_000) -> Coverability:
             if j is None:
                 if len(nodes) >= max_nodes:
                     complete = False
+                    stopped = f"outgrew its limit of {max_nodes:,} nodes"
                     todo.clear()
                     break
                 j = len(nodes)
@@ -166,7 +180,7 @@ def karp_miller(net: PetriNet, *, max_nodes: int = 200_000) -> Coverability:
     return Coverability(
         net=net, markings=markings, src=np.array(src, dtype=np.int64), dst=np.array(dst, dtype=np.int64),
         transition=np.array(trs, dtype=np.int32), parent=np.array(parent, dtype=np.int64),
-        parent_transition=np.array(ptrans, dtype=np.int32), complete=complete,
+        parent_transition=np.array(ptrans, dtype=np.int32), complete=complete, stopped=stopped,
     )
 
 
@@ -185,44 +199,49 @@ class CoveringWitness:
     growing: list[str]
 
 
-def covering_witness(space: StateSpace, *, max_work: int = 200_000_000) -> CoveringWitness | None:
+def covering_witness(space: StateSpace, *, max_work: int = 200_000_000, block_bytes: int = 1 << 26) -> CoveringWitness | None:
     """Look for a state that strictly covers one of its ancestors on the breadth-first tree.
 
     Vectorised: all states are compared with their k-th tree ancestor for k = 1, 2, ... until no
-    state has one or ``max_work`` element comparisons are spent. Sound on every net: a pair counts
-    only if the difference is zero on the places read by inhibitor arcs. Not complete: None means
-    "no witness found", not "bounded".
+    state has one or ``max_work`` element comparisons are spent; states are taken in blocks whose
+    int64 differences stay below ``block_bytes``, so a wide net never needs an (N, |P|) copy. Sound
+    on every net: a pair counts only if the difference is zero on the places read by inhibitor arcs.
+    Not complete: None means "no witness found", not "bounded".
 
     Args:
         space: a (possibly truncated) state space with its ``parent_edge`` tree.
         max_work: budget of element comparisons (states × |P| per ancestor level).
+        block_bytes: size limit of the temporaries.
 
     Returns:
         A :class:`CoveringWitness`, or ``None``.
     """
-    states = space.states.astype(np.int64)
+    states = space.states
     n, n_p = states.shape
     if n < 2 or space.parent_edge.shape[0] != n:
         return None
-    par = np.where(space.parent_edge >= 0, space.src[np.maximum(space.parent_edge, 0)], -1)
-    inhibited = np.flatnonzero(np.asarray(space.net.inhibitor).any(axis=1))
+    par = np.where(space.parent_edge >= 0, space.src[np.maximum(space.parent_edge, 0)], -1).astype(np.int64)
+    inhibited = np.flatnonzero(sparse_net(space.net).inhibitor.getnnz(axis=1) > 0)
     anc = par.copy()
     alive = np.flatnonzero(anc >= 0)
     work = 0
+    step = max(1, block_bytes // max(8 * n_p, 1))
     while alive.size and work < max_work:
-        a = anc[alive]
-        diff = states[alive] - states[a]
-        ok = (diff >= 0).all(axis=1) & (diff > 0).any(axis=1)
-        if inhibited.size:
-            ok &= (diff[:, inhibited] == 0).all(axis=1)
-        hit = np.flatnonzero(ok)
-        if hit.size:
-            i, j = int(alive[hit[0]]), int(a[hit[0]])
-            full_i = space.firing_sequence(i)
-            full_j = space.firing_sequence(j)
-            grow = [space.net.places[int(p)].id for p in np.flatnonzero(diff[hit[0]] > 0)]
-            return CoveringWitness(prefix=full_j, loop=full_i[len(full_j):], growing=grow)
+        for lo in range(0, alive.size, step):
+            part = alive[lo:lo + step]
+            a = anc[part]
+            diff = states[part].astype(np.int64) - states[a].astype(np.int64)
+            ok = (diff >= 0).all(axis=1) & (diff > 0).any(axis=1)
+            if inhibited.size:
+                ok &= (diff[:, inhibited] == 0).all(axis=1)
+            hit = np.flatnonzero(ok)
+            if hit.size:
+                i, j = int(part[hit[0]]), int(a[hit[0]])
+                full_i = space.firing_sequence(i)
+                full_j = space.firing_sequence(j)
+                grow = [space.net.places[int(p)].id for p in np.flatnonzero(diff[hit[0]] > 0)]
+                return CoveringWitness(prefix=full_j, loop=full_i[len(full_j):], growing=grow)
         work += alive.size * n_p
-        anc[alive] = par[a]
+        anc[alive] = par[anc[alive]]
         alive = alive[anc[alive] >= 0]
     return None

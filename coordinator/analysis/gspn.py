@@ -24,6 +24,9 @@ G. Franceschinis, *Modelling with Generalized Stochastic Petri Nets*, Wiley, 199
 
 from __future__ import annotations
 
+import difflib
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,11 +36,13 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from coordinator.analysis import ctmc
+from coordinator.analysis.expr import Compiled, ExprError, compile_expr
 from coordinator.analysis.gspn_graph import GSPNGraph, explore_gspn
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet, TransitionKind
 
-__all__ = ["GSPNResult", "TangibleChain", "analyse", "enabling_degree", "tangible_chain"]
+__all__ = ["GSPNResult", "Measure", "TangibleChain", "analyse", "compile_measure", "enabling_degree",
+           "parse_measure", "tangible_chain"]
 
 
 def enabling_degree(net: PetriNet, states: np.ndarray, transitions: np.ndarray) -> np.ndarray:
@@ -251,6 +256,14 @@ class GSPNResult:
             dead marking ``{"marking": {...}, "probability": p}``.
         expected_firings: expected number of firings of each transition before absorption.
         time_enabled: expected time each exponential transition is enabled before absorption.
+        ctmc: size of the tangible CTMC: ``{"tangible_states": n, "arcs": off-diagonal non-zeros of Q}``.
+        measures: one entry per requested reward measure (:func:`parse_measure`): ``measure`` (as
+            given), ``kind`` (P, E or X), ``value`` (long run), and for chains that reach a closed
+            class from transient states ``until_absorption`` (expected time the condition holds, the
+            expected time-integral of the expression, or the expected number of firings, before
+            absorption).
+        marking_probabilities: when requested, every tangible marking with its long-run probability,
+            most probable first: ``{"marking": {...}, "probability": p}``; else None.
     """
 
     tangible_markings: int
@@ -268,10 +281,78 @@ class GSPNResult:
     absorption: list[dict[str, Any]] = field(default_factory=list)
     expected_firings: dict[str, float] = field(default_factory=dict)
     time_enabled: dict[str, float] = field(default_factory=dict)
+    ctmc: dict[str, int] = field(default_factory=dict)
+    measures: list[dict[str, Any]] = field(default_factory=list)
+    marking_probabilities: list[dict[str, Any]] | None = None
 
     def to_json(self) -> dict[str, Any]:
-        """Return a JSON-ready dict of every field."""
-        return {k: getattr(self, k) for k in self.__dataclass_fields__}
+        """Return a JSON-ready dict of every field (``marking_probabilities`` only when computed)."""
+        out = {k: getattr(self, k) for k in self.__dataclass_fields__}
+        if out["marking_probabilities"] is None:
+            del out["marking_probabilities"]
+        return out
+
+
+_MEASURE = re.compile(r"\s*([PEX])\s*\{(.*)\}\s*$", re.DOTALL)
+
+
+@dataclass(frozen=True)
+class Measure:
+    """A reward measure of a GSPN, as written on the command line.
+
+    Attributes:
+        text: the measure as given, e.g. ``P{#p1 == 1 and #p3 == 1}``.
+        kind: ``P`` (probability of a condition), ``E`` (expected value of an expression) or ``X``
+            (throughput of a transition).
+        body: the expression, or the transition id for ``X``.
+        offset: 0-based position of ``body`` in ``text`` (to report columns in the whole text).
+    """
+
+    text: str
+    kind: str
+    body: str
+    offset: int
+
+
+def parse_measure(text: str) -> Measure:
+    """Split ``P{cond}``, ``E{expr}`` or ``X{transition}`` (definitions in docs/gspn.md).
+
+    Raises:
+        ExprError: when the text is none of the three forms (column of the problem).
+    """
+    m = _MEASURE.match(text)
+    if m is None:
+        lead = len(text) - len(text.lstrip())
+        if lead < len(text) and text[lead] not in "PEX":
+            raise ExprError("a measure starts with P{...} (probability), E{...} (expected value) or X{...} "
+                            "(throughput)", lead + 1, text)
+        raise ExprError("a measure is P{condition}, E{expression} or X{transition}: braces missing", lead + 2,
+                        text)
+    return Measure(text=text, kind=m.group(1), body=m.group(2), offset=m.start(2))
+
+
+def compile_measure(measure: Measure | str, net: PetriNet) -> tuple[Measure, Compiled | int]:
+    """Bind a measure to a net: the compiled condition or expression (over the places' columns), or
+    the transition's index for ``X``.
+
+    Raises:
+        ExprError: syntax, type or name errors, with the column in the whole measure text.
+    """
+    meas = parse_measure(measure) if isinstance(measure, str) else measure
+    if meas.kind == "X":
+        tid = meas.body.strip()
+        if tid not in net.transition_index:
+            close = difflib.get_close_matches(tid, list(net.transition_index), n=1)
+            hint = f"; did you mean {close[0]}?" if close else ""
+            col = meas.offset + len(meas.body) - len(meas.body.lstrip()) + 1
+            raise ExprError(f"unknown transition {tid!r}{hint}", col, meas.text)
+        return meas, net.transition_index[tid]
+    try:
+        compiled = compile_expr(meas.body, [p.id for p in net.places], kind="bool" if meas.kind == "P" else "num")
+    except ExprError as exc:
+        raise ExprError(exc.message + (" (P{...} takes a condition)" if meas.kind == "P" and "expected" in exc.message
+                                       else ""), exc.column + meas.offset, meas.text) from None
+    return meas, compiled
 
 
 def _per_transition(chain: TangibleChain, weight_t: np.ndarray, weight_v: np.ndarray) -> np.ndarray:
@@ -283,7 +364,8 @@ def _per_transition(chain: TangibleChain, weight_t: np.ndarray, weight_v: np.nda
 
 
 def analyse(net: PetriNet, *, chain: TangibleChain | None = None, method: str = "auto",
-            max_states: int = 5_000_000) -> GSPNResult:
+            max_states: int = 5_000_000, measures: Sequence[str | Measure] = (),
+            markings: bool = False) -> GSPNResult:
     """Solve a GSPN and compute its measures.
 
     Bottleneck ranking: for a net that runs forever, exponential transitions with finitely many
@@ -298,13 +380,18 @@ def analyse(net: PetriNet, *, chain: TangibleChain | None = None, method: str = 
         chain: a prebuilt :class:`TangibleChain` (built if omitted).
         method: steady-state method (see :func:`coordinator.analysis.ctmc.steady_state`).
         max_states: limit on reachable markings.
+        measures: reward measures ``P{cond}``, ``E{expr}``, ``X{transition}`` (:func:`parse_measure`),
+            compiled before anything is solved.
+        markings: also list every tangible marking with its long-run probability.
 
     Returns:
         :class:`GSPNResult`.
 
     Raises:
         AnalysisError: see :func:`tangible_chain` and :func:`ctmc.steady_state`.
+        ExprError: a measure does not parse, type-check or name a place or transition of the net.
     """
+    bound = [compile_measure(m, net) for m in measures]
     chain = chain if chain is not None else tangible_chain(net, max_states=max_states)
     g, q = chain.graph, chain.q
     classes = ctmc.classify(q)
@@ -336,9 +423,10 @@ def analyse(net: PetriNet, *, chain: TangibleChain | None = None, method: str = 
         "residual": steady.residual, "method": steady.method,
     }
     bottlenecks: list[dict[str, Any]] = []
+    sojourn: np.ndarray | None = None
     if terminates or not classes.irreducible:
         absorbed = ctmc.absorption(q, chain.alpha, classes)
-        y = absorbed.sojourn
+        y = sojourn = absorbed.sojourn
         start = np.zeros(nv)
         if g.vanishing[0]:
             start[chain.v_index[0]] = 1.0
@@ -373,4 +461,26 @@ def analyse(net: PetriNet, *, chain: TangibleChain | None = None, method: str = 
         scores.sort(key=lambda s: (-s[0], s[1]))
         bottlenecks = [{"transition": tids[i], "utilisation": s, "criterion": "utilisation"} for s, i in scores]
     result["bottlenecks"] = bottlenecks
+    diag = q.diagonal()
+    result["ctmc"] = {"tangible_states": int(q.shape[0]), "arcs": int(q.nnz - np.count_nonzero(diag))}
+    fired_before = result.get("expected_firings")
+    out_measures = []
+    for meas, target in bound:
+        entry: dict[str, Any] = {"measure": meas.text, "kind": meas.kind}
+        if isinstance(target, int):
+            entry["value"] = float(thr[target])
+            if sojourn is not None and fired_before:
+                entry["until_absorption"] = float(fired_before[tids[target]])
+        else:
+            values = np.asarray(target(g.states[chain.tangible]), dtype=float)
+            entry["value"] = float(pi @ values)
+            if sojourn is not None:
+                entry["until_absorption"] = float(sojourn @ values)
+        out_measures.append(entry)
+    result["measures"] = out_measures
+    if markings:
+        order = np.argsort(-pi, kind="stable")
+        result["marking_probabilities"] = [
+            {"marking": net.marking(g.states[chain.tangible[i]]).to_dict(), "probability": float(pi[i])}
+            for i in order.tolist()]
     return GSPNResult(**result)

@@ -59,6 +59,7 @@ def explore_gspn(
     *,
     max_states: int = 5_000_000,
     progress: Callable[[int, int], None] | None = None,
+    max_bytes: int | None = None,
 ) -> GSPNGraph:
     """Explore the reachability graph of ``net`` under GSPN priority rules.
 
@@ -70,14 +71,21 @@ def explore_gspn(
         net: the net; transitions' ``kind`` and ``priority`` are used.
         max_states: limit on the number of markings.
         progress: called as ``progress(markings, edges)`` while exploring.
+        max_bytes: byte budget of the search (default: half the physical memory or 4 GiB).
 
     Returns:
         :class:`GSPNGraph`.
 
     Raises:
-        AnalysisError: past ``max_states`` markings.
+        AnalysisError: past ``max_states`` markings or the byte budget.
     """
-    space = explore(net, max_states=max_states, priority=priority_levels(net), progress=progress)
+    space = explore(net, max_states=max_states, priority=priority_levels(net), progress=progress,
+                    max_bytes=max_bytes)
+    if not space.complete and space.stopped_by == "max_memory":
+        raise AnalysisError(
+            f"net {net.name!r}: the reachability graph outgrew the memory budget after {space.n_states:,} "
+            "markings; give the search more memory (or the net is unbounded)"
+        )
     if not space.complete:
         raise AnalysisError(
             f"net {net.name!r} has more than {max_states} reachable markings; raise max_states "

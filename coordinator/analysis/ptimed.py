@@ -47,7 +47,7 @@ from coordinator.net import (
 from coordinator.performance import ActionRecord
 from services.results import Status, latched_events
 
-__all__ = ["DEFAULT_EXT_RATE", "DEFAULT_MEAN_S", "PTimedNet", "TaskStats", "task_stats", "to_gspn"]
+__all__ = ["DEFAULT_EXT_RATE", "DEFAULT_MEAN_S", "PTimedNet", "TaskStats", "empirical_delays", "task_stats", "to_gspn"]
 
 #: Mean duration used for a primitive task with neither journal data nor ``mean_time_s`` (s).
 DEFAULT_MEAN_S = 1.0

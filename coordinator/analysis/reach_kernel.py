@@ -1,14 +1,15 @@
 """Compiled breadth-first search of the reachability graph (internal to :mod:`.statespace`).
 
 Pure: no I/O. The functions here are compiled to machine code by numba (``cache=True``: compiled
-once per machine and kept beside this file, or in the user's cache directory when that is not
-writable) and driven by :func:`coordinator.analysis.statespace.explore`, which documents the
+once per machine and kept in numba's cache directory, which :mod:`.jit` points at the user's cache
+directory) and driven by :func:`coordinator.analysis.statespace.explore`, which documents the
 result. What they implement (the reasons and the measurements are in docs/analysis.md, section 2):
 
 * Sparse arc lists per transition (CSR: ``ptr`` of shape (|T|+1,), then place indices and values)
-  for the input arcs, the inhibitor arcs and the non-zero entries of the incidence matrix C. Each
-  transition with input places is listed under its first input place (its *trigger*), so a marking
-  only tests the transitions whose trigger place is marked (enabling rule: Murata 1989, section II).
+  for the input arcs, the inhibitor arcs and the non-zero entries of the incidence matrix C, packed
+  in one int64 array (:func:`tables`, or built by the caller from sparse matrices). Each transition
+  with input places is listed under its first input place (its *trigger*), so a marking only tests
+  the transitions whose trigger place is marked (enabling rule: Murata 1989, section II).
 * A queue that is the state array itself: states are numbered in order of discovery and expanded in
   that order, so the search is breadth-first, a level (the markings at one distance from M0) is a
   contiguous index range, and edges come out sorted by source, then transition.
@@ -17,9 +18,18 @@ result. What they implement (the reasons and the measurements are in docs/analys
   to the places fit in 64 bits together, ``R[p] = 2**offset[p]`` packs the marking into its key
   exactly, so a key hit is a marking hit; a count that outgrows its width repacks every key. When
   the widths no longer fit, ``R`` becomes random odd multipliers and a key hit is confirmed by
-  comparing the stored marking. Either way the result is exact.
+  comparing the stored marking. Either way the result is exact. Keys are not stored: a state's key
+  is recomputed from its marking when it is expanded, and the table is rebuilt from the markings.
 * An open-addressing hash table (linear probing, load at most 1/2) of (key, index + 1) pairs side
-  by side, so a lookup usually touches one cache line.
+  by side in one flat uint64 array, so a lookup usually touches one cache line.
+* A byte budget: every buffer is counted, a buffer grows only if the bytes held (old and new buffer
+  together, during the copy) stay within ``max_bytes``, and growth near the budget takes only what
+  fits. When nothing fits the search stops (status ``MEMORY``) with the states found so far; states
+  not expanded are flagged, as with the state limit.
+
+Code shape: flat 1-D buffers, plain loops and few numpy calls, because numba's compile time grows
+with the amount of typed code (the first use on a machine compiles this module; docs/analysis.md,
+section 2, gives the times).
 
 One call of :func:`run` does the whole search, buffers and growth included, and hands back the
 finished arrays: on small nets the cost of crossing from Python into compiled code, not the search,
@@ -33,15 +43,20 @@ import threading
 from collections.abc import Callable
 
 import numpy as np
-from numba import njit, objmode
+from numba import njit, objmode, types
+
+__all__ = ["CURSOR_SIZE", "HEAD", "RUN_SIGNATURE", "cached", "load", "run", "set_progress", "tables"]
 
 #: status codes: graph complete, or the state limit reached and its level finished; ``budget``
 #: markings expanded; a buffer is full; a token count would exceed 2**31 - 1, the largest the int32
-#: state store holds.
-DONE, BUDGET, ROOM, OVERFLOW = 0, 1, 2, 3
-#: layout of the cursor, the first CURSOR_SIZE entries of the int64 scratch array
-N, E, NEXT, LEVEL_END, STOPPING, N_TRUNC, MAX_COUNT, EXACT, STARTED = range(9)
-CURSOR_SIZE = 9
+#: state store holds; the byte budget stopped the search.
+DONE, BUDGET, ROOM, OVERFLOW, MEMORY = 0, 1, 2, 3, 4
+#: layout of the cursor array
+N, E, NEXT, LEVEL_END, STOPPING, N_TRUNC, MAX_COUNT, EXACT, NEED, NEED_S = range(10)
+CURSOR_SIZE = 10
+#: header of the packed arc lists: offsets of in_ptr, in_p, in_w, ih_ptr, ih_p, ih_w, d_ptr, d_p,
+#: d_v and the end
+HEAD = 10
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _INT32_MAX = 2**31 - 1
 _SEED = np.uint64(0x5EED0F9E7B)
@@ -63,79 +78,67 @@ def _report(n_states: int, n_edges: int) -> None:
 
 @njit(cache=True)
 def tables(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray) -> np.ndarray:
-    """Arc lists of a net for :func:`_search`, packed in one int64 array.
+    """Packed arc lists of a net from its dense matrices.
 
     Args:
-        pre, inhibitor, incidence: (|P|, |T|) int64 matrices of the net, read row by row.
+        pre, inhibitor, incidence: (|P|, |T|) int64 matrices of the net.
 
     Returns:
-        A flat int64 array: a header of 12 offsets, then the input arcs, the inhibitor arcs and the
-        non-zero incidence entries as CSR lists (ptr (|T|+1,), places, values), then the
-        transitions by trigger place (ptr (|P|+2,): slot |P| lists those without input places;
-        transition ids). :func:`_unpack` gives the pieces back.
+        A flat int64 array: :data:`HEAD` offsets, then the input arcs, the inhibitor arcs and the
+        non-zero incidence entries as CSR lists by transition (ptr (|T|+1,) relative to its list,
+        place indices ascending, values).
     """
     n_p, n_t = pre.shape
-    head = 12
-    # entries per transition (column) of each matrix, counted in one row-major pass
-    count = np.zeros((3, n_t + 1), np.int64)
+    # entries per transition of each matrix (row-major pass: the matrices are C-ordered)
+    cnt = np.zeros(3 * (n_t + 1), np.int64)
     for p in range(n_p):
         for t in range(n_t):
             if pre[p, t] != 0:
-                count[0, t + 1] += 1
+                cnt[t + 1] += 1
             if inhibitor[p, t] != 0:
-                count[1, t + 1] += 1
+                cnt[n_t + 2 + t] += 1
             if incidence[p, t] != 0:
-                count[2, t + 1] += 1
+                cnt[2 * n_t + 3 + t] += 1
     for m in range(3):
         for t in range(n_t):
-            count[m, t + 1] += count[m, t]
-    nz0, nz1, nz2 = count[0, n_t], count[1, n_t], count[2, n_t]
-    sizes = np.array([n_t + 1, nz0, nz0, n_t + 1, nz1, nz1, n_t + 1, nz2, nz2, n_p + 2, n_t])
-    out = np.zeros(head + sizes.sum(), np.int64)
-    pos = head
-    for k in range(11):
-        out[k] = pos
-        pos += sizes[k]
-    out[11] = pos
-    # CSR by counting sort: places ascending within a transition, as the row-major pass meets them;
-    # once copied into the pointers, count[m, t] serves as transition t's next free slot
+            cnt[m * (n_t + 1) + t + 1] += cnt[m * (n_t + 1) + t]
+    c0, c1, c2 = cnt[n_t], cnt[2 * n_t + 1], cnt[3 * n_t + 2]
+    out = np.zeros(HEAD + 3 * (n_t + 1) + 2 * (c0 + c1 + c2), np.int64)
+    out[0] = HEAD
+    out[1] = out[0] + n_t + 1
+    out[2] = out[1] + c0
+    out[3] = out[2] + c0
+    out[4] = out[3] + n_t + 1
+    out[5] = out[4] + c1
+    out[6] = out[5] + c1
+    out[7] = out[6] + n_t + 1
+    out[8] = out[7] + c2
+    out[9] = out[8] + c2
     for m in range(3):
-        out[out[3 * m]:out[3 * m] + n_t + 1] = count[m]
+        for t in range(n_t + 1):
+            out[out[3 * m] + t] = cnt[m * (n_t + 1) + t]
+    # fill, places ascending within a transition; cnt[m, t] becomes transition t's next free slot
     for p in range(n_p):
         for t in range(n_t):
-            _put(out, count, 0, p, t, pre[p, t])
-            _put(out, count, 1, p, t, inhibitor[p, t])
-            _put(out, count, 2, p, t, incidence[p, t])
-    in_ptr, in_p, _, _, _, _, _, _, _, trig_ptr, trig_t = _unpack(out)
-    for t in range(n_t):
-        first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
-        trig_ptr[first + 1] += 1
-    for p in range(n_p + 1):
-        trig_ptr[p + 1] += trig_ptr[p]
-    slot = trig_ptr[:-1].copy()
-    for t in range(n_t):  # transition order within each trigger place
-        first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
-        trig_t[slot[first]] = t
-        slot[first] += 1
+            w = pre[p, t]
+            if w != 0:
+                k = cnt[t]
+                out[out[1] + k] = p
+                out[out[2] + k] = w
+                cnt[t] = k + 1
+            w = inhibitor[p, t]
+            if w != 0:
+                k = cnt[n_t + 1 + t]
+                out[out[4] + k] = p
+                out[out[5] + k] = w
+                cnt[n_t + 1 + t] = k + 1
+            w = incidence[p, t]
+            if w != 0:
+                k = cnt[2 * n_t + 2 + t]
+                out[out[7] + k] = p
+                out[out[8] + k] = w
+                cnt[2 * n_t + 2 + t] = k + 1
     return out
-
-
-@njit(cache=True)
-def _put(out: np.ndarray, fill: np.ndarray, m: int, p: int, t: int, value: int) -> None:
-    """Append entry (p, value) to transition t's list in CSR m; ``fill[m, t]`` is its next slot."""
-    if value != 0:
-        k = fill[m, t]
-        out[out[3 * m + 1] + k] = p
-        out[out[3 * m + 2] + k] = value
-        fill[m, t] = k + 1
-
-
-@njit(cache=True)
-def _unpack(tab: np.ndarray) -> tuple[np.ndarray, ...]:
-    """(in_ptr, in_p, in_w, ih_ptr, ih_p, ih_w, d_ptr, d_p, d_v, trig_ptr, trig_t) views of :func:`tables`."""
-    return (tab[tab[0]:tab[1]], tab[tab[1]:tab[2]], tab[tab[2]:tab[3]], tab[tab[3]:tab[4]], tab[tab[4]:tab[5]],
-            tab[tab[5]:tab[6]], tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]], tab[tab[9]:tab[10]],
-            tab[tab[10]:tab[11]])
 
 
 @njit(cache=True)
@@ -147,29 +150,45 @@ def _bit_length(v: int) -> int:
 
 
 @njit(cache=True)
-def _slot(key: np.uint64, bits: int) -> int:
+def _slot(key: np.uint64, bits: int) -> np.int64:
     return np.int64((key * _GOLDEN) >> np.uint64(64 - bits))
 
 
 @njit(cache=True)
-def _splitmix(x: np.uint64) -> np.uint64:
-    x = x + np.uint64(0x9E3779B97F4A7C15)
-    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return x ^ (x >> np.uint64(31))
+def _key(states: np.ndarray, j: int, n_p: int, mult: np.ndarray) -> np.uint64:
+    acc = np.uint64(0)
+    base = j * n_p
+    for p in range(n_p):
+        acc += np.uint64(states[base + p]) * mult[p]
+    return acc
 
 
 @njit(cache=True)
-def _rekey(d_ptr: np.ndarray, d_p: np.ndarray, d_v: np.ndarray, width: np.ndarray, mult: np.ndarray,
-           dkey: np.ndarray, states: np.ndarray, keys: np.ndarray, n: int, table: np.ndarray,
-           cursor: np.ndarray) -> None:
+def _fill_table(table: np.ndarray, states: np.ndarray, n: int, n_p: int, mult: np.ndarray) -> None:
+    """(Re)build the hash table, flat (2 * 2**k,) uint64 of (key, index + 1) pairs, from states 0..n-1."""
+    size = table.shape[0] // 2
+    bits = _bit_length(size) - 1
+    for k in range(table.shape[0]):
+        table[k] = 0
+    for j in range(n):
+        key = _key(states, j, n_p, mult)
+        s = _slot(key, bits)
+        while table[2 * s + 1] != 0:
+            s = (s + 1) & (size - 1)
+        table[2 * s] = key
+        table[2 * s + 1] = np.uint64(j + 1)
+
+
+@njit(cache=True)
+def _rekey(tab: np.ndarray, width: np.ndarray, mult: np.ndarray, dkey: np.ndarray, states: np.ndarray,
+           n: int, table: np.ndarray, cursor: np.ndarray) -> None:
     """Choose the multipliers from the widths (exact packing while it fits, else random, for good),
-    then recompute every key, the per-transition key deltas and the hash table, in place."""
+    then recompute the per-transition key deltas and the hash table, in place."""
     n_p = width.shape[0]
     total = 0
     for p in range(n_p):
         total += width[p]
-    if cursor[EXACT] and total <= 64:
+    if cursor[EXACT] != 0 and total <= 64:
         offset = 0
         for p in range(n_p):
             mult[p] = np.uint64(1) << np.uint64(offset)
@@ -177,88 +196,40 @@ def _rekey(d_ptr: np.ndarray, d_p: np.ndarray, d_v: np.ndarray, width: np.ndarra
     else:
         cursor[EXACT] = 0
         for p in range(n_p):
-            mult[p] = _splitmix(_SEED + np.uint64(p)) | np.uint64(1)
+            x = _SEED + np.uint64(p) + np.uint64(0x9E3779B97F4A7C15)
+            x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+            x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+            mult[p] = (x ^ (x >> np.uint64(31))) | np.uint64(1)
+    d_ptr, d_p, d_v = tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]]
     for t in range(dkey.shape[0]):
         acc = np.uint64(0)
         for k in range(d_ptr[t], d_ptr[t + 1]):
             acc += np.uint64(d_v[k]) * mult[d_p[k]]  # wraps modulo 2**64 for negative entries
         dkey[t] = acc
-    for j in range(n):
-        acc = np.uint64(0)
-        for p in range(n_p):
-            acc += np.uint64(states[j, p]) * mult[p]
-        keys[j] = acc
-    _fill_table(table, keys, n)
+    _fill_table(table, states, n, n_p, mult)
 
 
 @njit(cache=True)
-def _fill_table(table: np.ndarray, keys: np.ndarray, n: int) -> None:
-    """(Re)build the hash table, shape (2**k, 2) uint64, from the keys of states 0..n-1."""
-    size = table.shape[0]
-    bits = _bit_length(size) - 1
-    table[:] = 0
-    for j in range(n):
-        s = _slot(keys[j], bits)
-        while table[s, 1] != 0:
-            s = (s + 1) & (size - 1)
-        table[s, 0] = keys[j]
-        table[s, 1] = np.uint64(j + 1)
-
-
-@njit(cache=True)
-def _start(tab: np.ndarray, m0: np.ndarray, states: np.ndarray, keys: np.ndarray, table: np.ndarray,
-           out_ptr: np.ndarray, parent: np.ndarray, scratch: np.ndarray) -> None:
-    """State 0 = M0; key widths: the 64 bits shared out evenly (spare bits save repacking), at
-    least what M0 needs; exact packing if they fit."""
-    n_p = m0.shape[0]
-    n_t = tab[1] - tab[0] - 1
-    cursor = scratch[:CURSOR_SIZE]
-    width = scratch[CURSOR_SIZE:CURSOR_SIZE + n_p]
-    mult = scratch[CURSOR_SIZE + n_p:CURSOR_SIZE + 2 * n_p].view(np.uint64)
-    dkey = scratch[CURSOR_SIZE + 3 * n_p:CURSOR_SIZE + 3 * n_p + n_t].view(np.uint64)
-    d_ptr, d_p, d_v = tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]]
-    even = max(1, 64 // max(n_p, 1))
-    top = 0
-    total = 0
-    for p in range(n_p):
-        states[0, p] = min(m0[p], _INT32_MAX)
-        width[p] = max(even, _bit_length(m0[p]))
-        total += width[p]
-        top = max(top, m0[p])
-    if total > 64:
-        for p in range(n_p):
-            width[p] = max(1, _bit_length(m0[p]))
-    cursor[:] = 0
-    cursor[N] = 1
-    cursor[LEVEL_END] = 1
-    cursor[MAX_COUNT] = top
-    cursor[EXACT] = 1
-    cursor[STARTED] = 1
-    parent[0] = -1
-    out_ptr[0] = 0
-    _rekey(d_ptr, d_p, d_v, width, mult, dkey, states, keys, 1, table, cursor)
-
-
-@njit(cache=True)
-def _search(tab: np.ndarray, prio: np.ndarray, use_prio: bool, m0: np.ndarray, states: np.ndarray,
-            keys: np.ndarray, table: np.ndarray, dst: np.ndarray, tr: np.ndarray, out_ptr: np.ndarray,
-            parent: np.ndarray, trunc: np.ndarray, scratch: np.ndarray, max_states: int, budget: int) -> int:
+def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.ndarray, use_prio: bool,
+            states: np.ndarray, table: np.ndarray, dst: np.ndarray, tr: np.ndarray, out_ptr: np.ndarray,
+            parent: np.ndarray, trunc: np.ndarray, cursor: np.ndarray, width: np.ndarray, mult: np.ndarray,
+            succ: np.ndarray, dkey: np.ndarray, enabled: np.ndarray, max_states: int, budget: int) -> int:
     """Expand markings in breadth-first order, at most ``budget`` of them, from ``cursor[NEXT]``,
-    in the given buffers (never reallocated here: ``ROOM`` says one is full).
+    in the given buffers (never reallocated here: ``ROOM`` says one is full, and ``cursor[NEED]``
+    how many successors the state waiting to be expanded has).
 
     Args:
-        tab: the net's :func:`tables`.
+        tab: packed arc lists (:func:`tables`); trig_ptr (|P|+2,), trig_t (|T|,): transitions by
+            trigger place (slot |P| lists those without input places).
         prio: (|T|,) int64 priority levels, used if ``use_prio``: in each marking only the enabled
             transitions of the highest enabled level fire.
-        m0: (|P|,) int64 initial marking (read on the first call only), counts below 2**31.
-        states: (cap, |P|) int32 store; keys: (cap,) uint64; table: (2**k, 2) uint64, zeroed before
-            the first call; dst: (ecap,) int64 edge targets; tr: (ecap,) int32 their
-            transitions; out_ptr: (cap + 1,) int64, the edges of state i are
-            ``out_ptr[i]:out_ptr[i+1]`` (sources are implicit); parent: (cap,) int64 parent edge of
-            each state; trunc: (tcap,) int64 sources that lost an edge to the state limit;
-            scratch: int64, zeroed before the first call: the cursor (CURSOR_SIZE entries), then per
-            place a key width, a multiplier and a successor count, then per transition a key delta
-            and a slot of the list of enabled transitions.
+        states: (cap·|P|,) int32 markings, row-major; table: (2·2**k,) uint64 hash table; dst:
+            (ecap,) int32 edge targets; tr: (ecap,) int32 their transitions; out_ptr: (cap + 1,)
+            int64, the edges of state i are ``out_ptr[i]:out_ptr[i+1]``; parent: (cap,) int64 parent
+            edge of each state; trunc: int64 sources that lost an edge to the state limit;
+            cursor: int64 (:data:`CURSOR_SIZE`,); width, mult, succ: per place key width, key
+            multiplier (uint64), successor scratch; dkey (|T|,) uint64 key deltas; enabled (|T|,)
+            scratch.
         max_states: a new successor beyond this many states is dropped (its source goes to
             ``trunc``) and the search stops at the end of the level.
         budget: most markings to expand in this call.
@@ -266,60 +237,56 @@ def _search(tab: np.ndarray, prio: np.ndarray, use_prio: bool, m0: np.ndarray, s
     Returns:
         DONE, BUDGET, ROOM or OVERFLOW; the cursor says where the search is.
     """
-    n_p = states.shape[1]
-    n_t = tab[1] - tab[0] - 1
-    if scratch[STARTED] == 0:
-        _start(tab, m0, states, keys, table, out_ptr, parent, scratch)
-        if scratch[MAX_COUNT] > _INT32_MAX:
-            return OVERFLOW
-    in_ptr, in_p, in_w, ih_ptr, ih_p, ih_w, d_ptr, d_p, d_v, trig_ptr, trig_t = _unpack(tab)
-    cursor = scratch[:CURSOR_SIZE]
-    width = scratch[CURSOR_SIZE:CURSOR_SIZE + n_p]
-    mult = scratch[CURSOR_SIZE + n_p:CURSOR_SIZE + 2 * n_p].view(np.uint64)
-    succ = scratch[CURSOR_SIZE + 2 * n_p:CURSOR_SIZE + 3 * n_p]
-    dkey = scratch[CURSOR_SIZE + 3 * n_p:CURSOR_SIZE + 3 * n_p + n_t].view(np.uint64)
-    enabled = scratch[CURSOR_SIZE + 3 * n_p + n_t:CURSOR_SIZE + 3 * n_p + 2 * n_t]
+    n_p = width.shape[0]
+    in_ptr, in_p, in_w = tab[tab[0]:tab[1]], tab[tab[1]:tab[2]], tab[tab[2]:tab[3]]
+    ih_ptr, ih_p, ih_w = tab[tab[3]:tab[4]], tab[tab[4]:tab[5]], tab[tab[5]:tab[6]]
+    d_ptr, d_p, d_v = tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]]
     n, e, i = cursor[N], cursor[E], cursor[NEXT]
     level_end, stopping, n_trunc = cursor[LEVEL_END], cursor[STOPPING], cursor[N_TRUNC]
     top = cursor[MAX_COUNT]
     exact = cursor[EXACT] != 0
-    size = table.shape[0]
+    cap = parent.shape[0]
+    size = table.shape[0] // 2
     bits = _bit_length(size) - 1
     mask = size - 1
     status = DONE
     done = 0
     while True:
         if i == level_end:
-            if stopping or i == n:
+            if stopping != 0 or i == n:
                 break
             level_end = n
         if done == budget:
             status = BUDGET
             break
-        if n + n_t > states.shape[0] or e + n_t > tr.shape[0] or 2 * (n + n_t) > size \
-                or n_trunc == trunc.shape[0]:
-            status = ROOM
-            break
+        base = i * n_p
         # enabled transitions: those whose trigger place is marked, then the source transitions
         k = 0
         for p in range(n_p + 1):
-            if p < n_p and states[i, p] == 0:
+            if p < n_p and states[base + p] == 0:
                 continue
             for a in range(trig_ptr[p], trig_ptr[p + 1]):
                 t = trig_t[a]
                 ok = True
                 for b in range(in_ptr[t], in_ptr[t + 1]):
-                    if states[i, in_p[b]] < in_w[b]:
+                    if states[base + in_p[b]] < in_w[b]:
                         ok = False
                         break
                 if ok:
                     for b in range(ih_ptr[t], ih_ptr[t + 1]):
-                        if states[i, ih_p[b]] >= ih_w[b]:
+                        if states[base + ih_p[b]] >= ih_w[b]:
                             ok = False
                             break
                 if ok:
                     enabled[k] = t
                     k += 1
+        # room for k edges and for as many new states as the state limit still allows
+        room = min(k, max_states - n)
+        if n + room > cap or e + k > dst.shape[0] or 2 * (n + room) > size or n_trunc == trunc.shape[0]:
+            cursor[NEED] = k
+            cursor[NEED_S] = room
+            status = ROOM
+            break
         for a in range(1, k):  # insertion sort: few enabled transitions, often in order already
             t = enabled[a]
             b = a - 1
@@ -337,6 +304,7 @@ def _search(tab: np.ndarray, prio: np.ndarray, use_prio: bool, m0: np.ndarray, s
                     enabled[kept] = enabled[a]
                     kept += 1
             k = kept
+        key_i = _key(states, i, n_p, mult)
         dropped = False
         for a in range(k):
             t = enabled[a]
@@ -345,7 +313,7 @@ def _search(tab: np.ndarray, prio: np.ndarray, use_prio: bool, m0: np.ndarray, s
             for b in range(d_ptr[t], d_ptr[t + 1]):
                 if d_v[b] > 0:
                     q = d_p[b]
-                    v = np.int64(states[i, q]) + d_v[b]
+                    v = np.int64(states[base + q]) + d_v[b]
                     top = max(top, v)
                     if exact and v >> width[q]:
                         width[q] = _bit_length(v)
@@ -354,25 +322,27 @@ def _search(tab: np.ndarray, prio: np.ndarray, use_prio: bool, m0: np.ndarray, s
                 status = OVERFLOW
                 break
             if repack:
-                _rekey(d_ptr, d_p, d_v, width, mult, dkey, states, keys, n, table, cursor)
+                _rekey(tab, width, mult, dkey, states, n, table, cursor)
                 exact = cursor[EXACT] != 0
-            key = keys[i] + dkey[t]
+                key_i = _key(states, i, n_p, mult)
+            key = key_i + dkey[t]
             if not exact:
                 for p in range(n_p):
-                    succ[p] = states[i, p]
+                    succ[p] = states[base + p]
                 for b in range(d_ptr[t], d_ptr[t + 1]):
                     succ[d_p[b]] += d_v[b]
             s = _slot(key, bits)
             j = -1
-            while table[s, 1] != 0:
-                if table[s, 0] == key:
-                    cand = np.int64(table[s, 1]) - 1
+            while table[2 * s + 1] != 0:
+                if table[2 * s] == key:
+                    cand = int(table[2 * s + 1]) - 1
                     if exact:
                         j = cand
                         break
                     same = True
+                    cb = cand * n_p
                     for p in range(n_p):
-                        if states[cand, p] != succ[p]:
+                        if states[cb + p] != succ[p]:
                             same = False
                             break
                     if same:
@@ -385,13 +355,13 @@ def _search(tab: np.ndarray, prio: np.ndarray, use_prio: bool, m0: np.ndarray, s
                     stopping = 1
                     continue
                 j = n
+                jb = j * n_p
                 for p in range(n_p):
-                    states[j, p] = states[i, p]
+                    states[jb + p] = states[base + p]
                 for b in range(d_ptr[t], d_ptr[t + 1]):
-                    states[j, d_p[b]] += d_v[b]
-                keys[j] = key
-                table[s, 0] = key
-                table[s, 1] = np.uint64(j + 1)
+                    states[jb + d_p[b]] += d_v[b]
+                table[2 * s] = key
+                table[2 * s + 1] = np.uint64(j + 1)
                 parent[j] = e
                 n += 1
             dst[e] = j
@@ -412,124 +382,228 @@ def _search(tab: np.ndarray, prio: np.ndarray, use_prio: bool, m0: np.ndarray, s
 
 
 @njit(cache=True)
-def _finish(out_ptr: np.ndarray, trunc: np.ndarray, cursor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Edge sources, the out-edge pointers and the expanded-state mask of a finished search.
-
-    Returns:
-        src (E,) int64, non-decreasing; out_ptr (N+1,) int64 (states the search did not expand
-        have no edges); expanded (N,) bool (all True when the graph is complete).
-    """
-    n, e, done = cursor[N], cursor[E], cursor[NEXT]
-    ptr = np.empty(n + 1, np.int64)
-    ptr[: done + 1] = out_ptr[: done + 1]
-    ptr[done + 1:] = e
-    src = np.empty(e, np.int64)
-    for i in range(done):
-        src[ptr[i]:ptr[i + 1]] = i
-    expanded = np.zeros(n, np.bool_)
-    if cursor[STOPPING]:
-        expanded[:done] = True
-        for k in range(cursor[N_TRUNC]):
-            expanded[trunc[k]] = False
-    else:
-        expanded[:] = True
-    return src, ptr, expanded
+def _grow(a: np.ndarray, size: int, used: int) -> np.ndarray:
+    out = np.empty(size, a.dtype)
+    for k in range(used):
+        out[k] = a[k]
+    return out
 
 
 @njit(cache=True)
-def _next_size(size: int) -> int:
-    return 2 * size if size < (1 << 20) else size + size // 2
+def _target(cap: int, need: int, unit: int | np.int64, held: int | np.int64, max_bytes: int,
+            ceiling: int | np.int64) -> int:
+    """New capacity of a buffer of ``unit`` bytes per entry: the usual growth (×2 up to 2**20
+    entries, then ×1.5), cut to what the byte budget leaves while the old buffer is still held,
+    and to ``ceiling``; -1 if not even ``need`` entries fit."""
+    want: int | np.int64 = 2 * cap if cap < (1 << 20) else cap + cap // 2
+    want = min(max(want, need), max(ceiling, need))
+    want = min(want, (max_bytes - held) // unit)
+    return int(want) if want >= need else -1
+
+
+#: the one signature :func:`run` is compiled for (read-only matrices, marking and priorities, as a
+#: net holds them; callers pass exactly these types, so a call never goes through numba's slower
+#: type-conversion path and nothing is compiled twice). :func:`load` compiles it, or loads it from
+#: the cache, and then forbids further compilations.
+_RO2 = types.Array(types.int64, 2, "C", readonly=True)
+_RO1 = types.Array(types.int64, 1, "C", readonly=True)
+RUN_SIGNATURE = (_RO2, _RO2, _RO2, types.int64[::1], _RO1, _RO1, types.boolean, types.int64, types.int64,
+                 types.int64)
+
+
+def cached() -> bool | None:
+    """Load :func:`run` for :data:`RUN_SIGNATURE` from numba's cache if it is there (True), without
+    compiling; False if it is not (the next :func:`load` compiles), None if numba cannot say."""
+    if run.overloads:
+        return True
+    try:
+        result = run._cache.load_overload(RUN_SIGNATURE, run.targetctx)  # type: ignore[attr-defined]
+    except Exception:  # noqa: BLE001 - numba internals: unknown means "cannot say"
+        return None
+    if result is None:
+        return False
+    run.add_overload(result)
+    return True
+
+
+def load() -> None:
+    """Make :func:`run` ready: loaded from the cache or compiled (and cached) for its signature."""
+    if not run.overloads:
+        run.compile(RUN_SIGNATURE)
+    run.disable_compile()
 
 
 @njit(cache=True)
-def _fit(a: np.ndarray, used: int) -> np.ndarray:
-    """The first ``used`` entries: a view if they fill most of the buffer, else a compact copy."""
-    return a[:used] if 4 * used >= 3 * a.shape[0] else a[:used].copy()
-
-
-@njit(cache=True)
-def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, m0: np.ndarray, prio: np.ndarray,
-        use_prio: bool, max_states: int, report_every: int) -> tuple:  # type: ignore[type-arg]
+def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.ndarray, m0: np.ndarray,
+        prio: np.ndarray, use_prio: bool, max_states: int, max_bytes: int,
+        report_every: int) -> tuple:  # type: ignore[type-arg]
     """The whole breadth-first search of a net (see the module docstring).
 
     Args:
-        pre, inhibitor, incidence: (|P|, |T|) int64 matrices of the net.
+        pre, inhibitor, incidence: (|P|, |T|) int64 matrices of the net, read only if ``tab`` is
+            empty.
+        tab: packed arc lists (layout of :func:`tables`), or an empty array to build them from the
+            matrices.
         m0: (|P|,) int64 initial marking.
         prio, use_prio: (|T|,) int64 priority levels and whether to apply them (only the enabled
             transitions of the highest enabled level fire).
         max_states: a new marking beyond this many is dropped with its edge; the search then
             finishes the level and stops.
+        max_bytes: byte budget of the search's buffers (see the module docstring).
         report_every: call the progress hook (:func:`set_progress`) every this many expanded
             markings and at the end; 0 for never.
 
     Returns:
-        ``(status, states, src, dst, tr, parent, expanded, out_ptr, complete, max_count)``: DONE or
-        OVERFLOW; states (N, |P|) int32 in breadth-first order; edges src, dst (E,) int64 and tr
-        (E,) int32 sorted by source then transition; parent (N,) int64 edge from the previous level
-        (-1 for M0); expanded (N,) bool; out_ptr (N+1,) int64; whether the graph is complete; the
-        largest token count seen.
+        ``(status, states, dst, tr, parent, expanded, out_ptr, complete, max_count)``: DONE,
+        OVERFLOW or MEMORY; states (N, |P|) int32 in breadth-first order; edges as CSR: dst (E,)
+        int32 and tr (E,) int32 sorted by source then transition, out_ptr (N+1,) int64; parent (N,)
+        int64 edge from the previous level (-1 for M0); expanded (N,) bool; whether the graph is
+        complete; the largest token count seen.
     """
-    n_p, n_t = pre.shape
-    tab = tables(pre, inhibitor, incidence)
-    rows = max(64, 2 * n_t)
-    states = np.empty((rows, n_p), np.int32)
-    keys = np.empty(rows, np.uint64)
-    parent = np.empty(rows, np.int64)
-    out_ptr = np.empty(rows + 1, np.int64)
-    size = 128
-    while size < 2 * rows:
-        size *= 2
-    table = np.zeros((size, 2), np.uint64)
-    dst = np.empty(4 * rows, np.int64)
-    tr = np.empty(4 * rows, np.int32)
-    trunc = np.empty(16, np.int64)
-    scratch = np.zeros(CURSOR_SIZE + 3 * n_p + 2 * n_t, np.int64)
+    arcs = tables(pre, inhibitor, incidence) if tab.shape[0] == 0 else tab
+    n_p = m0.shape[0]
+    n_t = arcs[1] - arcs[0] - 1
+    in_ptr, in_p = arcs[arcs[0]:arcs[1]], arcs[arcs[1]:arcs[2]]
+    # one scratch allocation: the cursor, per place a key width, multiplier and successor count,
+    # per transition a key delta and an enabled slot, the trigger lists and their fill cursor
+    scratch = np.zeros(CURSOR_SIZE + 3 * n_p + 2 * n_t + 2 * (n_p + 2) + n_t, np.int64)
     cursor = scratch[:CURSOR_SIZE]
+    width = scratch[CURSOR_SIZE:CURSOR_SIZE + n_p]
+    mult = scratch[CURSOR_SIZE + n_p:CURSOR_SIZE + 2 * n_p].view(np.uint64)
+    succ = scratch[CURSOR_SIZE + 2 * n_p:CURSOR_SIZE + 3 * n_p]
+    base = CURSOR_SIZE + 3 * n_p
+    dkey = scratch[base:base + n_t].view(np.uint64)
+    enabled = scratch[base + n_t:base + 2 * n_t]
+    base += 2 * n_t
+    trig_ptr = scratch[base:base + n_p + 2]
+    slot = scratch[base + n_p + 2:base + 2 * (n_p + 2)]
+    trig_t = scratch[base + 2 * (n_p + 2):base + 2 * (n_p + 2) + n_t]
+    # transitions by trigger place (their first input place; slot n_p: no input place)
+    for t in range(n_t):
+        first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
+        trig_ptr[first + 1] += 1
+    for p in range(n_p + 1):
+        trig_ptr[p + 1] += trig_ptr[p]
+    for p in range(n_p + 2):
+        slot[p] = trig_ptr[p]
+    for t in range(n_t):
+        first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
+        trig_t[slot[first]] = t
+        slot[first] += 1
+    # buffers; bytes per state: its int32 marking (and the narrowed copy the caller makes), the
+    # parent edge, the out-edge pointer (twice: the final copy) and the expanded flag; per edge:
+    # int32 target and transition
+    unit_s = np.int64(5 * n_p + 25)
+    unit_e = np.int64(8)
+    no_ceiling = np.int64(1 << 62)
+    # first capacity: room for a few levels of a small net without growing, within 1/8 of the budget
+    # and 16 MiB (a wide net's markings are large)
+    cap = max(1, min(max(256, 2 * n_t), max_states, min(max_bytes // 8, 1 << 24) // unit_s))
+    ecap = 4 * cap
+    size = 128
+    while size < 2 * cap:
+        size *= 2
+    states = np.empty(cap * n_p, np.int32)
+    parent = np.empty(cap, np.int64)
+    out_ptr = np.empty(cap + 1, np.int64)
+    table = np.zeros(2 * size, np.uint64)
+    dst = np.empty(ecap, np.int32)
+    tr = np.empty(ecap, np.int32)
+    trunc = np.empty(16, np.int64)
+    held = cap * unit_s + ecap * unit_e + 16 * size
+    # state 0 = M0; key widths: the 64 bits shared out evenly (spare bits save repacking), at
+    # least what M0 needs; exact packing if they fit
+    even = max(1, 64 // max(n_p, 1))
+    top = 0
+    total = 0
+    for p in range(n_p):
+        states[p] = min(m0[p], _INT32_MAX)
+        width[p] = max(even, _bit_length(m0[p]))
+        total += width[p]
+        top = max(top, m0[p])
+    if total > 64:
+        for p in range(n_p):
+            width[p] = max(1, _bit_length(m0[p]))
+    cursor[N] = 1
+    cursor[LEVEL_END] = 1
+    cursor[MAX_COUNT] = top
+    cursor[EXACT] = 1
+    parent[0] = -1
+    out_ptr[0] = 0
+    _rekey(arcs, width, mult, dkey, states, cursor[N], table, cursor)
+    status = OVERFLOW
     next_report = report_every if report_every > 0 else 1 << 62  # in expanded markings
-    while True:
-        status = _search(tab, prio, use_prio, m0, states, keys, table, dst, tr, out_ptr, parent, trunc, scratch,
-                         max_states, max(1, next_report - cursor[NEXT]))
+    while top <= _INT32_MAX:
+        status = _search(arcs, trig_ptr, trig_t, prio, use_prio, states, table, dst, tr, out_ptr, parent,
+                         trunc, cursor, width, mult, succ, dkey, enabled, max_states,
+                         max(1, next_report - cursor[NEXT]))
         if status == ROOM:
-            n, e = cursor[N], cursor[E]
-            if n + n_t > states.shape[0]:
-                cap = max(n + n_t, _next_size(states.shape[0]))
-                grown = np.empty((cap, n_p), np.int32)
-                grown[:n] = states[:n]
-                states = grown
-                keys = _grow(keys, cap, n)
-                parent = _grow(parent, cap, n)
-                out_ptr = _grow(out_ptr, cap + 1, cursor[NEXT] + 1)
-            if e + n_t > tr.shape[0]:
-                cap = max(e + n_t, _next_size(tr.shape[0]))
-                dst = _grow(dst, cap, e)
-                tr = _grow(tr, cap, e)
-            if cursor[N_TRUNC] == trunc.shape[0]:
+            n, e, k, ks = cursor[N], cursor[E], cursor[NEED], cursor[NEED_S]
+            if n + ks > cap:
+                new = _target(cap, n + ks, unit_s, held, max_bytes, max_states)
+                if new < 0:
+                    status = MEMORY
+                else:
+                    states = _grow(states, new * n_p, n * n_p)
+                    parent = _grow(parent, new, n)
+                    out_ptr = _grow(out_ptr, new + 1, cursor[NEXT] + 1)
+                    held += (new - cap) * unit_s
+                    cap = new
+            if status == ROOM and e + k > dst.shape[0]:
+                new = _target(dst.shape[0], e + k, unit_e, held, max_bytes, no_ceiling)
+                if new < 0:
+                    status = MEMORY
+                else:
+                    held += (new - dst.shape[0]) * unit_e
+                    dst = _grow(dst, new, e)
+                    tr = _grow(tr, new, e)
+            if status == ROOM and cursor[N_TRUNC] == trunc.shape[0]:
                 trunc = _grow(trunc, 2 * trunc.shape[0], cursor[N_TRUNC])
-            if 2 * (n + n_t) > table.shape[0]:
-                size = table.shape[0]
-                while 2 * (n + n_t) > size:
-                    size *= 2
-                table = np.zeros((size, 2), np.uint64)
-                _fill_table(table, keys, n)
-            continue
+            if status == ROOM and 2 * (n + ks) > size:
+                new = size
+                while 2 * (n + ks) > new:
+                    new *= 2
+                if held + 16 * new > max_bytes:
+                    status = MEMORY
+                else:
+                    held += 16 * (new - size)
+                    size = new
+                    table = np.zeros(2 * size, np.uint64)
+                    _fill_table(table, states, n, n_p, mult)
+            if status == ROOM:
+                continue
         if status == OVERFLOW:
             break
+        if status == MEMORY:
+            cursor[STOPPING] = 1
         if report_every > 0:
             with objmode():
                 _report(cursor[N], cursor[E])
-        if status == DONE:
+        if status != BUDGET:
             break
         next_report = cursor[NEXT] + report_every
-    n, e = cursor[N], cursor[E]
-    table = np.zeros((1, 2), np.uint64)  # free the table and the keys before the edge arrays are built
-    keys = np.zeros(1, np.uint64)
-    src, ptr, expanded = _finish(out_ptr, trunc, cursor)
-    return (status, _fit(states, n), src, _fit(dst, e), _fit(tr, e), _fit(parent, n), expanded, ptr,
+    n, e, done = cursor[N], cursor[E], cursor[NEXT]
+    table = np.zeros(2, np.uint64)  # free the hash table before the result arrays are made
+    ptr = np.empty(n + 1, np.int64)
+    for i in range(done + 1):
+        ptr[i] = out_ptr[i]
+    for i in range(done + 1, n + 1):
+        ptr[i] = e
+    expanded = np.zeros(n, np.bool_)
+    if cursor[STOPPING] != 0:
+        for i in range(done):
+            expanded[i] = True
+        for q in range(cursor[N_TRUNC]):
+            expanded[trunc[q]] = False
+    else:
+        for i in range(n):
+            expanded[i] = True
+    # compact the buffers that are much larger than their contents, when the budget allows the copy
+    if 4 * e < 3 * dst.shape[0] and held + e * unit_e <= max_bytes:
+        dst = _grow(dst, e, e)
+        tr = _grow(tr, e, e)
+    if 4 * n < 3 * cap and held + n * unit_s <= max_bytes:
+        states = _grow(states, n * n_p, n * n_p)
+        parent = _grow(parent, n, n)
+    return (status, states[:n * n_p].reshape((n, n_p)), dst[:e], tr[:e], parent[:n], expanded, ptr,
             cursor[STOPPING] == 0, cursor[MAX_COUNT])
-
-
-@njit(cache=True)
-def _grow(a: np.ndarray, size: int, used: int) -> np.ndarray:
-    out = np.empty(size, a.dtype)
-    out[:used] = a[:used]
-    return out

@@ -32,7 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from coordinator.analysis.statespace import StateSpace
+from coordinator.analysis.statespace import StateSpace, default_max_bytes
 from coordinator.analysis.structure import (
     Analysis,
     analyse,
@@ -44,11 +44,14 @@ from coordinator.net import PetriNet, PlaceKind, parse_event
 __all__ = [
     "LEVEL_NAMES",
     "Verdict",
+    "controllability",
     "error_transitions",
     "home_condition",
     "record_places",
+    "recoverability",
     "report",
     "robotic_reading",
+    "stability",
 ]
 
 #: Names of the liveness levels used in reports.
@@ -160,19 +163,24 @@ def home_condition(net: PetriNet) -> tuple[dict[str, int], list[str]]:
 
 
 def _home_states(space: StateSpace, expected: dict[str, int]) -> np.ndarray:
-    cols = [space.net.place_index[p] for p in expected]
-    want = np.array([expected[p] for p in expected], dtype=np.int64)
-    if not cols:
-        return np.ones(space.n_states, dtype=bool)
-    return np.asarray((space.states[:, cols].astype(np.int64) == want[None, :]).all(axis=1))
+    """(N,) bool: the states equal to ``expected`` on its places (one column at a time: no (N, k) copy)."""
+    out = np.ones(space.n_states, dtype=bool)
+    top = int(space.states.max(initial=0)) if space.n_states else 0
+    for p, want in expected.items():
+        if want > top:
+            out[:] = False
+            break
+        out &= space.states[:, space.net.place_index[p]] == want
+    return out
 
 
 def _backward_reach(n: int, src: np.ndarray, dst: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """States from which some target state is reachable (reverse breadth-first search from a super node)."""
-    sources = np.flatnonzero(targets)
-    rows = np.concatenate([dst, np.full(sources.size, n, dtype=np.int64)])
-    cols = np.concatenate([src, sources])
+    sources = np.flatnonzero(targets).astype(np.int32)
+    rows = np.concatenate([dst.astype(np.int32, copy=False), np.full(sources.size, n, dtype=np.int32)])
+    cols = np.concatenate([src.astype(np.int32, copy=False), sources])
     rev = sp.csr_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n + 1, n + 1))
+    del rows, cols
     order = csgraph.breadth_first_order(rev, n, directed=True, return_predecessors=False)
     mask = np.zeros(n + 1, dtype=bool)
     mask[order] = True
@@ -187,12 +195,19 @@ def _home_text(net: PetriNet, expected: dict[str, int], skipped: list[str]) -> s
 
 
 def _behaviour_space(a: Analysis) -> StateSpace | None:
-    """The complete graph that carries the task's behaviour: its own, or that of its projection."""
+    """The complete graph that carries the task's behaviour: its own, or that of its projection
+    (None also when the passes over it did not fit in the memory budget)."""
     if a.space is not None and a.space.complete:
-        return a.space
+        return a.space if a.graph_work_done else None
     if a.projection is not None and a.projection.space is not None and a.projection.space.complete:
-        return a.projection.space
+        return a.projection.space if a.projection.graph_work_done else None
     return None
+
+
+def _why_not(a: Analysis) -> str:
+    if a.complete and not a.graph_work_done:
+        return "too large for the memory budget"
+    return "infinite" if a.bounded is False else "too large"
 
 
 def recoverability(a: Analysis, original: PetriNet) -> Verdict:
@@ -202,7 +217,7 @@ def recoverability(a: Analysis, original: PetriNet) -> Verdict:
     home_name = _home_text(original, expected, skipped)
     if space is None:
         return Verdict(None, f"Error recovery could not be checked: the reachability graph is "
-                             f"{'infinite' if a.bounded is False else 'too large'}, so it is unknown whether "
+                             f"{_why_not(a)}, so it is unknown whether "
                              f"every marking can return to {home_name}.", {})
     errors = set(error_transitions(original))
     err_idx = np.array([space.net.transition_index[t] for t in errors], dtype=np.int64)
@@ -256,20 +271,22 @@ def controllability(a: Analysis, original: PetriNet) -> Verdict:
             return Verdict(False, f"The task is not controllable: transition{'s' if len(dead) > 1 else ''} "
                                   f"{_names(dead)} can never fire.", {"dead_transitions": dead})
         return Verdict(None, "Controllability could not be checked: the reachability graph is "
-                             f"{'infinite' if a.bounded is False else 'too large'}, so liveness is not decided.", {})
+                             f"{_why_not(a)}, so liveness is not decided.", {})
     ids = [t.id for t in space.net.transitions]
     n_t = len(ids)
-    src, dst, tr = space.src, space.dst, space.transition.astype(np.int64)
+    src, dst, tr = space.src, space.dst, space.transition
     # a finished task: a dead marking in the home condition; restart it (pseudo transition n_t)
     expected, _ = home_condition(original)
     finished = np.intersect1d(space.deadlocks(), np.flatnonzero(_home_states(space, expected)))
     finished = finished[finished != 0]
     restarted = bool(finished.size)
     if restarted:
-        src = np.concatenate([src, finished])
-        dst = np.concatenate([dst, np.zeros(finished.size, dtype=np.int64)])
-        tr = np.concatenate([tr, np.full(finished.size, n_t, dtype=np.int64)])
-    levels, labels, terminal = graph_liveness(space.n_states, n_t + 1, src, dst, tr)
+        src = np.concatenate([src, finished.astype(src.dtype)])
+        dst = np.concatenate([dst, np.zeros(finished.size, dtype=dst.dtype)])
+        tr = np.concatenate([tr, np.full(finished.size, n_t, dtype=tr.dtype)])
+        levels, labels, terminal = graph_liveness(space.n_states, n_t + 1, src, dst, tr)
+    else:
+        levels, labels, terminal = graph_liveness(space.n_states, n_t + 1, src, dst, tr, out_ptr=space.out_ptr)
     levels = levels[:n_t]
     dead = [ids[j] for j in range(n_t) if levels[j] == 0]
     not_live = [ids[j] for j in range(n_t) if 0 < levels[j] < 4]
@@ -314,22 +331,42 @@ def robotic_reading(a: Analysis, original: PetriNet) -> dict[str, Verdict]:
             "controllable": controllability(a, original)}
 
 
-def report(net: PetriNet, *, max_states: int = 10_000_000,
+def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None = None,
            progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
     """Analyse a task net and return the JSON-ready report of ``petrobot analyze --json``.
 
-    Keys: ``net``, ``places``, ``transitions``, ``states``, ``edges``, ``complete``, ``bounded``,
-    ``place_bounds``, ``unbounded_places``, ``max_token_in_place``, ``max_token_per_marking``,
-    ``one_safe``, ``deadlock``, ``deadlocks`` (marking + firing sequence each), ``n_deadlocks``,
-    ``liveness`` (transition → "L0".."L4"), ``dead_transitions``, ``live``, ``quasi_live``,
-    ``reversible``, ``home_states``, ``home_marking_is_home``, ``stable_marking``, ``stable_places``,
-    ``p_invariants``, ``t_invariants`` (lists of {id: weight}), ``conservative``, ``consistent``,
-    ``structural_conflicts``, ``interpretation_problems``, ``notes`` and ``robotic``
-    (``stable``, ``error_recoverable``, ``controllable``: each ``{holds, explanation, witness}``).
-    ``None`` (JSON null) means "not decided".
+    Keys: ``net``, ``places``, ``transitions``, ``states``, ``edges``, ``complete``, ``truncated``
+    (null, or ``{"by": "max_states" | "max_memory", ...}``), ``budget`` (``max_states``,
+    ``max_memory_bytes``), ``bounded``, ``place_bounds``, ``place_bounds_exact`` (places whose bound
+    is exact; the others are upper bounds), ``unbounded_places``, ``max_token_in_place``,
+    ``max_token_per_marking``, ``one_safe``, ``deadlock``, ``deadlocks`` (marking + firing sequence
+    each), ``n_deadlocks``, ``liveness`` (transition → "L0".."L4"), ``dead_transitions``, ``live``,
+    ``quasi_live``, ``reversible``, ``home_states``, ``home_marking_is_home``, ``stable_marking``,
+    ``stable_places``, ``p_invariants``, ``t_invariants`` (lists of {id: weight}),
+    ``p_invariants_complete``, ``t_invariants_complete``, ``conservative``, ``consistent``,
+    ``structural`` (the linear programs: semiflow supports, certificates, state-equation bounds),
+    ``sources`` (property → what decided it: the explicit search or the structure), ``undecided``
+    (properties left null), ``structural_conflicts``, ``interpretation_problems``, ``notes`` and
+    ``robotic`` (``stable``, ``error_recoverable``, ``controllable``: each ``{holds, explanation,
+    witness}``). ``None`` (JSON null) means "not decided".
+
+    Args:
+        net: the task net.
+        max_states: state limit of the reachability graph.
+        max_bytes: memory budget of the analysis (see :func:`~coordinator.analysis.structure.analyse`).
+        progress: state-space progress callback.
     """
-    a = analyse(net, max_states=max_states, progress=progress)
+    budget = default_max_bytes() if max_bytes is None else int(max_bytes)
+    a = analyse(net, max_states=max_states, max_bytes=budget, progress=progress)
     verdicts = robotic_reading(a, net)
+    truncated: dict[str, Any] | None = None
+    if not a.complete and a.space is not None:
+        truncated = {"by": a.stopped_by, "states_found": a.states, "edges_found": a.edges,
+                     "undecided": a.undecided}
+    elif not a.graph_work_done:
+        truncated = {"by": "max_memory", "states_found": a.states, "edges_found": a.edges,
+                     "skipped": ["liveness", "reversibility", "error_recoverable", "controllable"],
+                     "undecided": a.undecided}
     return {
         "net": net.name,
         "places": len(net.places),
@@ -337,8 +374,11 @@ def report(net: PetriNet, *, max_states: int = 10_000_000,
         "states": a.states,
         "edges": a.edges,
         "complete": a.complete,
+        "truncated": truncated,
+        "budget": {"max_states": max_states, "max_memory_bytes": budget},
         "bounded": a.bounded,
         "place_bounds": a.place_bounds,
+        "place_bounds_exact": a.exact_bounds if len(a.exact_bounds) < len(a.place_bounds) else "all",
         "unbounded_places": a.unbounded_places,
         "max_token_in_place": a.max_token_in_place,
         "max_token_per_marking": a.max_token_per_marking,
@@ -361,9 +401,44 @@ def report(net: PetriNet, *, max_states: int = 10_000_000,
         "t_invariants_complete": a.t_invariants.complete,
         "conservative": a.conservative,
         "consistent": a.consistent,
+        "structural": _structural_json(a),
+        "sources": a.sources,
+        "undecided": a.undecided,
         "structural_conflicts": [{"place": c.place, "transitions": c.transitions, "effective": c.effective}
                                  for c in a.conflicts],
         "interpretation_problems": [{"element": e, "problem": p} for e, p in net.interpretation_problems()],
         "notes": a.notes,
         "robotic": {k: v.to_dict() for k, v in verdicts.items()},
     }
+
+
+def _weights(ids: list[str], vec: np.ndarray | None) -> dict[str, int] | None:
+    if vec is None:
+        return None
+    return {ids[i]: int(vec[i]) for i in np.flatnonzero(vec)}
+
+
+def _structural_json(a: Analysis) -> dict[str, Any]:
+    """The LP results as JSON: supports with their certificates, state-equation bounds."""
+    s = a.structural
+    if s is None:
+        return {}
+    places = [p.id for p in a.net.places]
+    trans = [t.id for t in a.net.transitions]
+    out: dict[str, Any] = {}
+    for key, sup, ids, other in (("p_semiflows", s.p_support, places, trans),
+                                 ("t_semiflows", s.t_support, trans, places)):
+        out[key] = {
+            "uncovered": None if sup.covered is None else [ids[i] for i in np.flatnonzero(~sup.covered)],
+            "certified": sup.certified,
+            "positive_semiflow": _weights(ids, sup.semiflow) if sup.covered is not None and sup.covered.all()
+            else None,
+            "uncovered_witness": _weights(other, sup.witness),
+        }
+    out["state_equation"] = {"total_token_bound": s.total_bound, "certified": s.total_certified}
+    if s.place_bounds is not None:
+        pb = s.place_bounds
+        out["state_equation"]["place_bounds"] = {p: (int(b) if b >= 0 else None) for p, b in zip(places, pb.bounds)}
+        out["state_equation"]["place_bounds_certified"] = bool(pb.certified[pb.bounds >= 0].all())
+        out["state_equation"]["every_place_has_its_own_lp"] = pb.complete
+    return out

@@ -16,6 +16,8 @@ structural analyses.
 
 from __future__ import annotations
 
+import functools
+import os
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -25,10 +27,12 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from coordinator.analysis.budget import default_max_bytes
+from coordinator.analysis.matrices import DENSE_LIMIT, dense_is_cheap, sparse_net
 from coordinator.errors import AnalysisError
 from coordinator.net import Arc, Marking, PetriNet, Place, Transition
 
-__all__ = ["StateSpace", "enabled_mask", "explore", "load_search"]
+__all__ = ["StateSpace", "arc_table", "default_max_bytes", "enabled_mask", "explore", "load_search"]
 
 #: largest n·|P|·|T| for which enabling is computed by matrix products (see _enabled)
 _MAX_PRODUCT = 500_000
@@ -38,32 +42,57 @@ _PROGRESS_STATES = 1 << 16
 
 @dataclass(frozen=True, eq=False)
 class StateSpace:
-    """The reachability graph of a net (possibly truncated at ``max_states``).
+    """The reachability graph of a net (possibly truncated at ``max_states`` or by the byte budget).
 
     Attributes:
         net: the explored net.
         states: markings, shape (N, |P|), dtype uint8/uint16/uint32/int64 (the smallest that fits),
             columns in ``net.places`` order; row 0 is the initial marking; rows are in breadth-first
             order, so a state's index never precedes that of a state closer to M0.
-        src: edge sources (state indices), shape (E,), int64, non-decreasing.
-        dst: edge targets, shape (E,), int64.
+        out_ptr: CSR row pointer over edges, shape (N+1,), int64: the edges of state i are
+            ``out_ptr[i]:out_ptr[i+1]``.
+        dst: edge targets, shape (E,), int32 (state indices stay below 2**31).
         transition: transition index (column of the net's matrices) of each edge, shape (E,), int32.
-        complete: False if the search stopped at ``max_states``; then the markings whose successors
-            were not all computed are those with ``expanded == False`` and edges are missing.
+        complete: False if the search stopped early; then the markings whose successors were not
+            all computed are those with ``expanded == False`` and edges are missing.
         parent_edge: for each state, the index of an edge from a state one level closer to M0
             (a breadth-first tree, so following it back gives a shortest firing sequence);
             -1 for M0. Shape (N,), int64.
         expanded: which states had all their successors computed, shape (N,), bool.
+        stopped_by: why an incomplete search stopped: ``"max_states"`` (the state limit; the level
+            in progress was finished) or ``"max_memory"`` (the byte budget; stopped at once);
+            None when complete.
+
+    ``src`` (edge sources, (E,) int32, non-decreasing) is derived from ``out_ptr`` on first use.
     """
 
     net: PetriNet
     states: np.ndarray
-    src: np.ndarray
+    out_ptr: np.ndarray
     dst: np.ndarray
     transition: np.ndarray
     complete: bool
     parent_edge: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     expanded: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    stopped_by: str | None = None
+
+    @property
+    def src(self) -> np.ndarray:
+        """Edge sources, shape (E,), int32, non-decreasing (built from ``out_ptr`` once, then kept)."""
+        cached = self.__dict__.get("_src")
+        if cached is None:
+            counts = np.diff(self.out_ptr)
+            cached = np.repeat(np.arange(self.n_states, dtype=np.int32), counts)
+            object.__setattr__(self, "_src", cached)
+        return cached
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the graph's arrays (``src`` included once built)."""
+        arrays = [self.states, self.out_ptr, self.dst, self.transition, self.parent_edge, self.expanded]
+        if "_src" in self.__dict__:
+            arrays.append(self.__dict__["_src"])
+        return int(sum(a.nbytes for a in arrays))
 
     @property
     def n_states(self) -> int:
@@ -73,7 +102,7 @@ class StateSpace:
     @property
     def n_edges(self) -> int:
         """Number of edges (firings between found markings), E."""
-        return int(self.src.shape[0])
+        return int(self.dst.shape[0])
 
     def marking(self, index: int) -> Marking:
         """Return state ``index`` as a :class:`~coordinator.net.Marking`."""
@@ -112,7 +141,7 @@ class StateSpace:
         """Return the graph as a CSR matrix A of shape (N, N): ``A[i, j]`` = number of edges i → j."""
         n = self.n_states
         data = np.ones(self.n_edges, dtype=np.int32)
-        mat = sp.csr_matrix((data, (self.src, self.dst)), shape=(n, n))
+        mat = sp.csr_matrix((data, self.dst, self.out_ptr), shape=(n, n))
         mat.sum_duplicates()
         return mat
 
@@ -124,15 +153,6 @@ class StateSpace:
         """Return the indices of the edges leaving state ``index`` (a slice of the sorted ``src``)."""
         lo, hi = self.out_ptr[index], self.out_ptr[index + 1]
         return np.arange(lo, hi, dtype=np.int64)
-
-    @property
-    def out_ptr(self) -> np.ndarray:
-        """CSR row pointer over edges: edges of state i are ``out_ptr[i]:out_ptr[i+1]``, shape (N+1,)."""
-        cached = self.__dict__.get("_out_ptr")
-        if cached is None:
-            cached = np.searchsorted(self.src, np.arange(self.n_states + 1), side="left").astype(np.int64)
-            object.__setattr__(self, "_out_ptr", cached)
-        return cached
 
     def successors(self, index: int) -> list[tuple[str, int]]:
         """Return ``(transition id, target state)`` for each edge leaving state ``index``."""
@@ -147,8 +167,7 @@ class StateSpace:
 
     def deadlocks(self) -> np.ndarray:
         """Return the indices of expanded states with no enabled transition, shape (k,), int64."""
-        has_out = np.zeros(self.n_states, dtype=bool)
-        has_out[self.src] = True
+        has_out = np.diff(self.out_ptr) > 0
         return np.flatnonzero(~has_out & self._expanded_mask()).astype(np.int64)
 
     def _expanded_mask(self) -> np.ndarray:
@@ -185,11 +204,17 @@ def _multipliers(n: int, seed: int) -> np.ndarray:
     return rng.integers(0, 2**63, size=n, dtype=np.uint64) * np.uint64(2) + np.uint64(1)
 
 
-def _random_key(rows: np.ndarray) -> np.ndarray:
-    """Fixed-seed linear hash of rows (N, P) → (N,) uint64 (used for index_of lookups)."""
-    mult = _multipliers(rows.shape[1], _HASH_SEED)
+def _random_key(rows: np.ndarray, block_bytes: int = 1 << 25) -> np.ndarray:
+    """Fixed-seed linear hash of rows (N, P) → (N,) uint64 (used for index_of lookups); rows are
+    taken in blocks of about ``block_bytes`` of uint64 temporaries, so a wide net never needs an
+    (N, P) uint64 copy."""
+    n, n_p = rows.shape
+    mult = _multipliers(n_p, _HASH_SEED)
+    out = np.empty(n, dtype=np.uint64)
+    step = max(1, block_bytes // max(8 * n_p, 1))
     with np.errstate(over="ignore"):
-        out: np.ndarray = (rows.astype(np.int64).astype(np.uint64) * mult).sum(axis=1, dtype=np.uint64)
+        for lo in range(0, n, step):
+            out[lo:lo + step] = (rows[lo:lo + step].astype(np.uint64) * mult).sum(axis=1, dtype=np.uint64)
     return out
 
 
@@ -201,48 +226,39 @@ def _storage_dtype(max_value: int) -> Any:
     return np.int64
 
 
-def _arcs_by_transition(matrix: np.ndarray) -> list[tuple[tuple[int, int], ...]]:
-    """Non-zero entries of a (|P|, |T|) matrix as ``(place, value)`` pairs per transition."""
-    ts, ps = np.nonzero(matrix.T)
-    vals = matrix.T[ts, ps].tolist()
-    out: list[list[tuple[int, int]]] = [[] for _ in range(matrix.shape[1])]
-    for t, p, v in zip(ts.tolist(), ps.tolist(), vals):
-        out[t].append((p, v))
-    return [tuple(arcs) for arcs in out]
-
-
 class _NetTables:
-    """Per-net arc lists and the dense arrays of the vectorised enabling test (:func:`enabled_mask`)."""
+    """Per-net arc lists (from the sparse matrices) and, for small nets, the dense 0/1 tables of the
+    vectorised enabling test (:func:`enabled_mask`)."""
 
     def __init__(self, net: PetriNet, priority: np.ndarray | None) -> None:
         self.net = net
-        self.n_p, self.n_t = net.pre.shape
-        #: per transition: input arcs and inhibitor arcs, as (place, weight)
-        self.inputs = _arcs_by_transition(net.pre)
-        self.inhib = _arcs_by_transition(net.inhibitor)
+        sn = sparse_net(net)
+        self.n_p, self.n_t = sn.n_places, sn.n_transitions
+        self.pre = sn.pre
+        self.inh = sn.inhibitor
         self.priority = None if priority is None else np.asarray(priority, dtype=np.int64)
         if self.priority is not None and self.priority.shape != (self.n_t,):
             raise AnalysisError(f"priority has shape {self.priority.shape}; expected ({self.n_t},)")
 
     @cached_property
     def n_arcs(self) -> int:
-        return sum(len(a) for a in self.inputs) + sum(len(a) for a in self.inhib)
+        return int(self.pre.nnz + self.inh.nnz)
 
     @cached_property
     def has_inhibitors(self) -> bool:
-        return any(self.inhib)
+        return bool(self.inh.nnz)
 
     @cached_property
     def threshold_tables(self) -> tuple[list[tuple[int, np.ndarray | None, np.ndarray | None]], np.ndarray]:
         """Per distinct arc weight w: w, then (|P|, |T|) float32 0/1 matrices of the input arcs and
         of the inhibitor arcs of weight w (None if there are none); and the number of input arcs of
-        each transition, (|T|,) float32."""
-        pre, inh = self.net.pre, self.net.inhibitor
+        each transition, (|T|,) float32. Only built for small nets (see :func:`_enabled`)."""
         tables = []
-        for w in sorted(set(np.unique(pre[pre > 0]).tolist()) | set(np.unique(inh[inh > 0]).tolist())):
-            tables.append((int(w), (pre == w).astype(np.float32) if (pre == w).any() else None,
-                           (inh == w).astype(np.float32) if (inh == w).any() else None))
-        return tables, (pre > 0).sum(axis=0).astype(np.float32)
+        for w in sorted(set(self.pre.data.tolist()) | set(self.inh.data.tolist())):
+            pre_w = (self.pre == w).astype(np.float32).toarray() if (self.pre.data == w).any() else None
+            inh_w = (self.inh == w).astype(np.float32).toarray() if (self.inh.data == w).any() else None
+            tables.append((int(w), pre_w, inh_w))
+        return tables, np.diff(self.pre.indptr).astype(np.float32)
 
 
 def enabled_mask(net: PetriNet, rows: np.ndarray, priority: np.ndarray | None = None) -> np.ndarray:
@@ -255,7 +271,7 @@ def enabled_mask(net: PetriNet, rows: np.ndarray, priority: np.ndarray | None = 
             enabled level are kept in each row (GSPN rule).
 
     Returns:
-        Boolean mask of shape (n, |T|).
+        Boolean mask of shape (n, |T|) (callers with many markings of a wide net pass them in blocks).
     """
     return _enabled(_NetTables(net, priority), np.ascontiguousarray(np.asarray(rows).T))
 
@@ -271,12 +287,15 @@ def _enabled(tab: _NetTables, cols: np.ndarray) -> np.ndarray:
     """
     n = cols.shape[1]
     per_arc = tab.n_arcs * (3000 + n)
-    tables, n_inputs = tab.threshold_tables
     macs = n * tab.n_p * tab.n_t
-    counting = len(tables) * (8000 + 2 * n * tab.n_p + macs // 8) + 5000
     # above ~5e5 multiply-adds per product BLAS goes multi-threaded, which on a shared machine was
     # measured 50-200x slower than single-threaded; the per-arc way is cheap there anyway
-    if counting < per_arc and macs <= _MAX_PRODUCT:
+    if macs <= _MAX_PRODUCT and tab.n_p * tab.n_t <= DENSE_LIMIT:
+        tables, n_inputs = tab.threshold_tables
+        counting = len(tables) * (8000 + 2 * n * tab.n_p + macs // 8) + 5000
+    else:
+        counting = per_arc + 1
+    if counting < per_arc:
         rows = cols.T
         met = np.zeros((n, tab.n_t), dtype=np.float32)
         blocked = np.zeros((n, tab.n_t), dtype=np.float32) if tab.has_inhibitors else None
@@ -291,12 +310,15 @@ def _enabled(tab: _NetTables, cols: np.ndarray) -> np.ndarray:
             out &= blocked == 0
     else:
         mask = np.ones((tab.n_t, n), dtype=bool)
-        for t in range(tab.n_t):
-            row = mask[t]
-            for p, w in tab.inputs[t]:
-                row &= cols[p] >= w
-            for p, w in tab.inhib[t]:
-                row &= cols[p] < w
+        for mat, inhibit in ((tab.pre, False), (tab.inh, True)):
+            ptr, idx, val = mat.indptr, mat.indices, mat.data
+            for t in np.flatnonzero(np.diff(ptr)).tolist():
+                row = mask[t]
+                for k in range(ptr[t], ptr[t + 1]):
+                    if inhibit:
+                        row &= cols[idx[k]] < val[k]
+                    else:
+                        row &= cols[idx[k]] >= val[k]
         out = mask.T
     if tab.priority is not None and n:
         level = np.where(out, tab.priority[None, :], np.iinfo(np.int64).min)
@@ -305,8 +327,21 @@ def _enabled(tab: _NetTables, cols: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(out)
 
 
+def arc_table(net: PetriNet) -> np.ndarray:
+    """The packed arc lists of :func:`.reach_kernel.tables` built from the sparse matrices (for nets
+    whose dense matrices would be large), shape (k,), int64."""
+    sn = sparse_net(net)
+    parts = []
+    for mat in (sn.pre, sn.inhibitor, sn.incidence):
+        parts += [mat.indptr.astype(np.int64), mat.indices.astype(np.int64), mat.data.astype(np.int64)]
+    head = np.zeros(10, dtype=np.int64)
+    offsets = np.cumsum([10] + [p.shape[0] for p in parts])
+    head[:] = offsets[:10]
+    return np.concatenate([head, *parts])
+
+
 def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray | None = None,
-            progress: Callable[[int, int], None] | None = None) -> StateSpace:
+            progress: Callable[[int, int], None] | None = None, max_bytes: int | None = None) -> StateSpace:
     """Build the reachability graph of ``net`` by a compiled breadth-first search.
 
     The ordinary firing rule of :mod:`coordinator.net` is used (inhibitor arcs honoured; events,
@@ -318,11 +353,15 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         net: the net; its initial marking is the root.
         max_states: stop once this many markings are found: the level being expanded is finished
             (its edges to known markings kept, those to new ones dropped) and ``complete`` is False.
+            At most 2**31 − 1.
         priority: optional (|T|,) integer levels; in each marking only the enabled transitions of the
             highest enabled level fire (the GSPN helper passes 0 for timed transitions and
             1 + priority for immediate ones).
         progress: called as ``progress(states_found, edges_found)`` every 65,536 expanded markings
             and at the end.
+        max_bytes: byte budget of the search's buffers (markings, edges, hash table, and the result's
+            narrowing copy); when growing a buffer would exceed it, the search stops at once with
+            what it has (``stopped_by == "max_memory"``). Default :func:`default_max_bytes`.
 
     Returns:
         The :class:`StateSpace`.
@@ -334,25 +373,36 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     rk = _kernel()
     if max_states < 1:
         raise AnalysisError(f"max_states must be >= 1, got {max_states}")
+    max_states = min(int(max_states), 2**31 - 1)
+    budget = _DEFAULT_BYTES if max_bytes is None else int(max_bytes)
     n_t = len(net.transitions)
     use_prio = priority is not None
-    prio = _NO_PRIORITY if priority is None else np.ascontiguousarray(priority, dtype=np.int64)
-    if use_prio and prio.shape != (n_t,):
-        raise AnalysisError(f"priority has shape {prio.shape}; expected ({n_t},)")
+    prio = _NO_PRIORITY
+    if priority is not None:
+        prio = np.array(priority, dtype=np.int64)  # a copy, made read-only: the compiled signature
+        prio.flags.writeable = False
+        if prio.shape != (n_t,):
+            raise AnalysisError(f"priority has shape {prio.shape}; expected ({n_t},)")
+    if dense_is_cheap(net):
+        pre, inh, inc, tab, m0 = net.pre, net.inhibitor, net.incidence, _NO_TABLE, net.initial_vector
+    else:
+        pre = inh = inc = _NO_MATRIX
+        tab, m0 = arc_table(net), sparse_net(net).m0
     rk.set_progress(progress)
     try:
-        status, states, src, dst, tr, parent, expanded, out_ptr, complete, top = rk.run(
-            net.pre, net.inhibitor, net.incidence, net.initial_vector, prio, use_prio, max_states,
+        status, states, dst, tr, parent, expanded, out_ptr, complete, top = rk.run(
+            pre, inh, inc, tab, m0, prio, use_prio, max_states, budget,
             _PROGRESS_STATES if progress is not None else 0)
     finally:
         rk.set_progress(None)
     if status == rk.OVERFLOW:
         raise AnalysisError(f"a token count reached {top}, above 2**31 - 1 (the search stores int32 counts), "
                             f"after {states.shape[0]} markings; petrobot analyze decides boundedness by coverability")
-    space = StateSpace(net=net, states=states.astype(_storage_dtype(top)), src=src,
-                       dst=dst, transition=tr, complete=bool(complete), parent_edge=parent, expanded=expanded)
-    object.__setattr__(space, "_out_ptr", out_ptr)
-    return space
+    stopped = None if complete else ("max_memory" if status == rk.MEMORY else "max_states")
+    narrowed = states.astype(_storage_dtype(top))
+    del states
+    return StateSpace(net=net, states=narrowed, out_ptr=out_ptr, dst=dst, transition=tr,
+                      complete=bool(complete), parent_edge=parent, expanded=expanded, stopped_by=stopped)
 
 
 def load_search() -> float:
@@ -364,16 +414,26 @@ def load_search() -> float:
     return time.perf_counter() - start
 
 
+_DEFAULT_BYTES = default_max_bytes()
 _NO_PRIORITY = np.zeros(0, np.int64)  # not read when use_prio is False
+_NO_PRIORITY.flags.writeable = False
+_NO_TABLE = np.zeros(0, np.int64)  # run builds the arc lists from the dense matrices
+_NO_MATRIX = np.zeros((0, 0), np.int64)  # the dense matrices, unused when the arc lists are given
+_NO_MATRIX.flags.writeable = False  # same numba type as a net's read-only matrices: one compilation
 _RK: Any = None
 
 
 def _kernel() -> Any:
-    """The compiled search module, imported on first use (numba takes ~0.3 s to import)."""
+    """The compiled search module, imported on first use (numba takes ~0.3 s to import) with numba's
+    cache in the user's cache directory (:mod:`.jit`), its search loaded from there or compiled."""
     global _RK
     if _RK is None:
+        from coordinator.analysis import jit
+
+        jit.configure()
         from coordinator.analysis import reach_kernel
 
+        reach_kernel.load()
         _RK = reach_kernel
     return _RK
 

@@ -6,11 +6,19 @@ Pure: no I/O. The ordinary view (:func:`ordinary_view`) drops the events of the 
 a transition fires as soon as it is enabled — and keeps the interpretation as labels.
 
 Boundedness is always decided when it can be: the reachability graph (:func:`explore`) is finite
-and complete ⇒ bounded; a place covered by a positive P-invariant is bounded by it (structural
-bound, Murata 1989 section VI); a marking strictly covering a breadth-first ancestor proves
-unboundedness; otherwise the Karp–Miller coverability graph decides (for nets without inhibitor
-arcs). Properties that need the whole graph (liveness, reversibility) are ``None`` when only a
-coverability graph or a truncated graph is available.
+and complete ⇒ bounded; the state equation bounds the total token count (an LP with an exact dual
+certificate, :mod:`.lp`) or the P-invariants cover every place ⇒ bounded, with an upper bound per
+place (Murata 1989 section VI; Silva, Teruel, Colom 1998); a marking strictly covering a
+breadth-first ancestor proves unboundedness; otherwise the Karp–Miller coverability graph decides
+(for nets without inhibitor arcs). Properties that need the whole graph (liveness, reversibility)
+are ``None`` when only a coverability graph or a truncated graph is available; :attr:`Analysis.sources`
+says what decided each property, so a report can tell the explicit search from the structure.
+Conservativeness and consistency come from linear programs (:mod:`.lp`), never from the Farkas
+enumeration, which is only there to list the minimal invariants when its budgets allow.
+
+Every analysis runs within a state limit and a byte budget (:func:`analyse`): the search stops
+with what it has when either is reached, and the passes over a complete graph run only if their
+memory need (estimated from its size) fits.
 
 Liveness levels (Murata 1989, section IV-C) on a finite reachability graph, through its strongly
 connected components (Tarjan 1972, via scipy.sparse.csgraph): L0 dead — t labels no edge; L1 — t
@@ -23,6 +31,7 @@ component when there is exactly one.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -30,6 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
+from coordinator.analysis import lp
 from coordinator.analysis.coverability import (
     Coverability,
     CoveringWitness,
@@ -37,12 +47,17 @@ from coordinator.analysis.coverability import (
     karp_miller,
 )
 from coordinator.analysis.invariants import (
+    DEFAULT_MAX_BYTES as DEFAULT_INVARIANT_BYTES,
+)
+from coordinator.analysis.invariants import (
     Invariants,
     p_invariants,
     structural_bounds,
     t_invariants,
 )
-from coordinator.analysis.statespace import StateSpace, enabled_mask, explore
+from coordinator.analysis.lp import PlaceBounds, Support
+from coordinator.analysis.matrices import SparseNet, sparse_net
+from coordinator.analysis.statespace import StateSpace, default_max_bytes, explore
 from coordinator.net import Marking, PetriNet
 
 __all__ = [
@@ -50,8 +65,10 @@ __all__ = [
     "Analysis",
     "Conflict",
     "Deadlock",
+    "Structural",
     "analyse",
     "graph_liveness",
+    "graph_pass_bytes",
     "liveness_levels",
     "ordinary_view",
     "record_only_places",
@@ -85,8 +102,8 @@ def ordinary_view(net: PetriNet) -> PetriNet:
 
 def record_only_places(net: PetriNet) -> list[str]:
     """Places no transition consumes from or is inhibited by: they only record what happened."""
-    touched = (np.asarray(net.pre) > 0) | (np.asarray(net.inhibitor) > 0)
-    return [p.id for i, p in enumerate(net.places) if not touched[i].any()]
+    touched = sparse_net(net).consumed_or_read()
+    return [p.id for i, p in enumerate(net.places) if not touched[i]]
 
 
 def without_places(net: PetriNet, drop: list[str]) -> PetriNet:
@@ -134,6 +151,26 @@ class Conflict:
 
 
 @dataclass(frozen=True)
+class Structural:
+    """What linear programming says about a net's structure (see :mod:`.lp`).
+
+    Attributes:
+        p_support: places covered by some P-semiflow (conservative iff all), with certificates.
+        t_support: transitions covered by some T-semiflow (consistent iff all), with certificates.
+        total_bound: state-equation bound on the total token count (None: the LP is unbounded or
+            did not finish), and whether an exact dual certificate backs it.
+        total_certified: see ``total_bound``.
+        place_bounds: per-place state-equation bounds, computed only when the graph is incomplete.
+    """
+
+    p_support: Support
+    t_support: Support
+    total_bound: int | None
+    total_certified: bool
+    place_bounds: PlaceBounds | None = None
+
+
+@dataclass(frozen=True)
 class Analysis:
     """Result of :func:`analyse`. ``None`` means "not decided" (see the module docstring).
 
@@ -145,7 +182,8 @@ class Analysis:
         edges: edges found.
         complete: the reachability graph is complete.
         bounded: every place has a bound.
-        place_bounds: place id → bound (``None``: unbounded or unknown).
+        place_bounds: place id → bound (``None``: unbounded or unknown); exact for the places listed
+            in ``exact_bounds``, an upper bound otherwise.
         unbounded_places: places proven to grow without bound.
         covering: a pumping witness for unboundedness, if one was found on the graph.
         max_token_in_place: largest count of a place in a reachable marking.
@@ -163,14 +201,24 @@ class Analysis:
         stable_places: places whose count never changes.
         p_invariants: minimal semi-positive P-invariants.
         t_invariants: minimal semi-positive T-invariants.
-        conservative: some positive P-invariant covers every place.
-        consistent: some positive T-invariant covers every transition.
+        conservative: a strictly positive P-semiflow exists (LP, :mod:`.lp`); None if undecided.
+        consistent: a strictly positive T-semiflow exists (LP); None if undecided.
         conflicts: structural conflicts.
         notes: plain sentences on what could not be decided and why.
         projection: when the graph is infinite or too large and the net has record-only places (no
             transition reads them) that account for any growth, the analysis of the net without
             them (complete): same enabling, so its liveness, deadlocks and graph stand for the
             task's behaviour.
+        sources: property name → what decided it (``"reachability graph"``, ``"state equation
+            (LP)"``, ``"P-invariants"``, ``"Karp-Miller coverability graph"``, ...); properties
+            left undecided are absent.
+        structural: the LP results.
+        exact_bounds: places whose bound in ``place_bounds`` is exact (all of them when complete).
+        graph_work_done: False when the graph is complete but the passes over it that need memory
+            beyond the budget (liveness, recovery) were skipped.
+        stopped_by: why the search stopped early: ``"max_states"``, ``"max_memory"``, or None.
+        stable_marking_partial: on a truncated graph, False when every place varies among the
+            markings found (then no place is stable); else None.
     """
 
     net: PetriNet
@@ -198,16 +246,25 @@ class Analysis:
     stable_places: list[str] | None
     p_invariants: Invariants
     t_invariants: Invariants
-    conservative: bool
-    consistent: bool
+    conservative: bool | None
+    consistent: bool | None
     conflicts: list[Conflict]
     notes: list[str] = field(default_factory=list)
     projection: Analysis | None = None
+    sources: dict[str, str] = field(default_factory=dict)
+    structural: Structural | None = None
+    exact_bounds: list[str] = field(default_factory=list)
+    graph_work_done: bool = True
+    stopped_by: str | None = None
+    stable_marking_partial: bool | None = None
 
     @property
     def stable_marking(self) -> bool | None:
-        """Some place keeps the same count in every reachable marking (MCC StableMarking)."""
-        return None if self.stable_places is None else bool(self.stable_places)
+        """Some place keeps the same count in every reachable marking (MCC StableMarking); on a
+        truncated graph only "no" can be known (every place varies among the markings found)."""
+        if self.stable_places is None:
+            return self.stable_marking_partial
+        return bool(self.stable_places)
 
     @property
     def dead_transitions(self) -> list[str] | None:
@@ -216,13 +273,25 @@ class Analysis:
             return None
         return [t for t, lvl in self.liveness.items() if lvl == 0]
 
+    @property
+    def undecided(self) -> list[str]:
+        """Names of the properties left undecided (``None``)."""
+        values = {
+            "bounded": self.bounded, "one_safe": self.one_safe, "max_token_in_place": self.max_token_in_place,
+            "max_token_per_marking": self.max_token_per_marking, "deadlock": self.deadlock,
+            "quasi_live": self.quasi_live, "live": self.live, "reversible": self.reversible,
+            "stable_marking": self.stable_marking, "conservative": self.conservative,
+            "consistent": self.consistent,
+        }
+        return [k for k, v in values.items() if v is None]
+
 
 def liveness_levels(space: StateSpace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Liveness level of each transition on a complete reachability graph.
 
     Returns:
         ``(levels, labels, terminal)``: levels (|T|,) int64 in {0, 1, 3, 4}; the strongly connected
-        component of each state (N,) int64; a boolean (n_components,) marking terminal components.
+        component of each state (N,) int32; a boolean (n_components,) marking terminal components.
     """
     # edges are sorted by source, so the CSR matrix is built without sorting
     return graph_liveness(space.n_states, len(space.net.transitions), space.src, space.dst, space.transition,
@@ -231,15 +300,19 @@ def liveness_levels(space: StateSpace) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 def graph_liveness(n: int, n_t: int, src: np.ndarray, dst: np.ndarray, transition: np.ndarray,
                    out_ptr: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`liveness_levels` on raw edge arrays (shapes (E,)); ``out_ptr`` if ``src`` is sorted."""
+    """:func:`liveness_levels` on raw edge arrays (shapes (E,)); ``out_ptr`` if ``src`` is sorted.
+
+    Memory: scipy's strongly-connected-components pass copies the graph with float64 weights and
+    int32 indices (~13 bytes per edge); the level computation adds ~9 bytes per edge.
+    """
     if out_ptr is not None:
-        graph = sp.csr_matrix((np.ones(src.shape[0], dtype=np.int8), dst.astype(np.int32), out_ptr),
+        graph = sp.csr_matrix((np.ones(dst.shape[0], dtype=np.int8), dst.astype(np.int32, copy=False), out_ptr),
                               shape=(n, n))
     else:
         graph = sp.csr_matrix((np.ones(src.shape[0], dtype=np.int8), (src, dst)), shape=(n, n))
-    n_comp, labels32 = csgraph.connected_components(graph, directed=True, connection="strong")
+    n_comp, labels = csgraph.connected_components(graph, directed=True, connection="strong")
     del graph
-    labels = labels32.astype(np.int64)
+    labels = labels.astype(np.int32, copy=False)
     cs = labels[src]
     same = cs == labels[dst]
     terminal = np.ones(n_comp, dtype=bool)
@@ -259,73 +332,140 @@ def graph_liveness(n: int, n_t: int, src: np.ndarray, dst: np.ndarray, transitio
         hit[term_index[cs[inside]], transition[inside]] = True
         live = hit.all(axis=0)
     else:
-        pairs = np.unique(cs[inside] * n_t + transition[inside].astype(np.int64))
+        pairs = np.unique(cs[inside].astype(np.int64) * n_t + transition[inside].astype(np.int64))
         live = np.bincount(pairs % n_t, minlength=n_t) == n_term
     levels[live & cyc] = 4
     return levels, labels, terminal
 
 
-def _conflicts(net: PetriNet, space: StateSpace | None, block: int = 1 << 16) -> list[Conflict]:
+def graph_pass_bytes(n_states: int, n_edges: int) -> int:
+    """Bytes the passes over a complete graph need beyond the graph itself (liveness levels through
+    strongly connected components, the robotic recovery and control checks): about 48 per edge
+    (edge sources, scipy's copies, reversed graph) and 48 per state."""
+    return 48 * n_edges + 48 * n_states
+
+
+def _enabled_one(sn: SparseNet, rows: np.ndarray, t: int) -> np.ndarray:
+    """Whether transition t is enabled in each row of ``rows`` (k, |P|): (k,) bool."""
+    out = np.ones(rows.shape[0], dtype=bool)
+    pre, inh = sn.pre, sn.inhibitor
+    for k in range(pre.indptr[t], pre.indptr[t + 1]):
+        out &= rows[:, pre.indices[k]] >= pre.data[k]
+    for k in range(inh.indptr[t], inh.indptr[t + 1]):
+        out &= rows[:, inh.indices[k]] < inh.data[k]
+    return out
+
+
+def _conflicts(net: PetriNet, space: StateSpace | None, *, seconds: float = 10.0,
+               block_bytes: int = 1 << 26) -> tuple[list[Conflict], bool]:
     """Structural conflicts; effective when, in a reachable marking enabling two of the transitions,
-    firing one disables the other."""
-    pre = np.asarray(net.pre)
-    inc = np.asarray(net.incidence, dtype=np.int64)
-    shared = [(p, np.flatnonzero(pre[p])) for p in range(pre.shape[0]) if np.count_nonzero(pre[p]) >= 2]
+    firing one disables the other. Checked on the complete graph in blocks of states (temporaries
+    below ``block_bytes``) within ``seconds``; returns the conflicts and whether the check finished."""
+    sn = sparse_net(net)
+    pre_r = sp.csr_matrix(sn.pre)
+    counts = np.diff(pre_r.indptr)
+    shared = [(p, pre_r.indices[pre_r.indptr[p]:pre_r.indptr[p + 1]]) for p in np.flatnonzero(counts >= 2).tolist()]
     effective: dict[int, bool | None] = {p: None for p, _ in shared}
+    finished = True
     if space is not None and space.complete and shared:
+        start = time.monotonic()
         effective = {p: False for p, _ in shared}
-        pairs = {p: [(int(a), int(b)) for i, a in enumerate(ts) for b in ts[i + 1:]] for p, ts in shared}
+        inc = sn.incidence
+        n_p = sn.n_places
+        block = max(1, min(1 << 16, block_bytes // max(8 * n_p, 1)))
         for lo in range(0, space.n_states, block):
+            if time.monotonic() - start > seconds:
+                finished = False
+                for p, _ in shared:
+                    if not effective[p]:
+                        effective[p] = None
+                break
             rows = space.states[lo:lo + block]
-            mask = enabled_mask(net, rows)
-            for p, _ in shared:
+            cache: dict[int, np.ndarray] = {}
+
+            def en(t: int, rows: np.ndarray = rows, cache: dict[int, np.ndarray] = cache) -> np.ndarray:
+                if t not in cache:
+                    cache[t] = _enabled_one(sn, rows, t)
+                return cache[t]
+
+            for p, ts in shared:
                 if effective[p]:
                     continue
-                for a, b in pairs[p]:
-                    both = np.flatnonzero(mask[:, a] & mask[:, b])
-                    if not both.size:
-                        continue
-                    base = rows[both].astype(np.int64)
-                    after_a = enabled_mask(net, base + inc[:, a])[:, b]
-                    after_b = enabled_mask(net, base + inc[:, b])[:, a]
-                    if not (after_a.all() and after_b.all()):
-                        effective[p] = True
+                for i, a in enumerate(ts.tolist()):
+                    for b in ts[i + 1:].tolist():
+                        both = np.flatnonzero(en(a) & en(b))
+                        if not both.size:
+                            continue
+                        base = rows[both].astype(np.int64)
+                        col_a = inc[:, a].toarray().ravel()
+                        col_b = inc[:, b].toarray().ravel()
+                        if not (_enabled_one(sn, base + col_a, b).all() and _enabled_one(sn, base + col_b, a).all()):
+                            effective[p] = True
+                            break
+                    if effective[p]:
                         break
-    return [Conflict(place=net.places[p].id, transitions=[net.transitions[int(t)].id for t in ts],
-                     effective=effective[p]) for p, ts in shared]
+    return ([Conflict(place=net.places[p].id, transitions=[net.transitions[int(t)].id for t in ts],
+                      effective=effective[p]) for p, ts in shared], finished)
 
 
-def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_coverability_nodes: int = 200_000,
-            max_invariant_rows: int = 20_000,
+def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None = None,
+            max_coverability_nodes: int = 200_000, max_invariant_rows: int = 20_000,
+            invariant_seconds: float = 5.0, lp_seconds: float = 10.0, coverability_seconds: float = 30.0,
             progress: Callable[[int, int], None] | None = None) -> Analysis:
     """Analyse the ordinary view of ``net`` (see the module docstring for the decision procedure).
 
     Args:
         net: the (interpreted or plain) net.
         max_states: limit of the reachability graph.
-        max_coverability_nodes: limit of the Karp–Miller graph.
+        max_bytes: memory budget of the whole analysis, bytes (default
+            :func:`~coordinator.analysis.statespace.default_max_bytes`): half goes to the
+            reachability graph's search, up to a quarter (at most 512 MiB) to each invariant
+            enumeration (before the search, freed after), and the passes over a complete graph
+            (liveness, recovery) run only if their estimated need fits in the budget beside the graph.
+        max_coverability_nodes: limit of the Karp–Miller graph (lowered to what the budget holds).
         max_invariant_rows: size guard of the Farkas algorithm.
+        invariant_seconds: time budget of each Farkas enumeration.
+        lp_seconds: time budget of each linear program (the per-place bounds share one such budget).
+        coverability_seconds: time budget of the Karp–Miller construction.
         progress: passed to :func:`~coordinator.analysis.statespace.explore`.
 
     Returns:
         An :class:`Analysis`.
     """
     net = ordinary_view(net)
+    budget = default_max_bytes() if max_bytes is None else int(max_bytes)
+    sn = sparse_net(net)
     notes: list[str] = []
-    pinv = p_invariants(net, max_rows=max_invariant_rows)
-    tinv = t_invariants(net, max_rows=max_invariant_rows)
-    if not pinv.complete:
-        notes.append("P-invariants: the Farkas table outgrew its size guard; none are listed")
-    if not tinv.complete:
-        notes.append("T-invariants: the Farkas table outgrew its size guard; none are listed")
+    sources: dict[str, str] = {}
+    psup = lp.conservative(sn, seconds=lp_seconds)
+    tsup = lp.consistent(sn, seconds=lp_seconds)
+    for key, sup in (("conservative", psup), ("consistent", tsup)):
+        if sup.covered is None:
+            notes.append(f"{key}: the linear program did not finish ({sup.message}); not decided")
+        else:
+            sources[key] = "LP (semiflow support, " + ("exact certificate)" if sup.certified else "floating point)")
+    farkas_bytes = min(DEFAULT_INVARIANT_BYTES, budget // 4)
+    pinv = p_invariants(net, max_rows=max_invariant_rows, max_bytes=farkas_bytes, seconds=invariant_seconds,
+                        support=psup.covered)
+    tinv = t_invariants(net, max_rows=max_invariant_rows, max_bytes=farkas_bytes, seconds=invariant_seconds,
+                        support=tsup.covered)
+    for name, inv in (("P-invariants", pinv), ("T-invariants", tinv)):
+        if not inv.complete:
+            notes.append(f"{name}: not enumerated ({inv.reason}); none are listed")
+    total, total_done, total_cert = lp.total_bound(sn, seconds=lp_seconds)
+    structural = Structural(p_support=psup, t_support=tsup, total_bound=total, total_certified=total_cert)
+    if not total_done:
+        notes.append("the state-equation LP of the total token count did not finish in time")
     sbounds = structural_bounds(net, pinv)
-    structurally_bounded = bool(pinv.complete and (sbounds >= 0).all())
-    has_inhibitors = bool(np.any(net.inhibitor))
+    by_invariants = bool(pinv.complete and (sbounds >= 0).all())
+    structurally_bounded = total is not None or by_invariants
+    has_inhibitors = bool(sn.inhibitor.nnz)
+    graph_bytes = budget // 2
 
     space: StateSpace | None = None
     witness: CoveringWitness | None = None
     if not structurally_bounded and max_states > PROBE_STATES:
-        probe = explore(net, max_states=PROBE_STATES, progress=progress)
+        probe = explore(net, max_states=PROBE_STATES, progress=progress, max_bytes=graph_bytes)
         if probe.complete:
             space = probe
         else:
@@ -333,16 +473,21 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_coverability_nod
             if witness is not None:
                 space = probe
     if space is None:
-        space = explore(net, max_states=max_states, progress=progress)
+        space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes)
         if not space.complete and not structurally_bounded and witness is None:
             witness = covering_witness(space)
 
-    cover: Coverability | None = None
     if space.complete:
-        return _from_graph(net, space, pinv, tinv, notes)
-    # the graph is truncated: decide boundedness by other means
+        return _from_graph(net, space, pinv, tinv, psup, tsup, structural, notes, sources, budget)
+    if space.stopped_by == "max_memory":
+        notes.append(f"the reachability graph was stopped by the memory budget ({graph_bytes / 2**30:.2f} GiB of "
+                     f"{budget / 2**30:.2f} GiB) after {space.n_states:,} markings")
+    else:
+        notes.append(f"the reachability graph was stopped at the state limit ({max_states:,} markings)")
+    cover: Coverability | None = None
     ids = [p.id for p in net.places]
     place_bounds: dict[str, int | None] = {pid: None for pid in ids}
+    exact: list[str] = []
     unbounded: list[str] = []
     bounded: bool | None = None
     deadlock: bool | None = None
@@ -350,80 +495,139 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_coverability_nod
     quasi: bool | None = None
     levels: dict[str, int] | None = None
     live: bool | None = None
+    max_in_place: int | None = None
+    max_per_marking: int | None = None
+    one_safe: bool | None = None
+    seen_max = space.states.max(axis=0).astype(np.int64) if space.n_states else np.zeros(len(ids), np.int64)
     if structurally_bounded:
         bounded = True
-        place_bounds = {pid: int(b) for pid, b in zip(ids, sbounds)}
-        notes.append(f"the net is bounded (covered by P-invariants; the bounds listed are the invariants' "
-                     f"bounds) but has more than {max_states:,} reachable markings")
+        flows = tuple(v for v in pinv.vectors) + ((psup.semiflow,) if psup.semiflow is not None else ())
+        pb = lp.place_bounds(sn, seconds=lp_seconds, seen=seen_max, semiflows=flows)
+        structural = replace(structural, place_bounds=pb)
+        notes.extend(pb.notes)
+        upper = pb.bounds.copy()
+        if pinv.complete:
+            both = (sbounds >= 0) & ((upper < 0) | (sbounds < upper))
+            upper[both] = sbounds[both]
+        place_bounds = {pid: (int(b) if b >= 0 else None) for pid, b in zip(ids, upper)}
+        exact = [pid for pid, b, m in zip(ids, upper, seen_max) if b >= 0 and m == b]
+        if total is not None:
+            sources["bounded"] = "state equation (LP" + (", exact certificate)" if total_cert else ", floating point)")
+        else:
+            sources["bounded"] = "P-invariants"
+        sources["place_bounds"] = ("upper bounds from the state equation (LP) and the P-invariants; exact where the "
+                                   "explored markings reach them")
+        if (upper >= 0).all():
+            top = int(upper.max(initial=0))
+            if top <= 1:
+                one_safe = True
+                sources["one_safe"] = sources["bounded"]
+            if int(seen_max.max(initial=0)) == top:
+                max_in_place = top
+                sources["max_token_in_place"] = "explored markings reach the structural upper bound"
+        if total is not None and space.n_states:
+            reached = int(space.states.sum(axis=1, dtype=np.int64).max())
+            if reached == total:
+                max_per_marking = total
+                sources["max_token_per_marking"] = "explored markings reach the state-equation bound"
+        notes.append(f"the net is bounded ({sources['bounded']}); the place bounds listed are upper bounds, "
+                     f"exact for {len(exact)} of {len(ids)} places (reached by an explored marking)")
     elif not has_inhibitors:
-        cover = karp_miller(net, max_nodes=max_coverability_nodes)
+        node_bytes = 96 * max(len(ids), 1) + 256
+        nodes = max(1, min(max_coverability_nodes, (budget // 4) // node_bytes))
+        cover = karp_miller(net, max_nodes=nodes, seconds=coverability_seconds)
         if cover.complete:
             bounded = cover.bounded
             place_bounds = dict(zip(ids, cover.place_bounds()))
+            exact = [pid for pid, b in place_bounds.items() if b is not None]
             unbounded = cover.unbounded_places()
             fire = cover.fireable_transitions()
             quasi = bool(fire.all())
+            sources["bounded"] = sources["place_bounds"] = sources["quasi_live"] = "Karp-Miller coverability graph"
             if not quasi:
                 levels = None
                 live = False
+                sources["live"] = "Karp-Miller coverability graph"
             for node in cover.dead_nodes()[:MAX_WITNESSES]:
                 deadlocks.append(Deadlock(marking=_omega_marking(net, cover.markings[node]),
                                           firing_sequence=cover.firing_sequence(int(node))))
             deadlock = True if deadlocks else None
+            if deadlock:
+                sources["deadlock"] = "Karp-Miller coverability graph"
             notes.append("the reachability graph is infinite or too large; boundedness, place bounds, "
                          "quasi-liveness and dead transitions come from the Karp–Miller coverability graph; "
                          "liveness and reversibility are not decided on it")
             if not quasi:
                 notes.append("dead transitions: " + ", ".join(
                     t.id for t, f in zip(net.transitions, fire) if not f))
+            if bounded:
+                max_in_place = max([0, *(b for b in place_bounds.values() if b is not None)])
+                one_safe = max_in_place <= 1
+                sources["max_token_in_place"] = sources["one_safe"] = "Karp-Miller coverability graph"
         elif witness is not None:
             bounded = False
-            notes.append("the coverability graph outgrew its limit; unboundedness comes from a pumping witness")
+            notes.append(f"the coverability graph {cover.stopped}; unboundedness comes from a pumping witness")
         else:
-            notes.append("neither the reachability graph nor the coverability graph fit their limits; "
-                         "boundedness is not decided")
+            notes.append(f"the coverability graph {cover.stopped}, and the state-equation LP does not bound the "
+                         "net: boundedness is not decided")
     else:
-        if witness is not None:
-            bounded = False
-        else:
-            notes.append("the net has inhibitor arcs and its reachability graph exceeds the limit: "
-                         "boundedness is undecidable in general and was not decided")
+        if witness is None:
+            notes.append("the net has inhibitor arcs, its reachability graph exceeds the limit and the state "
+                         "equation does not bound it: boundedness is undecidable in general and was not decided")
     if witness is not None:
         bounded = False
+        sources["bounded"] = "pumping witness (a firing sequence that can repeat for ever)"
+        one_safe = False
+        sources["one_safe"] = sources["bounded"]
         for pid in witness.growing:
             if pid not in unbounded:
                 unbounded.append(pid)
     for pid in unbounded:
         place_bounds[pid] = None
-    # what the explored part proves on its own: its dead markings are reachable deadlocks, and a
-    # transition that fired there is not dead
+        if pid in exact:
+            exact.remove(pid)
+    # what the explored part proves on its own: its dead markings are reachable deadlocks, a
+    # transition that fired there is not dead, a count above 1 breaks safeness, a place that varies
+    # is not stable
     dead_seen = space.deadlocks()
     if dead_seen.size:
         deadlock = True
+        sources["deadlock"] = "reachability graph (explored part)"
         if not deadlocks:
             deadlocks = [Deadlock(marking=space.marking(int(i)).to_dict(), firing_sequence=space.firing_sequence(int(i)))
                          for i in dead_seen[:MAX_WITNESSES]]
     if quasi is None and space.n_edges and np.unique(space.transition).size == len(net.transitions):
         quasi = True
+        sources["quasi_live"] = "reachability graph (explored part)"
+    if one_safe is None and int(seen_max.max(initial=0)) > 1:
+        one_safe = False
+        sources["one_safe"] = "reachability graph (explored part)"
+    stable_known: bool | None = None
+    if space.n_states and (space.states.min(axis=0) != space.states.max(axis=0)).all():
+        stable_known = False
+        sources["stable_marking"] = "reachability graph (explored part): every place varies"
     projection: Analysis | None = None
     reversible: bool | None = None
     record = record_only_places(net)
     growth_is_recorded = bounded is not False or (bool(unbounded) and set(unbounded) <= set(record))
     if record and len(record) < len(net.places) and growth_is_recorded:
-        projection = analyse(without_places(net, record), max_states=max_states,
+        projection = analyse(without_places(net, record), max_states=max_states, max_bytes=budget,
                              max_coverability_nodes=max_coverability_nodes, max_invariant_rows=max_invariant_rows,
-                             progress=progress)
-        if projection.complete:
+                             invariant_seconds=invariant_seconds, lp_seconds=lp_seconds,
+                             coverability_seconds=coverability_seconds, progress=progress)
+        if projection.complete and projection.graph_work_done:
             # record-only places never change what is enabled: liveness and deadlocks carry over
             levels, quasi, live = projection.liveness, projection.quasi_live, projection.live
             deadlock = projection.deadlock
             deadlocks = list(projection.deadlocks)
             # the projection of a path is a path; the record places come back only if never written
-            post = np.asarray(net.post)
-            writers = [t.id for j, t in enumerate(net.transitions)
-                       if any(post[net.place_index[p], j] for p in record)]
-            written = any((projection.liveness or {}).get(t, 0) > 0 for t in writers)
+            post = sp.csr_matrix(sn.post)
+            writers = {int(t) for p in record for t in post.indices[post.indptr[net.place_index[p]]:
+                                                                   post.indptr[net.place_index[p] + 1]]}
+            written = any((projection.liveness or {}).get(net.transitions[t].id, 0) > 0 for t in writers)
             reversible = bool(projection.reversible) and not written
+            for key in ("deadlock", "quasi_live", "live", "reversible"):
+                sources[key] = "reachability graph of the net without its record-only places"
             notes.append(f"liveness, deadlocks and reversibility come from the net without its record-only "
                          f"places ({', '.join(record)}), which has the same enabled transitions in every marking "
                          "and a finite reachability graph")
@@ -431,25 +635,19 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_coverability_nod
             projection = None
     if set(unbounded) & set(record):
         reversible = False  # a record-only place never loses tokens: once it has grown, M0 is out of reach
+        sources["reversible"] = "a record-only place grows for ever"
     if projection is None and levels is None:
         notes.append("liveness and reversibility need the whole reachability graph and were not decided")
-    max_in_place: int | None = None
-    one_safe: bool | None = None
-    if bounded is False:
-        one_safe = False
-    elif cover is not None and cover.complete:
-        max_in_place = max([0, *(b for b in place_bounds.values() if b is not None)])
-        one_safe = max_in_place <= 1
-    elif structurally_bounded and int(sbounds.max(initial=0)) <= 1:
-        one_safe = True
+    conflicts, _ = _conflicts(net, None)
     return Analysis(
         net=net, space=space, coverability=cover, states=space.n_states, edges=space.n_edges, complete=False,
         bounded=bounded, place_bounds=place_bounds, unbounded_places=unbounded, covering=witness,
-        max_token_in_place=max_in_place, max_token_per_marking=None, one_safe=one_safe,
+        max_token_in_place=max_in_place, max_token_per_marking=max_per_marking, one_safe=one_safe,
         deadlock=deadlock, deadlocks=deadlocks, n_deadlocks=None, liveness=levels, quasi_live=quasi, live=live,
         reversible=reversible, home_states=None, home_marking_is_home=None, stable_places=None,
-        p_invariants=pinv, t_invariants=tinv, conservative=pinv.covered, consistent=tinv.covered,
-        conflicts=_conflicts(net, None), notes=notes, projection=projection,
+        p_invariants=pinv, t_invariants=tinv, conservative=psup.all_covered, consistent=tsup.all_covered,
+        conflicts=conflicts, notes=notes, projection=projection, sources=sources, structural=structural,
+        exact_bounds=exact, stopped_by=space.stopped_by, stable_marking_partial=stable_known,
     )
 
 
@@ -457,35 +655,63 @@ def _omega_marking(net: PetriNet, row: np.ndarray) -> dict[str, int]:
     return {net.places[p].id: int(row[p]) for p in np.flatnonzero(row)}
 
 
-def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invariants,
-                notes: list[str]) -> Analysis:
+def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invariants, psup: Support,
+                tsup: Support, structural: Structural, notes: list[str], sources: dict[str, str],
+                budget: int) -> Analysis:
     states = space.states
     per_place = states.max(axis=0).astype(np.int64) if space.n_states else np.zeros(len(net.places), np.int64)
-    totals = states.sum(axis=1, dtype=np.int64)
+    totals_max = int(states.sum(axis=1, dtype=np.int64).max(initial=0)) if space.n_states else 0
     dead = space.deadlocks()
     deadlocks = [Deadlock(marking=space.marking(int(i)).to_dict(), firing_sequence=space.firing_sequence(int(i)))
                  for i in dead[:MAX_WITNESSES]]
-    levels, labels, terminal = liveness_levels(space)
-    n_terminal = int(terminal.sum())
-    home_count = int(np.count_nonzero(terminal[labels])) if n_terminal == 1 else 0
+    for key in ("bounded", "place_bounds", "max_token_in_place", "max_token_per_marking", "one_safe", "deadlock",
+                "stable_marking"):
+        sources[key] = "reachability graph"
+    need = graph_pass_bytes(space.n_states, space.n_edges)
+    work = space.nbytes + need <= budget
+    liveness: dict[str, int] | None = None
+    quasi: bool | None = None
+    live: bool | None = None
+    reversible: bool | None = None
+    home_count: int | None = None
     home_is_home: bool | None = None
-    if net.home_marking is not None:
-        try:
-            h = space.index_of(net.home_marking)
-            home_is_home = bool(n_terminal == 1 and terminal[labels[h]])
-        except KeyError:
-            home_is_home = False
+    if work:
+        levels, labels, terminal = liveness_levels(space)
+        n_terminal = int(terminal.sum())
+        home_count = int(np.count_nonzero(terminal[labels])) if n_terminal == 1 else 0
+        if net.home_marking is not None:
+            try:
+                h = space.index_of(net.home_marking)
+                home_is_home = bool(n_terminal == 1 and terminal[labels[h]])
+            except KeyError:
+                home_is_home = False
+        liveness = {t.id: int(lv) for t, lv in zip(net.transitions, levels)}
+        quasi, live = bool((levels >= 1).all()), bool((levels == 4).all())
+        reversible = bool(np.unique(labels).size == 1)
+        for key in ("quasi_live", "live", "reversible"):
+            sources[key] = "reachability graph"
+    else:
+        used = np.zeros(len(net.transitions), dtype=bool)
+        used[space.transition] = True
+        quasi = bool(used.all())
+        sources["quasi_live"] = "reachability graph"
+        notes.append(f"liveness, reversibility and the robotic recovery check were skipped: on a graph of "
+                     f"{space.n_edges:,} edges they need about {need / 2**30:.1f} GiB beyond the graph's "
+                     f"{space.nbytes / 2**30:.1f} GiB, over the memory budget of {budget / 2**30:.1f} GiB")
     stable = np.flatnonzero(states.min(axis=0) == states.max(axis=0))
+    conflicts, finished = _conflicts(net, space)
+    if not finished:
+        notes.append("structural conflicts: the effectiveness check ran out of time; some are left undecided")
     return Analysis(
         net=net, space=space, coverability=None, states=space.n_states, edges=space.n_edges, complete=True,
         bounded=True, place_bounds={p.id: int(b) for p, b in zip(net.places, per_place)}, unbounded_places=[],
         covering=None, max_token_in_place=int(per_place.max(initial=0)),
-        max_token_per_marking=int(totals.max(initial=0)), one_safe=bool(per_place.max(initial=0) <= 1),
+        max_token_per_marking=totals_max, one_safe=bool(per_place.max(initial=0) <= 1),
         deadlock=bool(dead.size), deadlocks=deadlocks, n_deadlocks=int(dead.size),
-        liveness={t.id: int(lv) for t, lv in zip(net.transitions, levels)},
-        quasi_live=bool((levels >= 1).all()), live=bool((levels == 4).all()),
-        reversible=bool(np.unique(labels).size == 1), home_states=home_count, home_marking_is_home=home_is_home,
+        liveness=liveness, quasi_live=quasi, live=live,
+        reversible=reversible, home_states=home_count, home_marking_is_home=home_is_home,
         stable_places=[net.places[int(p)].id for p in stable],
-        p_invariants=pinv, t_invariants=tinv, conservative=pinv.covered, consistent=tinv.covered,
-        conflicts=_conflicts(net, space), notes=notes,
+        p_invariants=pinv, t_invariants=tinv, conservative=psup.all_covered, consistent=tsup.all_covered,
+        conflicts=conflicts, notes=notes, sources=sources, structural=structural,
+        exact_bounds=[p.id for p in net.places], graph_work_done=work,
     )

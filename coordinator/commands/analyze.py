@@ -1,9 +1,12 @@
-"""``petrobot analyze NET [--json] [--max-states N] [--progress]``: qualitative analysis of a task net.
+"""``petrobot analyze NET [--json] [--max-states N] [--max-memory SIZE] [--progress]``: qualitative
+analysis of a task net.
 
 Thin shell over :func:`coordinator.analysis.robotic.report` (paper section 2, "Qualitative
 Performance Evaluation"): loads the net (TOML or PNML), analyses its ordinary view (events dropped)
-and prints a readable report, or the JSON report with ``--json``. Progress of long state-space
-constructions goes to stderr, on a terminal or with ``--progress``.
+within a state limit and a memory budget, and prints a readable report, or the JSON report with
+``--json``. Progress of long state-space constructions goes to stderr, on a terminal or with
+``--progress``; a one-line notice goes to stderr when the compiled search has to be compiled first
+(once per machine).
 """
 
 from __future__ import annotations
@@ -15,11 +18,37 @@ import time
 from collections.abc import Callable
 from typing import Any, TextIO
 
+from coordinator.analysis.budget import default_max_bytes
+from coordinator.analysis.jit import search_is_compiled
 from services.errors import PetrobotError
 
-__all__ = ["add_parser", "render", "run"]
+__all__ = ["add_parser", "parse_size", "render", "run"]
 
 DEFAULT_MAX_STATES = 10_000_000
+_UNITS = {"": 1, "B": 1, "K": 1 << 10, "KB": 1 << 10, "KIB": 1 << 10, "M": 1 << 20, "MB": 1 << 20,
+          "MIB": 1 << 20, "G": 1 << 30, "GB": 1 << 30, "GIB": 1 << 30, "T": 1 << 40, "TB": 1 << 40, "TIB": 1 << 40}
+
+
+def parse_size(text: str) -> int:
+    """Parse a memory size: a number with an optional unit K, M, G, T (powers of 1024; "MB", "MiB"
+    accepted), e.g. ``512M``, ``4G``, ``1.5GiB``; bytes without a unit.
+
+    Raises:
+        argparse.ArgumentTypeError: on anything else, or a size below 1 MiB.
+    """
+    raw = text.strip().upper().replace(" ", "")
+    num = raw.rstrip("KMGTIB")
+    unit = raw[len(num):]
+    try:
+        value = float(num)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a memory size: {text!r} (use e.g. 512M, 4G)") from None
+    if unit not in _UNITS:
+        raise argparse.ArgumentTypeError(f"unknown unit in {text!r} (use K, M, G or T)")
+    size = int(value * _UNITS[unit])
+    if size < 1 << 20:
+        raise argparse.ArgumentTypeError(f"memory budget {text!r} is below 1 MiB")
+    return size
 
 
 def add_parser(subparsers: Any) -> None:
@@ -43,6 +72,10 @@ def add_parser(subparsers: Any) -> None:
     parser.add_argument("--max-states", type=int, default=DEFAULT_MAX_STATES, metavar="N",
                         help=f"stop the reachability graph at N markings (default: {DEFAULT_MAX_STATES:,}); "
                              "properties that need the whole graph are then left undecided")
+    parser.add_argument("--max-memory", type=parse_size, default=None, metavar="SIZE",
+                        help="memory budget of the analysis, e.g. 512M or 8G (default: half the physical "
+                             f"memory or 4 GiB, whichever is smaller; here {default_max_bytes() / 2**30:.1f} GiB); "
+                             "a search that reaches it stops with a partial, labelled report")
     parser.add_argument("--progress", action="store_true",
                         help="report state-space progress on stderr even when stderr is not a terminal")
 
@@ -70,8 +103,14 @@ def _yes(value: Any) -> str:
 def render(rep: dict[str, Any]) -> str:
     """Return the readable text of a :func:`~coordinator.analysis.robotic.report` dictionary."""
     lines = [f"net {rep['net']!r}: {rep['places']} places, {rep['transitions']} transitions (ordinary view)"]
-    full = "" if rep["complete"] else " (graph truncated)"
+    trunc = rep.get("truncated")
+    full = ""
+    if trunc:
+        why = {"max_states": "the state limit", "max_memory": "the memory budget"}.get(trunc["by"], trunc["by"])
+        full = f" (partial: stopped by {why})" if not rep["complete"] else f" (complete; later passes skipped: {why})"
     lines.append(f"reachability graph: {rep['states']:,} markings, {rep['edges']:,} edges{full}")
+    if trunc and trunc.get("undecided"):
+        lines.append(f"undecided: {', '.join(trunc['undecided'])}")
     lines.append("")
     lines.append("robotic reading")
     for key, title in (("stable", "stable"), ("error_recoverable", "error recoverable"),
@@ -86,7 +125,12 @@ def render(rep: dict[str, Any]) -> str:
         lines.append(f"    unbounded places: {', '.join(rep['unbounded_places'])}")
     bounds = rep["place_bounds"]
     if bounds and rep["bounded"]:
-        lines.append("    bounds: " + ", ".join(f"{p}≤{b}" for p, b in bounds.items()))
+        exact = rep.get("place_bounds_exact", "all")
+        shown = list(bounds.items())[:40]
+        lines.append("    bounds: " + ", ".join(f"{p}≤{b}" for p, b in shown)
+                     + (f" ... ({len(bounds) - 40} more in --json)" if len(bounds) > 40 else ""))
+        if exact != "all":
+            lines.append(f"    (upper bounds; exact for {len(exact)} of {len(bounds)} places)")
     lines.append(f"  1-safe:             {_yes(rep['one_safe'])}")
     lines.append(f"  max tokens/place:   {rep['max_token_in_place'] if rep['max_token_in_place'] is not None else '-'}")
     lines.append(f"  max tokens/marking: {rep['max_token_per_marking'] if rep['max_token_per_marking'] is not None else '-'}")
@@ -119,6 +163,11 @@ def render(rep: dict[str, Any]) -> str:
             lines.append("    " + " + ".join(f"{w}·{i}" if w != 1 else i for i, w in vec.items()))
         if len(inv) > 10:
             lines.append(f"    ... {len(inv) - 10} more (see --json)")
+    sources = rep.get("sources") or {}
+    if sources and not rep["complete"]:
+        lines.append("  decided by:")
+        for key, how in sources.items():
+            lines.append(f"    {key}: {how}")
     conflicts = rep["structural_conflicts"]
     lines.append(f"  structural conflicts: {len(conflicts)}")
     for c in conflicts[:10]:
@@ -143,13 +192,16 @@ def run(args: argparse.Namespace) -> int:
         print(f"petrobot analyze: {exc}", file=sys.stderr)
         return 1
     show = args.progress or sys.stderr.isatty()
+    if search_is_compiled() is False:
+        sys.stderr.write("compiling the state-space search (once per machine)...\n")
+        sys.stderr.flush()
     if show:
         sys.stderr.write("  loading the compiled state-space search ...")
         sys.stderr.flush()
         sys.stderr.write(f" {load_search():.1f} s\n")
     progress = _progress(sys.stderr) if show else None
     try:
-        rep = report(net, max_states=args.max_states, progress=progress)
+        rep = report(net, max_states=args.max_states, max_bytes=args.max_memory, progress=progress)
     except PetrobotError as exc:
         print(f"petrobot analyze: {exc}", file=sys.stderr)
         return 1

@@ -55,6 +55,14 @@ def add_parser(subparsers: Any) -> None:
                              "(exponential otherwise); 95%% confidence intervals")
     options.add_seed(parser, help="seed of the simulation (default 0)")
     options.add_json(parser)
+    # reward measures (docs/gspn.md, "Measures"): self-contained, kept together
+    parser.add_argument("--measure", action="append", default=[], metavar="MEASURE",
+                        help="a reward measure, repeatable: 'P{#p1 == 1 and #p3 == 1}' (long-run probability "
+                             "of a condition), 'E{#p1 + #p2}' (long-run expected value), 'X{t3}' (throughput of "
+                             "a transition, 1/s); expressions use #place, numbers, + - * /, min/max, "
+                             "comparisons, and/or/not, parentheses")
+    parser.add_argument("--markings", action="store_true",
+                        help="also give the long-run probability of every tangible marking (most probable first)")
 
 
 def _is_interpreted(net: PetriNet) -> bool:
@@ -83,7 +91,8 @@ def report(args: argparse.Namespace) -> dict[str, Any]:
     if args.write_gspn:
         with open(args.write_gspn, "w", encoding="utf-8") as fh:
             fh.write(dump_net(gspn))
-    result = analyse(gspn, method=args.method, max_states=args.max_states)
+    result = analyse(gspn, method=args.method, max_states=args.max_states,
+                     measures=getattr(args, "measure", None) or (), markings=bool(getattr(args, "markings", False)))
     rep = {"net": net.name, **result.to_json(), "warnings": warnings, "sources": sources}
     if args.simulate > 0:
         rep["simulation"] = _simulate(gspn, delays, result.terminates, args.simulate, args.seed)
@@ -114,6 +123,9 @@ def render(rep: dict[str, Any]) -> str:
     """Return the readable text of a :func:`report` dict."""
     lines = [(f"net {rep['net']!r}: {rep['tangible_markings']:,} tangible and {rep['vanishing_markings']:,} "
               f"vanishing markings; steady state by {rep['method']}, residual {rep['residual']:.1e}")]
+    size = rep.get("ctmc") or {}
+    if size:
+        lines.append(f"CTMC: {size['tangible_states']:,} states, {size['arcs']:,} arcs")
     if rep["terminates"]:
         lines.append(f"the net terminates: mean time to absorption {rep['mean_time_to_absorption']:.6g} s")
         for a in sorted(rep["absorption"], key=lambda a: -a["probability"])[:15]:
@@ -137,6 +149,20 @@ def render(rep: dict[str, Any]) -> str:
     for b in rep["bottlenecks"][:10]:
         score = b.get("share", b.get("utilisation"))
         lines.append(f"  {b['transition']:28} {score:.4f}")
+    if rep.get("measures"):
+        lines += ["", "measures (long run" + (", and until absorption" if any("until_absorption" in m
+                                                                             for m in rep["measures"]) else "") + ")"]
+        for m in rep["measures"]:
+            extra = f"   until absorption {m['until_absorption']:.6g}" if "until_absorption" in m else ""
+            lines.append(f"  {m['measure']:40} {m['value']:.6g}{extra}")
+    if rep.get("marking_probabilities") is not None:
+        probs = rep["marking_probabilities"]
+        lines += ["", f"marking probabilities ({len(probs):,} tangible markings, most probable first)"]
+        for entry in probs[:20]:
+            marking = ", ".join(f"{p}:{n}" for p, n in entry["marking"].items()) or "empty"
+            lines.append(f"  {entry['probability']:.6g}  {{{marking}}}")
+        if len(probs) > 20:
+            lines.append(f"  ... {len(probs) - 20:,} more (see --json)")
     sim = rep.get("simulation")
     if sim:
         laws = ", ".join(f"{t}: {k}" for t, k in sim["delays"].items()) or "all exponential"
@@ -158,11 +184,16 @@ def render(rep: dict[str, Any]) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Print the report; 0 on success, 1 on an unreadable net or journal, 2 if the analysis fails."""
+    from coordinator.analysis.expr import ExprError
+
     try:
         rep = report(args)
     except (NetError, JournalError, OSError) as exc:
         print(f"petrobot gspn: {exc}", file=sys.stderr)
         return 1
+    except ExprError as exc:
+        print(f"petrobot gspn: bad --measure: {exc}", file=sys.stderr)
+        return 2
     except (AnalysisError, PetrobotError) as exc:
         print(f"petrobot gspn: {exc}", file=sys.stderr)
         return 2

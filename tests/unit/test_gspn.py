@@ -139,7 +139,6 @@ def test_steady_state_and_transient_at_large_time_agree() -> None:
     assert np.allclose(late, ctmc.steady_state(chain.q).pi, atol=1e-10)
 
 
-@pytest.mark.skipif(not (MCC / "Kanban-PT-00005").exists(), reason="MCC models not present")
 def test_kanban_tangible_state_counts_match_the_published_ones() -> None:
     # Kanban of G. Ciardo and M. Tilgner (ICASE report 96-35, 1996), every transition exponential:
     # they report 160, 4600 and 58400 tangible markings for N = 1, 2, 3.
@@ -150,7 +149,6 @@ def test_kanban_tangible_state_counts_match_the_published_ones() -> None:
     assert min(res.throughput.values()) > 0
 
 
-@pytest.mark.skipif(not (MCC / "FMS-PT-00002").exists(), reason="MCC models not present")
 def test_fms_gspn_tangible_and_vanishing_counts_match_the_published_ones() -> None:
     # FMS of G. Ciardo and K. S. Trivedi (1993): 54, 810, 6520 tangible markings for N = 1, 2, 3.
     graphs = [explore_gspn(literature_net("FMS-PT-00002", n, FMS_IMMEDIATE)) for n in (1, 2, 3)]
@@ -162,7 +160,6 @@ def test_fms_gspn_tangible_and_vanishing_counts_match_the_published_ones() -> No
     assert res.throughput["tP1j"] == pytest.approx(res.throughput["tx"], rel=1e-8)
 
 
-@pytest.mark.skipif(not (MCC / "FMS-PT-00002").exists(), reason="MCC models not present")
 def test_reachability_graph_of_all_exponential_nets_matches_the_mcc_oracle() -> None:
     # With every transition exponential the GSPN graph is the ordinary reachability graph:
     # the Model Checking Contest publishes 3444 markings and 16311 edges for FMS-PT-00002.
@@ -191,3 +188,126 @@ def test_state_limit_is_reported() -> None:
     with pytest.raises(AnalysisError, match="max_states"):
         explore_gspn(queue(1.0, 1.0, 50), max_states=10)
 
+
+
+# ------------------------------------------------------------------------------- reward measures
+def test_measures_of_the_mm1k_queue_match_the_closed_form() -> None:
+    lam, mu, k = 2.0, 3.0, 4
+    pi = mmck(lam, mu, 1, k)
+    res = analyse(queue(lam, mu, k), measures=["P{#queue == 0}", "P{#queue >= 2 and #free >= 1}",
+                                               "E{#queue}", "E{#queue * #queue - 1}", "X{serve}", "X{arrive}"],
+                  markings=True)
+    got = {m["measure"]: m["value"] for m in res.measures}
+    assert got["P{#queue == 0}"] == pytest.approx(pi[0], rel=1e-9)
+    assert got["P{#queue >= 2 and #free >= 1}"] == pytest.approx(pi[2] + pi[3], rel=1e-9)
+    assert got["E{#queue}"] == pytest.approx(float(np.arange(k + 1) @ pi), rel=1e-9)
+    assert got["E{#queue * #queue - 1}"] == pytest.approx(float((np.arange(k + 1) ** 2) @ pi) - 1, rel=1e-9)
+    assert got["X{serve}"] == pytest.approx(mu * (1 - pi[0]), rel=1e-9)
+    assert got["X{arrive}"] == pytest.approx(lam * (1 - pi[k]), rel=1e-9)  # = X{serve}: flow balance
+    assert all("until_absorption" not in m for m in res.measures)
+    assert res.ctmc == {"tangible_states": k + 1, "arcs": 2 * k}
+    probs = res.marking_probabilities
+    assert probs is not None and len(probs) == k + 1
+    assert [p["probability"] for p in probs] == sorted((p["probability"] for p in probs), reverse=True)
+    by_queue = {p["marking"].get("queue", 0): p["probability"] for p in probs}
+    assert by_queue == pytest.approx({n: pi[n] for n in range(k + 1)}, rel=1e-9)
+
+
+def erlang_loss(c: int, lam: float, mu: float) -> PetriNet:
+    """M/M/c/c: arrivals find a free server or are lost; each busy server finishes at rate mu."""
+    return PetriNet(name="erlang", places=[Place(id="free"), Place(id="busy")],
+                    transitions=[exp("arrive", lam), exp("finish", mu, None)],
+                    arcs=[Arc(source="free", target="arrive"), Arc(source="arrive", target="busy"),
+                          Arc(source="busy", target="finish"), Arc(source="finish", target="free")],
+                    initial_marking={"free": c})
+
+
+def test_blocking_probability_is_erlangs_loss_formula() -> None:
+    """Erlang's B formula (1917): P(all c servers busy) = (a^c/c!) / sum_k a^k/k!, a = lam/mu;
+    c = 3, a = 2 gives 4/19 by hand."""
+    res = analyse(erlang_loss(3, 2.0, 1.0), measures=["P{#free == 0}", "E{#busy}", "X{arrive}"])
+    blocked, busy, accepted = (m["value"] for m in res.measures)
+    assert blocked == pytest.approx(4 / 19, rel=1e-9)
+    assert busy == pytest.approx(2.0 * (1 - 4 / 19), rel=1e-9)  # Little: lam (1 - B) / mu
+    assert accepted == pytest.approx(2.0 * (1 - 4 / 19), rel=1e-9)
+
+
+def test_measures_of_a_terminating_net_also_accumulate_until_absorption() -> None:
+    a, b, r = 2.0, 0.5, 0.9
+    res = analyse(fork_join(a, b, r), measures=["P{#ok == 1}", "P{#a == 1}", "E{#a + #b}", "X{ta}"])
+    ok, a_on, pending, ta = res.measures
+    assert ok["value"] == pytest.approx(r) and ok["until_absorption"] == pytest.approx(0.0)
+    assert a_on["value"] == 0.0 and a_on["until_absorption"] == pytest.approx(1 / a)  # time ta is pending
+    assert pending["until_absorption"] == pytest.approx(1 / a + 1 / b)
+    assert ta["value"] == 0.0 and ta["until_absorption"] == pytest.approx(1.0)  # fires once
+
+
+@pytest.mark.parametrize(("measure", "column", "words"), [
+    ("P{#queue + 1}", 3, "expected a condition"),
+    ("E{#queue > 1}", 3, "expected a number"),
+    ("P{#qeue == 1}", 3, "did you mean #queue"),
+    ("X{srve}", 3, "did you mean serve"),
+    ("Q{#queue}", 1, "starts with P{...}"),
+    ("P #queue == 1", 2, "braces missing"),
+    ("E{#queue +}", 11, "ends too early"),
+])
+def test_bad_measures_are_reported_with_their_column_before_anything_is_solved(measure: str, column: int,
+                                                                             words: str) -> None:
+    from coordinator.analysis.expr import ExprError
+
+    with pytest.raises(ExprError) as info:
+        analyse(queue(1.0, 2.0, 3), measures=[measure])
+    assert info.value.column == column and words in str(info.value)
+
+
+def test_gspn_command_prints_measures_markings_and_the_ctmc_size(tmp_path: pytest.TempPathFactory,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+    from pathlib import Path
+
+    from coordinator.cli import main
+    from coordinator.netfile import dump_net
+
+    path = Path(str(tmp_path)) / "queue.toml"
+    path.write_text(dump_net(queue(2.0, 3.0, 4)), encoding="utf-8")
+    assert main(["gspn", str(path), "--json", "--measure", "P{#queue == 0}", "--measure", "E{#queue}",
+                 "--measure", "X{serve}", "--markings"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    pi = mmck(2.0, 3.0, 1, 4)
+    assert rep["ctmc"] == {"tangible_states": 5, "arcs": 8}
+    assert [m["kind"] for m in rep["measures"]] == ["P", "E", "X"]
+    assert rep["measures"][0]["value"] == pytest.approx(pi[0], rel=1e-9)
+    assert len(rep["marking_probabilities"]) == 5
+    assert main(["gspn", str(path), "--measure", "P{#queue == 0}"]) == 0
+    text = capsys.readouterr().out
+    assert "CTMC: 5 states, 8 arcs" in text and "P{#queue == 0}" in text
+    assert main(["gspn", str(path), "--measure", "P{#queue +}"]) == 2
+    assert "bad --measure" in capsys.readouterr().err
+
+
+def parallel_system() -> PetriNet:
+    """The parallel-processing GSPN of Ajmone Marsan, Balbo, Conte, Donatelli, Franceschinis,
+    *Modelling with Generalized Stochastic Petri Nets* (1995), section 6.3 (its Fig. 6.9, tables
+    6.7 and 6.8): two tokens in p1; new data at rate 0.2 per token (infinite server) to p2; an
+    immediate fork into two parallel branches (rates 2.0 and 1.0) that join immediately in p7; a
+    consistency check that passes with weight 0.99 (then I/O at rate 5.0 back to p1) or fails with
+    weight 0.01 (then a check at rate 0.1, back to the fork)."""
+    tr = [exp("Tndata", 0.2, None), imm("tstart", priority=1), exp("Tpar1", 2.0), exp("Tpar2", 1.0),
+          imm("tsyn", priority=1), imm("tOK", 0.99, priority=1), imm("tKO", 0.01, priority=1), exp("TIO", 5.0),
+          exp("Tcheck", 0.1)]
+    spec = [("p1", "Tndata"), ("Tndata", "p2"), ("p2", "tstart"), ("tstart", "p3"), ("tstart", "p4"),
+            ("p3", "Tpar1"), ("Tpar1", "p5"), ("p4", "Tpar2"), ("Tpar2", "p6"), ("p5", "tsyn"), ("p6", "tsyn"),
+            ("tsyn", "p7"), ("p7", "tOK"), ("tOK", "p9"), ("p7", "tKO"), ("tKO", "p8"), ("p9", "TIO"),
+            ("TIO", "p1"), ("p8", "Tcheck"), ("Tcheck", "p2")]
+    return PetriNet(name="parallel", places=[Place(id=f"p{i}") for i in range(1, 10)], transitions=tr,
+                    arcs=[Arc(source=a, target=b) for a, b in spec], initial_marking={"p1": 2})
+
+
+def test_the_parallel_system_of_the_gspn_book_gives_its_published_figures() -> None:
+    """Published: 38 reachable markings; steady-state probability 0.57990 of the initial marking and
+    0.07949 of {p1, p3, p4}; processing power E[M(p1)] = 1.50555."""
+    net = parallel_system()
+    assert explore_gspn(net).states.shape[0] == 38
+    res = analyse(net, measures=["P{#p1 == 2}", "P{#p1 == 1 and #p3 == 1 and #p4 == 1}", "E{#p1}"])
+    m0, m2, power = (round(m["value"], 5) for m in res.measures)
+    assert (m0, m2, power) == (0.57990, 0.07949, 1.50555)

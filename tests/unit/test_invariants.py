@@ -62,8 +62,8 @@ def test_producer_without_consumer_has_no_invariant_on_the_buffer() -> None:
 
 
 def test_size_guard_stops_the_farkas_table() -> None:
-    vecs, complete = semiflows(np.array([[1, -1]] * 6 + [[-1, 1]] * 6), max_rows=10)
-    assert not complete and vecs.shape[0] == 0
+    vecs, complete, why = semiflows(np.array([[1, -1]] * 6 + [[-1, 1]] * 6), max_rows=10)
+    assert not complete and vecs.shape[0] == 0 and "rows" in why
 
 
 def brute_force_semiflows(matrix: np.ndarray, top: int) -> np.ndarray:
@@ -77,7 +77,7 @@ def brute_force_semiflows(matrix: np.ndarray, top: int) -> np.ndarray:
 def test_random_matrices_agree_with_brute_force_enumeration(seed: int) -> None:
     rng = np.random.default_rng(seed)
     matrix = rng.integers(-2, 3, size=(6, 2))
-    vecs, complete = semiflows(matrix)
+    vecs, complete, _ = semiflows(matrix)
     assert complete
     for v in vecs:
         assert (v >= 0).all() and v.any() and not (v @ matrix).any()

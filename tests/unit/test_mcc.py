@@ -1,4 +1,4 @@
-"""Every Model Checking Contest model in ../shared/mcc against the contest's published answers."""
+"""Every Model Checking Contest model in tests/data/mcc against the contest's published answers."""
 
 from __future__ import annotations
 
@@ -36,7 +36,6 @@ def expected(value: str) -> object:
     return int(value)
 
 
-@pytest.mark.skipif(not ORACLE.exists(), reason="the MCC models are not available")
 @pytest.mark.timeout(180)
 @pytest.mark.parametrize("row", params())
 def test_model_matches_every_column_of_the_oracle(row: dict[str, str]) -> None:
@@ -52,7 +51,6 @@ def test_model_matches_every_column_of_the_oracle(row: dict[str, str]) -> None:
     assert a.complete and a.bounded is True
 
 
-@pytest.mark.skipif(not ORACLE.exists(), reason="the MCC models are not available")
 def test_json_report_of_an_mcc_model_carries_the_oracle_columns() -> None:
     rep = report(load_pnml(MCC / "Philosophers-PT-000005" / "model.pnml"))
     json.dumps(rep)

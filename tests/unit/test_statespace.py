@@ -64,7 +64,7 @@ def test_initial_marking_is_state_zero_and_edges_are_sorted_by_source() -> None:
     assert ss.marking(0) == mutex().initial_marking
     assert ss.n_states == 3 and ss.n_edges == 4
     assert np.all(np.diff(ss.src) >= 0)
-    assert ss.src.dtype == np.int64 and ss.dst.dtype == np.int64 and ss.transition.dtype == np.int32
+    assert ss.src.dtype == ss.dst.dtype == ss.transition.dtype == np.int32
 
 
 def test_weighted_arcs_and_inhibitor_arcs_follow_the_firing_rule() -> None:
@@ -233,7 +233,8 @@ def assert_matches_reference(net: PetriNet, **kwargs: object) -> StateSpace:
     assert np.array_equal(ss.states.astype(np.int64), ref["states"])
     for name in ("src", "dst", "transition", "parent_edge", "expanded"):
         assert getattr(ss, name).tolist() == ref[name], name
-    assert ss.src.dtype == ss.dst.dtype == ss.parent_edge.dtype == np.int64 and ss.transition.dtype == np.int32
+    assert ss.parent_edge.dtype == ss.out_ptr.dtype == np.int64
+    assert ss.src.dtype == ss.dst.dtype == ss.transition.dtype == np.int32
     assert ss.out_ptr.tolist() == np.searchsorted(ss.src, np.arange(ss.n_states + 1)).tolist()
     return ss
 

@@ -1,0 +1,19 @@
+"""The default memory budget of an analysis (cheap to import: the command line reads it for --help)."""
+
+from __future__ import annotations
+
+import functools
+import os
+
+__all__ = ["default_max_bytes"]
+
+
+@functools.cache
+def default_max_bytes() -> int:
+    """The default byte budget of one analysis: half the physical memory or 4 GiB, whichever is
+    smaller (4 GiB when the physical memory cannot be read). Read once per process."""
+    try:
+        total = int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 4 << 30
+    return int(min(total // 2, 4 << 30))

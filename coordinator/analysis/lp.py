@@ -1,0 +1,353 @@
+"""Structural answers by linear programming, each checked in exact integer arithmetic (pure, no I/O).
+
+Enumerating minimal semiflows (:mod:`.invariants`) can take exponential time, and an explicit state
+space can be too large; the questions below need neither. Each is a linear program (LP) solved by
+HiGHS through :func:`scipy.optimize.linprog`, and each answer comes with a certificate, an integer
+vector rebuilt from the LP's floating-point solution and checked exactly, so a verdict is either
+proved or reported as resting on floating point (``certified`` False).
+
+* **Which places (transitions) lie in the support of some P-semiflow (T-semiflow)?** For a matrix
+  A of shape (n, m), the semi-positive y (n,) with yᵀA = 0 have a largest support, the union of all
+  minimal supports. The LP ``max Σ z  s.t.  yᵀA = 0, 0 ≤ z ≤ 1, z ≤ y, y ≥ 0`` finds it: y can be
+  scaled up freely, so z is 1 exactly on that support. By Tucker's complementarity theorem (the
+  strict form of Farkas' lemma; Schrijver 1986, *Theory of Linear and Integer Programming*, §7.8),
+  every index outside it carries a witness x with A·x ≥ 0 and (A·x)_i > 0, found by the LP
+  ``max Σ w  s.t.  A·x ≥ 0, 0 ≤ w ≤ 1, w ≤ A·x``. Both vectors together prove the partition. With
+  A = C (incidence, |P| × |T|): the net is *conservative* (a strictly positive P-semiflow exists)
+  iff every place is covered; with A = Cᵀ: *consistent* (a strictly positive T-semiflow) iff
+  every transition is covered (Murata 1989, section VI; Silva, Teruel, Colom 1998, *Linear algebraic
+  and linear programming techniques for the analysis of P/T net systems*).
+* **Upper bounds from the state equation.** Every reachable marking is M = M0 + C·σ for some σ ≥ 0
+  (the firing count vector), so ``max M(p)  s.t.  M0 + C·σ ≥ 0, σ ≥ 0`` bounds place p (Silva et
+  al. 1998, section 4). Its dual gives y ≥ 0 with y_p ≥ 1 and yᵀC ≤ 0, and then M(p) ≤ y·M0 for
+  every reachable M: an integer check of yᵀC ≤ 0 certifies the bound. The same LP for Σ_p M(p)
+  decides boundedness of every place at once when it is finite (structural boundedness: a y > 0
+  with yᵀC ≤ 0; Memmi and Roucairol 1980, Murata 1989 theorem 29). Inhibitor arcs only forbid
+  firings, so the bounds hold on nets with them too. An unbounded LP proves nothing (the relaxation
+  admits markings that are not reachable).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from math import floor
+from typing import Any
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import linprog
+
+from coordinator.analysis.matrices import SparseNet
+
+__all__ = [
+    "PlaceBounds",
+    "Support",
+    "conservative",
+    "consistent",
+    "place_bounds",
+    "semiflow_support",
+    "total_bound",
+]
+
+#: default seconds allowed to one LP
+LP_SECONDS = 10.0
+_TOL = 1e-7
+
+
+@dataclass(frozen=True)
+class Support:
+    """The largest support of the semi-positive y with yᵀA = 0, with its certificates.
+
+    Attributes:
+        covered: shape (n,), bool: index i lies in the support of some semiflow; None if the LP
+            did not finish (time limit, numerical trouble).
+        certified: True when both certificates were rebuilt as integer vectors and checked exactly.
+        semiflow: an integer semiflow (n,) whose support is ``covered`` (Python ints as int64 when
+            they fit, else object), or None.
+        witness: integer x (m,) with A·x ≥ 0 and (A·x)_i > 0 for every uncovered i, or None (also
+            when every index is covered: nothing to witness).
+        message: what the solver said when it did not finish.
+    """
+
+    covered: np.ndarray | None
+    certified: bool = False
+    semiflow: np.ndarray | None = None
+    witness: np.ndarray | None = None
+    message: str = ""
+
+    @property
+    def all_covered(self) -> bool | None:
+        """True if every index is covered (conservative / consistent), None if undecided."""
+        return None if self.covered is None else bool(self.covered.all())
+
+
+def _solve(c: np.ndarray, a_ub: sp.spmatrix | None, b_ub: np.ndarray | None, a_eq: sp.spmatrix | None,
+           b_eq: np.ndarray | None, bounds: Sequence[tuple[float | None, float | None]] | tuple[float, None],
+           seconds: float) -> Any:
+    return linprog(c, A_ub=a_ub, b_ub=b_ub, A_eq=a_eq, b_eq=b_eq, bounds=bounds, method="highs",
+                   options={"time_limit": max(float(seconds), 0.01), "presolve": True})
+
+
+#: common denominators tried when an LP solution is rebuilt as an integer vector (720720 is the
+#: least common multiple of 1..16, so vertex solutions with small denominators come back exactly)
+_DENOMINATORS = (1, 2, 6, 12, 60, 840, 27720, 720720)
+
+
+def _rationalised(values: np.ndarray) -> list[np.ndarray]:
+    """Integer vectors proportional to ``values`` (scaled to a largest magnitude of 1, then
+    multiplied by each common denominator of :data:`_DENOMINATORS` and rounded), keeping only the
+    roundings that moved no entry by more than 1e-6 relative; each divided by the gcd of its
+    entries. Vectorised: no per-entry Python work."""
+    top = float(np.abs(values).max(initial=0.0))
+    if top <= 0:
+        return []
+    vals = values / top
+    out: list[np.ndarray] = []
+    for den in _DENOMINATORS:
+        scaled = vals * den
+        ints = np.rint(scaled)
+        if np.abs(scaled - ints).max(initial=0.0) > 1e-6 * den:
+            continue
+        vec = ints.astype(np.int64)
+        g = int(np.gcd.reduce(np.abs(vec))) if vec.size else 0
+        if g > 1:
+            vec //= g
+        if vec.any() and not any(np.array_equal(vec, o) for o in out):
+            out.append(vec)
+    return out
+
+
+def _exact_product(mat: sp.csr_matrix, vec: np.ndarray | list[int]) -> list[int]:
+    """mat @ vec in exact integer arithmetic (int64 when it provably fits, Python ints otherwise)."""
+    vec = [int(v) for v in vec]
+    big = max((abs(v) for v in vec), default=0)
+    row_nnz = int(np.diff(mat.indptr).max(initial=0))
+    scale = int(np.abs(mat.data).max(initial=0))
+    if big * scale * max(row_nnz, 1) < 2**62:
+        res = mat.astype(np.int64) @ np.array(vec, dtype=np.int64)
+        return [int(v) for v in res]
+    out = []
+    data, idx, ptr = mat.data.tolist(), mat.indices.tolist(), mat.indptr.tolist()
+    for r in range(mat.shape[0]):
+        out.append(sum(int(data[k]) * vec[idx[k]] for k in range(ptr[r], ptr[r + 1])))
+    return out
+
+
+def semiflow_support(matrix: sp.spmatrix | np.ndarray, *, seconds: float = LP_SECONDS) -> Support:
+    """The largest support of the semi-positive y with yᵀ·matrix = 0, by two LPs (module docstring).
+
+    Args:
+        matrix: shape (n, m), integer (the incidence matrix C for P-semiflows, Cᵀ for T-semiflows).
+        seconds: time limit of each LP.
+
+    Returns:
+        A :class:`Support` (``covered`` None if an LP did not finish).
+    """
+    a = sp.csr_matrix(matrix, dtype=np.float64)
+    n, m = a.shape
+    if n == 0:
+        return Support(covered=np.zeros(0, dtype=bool), certified=True)
+    a_int = sp.csr_matrix(matrix).astype(np.int64)
+    at_int = sp.csr_matrix(a_int.T)
+    # LP 1: max sum z, yᵀA = 0, z <= y, 0 <= z <= 1, y >= 0; variables [y, z]
+    eye = sp.identity(n, format="csr")
+    a_eq = sp.hstack([a.T, sp.csr_matrix((m, n))], format="csr") if m else None
+    a_ub = sp.hstack([-eye, eye], format="csr")
+    c = np.concatenate([np.zeros(n), -np.ones(n)])
+    bounds = [(0.0, None)] * n + [(0.0, 1.0)] * n
+    res = _solve(c, a_ub, np.zeros(n), a_eq, np.zeros(m) if m else None, bounds, seconds)
+    if res.status != 0:
+        return Support(covered=None, message=str(res.message))
+    y = np.asarray(res.x[:n])
+    z = np.asarray(res.x[n:])
+    covered = z > 0.5
+    semiflow: np.ndarray | None = None
+    for cand in _rationalised(np.where(covered, np.maximum(y, 0.0), 0.0)):
+        if (cand[covered] > 0).all() and (cand >= 0).all() and not any(_exact_product(at_int, cand)):
+            semiflow = cand
+            break
+    if covered.all():
+        return Support(covered=covered, certified=semiflow is not None, semiflow=semiflow)
+    # LP 2: max sum w, A x >= 0, w <= A x, 0 <= w <= 1, x free; variables [x, w]
+    a_ub2 = sp.vstack([sp.hstack([-a, sp.csr_matrix((n, n))]), sp.hstack([-a, eye])], format="csr")
+    c2 = np.concatenate([np.zeros(m), -np.ones(n)])
+    bounds2 = [(None, None)] * m + [(0.0, 1.0)] * n
+    res2 = _solve(c2, a_ub2, np.zeros(2 * n), None, None, bounds2, seconds)
+    witness: np.ndarray | None = None
+    if res2.status == 0:
+        x = np.asarray(res2.x[:m])
+        for cand in _rationalised(x):
+            ax = np.array(_exact_product(a_int, cand), dtype=object)
+            if (ax >= 0).all() and (ax[~covered] > 0).all():
+                witness = cand
+                break
+    certified = witness is not None and (semiflow is not None or not covered.any())
+    return Support(covered=covered, certified=certified, semiflow=semiflow, witness=witness)
+
+
+def conservative(sn: SparseNet, *, seconds: float = LP_SECONDS) -> Support:
+    """P-semiflow support of a net (:func:`semiflow_support` of C): conservative iff all covered."""
+    return semiflow_support(sn.incidence, seconds=seconds)
+
+
+def consistent(sn: SparseNet, *, seconds: float = LP_SECONDS) -> Support:
+    """T-semiflow support of a net (:func:`semiflow_support` of Cᵀ): consistent iff all covered."""
+    return semiflow_support(sn.incidence.T, seconds=seconds)
+
+
+@dataclass(frozen=True)
+class _Bound:
+    value: int | None  # None: the LP is unbounded (or did not finish: see ok)
+    ok: bool  # the LP finished (optimal or unbounded)
+    certified: bool
+    dual: np.ndarray | None = None  # the integer certificate y (yᵀC <= 0, y >= 0), if any
+
+
+def _certified_dual(sn: SparseNet, weights: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, int] | None:
+    """An integer y = d·(weights + u') (u' ≈ u, rounded to a common denominator d) with yᵀC ≤ 0,
+    checked exactly; returned with d, or None."""
+    ct = sp.csr_matrix(sn.incidence.T).astype(np.int64)
+    w = np.asarray(weights, dtype=np.float64)
+    for den in _DENOMINATORS:
+        scaled = u * den
+        ints = np.rint(scaled)
+        if np.abs(scaled).max(initial=0.0) > 2.0**52 or np.abs(scaled - ints).max(initial=0.0) > 1e-6 * den:
+            continue
+        y = ints.astype(np.int64) + np.rint(w * den).astype(np.int64)
+        if all(v <= 0 for v in _exact_product(ct, y)):
+            return y, den
+    return None
+
+
+def _bound(sn: SparseNet, weights: np.ndarray, seconds: float) -> _Bound:
+    """max weights·M over the state equation: M = M0 + Cσ ≥ 0, σ ≥ 0 (weights ≥ 0, (|P|,))."""
+    c_mat = sp.csr_matrix(sn.incidence, dtype=np.float64)
+    m0 = np.asarray(sn.m0, dtype=np.float64)
+    obj = -(c_mat.T @ weights)
+    res = _solve(obj, -c_mat, m0, None, None, (0.0, None), seconds) if sn.n_transitions else None
+    base = float(weights @ m0)
+    if res is None:
+        return _Bound(value=floor(base + 1e-9), ok=True, certified=True)
+    if res.status == 3:
+        return _Bound(value=None, ok=True, certified=False)
+    if res.status != 0:
+        return _Bound(value=None, ok=False, certified=False)
+    value = base - float(res.fun)
+    # dual certificate: y = weights + u, u = -marginals >= 0, with yᵀC <= 0; then w·M <= y·M <= y·M0
+    u = np.maximum(-np.asarray(res.ineqlin.marginals, dtype=np.float64), 0.0)
+    y = _certified_dual(sn, weights, u)
+    if y is not None:
+        vec, den = y
+        num = int(np.dot(vec.astype(object), sn.m0.astype(object)))
+        return _Bound(value=num // den, ok=True, certified=True, dual=vec)
+    return _Bound(value=floor(value + _TOL * max(1.0, abs(value))), ok=True, certified=False)
+
+
+def total_bound(sn: SparseNet, *, seconds: float = LP_SECONDS) -> tuple[int | None, bool, bool]:
+    """Bound on the total token count Σ_p M(p) from the state equation.
+
+    Returns:
+        ``(bound, finished, certified)``: bound None when the LP is unbounded or did not finish
+        (``finished`` False); ``certified`` when a dual vector y ≥ 1, yᵀC ≤ 0 was checked exactly.
+    """
+    b = _bound(sn, np.ones(sn.n_places), seconds)
+    return b.value, b.ok, b.certified
+
+
+@dataclass(frozen=True)
+class PlaceBounds:
+    """Upper bounds of the places of a net from the state equation and semiflows.
+
+    Attributes:
+        total: bound on Σ_p M(p), or None (LP unbounded or not finished).
+        bounds: per place (|P|,), int64: the best bound known, -1 where none.
+        own: (|P|,) bool: the place had its own LP.
+        certified: (|P|,) bool: the bound rests on an integer vector checked exactly.
+        complete: every place that could still be improved had its own LP within the time allowed.
+        notes: what was left out and why.
+    """
+
+    total: int | None
+    bounds: np.ndarray
+    own: np.ndarray
+    certified: np.ndarray
+    complete: bool
+    notes: list[str] = field(default_factory=list)
+
+
+def _apply(bounds: np.ndarray, cert: np.ndarray, y: np.ndarray, m0: np.ndarray, certified: bool) -> None:
+    """Tighten ``bounds`` with y ≥ 0 such that y·M ≤ y·M0 for every reachable M: M(p) ≤ ⌊y·M0 / y_p⌋."""
+    total = int(np.dot(np.asarray(y).astype(object), np.asarray(m0).astype(object)))
+    for p in np.flatnonzero(y).tolist():
+        b = total // int(y[p])
+        if bounds[p] < 0 or b < bounds[p] or (b == bounds[p] and certified and not cert[p]):
+            bounds[p] = b
+            cert[p] = certified
+
+
+def place_bounds(sn: SparseNet, *, seconds: float = 5.0, seen: np.ndarray | None = None,
+                 semiflows: tuple[np.ndarray, ...] = ()) -> PlaceBounds:
+    """Upper bound of each place from the state equation (module docstring), within a time budget.
+
+    First the LP of the total token count Σ M(p): its dual vector y (y ≥ 1, yᵀC ≤ 0) bounds every
+    place at once by ⌊y·M0 / y_p⌋, and so does every semiflow given (yᵀC = 0, e.g. P-invariants).
+    Then each place whose bound is not yet reached by an explored marking (``seen``) gets its own
+    LP, in order, until ``seconds`` are spent.
+
+    Args:
+        sn: the net's sparse matrices.
+        seconds: wall-clock budget of all the LPs together.
+        seen: (|P|,) largest count of each place among markings known to be reachable; a place
+            whose bound equals it needs no LP (the bound is exact).
+        semiflows: semi-positive integer vectors y with yᵀC = 0 (their bounds are exact certificates).
+
+    Returns:
+        :class:`PlaceBounds`.
+    """
+    start = time.monotonic()
+    n = sn.n_places
+    ones = np.ones(n)
+    tb = _bound(sn, ones, seconds)
+    bounds = np.full(n, -1, dtype=np.int64)
+    cert = np.zeros(n, dtype=bool)
+    if tb.value is not None:
+        bounds[:] = tb.value
+        cert[:] = tb.certified
+        if tb.dual is not None:
+            _apply(bounds, cert, tb.dual, sn.m0, True)
+    for y in semiflows:
+        _apply(bounds, cert, y, sn.m0, True)
+    notes: list[str] = []
+    if not tb.ok:
+        notes.append("the LP of the total token count did not finish in time")
+    reached = np.full(n, -1, dtype=np.int64) if seen is None else np.asarray(seen, dtype=np.int64)
+    todo = np.flatnonzero((bounds < 0) | (reached < bounds))
+    own = np.zeros(n, dtype=bool)
+    done = 0
+    one_lp = time.monotonic() - start
+    if todo.size and one_lp * todo.size > seconds:
+        notes.append(f"state-equation LP bounds: the {todo.size:,} places whose bound is not reached by an explored "
+                     f"marking keep the bound of the total token count's LP (their own LPs would take about "
+                     f"{one_lp * todo.size:,.0f} s)")
+        return PlaceBounds(total=tb.value, bounds=bounds, own=own, certified=cert, complete=False, notes=notes)
+    for p in todo.tolist():
+        left = seconds - (time.monotonic() - start)
+        if left <= 0:
+            break
+        w = np.zeros(n)
+        w[p] = 1.0
+        b = _bound(sn, w, left)
+        if b.ok:
+            done += 1
+            own[p] = True
+            if b.value is not None and (bounds[p] < 0 or b.value < bounds[p] or (b.value == bounds[p] and b.certified)):
+                bounds[p] = b.value
+                cert[p] = b.certified
+    complete = done == todo.size
+    if not complete:
+        notes.append(f"state-equation LP bounds: {done} of the {todo.size} places whose bound was not yet "
+                     f"reached had their own LP within {seconds:g} s; the others keep the bound of the total "
+                     "token count's LP")
+    return PlaceBounds(total=tb.value, bounds=bounds, own=own, certified=cert, complete=complete, notes=notes)

@@ -1,0 +1,123 @@
+"""Sparse incidence matrices of a net, built from its arc list (pure, no I/O).
+
+:class:`coordinator.net.PetriNet` offers dense ``(|P|, |T|)`` int64 matrices (``pre``, ``post``,
+``inhibitor``, ``incidence``). They are the right tool for task nets of tens of places, but a net
+of 20,000 places and 20,000 transitions needs 3.2 GB for each of them, although it has only
+40,000 arcs. The analyses of this package read the matrices through :func:`sparse_net`, which builds
+compressed sparse column (CSC) matrices straight from the net's adjacency (O(arcs) time and memory)
+and keeps them on the net object, as the net keeps its own dense matrices.
+
+:func:`dense_is_cheap` says when the dense matrices are small enough (or already built) to use them
+instead; the state-space search uses them then, because building them is cheaper for a small net.
+
+Reference for the matrices themselves: Murata (1989), *Petri nets: properties, analysis and
+applications*, section II (incidence matrix and state equation).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from coordinator.net import PetriNet
+
+__all__ = ["DENSE_LIMIT", "SparseNet", "dense_is_cheap", "sparse_net"]
+
+#: largest |P|·|T| for which the dense matrices of a net are built on purpose (2 MB per matrix)
+DENSE_LIMIT = 250_000
+_CACHE_KEY = "_petrobot_sparse_net"
+
+
+@dataclass(frozen=True, eq=False)
+class SparseNet:
+    """The matrices of a net in compressed sparse column form (columns = transitions).
+
+    Attributes:
+        n_places, n_transitions: |P| and |T|.
+        pre: shape (|P|, |T|), int64 CSC: weight of arc p → t.
+        post: shape (|P|, |T|), int64 CSC: weight of arc t → p.
+        inhibitor: shape (|P|, |T|), int64 CSC: threshold of the inhibitor arc p → t.
+        incidence: C = post − pre, shape (|P|, |T|), int64 CSC, explicit zeros removed.
+        m0: the initial marking, shape (|P|,), int64.
+    Every CSC matrix has sorted row indices within each column (canonical format).
+    """
+
+    n_places: int
+    n_transitions: int
+    pre: sp.csc_matrix
+    post: sp.csc_matrix
+    inhibitor: sp.csc_matrix
+    incidence: sp.csc_matrix
+    m0: np.ndarray
+
+    @property
+    def n_arcs(self) -> int:
+        """Number of arcs (normal and inhibitor)."""
+        return int(self.pre.nnz + self.post.nnz + self.inhibitor.nnz)
+
+    def consumed_or_read(self) -> np.ndarray:
+        """Boolean (|P|,): places some transition consumes from or is inhibited by."""
+        out = np.zeros(self.n_places, dtype=bool)
+        out[self.pre.indices] = True
+        out[self.inhibitor.indices] = True
+        return out
+
+
+def _csc(net: PetriNet, table: object, shape: tuple[int, int]) -> sp.csc_matrix:
+    rows: list[int] = []
+    cols: list[int] = []
+    vals: list[int] = []
+    pidx, tidx = net.place_index, net.transition_index
+    for tid, places in table.items():  # type: ignore[attr-defined]
+        j = tidx[tid]
+        for pid, w in places.items():
+            rows.append(pidx[pid])
+            cols.append(j)
+            vals.append(int(w))
+    mat = sp.csc_matrix((np.array(vals, dtype=np.int64), (np.array(rows, dtype=np.int64),
+                                                          np.array(cols, dtype=np.int64))), shape=shape)
+    mat.sum_duplicates()
+    mat.sort_indices()
+    return mat
+
+
+def sparse_net(net: PetriNet) -> SparseNet:
+    """Return the sparse matrices of ``net`` (built once, then kept on the net object).
+
+    When the net's dense matrices already exist they are converted; otherwise the matrices are built
+    from the arc adjacency (``net.input_places``, ``output_places``, ``inhibitor_places``) without
+    ever allocating a dense (|P|, |T|) array.
+    """
+    cached = net.__dict__.get(_CACHE_KEY)
+    if isinstance(cached, SparseNet):
+        return cached
+    shape = (len(net.places), len(net.transitions))
+    if all(name in net.__dict__ for name in ("pre", "post", "inhibitor")):
+        pre, post, inh = (sp.csc_matrix(np.asarray(getattr(net, name))) for name in ("pre", "post", "inhibitor"))
+    else:
+        pre = _csc(net, net.input_places, shape)
+        post = _csc(net, net.output_places, shape)
+        inh = _csc(net, net.inhibitor_places, shape)
+    inc = sp.csc_matrix(post - pre)
+    inc.eliminate_zeros()
+    inc.sort_indices()
+    for mat in (pre, post, inh):
+        mat.sort_indices()
+    m0 = np.zeros(shape[0], dtype=np.int64)
+    pidx = net.place_index
+    for pid, count in net.initial_marking.items():
+        m0[pidx[pid]] = count
+    m0.flags.writeable = False
+    out = SparseNet(n_places=shape[0], n_transitions=shape[1], pre=pre, post=post, inhibitor=inh,
+                    incidence=inc, m0=m0)
+    net.__dict__[_CACHE_KEY] = out
+    return out
+
+
+def dense_is_cheap(net: PetriNet) -> bool:
+    """True when the net's dense matrices exist already or are small (|P|·|T| ≤ :data:`DENSE_LIMIT`)."""
+    if "pre" in net.__dict__ and "inhibitor" in net.__dict__ and "incidence" in net.__dict__:
+        return True
+    return len(net.places) * len(net.transitions) <= DENSE_LIMIT

@@ -1,0 +1,58 @@
+"""Where numba caches the compiled search (coordinator.analysis.jit), and the compile notice."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from coordinator.analysis import jit
+from coordinator.cli import main
+from coordinator.commands import analyze
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_cache_goes_to_the_xdg_cache_home_or_the_home_cache() -> None:
+    assert jit.cache_dir({"XDG_CACHE_HOME": "/c", "HOME": "/h"}) == Path("/c/petrobot/numba")
+    assert jit.cache_dir({"HOME": "/h"}) == Path("/h/.cache/petrobot/numba")
+    assert jit.cache_dir({"XDG_CACHE_HOME": "relative", "HOME": "/h"}) == Path("/h/.cache/petrobot/numba")
+
+
+def configured(env: dict[str, str]) -> str:
+    code = "from coordinator.analysis import jit; import os; print(jit.configure(), os.environ['NUMBA_CACHE_DIR'])"
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
+                         timeout=60, check=True)
+    return out.stdout.strip()
+
+
+def test_configure_sets_numba_cache_dir_only_when_the_user_has_not(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(tmp_path)
+    want = str(tmp_path / "petrobot" / "numba")
+    assert configured(env) == f"{want} {want}"
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "mine")
+    assert configured(env) == f"{tmp_path / 'mine'} {tmp_path / 'mine'}"
+
+
+def test_analyze_says_on_stderr_when_it_has_to_compile_the_search(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                   capsys: pytest.CaptureFixture[str]) -> None:
+    net = tmp_path / "one.toml"
+    net.write_text('[[place]]\nid = "p"\ntokens = 1\n\n[[transition]]\nid = "t"\ninputs = { p = 1 }\n'
+                   'outputs = { p = 1 }\n', encoding="utf-8")
+    monkeypatch.setattr(analyze, "search_is_compiled", lambda: False)
+    assert main(["analyze", str(net), "--json"]) == 0
+    assert "compiling the state-space search (once per machine)..." in capsys.readouterr().err
+    monkeypatch.setattr(analyze, "search_is_compiled", lambda: True)
+    assert main(["analyze", str(net), "--json"]) == 0
+    assert "compiling" not in capsys.readouterr().err
+
+
+def test_the_loaded_search_reports_itself_compiled() -> None:
+    from coordinator.analysis.statespace import load_search
+
+    load_search()
+    assert jit.search_is_compiled() is True

@@ -1,0 +1,156 @@
+"""Linear-programming answers (coordinator.analysis.lp): semiflow supports with exact certificates,
+state-equation bounds, and the verdicts that no longer depend on the Farkas enumeration."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+from types import ModuleType
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from analysis_nets import make_net
+
+from coordinator.analysis import lp
+from coordinator.analysis.invariants import farkas_estimate, semiflows
+from coordinator.analysis.matrices import sparse_net
+from coordinator.analysis.structure import analyse
+from coordinator.net import PetriNet
+from coordinator.netfile import loads_net
+from coordinator.netfile.pnml import load_pnml
+from tests.unit.mcc_models import MCC
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+
+
+def hostile() -> ModuleType:
+    spec = importlib.util.spec_from_file_location("hostile_nets", DATA / "hostile_nets.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def choices(k: int) -> PetriNet:
+    return loads_net(hostile().choices_toml(k), interpreted=False)
+
+
+def mutex() -> PetriNet:
+    return make_net("mutex", {"idle1": 1, "idle2": 1, "free": 1}, {
+        "enter1": ({"idle1": 1, "free": 1}, {"crit1": 1}),
+        "leave1": ({"crit1": 1}, {"idle1": 1, "free": 1}),
+        "enter2": ({"idle2": 1, "free": 1}, {"crit2": 1}),
+        "leave2": ({"crit2": 1}, {"idle2": 1, "free": 1}),
+    })
+
+
+def check_support(matrix: np.ndarray, sup: lp.Support) -> None:
+    """The certificates prove the partition: yᵀA = 0 on the covered support, A·x ≥ 0 and > 0 outside."""
+    assert sup.covered is not None and sup.certified
+    if sup.covered.any():
+        assert sup.semiflow is not None
+        y = sup.semiflow.astype(np.int64)
+        assert (y >= 0).all() and not (y @ matrix).any()
+        assert np.array_equal(y > 0, sup.covered)
+    if not sup.covered.all():
+        assert sup.witness is not None
+        ax = matrix @ sup.witness.astype(np.int64)
+        assert (ax >= 0).all() and (ax[~sup.covered] > 0).all()
+
+
+def test_mutex_is_conservative_and_consistent_with_exact_certificates() -> None:
+    sn = sparse_net(mutex())
+    c = sn.incidence.toarray()
+    p, t = lp.conservative(sn), lp.consistent(sn)
+    assert p.all_covered and t.all_covered
+    check_support(c, p)
+    check_support(c.T, t)
+
+
+def test_a_producer_is_neither_and_the_witnesses_say_why() -> None:
+    net = make_net("producer", {"go": 1}, {"produce": ({"go": 1}, {"go": 1, "buf": 1})})
+    sn = sparse_net(net)
+    c = sn.incidence.toarray()
+    p, t = lp.conservative(sn), lp.consistent(sn)
+    assert p.covered is not None and p.covered.tolist() == [True, False]
+    assert t.covered is not None and t.covered.tolist() == [False]
+    check_support(c, p)
+    check_support(c.T, t)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_random_matrices_partition_exactly_into_covered_and_witnessed(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    matrix = rng.integers(-2, 3, size=(7, 4)) * (rng.random((7, 4)) < 0.6)
+    sup = lp.semiflow_support(matrix)
+    check_support(matrix, sup)
+    vecs, complete, _ = semiflows(matrix)
+    assert complete
+    union = vecs.sum(axis=0) > 0 if vecs.shape[0] else np.zeros(7, dtype=bool)
+    assert np.array_equal(union, sup.covered)  # the union of the minimal supports is the LP's support
+
+
+def test_choice_net_whose_farkas_table_explodes_is_decided_by_the_lp() -> None:
+    """Stands in for Peterson-PT-2 and SafeBus-PT-03: consistent and conservative, but 2**16 minimal
+    semiflows of each kind; the enumeration gives up within its budget and the LP still says yes."""
+    net = choices(16)
+    a = analyse(net)
+    assert not a.t_invariants.complete and not a.p_invariants.complete
+    assert a.consistent is True and a.conservative is True
+    assert a.sources["consistent"] == a.sources["conservative"] == "LP (semiflow support, exact certificate)"
+    assert a.complete and a.states == 256 and a.live is True
+
+
+def test_the_enumeration_is_refused_before_it_starts_when_the_table_cannot_fit() -> None:
+    """Stands in for IBM319: the cost is estimated from the matrix before anything is allocated."""
+    n = 20_000
+    ring = sp.csr_matrix((np.r_[-np.ones(n), np.ones(n)], (np.r_[np.arange(n), (np.arange(n) + 1) % n],
+                                                         np.r_[np.arange(n), np.arange(n)])), shape=(n, n))
+    est = farkas_estimate(ring, max_bytes=512 << 20)
+    assert est.first_bytes > 512 << 20
+    vecs, complete, why = semiflows(ring, max_bytes=512 << 20)
+    assert not complete and vecs.shape == (0, n) and why.startswith("not started")
+    assert lp.semiflow_support(ring).all_covered is True
+
+
+def test_a_step_that_would_outrun_the_time_budget_is_not_made() -> None:
+    net = choices(12)
+    vecs, complete, why = semiflows(sparse_net(net).incidence.T, seconds=0.05)
+    assert not complete and "time budget" in why and vecs.shape[0] == 0
+
+
+def test_state_equation_bounds_of_mutex_are_exact_and_certified() -> None:
+    pb = lp.place_bounds(sparse_net(mutex()))
+    assert pb.total == 3
+    assert pb.bounds.tolist() == [1, 1, 1, 1, 1] and pb.certified.all()
+
+
+def test_weighted_arcs_bound_by_the_dual_vector() -> None:
+    net = make_net("pairs", {"a": 4}, {"join": ({"a": 2}, {"b": 1}), "split": ({"b": 1}, {"a": 2})})
+    pb = lp.place_bounds(sparse_net(net))
+    assert pb.bounds.tolist() == [4, 2] and pb.certified.all()
+
+
+def test_an_unbounded_relaxation_gives_no_total_but_bounds_the_other_places() -> None:
+    net = make_net("producer", {"go": 1}, {"produce": ({"go": 1}, {"go": 1, "buf": 1})})
+    total, finished, _ = lp.total_bound(sparse_net(net))
+    assert finished and total is None
+    pb = lp.place_bounds(sparse_net(net))
+    assert pb.bounds.tolist() == [1, -1]
+
+
+def test_bounds_hold_on_nets_with_inhibitor_arcs() -> None:
+    net = make_net("guarded", {"a": 3}, {"t": ({"a": 1}, {"b": 1}), "u": ({"b": 1}, {"a": 1})},
+                   inhibitors={"t": {"b": 2}})
+    pb = lp.place_bounds(sparse_net(net))
+    assert pb.bounds.tolist() == [3, 3]  # the relaxation ignores the inhibitor: b <= 2 in fact, 3 is sound
+
+
+def test_kanban_bounds_are_decided_by_structure_when_the_graph_is_cut_short() -> None:
+    a = analyse(load_pnml(MCC / "Kanban-PT-00005" / "model.pnml"), max_states=20_000)
+    assert not a.complete and a.stopped_by == "max_states"
+    assert a.bounded is True and a.sources["bounded"] == "state equation (LP, exact certificate)"
+    assert a.max_token_in_place == 5  # the oracle's value: explored markings reach the LP bound
+    assert all(b == 5 for b in a.place_bounds.values())
+    assert a.live is None and "live" in a.undecided
