@@ -434,7 +434,7 @@ def test_shipped_nets_round_trip_through_canonical_toml(path: Path) -> None:
 
 def test_net_built_in_code_round_trips_with_awkward_values() -> None:
     net = PetriNet(
-        name='odd "name"\n2', description="line one\nline two\t\\ é ✓",
+        name='odd "name" 2 ✓', description="line one\nline two\t\\ é ✓",
         places=(Place(id="a.b", kind=PlaceKind.CONTROL, label='say "hi"', capacity=4),
                 Place(id="task-place", kind=PlaceKind.PRIMITIVE_TASK, task="do_it"),
                 Place(id="err")),
