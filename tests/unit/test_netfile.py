@@ -537,11 +537,11 @@ def test_check_command_prints_each_problem_as_file_line(tmp_path: Path, capsys: 
     path = tmp_path / "bad.toml"
     path.write_text(text)
     code = check_cmd.run(_args(check_cmd, ["check", str(path), "--services", str(SERVICES)]))
-    assert code == 1
+    assert code == 2
     out = capsys.readouterr().out.splitlines()
     assert out == [f"{path}:{line_of(text, 'tokens = -1')}: place 'idle' has a negative initial marking (-1)"]
     path.write_text(edit('actions = ["locate_threshold"]', 'actions = ["teleport"]'))
-    assert check_cmd.run(_args(check_cmd, ["check", str(path), "--services", str(SERVICES)])) == 1
+    assert check_cmd.run(_args(check_cmd, ["check", str(path), "--services", str(SERVICES)])) == 2
     out = capsys.readouterr().out.splitlines()
     assert len(out) == 1 and out[0].startswith(f"{path}:{line_of(text, '[task.locate]')}: primitive action 'teleport'")
 
@@ -555,7 +555,7 @@ def test_export_command_writes_toml_pnml_and_dot(tmp_path: Path, capsys: pytest.
     assert export_cmd.run(_args(export_cmd, ["export", str(DEMO), "--to", "dot", "--no-hidden"])) == 0
     dot = capsys.readouterr().out
     assert dot.startswith('digraph "demo"') and "recovered" not in dot
-    assert export_cmd.run(_args(export_cmd, ["export", str(tmp_path / "none.toml"), "--to", "dot"])) == 1
+    assert export_cmd.run(_args(export_cmd, ["export", str(tmp_path / "none.toml"), "--to", "dot"])) == 2
     assert "cannot read" in capsys.readouterr().err
 
 
