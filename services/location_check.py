@@ -63,7 +63,7 @@ def action_impl_problem(impl: str) -> str | None:
         return None
     if isinstance(obj, PrimitiveAction) or inspect.iscoroutinefunction(obj):
         return None
-    kind = "a class" if isinstance(obj, type) else type(obj).__name__
+    kind = "a class" if isinstance(obj, type) else f"a {type(obj).__name__}"
     return f"{impl!r} is {kind}, neither a PrimitiveAction (subclass or instance) nor an async function"
 
 
@@ -76,7 +76,7 @@ def driver_impl_problem(impl: str) -> str | None:
         return problem
     if isinstance(obj, type) and issubclass(obj, Driver):
         return None
-    kind = "a class that is not a Driver" if isinstance(obj, type) else type(obj).__name__
+    kind = "a class that is not a Driver" if isinstance(obj, type) else f"a {type(obj).__name__}"
     return f"{impl!r} is {kind}; a driver's impl names a Driver subclass"
 
 
