@@ -53,7 +53,8 @@ def read_capped(path: str | os.PathLike[str], *, what: str = "file", limit: int 
         limit: largest accepted size, bytes.
 
     Raises:
-        TextProblem: the file cannot be read, is not a regular file, or is larger than ``limit``.
+        TextProblem: the file cannot be read or is not a regular file (no line), or is larger than
+            ``limit`` (line 1: the file as a whole).
     """
     try:
         info = os.stat(path)
@@ -61,13 +62,13 @@ def read_capped(path: str | os.PathLike[str], *, what: str = "file", limit: int 
             kind = "a directory" if stat.S_ISDIR(info.st_mode) else "not a regular file"
             raise TextProblem(f"cannot read {what}: {kind}")
         if info.st_size > limit:
-            raise TextProblem(f"{what} too large: {info.st_size} bytes (the limit is {_mib(limit)})")
+            raise TextProblem(f"{what} too large: {info.st_size} bytes (the limit is {_mib(limit)})", 1)
         with open(path, "rb") as fh:
             data = fh.read(limit + 1)
     except OSError as exc:
         raise TextProblem(f"cannot read {what}: {exc.strerror or exc}") from None
     if len(data) > limit:  # grew while we read it
-        raise TextProblem(f"{what} too large: more than {_mib(limit)}")
+        raise TextProblem(f"{what} too large: more than {_mib(limit)}", 1)
     return data
 
 
@@ -112,7 +113,7 @@ def screen_text(text: str, limit: int = MAX_FILE_BYTES) -> None:
         TextProblem: with the line of the first offending character.
     """
     if len(text) > limit:
-        raise TextProblem(f"text too large: {len(text)} characters (the limit is {_mib(limit)})")
+        raise TextProblem(f"text too large: {len(text)} characters (the limit is {_mib(limit)})", 1)
     nul = text.find("\0")
     if nul >= 0:
         head = text[:4096]

@@ -37,6 +37,9 @@ KeyPath = tuple[str | int, ...]
 
 _BARE_KEY = re.compile(r"[A-Za-z0-9_\-]+")
 _DELIMITERS = frozenset(" \t\r,[]{}=#\"'")
+#: A value that opens nothing: one plain basic string, or one short bare value; a comment may follow.
+_PLAIN_VALUE = re.compile(r"[ \t]*(?:\"[^\"\\]*\"|[^\s\"'\[\]{}#,=.]{1,%d}(?:\.[^\s\"'\[\]{}#,=.]{1,%d})?)"
+                          r"[ \t\r]*(?:#.*)?" % (MAX_BARE_VALUE, MAX_BARE_VALUE))
 
 
 def _skip_ws(line: str, i: int) -> int:
@@ -46,11 +49,22 @@ def _skip_ws(line: str, i: int) -> int:
     return i
 
 
-def _parse_key(line: str, i: int) -> tuple[list[str], int] | None:
-    """Parse a (dotted) key starting at ``line[i]``; return its parts and the index after it."""
+class _TooManyParts(Exception):
+    """A dotted key has more parts than the nesting limit allows."""
+
+
+def _parse_key(line: str, i: int, max_parts: int) -> tuple[list[str], int] | None:
+    """Parse a (dotted) key starting at ``line[i]``; return its parts and the index after it.
+
+    Raises:
+        _TooManyParts: more than ``max_parts`` parts, whether or not the key is well formed
+            (:mod:`tomllib` takes time quadratic in the number of parts, even to refuse a key).
+    """
     parts: list[str] = []
     n = len(line)
     while True:
+        if len(parts) > max_parts:
+            raise _TooManyParts
         i = _skip_ws(line, i)
         if i >= n:
             return None
@@ -127,12 +141,16 @@ class TomlLines:
                 i = _skip_ws(line, 0)
                 if i >= len(line) or line[i] == "#":
                     continue
-                if line[i] == "[":
-                    head = out._header(line, i, counters, number, max_depth)
-                    if head is not None:
-                        header = head
-                        continue
-                parsed = _parse_key(line, i)
+                try:
+                    if line[i] == "[":
+                        head = out._header(line, i, counters, number, max_depth)
+                        if head is not None:
+                            header = head
+                            continue
+                    parsed = _parse_key(line, i, max_depth)
+                except _TooManyParts:
+                    raise TextProblem(f"nesting deeper than {max_depth} levels (a dotted key of more "
+                                      f"than {max_depth} parts)", number) from None
                 if parsed is None or parsed[1] >= len(line) or line[parsed[1]] != "=":
                     continue  # not a key: tomllib will say why
                 parts, end = parsed
@@ -141,10 +159,12 @@ class TomlLines:
                 if depth > max_depth:
                     raise TextProblem(f"nesting deeper than {max_depth} levels (a dotted key of "
                                       f"{len(parts)} parts)", number)
-                out.lines.setdefault(path, number)
-                out.values.setdefault(path, line[end + 1:])
-                state.base = depth
-                _scan_value(line, end + 1, state, number, max_depth)
+                out._record(path, number)
+                value = line[end + 1:]
+                out.values.setdefault(path, value)
+                if not _PLAIN_VALUE.fullmatch(value):  # the common one-line value needs no scan
+                    state.base = depth
+                    _scan_value(line, end + 1, state, number, max_depth)
             else:
                 _scan_value(line, 0, state, number, max_depth)
         out.last_line = max(1, number - 1 if text.endswith("\n") else number)
@@ -153,7 +173,7 @@ class TomlLines:
     def _header(self, line: str, i: int, counters: dict[KeyPath, int], number: int,
                 max_depth: int) -> KeyPath | None:
         double = line.startswith("[[", i)
-        parsed = _parse_key(line, i + (2 if double else 1))
+        parsed = _parse_key(line, i + (2 if double else 1), max_depth)
         if parsed is None:
             return None
         parts, end = parsed
@@ -173,8 +193,13 @@ class TomlLines:
             path = path + (counters[path],)
         if len(path) > max_depth:
             raise TextProblem(f"nesting deeper than {max_depth} levels (a table header)", number)
-        self.lines.setdefault(path, number)
+        self._record(path, number)
         return path
+
+    def _record(self, path: KeyPath, number: int) -> None:
+        """Record the line of ``path`` and of the tables it defines implicitly (``[a.b]`` defines ``a``)."""
+        for end in range(1, len(path) + 1):
+            self.lines.setdefault(path[:end], number)
 
     def exact(self, path: KeyPath) -> int | None:
         """Line of exactly this table or key, or ``None``."""
@@ -196,7 +221,7 @@ class TomlLines:
 def _scan_value(line: str, i: int, state: _State, number: int, max_depth: int) -> None:
     """Follow strings and brackets over one line of a value; check nesting and bare values."""
     n = len(line)
-    bare = 0
+    bare = dots = 0
     while i < n:
         if state.ml is not None:
             end = line.find(state.ml, i)
@@ -210,8 +235,15 @@ def _scan_value(line: str, i: int, state: _State, number: int, max_depth: int) -
         ch = line[i]
         if ch in _DELIMITERS:
             bare = 0
+            if ch in "=,[]{}":
+                dots = 0
         else:
             bare += 1
+            if ch == ".":  # dotted keys in inline tables: a float or a date has one dot
+                dots += 1
+                if dots > max_depth:
+                    raise TextProblem(f"nesting deeper than {max_depth} levels (a dotted key of more "
+                                      f"than {max_depth} parts)", number)
             if bare > MAX_BARE_VALUE:
                 raise TextProblem(f"a bare value of more than {MAX_BARE_VALUE} characters (a number "
                                   "too long?)", number)

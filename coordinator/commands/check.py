@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
                 problems.append(f"{path}:{line}: {problem}" if line else f"{path}: {problem}")
             placed = f"; placement checked against {services}"
     ok = f"OK {path}: {summary(net)}{placed}" if net is not None else ""
-    return _finish(problems, path, ok)
+    return _finish(problems, path if services is None else f"{path} and {services}", ok)
 
 
 def _check_net(path: str) -> tuple[PetriNet | None, list[str], Any]:

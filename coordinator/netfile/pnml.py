@@ -99,7 +99,8 @@ def _parse_xml(data: bytes, path: str) -> tuple[ET.Element, dict[ET.Element, int
     """
     builder = ET.TreeBuilder()
     lines: dict[ET.Element, int] = {}
-    parser = xml.parsers.expat.ParserCreate(namespace_separator="}")
+    # The bytes were checked to be UTF-8; an encoding the document declares is not followed.
+    parser = xml.parsers.expat.ParserCreate(encoding="utf-8", namespace_separator="}")
     depth = 0
 
     def start(tag: str, attrs: dict[str, str]) -> None:
@@ -493,7 +494,7 @@ def loads_pnml(text: str | bytes, path: str = "<string>", *, net_id: str | None 
             data = text.encode("utf-8")
         else:
             if len(text) > MAX_FILE_BYTES:
-                raise TextProblem(f"net file too large: {len(text)} bytes (the limit is 16 MiB)")
+                raise TextProblem(f"net file too large: {len(text)} bytes (the limit is 16 MiB)", 1)
             decode_utf8(text)
             data = text
     except TextProblem as exc:

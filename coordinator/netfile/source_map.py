@@ -9,6 +9,7 @@ A best effort on text that is not valid TOML.
 
 from __future__ import annotations
 
+import re
 import tomllib
 from dataclasses import dataclass, field
 from typing import Any
@@ -19,6 +20,7 @@ from services.tomllines import TomlLines
 __all__ = ["SourceMap"]
 
 _ARRAYS = ("place", "transition", "arc")
+_SIMPLE_STRING = re.compile(r'[ \t]*"([^"\\]*)"[ \t\r]*(?:#.*)?')
 
 
 @dataclass
@@ -75,8 +77,9 @@ class SourceMap:
         if rest:
             self.keys.setdefault((section, ident, str(rest[0])), number)
             if rest == ("id",) and section in _ARRAYS and value_text is not None and len(value_text) < 1024:
+                simple = _SIMPLE_STRING.fullmatch(value_text)
                 try:
-                    value = tomllib.loads("id = " + value_text)["id"]
+                    value = simple.group(1) if simple else tomllib.loads("id = " + value_text)["id"]
                 except tomllib.TOMLDecodeError:
                     return
                 if isinstance(value, str):

@@ -298,6 +298,13 @@ def test_pnml_values_obey_the_same_limits_as_toml(fragment: str, words: str) -> 
     assert words in info.value.problem and info.value.line == 1
 
 
+def test_pnml_declaring_an_unknown_or_other_encoding_is_read_as_the_utf8_it_was_checked_to_be() -> None:
+    for encoding in ("ttf-8", "ISO-8859-1", "UTF-16"):
+        text = f'<?xml version="1.0" encoding="{encoding}"?>\n' + _pnml('<place id="c"><name><text>café</text></name></place>')
+        net = loads_pnml(text.encode(), "e.pnml")
+        assert net.places[1].label == "café"
+
+
 def test_pnml_text_with_a_nul_or_a_lone_surrogate_is_refused() -> None:
     for text in (_pnml("\0"), _pnml("\ud800")):
         with pytest.raises(NetFileError, match="NUL|surrogate"):
