@@ -235,7 +235,7 @@ def _host_problem(host: str) -> str | None:
         return None
     except ValueError:
         pass
-    name = host[:-1] if host.endswith(".") else host
+    name = host.removesuffix(".")
     if _NUMERIC_HOST.fullmatch(name):
         return f"host {host!r} is not a valid IP address"
     if len(name) > 253 or not all(_HOST_LABEL.fullmatch(label) for label in name.split(".")):

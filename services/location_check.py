@@ -38,7 +38,7 @@ def _import(impl: str) -> tuple[Any, str | None]:
     module_name, _, attr = impl.partition(":")
     try:
         obj: Any = importlib.import_module(module_name)
-    except (Exception, SystemExit) as exc:  # any failure of a module's top level is a problem to report
+    except (Exception, SystemExit) as exc:  # noqa: BLE001 (any failure of a module's top level is a problem to report)
         return None, f"module {module_name!r} cannot be imported ({_brief(exc)})"
     for part in attr.split("."):
         try:

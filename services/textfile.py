@@ -94,8 +94,7 @@ def decode_utf8(data: bytes) -> str:
         if data.startswith(bom):
             raise TextProblem(f"not UTF-8 text: the file starts with a {name} byte-order mark "
                               "(save it as UTF-8)", 1)
-    if data.startswith(_UTF8_BOM):
-        data = data[len(_UTF8_BOM):]
+    data = data.removeprefix(_UTF8_BOM)
     try:
         text = data.decode("utf-8")
     except UnicodeDecodeError as exc:

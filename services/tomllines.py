@@ -38,8 +38,8 @@ KeyPath = tuple[str | int, ...]
 _BARE_KEY = re.compile(r"[A-Za-z0-9_\-]+")
 _DELIMITERS = frozenset(" \t\r,[]{}=#\"'")
 #: A value that opens nothing: one plain basic string, or one short bare value; a comment may follow.
-_PLAIN_VALUE = re.compile(r"[ \t]*(?:\"[^\"\\]*\"|[^\s\"'\[\]{}#,=.]{1,%d}(?:\.[^\s\"'\[\]{}#,=.]{1,%d})?)"
-                          r"[ \t\r]*(?:#.*)?" % (MAX_BARE_VALUE, MAX_BARE_VALUE))
+_BARE = r"[^\s\"'\[\]{}#,=.]{1,%d}" % MAX_BARE_VALUE  # noqa: UP031 (braces of the class)
+_PLAIN_VALUE = re.compile(rf"[ \t]*(?:\"[^\"\\]*\"|{_BARE}(?:\.{_BARE})?)[ \t\r]*(?:#.*)?")
 
 
 def _skip_ws(line: str, i: int) -> int:

@@ -57,7 +57,13 @@ from coordinator.netfile.limits import (
     text_problem,
 )
 from coordinator.netfile.writer import format_value
-from services.textfile import MAX_FILE_BYTES, TextProblem, decode_utf8, read_capped, screen_text
+from services.textfile import (
+    MAX_FILE_BYTES,
+    TextProblem,
+    decode_utf8,
+    read_capped,
+    screen_text,
+)
 from services.tomllines import parse_toml
 
 __all__ = ["PNML_NS", "PTNET_TYPE", "TOOL", "TOOL_VERSION", "dump_pnml", "load_pnml", "loads_pnml", "save_pnml"]

@@ -288,8 +288,8 @@ def test_pnml_external_entity_is_refused_without_reading_the_file(tmp_path: Path
      "it must be a finite number"),
     ('<transition id="t"><toolspecific tool="petrobot" version="1" priority="9999999999"/></transition>',
      "the limit is"),
-    ('<transition id="t"><toolspecific tool="petrobot" version="1"><event name="ext:a b"/>'
-     "</toolspecific></transition>", "bad event name"),
+    (('<transition id="t"><toolspecific tool="petrobot" version="1"><event name="ext:a b"/>'
+      "</toolspecific></transition>"), "bad event name"),
     ('<place id="p&#10;"/>', "bad place id"),
 ])
 def test_pnml_values_obey_the_same_limits_as_toml(fragment: str, words: str) -> None:
@@ -334,8 +334,8 @@ def test_toml_lines_index_arrays_of_tables_and_follow_dotted_keys() -> None:
 
 
 def test_the_net_loader_and_the_location_file_share_one_toml_line_map() -> None:
-    import coordinator.netfile.source_map as source_map
-    import services.location as location
+    from coordinator.netfile import source_map
+    from services import location
 
     assert source_map.TomlLines is TomlLines and location.parse_toml is parse_toml
 
