@@ -161,10 +161,8 @@ class _Loader:
     # ---------------------------------------------------------------- top level
     def load(self, default_name: str, interpreted: bool) -> PetriNet | None:
         doc = self.doc
-        if not any(key in doc for key in TOP_KEYS):
-            found = f" (only {', '.join(_brief(k) for k in list(doc)[:3])})" if doc else ""
-            self.report(f"no net in this file: it has no [net] table and no [[place]]{found}; "
-                        "see docs/netfile.md", self._find_header(next(iter(doc))) if doc else 1)
+        if not doc:
+            self.report("no net in this file: it has no [net] table and no [[place]]; see docs/netfile.md", 1)
             return None
         for key in doc:
             if key not in TOP_KEYS:
