@@ -2,7 +2,10 @@
 
 "The designer must initially define in a file the location of the different primitive actions and
 then the software will know where to direct a request for such a service" (Lima et al., §5). This
-module parses that file with :mod:`tomllib` into a frozen :class:`Location`; it does no other I/O.
+module parses that file (:func:`services.tomllines.parse_toml`: bounded nesting, no NUL, the line of
+every key) into a frozen :class:`Location`; it reads the file and does no other I/O. Every problem is
+a :class:`~services.errors.LocationError` reading ``FILE:LINE: problem``. Whether each ``impl``
+imports and each host resolves is checked by :mod:`services.location_check` (``petrobot check``).
 
 Format (every section optional except ``[nodes.*]``)::
 
@@ -35,15 +38,18 @@ The global memory actions ``memory.get``, ``memory.set`` and ``memory.keys`` are
 
 from __future__ import annotations
 
+import ipaddress
+import math
 import os
 import re
-import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
 from services.errors import LocationError
+from services.textfile import TextProblem, decode_utf8, read_capped
+from services.tomllines import parse_toml
 
 __all__ = [
     "MEMORY_ACTIONS",
@@ -59,8 +65,14 @@ MEMORY_ACTIONS = ("memory.get", "memory.set", "memory.keys")
 """Actions of the global memory service, hosted by the ``[memory]`` node."""
 
 MEMORY_IMPL = "services.actions.memory:memory_actions"
-_IMPL_RE = re.compile(r"^[A-Za-z_][\w.]*:[A-Za-z_][\w.]*$")
-_NAME_RE = re.compile(r"^[A-Za-z_][\w.\-]*$")
+_IMPL_RE = re.compile(r"[A-Za-z_][\w.]*:[A-Za-z_][\w.]*", re.ASCII)
+_NAME_RE = re.compile(r"[A-Za-z_][\w.\-]*", re.ASCII)  # nodes
+_ACTION_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*")  # actions and drivers: the net's action ids
+_TOPIC_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")  # event topics: 'ext:<topic>' in a net
+_NAME_CHARS = {_NAME_RE: ", '.', '-'", _ACTION_RE: ", '.', '-'", _TOPIC_RE: ""}
+_MAX_NAME = 256
+_NUMERIC_HOST = re.compile(r"[0-9.]+")
+_HOST_LABEL = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9\-]{0,61}[A-Za-z0-9])?")
 _DEFAULT_MAX_IN_FLIGHT = 16
 
 
@@ -197,31 +209,38 @@ class Location:
 
 
 def load_location(path: str | os.PathLike[str]) -> Location:
-    """Read and parse a location file.
+    """Read and parse a location file (a regular UTF-8 file of at most 16 MiB).
 
     Raises:
-        LocationError: the file cannot be read, is not TOML, or is inconsistent.
+        LocationError: the file cannot be read, is not TOML, or is inconsistent; the message is
+            ``FILE:LINE: problem``.
     """
     p = os.fspath(path)
     try:
-        with open(p, "rb") as fh:
-            text = fh.read().decode("utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise LocationError(f"{p}: cannot read location file: {exc}") from exc
+        text = decode_utf8(read_capped(p, what="location file"))
+    except TextProblem as exc:
+        raise _error(p, exc.line, exc.problem) from None
     return parse_location(text, path=p)
 
 
-def _table(doc: Mapping[str, Any], key: str, where: str) -> Mapping[str, Any]:
-    value = doc.get(key, {})
-    if not isinstance(value, dict):
-        raise LocationError(f"{where}: [{key}] must be a table")
-    return value
+def _error(path: str, line: int | None, problem: str) -> LocationError:
+    """A :class:`LocationError` whose message is ``FILE:LINE: problem`` (``FILE: problem`` without a line)."""
+    return LocationError(f"{path}:{line}: {problem}" if line is not None else f"{path}: {problem}")
 
 
-def _check_keys(entry: Mapping[str, Any], allowed: set[str], where: str) -> None:
-    extra = set(entry) - allowed
-    if extra:
-        raise LocationError(f"{where}: unknown key(s) {', '.join(sorted(extra))}")
+def _host_problem(host: str) -> str | None:
+    """Why ``host`` is not an IP address or a host name (RFC 1123), or ``None``. No lookup."""
+    try:
+        ipaddress.ip_address(host)
+        return None
+    except ValueError:
+        pass
+    name = host.removesuffix(".")
+    if _NUMERIC_HOST.fullmatch(name):
+        return f"host {host!r} is not a valid IP address"
+    if len(name) > 253 or not all(_HOST_LABEL.fullmatch(label) for label in name.split(".")):
+        return f"host {host!r} is neither an IP address nor a host name (letters, digits, '-', dots)"
+    return None
 
 
 def parse_location(text: str, *, path: str = "<string>") -> Location:
@@ -232,108 +251,140 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         path: file name used in error messages.
 
     Raises:
-        LocationError: bad TOML, unknown node, bad impl string, duplicate address, bad types.
+        LocationError: bad TOML (NUL characters, nesting deeper than 64, syntax), unknown node, bad
+            name, bad host, bad impl string, duplicate address, bad types. The message is
+            ``FILE:LINE: problem``, the line that of the key or table concerned.
     """
     try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise LocationError(f"{path}: not valid TOML: {exc}") from exc
-    _check_keys(doc, {"nodes", "actions", "drivers", "events", "memory"}, path)
+        doc, lines = parse_toml(text)
+    except TextProblem as exc:
+        raise _error(path, exc.line, exc.problem.replace("TOML syntax error", "not valid TOML", 1)) from None
+
+    def fail(problem: str, *key: str) -> LocationError:
+        return _error(path, lines.line(*key), problem)
+
+    def table(key: str) -> Mapping[str, Any]:
+        value = doc.get(key, {})
+        if not isinstance(value, dict):
+            raise fail(f"[{key}] must be a table", key)
+        return value
+
+    def check_keys(entry: Mapping[str, Any], allowed: set[str], where: str, *key: str) -> None:
+        extra = sorted(set(entry) - allowed)
+        if extra:
+            raise fail(f"{where}: unknown key(s) {', '.join(extra)}", *key, extra[0])
+
+    def check_name(name: str, pattern: re.Pattern[str], where: str, *key: str) -> None:
+        if len(name) > _MAX_NAME or not pattern.fullmatch(name):
+            raise fail(f"{where}: bad name (use letters, digits, '_'{_NAME_CHARS[pattern]}, starting with a "
+                       f"letter or '_'; at most {_MAX_NAME} characters)", *key)
+
+    extra = sorted(set(doc) - {"nodes", "actions", "drivers", "events", "memory"})
+    if extra:
+        raise fail(f"unknown key(s) {', '.join(extra)}", extra[0])
 
     nodes: dict[str, NodeSpec] = {}
     seen_addr: dict[tuple[str, int], str] = {}
-    for name, entry in _table(doc, "nodes", path).items():
-        where = f"{path}: [nodes.{name}]"
+    for name, entry in table("nodes").items():
+        where = f"[nodes.{name}]"
         if not isinstance(entry, dict):
-            raise LocationError(f"{where} must be a table")
-        _check_keys(entry, {"host", "port", "max_in_flight"}, where)
-        if not _NAME_RE.match(name):
-            raise LocationError(f"{where}: bad node name")
+            raise fail(f"{where} must be a table", "nodes", name)
+        check_keys(entry, {"host", "port", "max_in_flight"}, where, "nodes", name)
+        check_name(name, _NAME_RE, where, "nodes", name)
         host = entry.get("host")
         port = entry.get("port")
         cap = entry.get("max_in_flight", _DEFAULT_MAX_IN_FLIGHT)
         if not isinstance(host, str) or not host:
-            raise LocationError(f"{where}: host must be a non-empty string")
+            raise fail(f"{where}: host must be a non-empty string", "nodes", name, "host")
+        problem = _host_problem(host)
+        if problem is not None:
+            raise fail(f"{where}: {problem}", "nodes", name, "host")
         if type(port) is not int or not 0 < port < 65536:
-            raise LocationError(f"{where}: port must be an integer in 1..65535")
+            raise fail(f"{where}: port must be an integer in 1..65535", "nodes", name, "port")
         if type(cap) is not int or cap < 1:
-            raise LocationError(f"{where}: max_in_flight must be a positive integer")
+            raise fail(f"{where}: max_in_flight must be a positive integer", "nodes", name, "max_in_flight")
         if (host, port) in seen_addr:
-            raise LocationError(f"{where}: duplicate address {host}:{port} (also node {seen_addr[host, port]!r})")
+            raise fail(f"{where}: duplicate address {host}:{port} (also node {seen_addr[host, port]!r})",
+                       "nodes", name, "port")
         seen_addr[host, port] = name
         nodes[name] = NodeSpec(name=name, host=host, port=port, max_in_flight=cap)
     if not nodes:
-        raise LocationError(f"{path}: no [nodes.*] table")
+        raise _error(path, 1, "no [nodes.*] table: a location file names at least one node")
 
-    def node_ref(entry: Mapping[str, Any], where: str) -> str:
+    def node_ref(entry: Mapping[str, Any], where: str, *key: str) -> str:
         node = entry.get("node")
         if not isinstance(node, str):
-            raise LocationError(f"{where}: node must be a string")
+            raise fail(f"{where}: node must be a string", *key, "node")
         if node not in nodes:
-            raise LocationError(f"{where}: unknown node {node!r} (known: {', '.join(sorted(nodes))})")
+            raise fail(f"{where}: unknown node {node!r} (known: {', '.join(sorted(nodes))})", *key, "node")
         return node
 
-    def impl_ref(entry: Mapping[str, Any], where: str) -> str:
+    def impl_ref(entry: Mapping[str, Any], where: str, *key: str) -> str:
         impl = entry.get("impl")
-        if not isinstance(impl, str) or not _IMPL_RE.match(impl):
-            raise LocationError(f"{where}: impl must be an importable \"module:attr\" string, got {impl!r}")
+        if not isinstance(impl, str) or not _IMPL_RE.fullmatch(impl):
+            raise fail(f"{where}: impl must be an importable \"module:attr\" string, got {impl!r}", *key, "impl")
         return impl
 
-    def params_of(entry: Mapping[str, Any], where: str) -> Mapping[str, Any]:
+    def params_of(entry: Mapping[str, Any], where: str, *key: str) -> Mapping[str, Any]:
         params = entry.get("params", {})
         if not isinstance(params, dict):
-            raise LocationError(f"{where}: params must be a table")
+            raise fail(f"{where}: params must be a table", *key, "params")
         return MappingProxyType(dict(params))
 
     memory_node: str | None = None
-    mem = _table(doc, "memory", path)
+    mem = table("memory")
     if mem:
-        _check_keys(mem, {"node"}, f"{path}: [memory]")
-        memory_node = node_ref(mem, f"{path}: [memory]")
+        check_keys(mem, {"node"}, "[memory]", "memory")
+        memory_node = node_ref(mem, "[memory]", "memory")
 
     actions: dict[str, ActionPlacement] = {}
-    for name, entry in _table(doc, "actions", path).items():
-        where = f"{path}: [actions.{name}]"
+    for name, entry in table("actions").items():
+        where = f"[actions.{name}]"
         if not isinstance(entry, dict):
-            raise LocationError(f"{where} must be a table")
-        _check_keys(entry, {"node", "impl", "local_only", "deadline_s", "params"}, where)
+            raise fail(f"{where} must be a table", "actions", name)
+        check_keys(entry, {"node", "impl", "local_only", "deadline_s", "params"}, where, "actions", name)
         if name in MEMORY_ACTIONS:
-            raise LocationError(f"{where}: {name} is reserved for the global memory service")
+            raise fail(f"{where}: {name} is reserved for the global memory service", "actions", name)
+        check_name(name, _ACTION_RE, where, "actions", name)
         local_only = entry.get("local_only", False)
         if not isinstance(local_only, bool):
-            raise LocationError(f"{where}: local_only must be true or false")
+            raise fail(f"{where}: local_only must be true or false", "actions", name, "local_only")
         deadline = entry.get("deadline_s")
-        if deadline is not None and (isinstance(deadline, bool) or not isinstance(deadline, (int, float)) or deadline <= 0):
-            raise LocationError(f"{where}: deadline_s must be a positive number")
+        if deadline is not None and (isinstance(deadline, bool) or not isinstance(deadline, (int, float))
+                                     or not 0 < deadline < math.inf):
+            raise fail(f"{where}: deadline_s must be a positive finite number", "actions", name, "deadline_s")
         actions[name] = ActionPlacement(
             name=name,
-            node=node_ref(entry, where),
-            impl=impl_ref(entry, where),
+            node=node_ref(entry, where, "actions", name),
+            impl=impl_ref(entry, where, "actions", name),
             local_only=local_only,
             deadline_s=float(deadline) if deadline is not None else None,
-            params=params_of(entry, where),
+            params=params_of(entry, where, "actions", name),
         )
     if memory_node is not None:
         for name in MEMORY_ACTIONS:
             actions[name] = ActionPlacement(name=name, node=memory_node, impl=MEMORY_IMPL)
 
     drivers: dict[str, DriverSpec] = {}
-    for name, entry in _table(doc, "drivers", path).items():
-        where = f"{path}: [drivers.{name}]"
+    for name, entry in table("drivers").items():
+        where = f"[drivers.{name}]"
         if not isinstance(entry, dict):
-            raise LocationError(f"{where} must be a table")
-        _check_keys(entry, {"node", "impl", "params"}, where)
+            raise fail(f"{where} must be a table", "drivers", name)
+        check_keys(entry, {"node", "impl", "params"}, where, "drivers", name)
+        check_name(name, _ACTION_RE, where, "drivers", name)
         drivers[name] = DriverSpec(
-            name=name, node=node_ref(entry, where), impl=impl_ref(entry, where), params=params_of(entry, where)
+            name=name, node=node_ref(entry, where, "drivers", name), impl=impl_ref(entry, where, "drivers", name),
+            params=params_of(entry, where, "drivers", name),
         )
 
     events: dict[str, str] = {}
-    for topic, entry in _table(doc, "events", path).items():
-        where = f"{path}: [events.{topic}]"
+    for topic, entry in table("events").items():
+        where = f"[events.{topic}]"
         if not isinstance(entry, dict):
-            raise LocationError(f"{where} must be a table")
-        _check_keys(entry, {"node"}, where)
-        events[topic] = node_ref(entry, where)
+            raise fail(f"{where} must be a table", "events", topic)
+        check_keys(entry, {"node"}, where, "events", topic)
+        check_name(topic, _TOPIC_RE, where, "events", topic)
+        events[topic] = node_ref(entry, where, "events", topic)
 
     return Location(
         path=path,

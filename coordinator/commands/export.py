@@ -3,19 +3,27 @@
 Reads any net file :func:`coordinator.netfile.load_any` reads (``.toml``, ``.pnml``, ``.xml``) and
 writes canonical TOML (docs/netfile.md), PNML 2009 with petrobot tool-specific data
 (:mod:`coordinator.netfile.pnml`) or a Graphviz picture (:mod:`coordinator.netfile.dot`), to stdout by default.
+A net that does not load is reported as ``FILE:LINE: problem`` with exit status 2, and nothing is
+written; the output file is replaced in one step (a temporary file renamed over it), so a failed
+write leaves no partial file either.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import sys
+import tempfile
 import textwrap
 from pathlib import Path
 from typing import Any
 
 from services.errors import PetrobotError
 
-__all__ = ["FORMATS", "add_parser", "run"]
+__all__ = ["EXIT_ERROR", "FORMATS", "add_parser", "run", "write_atomically"]
+
+#: Exit status when the net does not load or the output cannot be written.
+EXIT_ERROR = 2
 
 #: Output formats and what they are.
 FORMATS = {
@@ -34,7 +42,8 @@ def add_parser(subparsers: Any) -> None:
             "Read a net file (.toml, .pnml or .xml) and write it in another format: canonical "
             "TOML, PNML 2009 (readable by other Petri-net tools; the task interpretation travels in "
             "petrobot tool-specific elements, so TOML -> PNML -> TOML is lossless) or a Graphviz "
-            "DOT picture. Writes to standard output unless -o is given."),
+            "DOT picture. Writes to standard output unless -o is given. A net that does not load "
+            "is reported as FILE:LINE: PROBLEM (exit status 2) and nothing is written."),
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="formats:\n" + "\n".join(f"  {k:5} {v}" for k, v in FORMATS.items()),
     )
@@ -49,8 +58,25 @@ def add_parser(subparsers: Any) -> None:
                              "structural errors are still reported")
 
 
+def write_atomically(path: str | Path, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` through a temporary file in the same directory, renamed over it.
+
+    Raises:
+        OSError: the file cannot be written; ``path`` is then unchanged and no temporary file remains.
+    """
+    target = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
 def run(args: argparse.Namespace) -> int:
-    """Export a net; return 0, or 1 after printing the problem on stderr."""
+    """Export a net; return 0, or 2 after printing the problem on stderr."""
     from coordinator.netfile import dump_net, load_any
     from coordinator.netfile.dot import to_dot
     from coordinator.netfile.pnml import dump_pnml
@@ -65,13 +91,13 @@ def run(args: argparse.Namespace) -> int:
             text = to_dot(net, show_hidden=not args.no_hidden)
     except PetrobotError as exc:
         print(f"petrobot export: {exc}", file=sys.stderr)
-        return 1
+        return EXIT_ERROR
     if args.output is None:
         sys.stdout.write(text)
         return 0
     try:
-        Path(args.output).write_text(text, encoding="utf-8")
+        write_atomically(args.output, text)
     except OSError as exc:
         print(f"petrobot export: cannot write {args.output}: {exc.strerror or exc}", file=sys.stderr)
-        return 1
+        return EXIT_ERROR
     return 0

@@ -1,7 +1,9 @@
 """Net files: the TOML net file (docs/netfile.md), PNML and Graphviz DOT (paper section 2).
 
 * :mod:`~coordinator.netfile.schema` — the TOML format's version, sections and keys;
-* :mod:`~coordinator.netfile.source_map` — :class:`SourceMap`, the line of each element and key;
+* :mod:`~coordinator.netfile.source_map` — :class:`SourceMap`, the line of each element and key
+  (from :class:`services.tomllines.TomlLines`, shared with ``services.toml``);
+* :mod:`~coordinator.netfile.limits` — the limits every reader applies (sizes, names, counts);
 * :mod:`~coordinator.netfile.loader` — :func:`loads_net`, :func:`load_net`, :func:`lint_net`:
   TOML → :class:`~coordinator.net.PetriNet`, every problem at its file and line;
 * :mod:`~coordinator.netfile.writer` — :func:`dump_net`, :func:`save_net` (canonical TOML),

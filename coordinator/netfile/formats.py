@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from coordinator.errors import NetError, NetFileError
+from coordinator.errors import NetFileError
 from coordinator.net import PetriNet
 from coordinator.netfile.loader import load_net
 from coordinator.netfile.pnml import load_pnml
@@ -30,10 +30,5 @@ def load_any(path: str | Path, *, interpreted: bool = True) -> PetriNet:
     if suffix == ".toml":
         return load_net(path, interpreted=interpreted)
     if suffix in (".pnml", ".xml"):
-        net = load_pnml(path)
-        if interpreted:
-            problems = net.interpretation_problems()
-            if problems:
-                raise NetError(problems[0][1], path=str(path))
-        return net
+        return load_pnml(path, interpreted=interpreted)
     raise NetFileError(f"unknown net file type {suffix or '(no suffix)'!r}: use .toml, .pnml or .xml", path=str(path))

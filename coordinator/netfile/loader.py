@@ -16,8 +16,6 @@ collected with its line, instead of stopping at the first.
 from __future__ import annotations
 
 import difflib
-import re
-import tomllib
 from collections.abc import Callable, Mapping
 from functools import partial
 from pathlib import Path
@@ -26,7 +24,6 @@ from typing import Any, TypeVar
 from coordinator.errors import NetError, NetFileError
 from coordinator.learning.validation import learner_spec
 from coordinator.net import (
-    EVENT_RE,
     ActionSpec,
     Arc,
     Marking,
@@ -36,6 +33,18 @@ from coordinator.net import (
     PrimitiveTask,
     Transition,
     TransitionKind,
+)
+from coordinator.netfile.limits import (
+    MAX_DESCRIPTION,
+    MAX_LABEL,
+    MAX_NAME,
+    count_problem,
+    event_problem,
+    finite_problem,
+    id_problem,
+    priority_problem,
+    task_name_problem,
+    text_problem,
 )
 from coordinator.netfile.schema import (
     ACTION_KEYS,
@@ -48,6 +57,8 @@ from coordinator.netfile.schema import (
     TRANSITION_KEYS,
 )
 from coordinator.netfile.source_map import SourceMap
+from services.textfile import TextProblem, decode_utf8, read_capped
+from services.tomllines import parse_toml
 
 __all__ = ["lint_net", "load_net", "loads_net", "read_text"]
 
@@ -60,6 +71,12 @@ def _is_int(value: Any) -> bool:
 
 def _is_num(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _brief(value: Any) -> str:
+    """``repr`` of a value, cut to a length fit for one line of a message."""
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
 
 
 def _type_name(value: Any) -> str:
@@ -79,6 +96,8 @@ class _Loader:
         self.smap = smap
         self.path = path
         self.problems: list[NetError] = []
+        self.declared: dict[str, set[str]] = {"place": set(), "transition": set()}
+        self.seen: dict[str, set[str]] = {"place": set(), "transition": set()}
 
     # ---------------------------------------------------------------- reporting
     def report(self, problem: str, line: int | None) -> None:
@@ -94,7 +113,7 @@ class _Loader:
             if key not in allowed:
                 close = difflib.get_close_matches(key, allowed, n=1)
                 hint = f"; did you mean {close[0]!r}?" if close else f" (known keys: {', '.join(allowed)})"
-                self.report(f"unknown key {key!r} in {what}{hint}", self.smap.key(section, ident, key))
+                self.report(f"unknown key {_brief(key)} in {what}{hint}", self.smap.key(section, ident, key))
 
     def get(self, table: Mapping[str, Any], key: str, kind: str, what: str, section: str, ident: Any,
             default: Any = None) -> Any:
@@ -108,8 +127,28 @@ class _Loader:
         if not ok:
             wanted = {"str": "a string", "int": "an integer", "num": "a number", "bool": "true or false",
                       "table": "a table", "array": "an array"}[kind]
-            raise self.fail(f"{key} of {what} must be {wanted}, not {_type_name(value)} ({value!r})",
+            raise self.fail(f"{key} of {what} must be {wanted}, not {_type_name(value)} ({_brief(value)})",
                             self.smap.key(section, ident, key))
+        return value
+
+    def check(self, problem: str | None, line: int | None) -> None:
+        """Raise :class:`_Skip` after recording ``problem``, if there is one."""
+        if problem is not None:
+            raise self.fail(problem, line)
+
+    def real(self, table: Mapping[str, Any], key: str, what: str, section: str, ident: Any,
+             default: Any = None) -> Any:
+        """Fetch a finite number (TOML allows ``inf`` and ``nan``; no field of a net does)."""
+        value = self.get(table, key, "num", what, section, ident, default)
+        if value is not None:
+            self.check(finite_problem(value, f"{key} of {what}"), self.smap.key(section, ident, key))
+        return value
+
+    def text(self, table: Mapping[str, Any], key: str, what: str, section: str, ident: Any,
+             default: str, limit: int, lines: bool = False) -> str:
+        """Fetch a string of at most ``limit`` characters without control characters."""
+        value: str = self.get(table, key, "str", what, section, ident, default)
+        self.check(text_problem(value, f"{key} of {what}", limit, lines=lines), self.smap.key(section, ident, key))
         return value
 
     def build(self, line: int | None, make: Callable[[], _T]) -> _T:
@@ -122,17 +161,26 @@ class _Loader:
     # ---------------------------------------------------------------- top level
     def load(self, default_name: str, interpreted: bool) -> PetriNet | None:
         doc = self.doc
+        if not doc:
+            self.report("no net in this file: it has no [net] table and no [[place]]; see docs/netfile.md", 1)
+            return None
         for key in doc:
             if key not in TOP_KEYS:
                 close = difflib.get_close_matches(key, TOP_KEYS, n=1)
                 hint = f"; did you mean {close[0]!r}?" if close else f" (known: {', '.join(TOP_KEYS)})"
                 line = self.smap.elements.get((key, None))
-                self.report(f"unknown section {key!r}{hint}", line or self._find_header(key))
+                self.report(f"unknown section {_brief(key)}{hint}", line or self._find_header(key))
         for key, kind in (("net", dict), ("task", dict), ("place", list), ("transition", list), ("arc", list)):
             if key in doc and not isinstance(doc[key], kind):
                 form = f"[{key}]" if kind is dict else f"[[{key}]]"
                 self.report(f"{key} must be written as {form} table(s)", self._find_header(key))
                 return None
+        if not doc.get("place"):
+            self.report("the net has no places: add at least one [[place]]",
+                        self.smap.elements.get(("net", None)) or self._find_header(next(iter(doc))))
+        for section in self.declared:  # ids of every element, usable or not: no cascade of "unknown id"
+            self.declared[section] = {t["id"] for t in doc.get(section, [])
+                                      if isinstance(t, dict) and isinstance(t.get("id"), str)}
         name, description, home = self.load_header(default_name)
         tasks = self.load_tasks()
         places, marking = self.load_places()
@@ -145,7 +193,7 @@ class _Loader:
         self.check_places(places, tasks)
         if home is not None:
             for pid in home:
-                if pid not in places:
+                if pid not in places and pid not in self.declared["place"]:
                     self.report(f"home marking of [net] puts tokens in unknown place {pid!r}",
                                 self.smap.key("net", None, "home"))
         if self.problems:
@@ -173,8 +221,8 @@ class _Loader:
         self.check_keys(table, NET_KEYS, "[net]", "net", None)
         name, description, home = default_name, "", None
         try:
-            name = self.get(table, "name", "str", "[net]", "net", None, default_name)
-            description = self.get(table, "description", "str", "[net]", "net", None, "")
+            name = self.text(table, "name", "[net]", "net", None, default_name, MAX_NAME)
+            description = self.text(table, "description", "[net]", "net", None, "", MAX_DESCRIPTION, lines=True)
             version = self.get(table, "format", "int", "[net]", "net", None, FORMAT_VERSION)
             if version != FORMAT_VERSION:
                 self.report(f"net file format {version} is not supported (this reader knows format "
@@ -190,7 +238,9 @@ class _Loader:
         line = self.smap.key(section, ident, key)
         for place, count in table.items():
             if not _is_int(count) or count < 0:
-                raise self.fail(f"{what}: token count of {place!r} must be an integer >= 0, not {count!r}", line)
+                raise self.fail(f"{what}: token count of {_brief(place)} must be an integer >= 0, not "
+                                f"{_brief(count)}", line)
+            self.check(count_problem(count, f"{what}: token count of {_brief(place)}", 0), line)
         return Marking(table)
 
     # ---------------------------------------------------------------- tasks
@@ -204,8 +254,9 @@ class _Loader:
         return tasks
 
     def load_task(self, name: str, table: Any) -> PrimitiveTask:
-        what = f"[task.{name}]"
         line = self.smap.elements.get(("task", name))
+        self.check(task_name_problem(name), line)
+        what = f"[task.{name}]"
         if not isinstance(table, dict):
             raise self.fail(f"{what} must be a table", line)
         self.check_keys(table, TASK_KEYS, what, "task", name)
@@ -224,7 +275,7 @@ class _Loader:
                     if key not in ACTION_KEYS:
                         close = difflib.get_close_matches(key, ACTION_KEYS, n=1)
                         hint = f"; did you mean {close[0]!r}?" if close else ""
-                        raise self.fail(f"unknown key {key!r} in an action of {what}{hint}", actions_line)
+                        raise self.fail(f"unknown key {_brief(key)} in an action of {what}{hint}", actions_line)
             else:
                 raise self.fail(f"actions of {what} must be names or tables {{ name = ..., params = ..., "
                                 f"cost = ... }}, not {_type_name(item)}", actions_line)
@@ -233,16 +284,18 @@ class _Loader:
             cost = spec.get("cost")
             if not isinstance(action_name, str):
                 raise self.fail(f"an action of {what} has no name (a string)", actions_line)
+            self.check(id_problem(action_name, f"action of {what}"), actions_line)
             if not isinstance(params, dict):
                 raise self.fail(f"params of action {action_name!r} in {what} must be a table", actions_line)
-            if cost is not None and (not _is_num(cost) or cost < 0):
-                raise self.fail(f"cost of action {action_name!r} in {what} must be a number >= 0", actions_line)
+            if cost is not None and (not _is_num(cost) or not 0 <= cost < float("inf")):
+                raise self.fail(f"cost of action {action_name!r} in {what} must be a finite number >= 0, "
+                                f"not {_brief(cost)}", actions_line)
             merged = {**common, **params}
             actions.append(self.build(actions_line, partial(
                 ActionSpec, name=action_name, params=merged, cost=None if cost is None else float(cost))))
         values: dict[str, float | None] = {}
         for key in ("deadline_s", "mean_time_s", "reliability"):
-            value = self.get(table, key, "num", what, "task", name)
+            value = self.real(table, key, what, "task", name)
             if value is not None and not (0 <= value <= 1 if key == "reliability" else value > 0):
                 wanted = "in [0, 1]" if key == "reliability" else "> 0"
                 raise self.fail(f"{key} of {what} is {value}; it must be {wanted}", self.smap.key("task", name, key))
@@ -276,8 +329,10 @@ class _Loader:
         line = self.smap.element(section, index)
         if not isinstance(ident, str):
             raise self.fail(f"id of a [[{section}]] must be a string, not {_type_name(ident)}", line)
-        if ident in taken:
+        self.check(id_problem(ident, section), line)
+        if ident in taken or ident in self.seen[section]:
             raise self.fail(f"duplicate {section} id {ident!r}", line)
+        self.seen[section].add(ident)
         return ident
 
     def load_place(self, index: int, table: Any, places: Mapping[str, Place]) -> tuple[Place, int]:
@@ -303,10 +358,13 @@ class _Loader:
         tokens = self.get(table, "tokens", "int", what, "place", index, 0)
         if tokens < 0:
             raise self.fail(f"{what} has a negative initial marking ({tokens})", self.smap.key("place", index, "tokens"))
-        label = self.get(table, "label", "str", what, "place", index, "")
+        self.check(count_problem(tokens, f"initial marking of {what}", 0), self.smap.key("place", index, "tokens"))
+        label = self.text(table, "label", what, "place", index, "", MAX_LABEL)
         capacity = self.get(table, "capacity", "int", what, "place", index)
         if capacity is not None and capacity < 0:
             raise self.fail(f"{what} has a negative capacity ({capacity})", self.smap.key("place", index, "capacity"))
+        if capacity is not None:
+            self.check(count_problem(capacity, f"capacity of {what}", 0), self.smap.key("place", index, "capacity"))
         return self.build(self.smap.element("place", index), lambda: Place(
             id=pid, kind=kind, task=task, label=label, capacity=capacity)), tokens
 
@@ -345,12 +403,13 @@ class _Loader:
         self.check_keys(table, TRANSITION_KEYS, what, sec, index)
         events = self.get(table, "events", "array", what, sec, index, [])
         for event in events:
-            if not isinstance(event, str) or not EVENT_RE.match(event):
-                raise self.fail(f"{what} links bad event name {event!r}: use 'int:<task>.<outcome>' or "
-                                "'ext:<topic>' (identifiers of letters, digits and '_')",
-                                self.smap.key(sec, index, "events"))
+            problem = event_problem(event) if isinstance(event, str) else "an event name must be a string"
+            if problem is not None:
+                raise self.fail(f"{what} links a {problem}" if isinstance(event, str) else
+                                f"{what} links {_brief(event)}: {problem}", self.smap.key(sec, index, "events"))
         priority = self.get(table, "priority", "int", what, sec, index, 0)
-        weight = self.get(table, "weight", "num", what, sec, index, 1.0)
+        self.check(priority_problem(priority, f"priority of {what}"), self.smap.key(sec, index, "priority"))
+        weight = self.real(table, "weight", what, sec, index, 1.0)
         if not weight > 0:
             raise self.fail(f"{what} has weight {weight}; weights must be > 0", self.smap.key(sec, index, "weight"))
         kind_text = self.get(table, "kind", "str", what, sec, index, "immediate")
@@ -359,7 +418,7 @@ class _Loader:
         except ValueError:
             raise self.fail(f"{what} has unknown kind {kind_text!r} (use immediate or exponential)",
                             self.smap.key(sec, index, "kind")) from None
-        rate = self.get(table, "rate", "num", what, sec, index)
+        rate = self.real(table, "rate", what, sec, index)
         if rate is not None and kind is TransitionKind.IMMEDIATE:
             raise self.fail(f"immediate {what} cannot have a rate (add kind = \"exponential\")",
                             self.smap.key(sec, index, "rate"))
@@ -370,11 +429,12 @@ class _Loader:
             servers: int | None = None
         elif _is_int(servers_value) and servers_value >= 1:
             servers = servers_value
+            self.check(count_problem(servers, f"servers of {what}", 1), self.smap.key(sec, index, "servers"))
         else:
-            raise self.fail(f"servers of {what} must be an integer >= 1 or \"infinite\", not {servers_value!r}",
-                            self.smap.key(sec, index, "servers"))
+            raise self.fail(f"servers of {what} must be an integer >= 1 or \"infinite\", not "
+                            f"{_brief(servers_value)}", self.smap.key(sec, index, "servers"))
         hidden = self.get(table, "hidden", "bool", what, sec, index, False)
-        label = self.get(table, "label", "str", what, sec, index, "")
+        label = self.text(table, "label", what, sec, index, "", MAX_LABEL)
         for key in ("inputs", "outputs", "inhibitors"):
             arcs = self.get(table, key, "table", what, sec, index, {})
             self.transition_arcs.append((index, tid, key, arcs))
@@ -385,7 +445,8 @@ class _Loader:
     # ---------------------------------------------------------------- arcs
     def arc_weight(self, weight: Any, what: str, line: int | None) -> int:
         if not _is_int(weight) or weight < 1:
-            raise self.fail(f"{what} has weight {weight!r}; arc weights are integers >= 1", line)
+            raise self.fail(f"{what} has weight {_brief(weight)}; arc weights are integers >= 1", line)
+        self.check(count_problem(weight, f"weight of {what}", 1), line)
         return int(weight)
 
     def load_arcs(self, places: Mapping[str, Place], transitions: Mapping[str, Transition]) -> list[Arc]:
@@ -411,10 +472,10 @@ class _Loader:
                 except _Skip:
                     continue
                 if pid not in places:
-                    if pid in transitions:
+                    if pid in transitions or pid in self.declared["transition"]:
                         self.report(f"{key} of transition {tid!r} names transition {pid!r}; arcs join a place "
                                     "and a transition", line)
-                    elif pid in self.smap_place_ids():
+                    elif pid in self.declared["place"]:
                         pass  # the place is broken, already reported
                     else:
                         self.report(f"{key} of transition {tid!r} names unknown place {pid!r}", line)
@@ -430,13 +491,6 @@ class _Loader:
                 continue
         return arcs
 
-    def smap_place_ids(self) -> set[str]:
-        ids = {ident for (section, ident) in self.smap.ids if section == "place"}
-        for table in self.doc.get("place", []):
-            if isinstance(table, dict) and isinstance(table.get("id"), str):
-                ids.add(table["id"])
-        return ids
-
     def load_arc(self, index: int, table: Any, places: Mapping[str, Place],
                  transitions: Mapping[str, Transition], add: Any) -> None:
         header = self.smap.elements.get(("arc", index))
@@ -449,6 +503,8 @@ class _Loader:
                 raise self.fail(f"an [[arc]] has no {key!r}", header)
             end = self.get(table, key, "str", "an [[arc]]", "arc", index)
             if end not in places and end not in transitions:
+                if end in self.declared["place"] or end in self.declared["transition"]:
+                    raise _Skip()  # the element is broken, already reported
                 raise self.fail(f"arc {table.get('from')} -> {table.get('to')}: unknown place or transition "
                                 f"{end!r}", self.smap.key("arc", index, key))
             ends.append(end)
@@ -464,20 +520,6 @@ class _Loader:
             raise self.fail(f"inhibitor arc {source} -> {target} must go from a place to a transition",
                             self.smap.key("arc", index, "inhibitor"))
         add(source, target, weight, inhibitor, line)
-
-
-def _syntax_error(exc: tomllib.TOMLDecodeError, path: str, smap_last: int) -> NetFileError:
-    message = str(exc)
-    match = re.search(r"\s*\(at line (\d+), column (\d+)\)\s*$", message)
-    if match:
-        line = int(match.group(1))
-        problem = f"TOML syntax error: {message[:match.start()]} (column {match.group(2)})"
-        return NetFileError(problem, path=path, line=line)
-    match = re.search(r"\s*\(at end of document\)\s*$", message)
-    if match:
-        return NetFileError(f"TOML syntax error: {message[:match.start()]} (at end of file)",
-                            path=path, line=smap_last)
-    return NetFileError(f"TOML syntax error: {message}", path=path)
 
 
 def _default_name(path: str) -> str:
@@ -498,11 +540,11 @@ def lint_net(text: str, path: str = "<string>", *, interpreted: bool = True) -> 
         ``(net, [])`` for a valid file, else ``(None, problems)`` sorted by line; each problem is a
         :class:`NetError` (:class:`NetFileError` for a syntax error) with ``path`` and ``line``.
     """
-    smap = SourceMap.scan(text)
     try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        return None, [_syntax_error(exc, path, smap.last_line)]
+        doc, lines = parse_toml(text)
+    except TextProblem as exc:
+        return None, [NetFileError(exc.problem, path=path, line=exc.line)]
+    smap = SourceMap.from_lines(lines)
     loader = _Loader(doc, smap, path)
     net = loader.load(_default_name(path), interpreted)
     problems = sorted(loader.problems, key=lambda e: (e.line is None, e.line or 0))
@@ -521,7 +563,8 @@ def loads_net(text: str, path: str = "<string>", *, interpreted: bool = True) ->
         The net.
 
     Raises:
-        NetFileError: on a TOML syntax error (line from :mod:`tomllib`).
+        NetFileError: on a TOML syntax error (line from :mod:`tomllib`), text that no net file may
+            hold (NUL, nesting deeper than 64, a 5,000-digit number: docs/netfile.md, "Limits").
         NetError: on the first problem found (by line), with ``path`` and ``line`` set.
     """
     net, problems = lint_net(text, path, interpreted=interpreted)
@@ -532,18 +575,23 @@ def loads_net(text: str, path: str = "<string>", *, interpreted: bool = True) ->
 
 
 def read_text(path: str | Path) -> str:
+    """Read a net file as text: a regular file of at most 16 MiB, UTF-8, without NUL.
+
+    Raises:
+        NetFileError: the file cannot be read or is refused, with the line of the offending byte.
+    """
     try:
-        return Path(path).read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
-        raise NetFileError(f"cannot read net file: {reason}", path=str(path)) from None
+        return decode_utf8(read_capped(path, what="net file"))
+    except TextProblem as exc:
+        raise NetFileError(exc.problem, path=str(path), line=exc.line) from None
 
 
 def load_net(path: str | Path, *, interpreted: bool = True) -> PetriNet:
     """Load a TOML net file; see :func:`loads_net`.
 
     Raises:
-        NetFileError: if the file cannot be read, or on a syntax error.
+        NetFileError: if the file cannot be read, is not a regular file, is larger than 16 MiB, is
+            not UTF-8 text or holds a NUL byte; or as :func:`loads_net`.
         NetError: as :func:`loads_net`.
     """
     return loads_net(read_text(path), str(path), interpreted=interpreted)

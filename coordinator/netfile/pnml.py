@@ -23,7 +23,7 @@ Reference: ISO/IEC 15909-2:2011, *Petri net Markup Language*; Hillah, Kordon, Pe
 from __future__ import annotations
 
 import math
-import tomllib
+import re
 import xml.parsers.expat
 from collections.abc import Callable
 from functools import partial
@@ -44,7 +44,27 @@ from coordinator.net import (
     Transition,
     TransitionKind,
 )
+from coordinator.netfile.limits import (
+    MAX_COUNT,
+    MAX_DESCRIPTION,
+    MAX_LABEL,
+    MAX_NAME,
+    MAX_PRIORITY,
+    event_problem,
+    finite_problem,
+    id_problem,
+    task_name_problem,
+    text_problem,
+)
 from coordinator.netfile.writer import format_value
+from services.textfile import (
+    MAX_FILE_BYTES,
+    TextProblem,
+    decode_utf8,
+    read_capped,
+    screen_text,
+)
+from services.tomllines import parse_toml
 
 __all__ = ["PNML_NS", "PTNET_TYPE", "TOOL", "TOOL_VERSION", "dump_pnml", "load_pnml", "loads_pnml", "save_pnml"]
 
@@ -57,31 +77,66 @@ TOOL = "petrobot"
 #: ``version`` attribute of our ``<toolspecific>`` elements.
 TOOL_VERSION = "1"
 
+#: Deepest nesting of XML elements accepted. PNML nests six levels (pnml, net, page, place,
+#: initialMarking, text) plus one per nested page; 5,000 nested pages are refused, not recursed into.
+MAX_XML_DEPTH = 256
+
 _T = TypeVar("_T")
 _NOT_PT = ("symmetricnet", "highlevelnet", "pt-hlpng", "hlpng", "coloured", "colored")
+_SPACE = re.compile(r"\s+")
 
 
 # ---------------------------------------------------------------------------------------- parsing
+def _brief(value: object) -> str:
+    """``repr`` of a value, cut to a length fit for one line of a message."""
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+class _Refused(Exception):
+    """Raised from an expat handler to stop parsing a document we refuse."""
+
+
 def _parse_xml(data: bytes, path: str) -> tuple[ET.Element, dict[ET.Element, int]]:
-    """Parse XML with expat, stripping namespaces, and remember each element's line."""
+    """Parse XML with expat, stripping namespaces, and remember each element's line.
+
+    A document type declaration is refused (PNML needs none; refusing it rules out entity
+    expansion bombs and external entities), and so is nesting deeper than :data:`MAX_XML_DEPTH`.
+    """
     builder = ET.TreeBuilder()
     lines: dict[ET.Element, int] = {}
-    parser = xml.parsers.expat.ParserCreate(namespace_separator="}")
+    # The bytes were checked to be UTF-8; an encoding the document declares is not followed.
+    parser = xml.parsers.expat.ParserCreate(encoding="utf-8", namespace_separator="}")
+    depth = 0
 
     def start(tag: str, attrs: dict[str, str]) -> None:
+        nonlocal depth
+        depth += 1
+        if depth > MAX_XML_DEPTH:
+            raise _Refused(f"elements nested deeper than {MAX_XML_DEPTH} levels")
         local = tag.rsplit("}", 1)[-1]
         attributes = {k.rsplit("}", 1)[-1]: v for k, v in attrs.items()}
         lines[builder.start(local, attributes)] = parser.CurrentLineNumber
 
     def end(tag: str) -> None:
+        nonlocal depth
+        depth -= 1
         builder.end(tag.rsplit("}", 1)[-1])
+
+    def doctype(*_: object) -> None:
+        raise _Refused("a document type declaration (<!DOCTYPE>) is not allowed in PNML: "
+                       "entities are not expanded")
 
     parser.StartElementHandler = start
     parser.EndElementHandler = end
     parser.CharacterDataHandler = builder.data
+    parser.StartDoctypeDeclHandler = doctype
+    parser.EntityDeclHandler = doctype
     parser.buffer_text = True
     try:
         parser.Parse(data, True)
+    except _Refused as exc:
+        raise NetFileError(str(exc), path=path, line=parser.CurrentLineNumber) from None
     except xml.parsers.expat.ExpatError as exc:
         raise NetFileError(
             f"not well-formed XML: {xml.parsers.expat.ErrorString(exc.code)} (column {exc.offset + 1})",
@@ -100,6 +155,12 @@ def _label_text(elem: ET.Element | None) -> str | None:
     return None
 
 
+def _name_text(elem: ET.Element | None) -> str | None:
+    """A ``<name>`` label with its runs of white space (line breaks, tabs) made single spaces."""
+    text = _label_text(elem)
+    return None if text is None else _SPACE.sub(" ", text)
+
+
 class _Reader:
     """One PNML document being turned into a :class:`PetriNet`."""
 
@@ -107,6 +168,7 @@ class _Reader:
         self.root = root
         self.lines = lines
         self.path = path
+        self.elements: dict[str, ET.Element] = {}  # places, transitions and tasks by id or name
 
     def error(self, problem: str, elem: ET.Element | None) -> NetError:
         return NetError(problem, path=self.path, line=self.lines.get(elem) if elem is not None else None)
@@ -120,27 +182,44 @@ class _Reader:
         except (TypeError, ValueError) as exc:
             raise self.error(str(exc), elem) from None
 
-    def integer(self, text: str | None, what: str, elem: ET.Element, minimum: int) -> int:
+    def integer(self, text: str | None, what: str, elem: ET.Element, minimum: int,
+                maximum: int = MAX_COUNT) -> int:
+        """Parse an integer in ``[minimum, maximum]`` (2**31 - 1 by default: docs/netfile.md, "Limits")."""
         if text is None or text == "":
             raise self.error(f"{what} is empty", elem)
         # PIPE writes "Default,3"; the 2009 grammar writes "3".
         token = text.rsplit(",", 1)[-1].strip()
         try:
+            if len(token) > 32:
+                raise ValueError(token)
             value = int(token)
         except ValueError:
-            raise self.error(f"{what} {text!r} is not an integer", elem) from None
+            raise self.error(f"{what} {_brief(text)} is not an integer", elem) from None
         if value < minimum:
             raise self.error(f"{what} is {value}; it must be >= {minimum}", elem)
+        if value > maximum:
+            raise self.error(f"{what} is {value}; the limit is {maximum}", elem)
         return value
 
     def number(self, text: str | None, what: str, elem: ET.Element) -> float | None:
-        """Parse an optional float attribute."""
+        """Parse an optional finite float attribute."""
         if text is None:
             return None
         try:
-            return float(text)
+            value = float(text)
         except ValueError:
-            raise self.error(f"{what} {text!r} is not a number", elem) from None
+            raise self.error(f"{what} {_brief(text)} is not a number", elem) from None
+        problem = finite_problem(value, what)
+        if problem is not None:
+            raise self.error(problem, elem)
+        return value
+
+    def text(self, value: str, what: str, elem: ET.Element, limit: int, lines: bool = False) -> str:
+        """Check free text (a name, label, description) against the limits of docs/netfile.md."""
+        problem = text_problem(value, what, limit, lines=lines)
+        if problem is not None:
+            raise self.error(problem, elem)
+        return value
 
     def tool(self, elem: ET.Element) -> ET.Element | None:
         for child in elem:
@@ -153,6 +232,12 @@ class _Reader:
         return None
 
     # ---------------------------------------------------------------- net
+    def interpreted(self, net: PetriNet) -> PetriNet:
+        """Apply the interpreted-net rules; raise the first problem at its element's line."""
+        for ident, problem in net.interpretation_problems():
+            raise self.error(problem, self.elements.get(ident))
+        return net
+
     def net(self, net_id: str | None) -> PetriNet:
         root = self.root
         if root.tag == "net":
@@ -182,6 +267,7 @@ class _Reader:
         arcs: list[ET.Element] = []
         refs: dict[str, tuple[str, ET.Element]] = {}
         self.collect(net, places, transitions, arcs, refs)
+        self.elements = {**places, **transitions}
 
         tool = self.tool(net)
         tasks = self.read_tasks(tool) if tool is not None else {}
@@ -190,19 +276,23 @@ class _Reader:
         trans_objs = [self.read_transition(tid, elem) for tid, elem in transitions.items()]
         arc_objs = self.read_arcs(arcs, refs, places, transitions)
 
-        name = _label_text(net.find("name")) or net.get("id") or "net"
+        name = self.text(_name_text(net.find("name")) or net.get("id") or "net", "the net's name", net, MAX_NAME)
         description = ""
         home: Marking | None = None
         if tool is not None:
             desc = tool.find("description")
             if desc is not None:
-                description = desc.text or ""
+                description = self.text(desc.text or "", "the net's description", desc, MAX_DESCRIPTION,
+                                        lines=True)
             home_elem = tool.find("home")
             if home_elem is not None:
-                home = Marking({
-                    tok.get("place", ""): self.integer(tok.get("count"), "home token count", tok, 0)
-                    for tok in home_elem.iter("token")
-                })
+                counts: dict[str, int] = {}
+                for tok in home_elem.iter("token"):
+                    place = tok.get("place", "")
+                    if place not in places:
+                        raise self.error(f"home marking puts tokens in unknown place {_brief(place)}", tok)
+                    counts[place] = self.integer(tok.get("count"), "home token count", tok, 0)
+                home = self.guarded(home_elem, lambda: Marking(counts))
         return self.guarded(net, lambda: PetriNet(
             name=name, places=tuple(place_objs), transitions=tuple(trans_objs), arcs=tuple(arc_objs),
             initial_marking=Marking(marking), tasks=tasks, description=description, home_marking=home,
@@ -211,11 +301,16 @@ class _Reader:
     def collect(self, container: ET.Element, places: dict[str, ET.Element],
                 transitions: dict[str, ET.Element], arcs: list[ET.Element],
                 refs: dict[str, tuple[str, ET.Element]]) -> None:
-        """Gather nodes and arcs of ``container`` and of all its pages, recursively."""
-        for child in container:
+        """Gather nodes and arcs of ``container`` and of all its pages, in document order."""
+        stack = [iter(container)]
+        while stack:
+            child = next(stack[-1], None)
+            if child is None:
+                stack.pop()
+                continue
             tag = child.tag
             if tag == "page":
-                self.collect(child, places, transitions, arcs, refs)
+                stack.append(iter(child))
                 continue
             if tag not in ("place", "transition", "arc", "referencePlace", "referenceTransition"):
                 continue
@@ -223,7 +318,7 @@ class _Reader:
             if not ident:
                 raise self.error(f"<{tag}> has no id", child)
             if ident in places or ident in transitions or ident in refs:
-                raise self.error(f"duplicate id {ident!r}", child)
+                raise self.error(f"duplicate id {_brief(ident)}", child)
             if tag == "place":
                 places[ident] = child
             elif tag == "transition":
@@ -238,6 +333,7 @@ class _Reader:
 
     # ---------------------------------------------------------------- nodes
     def read_place(self, pid: str, elem: ET.Element, marking: dict[str, int]) -> Place:
+        self.check_id(pid, "place", elem)
         text = _label_text(elem.find("initialMarking"))
         if text:
             tokens = self.integer(text, f"initial marking of place {pid!r}", elem, 0)
@@ -245,43 +341,57 @@ class _Reader:
                 marking[pid] = tokens
         tool = self.tool(elem)
         if tool is None:
-            name = _label_text(elem.find("name"))
-            label = name if name and name != pid else ""
+            name = _name_text(elem.find("name"))
+            label = self.text(name, f"the name of place {pid!r}", elem, MAX_LABEL) if name and name != pid else ""
             return self.guarded(elem, lambda: Place(id=pid, label=label))
         kind_text = tool.get("kind", "plain")
         try:
             kind = PlaceKind(kind_text)
         except ValueError:
-            raise self.error(f"place {pid!r} has unknown kind {kind_text!r}", tool) from None
+            raise self.error(f"place {pid!r} has unknown kind {_brief(kind_text)}", tool) from None
         capacity = tool.get("capacity")
         cap = None if capacity is None else self.integer(capacity, f"capacity of place {pid!r}", tool, 0)
+        label = self.text(tool.get("label", ""), f"label of place {pid!r}", tool, MAX_LABEL)
         return self.guarded(elem, lambda: Place(
-            id=pid, kind=kind, task=tool.get("task"), label=tool.get("label", ""), capacity=cap))
+            id=pid, kind=kind, task=tool.get("task"), label=label, capacity=cap))
+
+    def check_id(self, ident: str, what: str, elem: ET.Element) -> None:
+        problem = id_problem(ident, what)
+        if problem is not None:
+            raise self.error(problem, elem)
 
     def read_transition(self, tid: str, elem: ET.Element) -> Transition:
+        self.check_id(tid, "transition", elem)
         tool = self.tool(elem)
         if tool is None:
-            name = _label_text(elem.find("name"))
-            label = name if name and name != tid else ""
+            name = _name_text(elem.find("name"))
+            label = self.text(name, f"the name of transition {tid!r}", elem, MAX_LABEL) if name and name != tid else ""
             return self.guarded(elem, lambda: Transition(id=tid, label=label))
         kind_text = tool.get("kind", "immediate")
         try:
             kind = TransitionKind(kind_text)
         except ValueError:
-            raise self.error(f"transition {tid!r} has unknown kind {kind_text!r}", tool) from None
-        events = tuple(ev.get("name", "") for ev in tool.iter("event"))
+            raise self.error(f"transition {tid!r} has unknown kind {_brief(kind_text)}", tool) from None
+        events: list[str] = []
+        for ev in tool.iter("event"):
+            problem = event_problem(ev.get("name", ""))
+            if problem is not None:
+                raise self.error(f"transition {tid!r} links a {problem}", ev)
+            events.append(ev.get("name", ""))
         servers_text = tool.get("servers", "1")
         servers = None if servers_text == "infinite" else self.integer(
             servers_text, f"servers of transition {tid!r}", tool, 1)
-        rate = tool.get("rate")
+        rate = self.number(tool.get("rate"), f"rate of transition {tid!r}", tool)
+        weight = self.number(tool.get("weight", "1.0"), f"weight of transition {tid!r}", tool)
         hidden = tool.get("hidden", "false")
         if hidden not in ("true", "false"):
-            raise self.error(f"transition {tid!r}: hidden must be 'true' or 'false', not {hidden!r}", tool)
-        priority = self.integer(tool.get("priority", "0"), f"priority of transition {tid!r}", tool, -(2**63))
+            raise self.error(f"transition {tid!r}: hidden must be 'true' or 'false', not {_brief(hidden)}", tool)
+        priority = self.integer(tool.get("priority", "0"), f"priority of transition {tid!r}", tool,
+                                -MAX_PRIORITY - 1, MAX_PRIORITY)
+        label = self.text(tool.get("label", ""), f"label of transition {tid!r}", tool, MAX_LABEL)
         return self.guarded(elem, lambda: Transition(
-            id=tid, events=events, priority=priority, weight=float(tool.get("weight", "1.0")),
-            kind=kind, rate=None if rate is None else float(rate), servers=servers,
-            hidden=hidden == "true", label=tool.get("label", ""),
+            id=tid, events=tuple(events), priority=priority, weight=1.0 if weight is None else weight,
+            kind=kind, rate=rate, servers=servers, hidden=hidden == "true", label=label,
         ))
 
     def read_arcs(self, arcs: list[ET.Element], refs: dict[str, tuple[str, ET.Element]],
@@ -292,7 +402,7 @@ class _Reader:
                 seen.add(node)
                 node = refs[node][0]
             if node not in places and node not in transitions:
-                raise self.error(f"arc {elem.get('id')!r} refers to unknown node {node!r}", elem)
+                raise self.error(f"arc {_brief(elem.get('id'))} refers to unknown node {_brief(node)}", elem)
             return node
 
         merged: dict[tuple[str, str, bool], int] = {}
@@ -312,6 +422,9 @@ class _Reader:
                 type_elem is not None and (type_elem.get("value") or _label_text(type_elem)) == "inhibitor")
             key = (source, target, inhibitor)
             merged[key] = merged.get(key, 0) + weight
+            if merged[key] > MAX_COUNT:
+                raise self.error(f"arcs {source} -> {target} add up to weight {merged[key]}; the limit is "
+                                 f"{MAX_COUNT}", elem)
             first_elem.setdefault(key, elem)
         return [self.guarded(first_elem[key], partial(Arc, source=key[0], target=key[1], weight=w,
                                                       inhibitor=key[2]))
@@ -325,10 +438,15 @@ class _Reader:
             return tasks
         for elem in container.iter("task"):
             name = elem.get("name", "")
+            problem = task_name_problem(name)
+            if problem is not None:
+                raise self.error(problem, elem)
             if name in tasks:
                 raise self.error(f"primitive task {name!r} is defined twice", elem)
+            self.elements.setdefault(name, elem)
             actions: list[ActionSpec] = []
             for act in elem.iter("action"):
+                self.check_id(act.get("name", ""), "action", act)
                 cost = self.number(act.get("cost"), f"cost of action {act.get('name')!r}", act)
                 actions.append(self.guarded(act, partial(
                     ActionSpec, name=act.get("name", ""), params=self.toml_table(act.find("params")), cost=cost)))
@@ -343,45 +461,68 @@ class _Reader:
         """Read a table kept as a TOML inline table in the text of ``elem``."""
         if elem is None or not (elem.text or "").strip():
             return {}
+        text = (elem.text or "").strip()
         try:
-            return dict(tomllib.loads("value = " + (elem.text or "").strip())["value"])
-        except (tomllib.TOMLDecodeError, TypeError, ValueError) as exc:
-            raise self.error(f"<{elem.tag}> does not hold a TOML inline table: {exc}", elem) from None
+            doc, _ = parse_toml("value = " + text)
+        except TextProblem as exc:
+            raise self.error(f"<{elem.tag}> does not hold a TOML inline table: {exc.problem}", elem) from None
+        value = doc.get("value")
+        if set(doc) != {"value"} or not isinstance(value, dict):
+            raise self.error(f"<{elem.tag}> does not hold a TOML inline table {{ key = value, ... }}", elem)
+        return value
 
 
-def loads_pnml(text: str | bytes, path: str = "<string>", *, net_id: str | None = None) -> PetriNet:
+def loads_pnml(text: str | bytes, path: str = "<string>", *, net_id: str | None = None,
+               interpreted: bool = False) -> PetriNet:
     """Read a PNML document.
 
     Args:
-        text: the XML document.
+        text: the XML document, UTF-8 when given as bytes.
         path: name used in error messages.
         net_id: id of the ``<net>`` to read when the document holds several.
+        interpreted: also apply :meth:`PetriNet.interpretation_problems` (a net with primitive
+            tasks), reporting the first at the line of its element.
 
     Returns:
         The net. Without petrobot tool-specific data, places are plain and transitions immediate.
 
     Raises:
-        NetFileError: on malformed XML, a document with no or several nets, a non-P/T net type.
+        NetFileError: on text that is not UTF-8 or holds NUL, more than 16 MiB, malformed XML, a
+            document type declaration, elements nested deeper than 256, a document with no or
+            several nets, a non-P/T net type.
         NetError: on a structural problem (unknown arc end, arc between two places, bad marking or
-            inscription, duplicate id), naming ``path`` and the element's line.
+            inscription, duplicate id, a value beyond the limits of docs/netfile.md), naming
+            ``path`` and the element's line.
     """
-    data = text.encode("utf-8") if isinstance(text, str) else text
+    try:
+        if isinstance(text, str):
+            screen_text(text)
+            data = text.encode("utf-8")
+        else:
+            if len(text) > MAX_FILE_BYTES:
+                raise TextProblem(f"net file too large: {len(text)} bytes (the limit is 16 MiB)", 1)
+            decode_utf8(text)
+            data = text
+    except TextProblem as exc:
+        raise NetFileError(exc.problem, path=path, line=exc.line) from None
     root, lines = _parse_xml(data, path)
-    return _Reader(root, lines, path).net(net_id)
+    reader = _Reader(root, lines, path)
+    net = reader.net(net_id)
+    return reader.interpreted(net) if interpreted else net
 
 
-def load_pnml(path: str | Path, *, net_id: str | None = None) -> PetriNet:
-    """Read a PNML file; see :func:`loads_pnml`.
+def load_pnml(path: str | Path, *, net_id: str | None = None, interpreted: bool = False) -> PetriNet:
+    """Read a PNML file (a regular file of at most 16 MiB); see :func:`loads_pnml`.
 
     Raises:
         NetFileError: if the file cannot be read, or as :func:`loads_pnml`.
         NetError: as :func:`loads_pnml`.
     """
     try:
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        raise NetFileError(f"cannot read net file: {exc.strerror or exc}", path=str(path)) from None
-    return loads_pnml(data, str(path), net_id=net_id)
+        data = read_capped(path, what="net file")
+    except TextProblem as exc:
+        raise NetFileError(exc.problem, path=str(path), line=exc.line) from None
+    return loads_pnml(data, str(path), net_id=net_id, interpreted=interpreted)
 
 
 # ---------------------------------------------------------------------------------------- writing

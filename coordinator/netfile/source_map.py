@@ -1,8 +1,10 @@
 """Where things are in a TOML net file: the line of each element and key (docs/netfile.md).
 
-:mod:`tomllib` reports positions of syntax errors only, so :class:`SourceMap` scans the source text
-for table headers and keys; the loader uses it to name the line of every problem, and ``petrobot
-check`` the line of a placement problem. A best effort on text that is not valid TOML.
+:mod:`tomllib` reports positions of syntax errors only, so :class:`SourceMap` reads the lines
+:class:`services.tomllines.TomlLines` found for each table and key (the same scan ``services.toml``
+uses) in terms of the net file: places, transitions, arcs by index, tasks by name, ids. The loader
+uses it to name the line of every problem, and ``petrobot check`` the line of a placement problem.
+A best effort on text that is not valid TOML.
 """
 
 from __future__ import annotations
@@ -12,79 +14,13 @@ import tomllib
 from dataclasses import dataclass, field
 from typing import Any
 
+from services.textfile import TextProblem
+from services.tomllines import TomlLines
+
 __all__ = ["SourceMap"]
 
-
-def _split_key(text: str) -> list[str]:
-    """Split a dotted TOML key (``a."b.c".d``) into its parts."""
-    parts: list[str] = []
-    i, n = 0, len(text)
-    while i < n:
-        while i < n and text[i] in " \t":
-            i += 1
-        if i >= n:
-            break
-        if text[i] in "\"'":
-            quote = text[i]
-            j = i + 1
-            buf: list[str] = []
-            while j < n and text[j] != quote:
-                if quote == '"' and text[j] == "\\" and j + 1 < n:
-                    buf.append(text[j + 1])
-                    j += 2
-                    continue
-                buf.append(text[j])
-                j += 1
-            parts.append("".join(buf))
-            i = j + 1
-        else:
-            j = i
-            while j < n and text[j] not in ". \t":
-                j += 1
-            parts.append(text[i:j])
-            i = j
-        while i < n and text[i] in " \t":
-            i += 1
-        if i < n and text[i] == ".":
-            i += 1
-    return parts
-
-
-def _scan_line(line: str, state: dict[str, Any]) -> None:
-    """Update bracket depth and multi-line string state over one source line."""
-    i, n = 0, len(line)
-    while i < n:
-        ml = state["ml"]
-        if ml:
-            end = line.find(ml, i)
-            if end < 0:
-                return
-            i = end + 3
-            state["ml"] = None
-            continue
-        ch = line[i]
-        if ch == "#":
-            return
-        if line.startswith('"""', i) or line.startswith("'''", i):
-            state["ml"] = line[i:i + 3]
-            i += 3
-            continue
-        if ch in "\"'":
-            j = i + 1
-            while j < n and line[j] != ch:
-                j += 2 if ch == '"' and line[j] == "\\" else 1
-            i = j + 1
-            continue
-        if ch in "[{":
-            state["depth"] += 1
-        elif ch in "]}":
-            state["depth"] = max(0, state["depth"] - 1)
-        i += 1
-
-
-_HEADER = re.compile(r"^\s*(\[\[?)\s*(.*?)\s*\]\]?\s*(?:#.*)?$")
-_KEY = re.compile(r"^\s*((?:[A-Za-z0-9_-]+|\"(?:[^\"\\]|\\.)*\"|'[^']*')"
-                  r"(?:\s*\.\s*(?:[A-Za-z0-9_-]+|\"(?:[^\"\\]|\\.)*\"|'[^']*'))*)\s*=")
+_ARRAYS = ("place", "transition", "arc")
+_SIMPLE_STRING = re.compile(r'[ \t]*"([^"\\]*)"[ \t\r]*(?:#.*)?')
 
 
 @dataclass
@@ -102,40 +38,32 @@ class SourceMap:
 
     @classmethod
     def scan(cls, text: str) -> SourceMap:
-        """Build the map of ``text`` (a best effort on text that is not valid TOML)."""
-        smap = cls()
-        counters = {"place": -1, "transition": -1, "arc": -1}
-        header: list[str] = []
-        state: dict[str, Any] = {"ml": None, "depth": 0}
-        lines = text.splitlines()
-        smap.last_line = max(1, len(lines))
-        for number, line in enumerate(lines, start=1):
-            if state["ml"] is None and state["depth"] == 0:
-                head = _HEADER.match(line)
-                if head and not _KEY.match(line):
-                    header = _split_key(head.group(2))
-                    if head.group(1) == "[[" and len(header) == 1 and header[0] in counters:
-                        counters[header[0]] += 1
-                    smap._record(header, number, counters)
-                    continue
-                key = _KEY.match(line)
-                if key:
-                    smap._record(header + _split_key(key.group(1)), number, counters, line[key.end():])
-            _scan_line(line, state)
+        """Build the map of ``text`` (a best effort: empty for text the scan refuses)."""
+        try:
+            lines = TomlLines.scan(text)
+        except TextProblem:
+            return cls()
+        return cls.from_lines(lines)
+
+    @classmethod
+    def from_lines(cls, lines: TomlLines) -> SourceMap:
+        """Read the tables and keys :class:`TomlLines` found as net-file elements."""
+        smap = cls(last_line=lines.last_line)
+        for path, number in lines.in_order():
+            smap._record(path, number, lines.values.get(path))
         return smap
 
-    def _record(self, path: list[str], number: int, counters: dict[str, int],
-                value_text: str | None = None) -> None:
-        if not path:
-            return
-        section = path[0]
+    def _record(self, path: tuple[str | int, ...], number: int, value_text: str | None) -> None:
+        section = str(path[0])
         ident: Any
-        if section in counters:
-            ident, rest = counters[section], path[1:]
-            if ident < 0:
+        if section in _ARRAYS:
+            if len(path) < 2 or not isinstance(path[1], int):
+                self.elements.setdefault((section, None), number)
                 return
+            ident, rest = path[1], path[2:]
         elif section == "task":
             if len(path) < 2:
+                self.elements.setdefault((section, None), number)
                 return
             ident, rest = path[1], path[2:]
         elif section == "net":
@@ -147,10 +75,11 @@ class SourceMap:
         if section == "task":
             self.ids.setdefault(("task", ident), number)
         if rest:
-            self.keys.setdefault((section, ident, rest[0]), number)
-            if rest == ["id"] and section in counters and value_text is not None:
+            self.keys.setdefault((section, ident, str(rest[0])), number)
+            if rest == ("id",) and section in _ARRAYS and value_text is not None and len(value_text) < 1024:
+                simple = _SIMPLE_STRING.fullmatch(value_text)
                 try:
-                    value = tomllib.loads("id = " + value_text)["id"]
+                    value = simple.group(1) if simple else tomllib.loads("id = " + value_text)["id"]
                 except tomllib.TOMLDecodeError:
                     return
                 if isinstance(value, str):

@@ -434,7 +434,7 @@ def test_shipped_nets_round_trip_through_canonical_toml(path: Path) -> None:
 
 def test_net_built_in_code_round_trips_with_awkward_values() -> None:
     net = PetriNet(
-        name='odd "name"\n2', description="line one\nline two\t\\ é ✓",
+        name='odd "name" 2 ✓', description="line one\nline two\t\\ é ✓",
         places=(Place(id="a.b", kind=PlaceKind.CONTROL, label='say "hi"', capacity=4),
                 Place(id="task-place", kind=PlaceKind.PRIMITIVE_TASK, task="do_it"),
                 Place(id="err")),
@@ -537,11 +537,11 @@ def test_check_command_prints_each_problem_as_file_line(tmp_path: Path, capsys: 
     path = tmp_path / "bad.toml"
     path.write_text(text)
     code = check_cmd.run(_args(check_cmd, ["check", str(path), "--services", str(SERVICES)]))
-    assert code == 1
+    assert code == 2
     out = capsys.readouterr().out.splitlines()
     assert out == [f"{path}:{line_of(text, 'tokens = -1')}: place 'idle' has a negative initial marking (-1)"]
     path.write_text(edit('actions = ["locate_threshold"]', 'actions = ["teleport"]'))
-    assert check_cmd.run(_args(check_cmd, ["check", str(path), "--services", str(SERVICES)])) == 1
+    assert check_cmd.run(_args(check_cmd, ["check", str(path), "--services", str(SERVICES)])) == 2
     out = capsys.readouterr().out.splitlines()
     assert len(out) == 1 and out[0].startswith(f"{path}:{line_of(text, '[task.locate]')}: primitive action 'teleport'")
 
@@ -555,7 +555,7 @@ def test_export_command_writes_toml_pnml_and_dot(tmp_path: Path, capsys: pytest.
     assert export_cmd.run(_args(export_cmd, ["export", str(DEMO), "--to", "dot", "--no-hidden"])) == 0
     dot = capsys.readouterr().out
     assert dot.startswith('digraph "demo"') and "recovered" not in dot
-    assert export_cmd.run(_args(export_cmd, ["export", str(tmp_path / "none.toml"), "--to", "dot"])) == 1
+    assert export_cmd.run(_args(export_cmd, ["export", str(tmp_path / "none.toml"), "--to", "dot"])) == 2
     assert "cannot read" in capsys.readouterr().err
 
 
