@@ -25,7 +25,7 @@ from services.location import MEMORY_ACTIONS, Location, load_location
 from services.textfile import TextProblem, decode_utf8, read_capped
 from services.tomllines import TomlLines
 
-__all__ = ["check_location", "check_location_file"]
+__all__ = ["action_impl_problem", "check_location", "check_location_file", "driver_impl_problem", "host_problem"]
 
 
 def _brief(exc: BaseException) -> str:

@@ -190,7 +190,7 @@ def run(args: argparse.Namespace) -> int:
         net = load_any(args.net, interpreted=False)
     except PetrobotError as exc:
         print(f"petrobot analyze: {exc}", file=sys.stderr)
-        return 1
+        return 2
     show = args.progress or sys.stderr.isatty()
     if search_is_compiled() is False:
         sys.stderr.write("compiling the state-space search (once per machine)...\n")

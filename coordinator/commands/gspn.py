@@ -33,7 +33,7 @@ def add_parser(subparsers: Any) -> None:
             "probability of a token per place, throughput per transition, utilisation and bottlenecks, and "
             "for nets that terminate the mean time to absorption (task execution time, s) and the "
             "probability of each final marking. A net that is already a GSPN (no primitive-task place, no "
-            "event) is solved as it is. Exit status 0 on success, 1 on an unreadable net or journal, 2 if "
+            "event) is solved as it is. Exit status 0 on success, 2 on an unreadable net or journal, 1 if "
             "the analysis fails (state limit, timeless trap)."),
     )
     parser.add_argument("net", metavar="NET", help="net file (.toml, .pnml or .xml)")
@@ -183,19 +183,19 @@ def render(rep: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Print the report; 0 on success, 1 on an unreadable net or journal, 2 if the analysis fails."""
+    """Print the report; 0 on success, 2 on an unreadable net or journal, 1 if the analysis fails."""
     from coordinator.analysis.expr import ExprError
 
     try:
         rep = report(args)
     except (NetError, JournalError, OSError) as exc:
         print(f"petrobot gspn: {exc}", file=sys.stderr)
-        return 1
+        return 2
     except ExprError as exc:
         print(f"petrobot gspn: bad --measure: {exc}", file=sys.stderr)
         return 2
     except (AnalysisError, PetrobotError) as exc:
         print(f"petrobot gspn: {exc}", file=sys.stderr)
-        return 2
+        return 1
     print(json.dumps(rep, indent=2) if args.json else render(rep))
     return 0

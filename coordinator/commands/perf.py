@@ -28,7 +28,7 @@ def add_parser(subparsers: Any) -> None:
             "(least J, where the learning automaton converges) and of the mix of actions actually used. "
             "Per task: through the GSPN view, R = probability of ending in a goal marking, C = mean time "
             "to absorption (s), rho = 1/C_max with every primitive task at its slowest action. Exit status "
-            "0 on success, 1 on an unreadable net or journal, 2 if the analysis fails."),
+            "0 on success, 2 on an unreadable net or journal, 1 if the analysis fails."),
     )
     parser.add_argument("net", metavar="NET", help="task net file (.toml, .pnml or .xml)")
     options.add_journal(parser, required=True, help="SQLite journal of real runs (read only)")
@@ -111,16 +111,16 @@ def render(rep: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Print the report; 0 on success, 1 on an unreadable net or journal, 2 if the analysis fails."""
+    """Print the report; 0 on success, 2 on an unreadable net or journal, 1 if the analysis fails."""
     from coordinator.errors import AnalysisError, JournalError, NetError
 
     try:
         rep = report(args)
     except (NetError, JournalError) as exc:
         print(f"petrobot perf: {exc}", file=sys.stderr)
-        return 1
+        return 2
     except (AnalysisError, PetrobotError) as exc:
         print(f"petrobot perf: {exc}", file=sys.stderr)
-        return 2
+        return 1
     print(json.dumps(rep, indent=2) if args.json else render(rep))
     return 0

@@ -116,7 +116,7 @@ def test_perf_and_gspn_commands_report_json(tmp_path: Path, capsys: pytest.Captu
     assert sim["delays"]["run_a.run"] == "empirical"
     assert abs(sim["mean_time_to_absorption"]["mean"] - rep["mean_time_to_absorption"]) < 0.2
     args = parser.parse_args(["perf", str(net_file), "--journal", str(tmp_path / "missing.sqlite")])
-    assert perf_cmd.run(args) == 1
+    assert perf_cmd.run(args) == 2
 
 
 def test_a_record_takes_its_status_as_the_result_vocabulary() -> None:
@@ -148,7 +148,7 @@ def test_perf_and_gspn_take_one_run_of_the_journal_with_run(tmp_path: Path,
     assert gspn_cmd.run(args) == 0
     assert json.loads(capsys.readouterr().out)["mean_time_to_absorption"] > 0
     args = parser.parse_args(["perf", str(net_file), "--journal", str(journal), "--run", "nope"])
-    assert perf_cmd.run(args) == 1
+    assert perf_cmd.run(args) == 2
     assert "no run 'nope'" in capsys.readouterr().err
 
 

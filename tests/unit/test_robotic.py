@@ -203,7 +203,7 @@ def test_analyze_command_reports_an_unreadable_net(tmp_path: pytest.TempPathFact
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "bad.toml"  # type: ignore[operator]
     path.write_text("[net\n", encoding="utf-8")
-    assert analyze.run(parse([str(path)])) == 1
+    assert analyze.run(parse([str(path)])) == 2
     assert "petrobot analyze" in capsys.readouterr().err
 
 
