@@ -365,6 +365,7 @@ def run_course(
         raise ValueError(f"unknown camera {camera!r} (analytic or tiny)")
     world = World(dt=dt, mode=ClockMode.REALTIME if realtime else ClockMode.LOCKSTEP, solver_iterations=10)
     result = RunResult(course.name, length=course.length, interruptions=sum(t.blank for t in course.tiles))
+    mw: MobileWorld | None = None
     try:
         mw = MobileWorld(world, course, robot=spec, textured=camera == "tiny")
         cam_model = camera_model or mw.camera_model()
@@ -432,4 +433,6 @@ def run_course(
                 result.mean_speed = course.length / result.t_sim
         return result
     finally:
+        if mw is not None:
+            mw.close()
         world.close()

@@ -147,12 +147,12 @@ class AnalyticCamera:
 class TinyCamera:
     """The downward camera rendered by pybullet's TinyRenderer (see the module docstring).
 
-    Needs a world built with a textured floor. The robot's own body is outside the view (the
-    camera hangs from a boom ahead of the chassis).
+    Renders a client holding the textured floor (:attr:`sim.mobile.world.MobileWorld.render_client`,
+    floor only: TinyRenderer does not clip geometry behind the camera's plane).
 
     Args:
         camera: the camera model.
-        client: the pybullet client.
+        client: the pybullet client to render.
         noise: image degradations (blur, vignetting, gain, noise).
         seed: seed of the noise generator.
         light: (ambient, diffuse) coefficients of pybullet's light.

@@ -3,8 +3,13 @@
 Paper section 6 ("Mobile Robot Task", Fig. 2). The world frame is the floor's: x, y on the floor
 (square (i, j) covers [2i, 2i+2] × [2j, 2j+2] m), z up. :class:`MobileWorld` builds
 
-* the floor (:class:`sim.mobile.floor.PybulletFloor`, textured only when a TinyRenderer camera is
-  wanted) and the :class:`sim.mobile.floor.FloorMap` the analytic camera warps;
+* the floor (:class:`sim.mobile.floor.PybulletFloor`) and the :class:`sim.mobile.floor.FloorMap`
+  the analytic camera warps; for a TinyRenderer camera, the textured floor is built in a second,
+  render-only pybullet client (:attr:`MobileWorld.render_client`) holding nothing but the floor.
+  TinyRenderer does not clip triangles that cross the camera's plane, and everything taller than
+  the 0.2 m high downward camera (beacons, posts, the robot's own mast and camera housing) lies
+  behind that plane: in one client some frames took seconds. The downward camera sees only the
+  floor, so the floor-only scene renders the same image;
 * one retroreflector per interruption, its centre ``beacon.height`` above the resume point
   (:class:`sim.mobile.course.BeaconSpec`): a static cylinder, and unless hung, a post beside the
   resume point on the exit edge's line with an arm over it; the post stands on the side away from
@@ -25,6 +30,9 @@ from __future__ import annotations
 
 import math
 from typing import Any
+
+import pybullet
+from pybullet_utils import bullet_client
 
 from services.mobile.camera import GroundCamera
 
@@ -72,7 +80,10 @@ class MobileWorld:
 
     Attributes:
         pb: the pybullet client.
-        floor: the pybullet floor.
+        floor: the pybullet floor (collision plane) in the physics client.
+        render_client: the floor-only client the TinyRenderer camera renders (None unless
+            ``textured``); closed by :meth:`close`.
+        render_floor: the textured floor in it (None unless ``textured``).
         floor_map: the floor map (for the analytic camera).
         beacons: one per interruption, in course order.
         robot: the robot.
@@ -86,7 +97,12 @@ class MobileWorld:
         self.course = course
         self.style = style or FloorStyle()
         self.pb: Any = world.client
-        self.floor = PybulletFloor(self.pb, course, self.style, textured=textured)
+        self.floor = PybulletFloor(self.pb, course, self.style)
+        self.render_client: Any = None
+        self.render_floor: PybulletFloor | None = None
+        if textured:
+            self.render_client = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
+            self.render_floor = PybulletFloor(self.render_client, course, self.style, textured=True)
         self.floor_map = FloorMap(course, self.style)
         self.beacons = [self._build_beacon(t) for t in course.tiles if t.blank]
         self.robot = MobileRobot(self.pb, robot, start or course.start_pose(), dt=world.dt)
@@ -157,9 +173,9 @@ class MobileWorld:
 
     def tiny_camera(self, camera: GroundCamera | None = None, *, noise: ImageNoise | None = None, seed: int = 0) -> TinyCamera:
         """A TinyRenderer camera on the robot (build the world with ``textured=True``)."""
-        if not self.floor.quad_ids:
+        if self.render_client is None:
             raise RuntimeError("the TinyRenderer camera needs a world built with textured=True")
-        return TinyCamera(camera or self.camera_model(), self.pb, noise=noise, seed=seed)
+        return TinyCamera(camera or self.camera_model(), self.render_client, noise=noise, seed=seed)
 
     def beacon_sensor(self, spec: BeaconSensorSpec | None = None, *, seed: int = 0) -> BeaconSensor:
         """The beacon sensor on the robot, seeing this world's reflectors."""
@@ -176,3 +192,12 @@ class MobileWorld:
             return None
         s, off = self.course.project(tile, x, y)
         return tile, self._tile_start[tile.index] + s, off
+
+    def close(self) -> None:
+        """Disconnect the render-only client (the physics world is closed by its owner)."""
+        if self.render_client is not None:
+            try:
+                self.render_client.disconnect()
+            except pybullet.error:
+                pass
+            self.render_client = None
