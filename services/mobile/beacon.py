@@ -258,19 +258,18 @@ class Reacquire:
 
     Args:
         frames: consecutive frames needed.
-        min_confidence: least :attr:`LineEstimate.confidence` of each.
-        min_rows: least rows of each.
+        min_confidence: least :attr:`LineEstimate.confidence` of each (the share of the
+            detector's rows or scan lines that found the track, discounted by the fit's residual:
+            0.4 is 40 % of the view's length for the row-based detectors, 2 of 5 scan lines).
         max_offset: the track's lateral position at ``at_x`` must be within ±this, m.
         at_x: forward distance at which the offset is checked, m.
     """
 
     def __init__(
-        self, *, frames: int = 2, min_confidence: float = 0.3, min_rows: int = 6,
-        max_offset: float = 0.12, at_x: float = 0.26,
+        self, *, frames: int = 2, min_confidence: float = 0.4, max_offset: float = 0.12, at_x: float = 0.26,
     ) -> None:
         self.frames = frames
         self.min_confidence = min_confidence
-        self.min_rows = min_rows
         self.max_offset = max_offset
         self.at_x = at_x
         self._run = 0
@@ -284,7 +283,6 @@ class Reacquire:
         good = (
             line is not None
             and line.confidence >= self.min_confidence
-            and line.rows >= self.min_rows
             and abs(line.lateral_at(self.at_x)) <= self.max_offset
         )
         self._run = self._run + 1 if good else 0

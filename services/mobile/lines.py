@@ -110,20 +110,25 @@ def to_grey(image: np.ndarray) -> np.ndarray:
     raise ValueError(f"expected an (H, W) or (H, W, 3) image, got shape {image.shape}")
 
 
-def thin_structures(grey: np.ndarray, kernel_px: int) -> np.ndarray:
+def thin_structures(grey: np.ndarray, kernel_px: int, smooth_px: float = 1.2) -> np.ndarray:
     """Contrast of thin bands of either polarity: white top-hat + black top-hat.
 
     A band narrower than the square structuring element (bright on dark *or* dark on bright) keeps
     its full contrast; uniform areas and the boundary between two large areas (a square edge) give
-    about 0.
+    about 0. The image is smoothed first: a top-hat measures a pixel against the extreme values
+    of its neighbourhood, so unsmoothed pixel noise of σ grey levels reads as thin structure of
+    several σ everywhere.
 
     Args:
         grey: (H, W) uint8 image.
         kernel_px: side of the square structuring element, pixels (about twice the track width).
+        smooth_px: 1-σ of the Gaussian pre-smoothing, pixels (0 = none).
 
     Returns:
         (H, W) uint8 contrast map (saturating sum of the two top-hats).
     """
+    if smooth_px > 0:
+        grey = cv2.GaussianBlur(grey, (0, 0), smooth_px)
     k = max(3, int(kernel_px) | 1)
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (k, k))
     white = cv2.morphologyEx(grey, cv2.MORPH_TOPHAT, kernel)
@@ -179,7 +184,7 @@ class _Common:
     """Smallest grey-level difference between track and square accepted as track."""
     min_rows: int = 4
     """Fewest rows a line is fitted to."""
-    curvature_span: float = 0.6
+    curvature_span: float = 0.45
     """A curvature is fitted only if the rows found span this fraction of the view's length."""
 
     def _width_px(self) -> float:

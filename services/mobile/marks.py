@@ -7,7 +7,9 @@ interruption". Both are judged from what the downward camera sees:
 * the **T mark**'s cross bar, as wide as the whole view and one track width thick, is a band of
   image rows that are almost entirely thin structure (see :func:`services.mobile.lines.
   thin_structures`): a run of such rows whose thickness is that of the bar, fully inside the view,
-  gives the bar's forward distance (:class:`EndMarkDetector`);
+  gives the bar's forward distance (:class:`EndMarkDetector`). A bar also changes the rows' median
+  grey level — toward the track's colour, against the rows just before *and* just after it —
+  which scuffs or dirt lined up with the track on one row do not; that is checked too;
 * an **interruption** is no track in view over a travelled distance longer than the gaps that noise
   or a track end passing the view's rear edge can cause (:class:`GapMonitor`, fed with odometry's
   path length).
@@ -83,12 +85,25 @@ class EndMarkDetector:
                 continue  # cut by the image border: not the whole bar
             if not (0.5 * bar_px <= n <= 2.0 * bar_px):
                 continue
+            if not self._bar_contrast(grey, a, b, n):
+                continue
             v = 0.5 * (a + b - 1)
             x, _ = cam.pixel_to_floor(0.0, v)
             mark = EndMark(float(x), n * cam.metres_per_px, float(cover[a:b].mean()))
             if best is None or mark.x < best.x:
                 best = mark
         return best
+
+    def _bar_contrast(self, grey: np.ndarray, a: int, b: int, n: int) -> bool:
+        """The band of rows [a, b) differs in median grey from the n rows before and after it, by
+        at least ``min_contrast`` and in the same direction."""
+        before, after = grey[max(0, a - n) : a], grey[b : b + n]
+        if len(before) < max(2, n // 2) or len(after) < max(2, n // 2):
+            return False
+        m_bar = float(np.median(grey[a:b]))
+        d1 = m_bar - float(np.median(before))
+        d2 = m_bar - float(np.median(after))
+        return d1 * d2 > 0 and min(abs(d1), abs(d2)) >= self.min_contrast
 
 
 class GapMonitor:

@@ -73,6 +73,8 @@ class MissionParams:
         look_ahead: pure-pursuit goal distance on the track, m.
         gap: travel without track before an interruption is declared, m.
         min_confidence: least detector confidence for a frame to count as seeing the track.
+        max_offset: while following, a line whose lateral position at the look-ahead is further
+            off than this is not the track being followed (a scuff, a mark), m.
         end_frames: consecutive frames that must show the T bar before stopping.
         stop_decel: deceleration of the final stop, m/s².
         reacquire_window: the track detector is consulted for reacquisition within this distance
@@ -90,8 +92,9 @@ class MissionParams:
     approach_speed: float = 0.6
     look_ahead: float = 0.26
     gap: float = 0.06
-    min_confidence: float = 0.2
-    end_frames: int = 2
+    min_confidence: float = 0.3
+    max_offset: float = 0.12
+    end_frames: int = 3
     stop_decel: float = 1.0
     reacquire_window: float = 0.6
     max_overshoot: float = 0.6
@@ -185,6 +188,9 @@ class MobileMission:
             return self.steering.stop(t)
         line = self.detector.detect(image)
         seen = line is not None and line.confidence >= self.params.min_confidence
+        if seen and self.phase is not Phase.APPROACH:
+            assert line is not None
+            seen = abs(line.lateral_at(self.params.look_ahead)) <= self.params.max_offset
         self.line = line if seen else None
         if self.phase is Phase.FOLLOW:
             return self._follow(t, pose, image, line if seen else None)
@@ -205,7 +211,7 @@ class MobileMission:
         if line is not None:
             self.gap.update(True, pose.s)
             self._last_line = (pose, line)
-            if line.rows >= 15:
+            if line.confidence >= 0.5:
                 self._heading = pose.theta + line.heading
             self._curvature = self.pursuit.curvature(line)
             return self.steering.command(t, p.cruise, self._curvature)

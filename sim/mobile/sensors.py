@@ -66,12 +66,15 @@ class ImageNoise:
         blur_px: 1-σ of a Gaussian optics blur, pixels (0 = none).
         vignetting: relative brightness loss in the image corners (0 = none).
         gain_sigma: 1-σ of a per-frame illumination gain around 1 (0 = none).
+        spots: mean number of scuffs per frame (Poisson): ellipses of 2–8 px half-axes in a random
+            grey, drawn before the blur (dust, tyre marks, worn paint; 0 = clean floor).
     """
 
     sigma: float = 5.0
     blur_px: float = 0.6
     vignetting: float = 0.15
     gain_sigma: float = 0.05
+    spots: float = 0.0
 
 
 class _Degrade:
@@ -89,6 +92,15 @@ class _Degrade:
 
     def apply(self, img: np.ndarray) -> np.ndarray:
         n = self.noise
+        if n.spots > 0:
+            k = int(self.rng.poisson(n.spots))
+            if k:
+                img = img.copy()
+                h, w = img.shape
+                for _ in range(k):
+                    c = (int(self.rng.integers(w)), int(self.rng.integers(h)))
+                    axes = (int(self.rng.integers(2, 9)), int(self.rng.integers(2, 9)))
+                    cv2.ellipse(img, c, axes, float(self.rng.uniform(0, 180)), 0, 360, int(self.rng.integers(0, 256)), -1)
         f = img.astype(np.float32)
         if n.blur_px > 0:
             f = cv2.GaussianBlur(f, (0, 0), n.blur_px)
