@@ -115,7 +115,8 @@ def thin_structures(grey: np.ndarray, kernel_px: int, smooth_px: float = 1.2) ->
 
     A band narrower than the square structuring element (bright on dark *or* dark on bright) keeps
     its full contrast; uniform areas and the boundary between two large areas (a square edge) give
-    about 0. The image is smoothed first: a top-hat measures a pixel against the extreme values
+    about 0; so does a strip along the image border (the border is replicated outwards). The
+    image is smoothed first: a top-hat measures a pixel against the extreme values
     of its neighbourhood, so unsmoothed pixel noise of σ grey levels reads as thin structure of
     several σ everywhere.
 
@@ -131,9 +132,14 @@ def thin_structures(grey: np.ndarray, kernel_px: int, smooth_px: float = 1.2) ->
         grey = cv2.GaussianBlur(grey, (0, 0), smooth_px)
     k = max(3, int(kernel_px) | 1)
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (k, k))
-    white = cv2.morphologyEx(grey, cv2.MORPH_TOPHAT, kernel)
-    black = cv2.morphologyEx(grey, cv2.MORPH_BLACKHAT, kernel)
-    return cv2.add(white, black)
+    # the image continues beyond its border as its edge pixels (padded before the morphology: a
+    # border mode of the operators would replicate their intermediate results instead), so that a
+    # strip of background between a mark and the border is not mistaken for a thin band
+    p = k // 2
+    padded = cv2.copyMakeBorder(grey, p, p, p, p, cv2.BORDER_REPLICATE)
+    white = cv2.morphologyEx(padded, cv2.MORPH_TOPHAT, kernel)
+    black = cv2.morphologyEx(padded, cv2.MORPH_BLACKHAT, kernel)
+    return cv2.add(white, black)[p:-p, p:-p]
 
 
 def _fit(
