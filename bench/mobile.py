@@ -3,7 +3,8 @@
 Usage::
 
     python bench/mobile.py --courses 100 --seed 1 [--json] [--detector ransac|centroid|scanline]
-        [--camera analytic|tiny] [--cruise 0.8] [--course FILE.toml] [--timing]
+        [--camera analytic|tiny] [--noise default|noisy|scuffed|harsh] [--latency 0.0]
+        [--cruise 0.8] [--course FILE.toml] [--timing] [--detectors N]
 
 Paper section 6 ("Mobile Robot Task"). For every course of a seeded generator
 (:func:`sim.mobile.course.random_course`: 8–16 tiles, 0–3 interruptions) — or the course file given
@@ -245,6 +246,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--timing", action="store_true", help="also time cameras, detectors and physics")
     ap.add_argument("--detectors", type=int, metavar="N", help="frame-level detector benchmark on N frames instead")
     ap.add_argument("--noise", choices=sorted(CONDITIONS), default="default", help="image condition of the runs")
+    ap.add_argument("--latency", type=float, default=0.0, help="frame-to-drive set-point delay, s")
     args = ap.parse_args(argv)
     if args.detectors:
         res = _detector_bench(args.detectors, args.seed)
@@ -252,6 +254,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.courses < 1 and not args.course:
         ap.error("--courses must be at least 1")
+    if args.latency < 0:
+        ap.error("--latency must not be negative")
     params = MissionParams(detector=args.detector, cruise=args.cruise)
     results: list[RunResult] = []
     build = 0.0
@@ -267,7 +271,8 @@ def main(argv: list[str] | None = None) -> int:
     for k, course in enumerate(courses):
         with _stdout_to_stderr():
             r = run_course(
-                course, params=params, camera=args.camera, noise=CONDITIONS[args.noise], seed=args.seed * 7919 + k
+                course, params=params, camera=args.camera, noise=CONDITIONS[args.noise],
+                seed=args.seed * 7919 + k, latency=args.latency,
             )
         results.append(r)
         if not args.json:
@@ -283,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
     out = _summary(results, build)
     out.update({
         "seed": args.seed, "detector": args.detector, "camera": args.camera, "noise": args.noise,
-        "cruise_m_s": args.cruise,
+        "cruise_m_s": args.cruise, "latency_s": args.latency,
     })
     if args.timing:
         with _stdout_to_stderr():

@@ -339,6 +339,7 @@ def run_course(
     stop_tolerance: float = 0.3,
     off_track: float = 0.4,
     realtime: bool = False,
+    latency: float = 0.0,
     on_tick: Any = None,
 ) -> RunResult:
     """Drive a course end to end in a fresh world and score the run.
@@ -357,6 +358,9 @@ def run_course(
         off_track: the run is judged lost when the axle is further than this from the track on a
             painted tile, m.
         realtime: pace the world to the wall clock (the demo) instead of lock-step.
+        latency: delay from a frame's exposure to its set point reaching the drives, s (applied at
+            the first physics step at or after it; 0 = the next step). Stands for image transfer,
+            processing and the set-point stream between nodes.
         on_tick: optional ``f(t, mission, world, set_point)`` called after every control tick.
 
     Returns:
@@ -388,6 +392,14 @@ def run_course(
         scan_every = max(1, round(p.control_rate / p.beacon_rate))
         limit = max_time if max_time is not None else course.length / 0.25 + 10.0
         pending = {b.tile for b in mw.beacons}
+        queue: deque[tuple[float, SetPoint]] = deque()
+
+        def deliver(t_step: float) -> None:
+            while queue and queue[0][0] <= t_step + 1e-9:
+                sp_due = queue.popleft()[1]
+                mw.set_wheel_velocities(sp_due.left, sp_due.right)
+
+        world.add_step_hook(deliver)
         t_start = world.t
         wall0 = time.perf_counter()
         tick = 0
@@ -397,7 +409,7 @@ def run_course(
             frame = cam.render(pose)
             obs = sensor.observe(pose, t) if tick % scan_every == 0 else None
             sp = mission.tick(t, frame, mw.encoders(), obs)
-            mw.set_wheel_velocities(sp.left, sp.right)
+            queue.append((t + latency, sp))
             if on_tick is not None:
                 on_tick(t, mission, mw, sp)
             here = mw.where(pose[0], pose[1])

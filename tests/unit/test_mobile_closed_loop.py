@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from services.mobile.odometry import Pose2D
 from sim.mobile.course import course_from_codes
+from sim.mobile.coursefile import load_course
 from sim.mobile.harness import MobileMission, Phase, run_course
 from sim.mobile.robot import RobotSpec
 from sim.mobile.sensors import robot_camera
+
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("codes", ["S S B S E", "S R S BL S E"], ids=["hidden-straight", "hidden-arc"])
@@ -24,6 +29,13 @@ def test_a_short_course_with_an_interruption_is_driven_to_the_t_mark(codes):
     assert r.stop_error < 0.05
     assert r.mean_speed > 0.5
     assert r.t_sim > 0 and r.wall > 0
+
+
+def test_the_fig2_course_is_driven_end_to_end():
+    r = run_course(load_course(ROOT / "nets" / "courses" / "fig2.toml"), seed=2)
+    assert r.completed, (r.reason, r.log)
+    assert (r.interruptions, r.recovered) == (2, 2)
+    assert r.cross_track_rms < 0.010 and r.stop_error < 0.10
 
 
 def test_a_run_is_the_same_for_the_same_seed():
