@@ -287,6 +287,7 @@ def main(argv: list[str] | None = None) -> int:
     build = time.perf_counter() - t_all - sum(r.wall for r in results)
     out = _summary(results, build)
     out.update({
+        "load_average_1min": os.getloadavg()[0],  # the machine's load: wall-clock speed depends on it
         "seed": args.seed, "detector": args.detector, "camera": args.camera, "noise": args.noise,
         "cruise_m_s": args.cruise, "latency_s": args.latency,
     })

@@ -153,8 +153,12 @@ def _fit(
     dx = x - x_ref
     cols = [np.ones_like(dx), dx] + ([0.5 * dx * dx] if quadratic else [])
     a = np.stack(cols, axis=1)
-    sw = np.sqrt(w)
-    coef, *_ = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)
+    aw = a * w[:, None]
+    try:  # normal equations: two or three unknowns, well scaled (dx is a fraction of a metre)
+        coef = np.linalg.solve(aw.T @ a, aw.T @ y)
+    except np.linalg.LinAlgError:
+        sw = np.sqrt(w)
+        coef, *_ = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)
     res = y - a @ coef
     rms = float(np.sqrt(np.sum(w * res * res) / max(float(np.sum(w)), 1e-12)))
     out = np.zeros(3)
