@@ -57,15 +57,15 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from services.mobile.lines import DETECTORS, make_detector  # noqa: E402
-from services.mobile.marks import EndMarkDetector  # noqa: E402
-from sim.mobile.course import CourseError, random_course  # noqa: E402
-from sim.mobile.coursefile import load_course  # noqa: E402
-from sim.mobile.harness import MissionParams, RunResult, run_course  # noqa: E402
-from sim.mobile.sensors import AnalyticCamera, ImageNoise, robot_camera  # noqa: E402
-from sim.mobile.floor import FloorMap  # noqa: E402
-from sim.world import World  # noqa: E402
-from sim.mobile.world import DEFAULT_DT, MobileWorld  # noqa: E402
+from services.mobile.lines import DETECTORS, make_detector
+from services.mobile.marks import EndMarkDetector
+from sim.mobile.course import CourseError, random_course
+from sim.mobile.coursefile import load_course
+from sim.mobile.floor import FloorMap
+from sim.mobile.harness import MissionParams, RunResult, run_course
+from sim.mobile.sensors import AnalyticCamera, ImageNoise, robot_camera
+from sim.mobile.world import DEFAULT_DT, MobileWorld
+from sim.world import World
 
 
 @contextlib.contextmanager
@@ -205,7 +205,10 @@ def _detector_bench(frames: int, seed: int, look_ahead: float = 0.26) -> dict[st
     for cond, noise in CONDITIONS.items():
         cams: dict[int, AnalyticCamera] = {}
 
-        def render(fmap: FloorMap, pose: tuple[float, float, float]) -> np.ndarray:
+        def render(
+            fmap: FloorMap, pose: tuple[float, float, float], cams: dict[int, AnalyticCamera] = cams,
+            noise: ImageNoise = noise,
+        ) -> np.ndarray:
             key = id(fmap)
             if key not in cams:
                 cams[key] = AnalyticCamera(cam, fmap, noise=noise, seed=seed + len(cams))

@@ -36,8 +36,8 @@ import numpy as np
 from .camera import GroundCamera
 
 __all__ = [
-    "CentroidDetector",
     "DETECTORS",
+    "CentroidDetector",
     "LineDetector",
     "LineEstimate",
     "RansacDetector",

@@ -85,7 +85,7 @@ class EndMarkDetector:
                 continue  # cut by the image border: not the whole bar
             if not (0.5 * bar_px <= n <= 2.0 * bar_px):
                 continue
-            if not self._bar_contrast(grey, a, b, n):
+            if not self._bar_contrast(grey, int(a), int(b), int(n)):
                 continue
             v = 0.5 * (a + b - 1)
             x, _ = cam.pixel_to_floor(0.0, v)

@@ -48,11 +48,11 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "HEADINGS",
+    "TILE_CODES",
     "BeaconSpec",
     "Course",
     "CourseError",
-    "HEADINGS",
-    "TILE_CODES",
     "Tile",
     "build_tiles",
     "check",
@@ -286,7 +286,7 @@ class Course:
             th,
         )
 
-    def to_local(self, tile: Tile, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def to_local(self, tile: Tile, x: np.ndarray | float, y: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
         """Points in the tile's frame: origin the square's centre, x along the entry heading, m."""
         cx, cy = self.centre(*tile.square)
         c, s = _STEP[tile.heading]
@@ -295,7 +295,7 @@ class Course:
 
     def project(self, tile: Tile, x: float, y: float) -> tuple[float, float]:
         """(s along the tile from its entry, signed cross-track offset + left) of a point, m."""
-        lx, ly = (float(v) for v in self.to_local(tile, np.float64(x), np.float64(y)))
+        lx, ly = (float(v) for v in self.to_local(tile, np.array(x), np.array(y)))
         h = self.half
         if tile.shape in ("S", "E"):
             return lx + h, ly

@@ -32,8 +32,16 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-from .course import HEADINGS, TILE_CODES, BeaconSpec, Course, CourseError, build_tiles, check
+from .course import (
+    HEADINGS,
+    BeaconSpec,
+    Course,
+    CourseError,
+    build_tiles,
+    check,
+)
 
 __all__ = ["load_course", "parse_course"]
 
@@ -179,7 +187,8 @@ def parse_course(text: str, file: str = "<course>") -> Course:
         raise err(f"[floor] square must be positive, got {square}", "floor", "square")
     bc = data.get("beacon", {})
     try:
-        beacon = BeaconSpec(**{k: (float(v) if k != "post" else v) for k, v in bc.items()})
+        values: dict[str, Any] = {k: (float(v) if k != "post" else v) for k, v in bc.items()}
+        beacon = BeaconSpec(**values)
     except ValueError as exc:
         raise err(str(exc), "beacon", next(iter(bc), None)) from None
     lines = [where.tiles[k] if k < len(where.tiles) else None for k in range(len(codes))]

@@ -34,12 +34,22 @@ from typing import Any
 
 import numpy as np
 
-from services.mobile.beacon import BeaconApproach, BeaconModel, BeaconObservation, Reacquire
+from services.mobile.beacon import (
+    BeaconApproach,
+    BeaconModel,
+    BeaconObservation,
+    Reacquire,
+)
 from services.mobile.camera import GroundCamera
 from services.mobile.lines import LineEstimate, make_detector
 from services.mobile.marks import EndMarkDetector, GapMonitor
 from services.mobile.odometry import DriveGeometry, Odometry, Pose2D
-from services.mobile.steering import PurePursuit, SetPoint, SpeedLimits, SteeringController
+from services.mobile.steering import (
+    PurePursuit,
+    SetPoint,
+    SpeedLimits,
+    SteeringController,
+)
 
 from ..world import ClockMode, World
 from .course import Course

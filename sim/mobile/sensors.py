@@ -101,7 +101,7 @@ class _Degrade:
                     c = (int(self.rng.integers(w)), int(self.rng.integers(h)))
                     axes = (int(self.rng.integers(2, 9)), int(self.rng.integers(2, 9)))
                     cv2.ellipse(img, c, axes, float(self.rng.uniform(0, 180)), 0, 360, int(self.rng.integers(0, 256)), -1)
-        f = img.astype(np.float32)
+        f: np.ndarray = img.astype(np.float32)
         if n.blur_px > 0:
             f = cv2.GaussianBlur(f, (0, 0), n.blur_px)
         gain = 1.0 + (float(self.rng.normal(0.0, n.gain_sigma)) if n.gain_sigma > 0 else 0.0)

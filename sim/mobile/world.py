@@ -40,7 +40,14 @@ from ..world import World
 from .course import Course, Tile
 from .floor import FloorMap, FloorStyle, PybulletFloor
 from .robot import MobileRobot, RobotSpec
-from .sensors import AnalyticCamera, BeaconSensor, BeaconSensorSpec, ImageNoise, TinyCamera, robot_camera
+from .sensors import (
+    AnalyticCamera,
+    BeaconSensor,
+    BeaconSensorSpec,
+    ImageNoise,
+    TinyCamera,
+    robot_camera,
+)
 
 __all__ = ["Beacon", "MobileWorld"]
 

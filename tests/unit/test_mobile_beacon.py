@@ -7,7 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from services.mobile.beacon import BeaconApproach, BeaconModel, BeaconObservation, Reacquire, expected_exits
+from services.mobile.beacon import (
+    BeaconApproach,
+    BeaconModel,
+    BeaconObservation,
+    Reacquire,
+    expected_exits,
+)
 from services.mobile.lines import LineEstimate
 from services.mobile.odometry import DriveGeometry, Pose2D
 from services.mobile.steering import SpeedLimits, SteeringController, pursuit_curvature
@@ -23,7 +29,7 @@ EXACT = BeaconSensorSpec(azimuth_sigma=0.0, elevation_sigma=0.0)
 def beacon_world():
     world = World(dt=DEFAULT_DT)
     # one interruption: the track resumes at (4, 1); the reflector hangs 1 m above it
-    course = course_from_codes("S B S S E".split(), beacon=BeaconSpec(post=False))
+    course = course_from_codes(["S", "B", "S", "S", "E"], beacon=BeaconSpec(post=False))
     mw = MobileWorld(world, course)
     yield world, mw
     world.close()
@@ -65,7 +71,7 @@ def test_an_obstacle_in_the_line_of_sight_hides_the_reflector(beacon_world):
 
 def test_the_post_stands_beside_the_resume_point_and_carries_the_reflector_over_it():
     with World(dt=DEFAULT_DT) as world:
-        mw = MobileWorld(world, course_from_codes("S B S S E".split()))
+        mw = MobileWorld(world, course_from_codes(["S", "B", "S", "S", "E"]))
         (b,) = mw.beacons
         assert b.centre == (4.0, 1.0, 1.0) and b.post is not None
         lo, hi = mw.pb.getAABB(b.post, -1)

@@ -39,13 +39,13 @@ def test_the_fig2_course_is_driven_end_to_end():
 
 
 def test_a_run_is_the_same_for_the_same_seed():
-    course = course_from_codes("S L S B S E".split())
+    course = course_from_codes(["S", "L", "S", "B", "S", "E"])
     a, b = run_course(course, seed=5), run_course(course, seed=5)
     assert a.t_sim == b.t_sim and a.cross_track == b.cross_track and a.stop_error == b.stop_error
 
 
 def test_the_tinyrenderer_camera_drives_the_same_mission():
-    r = run_course(course_from_codes("S B S E".split()), camera="tiny", seed=1)
+    r = run_course(course_from_codes(["S", "B", "S", "E"]), camera="tiny", seed=1)
     assert r.completed, (r.reason, r.log)
     assert r.cross_track_rms < 0.010 and r.stop_error < 0.05
 

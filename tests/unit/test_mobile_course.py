@@ -8,7 +8,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sim.mobile.course import BeaconSpec, CourseError, check, course_from_codes, random_course
+from sim.mobile.course import (
+    BeaconSpec,
+    CourseError,
+    check,
+    course_from_codes,
+    random_course,
+)
 from sim.mobile.coursefile import load_course, parse_course
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -16,7 +22,7 @@ FIG2 = ROOT / "nets" / "courses" / "fig2.toml"
 
 
 def test_the_centre_line_is_continuous_from_tile_to_tile_and_ends_on_the_t_mark():
-    c = course_from_codes("S L S B S R S BL S R E".split())
+    c = course_from_codes(["S", "L", "S", "B", "S", "R", "S", "BL", "S", "R", "E"])
     s = 0.0
     for t in c.tiles[:-1]:
         s += c.tile_length(t)
@@ -27,10 +33,10 @@ def test_the_centre_line_is_continuous_from_tile_to_tile_and_ends_on_the_t_mark(
 
 
 def test_points_on_the_centre_line_project_with_zero_offset_and_their_path_length():
-    c = course_from_codes("S L R L S E".split())
+    c = course_from_codes(["S", "L", "R", "L", "S", "E"])
     for s in np.linspace(0.05, c.length - 0.05, 40):
         x, y, th = c.pose_at(float(s))
-        tile, s_here, off = c.locate(x, y)  # type: ignore[misc]
+        _, s_here, off = c.locate(x, y)  # type: ignore[misc]
         assert abs(off) < 1e-9
         assert s_here == pytest.approx(s, abs=1e-9)
         # a point 3 cm to the left of the direction of travel has offset +0.03
@@ -39,7 +45,7 @@ def test_points_on_the_centre_line_project_with_zero_offset_and_their_path_lengt
 
 
 def test_resume_points_are_the_exit_midpoints_of_the_blank_squares():
-    c = course_from_codes("S B S S BR S E".split())
+    c = course_from_codes(["S", "B", "S", "S", "BR", "S", "E"])
     (i1, x1, y1, h1), (i2, x2, y2, h2) = c.resume_points()
     assert (i1, x1, y1, h1) == (1, 4.0, 1.0, 0.0)  # a hidden straight: 2 m on, same heading
     assert i2 == 4 and (x2, y2) == (9.0, 0.0) and h2 == pytest.approx(-math.pi / 2 % (2 * math.pi))

@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from sim.mobile.course import course_from_codes, random_course
-from sim.mobile.floor import FloorMap, FloorStyle, colour, edge_distance, painted, tile_raster
+from sim.mobile.floor import (
+    FloorMap,
+    FloorStyle,
+    colour,
+    edge_distance,
+    painted,
+    tile_raster,
+)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
@@ -29,7 +36,7 @@ def test_the_floor_map_shows_the_analytic_colour_everywhere_away_from_edges(seed
 
 
 def test_the_track_has_the_opposite_colour_of_the_square_it_crosses():
-    course = course_from_codes("S L R S E".split())
+    course = course_from_codes(["S", "L", "R", "S", "E"])
     st = FloorStyle()
     for s in np.linspace(0.01, course.length - 0.3, 300):
         x, y, th = course.pose_at(float(s))
@@ -40,7 +47,7 @@ def test_the_track_has_the_opposite_colour_of_the_square_it_crosses():
 
 
 def test_the_track_is_five_centimetres_wide_on_straights_and_arcs():
-    course = course_from_codes("S L E".split())
+    course = course_from_codes(["S", "L", "E"])
     for s in (1.0, 2.0 + math.pi / 4):
         x, y, th = course.pose_at(s)
         offs = np.linspace(-0.05, 0.05, 1001)
@@ -50,7 +57,7 @@ def test_the_track_is_five_centimetres_wide_on_straights_and_arcs():
 
 
 def test_the_t_mark_crosses_the_end_square_and_blank_squares_carry_no_paint():
-    course = course_from_codes("S B S E".split())
+    course = course_from_codes(["S", "B", "S", "E"])
     ex, ey = course.end_point()
     ys = np.linspace(ey - 0.19, ey + 0.19, 50)
     assert painted(course, np.full_like(ys, ex), ys).all()  # the 0.40 m cross bar, east-west course
@@ -60,7 +67,7 @@ def test_the_t_mark_crosses_the_end_square_and_blank_squares_carry_no_paint():
 
 
 def test_tile_rasters_turn_with_the_heading_like_the_analytic_floor():
-    course = course_from_codes("L E".split(), heading="north")
+    course = course_from_codes(["L", "E"], heading="north")
     raster = tile_raster(course, "L", heading=1, black=True)
     n = raster.shape[0]
     # texel centres of the square (0, 0): row 0 is the +y side

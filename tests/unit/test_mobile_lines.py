@@ -19,7 +19,7 @@ from sim.mobile.world import DEFAULT_DT, MobileWorld
 from sim.world import World
 
 ROOT = Path(__file__).resolve().parents[2]
-COURSE = course_from_codes("S S L S B S R S E".split())  # square (0, 0) black: a white track first
+COURSE = course_from_codes(["S", "S", "L", "S", "B", "S", "R", "S", "E"])  # square (0, 0) black: a white track first
 ARC = 4.0  # path length where the left arc starts
 CAM = robot_camera()
 

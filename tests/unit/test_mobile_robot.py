@@ -10,7 +10,13 @@ import pytest
 
 from services.mobile.odometry import DriveGeometry, Odometry, Pose2D, wrap_angle
 from sim.mobile.course import course_from_codes
-from sim.mobile.robot import RobotSpec, box_inertia, cylinder_inertia, sphere_inertia, urdf
+from sim.mobile.robot import (
+    RobotSpec,
+    box_inertia,
+    cylinder_inertia,
+    sphere_inertia,
+    urdf,
+)
 from sim.mobile.world import DEFAULT_DT, MobileWorld
 from sim.world import World
 
@@ -78,7 +84,7 @@ def world():
 
 
 def _robot_world(world: World) -> MobileWorld:
-    return MobileWorld(world, course_from_codes("S S S E".split()), start=(1.0, 1.0, 0.3))
+    return MobileWorld(world, course_from_codes(["S", "S", "S", "E"]), start=(1.0, 1.0, 0.3))
 
 
 def test_the_robot_stands_where_it_was_placed_and_drives_the_commanded_twist(world):
@@ -102,7 +108,7 @@ def test_the_drives_ramp_and_clamp_the_velocity_set_points(world):
     world.advance(0.2)
     assert mw.robot.drives.demand[0] == pytest.approx(spec.ramp * 0.2, rel=0.05)
     world.advance(1.0)
-    left, right = mw.robot.drives.velocities()
+    left, _ = mw.robot.drives.velocities()
     assert left == pytest.approx(spec.max_wheel_speed, rel=0.02)
     assert max(abs(t) for t in mw.robot.drives.torques()) <= spec.max_torque + 1e-9
 
