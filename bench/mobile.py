@@ -4,7 +4,7 @@ Usage::
 
     python bench/mobile.py --courses 100 --seed 1 [--json] [--detector ransac|centroid|scanline]
         [--camera analytic|tiny] [--noise default|noisy|scuffed|harsh] [--latency 0.0]
-        [--cruise 0.8] [--course FILE.toml] [--timing] [--detectors N]
+        [--cruise 0.8] [--look-ahead 0.26] [--course FILE.toml] [--timing] [--detectors N]
 
 Paper section 6 ("Mobile Robot Task"). For every course of a seeded generator
 (:func:`sim.mobile.course.random_course`: 8–16 tiles, 0–3 interruptions) — or the course file given
@@ -245,6 +245,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--detector", choices=sorted(DETECTORS), default="ransac")
     ap.add_argument("--camera", choices=["analytic", "tiny"], default="analytic")
     ap.add_argument("--cruise", type=float, default=0.8, help="following speed, m/s")
+    ap.add_argument("--look-ahead", type=float, default=0.26, help="pure-pursuit goal distance, m")
     ap.add_argument("--course", help="run this course file (once) instead of random courses")
     ap.add_argument("--timing", action="store_true", help="also time cameras, detectors and physics")
     ap.add_argument("--detectors", type=int, metavar="N", help="frame-level detector benchmark on N frames instead")
@@ -259,7 +260,9 @@ def main(argv: list[str] | None = None) -> int:
         ap.error("--courses must be at least 1")
     if args.latency < 0:
         ap.error("--latency must not be negative")
-    params = MissionParams(detector=args.detector, cruise=args.cruise)
+    if not 0.08 <= args.look_ahead <= 0.32:
+        ap.error("--look-ahead must lie in the camera's view, 0.08-0.32 m")
+    params = MissionParams(detector=args.detector, cruise=args.cruise, look_ahead=args.look_ahead)
     results: list[RunResult] = []
     build = 0.0
     if args.course:
@@ -292,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
     out.update({
         "load_average_1min": os.getloadavg()[0],  # the machine's load: wall-clock speed depends on it
         "seed": args.seed, "detector": args.detector, "camera": args.camera, "noise": args.noise,
-        "cruise_m_s": args.cruise, "latency_s": args.latency,
+        "cruise_m_s": args.cruise, "latency_s": args.latency, "look_ahead_m": args.look_ahead,
     })
     if args.timing:
         with _stdout_to_stderr():
