@@ -26,7 +26,9 @@ Reported (JSON keys):
 * ``t_stop_error_m`` (mean), ``t_stop_error_max_m`` — distance of the stopped axle midpoint from
   the T mark's centre;
 * ``sim_speed_x_realtime`` — simulated seconds per wall-clock second of the closed loops (world
-  construction excluded; reported separately as ``build_s``).
+  construction excluded; reported separately as ``build_s``); it depends on the machine's load
+  (``load_average_1min``), so ``sim_speed_x_cpu`` gives simulated seconds per CPU second of this
+  process as well.
 
 ``--timing`` adds the per-call cost of the cameras, detectors and a physics step.
 
@@ -90,6 +92,7 @@ def _summary(results: list[RunResult], build_s: float) -> dict[str, Any]:
     n_rec = sum(r.recovered for r in results)
     t_sim = sum(r.t_sim for r in results)
     wall = sum(r.wall for r in results)
+    cpu = sum(r.cpu for r in results)
     return {
         "courses": len(results),
         "completed": len(done),
@@ -104,6 +107,7 @@ def _summary(results: list[RunResult], build_s: float) -> dict[str, Any]:
         "t_stop_error_m": float(np.mean(stops)) if stops else math.nan,
         "t_stop_error_max_m": float(np.max(stops)) if stops else math.nan,
         "sim_speed_x_realtime": t_sim / wall if wall > 0 else math.nan,
+        "sim_speed_x_cpu": t_sim / cpu if cpu > 0 else math.nan,
         "sim_s": t_sim,
         "loop_wall_s": wall,
         "build_s": build_s,

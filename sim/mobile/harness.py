@@ -127,6 +127,8 @@ class MobileMission:
         reason: why the mission failed ("" otherwise).
         interruptions: interruptions declared.
         log: (t, phase name, note) of every phase change.
+        line: the present frame's track estimate when it counted as the track, else None
+            (telemetry).
     """
 
     def __init__(
@@ -160,7 +162,6 @@ class MobileMission:
         self._heading: float | None = None
         self._end_hits = 0
         self._stops: list[float] = []
-        self._stop_s: float | None = None
         self.line: LineEstimate | None = None
 
     def _enter(self, phase: Phase, t: float, note: str = "") -> None:
@@ -239,7 +240,6 @@ class MobileMission:
         if not self.approach.start((ex, ey, heading), list(self._sightings)):
             return self._fail(t, "interruption: no beacon at an expected exit")
         self.reacquire.reset()
-        self._approach_s = pose.s
         self._enter(Phase.APPROACH, t, f"exit {('straight', 'left', 'right')[self.approach.exit_index]}")
         return self._approach(t, pose, None, None)
 
@@ -299,6 +299,8 @@ class RunResult:
         reason: why not (empty when completed).
         t_sim: simulated time from the start to the stop (or the end of the run), s.
         wall: wall-clock time of the closed loop, s.
+        cpu: CPU time of this process during the closed loop, s (independent of the machine's
+            load, unlike ``wall``).
         length: course length from the start to the T mark, m.
         interruptions: interruptions on the course.
         recovered: interruptions after which the robot was on the next tile's track (|offset| <
@@ -316,6 +318,7 @@ class RunResult:
     reason: str = ""
     t_sim: float = 0.0
     wall: float = 0.0
+    cpu: float = 0.0
     length: float = 0.0
     interruptions: int = 0
     recovered: int = 0
@@ -412,6 +415,7 @@ def run_course(
         world.add_step_hook(deliver)
         t_start = world.t
         wall0 = time.perf_counter()
+        cpu0 = time.process_time()
         tick = 0
         while True:
             t = world.t
@@ -445,6 +449,7 @@ def run_course(
             world.advance(period)
             tick += 1
         result.wall = time.perf_counter() - wall0
+        result.cpu = time.process_time() - cpu0
         result.t_sim = world.t - t_start
         result.log = mission.log
         if mission.phase is Phase.DONE:
