@@ -9,14 +9,16 @@ served by three detectors of the same interface (``detect(image) -> LineEstimate
 * :class:`CentroidDetector` — thin-structure map of the whole frame (morphological white top-hat
   plus black top-hat, Soille, *Morphological Image Analysis*, 2nd ed., §4.4), then per row the
   centroid of the thin pixels, rows gated by the band's width and contiguity, and a weighted
-  least-squares fit of a quadratic y(x). Area-based: robust to pixel noise; ~0.1 ms at 80×60.
+  least-squares fit of a quadratic y(x). Area-based: robust to pixel noise, pulled by scuffs
+  next to the track; ~0.3 ms at 80×60.
 * :class:`RansacDetector` — horizontal Sobel gradient; per row the strongest rising and falling
   edges, kept when they are a track width apart (either polarity), then a RANSAC line (Fischler &
   Bolles, CACM 24(6), 1981) over the row centres and a least-squares refit on the inliers.
-  Rejects outlier rows (marks, noise edges); ~0.15 ms.
+  Rejects outlier rows (marks, scuffs, noise edges); ~0.3 ms.
 * :class:`ScanLineDetector` — the same edge pairing on five scan lines only (each the mean of three
-  image rows) and a straight-line least-squares fit; no curvature, no outlier rejection; cheapest
-  (~0.04 ms) and the least reliable (a single bad row moves the line).
+  image rows) and a straight-line least-squares fit; no curvature, no outlier rejection; the
+  cheapest (~0.2 ms; image work grows with the width only) and the least reliable (a scuff on one
+  of its lines moves or loses the line).
 
 A :class:`LineEstimate` gives, in the robot frame, the lateral position of the track's centre line
 at a reference distance ahead, its direction and (when measurable) its curvature, plus a

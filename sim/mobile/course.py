@@ -27,12 +27,11 @@ midpoint of another:
 3. interruptions: never the first tile (the robot starts on the track), never the end tile nor
    the tile just before it (after a resume at least one whole painted tile precedes the T), never
    two in a row;
-4. an interruption hiding an arc (``BL``/``BR``) needs straights before and after it. Decided
-   rule, the "arc-to-arc corner" case: a robot leaving an arc is still settling its heading and
-   one arriving on an arc has to turn at once; a hidden arc next to a painted arc would chain
-   a turn the robot retraces blind to one it must pick up on the move, and its resume point
-   (√2 m away at ±45°) would lie at the same distance as a corner of the square it left. Straights
-   either side make the track end and resume with a known tangent.
+4. an interruption hiding an arc (``BL``/``BR``) needs straights before and after it. Decided, a
+   conservative rule for the "arc-to-arc corner": the robot places the blank square's possible
+   exits from the track's tangent where it ended, which a straight gives best, and leaves the blank
+   square onto a straight. (The closed loop also drove hidden arcs next to painted arcs correctly
+   with the rule lifted; see ``docs/mobile.md``.)
 
 **Course files**: :mod:`sim.mobile.coursefile` (TOML). Problems are reported as
 :class:`CourseError` ``FILE:LINE: problem``.
