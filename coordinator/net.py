@@ -506,6 +506,7 @@ class PetriNet:
             raise NetError(f"id {sorted(both)[0]!r} is both a place and a transition")
         pset, tset = set(place_ids), set(trans_ids)
         seen_arcs: set[tuple[str, str, str]] = set()
+        resets = False
         for arc in self.arcs:
             src_p, src_t = arc.source in pset, arc.source in tset
             dst_p, dst_t = arc.target in pset, arc.target in tset
@@ -523,12 +524,14 @@ class PetriNet:
                 raise NetError(f"inhibitor arc {arc.source} -> {arc.target} must go from a place to a transition")
             if arc.reset and not src_p:
                 raise NetError(f"reset arc {arc.source} -> {arc.target} must go from a place to a transition")
+            resets = resets or arc.reset
             key = (arc.source, arc.target, arc.kind)
             if key in seen_arcs:
                 what = "arc" if arc.kind == "normal" else f"{arc.kind} arc"
                 raise NetError(f"{what} {arc.source} -> {arc.target} is given twice"
                                + ("; use one arc with a weight" if arc.kind != "reset" else ""))
             seen_arcs.add(key)
+        self.__dict__["has_resets"] = resets  # the cached property, known at no extra cost here
         for t in self.transitions:
             for what, text in (("rate", t.rate_expr), ("weight", t.weight_expr)):
                 if text is None:

@@ -9,8 +9,12 @@ graph is not expanded again. The net is bounded iff no node holds ω; a place is
 holds ω in it, and then its bound is the largest count any node gives it.
 
 Karp–Miller is only sound for nets without inhibitor arcs (with them boundedness is undecidable);
-:func:`karp_miller` refuses such nets. :func:`covering_witness` works on any net: it needs the pumped
-difference to be zero on every place read by an inhibitor arc, which makes the repetition legal.
+:func:`karp_miller` refuses such nets, and nets with reset arcs too: with resets the acceleration is
+unsound (a pumped place can be emptied again, so ω overstates it) and the construction need not
+terminate, and boundedness of reset nets is undecidable in general (Dufourd, Finkel, Schnoebelen,
+"Reset nets between decidability and undecidability", ICALP 1998). :func:`covering_witness` works
+on any net: it needs the pumped difference to be zero on every place read by an inhibitor arc or
+emptied by a reset arc, which makes the repetition legal and keeps it growing.
 """
 
 from __future__ import annotations
@@ -111,11 +115,14 @@ def karp_miller(net: PetriNet, *, max_nodes: int = 200_000, seconds: float = 60.
         The :class:`Coverability` graph.
 
     Raises:
-        AnalysisError: if the net has inhibitor arcs (Karp–Miller is unsound for them).
+        AnalysisError: if the net has inhibitor or reset arcs (Karp–Miller is unsound for them).
     """
     sn = sparse_net(net)
     if sn.inhibitor.nnz:
         raise AnalysisError("Karp–Miller coverability is unsound for nets with inhibitor arcs")
+    if sn.n_resets:
+        raise AnalysisError("Karp–Miller coverability is unsound for nets with reset arcs (a pumped place can be "
+                            "emptied again; boundedness of reset nets is undecidable in general)")
     n_t = sn.n_transitions
     pre, inc = sn.pre, sn.incidence
     inputs = [list(zip(pre.indices[pre.indptr[t]:pre.indptr[t + 1]].tolist(),
@@ -205,7 +212,9 @@ def covering_witness(space: StateSpace, *, max_work: int = 200_000_000, block_by
     Vectorised: all states are compared with their k-th tree ancestor for k = 1, 2, ... until no
     state has one or ``max_work`` element comparisons are spent; states are taken in blocks whose
     int64 differences stay below ``block_bytes``, so a wide net never needs an (N, |P|) copy. Sound
-    on every net: a pair counts only if the difference is zero on the places read by inhibitor arcs.
+    on every net: a pair counts only if the difference is zero on the places read by inhibitor arcs and
+    on those emptied by reset arcs (then the same firings repeat from the larger marking and add the
+    same difference again).
     Not complete: None means "no witness found", not "bounded".
 
     Args:
@@ -221,7 +230,8 @@ def covering_witness(space: StateSpace, *, max_work: int = 200_000_000, block_by
     if n < 2 or space.parent_edge.shape[0] != n:
         return None
     par = np.where(space.parent_edge >= 0, space.src[np.maximum(space.parent_edge, 0)], -1).astype(np.int64)
-    inhibited = np.flatnonzero(sparse_net(space.net).inhibitor.getnnz(axis=1) > 0)
+    sn = sparse_net(space.net)
+    inhibited = np.union1d(np.flatnonzero(sn.inhibitor.getnnz(axis=1) > 0), sn.reset_places()).astype(np.int64)
     anc = par.copy()
     alive = np.flatnonzero(anc >= 0)
     work = 0
