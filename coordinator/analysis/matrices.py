@@ -83,7 +83,7 @@ class SparseNet:
     def firing_rows(self, rows: np.ndarray, t: int) -> np.ndarray:
         """Successors of markings ``rows`` (k, |P|) by transition t (assumed enabled), (k, |P|) int64:
         ``M + C[:, t]``, with the places of t's reset arcs set to ``Post[p, t]``."""
-        out = np.asarray(rows, dtype=np.int64) + self.incidence[:, t].toarray().ravel()[None, :]
+        out: np.ndarray = np.asarray(rows, dtype=np.int64) + self.incidence[:, t].toarray().ravel()[None, :]
         if self.reset is not None and self.reset.nnz:
             for k in range(self.reset.indptr[t], self.reset.indptr[t + 1]):
                 p = int(self.reset.indices[k])
