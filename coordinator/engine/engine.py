@@ -391,16 +391,21 @@ class Engine:
                 if task is not None:
                     need = needs.get(task)
                     instances.extend([i.id for i in self._ended[pid] if not need or need <= i.outcomes][:w])
-        consumed = self._consumed_map[tid]
-        if self._resets[tid]:
-            removed = dict(consumed)
-            for pid in self._resets[tid]:
-                left = self._counts[pid] - removed.get(pid, 0)
-                if left:
-                    removed[pid] = removed.get(pid, 0) + left
-            consumed = MappingProxyType(removed)
-        return Firing(self._fired + 1, tid, consumed, self._produced_map[tid],
+        return Firing(self._fired + 1, tid, self._consumed_now(tid), self._produced_map[tid],
                       tuple(instances), self._pulse_of[tid])
+
+    def _consumed_now(self, tid: str) -> Mapping[str, int]:
+        """What firing ``tid`` removes in the current marking: its input arcs, plus what is left in
+        the places of its reset arcs."""
+        consumed = self._consumed_map[tid]
+        if not self._resets[tid]:
+            return consumed
+        removed = dict(consumed)
+        for pid in self._resets[tid]:
+            left = self._counts[pid] - removed.get(pid, 0)
+            if left:
+                removed[pid] = removed.get(pid, 0) + left
+        return MappingProxyType(removed)
 
     def apply(self, firing: Firing) -> list[Effect]:
         """Apply a firing decided by :meth:`next_firing` (or read back from the journal).
@@ -418,6 +423,9 @@ class Engine:
                 raise NotEnabledError(f"unknown transition {tid!r}")
             if not self._can_fire(tid) or (self._ext[tid] is not None and firing.pulse is None):
                 raise NotEnabledError(f"transition {tid!r} cannot fire in {self.marking!r}")
+            if self._resets[tid] and dict(firing.consumed) != dict(self._consumed_now(tid)):
+                raise NotEnabledError(f"firing {tid!r} removes {dict(firing.consumed)}, but its reset arcs would "
+                                      f"remove {dict(self._consumed_now(tid))} in {self.marking!r} (stale decision)")
             for iid in firing.instances:
                 inst = self._instances.get(iid)
                 if inst is None or inst.running:

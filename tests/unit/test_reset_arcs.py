@@ -17,7 +17,7 @@ from coordinator.analysis.simulate import simulate_steady
 from coordinator.analysis.statespace import explore
 from coordinator.analysis.structure import analyse
 from coordinator.engine import Engine, Firing
-from coordinator.errors import AnalysisError, EngineError, NetError
+from coordinator.errors import AnalysisError, EngineError, NetError, NotEnabledError
 from coordinator.journal import Journal
 from coordinator.net import Arc, Marking, PetriNet, Place, PlaceKind, PrimitiveTask, ActionSpec, Transition, TransitionKind
 from coordinator.netfile import dump_net, loads_net
@@ -164,6 +164,17 @@ def test_the_engine_empties_the_reset_place_and_records_what_it_removed() -> Non
     firing = next(e for e in effects if isinstance(e, Firing))
     assert dict(firing.consumed) == {"go": 1, "buf": 4}
     assert engine.marking == {"done": 1}
+
+
+def test_a_stale_reset_firing_that_would_remove_other_counts_is_refused() -> None:
+    net = with_resets(make_net("r", {"go": 2, "buf": 4}, {"flush": ({"go": 1}, {})}), [("buf", "flush")])
+    engine = Engine(net)
+    stale = Firing(1, "flush", {"go": 1, "buf": 2}, {}, (), None)
+    with pytest.raises(NotEnabledError, match="reset arcs would remove"):
+        engine.apply(stale)
+    assert engine.marking == {"go": 2, "buf": 4}
+    engine.apply(Firing(1, "flush", {"go": 1, "buf": 4}, {}, (), None))
+    assert engine.marking == {"go": 1}
 
 
 def test_a_replayed_reset_firing_recovers_the_marking(tmp_path: Path) -> None:
