@@ -11,7 +11,8 @@ result. What they implement (the reasons and the measurements are in docs/analys
   matrices; always by the caller for a net with reset arcs). A reset arc r → t lists r with the
   count it holds after t fires, ``Post[r, t]``, and r is left out of t's incidence list: the
   successor is ``M + C[:, t]`` off the reset places and ``Post[r, t]`` on them. A net without reset
-  arcs has empty reset lists, and its search skips their code on a loop-invariant flag. Each transition
+  arcs has empty reset lists, and its search is a specialisation compiled without their code (an
+  argument that is ``None`` for such nets, pruned by numba when it compiles). Each transition
   with input places is listed under its first input place (its *trigger*), so a marking only tests
   the transitions whose trigger place is marked (enabling rule: Murata 1989, section II).
 * A queue that is the state array itself: states are numbered in order of discovery and expanded in
@@ -50,7 +51,8 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit, objmode, types
 
-__all__ = ["CURSOR_SIZE", "HEAD", "RUN_SIGNATURE", "cached", "load", "run", "set_progress", "tables"]
+__all__ = ["CURSOR_SIZE", "HEAD", "RESET_SIGNATURE", "RUN_SIGNATURE", "cached", "load", "load_resets", "run",
+           "set_progress", "tables"]
 
 #: status codes: graph complete, or the state limit reached and its level finished; ``budget``
 #: markings expanded; a buffer is full; a token count would exceed 2**31 - 1, the largest the int32
@@ -223,7 +225,8 @@ def _rekey(tab: np.ndarray, width: np.ndarray, mult: np.ndarray, dkey: np.ndarra
 def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.ndarray, use_prio: bool,
             states: np.ndarray, table: np.ndarray, dst: np.ndarray, tr: np.ndarray, out_ptr: np.ndarray,
             parent: np.ndarray, trunc: np.ndarray, cursor: np.ndarray, width: np.ndarray, mult: np.ndarray,
-            succ: np.ndarray, dkey: np.ndarray, enabled: np.ndarray, max_states: int, budget: int) -> int:
+            succ: np.ndarray, dkey: np.ndarray, enabled: np.ndarray, max_states: int, budget: int,
+            resets: np.ndarray | None) -> int:
     """Expand markings in breadth-first order, at most ``budget`` of them, from ``cursor[NEXT]``,
     in the given buffers (never reallocated here: ``ROOM`` says one is full, and ``cursor[NEED]``
     how many successors the state waiting to be expanded has).
@@ -252,7 +255,8 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
     ih_ptr, ih_p, ih_w = tab[tab[3]:tab[4]], tab[tab[4]:tab[5]], tab[tab[5]:tab[6]]
     d_ptr, d_p, d_v = tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]]
     r_ptr, r_p, r_v = tab[tab[9]:tab[10]], tab[tab[10]:tab[11]], tab[tab[11]:tab[12]]
-    resets = r_p.shape[0] > 0  # loop-invariant: a net without reset arcs skips their code
+    # ``resets is not None`` is decided when numba compiles: a net without reset arcs passes None
+    # and runs a specialisation of this function without their code
     n, e, i = cursor[N], cursor[E], cursor[NEXT]
     level_end, stopping, n_trunc = cursor[LEVEL_END], cursor[STOPPING], cursor[N_TRUNC]
     top = cursor[MAX_COUNT]
@@ -331,7 +335,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                         width[q] = _bit_length(v)
                         repack = True
             r0 = r1 = 0
-            if resets:
+            if resets is not None:
                 r0, r1 = r_ptr[t], r_ptr[t + 1]
                 for b in range(r0, r1):  # reset places end with r_v tokens
                     v = r_v[b]
@@ -347,7 +351,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                 exact = cursor[EXACT] != 0
                 key_i = _key(states, i, n_p, mult)
             key = key_i + dkey[t]
-            if resets:
+            if resets is not None:
                 for b in range(r0, r1):
                     q = r_p[b]
                     key += (np.uint64(r_v[b]) - np.uint64(states[base + q])) * mult[q]  # modulo 2**64
@@ -356,7 +360,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                     succ[p] = states[base + p]
                 for b in range(d_ptr[t], d_ptr[t + 1]):
                     succ[d_p[b]] += d_v[b]
-                if resets:
+                if resets is not None:
                     for b in range(r0, r1):
                         succ[r_p[b]] = r_v[b]
             s = _slot(key, bits)
@@ -388,7 +392,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                     states[jb + p] = states[base + p]
                 for b in range(d_ptr[t], d_ptr[t + 1]):
                     states[jb + d_p[b]] += d_v[b]
-                if resets:
+                if resets is not None:
                     for b in range(r0, r1):
                         states[jb + r_p[b]] = r_v[b]
                 table[2 * s] = key
@@ -432,14 +436,17 @@ def _target(cap: int, need: int, unit: int | np.int64, held: int | np.int64, max
     return int(want) if want >= need else -1
 
 
-#: the one signature :func:`run` is compiled for (read-only matrices, marking and priorities, as a
-#: net holds them; callers pass exactly these types, so a call never goes through numba's slower
-#: type-conversion path and nothing is compiled twice). :func:`load` compiles it, or loads it from
-#: the cache, and then forbids further compilations.
+#: the signature :func:`run` is compiled for (read-only matrices, marking and priorities, as a
+#: net holds them, and ``resets`` None: a net without reset arcs; callers pass exactly these types,
+#: so a call never goes through numba's slower type-conversion path and nothing is compiled twice).
+#: :func:`load` compiles it, or loads it from the cache, and then forbids further compilations;
+#: :func:`load_resets` does the same for :data:`RESET_SIGNATURE`, the search of nets with reset
+#: arcs, on the first such net.
 _RO2 = types.Array(types.int64, 2, "C", readonly=True)
 _RO1 = types.Array(types.int64, 1, "C", readonly=True)
 RUN_SIGNATURE = (_RO2, _RO2, _RO2, types.int64[::1], _RO1, _RO1, types.boolean, types.int64, types.int64,
-                 types.int64)
+                 types.int64, types.none)
+RESET_SIGNATURE = (*RUN_SIGNATURE[:-1], types.int64[::1])
 
 
 def cached() -> bool | None:
@@ -459,15 +466,26 @@ def cached() -> bool | None:
 
 def load() -> None:
     """Make :func:`run` ready: loaded from the cache or compiled (and cached) for its signature."""
-    if not run.overloads:
+    if RUN_SIGNATURE not in run.overloads:
         run.compile(RUN_SIGNATURE)
     run.disable_compile()
+
+
+def load_resets() -> None:
+    """Make :func:`run` ready for nets with reset arcs (:data:`RESET_SIGNATURE`): loaded from the
+    cache or compiled (and cached) the first time such a net is explored."""
+    if RESET_SIGNATURE not in run.overloads:
+        run.disable_compile(False)
+        try:
+            run.compile(RESET_SIGNATURE)
+        finally:
+            run.disable_compile()
 
 
 @njit(cache=True)
 def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.ndarray, m0: np.ndarray,
         prio: np.ndarray, use_prio: bool, max_states: int, max_bytes: int,
-        report_every: int) -> tuple:  # type: ignore[type-arg]
+        report_every: int, resets: np.ndarray | None) -> tuple:  # type: ignore[type-arg]
     """The whole breadth-first search of a net (see the module docstring).
 
     Args:
@@ -483,6 +501,8 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         max_bytes: byte budget of the search's buffers (see the module docstring).
         report_every: call the progress hook (:func:`set_progress`) every this many expanded
             markings and at the end; 0 for never.
+        resets: ``None`` for a net without reset arcs (the search is compiled without their code),
+            else any array (``tab``): the reset lists of ``tab`` are applied.
 
     Returns:
         ``(status, states, dst, tr, parent, expanded, out_ptr, complete, max_count)``: DONE,
@@ -567,7 +587,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     while top <= _INT32_MAX:
         status = _search(arcs, trig_ptr, trig_t, prio, use_prio, states, table, dst, tr, out_ptr, parent,
                          trunc, cursor, width, mult, succ, dkey, enabled, max_states,
-                         max(1, next_report - cursor[NEXT]))
+                         max(1, next_report - cursor[NEXT]), resets)
         if status == ROOM:
             n, e, k, ks = cursor[N], cursor[E], cursor[NEED], cursor[NEED_S]
             if n + ks > cap:

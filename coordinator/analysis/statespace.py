@@ -406,11 +406,13 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     else:
         pre = inh = inc = _NO_MATRIX
         tab, m0 = arc_table(net), sparse_net(net).m0
+    if net.has_resets:
+        rk.load_resets()  # the search of nets with reset arcs is a second compiled specialisation
     rk.set_progress(progress)
     try:
         status, states, dst, tr, parent, expanded, out_ptr, complete, top = rk.run(
             pre, inh, inc, tab, m0, prio, use_prio, max_states, budget,
-            _PROGRESS_STATES if progress is not None else 0)
+            _PROGRESS_STATES if progress is not None else 0, tab if net.has_resets else None)
     finally:
         rk.set_progress(None)
     if status == rk.OVERFLOW:
