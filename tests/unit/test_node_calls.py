@@ -34,14 +34,14 @@ def result(cid: str, value: object = None) -> Result:
 
 def finish(t: CallTable[str], cid: str, now: float = 0.0, value: object = None) -> list[str]:
     res = result(cid, value)
-    return t.finish(res, size=len(encode_frame(res)), now=now).waiters
+    return list(t.finish(res, size=len(encode_frame(res)), now=now).waiters)
 
 
 def test_a_new_call_starts_and_its_caller_waits_for_it() -> None:
     t = table()
     verdict = t.admit(call("c1"), "p1", local=True)
     assert isinstance(verdict, Start)
-    assert verdict.running.call == call("c1") and verdict.running.waiters == ["p1"]
+    assert verdict.running.call == call("c1") and list(verdict.running.waiters) == ["p1"]
     assert t.in_flight == 1 and t.running("c1") is verdict.running
 
 
@@ -128,7 +128,8 @@ def test_finishing_an_id_that_is_not_running_is_a_key_error() -> None:
 
 
 def test_rejection_reasons_are_the_wire_strings() -> None:
-    assert [r.value for r in RejectReason] == ["unknown_action", "local_only", "duplicate_id", "busy", "shutdown"]
+    assert [r.value for r in RejectReason] == [
+        "unknown_action", "local_only", "duplicate_id", "busy", "shutdown", "unknown_call"]
 
 
 def test_a_local_only_action_that_is_not_hosted_is_a_value_error() -> None:
@@ -218,6 +219,12 @@ def test_any_store_with_get_put_and_expire_can_keep_the_results() -> None:
         def expire(self, now: float) -> int:
             self.expired_at.append(now)
             return 0
+
+        def begin(self, call_id: str, action: str, now: float) -> None:
+            pass
+
+        def flush(self) -> None:
+            pass
 
     store = DictStore()
     before_restart = CallTable[str](["echo"], cache=store)
