@@ -21,6 +21,8 @@ import asyncio
 import contextlib
 import itertools
 import logging
+import os
+import ssl
 import uuid
 from collections.abc import Callable
 from typing import Any
@@ -421,7 +423,7 @@ class NodeLink:
         except AuthenticationError as exc:
             raise _Unreachable(ActionResult.error(f"authentication failed: {exc}")) from None
         except (TimeoutError, OSError, ProtocolError) as exc:
-            raise _Unreachable(ActionResult.error(f"node {self.node} unreachable: {_describe(exc)}")) from None
+            raise _Unreachable(ActionResult.error(f"node {self.node} unreachable: {describe(exc)}")) from None
 
     def _welcomed(self, msg: Welcome) -> None:
         self.offered_actions = tuple(msg.actions) if msg.actions is not None else None
@@ -534,7 +536,7 @@ class NodeLink:
 
     def _fail_all(self, reason: str) -> None:
         pending, self._pending = self._pending, {}
-        for cid, p in pending.items():
+        for p in pending.values():
             if not p.future.done():
                 p.future.set_result(ActionResult.error(reason))
 
@@ -547,7 +549,10 @@ class _Unreachable(Exception):
         self.result = result
 
 
-def _describe(exc: BaseException) -> str:
+def describe(exc: BaseException) -> str:
+    """A connection error in words: ``timed out``, the OS's text for its errno, or its message."""
     if isinstance(exc, asyncio.TimeoutError):
         return "timed out"
+    if isinstance(exc, OSError) and exc.errno and not isinstance(exc, ssl.SSLError):
+        return f"{os.strerror(exc.errno)} (errno {exc.errno})"
     return str(exc) or exc.__class__.__name__

@@ -14,7 +14,7 @@ import hashlib
 from collections.abc import Iterable
 from typing import Any, Self
 
-from services.client.link import EventCallback, FeedbackCallback, NodeLink
+from services.client.link import EventCallback, FeedbackCallback, NodeLink, describe
 from services.errors import AuthenticationError, LocationError, ProtocolError
 from services.location import Location
 from services.results import ActionResult
@@ -173,8 +173,7 @@ class ServiceClient:
         except AuthenticationError as exc:
             return [f"node {node} at {host}:{port} refused our key: {exc}"]
         except (TimeoutError, OSError, ProtocolError) as exc:
-            what = "timed out" if isinstance(exc, TimeoutError) else (str(exc) or exc.__class__.__name__)
-            return [f"node {node} at {host}:{port} is unreachable: {what}"]
+            return [f"node {node} at {host}:{port} is unreachable: {describe(exc)}"]
         problems = []
         offered = link.offered_actions
         if offered is not None:

@@ -8,13 +8,18 @@ connections to close. The rules (docs/protocol.md §6, "Connection limits"):
 * A connection is *pending* from accept until its handshake succeeds, then *open*.
 * Pending connections are capped in total (``max_pending``) and per peer address
   (``max_pending_per_host``). A new connection over a cap is not refused: the **oldest** pending
-  connection (of that address for the per-address cap) is closed to make room. A slow or stalled
-  handshake is what an attacker holds on to; a real client finishes its handshake in one round
-  trip, long before newer connections push it out.
+  connection of its address (per-address cap), or of the address holding the most pending
+  connections (total cap), is closed to make room. A slow or stalled handshake is what an attacker
+  holds on to; a real client finishes its handshake in one round trip, long before newer
+  connections push it out, and a flood from other addresses takes room from itself first.
 * Open (authenticated) connections are capped in total (``max_open``) and per address
   (``max_open_per_host``); a handshake that would exceed a cap is refused.
 * Every pending connection must finish its handshake within ``handshake_timeout_s`` of being
   accepted, however many bytes it trickles in (:meth:`ConnectionGuard.overdue`).
+* New connections are rate-limited per address (``accepts_per_s``, bursts of ``accept_burst``;
+  :meth:`ConnectionGuard.may_accept`): over the rate, a connection is closed at once, before any
+  work is done for it, so that an address reconnecting in a loop costs the node little. A client
+  opens a handful of connections a minute.
 * Failed logins are throttled per address (:class:`AuthThrottle`): each failure takes a token from
   the address's bucket; while the bucket is empty, new connections from that address are closed at
   once, before any work is done for them.
@@ -27,7 +32,7 @@ from __future__ import annotations
 
 import collections
 from collections.abc import Hashable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Final, Generic, TypeVar
 
 __all__ = [
@@ -35,6 +40,7 @@ __all__ = [
     "AuthThrottle",
     "Caps",
     "ConnectionGuard",
+    "TokenBuckets",
     "budget_caps",
 ]
 
@@ -52,6 +58,8 @@ class Caps:
         max_pending: connections still in their handshake, in total.
         max_pending_per_host: connections still in their handshake from one address.
         handshake_timeout_s: time from accept to a finished handshake, seconds.
+        accepts_per_s: new connections accepted per second from one address, in the long run.
+        accept_burst: new connections one address may open at once.
     """
 
     max_open: int = 256
@@ -59,12 +67,15 @@ class Caps:
     max_pending: int = 128
     max_pending_per_host: int = 32
     handshake_timeout_s: float = 2.0
+    accepts_per_s: float = 50.0
+    accept_burst: int = 100
 
     def __post_init__(self) -> None:
-        if min(self.max_open, self.max_open_per_host, self.max_pending, self.max_pending_per_host) < 1:
+        if min(self.max_open, self.max_open_per_host, self.max_pending, self.max_pending_per_host,
+               self.accept_burst) < 1:
             raise ValueError("connection caps must be >= 1")
-        if not self.handshake_timeout_s > 0:
-            raise ValueError("handshake_timeout_s must be positive")
+        if not (self.handshake_timeout_s > 0 and self.accepts_per_s > 0):
+            raise ValueError("handshake_timeout_s and accepts_per_s must be positive")
 
 
 DEFAULT_CAPS: Final = Caps()
@@ -92,10 +103,9 @@ def budget_caps(caps: Caps, fd_limit: int, fds_in_use: int, reserve: int = 64) -
         return caps
     pending = max(1, min(caps.max_pending, budget // 4))
     open_ = max(1, min(caps.max_open, budget - pending))
-    return Caps(
-        max_open=open_, max_open_per_host=min(caps.max_open_per_host, open_),
+    return replace(
+        caps, max_open=open_, max_open_per_host=min(caps.max_open_per_host, open_),
         max_pending=pending, max_pending_per_host=min(caps.max_pending_per_host, pending),
-        handshake_timeout_s=caps.handshake_timeout_s,
     )
 
 
@@ -106,10 +116,11 @@ class ConnectionGuard(Generic[C]):
         caps: the caps.
     """
 
-    __slots__ = ("_open", "_open_by_host", "_pending", "_pending_by_host", "caps")
+    __slots__ = ("_accepts", "_caps", "_open", "_open_by_host", "_pending", "_pending_by_host")
 
     def __init__(self, caps: Caps = DEFAULT_CAPS) -> None:
-        self.caps = caps
+        self._caps = caps
+        self._accepts = TokenBuckets(burst=caps.accept_burst, per_s=caps.accepts_per_s)
         # pending connections in order of acceptance, with (host, accepted_at)
         self._pending: collections.OrderedDict[C, tuple[str, float]] = collections.OrderedDict()
         self._pending_by_host: dict[str, collections.OrderedDict[C, None]] = {}
@@ -117,9 +128,24 @@ class ConnectionGuard(Generic[C]):
         self._open_by_host: collections.Counter[str] = collections.Counter()
 
     @property
+    def caps(self) -> Caps:
+        """The caps in force."""
+        return self._caps
+
+    @caps.setter
+    def caps(self, caps: Caps) -> None:
+        self._caps = caps
+        self._accepts = TokenBuckets(burst=caps.accept_burst, per_s=caps.accepts_per_s)
+
+    @property
     def pending(self) -> int:
         """Connections in their handshake now."""
         return len(self._pending)
+
+    def may_accept(self, host: str, now: float) -> bool:
+        """Whether a new connection from ``host`` is within its address's rate at ``now`` (s); if it
+        is, it uses up its share of the rate."""
+        return self._accepts.take(host, now)
 
     @property
     def open(self) -> int:
@@ -137,8 +163,10 @@ class ConnectionGuard(Generic[C]):
         if same is not None and len(same) >= self.caps.max_pending_per_host:
             evict.append(next(iter(same)))
             self._drop_pending(evict[-1])
-        if len(self._pending) >= self.caps.max_pending:
-            evict.append(next(iter(self._pending)))
+        if len(self._pending) >= self._caps.max_pending:
+            # the busiest address gives way (the one whose oldest connection is oldest among equals)
+            busiest = max(self._pending_by_host.values(), key=len)
+            evict.append(next(iter(busiest)))
             self._drop_pending(evict[-1])
         self._pending[conn] = (host, now)
         self._pending_by_host.setdefault(host, collections.OrderedDict())[conn] = None
@@ -190,18 +218,18 @@ class ConnectionGuard(Generic[C]):
             del self._pending_by_host[host]
 
 
-class AuthThrottle:
-    """Failed logins per address, as token buckets (see the module docstring).
+class TokenBuckets:
+    """A token bucket per key (an address): ``burst`` tokens, earned back at ``per_s`` a second.
 
     Args:
-        burst: failures an address may have in a row before it is throttled.
-        per_s: failures per second an address earns back.
-        max_hosts: addresses remembered; the least recently failing are forgotten beyond it.
+        burst: tokens a full bucket holds.
+        per_s: tokens earned back per second.
+        max_hosts: buckets remembered; the least recently used are forgotten (refilled) beyond it.
     """
 
     __slots__ = ("_buckets", "burst", "max_hosts", "per_s")
 
-    def __init__(self, *, burst: int = 20, per_s: float = 5.0, max_hosts: int = 4096) -> None:
+    def __init__(self, *, burst: int, per_s: float, max_hosts: int = 4096) -> None:
         if burst < 1 or per_s <= 0 or max_hosts < 1:
             raise ValueError("burst and max_hosts must be >= 1, per_s positive")
         self.burst = burst
@@ -209,21 +237,48 @@ class AuthThrottle:
         self.max_hosts = max_hosts
         self._buckets: collections.OrderedDict[str, tuple[float, float]] = collections.OrderedDict()
 
-    def _tokens(self, host: str, now: float) -> float:
-        entry = self._buckets.get(host)
+    def tokens(self, key: str, now: float) -> float:
+        """Tokens in ``key``'s bucket at ``now`` (s)."""
+        entry = self._buckets.get(key)
         if entry is None:
             return float(self.burst)
         tokens, at = entry
         return min(float(self.burst), tokens + (now - at) * self.per_s)
 
+    def spend(self, key: str, now: float) -> None:
+        """Take a token from ``key``'s bucket (none left: it stays empty)."""
+        self._buckets[key] = (max(0.0, self.tokens(key, now) - 1.0), now)
+        self._buckets.move_to_end(key)
+        while len(self._buckets) > self.max_hosts:
+            self._buckets.popitem(last=False)
+
+    def take(self, key: str, now: float) -> bool:
+        """Take a token if there is one; return whether there was."""
+        if key in self._buckets and self.tokens(key, now) < 1.0:
+            return False
+        self.spend(key, now)
+        return True
+
+
+class AuthThrottle(TokenBuckets):
+    """Failed logins per address (see the module docstring): each failure spends a token; an
+    address whose bucket is empty is throttled.
+
+    Args:
+        burst: failures an address may have in a row before it is throttled.
+        per_s: failures per second an address earns back.
+        max_hosts: addresses remembered; the least recently failing are forgotten beyond it.
+    """
+
+    __slots__ = ()
+
+    def __init__(self, *, burst: int = 20, per_s: float = 5.0, max_hosts: int = 4096) -> None:
+        super().__init__(burst=burst, per_s=per_s, max_hosts=max_hosts)
+
     def throttled(self, host: str, now: float) -> bool:
         """Whether a new connection from ``host`` should be refused at ``now`` (s)."""
-        return host in self._buckets and self._tokens(host, now) < 1.0
+        return host in self._buckets and self.tokens(host, now) < 1.0
 
     def failed(self, host: str, now: float) -> None:
         """A login from ``host`` failed at ``now`` (s)."""
-        tokens = max(0.0, self._tokens(host, now) - 1.0)
-        self._buckets[host] = (tokens, now)
-        self._buckets.move_to_end(host)
-        while len(self._buckets) > self.max_hosts:
-            self._buckets.popitem(last=False)
+        self.spend(host, now)

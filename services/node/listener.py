@@ -7,7 +7,8 @@ that each connection passes the node's :class:`~services.node.guard.ConnectionGu
 only unauthenticated peers:
 
 * an address throttled for failed logins has its new connections closed at once (a ``bye`` with
-  reason ``auth_throttled`` on plain TCP), before any handshake work;
+  reason ``auth_throttled`` on plain TCP), before any handshake work, and so has an address
+  opening connections faster than its rate (``bye{"overloaded"}``);
 * an accepted connection may push out the oldest pending ones (the guard's caps);
 * if ``accept`` fails for want of descriptors (``EMFILE``, ``ENFILE``, ``ENOBUFS``, ``ENOMEM``),
   the oldest pending connection is closed to make room; if none is pending, a spare descriptor
@@ -39,9 +40,10 @@ __all__ = ["Listener"]
 log = logging.getLogger("petrobot.node")
 
 _OUT_OF_FDS: Final = frozenset({errno.EMFILE, errno.ENFILE, errno.ENOBUFS, errno.ENOMEM})
-_ACCEPTS_PER_WAKEUP: Final = 64
+_ACCEPTS_PER_WAKEUP: Final = 128  # refusals are cheap; admissions are rate-limited per address
 _BACKLOG: Final = 1024
 _THROTTLED_BYE: Final = encode_frame(Bye(reason="auth_throttled"))
+_OVERLOADED_BYE: Final = encode_frame(Bye(reason="overloaded"))
 
 
 class Listener:
@@ -121,7 +123,15 @@ class Listener:
             host = addr[0]
             now = loop.time()
             if self.throttle.throttled(host, now):
-                self._refuse(sock, host)
+                self._limited.log(logging.WARNING, ("throttled", host), "refused a connection from %s: "
+                                  "too many failed logins from that address", host)
+                self._refuse(sock, _THROTTLED_BYE)
+                continue
+            if not self.guard.may_accept(host, now):
+                self._limited.log(logging.WARNING, ("accept rate", host), "refused a connection from %s: "
+                                  "more than %g new connections a second from that address", host,
+                                  self.guard.caps.accepts_per_s)
+                self._refuse(sock, _OVERLOADED_BYE)
                 continue
             peer = self._make_peer(host, now)
             for old in self.guard.accept(peer, host, now):
@@ -147,13 +157,11 @@ class Listener:
             peer.closed = True
             peer.node._gone(peer)
 
-    def _refuse(self, sock: socket.socket, host: str) -> None:
-        self._limited.log(logging.WARNING, ("throttled", host),
-                          "refused a connection from %s: too many failed logins from that address", host)
+    def _refuse(self, sock: socket.socket, bye: bytes) -> None:
         if self._ssl is None:
             sock.setblocking(False)
             try:
-                sock.send(_THROTTLED_BYE)
+                sock.send(bye)
             except OSError:
                 pass
         sock.close()

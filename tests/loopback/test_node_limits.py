@@ -157,7 +157,7 @@ async def test_a_peer_that_does_not_read_cannot_make_the_node_hold_its_answers()
         good = link(node)
         big = {"blob": b"x" * (128 * 1024)}
         assert (await good.call("echo", big, call_id="big")).status == "success"
-        conn, reader, writer = await logged_in(node)
+        conn, _reader, writer = await logged_in(node)
         conn.send(Call(id="slow-feedback", action="wait", params={"seconds": 1.0, "step": 0.01}))
         for _ in range(2000):  # 2000 answers of 128 KiB asked for in one write, none read
             conn.send(Call(id="big", action="echo", params=big))
@@ -178,7 +178,7 @@ async def test_a_peer_that_does_not_read_cannot_make_the_node_hold_its_answers()
 
 async def test_subscriptions_are_capped_per_connection_and_forgotten_when_it_closes() -> None:
     async with running_node() as node:
-        conn, reader, writer = await logged_in(node)
+        conn, _reader, writer = await logged_in(node)
         for i in range(300):
             conn.send(Subscribe(topic=f"topic-{i}"))
         conn.send(Subscribe(topic="t" * 300))

@@ -23,7 +23,10 @@ from services.wire import client_context, server_context
 PSK = '[tls]\nmode = "psk"\n'
 
 
-def psk_link(node: Node, key: bytes = KEY, tls: TlsSettings | None = TlsSettings(mode="psk")) -> NodeLink:
+PSK_TLS = TlsSettings(mode="psk")
+
+
+def psk_link(node: Node, key: bytes = KEY, tls: TlsSettings | None = PSK_TLS) -> NodeLink:
     return NodeLink("alpha", (node.host, node.port), key, connect_timeout_s=2.0, tls=tls)
 
 

@@ -8,7 +8,14 @@ from pathlib import Path
 
 import pytest
 
-from services.keys import MIN_KEY_BYTES, SharedKeyError, check_key, decode_key, load_key, load_keys
+from services.keys import (
+    MIN_KEY_BYTES,
+    SharedKeyError,
+    check_key,
+    decode_key,
+    load_key,
+    load_keys,
+)
 
 PASSPHRASE = "correct horse battery staple"
 

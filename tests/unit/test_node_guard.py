@@ -20,7 +20,17 @@ def test_the_oldest_pending_connection_of_an_address_makes_room_for_a_new_one() 
     assert g.pending == 3
 
 
-def test_the_oldest_pending_connection_overall_makes_room_at_the_total_cap() -> None:
+def test_at_the_total_cap_the_address_holding_most_pending_connections_makes_room() -> None:
+    g = guard(max_pending=4, max_pending_per_host=4)
+    g.accept("legit", "10.0.0.1", 0.0)  # the oldest, but alone on its address
+    for i in range(3):
+        g.accept(f"flood{i}", "10.0.0.66", 1.0 + i)
+    assert g.accept("flood3", "10.0.0.66", 5.0) == ["flood0"]
+    assert g.accept("other", "10.0.0.77", 6.0) == ["flood1"]
+    assert g.oldest_pending() == "legit"
+
+
+def test_among_addresses_holding_as_many_the_first_listed_makes_room() -> None:
     g = guard(max_pending=3, max_pending_per_host=3)
     for i, host in enumerate(["h1", "h2", "h3"]):
         g.accept(f"c{i}", host, float(i))
@@ -119,3 +129,12 @@ def test_the_throttle_remembers_a_bounded_number_of_addresses() -> None:
         t.failed(f"10.0.{i // 256}.{i % 256}", 0.0)
     assert len(t._buckets) == 100
     assert t.throttled("10.0.3.231", 0.0) and not t.throttled("10.0.0.0", 0.0)
+
+
+def test_new_connections_are_rate_limited_per_address() -> None:
+    g = guard(accepts_per_s=10.0, accept_burst=5)
+    assert [g.may_accept("h", 0.0) for _ in range(7)] == [True] * 5 + [False] * 2
+    assert g.may_accept("other", 0.0)
+    assert not g.may_accept("h", 0.05) and g.may_accept("h", 0.1)  # one earned back per 0.1 s
+    accepted = sum(g.may_accept("h", 1.0 + i / 1000) for i in range(10_000))  # 10 s of a tight loop
+    assert accepted <= 5 + 10 * 10 + 1

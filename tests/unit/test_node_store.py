@@ -9,7 +9,13 @@ from pathlib import Path
 import pytest
 
 from services.node.calls import Answer, CallTable, KeptResult, Start
-from services.node.store import DB_NAME, NODE_RESTARTED, SqliteResultCache, StateDirError, default_state_dir
+from services.node.store import (
+    DB_NAME,
+    NODE_RESTARTED,
+    SqliteResultCache,
+    StateDirError,
+    default_state_dir,
+)
 from services.protocol import Call, Result, encode_frame
 from services.results import ActionResult
 

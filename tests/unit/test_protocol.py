@@ -8,9 +8,8 @@ import struct
 import msgpack
 import pytest
 
-from services.errors import AuthenticationError, LocalProtocolError, RemoteProtocolError
 from services import protocol
-from services.results import ActionResult, Status
+from services.errors import AuthenticationError, LocalProtocolError, RemoteProtocolError
 from services.protocol import (
     PROTOCOL_VERSION,
     Accepted,
@@ -35,6 +34,7 @@ from services.protocol import (
     encode_frame,
     handshake_mac,
 )
+from services.results import ActionResult, Status
 
 KEY = b"k" * 32
 CLIENT_NONCE = bytes(range(16))

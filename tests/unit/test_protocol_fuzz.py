@@ -7,6 +7,7 @@ bad MAC); it never opens without a valid MAC and never buffers more than one cap
 
 from __future__ import annotations
 
+import itertools
 import struct
 from typing import Any
 
@@ -71,7 +72,7 @@ def test_the_frame_reader_returns_bodies_or_a_remote_error_and_holds_at_most_one
     reader = FrameReader(max_frame=256)
     points = sorted({0, len(data), *(c for c in cuts if c <= len(data))})
     try:
-        for a, b in zip(points, points[1:]):
+        for a, b in itertools.pairwise(points):
             reader.feed(data[a:b])
             while (body := reader.next_body()) is not None:
                 assert len(body) <= 256
