@@ -331,6 +331,9 @@ class NodeLink:
             wire = await self._open_wire()
         except _Unreachable as exc:
             return exc.result
+        if self.offered_actions is None:  # a node that does not list its actions predates query
+            return ActionResult.error(f"node {self.node} does not answer queries (an older node: restart it "
+                                      "with this version)")
         if call_id in self._pending:
             return ActionResult.error(f"call id {call_id} is already waiting on this link")
         fut: asyncio.Future[ActionResult] = asyncio.get_running_loop().create_future()

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import asyncio
 import errno
+import functools
 import logging
 import os
 import socket
@@ -44,6 +45,10 @@ _ACCEPTS_PER_WAKEUP: Final = 128  # refusals are cheap; admissions are rate-limi
 _BACKLOG: Final = 1024
 _THROTTLED_BYE: Final = encode_frame(Bye(reason="auth_throttled"))
 _OVERLOADED_BYE: Final = encode_frame(Bye(reason="overloaded"))
+
+
+def _same(peer: Peer) -> Peer:
+    return peer
 
 
 class Listener:
@@ -140,13 +145,13 @@ class Listener:
                                   old.peer_host)
                 old.evict("overloaded")
             sock.setblocking(False)
-            task = loop.create_task(loop.connect_accepted_socket(
-                lambda peer=peer: peer, sock, ssl=self._ssl,  # type: ignore[misc]
+            task: asyncio.Task[object] = loop.create_task(loop.connect_accepted_socket(
+                functools.partial(_same, peer), sock, ssl=self._ssl,
                 ssl_handshake_timeout=self.guard.caps.handshake_timeout_s if self._ssl else None))
             peer.connecting = task
-            task.add_done_callback(lambda t, peer=peer: self._connected(t, peer))
+            task.add_done_callback(functools.partial(self._connected, peer=peer))
 
-    def _connected(self, task: asyncio.Task[object], peer: Peer) -> None:
+    def _connected(self, task: asyncio.Task[object], *, peer: Peer) -> None:
         peer.connecting = None
         if task.cancelled():
             return

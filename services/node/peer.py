@@ -87,13 +87,13 @@ class Peer(FramedConnection):
     # ---- asyncio callbacks
 
     def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
         try:
             super().connection_made(transport)
         except ProtocolError as exc:
             log.warning("connection from %s refused: %s", self.peer_host, exc)
             transport.abort()
             return
-        assert isinstance(transport, asyncio.Transport)
         transport.set_write_buffer_limits(high=_WRITE_HIGH_WATER)
         if self.closed:  # evicted while its TLS handshake ran
             transport.abort()

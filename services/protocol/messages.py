@@ -366,7 +366,8 @@ def to_map(msg: Message) -> dict[str, Any]:
 
 def _result_from_map(obj: dict[str, Any]) -> Result:
     cid = obj.get("id")
-    _need(type(cid) is str, "result.id must be a string")
+    if type(cid) is not str:
+        raise RemoteProtocolError("result.id must be a string")
     _need("status" in obj, "result lacks field(s) status")
     kw = {k: obj[k] for k in _RESULT_FIELDS if k in obj and obj[k] is not None}
     _need(type(kw.get("status")) is str, "result.status must be a string")

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import asyncio
 import signal
-import time
 
 import pytest
 from conftest import Cluster
+from waiting import log_says
 
 pytestmark = pytest.mark.integration
 
@@ -38,15 +38,6 @@ node = "alpha"
 impl = "services.actions.demo:wait"
 unattended = true
 """
-
-
-async def log_says(cluster: Cluster, name: str, text: str, timeout_s: float = 20.0) -> None:
-    """Wait until node ``name``'s log contains ``text`` (fail after a generous ``timeout_s``)."""
-    end = time.monotonic() + timeout_s
-    while text not in cluster.log(name):
-        if time.monotonic() > end:
-            raise AssertionError(f"{text!r} not in the log of {name} after {timeout_s} s:\n{cluster.log(name)[-3000:]}")
-        await asyncio.sleep(0.05)
 
 
 async def freeze_during(cluster: Cluster, action: str, call_id: str) -> None:
