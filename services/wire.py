@@ -18,7 +18,8 @@ TLS (stdlib :mod:`ssl`), configured per node by :class:`services.location.TlsSet
   (``tls-unique``, RFC 5929) on both sides. The key exchange alone authenticates nobody; the MACs
   do, and since they cover the binding, a relay that runs one TLS session with the client and
   another with the node cannot pass them on: its two sessions have different bindings. Session
-  tickets and renegotiation are off.
+  tickets and renegotiation are off; OpenSSL negotiates encrypt-then-MAC (RFC 7366) and the
+  extended master secret (RFC 7627), which keeps ``tls-unique`` unique to one session.
 
 :func:`server_context` and :func:`client_context` build the contexts; ``None`` means plain TCP.
 """

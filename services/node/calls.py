@@ -108,6 +108,8 @@ class KeptResult(NamedTuple):
         result: the ``result`` message sent to the callers.
         size: length of its encoded frame, bytes.
         stored_at: when it was kept, seconds on the clock the caller passes to the cache.
+        frame: the encoded frame, when the caller has it (a store that writes frames uses it
+            instead of encoding the result again; the in-memory cache does not keep it).
     """
 
     call_id: str
@@ -115,6 +117,7 @@ class KeptResult(NamedTuple):
     result: Result
     size: int
     stored_at: float
+    frame: bytes | None = None
 
 
 class ResultCache(Protocol):
@@ -195,6 +198,8 @@ class MemoryResultCache:
         """Keep ``kept`` as the newest result, then drop the oldest while over ``max_bytes``."""
         results = self._kept
         cid = kept.call_id
+        if kept.frame is not None:
+            kept = kept._replace(frame=None)  # the Result is kept; its bytes would be counted twice
         if cid in results:
             self.nbytes -= results.pop(cid).size + self.entry_overhead
         results[cid] = kept
@@ -446,19 +451,20 @@ class CallTable(Generic[W]):
                 due.append(running)
         return due
 
-    def finish(self, result: Result, *, size: int, now: float) -> RunningCall[W]:
+    def finish(self, result: Result, *, size: int, now: float, frame: bytes | None = None) -> RunningCall[W]:
         """End the running call ``result.id``: keep ``result`` and return the call (its waiters).
 
         Args:
             result: the ``result`` message sent to the waiters.
             size: length of its encoded frame, bytes.
             now: the time, seconds on the cache's clock.
+            frame: the encoded frame, if the caller has it.
 
         Raises:
             KeyError: ``result.id`` is not running.
         """
         running = self._running.pop(result.id)
-        self.cache.put(KeptResult(result.id, running.call.action, result, size, now))
+        self.cache.put(KeptResult(result.id, running.call.action, result, size, now, frame))
         return running
 
     def expire(self, now: float) -> int:

@@ -149,6 +149,9 @@ class Peer(FramedConnection):
                                        "bad frame from %r: %s", self, shown(str(exc), 200))
                 self.close(f"protocol_error: {shown(str(exc), 200)}")
             return
+        finally:
+            if self.node._durable:
+                self.node.commit()  # the calls started by this read are on disk before they run
         self._schedule_flush()
 
     def _block(self) -> None:

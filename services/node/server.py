@@ -20,8 +20,9 @@ What the shell adds:
   ``error`` and reason ``"deadline"``; a ``cancel`` cuts it off with reason ``"cancelled"``; a call
   nobody has waited for during ``peer_timeout_s`` with ``"caller_gone"`` (unless its action is
   unattended); stopping the node with ``"node shutdown"``;
-* with a durable store, a call's start is committed before its action runs and its result before
-  it is sent (one commit per event-loop iteration for all the calls of that iteration);
+* with a durable store, a call's start is committed before its action runs (at the end of the read
+  that brought the call: its task starts on the next loop iteration) and its result before it is
+  sent (one commit per loop iteration for all the calls that finished in it);
 * a peer is local when its address is one of this host's own addresses
   (:mod:`services.node.locality`);
 * an action that raises gives status ``error`` with the exception text; the node keeps running;
@@ -198,7 +199,8 @@ class Node:
             max_in_flight=self.max_in_flight, cache=results,
         )
         self._tasks: dict[str, asyncio.Task[None]] = {}
-        self._commit_waiters: list[asyncio.Future[None]] = []
+        self._unsent: list[tuple[RunningCall[Peer], bytes]] = []  # results waiting for the next commit
+        self._commit_scheduled = False
         self._fanout: Fanout[Peer] = Fanout(backlog=event_backlog, max_topics=max_topics,
                                             max_topic_bytes=max_topic_bytes)
         self._guard: ConnectionGuard[Peer] = ConnectionGuard(caps)
@@ -294,6 +296,8 @@ class Node:
             t.cancel("node shutdown")
         if tasks:
             await asyncio.wait(tasks, timeout=2.0)
+        if self._durable:
+            self.commit()  # the results of the calls just cancelled, before the peers go
         for peer in list(self._peers):
             peer.close("shutdown")
         for link in self._links.values():
@@ -352,6 +356,7 @@ class Node:
         if not self._guard.authenticate(peer):
             self._limited.log(logging.WARNING, ("open cap", peer.peer_host),
                               "refused %r: too many connections (%d open)", peer, self._guard.open)
+            peer.conn.data_to_send()  # the welcome the connection queued is not sent: only the bye
             peer.close("overloaded")
             return
         peer.authenticated = True
@@ -430,23 +435,22 @@ class Node:
             task.cancel(reason)
             log.info("call %s: %s", shown(cid, 64), "cancel requested" if reason == "cancelled" else reason)
 
-    def _committed(self) -> asyncio.Future[None]:
-        """A future done once everything begun or kept so far is durable (one commit per loop iteration)."""
-        fut: asyncio.Future[None] = self._loop.create_future()
-        self._commit_waiters.append(fut)
-        if len(self._commit_waiters) == 1:
-            self._loop.call_soon(self._commit)
-        return fut
+    def commit(self) -> None:
+        """Make every start and result so far durable, then send the results that waited for it.
 
-    def _commit(self) -> None:
-        waiters, self._commit_waiters = self._commit_waiters, []
+        Called at the end of each read from a peer (the calls it started begin on the next loop
+        iteration, after this), and once per loop iteration in which calls finished.
+        """
+        self._commit_scheduled = False
         try:
             self._calls.cache.flush()
         except Exception as exc:  # noqa: BLE001 - a failing disk must not stop the calls
             self._limited.log(logging.ERROR, "store", "cannot write the result store: %s", exc)
-        for fut in waiters:
-            if not fut.done():
-                fut.set_result(None)
+        unsent, self._unsent = self._unsent, []
+        for rec, frame in unsent:
+            for peer in rec.waiters:
+                if peer.open:
+                    peer.send_frame(frame)
 
     async def _run(self, rec: RunningCall[Peer], run: ActionRun, defaults: Any, peer: Peer) -> None:
         call = rec.call
@@ -465,8 +469,6 @@ class Node:
         t0 = time.perf_counter()
         c0 = time.process_time()
         try:
-            if self._durable:
-                await self._committed()  # the start is on disk before the action does anything
             if deadline is None:
                 out = await run(params, ctx)
             else:
@@ -485,10 +487,11 @@ class Node:
             record = ActionResult.error(f"{exc.__class__.__name__}: {exc}")
             log.warning("call %s %s raised %s", shown(call.id, 64), call.action, shown(record.reason, 200))
         record = replace(record, wall_s=time.perf_counter() - t0, cpu_s=max(0.0, time.process_time() - c0))
-        await self._finish(rec, Result(id=call.id, result=record), info)
+        self._finish(rec, Result(id=call.id, result=record), info)
 
-    async def _finish(self, rec: RunningCall[Peer], result: Result, info: bool) -> None:
-        """Keep ``result`` (charged its frame length), make it durable, then send it to every waiter still connected."""
+    def _finish(self, rec: RunningCall[Peer], result: Result, info: bool) -> None:
+        """Keep ``result`` (charged its frame length) and send it to every waiter still connected,
+        after the next commit if results are durable."""
         cid = result.id
         self._tasks.pop(cid, None)
         try:
@@ -496,12 +499,17 @@ class Node:
         except ProtocolError as exc:  # value not msgpack-able, too big...
             result = _unsendable(result, exc)
             frame = encode_frame(result, self.max_frame)
-        self._calls.finish(result, size=len(frame), now=time.time())
-        if self._durable:
-            await asyncio.shield(self._committed())
-        for peer in rec.waiters:
-            if peer.open:
-                peer.send_frame(frame)
+        durable = self._durable
+        self._calls.finish(result, size=len(frame), now=time.time(), frame=frame if durable else None)
+        if durable:
+            self._unsent.append((rec, frame))
+            if not self._commit_scheduled:
+                self._commit_scheduled = True
+                self._loop.call_soon(self.commit)
+        else:
+            for peer in rec.waiters:
+                if peer.open:
+                    peer.send_frame(frame)
         if info:
             r = result.result
             log.info("result %s %s: %s%s (%.3f s)", shown(cid, 64), shown(rec.call.action, 64), r.status.value,

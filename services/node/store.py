@@ -200,16 +200,17 @@ class SqliteResultCache:
         return KeptResult(call_id, action, msg, size, at)
 
     def put(self, kept: KeptResult) -> None:
-        """Keep ``kept`` (replacing a result kept under the same id); written at the next :meth:`flush`."""
-        cid = kept.call_id
-        old = self._kept.get(cid)
+        """Keep ``kept``; written at the next :meth:`flush`.
+
+        A result kept again under the same id replaces the first; its first charge is then only
+        dropped when it was not yet flushed (a node never keeps an id twice: a repeated id is
+        answered from the store), so the charge can only be too high, which drops old results a
+        little early, never too late.
+        """
+        old = self._kept.get(kept.call_id)
         if old is not None:
             self.nbytes -= old.size + self.entry_overhead
-        else:
-            row = self._db.execute("SELECT size FROM calls WHERE call_id = ? AND frame IS NOT NULL", (cid,)).fetchone()
-            if row is not None:
-                self.nbytes -= row[0] + self.entry_overhead
-        self._kept[cid] = kept
+        self._kept[kept.call_id] = kept
         self.nbytes += kept.size + self.entry_overhead
 
     def begin(self, call_id: str, action: str, now: float) -> None:
@@ -226,7 +227,8 @@ class SqliteResultCache:
         if not self._begun and not self._kept:
             return
         db = self._db
-        rows = [(k.call_id, k.action, encode_frame(k.result), k.size, k.stored_at) for k in self._kept.values()]
+        rows = [(k.call_id, k.action, k.frame if k.frame is not None else encode_frame(k.result), k.size, k.stored_at)
+                for k in self._kept.values()]
         db.execute("BEGIN")
         try:
             if self._begun:

@@ -233,3 +233,23 @@ async def test_a_previous_key_is_accepted_during_a_rotation_with_a_warning(caplo
         for c in (legacy, current, stranger):
             await c.close()
     assert "authenticated with a previous key" in caplog.text
+
+
+async def test_a_handshake_over_the_open_connection_cap_gets_only_a_bye() -> None:
+    caps = Caps(max_open=2, max_open_per_host=2)
+    async with running_node(caps=caps) as node:
+        held = [link(node), link(node)]
+        for c in held:
+            assert (await c.call("echo")).status == "success"
+        conn = Connection(Role.CLIENT, KEY, name="third")
+        reader, writer = await raw(node)
+        got = []
+        while conn.state.name != "CLOSED":
+            data = await asyncio.wait_for(reader.read(65536), 10)
+            conn.receive_data(data)
+            got.extend(conn.messages())
+            writer.write(conn.data_to_send())
+        assert [type(m).__name__ for m in got] == ["Hello", "Bye"] and got[-1].reason == "overloaded"
+        writer.close()
+        for c in held:
+            await c.close()
