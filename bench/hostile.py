@@ -17,7 +17,9 @@ then, in this one run:
    peers that connect and then send one byte a second, and connect again when the node drops
    them (``--reconnect-s`` later, default 1 s; 0 for a tight loop); from 127.0.0.2–127.0.0.9
    (other "hosts"), or half of them from the client's own 127.0.0.1 with ``--same-host``. The
-   flood runs in two processes of its own. Meanwhile a legitimate client (127.0.0.1) repeatedly opens a connection,
+   flood runs in two processes of its own at the lowest CPU priority (nice 19): on a network the
+   attackers' CPU would not be the node's. ``--flood 1`` gives the baseline of the same
+   measurement without a flood. Meanwhile a legitimate client (127.0.0.1) repeatedly opens a connection,
    authenticates and makes one call (its latency: ``legit_*``), and makes calls over a link it
    keeps open (``established_*``).
 
@@ -344,11 +346,14 @@ FLOOD_CPUS: set[int] | None = None
 NODE_CPUS: set[int] | None = None
 
 
-def _pin(cpus: set[int] | None) -> Any:
-    """A ``preexec_fn`` that pins the child to ``cpus`` (``None``: leave it free)."""
-    if cpus is None:
-        return None
-    return lambda: os.sched_setaffinity(0, cpus)
+def _flood_process(cpus: set[int] | None) -> Any:
+    """A ``preexec_fn`` for a flood process: the lowest CPU priority (on a network, the attackers'
+    CPU is not the node's), pinned to ``cpus`` if given."""
+    def setup() -> None:
+        os.nice(19)
+        if cpus is not None:
+            os.sched_setaffinity(0, cpus)
+    return setup
 
 
 async def flood(port: int, conns: int, seconds: float, same_host: bool) -> dict[str, Any]:
@@ -360,7 +365,7 @@ async def flood(port: int, conns: int, seconds: float, same_host: bool) -> dict[
         mine = ",".join(sources[w::FLOOD_WORKERS])
         workers.append(await asyncio.create_subprocess_exec(
             sys.executable, __file__, "--flood-worker", f"{port}:{seconds + 2.0}:{RECONNECT_S}:{mine}",
-            stdout=asyncio.subprocess.PIPE, preexec_fn=_pin(FLOOD_CPUS)))
+            stdout=asyncio.subprocess.PIPE, preexec_fn=_flood_process(FLOOD_CPUS)))
     await asyncio.sleep(2.0)  # the flood builds up
     keeper = NodeLink("bench", ("127.0.0.1", port), KEY, name="legit-established", connect_timeout_s=5.0)
     await keeper.connect()

@@ -22,7 +22,8 @@ What the shell adds:
   unattended); stopping the node with ``"node shutdown"``;
 * with a durable store, a call's start is committed before its action runs (at the end of the read
   that brought the call: its task starts on the next loop iteration) and its result before it is
-  sent (one commit per loop iteration for all the calls that finished in it);
+  sent (at once when no other call runs, else once per loop iteration for all the calls that
+  finished in it);
 * a peer is local when its address is one of this host's own addresses
   (:mod:`services.node.locality`);
 * an action that raises gives status ``error`` with the exception text; the node keeps running;
@@ -213,6 +214,7 @@ class Node:
         self.watch = LocationWatch(location.path, location_digest)
         self._links: dict[str, NodeLink] = {}
         self._reaper: asyncio.Task[None] | None = None
+        self._checkpointing: asyncio.Task[None] | None = None  # the store's checkpoint, in a thread
         self._stopping = False
         self.context: NodeContext | None = None
 
@@ -312,6 +314,8 @@ class Node:
                 await drv.teardown()
             except Exception:
                 log.exception("teardown of driver %s failed", drv.name)
+        if self._checkpointing is not None:
+            await asyncio.wait([self._checkpointing])  # its thread uses the store's file
         close = getattr(self._calls.cache, "close", None)
         if close is not None:
             try:
@@ -503,7 +507,9 @@ class Node:
         self._calls.finish(result, size=len(frame), now=time.time(), frame=frame if durable else None)
         if durable:
             self._unsent.append((rec, frame))
-            if not self._commit_scheduled:
+            if not self._tasks:  # no other call runs: nothing to wait for to share the commit
+                self.commit()
+            elif not self._commit_scheduled:
                 self._commit_scheduled = True
                 self._loop.call_soon(self.commit)
         else:
@@ -531,6 +537,7 @@ class Node:
         """Every ``peer_timeout_s / 4`` (at most 0.5 s): drop silent peers and overdue handshakes,
         cancel orphaned calls past their grace period, expire kept results."""
         period = min(0.5, self.peer_timeout_s / 4)
+        checkpoint: Callable[[], None] | None = getattr(self._calls.cache, "checkpoint", None)
         while True:
             before = self._loop.time()
             await asyncio.sleep(period)
@@ -539,6 +546,11 @@ class Node:
                 self._calls.expire(time.time())
             except Exception as exc:  # noqa: BLE001 - keep reaping whatever the store does
                 self._limited.log(logging.ERROR, "store", "cannot expire results: %s", exc)
+            previous = self._checkpointing
+            if checkpoint is not None and (previous is None or previous.done()):
+                if previous is not None and not previous.cancelled() and previous.exception():
+                    self._limited.log(logging.ERROR, "store", "checkpoint failed: %s", previous.exception())
+                self._checkpointing = self._loop.create_task(asyncio.to_thread(checkpoint))
             if now - before > 2 * period:
                 continue  # our loop was blocked: peers' frames may be waiting unread
             for peer in list(self._guard.overdue(now)):
