@@ -284,10 +284,12 @@ class NodeLink:
             asyncio.CancelledError: the awaiting task was cancelled (a cancel is sent to the node).
         """
         cid = call_id if call_id is not None else self.new_call_id()
-        try:
-            wire = await self._open_wire()
-        except _Unreachable as exc:
-            return exc.result
+        wire = self._wire
+        if wire is None or wire.closed or wire.conn.state is not State.OPEN:
+            try:
+                wire = await self._open_wire()
+            except _Unreachable as exc:
+                return exc.result
         if cid in self._pending:
             return ActionResult.error(f"call id {cid} is already waiting on this link")
         loop = asyncio.get_running_loop()

@@ -12,6 +12,7 @@ are in, before any of the body is buffered: a peer cannot make the reader hold m
 
 from __future__ import annotations
 
+import re
 import socket
 from struct import Struct
 from typing import Any, Final
@@ -63,7 +64,7 @@ def _no_ext(code: int, data: bytes) -> Any:
 # The timestamp extension (type -1) is decoded by msgpack itself, without the ext hook; its three
 # encodings start with these bytes. They may also occur inside strings or binary data: only a body
 # holding one is searched for a decoded Timestamp.
-_TIMESTAMP_MARKS: Final = (b"\xd6\xff", b"\xd7\xff", b"\xc7\x0c\xff")
+_TIMESTAMP_MARKS: Final = re.compile(b"\xd6\xff|\xd7\xff|\xc7\x0c\xff")
 
 
 def _has_timestamp(obj: Any) -> bool:
@@ -96,7 +97,7 @@ def unpack_map(body: bytes) -> dict[str, Any]:
         raise RemoteProtocolError(f"bad msgpack body: {exc.__class__.__name__}: {str(exc)[:200]}") from None
     if type(obj) is not dict:
         raise RemoteProtocolError("frame body is not a msgpack map")
-    if any(mark in body for mark in _TIMESTAMP_MARKS) and _has_timestamp(obj):
+    if b"\xff" in body and _TIMESTAMP_MARKS.search(body) and _has_timestamp(obj):
         raise RemoteProtocolError("bad msgpack body: extension type -1 (timestamp) is not used by the protocol")
     return obj
 
