@@ -62,6 +62,7 @@ class Peer(FramedConnection):
         authenticated: the handshake succeeded.
         closed: ``bye`` was sent or received, or the connection is gone.
         dropped_feedback: feedback messages not sent because the peer was not reading.
+        forgotten: the node has let go of this connection (its caps, subscriptions and calls).
         connecting: the task setting up the transport (TLS handshake), until it is done.
     """
 
@@ -79,7 +80,7 @@ class Peer(FramedConnection):
         self.connecting: asyncio.Task[object] | None = None
         self._writing_paused = False
         self._reading_blocked = False
-        self._gone = False
+        self.forgotten = False
 
     def __repr__(self) -> str:
         return f"{shown(self.conn.peer, 40) if self.conn.peer is not None else '?'}@{self.peer_host}"

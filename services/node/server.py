@@ -378,9 +378,9 @@ class Node:
 
     def _gone(self, peer: Peer) -> None:
         """``peer`` closed or went away: forget it (once), and orphan the calls it alone waited for."""
-        if peer._gone:
+        if peer.forgotten:
             return
-        peer._gone = True
+        peer.forgotten = True
         self._guard.close(peer)
         self._peers.discard(peer)
         self._fanout.remove(peer)
