@@ -13,14 +13,14 @@ driver had its own module).
   ``frames`` in the value). With param ``spec_m`` the result is judged against a specification
   (see *Location within specification* below); without it any detection on the table is a success.
 * :class:`Predict` (primitive task *predict*): tracks the ball frame by frame, predicts where and
-  when it crosses the catch line, and streams each prediction as a set point (table frame, as
-  :class:`services.stream.SetPoint` specifies; the motion node turns it into its base frame) to
-  the motion node over its own TCP connection (params ``stream_host``, ``stream_port``; see
-  :mod:`services.stream`). ``success`` once the ball has crossed, with the last prediction;
-  ``failure`` when the ball stops or vanishes before the line; ``error`` when the camera or the
-  stream is lost. If the node hosts no camera driver (the action was moved to another node in
-  services.toml), it opens its own connection to the camera server (params ``camera_host``,
-  ``camera_port``).
+  when it crosses the catch line, and publishes each prediction as a set point (table frame, as
+  :class:`services.stream.SetPoint` specifies; the motion node turns it into its base frame) on
+  the node's event topic ``setpoints`` (param ``topic``), to which the motion node subscribes
+  through its authenticated node link (:mod:`services.stream`). ``success`` once the ball has
+  crossed, with the last prediction; ``failure`` when the ball stops or vanishes before the line;
+  ``error`` when the camera is lost. If the node hosts no camera driver (the action was moved to
+  another node in services.toml), it opens its own connection to the camera server (params
+  ``camera_host``, ``camera_port``).
 
 Location within specification. The node has no ground truth, so a location is judged by its
 consistency with the ball's track over the next frames: after a detection at time t, the action
@@ -41,7 +41,6 @@ map (:class:`services.actions.camera.VisionConfig`).
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import math
 import time
 from typing import Any
@@ -60,7 +59,7 @@ from services.actions.camera import (
 from services.devices.framegrabber import Frame
 from services.errors import ActionError
 from services.results import ActionResult, Status
-from services.stream import SetPointSender
+from services.stream import SETPOINT_TOPIC, SetPoint
 from services.vision import (
     BallTracker,
     Detection,
@@ -79,10 +78,6 @@ __all__ = [
     "Predict",
     "track_residual",
 ]
-
-DEFAULT_STREAM_PORT = 7220
-"""TCP port of the motion node's set-point receiver when :class:`Predict`'s params name none."""
-
 
 VERIFY_FRAMES = 10
 """Default number of frames after a detection used to judge it against ``spec_m``."""
@@ -187,7 +182,8 @@ class _Locate(PrimitiveAction):
                 return ActionResult(status=Status.SUCCESS, value=value, cost=cpu)
         except CameraLostError as exc:
             return ActionResult.error(str(exc), outcome="camera_lost", cost=cpu)
-        return ActionResult(status=Status.FAILURE, outcome="no_ball", value={"frames": frames_used}, cost=cpu)
+        return ActionResult(status=Status.FAILURE, outcome="no_ball", cost=cpu,
+                            value={"frames": frames_used, "reason": f"no ball on the table within {timeout:g} s"})
 
 
 class LocateThreshold(_Locate):
@@ -245,20 +241,15 @@ class Predict(PrimitiveAction):
                 return ActionResult.error(str(exc), outcome="camera_lost")
             link, config = own_link, VisionConfig.from_info(own_link.info)
         try:
-            return await self._track(params, link, config)
+            return await self._track(params, ctx, link, config)
         finally:
             if own_link is not None:
                 await own_link.close()
 
     async def _track(
-        self, params: dict[str, Any], link: CameraLink, config: VisionConfig
+        self, params: dict[str, Any], ctx: CallContext, link: CameraLink, config: VisionConfig
     ) -> ActionResult:
-        host = str(params.get("stream_host", "127.0.0.1"))
-        port = int(params.get("stream_port", DEFAULT_STREAM_PORT))
-        try:
-            sender = await asyncio.to_thread(SetPointSender, host, port)
-        except OSError as exc:
-            return ActionResult.error(f"set-point receiver {host}:{port}: {exc}", outcome="stream_lost")
+        topic = str(params.get("topic", SETPOINT_TOPIC))
         tracker = BallTracker(config.homography, RollingPredictor(config.model, catch_x=config.catch_x))
         timeout = float(params.get("timeout_s", 10.0))
         loop = asyncio.get_running_loop()
@@ -278,9 +269,10 @@ class Predict(PrimitiveAction):
                 pred = tracker.observe(det, frame.t)
                 cpu += time.thread_time() - c0
                 if pred is not None:
-                    sender.send(t_frame=frame.t, t_capture=frame.t_wall, x=pred.x, y=pred.y,
-                                t=pred.t, vx=pred.vx, vy=pred.vy, sigma_y=pred.sigma_y,
-                                sigma_t=pred.sigma_t)
+                    sp = SetPoint(seq=sent, t_frame=frame.t, t_capture=frame.t_wall, t_sent=time.time(),
+                                  x=pred.x, y=pred.y, t=pred.t, vx=pred.vx, vy=pred.vy,
+                                  sigma_y=pred.sigma_y, sigma_t=pred.sigma_t)
+                    ctx.publish(topic, sp.to_dict())
                     sent += 1
                     last = pred
                     if first is None:
@@ -304,8 +296,3 @@ class Predict(PrimitiveAction):
                                          value={"setpoints": sent, "frames": frames}, cost=cpu)
         except CameraLostError as exc:
             return ActionResult.error(str(exc), outcome="camera_lost", cost=cpu)
-        except OSError as exc:
-            return ActionResult.error(str(exc), outcome="stream_lost", cost=cpu)
-        finally:
-            with contextlib.suppress(OSError):
-                sender.close()
