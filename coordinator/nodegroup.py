@@ -30,6 +30,16 @@ _POLL_S = 0.05
 """How often a node's log file is read for its "listening" line, s."""
 
 
+def _read_from(path: Path, pos: int) -> bytes:
+    """The bytes of ``path`` from offset ``pos`` on (empty if it cannot be read)."""
+    try:
+        with path.open("rb") as fh:
+            fh.seek(pos)
+            return fh.read()
+    except OSError:
+        return b""
+
+
 class NodeGroup:
     """Node subprocesses on this machine, started and stopped together.
 
@@ -108,9 +118,12 @@ class NodeGroup:
             path = self.log_path(name)
             loop = asyncio.get_running_loop()
             if path is not None:
-                with open(path, "wb") as fh:
+                fh = await asyncio.to_thread(path.open, "wb")
+                try:
                     proc = await asyncio.create_subprocess_exec(
                         *cmd, stdout=fh, stderr=asyncio.subprocess.STDOUT, start_new_session=True)
+                finally:
+                    fh.close()  # the node has its own copy of the descriptor
                 self._pumps.append(loop.create_task(self._follow(name, path, proc)))
             else:
                 proc = await asyncio.create_subprocess_exec(
@@ -150,12 +163,7 @@ class NodeGroup:
         partial = b""
         while True:
             exited = proc.returncode is not None
-            try:
-                with open(path, "rb") as fh:
-                    fh.seek(pos)
-                    chunk = fh.read()
-            except OSError:
-                chunk = b""
+            chunk = await asyncio.to_thread(_read_from, path, pos)
             pos += len(chunk)
             lines = (partial + chunk).split(b"\n")
             partial = lines.pop()

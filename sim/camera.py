@@ -31,10 +31,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from services.vision import Homography, Roi, fit_homography, locate_threshold
 from services.devices.framegrabber import MAX_HEADER, Frame
 from services.errors import ProtocolError
 from services.protocol.framing import pack_map, recv_frame, unpack_map
+from services.vision import Homography, Roi, fit_homography, locate_threshold
 
 __all__ = [
     "AnalyticRenderer",

@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 from typing import Any, Self
 
 from services.devices import cia402 as cf
-from sim import socketcand
 from services.robots import puma560
+from sim import socketcand
 
 __all__ = [
     "FOLLOWING_ERROR_LIMIT",

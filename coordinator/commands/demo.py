@@ -106,7 +106,7 @@ class SimWorld:
     """
 
     def __init__(self, args: list[str], log: Path | None = None) -> None:
-        self._log = open(log, "w") if log is not None else None  # closed by stop()
+        self._log = open(log, "w") if log is not None else None  # noqa: SIM115 (kept open for the process, closed by stop())
         self.proc = subprocess.Popen([sys.executable, "-m", "coordinator.commands.sim", "catching", *args],
                                      cwd=ROOT, stdout=subprocess.PIPE,
                                      stderr=self._log if self._log is not None else subprocess.DEVNULL, text=True)

@@ -84,7 +84,12 @@ from services.errors import ActionError, LocationError
 from services.results import ActionResult, Status
 from services.robots import motion_control as mc
 from services.robots.puma560 import UnreachableError
-from services.stream import SETPOINT_TOPIC, SetPoint, SetPointSubscription, StreamLostError
+from services.stream import (
+    SETPOINT_TOPIC,
+    SetPoint,
+    SetPointSubscription,
+    StreamLostError,
+)
 
 __all__ = ["Catch", "MoveHome", "PumaDriver", "table_to_base"]
 
@@ -207,8 +212,9 @@ class PumaDriver(Driver):
 
         Connected with the control thread running and every drive operation enabled: nothing to
         do. A drive faulted or not enabled: pause the control thread, reset the fault and enable
-        the drives again (:meth:`PumaDrives.enable`), restart the servo where the arm is. No bus or
-        no control thread: reconnect and enable.
+        the drives again (:meth:`PumaDrives.enable`), restart the servo where the arm is. No bus, a
+        lost one (a heartbeat missing) or no control thread: reconnect (waiting up to
+        ``connect_timeout_s`` for the gateway) and enable, which resets faults too.
 
         Returns:
             What was recovered, in words (``None`` if nothing was wrong).
@@ -218,7 +224,9 @@ class PumaDriver(Driver):
                 each drive's state and fault cause).
         """
         drives = self.drives
-        if drives is not None and self.fault is None and self._thread is not None and self._thread.is_alive():
+        lost = drives.lost() if drives is not None else "not connected"
+        if drives is not None and lost is None and self.fault is None and self._thread is not None \
+                and self._thread.is_alive():
             faults = drives.faults()
             if not faults and drives.all_enabled():
                 return None
@@ -226,10 +234,13 @@ class PumaDriver(Driver):
             log.warning("recovering the PUMA drives (%s): fault reset and enable", what)
             await asyncio.to_thread(self._recover_drives)
             return f"fault reset and enable ({what})"
-        had = drives is not None
+        why = self.fault or lost
+        if drives is not None:
+            drives.mark_lost(why or "reconnecting")
+            log.warning("reconnecting the PUMA drives (%s)", why)
         await asyncio.to_thread(self._shutdown_drives)
         await asyncio.to_thread(self._start_drives)
-        return "bus reconnected" if had else None
+        return f"bus reconnected ({why})" if drives is not None else None
 
     def _start_drives(self) -> None:
         drives = PumaDrives(
@@ -299,6 +310,7 @@ class PumaDriver(Driver):
                 drives.send_targets(q)
             except BusError as exc:
                 self.fault = str(exc)
+                drives.mark_lost(str(exc))
                 log.error("PUMA control loop stopped: %s", exc)
                 return
 

@@ -57,8 +57,8 @@ import struct
 from dataclasses import dataclass, field
 
 __all__ = [
-    "CROSSFIRE_ID",
     "CONSUMER_HEARTBEAT_S",
+    "CROSSFIRE_ID",
     "CYCLE_S",
     "DRIVE_IDS",
     "EMCY_BASE",

@@ -28,8 +28,8 @@ import can
 import numpy as np
 from numpy.typing import NDArray
 
-from services.errors import ActionError
 from services.devices import cia402 as cf
+from services.errors import ActionError
 
 __all__ = ["BusError", "PumaDrives"]
 
@@ -161,25 +161,40 @@ class PumaDrives:
         """Call ``callback(blocked, t)`` from the receive thread on every crossfire report."""
         self._crossfire_callbacks.append(callback)
 
-    def check(self) -> None:
-        """Raise :class:`BusError` if the bus is lost, a heartbeat is missing, a drive faulted, or
-        (after :meth:`enable`) a drive is no longer operation enabled; the message says which."""
+    def lost(self) -> str | None:
+        """Why the bus counts as lost (closed, marked lost, a node's heartbeat missing), or ``None``."""
         if self._dead is not None:
-            raise BusError(self._dead)
+            return self._dead
         now = self._clock()
         with self._cond:
             beats = dict(self._heartbeats)
-            states = self._states_locked()
         for node in (*self.NODES, cf.CROSSFIRE_ID):
             seen = beats.get(node)
             last = seen[0] if seen else self._opened_at
             if now - last > self.heartbeat_timeout:
-                raise BusError(f"no heartbeat from CAN node {node} for {now - last:.2f} s: bus or drive lost")
+                return f"no heartbeat from CAN node {node} for {now - last:.2f} s: bus or drive lost"
+        return None
+
+    def check(self) -> None:
+        """Raise :class:`BusError` if the bus is lost, a heartbeat is missing, a drive faulted, or
+        (after :meth:`enable`) a drive is no longer operation enabled; the message says which."""
+        lost = self.lost()
+        if lost is not None:
+            raise BusError(lost)
+        with self._cond:
+            states = self._states_locked()
         for node, state in zip(self.NODES, states):
             if state in (cf.DriveState.FAULT, cf.DriveState.FAULT_REACTION_ACTIVE):
                 raise BusError(f"drive {node} is in FAULT ({self.fault_cause(node)})")
             if self._expect_enabled and state is not cf.DriveState.OPERATION_ENABLED:
                 raise BusError(f"drive {node} is '{state.value if state else 'silent'}', not operation enabled")
+
+    def mark_lost(self, reason: str) -> None:
+        """Declare the connection lost (e.g. the bus went silent): later sends and checks raise
+        :class:`BusError` with ``reason``, and :meth:`close` sends nothing more on it (frames
+        queued on a connection that comes back late could otherwise reach the drives after a
+        new connection has enabled them)."""
+        self._mark_dead(reason)
 
     def fault_cause(self, node: int) -> str:
         """What the latest EMCY of drive ``node`` said, in words ("unknown cause" without one)."""

@@ -96,7 +96,7 @@ class Up:
 
 def _petrobot(cluster: Cluster, cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run([sys.executable, "-m", "coordinator.cli", *args], cwd=cwd, env=cluster.env(),
-                          capture_output=True, text=True, timeout=90, stdin=subprocess.DEVNULL)
+                          capture_output=True, text=True, timeout=90, stdin=subprocess.DEVNULL, check=False)
 
 
 async def _call(cluster: Cluster, action: str, params: dict[str, Any]) -> Any:
@@ -106,7 +106,7 @@ async def _call(cluster: Cluster, action: str, params: dict[str, Any]) -> Any:
 
 def _node_pid(cluster: Cluster, name: str) -> int:
     found = subprocess.run(["pgrep", "-f", f"services.node {name} --services {cluster.services_path}"],
-                           capture_output=True, text=True)
+                           capture_output=True, text=True, check=False)
     pids = [int(p) for p in found.stdout.split()]
     assert len(pids) == 1, found
     return pids[0]

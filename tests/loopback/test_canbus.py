@@ -11,10 +11,10 @@ import pytest
 from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_message
 from puma_rig import SimRig
 
-from services.devices.drives import BusError, PumaDrives
 from services.devices import cia402 as cf
-from sim import socketcand
+from services.devices.drives import BusError, PumaDrives
 from services.robots import puma560 as P
+from sim import socketcand
 from sim.canbus import CanGateway
 
 # --- pure encoding -------------------------------------------------------------------------------
@@ -277,7 +277,7 @@ def _move_and_go_silent(rig, port, speed: float, cycles: int = 100) -> tuple[np.
 
 def test_a_drive_missing_a_few_targets_keeps_its_last_velocity_and_does_not_fault(rig):
     port = rig.drives.bus.connect()
-    q, _ = _move_and_go_silent(rig, port, speed=2.0)
+    _move_and_go_silent(rig, port, speed=2.0)
     before = rig.drives.positions()[3]
     rig.step(20)  # ten cycles without a target (fewer than TARGET_TIMEOUT_CYCLES)
     moved = rig.drives.positions()[3] - before
