@@ -146,14 +146,16 @@ class Lab:
         self._ok("-n", self.ns(a), "route", "del", "blackhole", f"{self.addr(b)}/32")
         self._ok("-n", self.ns(b), "route", "del", "blackhole", f"{self.addr(a)}/32")
 
-    def spawn(self, host: str, cmd: list[str], log: Path, *, pipe: bool = False) -> subprocess.Popen[str]:
-        """Start ``cmd`` in host ``host``'s namespace; stderr (and stdout unless ``pipe``) to ``log``."""
+    def spawn(self, host: str, cmd: list[str], log: Path, *, pipe: bool = False,
+              merge: bool = False) -> subprocess.Popen[str]:
+        """Start ``cmd`` in host ``host``'s namespace: stdout to a pipe (``pipe``) or to ``log``;
+        stderr to ``log``, or into stdout (``merge``)."""
         env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
         env.pop("PETROBOT_KEY", None)
         with open(log, "w") as fh:
             proc = subprocess.Popen(["ip", "netns", "exec", self.ns(host), *cmd], cwd=ROOT, env=env, text=True,
                                     stdout=subprocess.PIPE if pipe else fh,
-                                    stderr=fh if pipe else subprocess.STDOUT)
+                                    stderr=subprocess.STDOUT if merge or not pipe else fh)
         self.procs.append(proc)
         return proc
 
@@ -273,7 +275,7 @@ def test_catching_across_hosts_survives_cut_links_with_the_watchdogs_and_recover
     co = lab.spawn("co", [sys.executable, "-m", "coordinator.cli", "run", str(net), "--services", str(services),
                           "--journal", str(journal), "--key-file", str(key), "--lines", "--no-input",
                           "--seed", "3", "--max-seconds", "300"],
-                   tmp_path / "coordinator.err", pipe=True)
+                   tmp_path / "coordinator.log", pipe=True, merge=True)
     out = Lines(co)
 
     # run 1: the vision-motion link is cut while the arm servoes
