@@ -244,11 +244,17 @@ async def _foundation(args: argparse.Namespace) -> int:
     return 0 if summary.end_state == "dead" else 1
 
 
+def _terminate(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt  # SIGTERM stops the demo as Ctrl-C does: the sim and the nodes with it
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the chosen demonstration; 0 when the net ended dead, 1 otherwise, 2 on an error."""
     import asyncio
+    import signal
 
     demo = _catching if args.which == "catching" else _foundation
+    signal.signal(signal.SIGTERM, _terminate)
     try:
         return asyncio.run(demo(args))
     except PetrobotError as exc:

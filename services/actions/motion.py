@@ -31,7 +31,8 @@ services.toml (example)::
   table frame of the set points;
 * ``edge_x``, ``table_z``, ``rim_drop``, ``tilt_deg``, ``y_min``, ``y_max``: override
   :class:`services.robots.motion_control.CatchGeometry` (base frame);
-* ``heartbeat_timeout_s`` (0.5), ``connect_timeout_s`` (5.0).
+* ``heartbeat_timeout_s`` (0.5, bus time: a CAN node silent that long is lost), ``bus_silence_s``
+  (2.0, wall time: nothing at all on the bus that long and it is lost), ``connect_timeout_s`` (5.0).
 
 The driver owns a control thread that runs once per CAN SYNC (2 ms of simulated time): one
 :meth:`services.robots.motion_control.CatchServo.step` per cycle elapsed on the bus (at most
@@ -146,6 +147,7 @@ class PumaDriver(Driver):
             y_max=float(p.get("y_max", g.y_max)),
         )
         self.heartbeat_timeout = float(p.get("heartbeat_timeout_s", 0.5))
+        self.bus_silence = float(p.get("bus_silence_s", 2.0))
         self.connect_timeout = float(p.get("connect_timeout_s", 5.0))
         self.setpoints_from: str | None = str(p["setpoints_from"]) if "setpoints_from" in p else None
         self.setpoint_topic = str(p.get("setpoint_topic", SETPOINT_TOPIC))
@@ -244,7 +246,8 @@ class PumaDriver(Driver):
 
     def _start_drives(self) -> None:
         drives = PumaDrives(
-            self.can_host, self.can_port, self.channel, heartbeat_timeout=self.heartbeat_timeout
+            self.can_host, self.can_port, self.channel, heartbeat_timeout=self.heartbeat_timeout,
+            silence_timeout=self.bus_silence,
         )
         drives.open(timeout=self.connect_timeout)
         try:
@@ -297,7 +300,7 @@ class PumaDriver(Driver):
         t_prev: float | None = None
         while not self._stop.is_set():
             try:
-                t = drives.wait_sync(timeout=max(0.25, self.heartbeat_timeout))
+                t = drives.wait_sync(timeout=self.bus_silence)
                 # One servo step per SYNC cycle elapsed on the bus, so that the next target continues
                 # where the drives' extrapolation of the missing ones took the joints (bounded by
                 # the cycles a drive extrapolates before it faults).

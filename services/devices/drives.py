@@ -6,10 +6,14 @@ Talks to the bus through python-can's ``socketcand`` interface (the sim's gatewa
 
 A receive thread keeps the latest actual positions and statuswords (TPDO1), heartbeat times,
 the drives' emergency messages (EMCY), the crossfire state and the latest SYNC;
-:meth:`PumaDrives.wait_sync` lets a control loop run once per 2 ms bus cycle. Heartbeat
-supervision: a node whose heartbeat is older than ``heartbeat_timeout`` seconds (wall clock), or a
+:meth:`PumaDrives.wait_sync` lets a control loop run once per 2 ms bus cycle. Supervision, on
+two clocks: a node whose latest heartbeat is older than ``heartbeat_timeout`` seconds of *bus* time
+(the time the SYNCs carry: a node gone silent on a live bus), a bus on which nothing at all arrived
+for ``silence_timeout`` seconds of *wall* time (the bus, or the simulation behind it, stopped), or a
 closed connection, makes :meth:`PumaDrives.check` raise :class:`BusError`; so does a drive in
-FAULT, naming the cause its EMCY gave. The master produces its own heartbeat (node
+FAULT, naming the cause its EMCY gave. (A simulation slowed down by a loaded machine delivers its
+heartbeats further apart in wall time without anything being lost; judged on the wall clock alone,
+0.5 s, that stall failed catches of the demo.) The master produces its own heartbeat (node
 :data:`services.devices.cia402.MASTER_ID`, every 100 ms of bus time while it sends targets), which
 the drives consume. :meth:`PumaDrives.enable` is also the CiA 402 fault recovery: it waits out a
 running fault reaction, resets the fault (controlword 0x00, then the rising edge 0x80) and walks
@@ -55,7 +59,8 @@ class PumaDrives:
     Args:
         host, port: the socketcand server (the sim's CAN gateway).
         channel: bus name on the server.
-        heartbeat_timeout: seconds without a heartbeat after which a node counts as lost.
+        heartbeat_timeout: seconds of bus time without a heartbeat after which a node counts as lost.
+        silence_timeout: seconds of wall time without any frame after which the bus counts as lost.
         clock: monotonic clock for supervision (seconds).
     """
 
@@ -67,12 +72,15 @@ class PumaDrives:
         port: int,
         channel: str = "can0",
         heartbeat_timeout: float = 0.5,
+        silence_timeout: float = 2.0,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.host = host
         self.port = port
         self.channel = channel
         self.heartbeat_timeout = heartbeat_timeout
+        self.silence_timeout = silence_timeout
+        self._last_rx = 0.0
         self._clock = clock
         self._bus: can.BusABC | None = None
         self._thread: threading.Thread | None = None
@@ -81,7 +89,7 @@ class PumaDrives:
         self._positions = np.full(6, np.nan)
         self._statuswords = [0] * 6
         self._tpdo_seen = [False] * 6
-        self._heartbeats: dict[int, tuple[float, cf.NmtState]] = {}
+        self._heartbeats: dict[int, tuple[float, cf.NmtState]] = {}  # node -> (bus time, state)
         self._sync_count = 0
         self._sync_returned = 0
         self._sync_t = float("nan")
@@ -106,7 +114,7 @@ class PumaDrives:
             self._bus = _connect(self.host, self.port, self.channel, timeout)
         except (OSError, can.CanError, TimeoutError, BusError) as exc:
             raise BusError(f"cannot open CAN bus {self.channel} at {self.host}:{self.port}: {exc}") from exc
-        self._opened_at = self._clock()
+        self._opened_at = self._last_rx = self._clock()
         self._stop.clear()
         self._thread = threading.Thread(target=self._rx_loop, name="puma-drives-rx", daemon=True)
         self._thread.start()
@@ -168,11 +176,18 @@ class PumaDrives:
         now = self._clock()
         with self._cond:
             beats = dict(self._heartbeats)
+            bus_now = self._sync_t
+            silent = now - self._last_rx
+        if silent > self.silence_timeout:
+            return f"nothing on the CAN bus for {silent:.2f} s (no SYNC, no heartbeats): bus lost"
         for node in (*self.NODES, cf.CROSSFIRE_ID):
             seen = beats.get(node)
-            last = seen[0] if seen else self._opened_at
-            if now - last > self.heartbeat_timeout:
-                return f"no heartbeat from CAN node {node} for {now - last:.2f} s: bus or drive lost"
+            if seen is None:
+                if now - self._opened_at > self.silence_timeout:
+                    return f"no heartbeat from CAN node {node} since the bus was opened: node lost"
+            elif bus_now - seen[0] > self.heartbeat_timeout:
+                return (f"no heartbeat from CAN node {node} for {bus_now - seen[0]:.2f} s of bus time: "
+                        "node lost")
         return None
 
     def check(self) -> None:
@@ -388,6 +403,7 @@ class PumaDrives:
     def _handle(self, frame: cf.CanFrame) -> None:
         cid = frame.can_id
         callbacks: list[CrossfireCallback] = []
+        self._last_rx = self._clock()
         with self._cond:
             if cid == cf.SYNC_ID:
                 self._sync_count += 1
@@ -405,7 +421,7 @@ class PumaDrives:
                 code, _register = cf.decode_emcy(frame.data)
                 self._emcy[cid - cf.EMCY_BASE] = (code, frame.t)
             elif cf.HEARTBEAT_BASE <= cid <= cf.HEARTBEAT_BASE + 0x7F:
-                self._heartbeats[cid - cf.HEARTBEAT_BASE] = (self._clock(), cf.decode_heartbeat(frame.data))
+                self._heartbeats[cid - cf.HEARTBEAT_BASE] = (frame.t, cf.decode_heartbeat(frame.data))
             else:
                 return
             self._cond.notify_all()
