@@ -8,7 +8,7 @@ driver had its own module).
   reliability (paper §2 and §4): :class:`LocateThreshold`, :class:`LocateBgdiff`,
   :class:`LocateAverage` (k frames). Each waits for the ball on the table (params ``timeout_s``,
   default 10) and returns ``success`` with ``{"x", "y", "t", "u", "v", "seq", "frames"}`` (table
-  frame, m) once found and inside the table, ``failure`` when no ball was seen in time, ``error``
+  frame, m) once found and inside the table, ``failure`` when no ball was seen in time (``reason`` in the value says so), ``error``
   when the camera is lost. Cost = measured processing time, s (CPU time of the image processing,
   ``frames`` in the value). With param ``spec_m`` the result is judged against a specification
   (see *Location within specification* below); without it any detection on the table is a success.

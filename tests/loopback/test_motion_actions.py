@@ -228,6 +228,26 @@ async def test_malformed_set_points_are_dropped_and_counted_without_ending_the_c
 
 
 @pytest.mark.timeout(60)
+async def test_strangers_connecting_to_the_vision_node_during_a_catch_change_nothing(bench):
+    from services.errors import AuthenticationError
+
+    bench.stream(y=-0.15, lead_s=1.2)
+    catch = asyncio.create_task(Catch().run({"timeout_s": 5.0}, bench.call("catch")))
+    await asyncio.sleep(0.3)
+    host, port = bench.location.address("vision")
+    for _ in range(10):  # connect, then close at once (this ended a catch when set points had their own port)
+        with socket.create_connection((host, port), timeout=2.0):
+            pass
+    intruder = NodeLink("vision", (host, port), bytes(32), name="intruder", connect_timeout_s=1.0)
+    with pytest.raises(AuthenticationError):  # no key, no connection: nothing can be injected
+        await intruder.connect()
+    await intruder.close()
+    out = await catch
+    assert out.status == "success" and out.value["y_pred"] == pytest.approx(-0.15), out
+    assert out.value["malformed"] == 0
+
+
+@pytest.mark.timeout(60)
 async def test_catch_without_any_set_point_times_out_as_an_error(bench):
     out = await Catch().run({"timeout_s": 0.5}, bench.call("catch"))
     assert out.status == "error" and out.outcome == "stream_lost", out
