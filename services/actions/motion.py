@@ -392,7 +392,8 @@ class MoveHome(PrimitiveAction):
     """Return the cup to the home pose (middle of the catch line).
 
     Before moving, faulted drives are reset and enabled again (:meth:`PumaDriver.ensure_ready`).
-    Params: ``timeout_s`` (5.0), ``tolerance_rad`` (0.01, on the actual joint positions).
+    Params: ``timeout_s`` (5.0, bus time, with three times as much wall time as a backstop),
+    ``tolerance_rad`` (0.01, on the actual joint positions).
     Value: ``{"q": [6 joint angles, rad], "recovered": what was recovered or None}``.
     """
 
@@ -407,7 +408,8 @@ class MoveHome(PrimitiveAction):
             with drv.lock:
                 assert drv.servo is not None
                 drv.servo.set_goal(home)
-            deadline = t0 + timeout
+            t_bus0 = drv.bus_time()
+            wall_deadline = time.monotonic() + _WALL_BACKSTOP * timeout
             while True:
                 drv.check()
                 assert drv.drives is not None
@@ -417,7 +419,7 @@ class MoveHome(PrimitiveAction):
                 if done:
                     return ActionResult.success({"q": [float(v) for v in actual], "recovered": recovered},
                                                 cost=time.monotonic() - t0)
-                if time.monotonic() > deadline:
+                if drv.bus_time() - t_bus0 > timeout or time.monotonic() > wall_deadline:
                     return ActionResult.error(f"not home after {timeout} s", outcome="timeout",
                                               value={"recovered": recovered}, cost=time.monotonic() - t0)
                 await asyncio.sleep(0.01)

@@ -7,9 +7,9 @@ driver had its own module).
 * Three alternative primitive actions of the *locate ball* primitive task, with different cost and
   reliability (paper §2 and §4): :class:`LocateThreshold`, :class:`LocateBgdiff`,
   :class:`LocateAverage` (k frames). Each waits for the ball on the table (params ``timeout_s``,
-  default 10) and returns ``success`` with ``{"x", "y", "t", "u", "v", "seq", "frames"}`` (table
-  frame, m) once found and inside the table, ``failure`` when no ball was seen in time (``reason`` in the value says so), ``error``
-  when the camera is lost. Cost = measured processing time, s (CPU time of the image processing,
+  default 10, seconds of camera time) and returns ``success`` with ``{"x", "y", "t", "u", "v", "seq", "frames"}`` (table
+  frame, m) once found and inside the table, ``failure`` when no ball was seen in time (``reason``
+  in the value says so), ``error`` when the camera is lost. Cost = measured processing time, s (CPU time of the image processing,
   ``frames`` in the value). With param ``spec_m`` the result is judged against a specification
   (see *Location within specification* below); without it any detection on the table is a success.
 * :class:`Predict` (primitive task *predict*): tracks the ball frame by frame, predicts where and
@@ -82,6 +82,11 @@ __all__ = [
 VERIFY_FRAMES = 10
 """Default number of frames after a detection used to judge it against ``spec_m``."""
 
+WALL_BACKSTOP = 3.0
+"""Timeouts (``timeout_s``) run on the camera clock (simulated time in the simulation, which a
+loaded machine slows down, so that a demo's outcome does not depend on the machine's load); this
+many times as much wall time ends the wait anyway."""
+
 
 def track_residual(location: tuple[float, float, float],
                    track: list[tuple[float, float, float]]) -> float:
@@ -137,18 +142,23 @@ class _Locate(PrimitiveAction):
         timeout = float(params.get("timeout_s", 10.0))
         k = max(1, int(params.get("k", self.frames_needed)))
         loop = asyncio.get_running_loop()
-        end = loop.time() + timeout
+        wall_end = loop.time() + WALL_BACKSTOP * timeout
+        t_end: float | None = None  # on the camera clock
         seq = cam.link.frames[-1].seq if cam.link.frames else -1
         cpu = 0.0
         frames_used = 0
         try:
-            while loop.time() < end:
+            while loop.time() < wall_end:
                 batch: list[Frame] = []
                 while len(batch) < k:
                     f = await cam.link.next_frame(seq)
                     seq = f.seq
                     batch.append(f)
                 frames_used += len(batch)
+                if t_end is None:
+                    t_end = batch[0].t + timeout
+                elif batch[-1].t > t_end:
+                    break
                 c0 = time.thread_time()
                 det = self.locate(batch, cam)
                 cpu += time.thread_time() - c0
@@ -254,6 +264,7 @@ class Predict(PrimitiveAction):
         timeout = float(params.get("timeout_s", 10.0))
         loop = asyncio.get_running_loop()
         start = loop.time()
+        t_first: float | None = None  # camera clock
         seq = link.frames[-1].seq if link.frames else -1
         frames = sent = 0
         first: float | None = None
@@ -264,6 +275,8 @@ class Predict(PrimitiveAction):
                 frame = await link.next_frame(seq)
                 seq = frame.seq
                 frames += 1
+                if t_first is None:
+                    t_first = frame.t
                 c0 = time.thread_time()
                 det = locate_threshold(frame.image, frame.t, roi=config.roi)
                 pred = tracker.observe(det, frame.t)
@@ -291,7 +304,7 @@ class Predict(PrimitiveAction):
                 if last is not None and det is None and tracker.last_position is None:
                     return ActionResult(status=Status.FAILURE, outcome="ball_lost",
                                          value={"setpoints": sent, "frames": frames}, cost=cpu)
-                if loop.time() - start > timeout:
+                if frame.t - t_first > timeout or loop.time() - start > WALL_BACKSTOP * timeout:
                     return ActionResult(status=Status.FAILURE, outcome="no_crossing",
                                          value={"setpoints": sent, "frames": frames}, cost=cpu)
         except CameraLostError as exc:
