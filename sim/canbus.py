@@ -203,9 +203,12 @@ class SimDrives:
 
     Pacing (``master_wait_s`` > 0): the sim's own stepping is bursty (a camera frame takes tens of
     milliseconds to render, then the physics catches up), while a real bus's SYNC is strictly
-    periodic. So that the master is not charged with the sim's bursts, at each SYNC the sim waits
-    up to ``master_wait_s`` of wall time for the targets of a master that answered the previous
-    SYNC; a master that misses that wait is not waited for again until it answers.
+    periodic. So that the master is not charged with the sim's bursts, at each SYNC at which an
+    enabled drive has no target yet the sim waits for the master's targets: up to
+    ``master_wait_s`` of wall time if the master answered the previous SYNC; once a wait has run
+    out, only until one cycle (2 ms) of wall time has passed since the previous SYNC, so that the
+    bus runs no faster than real time while the master is silent and the RPDO timeout (50 ms of
+    bus time) is at least 50 ms of wall time too. A master that answers is in step again.
 
     Args:
         bus: the bus to sit on (a new one if ``None``).
@@ -246,6 +249,7 @@ class SimDrives:
         """Waits that ran out (the master did not answer within ``master_wait_s``)."""
         self._master_in_step = False
         self._master_heartbeat: float | None = None
+        self._last_sync_wall: float | None = None
         self._client: Any = None
         self._body = -1
         self._drives: list[_Drive] = []
@@ -375,23 +379,30 @@ class SimDrives:
         return d.nmt is cf.NmtState.OPERATIONAL and d.sm.state is cf.DriveState.OPERATION_ENABLED
 
     def _await_master(self, t: float) -> None:
-        """Wait (wall clock, bounded) for the targets of a master that is in step (see class)."""
-        if not self._master_in_step:
-            return
+        """Wait (wall clock, bounded) for the master's targets (see the class docstring)."""
+        now = time.monotonic()
+        last, self._last_sync_wall = self._last_sync_wall, now
         waiting = [d for d in self._drives if self._enabled(d) and d.pending is None]
         if not waiting:
             return
-        self.master_waits += 1
-        deadline = time.monotonic() + self.master_wait_s
+        if self._master_in_step:
+            self.master_waits += 1
+            deadline = now + self.master_wait_s
+        elif last is not None:
+            deadline = last + cf.CYCLE_S  # real-time pace while the master is silent
+        else:
+            return
         while any(d.pending is None and self._enabled(d) for d in waiting):
             left = deadline - time.monotonic()
             if left <= 0:
-                self._master_in_step = False
-                self.master_misses += 1
-                return
+                if self._master_in_step:
+                    self._master_in_step = False
+                    self.master_misses += 1
+                break
             frame = self.bus.wait_inbound(left)
             if frame is not None:
                 self._receive(frame, t)
+        self._last_sync_wall = time.monotonic()
 
     def _receive(self, frame: cf.CanFrame, t: float) -> None:
         if frame.can_id == cf.NMT_ID and len(frame.data) == 2:

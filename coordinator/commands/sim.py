@@ -104,9 +104,9 @@ def add_parser(subparsers: Any) -> None:
     c.add_argument("--camera-wait-ms", type=float, default=100.0, metavar="MS",
                    help="--realtime: wall time waited after each frame for a connected camera client "
                         "to take it (default 100; 0: never wait)")
-    c.add_argument("--master-wait-ms", type=float, default=50.0, metavar="MS",
+    c.add_argument("--master-wait-ms", type=float, default=100.0, metavar="MS",
                    help="wall time waited at each SYNC for the targets of a CAN master that answered "
-                        "the previous one (default 50; 0: never wait)")
+                        "the previous one (default 100; 0: never wait)")
 
 
 def _emit(out: TextIO, event: str, **data: Any) -> None:

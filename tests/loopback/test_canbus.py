@@ -360,8 +360,13 @@ def test_the_sim_waits_for_a_master_in_step_and_stops_waiting_for_a_silent_one(t
         th.join(timeout=5)
         port.recv_all()
         waits = rig.drives.master_waits
-        rig.step(20)  # the master is silent now: one wait runs out, then the sim goes on
+        t0 = time.monotonic()
+        rig.step(100)  # the master is silent now: one wait runs out, then the bus keeps real time
         assert rig.drives.master_misses == 1 and rig.drives.master_waits == waits + 1
+        # 0.5 s for the wait that ran out, then about 2 ms per SYNC: never faster than real time,
+        # so the RPDO timeout (26 cycles) is at least 50 ms of wall time after the last answer too
+        assert time.monotonic() - t0 >= 0.5 + 0.045
+        assert {f.code for f in rig.drives.faults} == {cf.EmcyCode.RPDO_TIMEOUT}
     finally:
         rig.close()
 
