@@ -262,31 +262,35 @@ class PumaDriver(Driver):
         )
         drives.open(timeout=self.connect_timeout)
         try:
+            drives.start(timeout=self.connect_timeout)
+            drives.on_crossfire(self._on_crossfire)
+            with self.lock:
+                self.drives = drives
+                self.servo = mc.CatchServo(drives.positions(), self.geometry)
+                self.fault = None
+            self._start_thread()  # targets flow from the first enabled cycle on
             drives.enable(timeout=self.connect_timeout)
         except BusError:
+            self._stop_thread()
+            self.drives = None
             drives.close()
             raise
-        drives.on_crossfire(self._on_crossfire)
-        with self.lock:
-            self.drives = drives
-            self.servo = mc.CatchServo(drives.positions(), self.geometry)
-            self.fault = None
-        self._start_thread()
 
     def _recover_drives(self) -> None:
+        """Fault reset and enable while the control loop keeps sending targets: the servo restarts
+        at the resting positions first, so the targets hold the arm still and flow from the first
+        enabled cycle on (a gap between enabling and the first target would be an RPDO timeout)."""
         drives = self.drives
         assert drives is not None
-        self._stop_thread()
         try:
+            drives.start(timeout=self.connect_timeout)
+            with self.lock:
+                self.servo = mc.CatchServo(drives.positions(), self.geometry)
             drives.enable(timeout=self.connect_timeout)
         except BusError as exc:
             self.fault = f"fault recovery failed: {exc}"
             raise BusError(self.fault) from exc
-        with self.lock:
-            self.servo = mc.CatchServo(drives.positions(), self.geometry)
-            self.fault = None
         self.recoveries += 1
-        self._start_thread()
 
     def _start_thread(self) -> None:
         self._stop.clear()

@@ -228,18 +228,15 @@ class PumaDrives:
 
     # --- commands --------------------------------------------------------------------------------
 
-    def enable(self, timeout: float = 3.0) -> None:
-        """NMT-start every node, recover faulted drives and walk every drive to OPERATION_ENABLED.
+    def start(self, timeout: float = 3.0) -> None:
+        """NMT-start every node, send the master's heartbeat, and wait until every drive has
+        reported (TPDO1: its position and state) and no fault reaction is running any more.
 
-        The CiA 402 recovery of a faulted drive: wait until its fault reaction has brought the
-        joint to rest (FAULT), send controlword 0x00 so that bit 7 is low, then the fault reset
-        0x80 (the rising edge), then shutdown, switch on, enable operation, each checked on the
-        statuswords. Each RPDO carries the drive's own actual position as target, so enabling
-        does not move the arm.
+        After it, :meth:`positions` are the joints' resting positions: a control loop can start
+        from them (and send targets) before :meth:`enable`.
 
         Raises:
-            BusError: a drive did not reach OPERATION_ENABLED within ``timeout`` s (its state and
-                fault cause named), or the bus is lost.
+            BusError: not within ``timeout`` s, or the bus is lost.
         """
         self._send(cf.nmt_frame(cf.NmtCommand.START, 0))
         deadline = self._clock() + timeout
@@ -247,29 +244,40 @@ class PumaDrives:
         self._send_heartbeat()
         self._wait(lambda: not any(s is cf.DriveState.FAULT_REACTION_ACTIVE for s in self._states_locked()),
                    deadline, "a drive's fault reaction did not end")
-        steps = (
-            cf.Controlword.DISABLE_VOLTAGE,
-            cf.Controlword.FAULT_RESET,
-            cf.Controlword.SHUTDOWN,
-            cf.Controlword.SWITCH_ON,
-            cf.Controlword.ENABLE_OPERATION,
+
+    def enable(self, timeout: float = 3.0) -> None:
+        """:meth:`start`, then recover faulted drives and walk every drive to OPERATION_ENABLED.
+
+        The CiA 402 recovery of a faulted drive: wait until its fault reaction has brought the
+        joint to rest (FAULT), send controlword 0x00 so that bit 7 is low, then the fault reset
+        0x80 (the rising edge), then shutdown, switch on, enable operation, each checked on the
+        statuswords. Each RPDO carries the drive's own actual position as target, so enabling
+        does not move the arm. A control loop may run meanwhile, sending enable-operation RPDOs
+        with targets at the resting positions (the motion node's does, so that cyclic targets flow
+        from the first enabled cycle on): a drive it enables from SWITCHED_ON counts as switched on.
+
+        Raises:
+            BusError: a drive did not reach OPERATION_ENABLED within ``timeout`` s (its state and
+                fault cause named), or the bus is lost.
+        """
+        deadline = self._clock() + timeout
+        self.start(timeout)
+        on = cf.DriveState.OPERATION_ENABLED
+        steps: tuple[tuple[cf.Controlword, tuple[cf.DriveState, ...]], ...] = (
+            (cf.Controlword.DISABLE_VOLTAGE, ()),
+            (cf.Controlword.FAULT_RESET, (cf.DriveState.SWITCH_ON_DISABLED,)),
+            (cf.Controlword.SHUTDOWN, (cf.DriveState.READY_TO_SWITCH_ON,)),
+            (cf.Controlword.SWITCH_ON, (cf.DriveState.SWITCHED_ON, on)),
+            (cf.Controlword.ENABLE_OPERATION, (on,)),
         )
-        wanted = {
-            cf.Controlword.DISABLE_VOLTAGE: None,
-            cf.Controlword.FAULT_RESET: cf.DriveState.SWITCH_ON_DISABLED,
-            cf.Controlword.SHUTDOWN: cf.DriveState.READY_TO_SWITCH_ON,
-            cf.Controlword.SWITCH_ON: cf.DriveState.SWITCHED_ON,
-            cf.Controlword.ENABLE_OPERATION: cf.DriveState.OPERATION_ENABLED,
-        }
-        for cw in steps:
+        for cw, states in steps:
             for node in self.NODES:
                 self._send(cf.encode_rpdo1(node, cw, self._pos_or0(node)))
-            state = wanted[cw]
-            if state is not None:
+            if states:
                 self._wait(
-                    lambda s=state: all(st is s for st in self._states_locked()),  # type: ignore[misc]
+                    lambda ok=states: all(st in ok for st in self._states_locked()),  # type: ignore[misc]
                     deadline,
-                    f"drives did not reach '{state.value}'",
+                    f"drives did not reach '{states[0].value}'",
                     describe=True,
                 )
             else:
