@@ -39,7 +39,7 @@ import sys
 import time
 from typing import Any, TextIO
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "main", "run"]
 
 DEFAULT_CAMERA_PORT = 7210
 DEFAULT_CAN_PORT = 7211

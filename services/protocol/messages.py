@@ -242,7 +242,7 @@ class Unsubscribe(Message):
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Event(Message):
-    """Server → client: one external event (a pulse, DESIGN.md §3).
+    """Server → client: one external event (a pulse; see docs/protocol.md).
 
     Attributes:
         topic: event name without the ``ext:`` prefix.
