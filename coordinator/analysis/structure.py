@@ -39,7 +39,7 @@ component, so it can fire infinitely often; L4 live — t labels an edge in ever
 reversible iff the graph is strongly connected; the home states are the states of the terminal
 component when there is exactly one.
 
-Length: about 700 lines because :func:`analyse` is one decision procedure (graph, then LP bounds,
+Length: about 770 lines because :func:`analyse` is one decision procedure (graph, then LP bounds,
 then invariants, then coverability, each step deciding what the previous one left open) and its
 result types and graph passes are read together with it; the LP, invariants, siphons and the
 search live in their own modules.
