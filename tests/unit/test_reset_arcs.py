@@ -150,6 +150,21 @@ def test_pnml_carries_reset_arcs_and_reads_them_back_equal() -> None:
     assert loads_pnml(text) == net
 
 
+def test_pnml_reads_the_standard_reset_arc_type_of_other_tools() -> None:
+    text = dump_pnml(loads_net(RESET_TOML)).replace(
+        '<toolspecific tool="petrobot" version="1" reset="true"/>', '<type value="reset"/>')
+    assert 'reset="true"' not in text
+    assert loads_pnml(text).reset_places["flush"] == ("buf",)
+
+
+def test_pnml_refuses_a_reset_arc_with_a_weight() -> None:
+    text = dump_pnml(loads_net(RESET_TOML)).replace(
+        '<toolspecific tool="petrobot" version="1" reset="true"/>',
+        '<type value="reset"/><inscription><text>2</text></inscription>')
+    with pytest.raises(NetError, match="reset arc"):
+        loads_pnml(text)
+
+
 def test_dot_draws_a_reset_arc_dashed_with_a_double_head() -> None:
     dot = to_dot(loads_net(RESET_TOML))
     line = next(line for line in dot.splitlines() if '"p:buf" -> "t:flush"' in line and "reset" in line)
