@@ -25,7 +25,8 @@ place (those are still invariants), the T-invariants those with no transition th
 and conservative / consistent are left undecided (their value on the net without reset arcs is in
 a note). Karp–Miller is not run on a net with reset arcs (unsound, and boundedness is undecidable
 for reset nets): when the graph is too large and the bounds do not settle boundedness, it stays
-undecided unless a pumping witness that avoids the reset places proves unboundedness.
+undecided unless a pumping witness proves unboundedness (one whose growing places the repeated
+firings do not reset; :func:`.coverability.covering_witness`).
 
 Every analysis runs within a state limit and a byte budget (:func:`analyse`): the search stops
 with what it has when either is reached, and the passes over a complete graph run only if their

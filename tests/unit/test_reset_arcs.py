@@ -11,7 +11,7 @@ import pytest
 from analysis_nets import make_net
 from test_statespace import assert_matches_reference, assert_same_as_reference, random_net
 
-from coordinator.analysis.coverability import karp_miller
+from coordinator.analysis.coverability import covering_witness, karp_miller
 from coordinator.analysis.gspn import analyse as gspn_analyse
 from coordinator.analysis.simulate import simulate_steady
 from coordinator.analysis.statespace import explore
@@ -291,3 +291,23 @@ def test_the_simulator_empties_reset_places_as_the_chain_does() -> None:
     est = simulate_steady(net, seed=5, batch_time=200.0, batches=20, warmup=20.0, confidence=0.99)
     assert est.mean_tokens["buf"].contains(exact.mean_tokens["buf"])
     assert est.throughput["flush"].contains(exact.throughput["flush"])
+
+
+def test_a_pumping_loop_that_resets_no_growing_place_proves_unboundedness() -> None:
+    # fill grows buf without resetting it; flush (elsewhere) empties buf: buf is still unbounded
+    net = with_resets(make_net("pump", {"go": 1}, {"fill": ({"go": 1}, {"go": 1, "buf": 1}),
+                                                    "flush": ({"go": 1}, {"go": 1})}), [("buf", "flush")])
+    a = analyse(net, max_states=50)
+    assert a.bounded is False and a.unbounded_places == ["buf"]
+    witness = covering_witness(explore(net, max_states=50))
+    assert witness is not None and witness.loop == ["fill"] and witness.growing == ["buf"]
+
+
+def test_a_loop_whose_growth_its_own_reset_undoes_is_no_witness() -> None:
+    # refill empties buf then puts one token back: buf = 1 covers buf = 0, but repeating refill
+    # leaves buf at 1, so the graph is finite and no witness may claim otherwise
+    net = with_resets(make_net("refill", {"go": 1}, {"refill": ({"go": 1}, {"go": 1, "buf": 1})}),
+                      [("buf", "refill")])
+    space = explore(net)
+    assert space.complete and space.n_states == 2
+    assert covering_witness(space) is None
