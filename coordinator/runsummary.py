@@ -76,7 +76,8 @@ class RunSummary:
         final_marking: the marking at the end (places with tokens).
         firings: firings in the run (a resumed run counts those before the interruption too).
         duration_s: wall-clock time of this execution, seconds.
-        actions: results per (primitive task, primitive action).
+        actions: results per (primitive task, primitive action) (a resumed run counts those before
+            the interruption too).
         errors: every error of the run, in words, in order (a call's reason, a refused subscription).
         note: why the run ended in its state, in words.
         detail: one line per stuck place, operator option or awaited event behind ``note``.

@@ -225,6 +225,10 @@ class Runtime:
         self._end_requested = False
         self._last_wait: _Wait | None = None
         self.stats: dict[tuple[str, str], ActionStats] = {}
+        if recovered is not None:  # a resumed run counts the results before its interruption too
+            for row in journal.results(self.run_id):
+                self.stats.setdefault((row.task, row.action), ActionStats(row.task, row.action, row.node or "?")).record(
+                    ActionResult(status=row.status, wall_s=row.wall_s or 0.0))
         self.errors: list[str] = []
         self._reconciler = Reconciler(client, self._reconciled)
         self._reconcile_s = reconcile_s
