@@ -245,9 +245,10 @@ async def test_up_starts_every_node_and_stops_them_all_on_sigterm(cluster: Clust
     cluster.write_services()
     script = ("import argparse, sys; from coordinator.commands import up; p = argparse.ArgumentParser(); "
               "up.add_parser(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a))")
+    logs = cluster.tmp / "logs"
     proc = subprocess.Popen(  # noqa: ASYNC220 - starting a process does not block
         [sys.executable, "-c", script, "up", "--services", str(cluster.services_path),
-         "--key-file", str(cluster.key_file)],
+         "--key-file", str(cluster.key_file), "--log-dir", str(logs)],
         env=cluster.env(), stderr=subprocess.PIPE, text=True,
     )
     try:
@@ -257,16 +258,17 @@ async def test_up_starts_every_node_and_stops_them_all_on_sigterm(cluster: Clust
         while time.monotonic() < deadline:
             line = await asyncio.to_thread(proc.stderr.readline)
             lines.append(line)
-            if line.startswith("up: 2 node(s) listening") or not line:
+            if line.startswith("up: 2 node(s) running") or not line:
                 break
-        assert any(ln.startswith("[alpha] node alpha listening on") for ln in lines), lines
+        assert any(ln.startswith("up: node alpha listening on") for ln in lines), lines
         async with cluster.client() as client:
             a, b = await asyncio.gather(client.call("echo", {"via": "up"}), client.call("compute_primes"))
         assert a.status == b.status == "success"
         proc.send_signal(signal.SIGTERM)
         _, rest = await asyncio.to_thread(proc.communicate, timeout=15)
         assert proc.returncode == 0
-        assert "up: all nodes stopped" in rest and "[beta ]" in rest
+        assert "up: all nodes stopped" in rest
+        assert "node beta listening on" in (logs / "beta.log").read_text()  # the node logs go to files
         with socket.socket() as s:  # the nodes are gone: their ports are free again
             # as a server binds: connections the node closed may sit in TIME_WAIT on its port, which
             # only a live listener, not SO_REUSEADDR, would make a bind fail on
