@@ -58,9 +58,9 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from coordinator.journal import JournalReader  # noqa: E402
-from services.protocol import Result, from_map, unpack_map  # noqa: E402
-from services.protocol.framing import HEADER_BYTES  # noqa: E402
+from coordinator.journal import JournalReader
+from services.protocol import Result, from_map, unpack_map
+from services.protocol.framing import HEADER_BYTES
 
 __all__ = ["SCENARIOS", "Agreement", "NodeRecord", "Rig", "campaign", "check", "node_starts", "node_store",
            "run_round"]
@@ -157,7 +157,7 @@ def check(journal: str | os.PathLike[str], nodes: Mapping[str, tuple[str | os.Pa
         words = reader.final_words(run)
         recs = reader.reconciliations(run)
     out = Agreement(reconciled=len(recs), differed=sum(r.differs for r in recs))
-    for start in dict((s.instance, s) for s in starts).values():
+    for start in {s.instance: s for s in starts}.values():
         out.calls += 1
         kept = [store[start.instance] for store in stores.values() if start.instance in store]
         if not kept:
@@ -543,8 +543,8 @@ def campaign(rounds: int, scenarios: tuple[str, ...] = SCENARIOS, *, seed: int =
 
 def render(report: dict[str, Any]) -> str:
     """The per-scenario table as Markdown."""
-    lines = ["| scenario | rounds | fault inside a call | error branch taken | reconciled (node did otherwise) | "
-             "disagreements | calls run twice | resumed runs completed | exit codes |",
+    lines = [("| scenario | rounds | fault inside a call | error branch taken | reconciled (node did otherwise) | "
+              "disagreements | calls run twice | resumed runs completed | exit codes |"),
              "|---|---|---|---|---|---|---|---|---|"]
     for name, r in report["scenarios"].items():
         resumed = "–" if r["resumed_completed"] is None else f"{r['resumed_completed']}/{r['rounds']}"

@@ -101,8 +101,8 @@ async def test_a_call_given_up_on_is_cancelled_and_asked_for_and_the_nodes_word_
     assert event.differs and event.lost == "heartbeat timeout"
     assert summary.final_marking == {"robot": 1, "done": 1}  # the net went on along its error branch
     assert summary.reconciled == 1
-    assert summary.differed == ("node fake finished act with success after the coordinator declared it lost "
-                                "(heartbeat timeout)",)
+    assert summary.differed == (("node fake finished act with success after the coordinator declared it lost "
+                                 "(heartbeat timeout)"),)
     assert "after the coordinator declared it lost" in summary.format()
     with JournalReader.open(path) as reader:
         (run,) = reader.runs()
