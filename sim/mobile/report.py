@@ -263,8 +263,9 @@ def render_report(course: Course, path: np.ndarray, events: Sequence[Mapping[str
     """
     r = score(course, path, events, stop_pose)
     blanks = sum(t.blank for t in course.tiles)
-    lines = [f"course {r['course']!r}: {len(course.tiles)} squares, {r['length_m']:.2f} m, "
-             f"{blanks} interruption{'s' if blanks != 1 else ''}"]
+    head = (f"course {r['course']!r}: {len(course.tiles)} squares, {r['length_m']:.2f} m, "
+            f"{blanks} interruption{'s' if blanks != 1 else ''}")
+    lines = [head]
     lines.append("completed: yes" if r["completed"] else "completed: no — " + "; ".join(r["reasons"]))
     speed = f", mean speed {r['mean_speed_mps']:.3f} m/s" if r["mean_speed_mps"] is not None else ""
     pspeed = f" ({r['path_length_m']:.2f} m driven, {r['path_speed_mps']:.3f} m/s)" if r["path_speed_mps"] else ""
