@@ -206,3 +206,15 @@ def test_braking_that_keeps_failing_puts_the_robot_out_of_service_until_the_oper
     d._take(d.engine.advance())
     assert d.fired[-4:-1] == ["operator_reset", "brake_retries_restored", "brake_retries_restored"]
     assert d.fired[-1] == "start_run" and "follow_track" in d.running
+
+
+def test_the_exits_declared_weights_are_the_a_priori_shares_of_the_outcomes_in_the_gspn() -> None:
+    from coordinator.analysis.ptimed import to_gspn
+
+    view = to_gspn(load_net(NET))
+    w = {t.id: t.weight for t in view.net.transitions}
+    normal = w["interruption"] + w["end_mark"] + w["track_lost"] + w["stop_requested_after_follow"]
+    assert normal == pytest.approx(0.995)  # follow_track's a-priori reliability
+    assert w["interruption"] / w["end_mark"] == pytest.approx(0.57 / 0.43)
+    assert w["follow_failed"] == pytest.approx(0.005)
+    assert not any("assuming 1/" in warning for warning in view.warnings)
