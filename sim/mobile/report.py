@@ -22,11 +22,18 @@ with):
 * where the robot **stopped** relative to the T mark: along the track (positive past the bar),
   across it (positive to the left), heading error, distance.
 
-``path`` is an (N, 4) float array of t [s], x, y [m], heading [rad] (world frame, ground truth);
-``events`` a list of dicts with at least ``t`` [s] and ``kind`` (``interruption``, ``recovered``,
-``lost``, ``end``, ``stop``), other keys kept and shown (e.g. ``{"how": "beacon"}``); ``stop_pose``
-(x, y, heading) or None if the robot never stopped. Per-primitive-task statistics come from the
-journal and are the demo's job.
+``path`` is an (N, 4) float array (or a list of 4-tuples) of t [s], x, y [m], heading [rad] (world
+frame, ground truth); ``events`` a list of dicts with at least ``t`` [s, on the path's clock] and
+``kind`` (``interruption``, ``recovered``, ``lost``, ``end``, ``stop``, ``error``), other keys kept
+and shown (e.g. ``{"how": "beacon"}``) — or the run's primitive-action ends (objects with ``task``,
+``action``, ``result``: an ``ActionResult``, and ``t_wall``, as ``coordinator.events.ActionEnded``),
+read as events by task and outcome (``follow_track`` success ``interruption`` → ``interruption``,
+``reacquire_track`` success → ``recovered``, ``stop_at_t`` or ``stop_robot`` success → ``stop``, any
+error → ``error``, ...) at the result value's ``t`` when it has one, else at ``t_wall - t0_wall``.
+Events none of whose times fall in the path's time span are on another clock: the report says so,
+matches interruptions to the blank squares in order and counts every sample as following.
+``stop_pose`` is (x, y, heading), or None if the robot never stopped. Per-primitive-task statistics
+come from the journal and are the demo's job.
 
 :func:`score` returns the numbers (JSON-ready), :func:`render_report` the text,
 :func:`write_top_view` a PNG of the floor, track, beacons, path and stop (matplotlib, Agg).
@@ -54,7 +61,7 @@ _RECOVERY_DEPTH = 0.5
 _KIND = {"S": "straight", "E": "straight", "L": "arc", "R": "arc"}
 
 
-def _check_path(path: np.ndarray) -> np.ndarray:
+def _check_path(path: Any) -> np.ndarray:
     arr = np.asarray(path, dtype=float)
     if arr.ndim != 2 or arr.shape[1] != 4:
         raise ValueError(f"path must be an (N, 4) array of t, x, y, heading; got shape {arr.shape}")
@@ -65,13 +72,63 @@ def _check_path(path: np.ndarray) -> np.ndarray:
     return arr
 
 
-def _check_events(events: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+#: (task, status, named outcome or None) of a primitive action's result → event kind.
+_RESULT_KINDS = {
+    ("follow_track", "success", "interruption"): "interruption",
+    ("follow_track", "success", "end"): "end",
+    ("follow_track", "failure", "lost"): "lost",
+    ("reacquire_track", "success", None): "recovered",
+    ("reacquire_track", "failure", "lost"): "reacquire_lost",
+    ("find_beacon", "success", "found"): "beacon_found",
+    ("find_beacon", "failure", "not_found"): "beacon_not_found",
+    ("stop_at_t", "success", None): "stop",
+    ("stop_robot", "success", None): "stop",
+}
+
+
+def _from_action_ended(e: Any, t0_wall: float | None) -> dict[str, Any]:
+    """An event dict from a primitive action's end (an object with ``task``, ``action``,
+    ``result`` (:class:`services.results.ActionResult`) and ``t_wall``, as the run's events carry
+    it): the time is the result value's ``t`` (simulated time) when it has one, else ``t_wall``
+    (minus ``t0_wall`` when given)."""
+    result = e.result
+    status = str(getattr(result.status, "value", result.status))
+    outcome = result.outcome
+    kind = _RESULT_KINDS.get((e.task, status, outcome))
+    if kind is None:
+        kind = "error" if status == "error" else f"{e.task}.{outcome or status}"
+    value = result.value if isinstance(result.value, Mapping) else {}
+    t = value.get("t")
+    if not isinstance(t, (int, float)) or isinstance(t, bool) or not math.isfinite(t):
+        t = float(e.t_wall) - (t0_wall or 0.0)
+    out: dict[str, Any] = {"t": float(t), "kind": kind, "task": e.task, "action": e.action}
+    if result.reason:
+        out["reason"] = result.reason
+    return out
+
+
+def _check_events(events: Sequence[Any], t0_wall: float | None = None) -> list[dict[str, Any]]:
     out = []
     for i, e in enumerate(events):
-        if "t" not in e or "kind" not in e:
-            raise ValueError(f"event {i} needs 't' and 'kind': {dict(e)!r}")
-        out.append(dict(e))
+        if isinstance(e, Mapping):
+            if "t" not in e or "kind" not in e:
+                raise ValueError(f"event {i} needs 't' and 'kind': {dict(e)!r}")
+            t = e["t"]
+            if not isinstance(t, (int, float)) or isinstance(t, bool) or not math.isfinite(t):
+                raise ValueError(f"event {i} has a bad time {t!r}")
+            out.append(dict(e))
+        elif all(hasattr(e, k) for k in ("task", "action", "result", "t_wall")):
+            out.append(_from_action_ended(e, t0_wall))
+        else:
+            raise ValueError(f"event {i} is neither a dict with 't' and 'kind' nor a primitive action's end: {e!r}")
     return sorted(out, key=lambda e: float(e["t"]))
+
+
+def _same_clock(t: np.ndarray, evs: list[dict[str, Any]], slack: float = 5.0) -> bool:
+    """Whether the events' times can be on the path's clock (some lie within its span)."""
+    if not evs or not t.size:
+        return True
+    return any(float(t[0]) - slack <= float(e["t"]) <= float(t[-1]) + slack for e in evs)
 
 
 def _wrap(a: float) -> float:
@@ -103,15 +160,16 @@ def _stats(values: list[float]) -> dict[str, Any]:
     return {"samples": int(a.size), "rms_m": float(np.sqrt(np.mean(a * a))), "max_m": float(a.max())}
 
 
-def score(course: Course, path: np.ndarray, events: Sequence[Mapping[str, Any]],
-          stop_pose: tuple[float, float, float] | None) -> dict[str, Any]:
+def score(course: Course, path: Any, events: Sequence[Any],
+          stop_pose: tuple[float, float, float] | None, *, t0_wall: float | None = None) -> dict[str, Any]:
     """Score a run (see the module docstring).
 
     Returns:
         JSON-ready ``{"course", "length_m", "completed", "reasons", "time_s", "mean_speed_mps",
         "path_speed_mps", "path_length_m", "cross_track": {"straight": {...}, "arc": {...}, "all":
         {...}} (each ``samples``, ``rms_m``, ``max_m``; None without samples), "off_track_max_m",
-        "interruptions": [...], "lost": [...], "end_seen_t", "stop"}``; ``stop`` is None or
+        "interruptions": [...], "lost": [...], "errors": [...], "events_on_path_clock", "end_seen_t",
+        "stop"}``; ``stop`` is None or
         ``{"t", "x", "y", "along_m", "across_m", "heading_error_rad", "distance_m"}``.
 
     Raises:
@@ -119,9 +177,10 @@ def score(course: Course, path: np.ndarray, events: Sequence[Mapping[str, Any]],
             without ``t`` and ``kind``.
     """
     arr = _check_path(path)
-    evs = _check_events(events)
+    evs = _check_events(events, t0_wall)
     t = arr[:, 0]
-    follow = _following_mask(t, evs)
+    same_clock = _same_clock(t, evs)
+    follow = _following_mask(t, evs) if same_clock else np.ones(t.shape, dtype=bool)
     by_kind: dict[str, list[float]] = {"straight": [], "arc": []}
     off_max = 0.0
     where: list[tuple[Tile, float, float] | None] = [course.locate(float(x), float(y)) for x, y in arr[:, 1:3]]
@@ -135,12 +194,12 @@ def score(course: Course, path: np.ndarray, events: Sequence[Mapping[str, Any]],
 
     stop_ev = next((e for e in evs if e["kind"] == "stop"), None)
     t0 = float(t[0]) if t.size else 0.0
-    t_end = float(stop_ev["t"]) if stop_ev is not None else (float(t[-1]) if t.size else 0.0)
+    t_end = float(stop_ev["t"]) if stop_ev is not None and same_clock else (float(t[-1]) if t.size else 0.0)
     upto = t <= t_end
     steps = np.hypot(np.diff(arr[upto, 1]), np.diff(arr[upto, 2])) if upto.sum() > 1 else np.zeros(0)
     duration = t_end - t0
 
-    interruptions = _interruptions(course, arr, where, evs)
+    interruptions = _interruptions(course, arr, where, evs, same_clock)
     stop = None
     if stop_pose is not None:
         stop = _stop(course, stop_pose, float(stop_ev["t"]) if stop_ev is not None else None)
@@ -170,6 +229,8 @@ def score(course: Course, path: np.ndarray, events: Sequence[Mapping[str, Any]],
         "off_track_max_m": off_max,
         "interruptions": interruptions,
         "lost": [e for e in evs if e["kind"] == "lost"],
+        "errors": [e for e in evs if e["kind"] == "error"],
+        "events_on_path_clock": same_clock,
         "end_seen_t": next((float(e["t"]) for e in evs if e["kind"] == "end"), None),
         "stop": stop,
     }
@@ -205,13 +266,15 @@ def _blank_at(course: Course, arr: np.ndarray, t: float) -> Tile | None:
 
 
 def _interruptions(course: Course, arr: np.ndarray, where: list[tuple[Tile, float, float] | None],
-                   evs: list[dict[str, Any]]) -> list[dict[str, Any]]:
+                   evs: list[dict[str, Any]], same_clock: bool = True) -> list[dict[str, Any]]:
     """One entry per blank square of the course, in course order, with the events of its crossing;
-    then one per declared interruption that matches no blank square (``tile`` None: a false one)."""
+    then one per declared interruption that matches no blank square (``tile`` None: a false one).
+    Events on another clock than the path's are matched to the blank squares in order."""
     matched: dict[int, tuple[dict[str, Any], dict[str, Any] | None]] = {}
     false: list[tuple[dict[str, Any], dict[str, Any] | None]] = []
+    blanks = iter([t for t in course.tiles if t.blank])
     for pair in _pairs(evs):
-        tile = _blank_at(course, arr, float(pair[0]["t"]))
+        tile = _blank_at(course, arr, float(pair[0]["t"])) if same_clock else next(blanks, None)
         if tile is None or tile.index in matched:
             false.append(pair)
         else:
@@ -254,14 +317,14 @@ def _mm(v: float | None) -> str:
     return "—" if v is None else f"{1000.0 * v:.1f} mm"
 
 
-def render_report(course: Course, path: np.ndarray, events: Sequence[Mapping[str, Any]],
-                  stop_pose: tuple[float, float, float] | None) -> str:
+def render_report(course: Course, path: Any, events: Sequence[Any],
+                  stop_pose: tuple[float, float, float] | None, *, t0_wall: float | None = None) -> str:
     """Return the run's report as text (see the module docstring and :func:`score`).
 
     Raises:
         ValueError: as :func:`score`.
     """
-    r = score(course, path, events, stop_pose)
+    r = score(course, path, events, stop_pose, t0_wall=t0_wall)
     blanks = sum(t.blank for t in course.tiles)
     head = (f"course {r['course']!r}: {len(course.tiles)} squares, {r['length_m']:.2f} m, "
             f"{blanks} interruption{'s' if blanks != 1 else ''}")
@@ -296,6 +359,12 @@ def render_report(course: Course, path: np.ndarray, events: Sequence[Mapping[str
     for e in r["lost"]:
         extra = ", ".join(f"{k} {v}" for k, v in e.items() if k not in ("t", "kind"))
         lines.append(f"track lost at {float(e['t']):.2f} s" + (f" ({extra})" if extra else ""))
+    for e in r["errors"]:
+        what = f"{e.get('task', '?')} ({e.get('action', '?')})" if "task" in e else "a primitive task"
+        lines.append(f"error in {what} at {float(e['t']):.2f} s" + (f": {e['reason']}" if e.get("reason") else ""))
+    if not r["events_on_path_clock"]:
+        lines.append("note: the events' times are not on the path's clock (give events with the simulated time, "
+                     "or t0_wall); interruptions were matched in order and every sample counted as following")
     if r["end_seen_t"] is not None:
         lines.append(f"T mark seen at {r['end_seen_t']:.2f} s")
     s = r["stop"]
@@ -317,7 +386,7 @@ def _centre_line(course: Course, tile: Tile, n: int = 40) -> np.ndarray:
     return np.array([course.pose_at(float(s))[:2] for s in ss])
 
 
-def write_top_view(course: Course, path: np.ndarray, png_path: str) -> None:
+def write_top_view(course: Course, path: Any, png_path: str) -> None:
     """Write a top view of the run as a PNG: the chessboard, the painted track (the hidden path of
     each interruption dotted), the T bar, the beacons (resume points), the robot's path and where
     it started and stopped.

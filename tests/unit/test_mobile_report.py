@@ -131,3 +131,56 @@ def test_the_top_view_is_written_as_a_png(course: Course, tmp_path) -> None:
     out = tmp_path / "top.png"
     write_top_view(course, path, str(out))
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def _ended(task: str, result, t_wall: float, action: str | None = None):
+    from types import SimpleNamespace
+
+    return SimpleNamespace(task=task, action=action or task, node="perception", result=result, t_wall=t_wall)
+
+
+def test_the_runs_primitive_action_ends_are_read_as_events(course: Course) -> None:
+    from services.results import ActionResult
+
+    path = _path(course)
+    ev = {e["kind"]: e["t"] for e in _events(course, path)}
+    t0_wall = 1.7e9
+    ends = [
+        _ended("follow_track", ActionResult.success({"frames": 400}, outcome="interruption"), t0_wall + ev["interruption"],
+               "follow_ransac"),
+        _ended("find_beacon", ActionResult.success(outcome="found"), t0_wall + ev["interruption"] + 0.5),
+        _ended("goto_beacon", ActionResult.success(), t0_wall + ev["recovered"] - 0.5),
+        _ended("reacquire_track", ActionResult.success(), t0_wall + ev["recovered"]),
+        _ended("follow_track", ActionResult.success(outcome="end"), t0_wall + ev["end"], "follow_scanline"),
+        _ended("stop_at_t", ActionResult.success({"t": ev["stop"]}), 0.0),  # the value's simulated time wins
+    ]
+    r = score(course, path, ends, tuple(path[-1, 1:]), t0_wall=t0_wall)
+    assert r["events_on_path_clock"] is True and r["completed"] is True
+    (it,) = r["interruptions"]
+    assert it["tile"] == 4 and it["declared"]["action"] == "follow_ransac" and it["recovered"] is not None
+    assert r["end_seen_t"] == pytest.approx(ev["end"])
+
+
+def test_events_on_another_clock_are_matched_in_order_and_said_so(course: Course) -> None:
+    from services.results import ActionResult
+
+    path = _path(course)
+    ends = [
+        _ended("follow_track", ActionResult.success(outcome="interruption"), 1.7e9 + 10.0),
+        _ended("reacquire_track", ActionResult.success(), 1.7e9 + 14.0),
+        _ended("goto_beacon", ActionResult.error("drive node silent"), 1.7e9 + 15.0),
+        _ended("stop_robot", ActionResult.success(), 1.7e9 + 16.0),
+    ]
+    r = score(course, path, ends, tuple(path[-1, 1:]))
+    assert r["events_on_path_clock"] is False
+    assert r["interruptions"][0]["tile"] == 4 and r["interruptions"][0]["recovered"] is not None
+    assert [e["reason"] for e in r["errors"]] == ["drive node silent"]
+    text = render_report(course, path, ends, tuple(path[-1, 1:]))
+    assert "not on the path's clock" in text and "error in goto_beacon (goto_beacon)" in text
+
+
+def test_a_list_of_tuples_is_a_path_and_an_unknown_event_object_is_refused(course: Course) -> None:
+    path = [tuple(row) for row in _path(course)]
+    assert score(course, path, [], None)["time_s"] > 0
+    with pytest.raises(ValueError, match="neither a dict"):
+        score(course, path, [object()], None)
