@@ -16,6 +16,8 @@ structural analyses.
 
 from __future__ import annotations
 
+import functools
+import os
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
