@@ -228,8 +228,8 @@ def to_gspn(
                                 f"({', '.join(lost)}) enable no exit of place {pid!r}; left out of its random switch")
     rewired: dict[tuple[str, str], str] = {}
     for t in net.transitions:
-        weight = t.weight
-        kind, rate, servers = t.kind, t.rate, t.servers
+        weight, weight_expr = t.weight, t.weight_expr
+        kind, rate, servers, rate_expr = t.kind, t.rate, t.servers, t.rate_expr
         exits: list[tuple[str, str]] = []
         for event in t.internal_events:
             _, tname, outcome = parse_event(event)
@@ -240,6 +240,8 @@ def to_gspn(
         if t.id in dropped:
             warnings.append(f"transition {t.id!r}: no journal result takes this exit; left out of the GSPN")
             continue
+        if exits:
+            weight_expr = None  # an exit's weight is its measured or a-priori probability
         if exits and t.id in measured:
             weight = measured[t.id]
             if weight <= 0:
@@ -282,12 +284,12 @@ def to_gspn(
                 used_ext[topic], sources[event] = DEFAULT_EXT_RATE, "default"
                 warnings.append(f"external event {event!r}: no rate given; using {DEFAULT_EXT_RATE}/s")
             kind, rate, servers = TransitionKind.EXPONENTIAL, used_ext[topic], 1
+            rate_expr = None
         label = t.label or (" ".join(t.events) if t.events else "")
         priority = exit_priority.get(t.id, t.priority)
         transitions.append(replace(t, events=(), kind=kind, rate=rate, servers=servers, weight=weight,
-                                   label=label, priority=priority))
-    arcs = [Arc(source=rewired.get((a.source, a.target), a.source), target=a.target, weight=a.weight,
-                inhibitor=a.inhibitor) if not a.inhibitor else a for a in arcs
+                                   label=label, priority=priority, rate_expr=rate_expr, weight_expr=weight_expr))
+    arcs = [replace(a, source=rewired.get((a.source, a.target), a.source)) if not a.inhibitor else a for a in arcs
             if not ({a.source, a.target} & dropped)]
     gspn = PetriNet(name=f"{net.name}_gspn", places=tuple(places), transitions=tuple(transitions), arcs=tuple(arcs),
                     initial_marking=net.initial_marking, tasks=net.tasks,
