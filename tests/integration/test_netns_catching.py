@@ -251,6 +251,7 @@ def _results(journal: Path, task: str) -> list[tuple[str, str | None, str | None
 def test_catching_across_hosts_survives_cut_links_with_the_watchdogs_and_recovers(lab: Lab, tmp_path: Path):
     key = tmp_path / "key"
     key.write_text(os.urandom(32).hex() + "\n")
+    key.chmod(0o600)
     services = tmp_path / "services.toml"
     services.write_text(SERVICES)
     net = tmp_path / "catch3.toml"
@@ -268,7 +269,7 @@ def test_catching_across_hosts_survives_cut_links_with_the_watchdogs_and_recover
     for host, node in (("vis", "vision"), ("mot", "motion")):
         logs[node] = tmp_path / f"{node}.log"
         lab.spawn(host, [sys.executable, "-m", "services.node", node, "--services", str(services),
-                         "--key-file", str(key)], logs[node])
+                         "--key-file", str(key), "--state-dir", str(tmp_path / "state" / node)], logs[node])
     for node, path in logs.items():
         _wait_log(path, f"node {node} listening on", 60)
     journal = tmp_path / "journal.sqlite"
