@@ -153,9 +153,9 @@ class ConsoleServer:
         Raises:
             OSError: the address cannot be bound.
         """
-        self._runner = web.AppRunner(self.app, access_log=None, handle_signals=False)
+        self._runner = web.AppRunner(self.app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
         await self._runner.setup()
-        site = web.TCPSite(self._runner, self.config.host, self.config.port, shutdown_timeout=1.0)
+        site = web.TCPSite(self._runner, self.config.host, self.config.port)
         await site.start()
         addresses = self._runner.addresses  # the bound socket tells the port chosen for port 0
         self.port = int(addresses[0][1]) if addresses else self.config.port
@@ -236,8 +236,9 @@ class ConsoleServer:
             return self._secure(web.Response(status=421, text="this console answers to its own address only"))
         try:
             response = await handler(request)
-        except web.HTTPException as exc:
-            response = exc
+        except web.HTTPException as exc:  # 404s and the like carry the headers too
+            self._secure(exc)
+            raise
         return self._secure(response)
 
     @staticmethod
@@ -368,7 +369,9 @@ class ConsoleServer:
         origin = request.headers.get("Origin")
         if origin is not None and origin != f"http://{request.headers.get('Host', '')}":
             return web.Response(status=403, text="cross-origin WebSocket refused")
-        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES, compress=False, heartbeat=30.0)
+        # aiohttp's own limit sits above the protocol's, so that an oversized message is closed here, with a
+        # reason; beyond aiohttp's limit it closes the socket itself (code 1009)
+        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES + (1 << 20), compress=False, heartbeat=30.0)
         await ws.prepare(request)
         page = _Page(self, ws)
         self.pages.add(page)
