@@ -34,6 +34,7 @@ from coordinator.net import (
     Transition,
     TransitionKind,
 )
+from coordinator.netfile.layout import position_problem
 from coordinator.netfile.limits import (
     MAX_DESCRIPTION,
     MAX_LABEL,
@@ -46,7 +47,6 @@ from coordinator.netfile.limits import (
     task_name_problem,
     text_problem,
 )
-from coordinator.netfile.layout import position_problem
 from coordinator.netfile.schema import (
     ACTION_KEYS,
     ARC_KEYS,
