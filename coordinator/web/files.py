@@ -22,7 +22,12 @@ from coordinator.netfile.formats import SUFFIXES
 from coordinator.netfile.layout import load_layout
 from coordinator.netfile.loader import read_text
 from coordinator.web.autolayout import layered_layout
-from coordinator.web.draft import draft_layout, draft_of_net, draft_of_text, validate_draft
+from coordinator.web.draft import (
+    draft_layout,
+    draft_of_net,
+    draft_of_text,
+    validate_draft,
+)
 
 __all__ = ["FileRefused", "export_draft", "inside", "list_nets", "open_net", "save_draft", "with_layout"]
 

@@ -117,6 +117,7 @@ class LiveFeed:
         self._learner: dict[str, dict[str, Any]] = {}
         self._operator: collections.deque[dict[str, Any]] = collections.deque(maxlen=20)
         self._errors: collections.deque[dict[str, Any]] = collections.deque(maxlen=20)
+        self._results: collections.deque[dict[str, Any]] = collections.deque(maxlen=40)
         self._last_frame = 0.0
 
     # ------------------------------------------------------------------ the observer
@@ -157,6 +158,7 @@ class LiveFeed:
         return {"run": runtime.run_id, "marking": engine.marking.to_dict(), "firings": engine.fired,
                 "paused": engine.paused, "state": self.state, "running": running, "latched": self._latched(),
                 "learner": views, "operator": list(self._operator), "errors": list(self._errors),
+                "results": list(self._results),
                 "server_time": now}
 
     # ------------------------------------------------------------------ frames
@@ -203,6 +205,7 @@ class LiveFeed:
                 item = result_json(event.instance, event.task, event.action, event.node, event.result, event.t_wall)
                 if len(ended) < MAX_LISTED:
                     ended.append(item)
+                self._results.append(item)
                 if item["status"] == "error":
                     self._errors.append(item)
             elif isinstance(event, LearnerUpdated):

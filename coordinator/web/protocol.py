@@ -121,10 +121,10 @@ def _str(value: Any, what: str, limit: int) -> str:
 def _keys(msg: dict[str, Any], allowed: set[str], required: set[str]) -> None:
     extra = set(msg) - allowed
     if extra:
-        raise ProtocolViolation(f"{msg['type']}: unknown key {sorted(extra)[0][:40]!r}")
+        raise ProtocolViolation(f"{msg['type']}: unknown key {min(extra)[:40]!r}")
     missing = required - set(msg)
     if missing:
-        raise ProtocolViolation(f"{msg['type']}: missing key {sorted(missing)[0]!r}")
+        raise ProtocolViolation(f"{msg['type']}: missing key {min(missing)!r}")
 
 
 def _draft(value: Any) -> dict[str, Any]:
@@ -133,7 +133,7 @@ def _draft(value: Any) -> dict[str, Any]:
         raise ProtocolViolation("draft must be an object")
     extra = set(value) - _DRAFT_KEYS
     if extra:
-        raise ProtocolViolation(f"draft: unknown key {sorted(extra)[0][:40]!r}")
+        raise ProtocolViolation(f"draft: unknown key {min(extra)[:40]!r}")
     for key in ("places", "transitions", "arcs"):
         items = value.get(key, [])
         if not isinstance(items, list) or len(items) > MAX_ELEMENTS:

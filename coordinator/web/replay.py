@@ -21,7 +21,13 @@ from __future__ import annotations
 
 from typing import Any
 
-from coordinator.journal import FiringRow, JournalReader, OperatorRow, ResultRow, StartRow
+from coordinator.journal import (
+    FiringRow,
+    JournalReader,
+    OperatorRow,
+    ResultRow,
+    StartRow,
+)
 from coordinator.learning.state import automaton_from_state
 from coordinator.web.draft import draft_of_text
 from coordinator.web.frames import learner_view

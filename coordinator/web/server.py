@@ -42,9 +42,16 @@ from aiohttp import WSCloseCode, WSMsgType, web
 from coordinator.errors import JournalError
 from coordinator.operator import Command, OperatorCommand
 from coordinator.web.analysis import run_analysis
-from coordinator.web.files import FileRefused, export_draft, inside, list_nets, open_net, save_draft
-from coordinator.web.frames import LiveFeed
 from coordinator.web.draft import validate_draft
+from coordinator.web.files import (
+    FileRefused,
+    export_draft,
+    inside,
+    list_nets,
+    open_net,
+    save_draft,
+)
+from coordinator.web.frames import LiveFeed
 from coordinator.web.protocol import (
     CLOSE_POLICY,
     MAX_MESSAGE_BYTES,
@@ -54,7 +61,7 @@ from coordinator.web.protocol import (
     parse_client_message,
 )
 
-__all__ = ["ConsoleConfig", "ConsoleServer", "STATIC", "is_loopback"]
+__all__ = ["STATIC", "ConsoleConfig", "ConsoleServer", "is_loopback"]
 
 log = logging.getLogger("petrobot.web")
 

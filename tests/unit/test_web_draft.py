@@ -9,8 +9,21 @@ import pytest
 
 from coordinator.cli import main
 from coordinator.netfile import load_any, load_layout, loads_net
-from coordinator.web.draft import draft_layout, draft_of_net, draft_of_text, draft_to_toml, validate_draft
-from coordinator.web.files import FileRefused, export_draft, inside, open_net, save_draft, with_layout
+from coordinator.web.draft import (
+    draft_layout,
+    draft_of_net,
+    draft_of_text,
+    draft_to_toml,
+    validate_draft,
+)
+from coordinator.web.files import (
+    FileRefused,
+    export_draft,
+    inside,
+    open_net,
+    save_draft,
+    with_layout,
+)
 from services.location import load_location
 
 ROOT = Path(__file__).resolve().parents[2]

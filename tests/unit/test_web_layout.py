@@ -7,7 +7,14 @@ from pathlib import Path
 
 import pytest
 
-from coordinator.netfile import dump_net, lint_net, load_any, load_layout, loads_layout, loads_net
+from coordinator.netfile import (
+    dump_net,
+    lint_net,
+    load_any,
+    load_layout,
+    loads_layout,
+    loads_net,
+)
 from coordinator.netfile.layout import pnml_layout
 from coordinator.netfile.pnml import dump_pnml, loads_pnml
 

@@ -39,6 +39,7 @@ export function initLive(app) {
     live.learner = snapshot.learner || {};
     live.operator = snapshot.operator || [];
     live.errors = snapshot.errors || [];
+    live.results = snapshot.results || [];
     live.offset = (snapshot.server_time || Date.now() / 1000) - Date.now() / 1000;
     live.ended = END_STATES.has(live.state.state);
     if (app.mode === "live") paint(true);
@@ -296,7 +297,7 @@ export function renderLearner(panel, learner) {
   if (!tasks.length) { panel.append(el("p", { class: "empty" }, "no primitive task has learned yet")); return; }
   panel.append(el("p", { class: "small" }, "p: probability of choosing the action next; R: successes / trials; C: cost (a-priori or mean measured); J = 1 \u2212 R + \u03c1C, lower is better (paper sections 3 and 4)."));
   for (const [task, v] of tasks) {
-    panel.append(el("h4", {}, `${task} \u2014 ${v.scheme || "?"}, ${v.steps ?? 0} results, \u03c1 = ${fmt(v.rho)}`));
+    panel.append(el("p", { class: "subhead" }, el("b", {}, task), ` \u2014 ${v.scheme || "?"}, ${v.steps ?? 0} results, \u03c1 = ${fmt(v.rho)}`));
     const t = el("table", { class: "grid" }, el("tr", {}, ...["action", "p", "", "n", "R", "C", "J"].map((h) => el("th", {}, h))));
     const best = Math.min(...v.actions.filter((a) => a.J !== null).map((a) => a.J));
     for (const a of v.actions) {
