@@ -27,12 +27,14 @@ detections, and a cup that stays at the home pose.
 ``--model-error E`` scales the predictor's deceleration model by 1 + E (robustness to a
 mis-calibrated model; the simulated ball keeps the true one).
 
-Phase 2 (real time, three processes on 127.0.0.1): a sim process (world paced to the wall clock,
-analytic camera at the demo's 320×240 and 25 frames/s by default, TCP frame server), a vision
-process (frame client → locator → predictor → set-point sender) and this process as the motion side
-(set-point receiver). Latency = receive time of a set point minus the capture time of its frame
-(same host clock), split into capture → sent (frame transfer and image processing) and sent →
-received (the stream). ``--throws 0`` runs phase 2 alone.
+Phase 2 (real time, three processes on 127.0.0.1): the sim (``coordinator.commands.sim catching``,
+world paced to the wall clock, analytic camera at the demo's 320×240 and 25 frames/s by default), a
+vision node (``services.node``: camera driver and ``predict``, which publishes each set point as an
+event of the node) and this process as the motion side (a :class:`services.stream.SetPointSubscription`
+on an authenticated node link, as the motion node has; it calls ``predict`` once per throw).
+Latency = receive time of a set point minus the capture time of its frame (same host clock), split
+into capture → sent (frame transfer and image processing) and sent → received (the node protocol).
+``--latency-seconds`` is wall time. ``--throws 0`` runs phase 2 alone.
 """
 
 from __future__ import annotations
@@ -42,7 +44,6 @@ import asyncio
 import functools
 import json
 import math
-import multiprocessing as mp
 import os
 import sys
 import time
@@ -53,7 +54,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from services.robots import motion_control
+from services.devices import cia402 as cf
+from services.robots import motion_control, puma560
 from services.vision import (
     BallTracker,
     RollingModel,
@@ -62,19 +64,14 @@ from services.vision import (
     locate_bgdiff,
     locate_threshold,
 )
-from services.stream import SetPointReceiver, SetPointSender
-from services.devices import cia402 as cf
-from services.robots import puma560
-from services.devices.framegrabber import Frame, FrameClient
 from sim.camera import (
     AnalyticRenderer,
-    FrameServer,
     calibrate,
     overhead_camera,
 )
 from sim.canbus import SimDrives
 from sim.catching import CatchingWorld, Thrower
-from sim.world import ClockMode, World
+from sim.world import World
 
 LEAD_TOLERANCE_M = 0.005
 AHEAD_S = 0.3
@@ -295,72 +292,58 @@ def run_throws(
 # --------------------------------------------------------------------------------------------------
 # phase 2: real-time latency across processes
 # --------------------------------------------------------------------------------------------------
-def _sim_process(port_q: Any, seconds: float, seed: int, fps: float, size: tuple[int, int]) -> None:
-    world = World(mode=ClockMode.REALTIME)
-    cw = CatchingWorld(world)
-    cam = overhead_camera(width=size[0], height=size[1])
-    renderer = AnalyticRenderer(cam, intensity_sigma=2.0, position_sigma_px=0.5, seed=seed)
-    server = FrameServer()
-    port_q.put(server.start())
-    thrower = Thrower(seed)
-    period = 1.0 / fps
-    seq = 0
-    world.resync()
+VISION_SERVICES = """
+[nodes.vision]
+host = "127.0.0.1"
+port = {node_port}
+
+[drivers.camera]
+node = "vision"
+impl = "services.actions.camera:CameraDriver"
+params = {{ port = {camera_port} }}
+
+[actions.predict]
+node = "vision"
+impl = "services.actions.vision:Predict"
+"""
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+async def _subscribe_and_predict(port: int, key: bytes, seconds: float, on_sp: Any) -> None:
+    """Subscribe to the vision node's set points and call ``predict`` for ``seconds`` (wall)."""
+    from services.client import NodeLink
+    from services.stream import SetPointSubscription
+
+    link = NodeLink("vision", ("127.0.0.1", port), key, name="node:motion", connect_timeout_s=30.0)
     try:
-        while world.t < seconds:
-            cw.launch(thrower.next())
-            t_throw = world.t
-            while world.t < seconds and world.t - t_throw < 4.0:
-                world.advance(period)
-                pos, _ = cw.ball_state()
-                t_wall = time.time()
-                img = renderer.render(pos if cw.ball_on_table() else None)
-                server.publish(Frame(seq, world.t, img, t_wall))
-                seq += 1
-                if cw.crossing is not None and world.t > cw.crossing.t + 0.2:
-                    break
-            cw.park()
-            world.advance(0.3)
+        sub = SetPointSubscription(link, on_set_point=on_sp)
+        sub.start()
+        await link.connect()
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            sub.restart()
+            await link.call("predict", {"timeout_s": 10.0}, deadline_s=20.0)
+        sub.close()
     finally:
-        server.close()
-        world.close()
+        await link.close()
 
 
-def _vision_process(frame_port: int, sp_port: int, seconds: float, size: tuple[int, int]) -> None:
-    cam = overhead_camera(width=size[0], height=size[1])
-    cal_renderer = AnalyticRenderer(cam, intensity_sigma=0.0)
-    world = World()
-    cw = CatchingWorld(world)
-    z = cw.ball_plane_z
-    model = RollingModel(*cw.ball.rolling_decel_params())
-    world.close()
-    hom = calibrate(lambda x, y: cal_renderer.render((x, y, z)), calibration_points(1.5, 0.76))
-    tracker = BallTracker(hom, RollingPredictor(model))
-    client = FrameClient("127.0.0.1", frame_port)
-    sender = SetPointSender("127.0.0.1", sp_port)
-    seq = -1
-    deadline = time.monotonic() + seconds + 5.0
-    try:
-        while time.monotonic() < deadline:
-            try:
-                frame = client.grab(after=seq, timeout=1.0)
-            except (ConnectionError, OSError):
-                break
-            if frame is None:
-                continue
-            seq = frame.seq
-            det = locate_threshold(frame.image, frame.t)
-            pred = tracker.observe(det, frame.t)
-            if pred is None:
-                continue
-            sender.send(t_frame=frame.t, t_capture=frame.t_wall, x=pred.x, y=pred.y, t=pred.t,
-                        vx=pred.vx, vy=pred.vy, sigma_y=pred.sigma_y, sigma_t=pred.sigma_t)
-    finally:
-        sender.close()
-        client.close()
+def _latency_phase(seconds: float, seed: int, fps: float, size: tuple[int, int]) -> dict[str, Any]:
+    """The sim (``coordinator.commands.sim catching``, analytic camera), a vision node process
+    (camera driver + ``predict``), and this process as the motion side: it subscribes to the vision
+    node's set points through an authenticated node link, as the motion node does, and calls
+    ``predict`` once per throw for ``seconds`` of wall time."""
+    import secrets
+    import subprocess
+    import tempfile
 
-
-async def _motion_side(seconds: float, seed: int, fps: float, size: tuple[int, int]) -> dict[str, Any]:
     latencies: list[float] = []
     vision_part: list[float] = []
     stream_part: list[float] = []
@@ -370,29 +353,42 @@ async def _motion_side(seconds: float, seed: int, fps: float, size: tuple[int, i
         vision_part.append(sp.t_sent - sp.t_capture)
         stream_part.append(now - sp.t_sent)
 
-    recv = SetPointReceiver(on_set_point=on_sp)
-    sp_port = await recv.start()
-    ctx = mp.get_context("spawn")
-    port_q = ctx.Queue()
-    sim = ctx.Process(target=_sim_process, args=(port_q, seconds, seed, fps, size), daemon=True)
-    sim.start()
-    frame_port = await asyncio.to_thread(port_q.get, True, 30.0)
-    vision = ctx.Process(target=_vision_process, args=(frame_port, sp_port, seconds, size), daemon=True)
-    vision.start()
-    try:
-        async with asyncio.timeout(seconds + 40.0):
-            while sim.is_alive():
-                await asyncio.sleep(0.1)
-            while vision.is_alive():
-                await asyncio.sleep(0.1)
-    except TimeoutError:
-        pass
-    finally:
-        for p in (vision, sim):
-            if p.is_alive():
-                p.terminate()
-            p.join(timeout=5.0)
-        await recv.close()
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    env = {**os.environ, "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    key = secrets.token_bytes(32)
+    with tempfile.TemporaryDirectory() as tmp:
+        key_file = os.path.join(tmp, "key")
+        with open(key_file, "w") as fh:
+            fh.write(key.hex() + "\n")
+        sim = subprocess.Popen(
+            [sys.executable, "-m", "coordinator.commands.sim", "catching", "--realtime", "--renderer", "analytic",
+             "--width", str(size[0]), "--height", str(size[1]), "--fps", str(fps), "--seed", str(seed),
+             "--throws", "0", "--interval", "0.5", "--first-throw", "1", "--after-camera-client",
+             "--camera-port", "0", "--can-port", "0"],
+            cwd=root, env=env, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        procs = [sim]
+        try:
+            assert sim.stdout is not None
+            while not (line := sim.stdout.readline()).startswith('{"event": "ready"'):
+                if not line:
+                    raise RuntimeError("the simulator exited before it was ready")
+            camera_port = int(json.loads(line)["camera_port"])
+            node_port = _free_port()
+            services = os.path.join(tmp, "services.toml")
+            with open(services, "w") as fh:
+                fh.write(VISION_SERVICES.format(node_port=node_port, camera_port=camera_port))
+            procs.append(subprocess.Popen(
+                [sys.executable, "-m", "services.node", "vision", "--services", services, "--key-file", key_file,
+                 "--log-level", "WARNING"], cwd=root, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            asyncio.run(_subscribe_and_predict(node_port, key, seconds, on_sp))
+        finally:
+            for p in reversed(procs):
+                if p.poll() is None:
+                    p.terminate()
+                    try:
+                        p.wait(timeout=10)
+                    except subprocess.TimeoutExpired:
+                        p.kill()
     arr = np.asarray(latencies)
     return {
         "setpoints": int(arr.size),
@@ -494,7 +490,7 @@ def main(argv: list[str] | None = None) -> int:
                     help="relative error of the predictor's deceleration model (alpha and beta are "
                          "scaled by 1 + this), to test robustness to a mis-calibrated model")
     ap.add_argument("--latency-seconds", type=float, default=8.0,
-                    help="simulated seconds of the real-time latency phase (0 skips it)")
+                    help="seconds (wall) of the real-time latency phase (0 skips it)")
     ap.add_argument("--latency-width", type=int, default=320,
                     help="image width of the latency phase, pixels (default 320, as the demo)")
     ap.add_argument("--latency-height", type=int, default=240,
@@ -512,7 +508,7 @@ def main(argv: list[str] | None = None) -> int:
     latency = None
     if args.latency_seconds > 0:
         size = (args.latency_width, args.latency_height)
-        latency = asyncio.run(_motion_side(args.latency_seconds, args.seed, args.latency_fps, size))
+        latency = _latency_phase(args.latency_seconds, args.seed, args.latency_fps, size)
     if args.throws <= 0:
         print(json.dumps({"latency": latency}, indent=2))
         return 0

@@ -5,7 +5,11 @@ Usage: ``python bench/rpc.py [--json] [--calls N] [--pipelined M] [--window W]``
 Starts, on 127.0.0.1 and in this one run:
 
 * a real node process (``python -m services.node bench``) hosting the ``echo`` action, from a
-  temporary services.toml, with logging at WARNING (one log line per call would dominate);
+  temporary services.toml, with logging at WARNING (one log line per call would dominate), its
+  results kept in an SQLite file in a temporary state directory (``--results sqlite``, the node's
+  default: every call's start and result committed, one commit per event-loop iteration) or in
+  memory (``--results memory``, the node's ``--volatile``), with ``--synchronous normal`` (default)
+  or ``full``;
 * a raw asyncio echo server process: length-prefixed frames echoed back by an ``asyncio.Protocol``
   (no msgpack, no handshake, no call bookkeeping): the floor our protocol is measured against.
 
@@ -236,6 +240,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--pipelined", type=int, default=30000, help="requests in the pipelined run (default 30000)")
     p.add_argument("--window", type=int, default=256, help="requests in flight at once when pipelined (default 256)")
     p.add_argument("--rounds", type=int, default=3, help="alternating pipelined rounds per side (default 3)")
+    p.add_argument("--results", choices=["sqlite", "memory"], default="sqlite",
+                   help="where the node keeps results: its SQLite store (default) or memory (--volatile)")
+    p.add_argument("--synchronous", choices=["normal", "full"], default="normal",
+                   help="the node's --synchronous (default normal)")
     p.add_argument("--echo-server", type=int, default=None, help=argparse.SUPPRESS)
     args = p.parse_args(argv)
     if args.echo_server is not None:
@@ -250,8 +258,11 @@ def main(argv: list[str] | None = None) -> int:
             f'[nodes.bench]\nhost = "127.0.0.1"\nport = {node_port}\nmax_in_flight = {max(64, 2 * args.window)}\n\n'
             '[actions.echo]\nnode = "bench"\nimpl = "services.actions.demo:echo"\n'
         )
+        store = (["--volatile"] if args.results == "memory"
+                 else ["--state-dir", str(Path(tmp) / "state"), "--synchronous", args.synchronous])
         node = subprocess.Popen(
-            [sys.executable, "-m", "services.node", "bench", "--services", str(services), "--log-level", "WARNING"],
+            [sys.executable, "-m", "services.node", "bench", "--services", str(services), "--log-level", "WARNING",
+             *store],
             cwd=ROOT, env=env, stderr=subprocess.DEVNULL,
         )
         echo = subprocess.Popen(
@@ -261,6 +272,7 @@ def main(argv: list[str] | None = None) -> int:
             _wait_listening(node_port, node)
             _wait_listening(echo_port, echo)
             res = asyncio.run(measure(args, node_port, echo_port, node.pid, echo.pid))
+            res["results"] = args.results if args.results == "memory" else f"sqlite/{args.synchronous}"
         finally:
             for proc in (node, echo):
                 proc.terminate()

@@ -2,9 +2,9 @@
 
 :class:`CatchReport` observes a run of the catching net (:mod:`coordinator.events`): it groups the
 events into runs of the experiment (each starts with the transition ``start_run``), keeps the
-outcome, the locate action the learner chose, the final prediction of the catch point and the time
-of each primitive task, and pairs each prediction with the simulator's ground truth.
-``petrobot demo`` prints it. Pure: it only reads events.
+outcome, the locate action the learner chose, the final prediction of the catch point, the time
+of each primitive task and the reason of every error (and of a miss), and pairs each prediction
+with the simulator's ground truth. ``petrobot demo`` prints it. Pure: it only reads events.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from coordinator.events import ActionEnded, Observer, RunEvent, TransitionFired
-from services.results import Status
+from services.results import ActionResult, Status
 
 __all__ = ["CatchReport", "RunRecord"]
 
@@ -29,6 +29,8 @@ class RunRecord:
     locate_action: str = ""
     predicted: dict[str, Any] | None = None
     truth: dict[str, Any] | None = None
+    notes: list[str] = field(default_factory=list)
+    """Why an action of the run ended in error (or a catch missed), one line each."""
 
     @property
     def error_mm(self) -> float | None:
@@ -36,6 +38,20 @@ class RunRecord:
         if not self.predicted or not self.truth:
             return None
         return abs(float(self.predicted["y"]) - float(self.truth["y"])) * 1000.0
+
+
+def _note(event: ActionEnded, result: ActionResult) -> str:
+    """One line saying why an action did not succeed: its reason, else its value's ``reason``."""
+    outcome = f" ({result.outcome})" if result.outcome else ""
+    where = f" on {event.node}" if event.node else ""
+    why = result.reason
+    if not why and isinstance(result.value, dict):
+        detail = result.value.get("reason")
+        residual = result.value.get("residual_m")
+        why = str(detail) if detail else None
+        if why and isinstance(residual, (int, float)):
+            why += f", track residual {residual * 1000:.1f} mm"
+    return f"{event.task}/{event.action}{where}: {result.status.value}{outcome}: {why or 'no reason given'}"
 
 
 class CatchReport:
@@ -49,7 +65,7 @@ class CatchReport:
     OUTCOMES: ClassVar[Mapping[str, str]] = {
         "ball_caught": "caught", "ball_missed": "missed", "ball_bounced_out": "bounced out",
         "catch_failed": "error", "catch_failed_after_sensor": "error", "locate_failed": "error",
-        "no_ball_seen": "no ball"}
+        "no_ball_seen": "no ball", "home_given_up": "out of service"}
 
     def __init__(self, forward: Observer) -> None:
         self.forward = forward
@@ -66,7 +82,9 @@ class CatchReport:
         elif isinstance(event, ActionEnded) and self.runs:
             run = self.runs[-1]
             result = event.result
-            run.times[event.task] = result.wall_s
+            run.times[event.task] = run.times.get(event.task, 0.0) + result.wall_s
+            if result.status is not Status.SUCCESS:
+                run.notes.append(_note(event, result))
             if event.task == "locate":
                 run.locate_action = event.action
             if event.task == "predict" and result.status is Status.SUCCESS and isinstance(result.value, dict):
@@ -95,10 +113,18 @@ class CatchReport:
             times = "".join(f"{r.times[k]:>{w}.2f}" if k in r.times else f"{'-':>{w}}"
                             for k, w in (("locate", 8), ("predict", 9), ("catch", 7), ("home", 7)))
             lines.append(f"{r.n:>3}  {r.outcome:<12}{r.locate_action:<18}{err}{lead}{times}")
+        for r in self.runs:
+            lines.extend(f"  run {r.n}: {note}" for note in r.notes)
         caught = sum(r.outcome == "caught" for r in self.runs)
         restarted = sum(r.outcome == "no ball" for r in self.runs)
         attempts = len(self.runs) - restarted
         note = (f" ({restarted} run{'s' * (restarted != 1)} restarted: no ball located within specification)"
                 if restarted else "")
         lines.append(f"caught {caught} of {attempts} balls{note}")
+        if any(r.outcome == "out of service" for r in self.runs):
+            lines.append("the PUMA is out of service: the move home failed after every retry (see the reasons above)")
         return "\n".join(lines)
+
+    def outcomes(self) -> list[tuple[str, str]]:
+        """(outcome, locate action) of each run: what two runs with the same seed should share."""
+        return [(r.outcome, r.locate_action) for r in self.runs]

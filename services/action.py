@@ -163,6 +163,10 @@ class PrimitiveAction:
     """Base class of primitive actions; see the module docstring for the lifecycle."""
 
     name: str = ""
+    unattended: bool = False
+    """True if a call may finish when its caller is gone (a motion that must not stop halfway);
+    otherwise the node cancels a call nobody has waited for during the heartbeat window, with reason
+    ``"caller_gone"`` (docs/protocol.md §5). ``unattended = true`` in services.toml sets it too."""
 
     async def setup(self, node: NodeContext) -> None:
         """Prepare once at node start (drivers are already set up)."""
@@ -194,6 +198,7 @@ class FunctionAction(PrimitiveAction):
             raise ActionError(f"{fn!r} is not an async function")
         self.fn = fn
         self.name = getattr(fn, "__name__", "")
+        self.unattended = bool(getattr(fn, "unattended", False))
 
     async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         out = await self.fn(params, ctx)

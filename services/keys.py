@@ -1,4 +1,4 @@
-"""The shared key that authenticates coordinator↔node connections (docs/protocol.md, "Handshake").
+"""The shared key that authenticates coordinator↔node connections (docs/protocol.md §3, "The shared key").
 
 Where the key comes from, first match wins:
 
@@ -7,7 +7,17 @@ Where the key comes from, first match wins:
    anything else is taken as UTF-8 text;
 3. the key file named by ``PETROBOT_KEY_FILE``, else ``~/.config/petrobot/key``.
 
-A key file's content (surrounding whitespace stripped) is read the same way as the variable.
+A key file holds one key per non-empty line, each read the same way as the variable (surrounding
+whitespace stripped): the first line is *the* key, used to connect; the lines after it are previous
+keys that a node still accepts while a new key is rolled out (key rotation, docs/protocol.md §3).
+
+Rules a key must meet:
+
+* at least :data:`MIN_KEY_BYTES` (16) bytes once decoded: a shorter key is refused, since a node
+  answers guesses and a short key can be guessed;
+* a key file must not be writable by other users (group or others write bits, or an owner other
+  than the current user or root): whoever can write it can replace the key. A key file readable by
+  other users is accepted with a warning (chmod 600 it).
 
 If the key file does not exist it is created with mode 0600 and 32 random bytes written as hex,
 and a log line says so: enough for a one-machine setup. For several hosts, copy that file.
@@ -18,41 +28,68 @@ from __future__ import annotations
 import logging
 import os
 import secrets
+import stat
 import string
 from pathlib import Path
+from typing import Final
 
 from services.errors import PetrobotError
 
-__all__ = ["DEFAULT_KEY_FILE", "SharedKeyError", "decode_key", "default_key_path", "load_key"]
+__all__ = [
+    "DEFAULT_KEY_FILE",
+    "MIN_KEY_BYTES",
+    "SharedKeyError",
+    "check_key",
+    "decode_key",
+    "default_key_path",
+    "load_key",
+    "load_keys",
+]
 
 log = logging.getLogger("petrobot.keys")
 
 DEFAULT_KEY_FILE = Path("~/.config/petrobot/key")
 """Key file used when neither ``--key-file`` nor ``PETROBOT_KEY_FILE`` is given."""
+MIN_KEY_BYTES: Final = 16
+"""Shortest key accepted, bytes (128 bits)."""
+
+_HOW_TO_MAKE = "make one with: python -c 'import secrets; print(secrets.token_hex(32))'"
 
 
 class SharedKeyError(PetrobotError):
-    """The shared key cannot be read (empty key, unreadable file)."""
+    """The shared key cannot be used (empty or too short, unreadable or unsafe file)."""
 
 
-def decode_key(text: str) -> bytes:
-    """Turn the text of ``PETROBOT_KEY`` or a key file into key bytes.
+def check_key(key: bytes, where: str = "the shared key") -> bytes:
+    """Return ``key`` if it is long enough.
+
+    Raises:
+        SharedKeyError: ``key`` is shorter than :data:`MIN_KEY_BYTES`.
+    """
+    if len(key) < MIN_KEY_BYTES:
+        raise SharedKeyError(f"{where} is {len(key)} bytes; at least {MIN_KEY_BYTES} are needed ({_HOW_TO_MAKE})")
+    return key
+
+
+def decode_key(text: str, where: str = "the shared key") -> bytes:
+    """Turn the text of ``PETROBOT_KEY`` or of one key-file line into key bytes.
 
     Args:
         text: hex digits (even count, >= 32 digits) or any other text.
+        where: what the text came from, for error messages.
 
     Returns:
         The decoded hex, or the UTF-8 bytes of the stripped text.
 
     Raises:
-        SharedKeyError: the text is empty.
+        SharedKeyError: the text is empty, or the key is shorter than :data:`MIN_KEY_BYTES`.
     """
     text = text.strip()
     if not text:
-        raise SharedKeyError("the shared key is empty")
+        raise SharedKeyError(f"{where} is empty")
     if len(text) >= 32 and len(text) % 2 == 0 and all(c in string.hexdigits for c in text):
-        return bytes.fromhex(text)
-    return text.encode("utf-8")
+        return check_key(bytes.fromhex(text), where)
+    return check_key(text.encode("utf-8"), where)
 
 
 def default_key_path(key_file: str | os.PathLike[str] | None = None) -> Path:
@@ -65,22 +102,35 @@ def default_key_path(key_file: str | os.PathLike[str] | None = None) -> Path:
     return DEFAULT_KEY_FILE.expanduser()
 
 
-def load_key(key_file: str | os.PathLike[str] | None = None, *, create: bool = True) -> bytes:
-    """Load the shared key (see the module docstring for the order of sources).
+def _check_mode(path: Path, st: os.stat_result) -> None:
+    mode = stat.S_IMODE(st.st_mode)
+    if mode & (stat.S_IWGRP | stat.S_IWOTH):
+        raise SharedKeyError(f"{path}: key file is writable by other users (mode {mode:04o}); run: chmod 600 {path}")
+    if st.st_uid not in (os.geteuid(), 0):
+        raise SharedKeyError(f"{path}: key file is owned by another user (uid {st.st_uid}); "
+                             "whoever owns it can replace the key")
+    if mode & (stat.S_IRGRP | stat.S_IROTH):
+        log.warning("key file %s is readable by other users (mode %04o): run chmod 600 %s", path, mode, path)
+
+
+def load_keys(key_file: str | os.PathLike[str] | None = None, *, create: bool = True) -> tuple[bytes, ...]:
+    """Load the shared key and any previous keys (see the module docstring for the sources).
 
     Args:
         key_file: explicit key file (the ``--key-file`` option), or ``None``.
         create: create a fresh key file if the chosen one does not exist.
 
     Returns:
-        The key bytes.
+        The key, then the previous keys still accepted (a node accepts them all; a client uses the
+        first).
 
     Raises:
-        SharedKeyError: the key is empty, or the file is missing (with ``create=False``) or unreadable.
+        SharedKeyError: a key is empty or too short, or the file is missing (with ``create=False``),
+            unreadable, or writable by other users.
     """
     env = os.environ.get("PETROBOT_KEY")
     if env is not None and key_file is None:
-        return decode_key(env)
+        return (decode_key(env, "PETROBOT_KEY"),)
     path = default_key_path(key_file)
     if not path.exists():
         if not create:
@@ -95,6 +145,20 @@ def load_key(key_file: str | os.PathLike[str] | None = None, *, create: bool = T
                 fh.write(secrets.token_hex(32) + "\n")
             log.warning("created a new shared key file %s (mode 0600); copy it to every host", path)
     try:
-        return decode_key(path.read_text(encoding="utf-8"))
-    except OSError as exc:
+        with open(path, encoding="utf-8") as fh:
+            _check_mode(path, os.fstat(fh.fileno()))
+            lines = [(n, line) for n, line in enumerate(fh.read().splitlines(), 1) if line.strip()]
+    except (OSError, UnicodeDecodeError) as exc:
         raise SharedKeyError(f"{path}: cannot read key file: {exc}") from exc
+    if not lines:
+        raise SharedKeyError(f"{path}: the key file is empty")
+    return tuple(decode_key(line, f"{path}: the key on line {n}") for n, line in lines)
+
+
+def load_key(key_file: str | os.PathLike[str] | None = None, *, create: bool = True) -> bytes:
+    """Load the shared key: the first of :func:`load_keys` (the one a client connects with).
+
+    Raises:
+        SharedKeyError: as :func:`load_keys`.
+    """
+    return load_keys(key_file, create=create)[0]

@@ -13,6 +13,16 @@ Format (every section optional except ``[nodes.*]``)::
     host = "127.0.0.1"
     port = 7101
     max_in_flight = 16            # optional cap on concurrently running calls
+    state_dir = "/var/lib/petrobot/alpha"  # optional: where the node keeps results across restarts
+
+    [tls]                         # optional: TLS on node connections (docs/protocol.md §3)
+    mode = "certificate"          # "off" (default), "certificate" or "psk"
+    ca = "ca.pem"                 # certificate mode: CA of every host's certificate
+    cert = "host.pem"             # certificate mode: this host's certificate and key (PEM)
+    key = "host.key"
+
+    [nodes.alpha.tls]             # optional per-node overrides of [tls]
+    server_name = "alpha.lab"     # name its certificate holds (default: its host)
 
     [actions.echo]
     node = "alpha"
@@ -20,6 +30,7 @@ Format (every section optional except ``[nodes.*]``)::
     local_only = false            # optional: refuse callers not on the node's own host
     deadline_s = 5.0              # optional default deadline, seconds
     params = { k = 1 }            # optional default params, merged under the call's params
+    unattended = false            # optional: may finish when its caller is gone (else cancelled)
 
     [drivers.camera]              # optional background components started with the node
     node = "alpha"
@@ -57,8 +68,10 @@ __all__ = [
     "DriverSpec",
     "Location",
     "NodeSpec",
+    "TlsSettings",
     "load_location",
     "parse_location",
+    "parse_tls",
 ]
 
 MEMORY_ACTIONS = ("memory.get", "memory.set", "memory.keys")
@@ -76,6 +89,32 @@ _HOST_LABEL = re.compile(r"[A-Za-z0-9](?:[A-Za-z0-9\-]{0,61}[A-Za-z0-9])?")
 _DEFAULT_MAX_IN_FLIGHT = 16
 
 
+TLS_MODES = ("off", "certificate", "psk")
+"""Values of ``mode`` in ``[tls]``: plain TCP, TLS with certificates, TLS keyed by the shared key."""
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class TlsSettings:
+    """TLS on the connections to and from one node (``[tls]``, overridden by ``[nodes.NAME.tls]``).
+
+    Attributes:
+        mode: ``"off"``, ``"certificate"`` (mutual TLS: every host presents ``cert``, checked
+            against ``ca``) or ``"psk"`` (TLS keyed by the shared key, no certificates).
+        ca: PEM file of the certificate authority (certificate mode).
+        cert: PEM file of this host's certificate chain (certificate mode).
+        key: PEM file of this host's private key (certificate mode).
+        server_name: name the node's certificate must hold (default: the node's ``host``).
+
+    Relative paths are taken from the directory of services.toml.
+    """
+
+    mode: str = "off"
+    ca: str | None = None
+    cert: str | None = None
+    key: str | None = None
+    server_name: str | None = None
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class NodeSpec:
     """One node (one per host).
@@ -85,12 +124,17 @@ class NodeSpec:
         host: address the node listens on and clients connect to.
         port: TCP port.
         max_in_flight: cap on concurrently running calls; more are rejected with ``"busy"``.
+        state_dir: directory where the node keeps call results across restarts, or ``None`` for
+            the default (``$XDG_STATE_HOME/petrobot/NAME``, i.e. ``~/.local/state/petrobot/NAME``).
+        tls: TLS settings of the connections to and from this node.
     """
 
     name: str
     host: str
     port: int
     max_in_flight: int = _DEFAULT_MAX_IN_FLIGHT
+    state_dir: str | None = None
+    tls: TlsSettings = field(default_factory=TlsSettings)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -107,6 +151,8 @@ class ActionPlacement:
         local_only: refuse callers that are not on the node's own host.
         deadline_s: default deadline in seconds, or ``None``.
         params: default parameters, merged under each call's params.
+        unattended: the call may finish when its caller is gone; otherwise the node cancels a
+            call nobody waits for (docs/protocol.md §5, "Orphaned calls").
     """
 
     name: str
@@ -115,6 +161,7 @@ class ActionPlacement:
     local_only: bool = False
     deadline_s: float | None = None
     params: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
+    unattended: bool = False
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -243,6 +290,39 @@ def _host_problem(host: str) -> str | None:
     return None
 
 
+def parse_tls(entry: Any, where: str, base: TlsSettings, directory: str) -> TlsSettings:
+    """Parse a ``[tls]`` or ``[nodes.NAME.tls]`` table over ``base`` (its keys override base's).
+
+    Args:
+        entry: the table.
+        where: its place in the file, for error messages.
+        base: the settings it overrides (the defaults, or ``[tls]`` for a node's table).
+        directory: directory relative paths are taken from.
+
+    Raises:
+        LocationError: not a table, an unknown key or mode, a value that is not a string, or
+            certificate mode without ``ca``, ``cert`` and ``key``.
+    """
+    if not isinstance(entry, dict):
+        raise LocationError(f"{where} must be a table")
+    extra = sorted(set(entry) - {"mode", "ca", "cert", "key", "server_name"})
+    if extra:
+        raise LocationError(f"{where}: unknown key(s) {', '.join(extra)}")
+    values: dict[str, Any] = {}
+    for name, value in entry.items():
+        if not isinstance(value, str) or not value:
+            raise LocationError(f"{where}: {name} must be a non-empty string")
+        if name in ("ca", "cert", "key"):
+            value = os.path.join(directory, os.path.expanduser(value))
+        values[name] = value
+    tls = TlsSettings(**{**{f: getattr(base, f) for f in TlsSettings.__slots__}, **values})
+    if tls.mode not in TLS_MODES:
+        raise LocationError(f"{where}: mode must be one of {', '.join(TLS_MODES)}, got {tls.mode!r}")
+    if tls.mode == "certificate" and None in (tls.ca, tls.cert, tls.key):
+        raise LocationError(f"{where}: certificate mode needs ca, cert and key")
+    return tls
+
+
 def parse_location(text: str, *, path: str = "<string>") -> Location:
     """Parse the text of a location file.
 
@@ -279,9 +359,17 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
             raise fail(f"{where}: bad name (use letters, digits, '_'{_NAME_CHARS[pattern]}, starting with a "
                        f"letter or '_'; at most {_MAX_NAME} characters)", *key)
 
-    extra = sorted(set(doc) - {"nodes", "actions", "drivers", "events", "memory"})
+    def tls_of(entry: Any, where: str, base: TlsSettings, *key: str) -> TlsSettings:
+        try:
+            return parse_tls(entry, where, base, directory)
+        except LocationError as exc:
+            raise fail(str(exc), *key) from None
+
+    extra = sorted(set(doc) - {"nodes", "actions", "drivers", "events", "memory", "tls"})
     if extra:
         raise fail(f"unknown key(s) {', '.join(extra)}", extra[0])
+    directory = os.path.dirname(path) if path != "<string>" else ""
+    tls = tls_of(doc["tls"], "[tls]", TlsSettings(), "tls") if "tls" in doc else TlsSettings()
 
     nodes: dict[str, NodeSpec] = {}
     seen_addr: dict[tuple[str, int], str] = {}
@@ -289,7 +377,7 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         where = f"[nodes.{name}]"
         if not isinstance(entry, dict):
             raise fail(f"{where} must be a table", "nodes", name)
-        check_keys(entry, {"host", "port", "max_in_flight"}, where, "nodes", name)
+        check_keys(entry, {"host", "port", "max_in_flight", "state_dir", "tls"}, where, "nodes", name)
         check_name(name, _NAME_RE, where, "nodes", name)
         host = entry.get("host")
         port = entry.get("port")
@@ -307,7 +395,14 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
             raise fail(f"{where}: duplicate address {host}:{port} (also node {seen_addr[host, port]!r})",
                        "nodes", name, "port")
         seen_addr[host, port] = name
-        nodes[name] = NodeSpec(name=name, host=host, port=port, max_in_flight=cap)
+        state_dir = entry.get("state_dir")
+        if state_dir is not None and (not isinstance(state_dir, str) or not state_dir):
+            raise fail(f"{where}: state_dir must be a non-empty string", "nodes", name, "state_dir")
+        node_tls = tls_of(entry["tls"], f"{where}.tls", tls, "nodes", name, "tls") if "tls" in entry else tls
+        nodes[name] = NodeSpec(
+            name=name, host=host, port=port, max_in_flight=cap, tls=node_tls,
+            state_dir=os.path.join(directory, os.path.expanduser(state_dir)) if state_dir else None,
+        )
     if not nodes:
         raise _error(path, 1, "no [nodes.*] table: a location file names at least one node")
 
@@ -342,13 +437,17 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         where = f"[actions.{name}]"
         if not isinstance(entry, dict):
             raise fail(f"{where} must be a table", "actions", name)
-        check_keys(entry, {"node", "impl", "local_only", "deadline_s", "params"}, where, "actions", name)
+        check_keys(entry, {"node", "impl", "local_only", "deadline_s", "params", "unattended"}, where,
+                   "actions", name)
         if name in MEMORY_ACTIONS:
             raise fail(f"{where}: {name} is reserved for the global memory service", "actions", name)
         check_name(name, _ACTION_RE, where, "actions", name)
         local_only = entry.get("local_only", False)
         if not isinstance(local_only, bool):
             raise fail(f"{where}: local_only must be true or false", "actions", name, "local_only")
+        unattended = entry.get("unattended", False)
+        if not isinstance(unattended, bool):
+            raise fail(f"{where}: unattended must be true or false", "actions", name, "unattended")
         deadline = entry.get("deadline_s")
         if deadline is not None and (isinstance(deadline, bool) or not isinstance(deadline, (int, float))
                                      or not 0 < deadline < math.inf):
@@ -360,6 +459,7 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
             local_only=local_only,
             deadline_s=float(deadline) if deadline is not None else None,
             params=params_of(entry, where, "actions", name),
+            unattended=unattended,
         )
     if memory_node is not None:
         for name in MEMORY_ACTIONS:

@@ -1,74 +1,87 @@
-"""Set-point stream from the vision node to the motion node (paper section 6).
+"""Set points from the vision node to the motion node (paper section 6).
 
 "The image processing PC sends set points periodically to the motion control PC using TCP/IP
-sockets. The set points represent the predicted catching points." Here: one TCP connection of its own
-(not the coordinator's), one set point per camera frame, each with a sequence number and timestamps;
-the receiver keeps only the latest (latest wins) and reports a lost stream when set points stop coming
-or the connection drops.
+sockets. The set points represent the predicted catching points." Here the set points travel inside
+the node protocol (docs/protocol.md), which is already authenticated (HMAC handshake with the shared
+key), framed, size-capped and validated: the vision node publishes each set point as an event on
+topic :data:`SETPOINT_TOPIC` (``ctx.publish``), and the motion node subscribes to that topic on the
+node that publishes it through the node's own authenticated link (``ctx.node.link(node)``). A
+process without the key cannot connect, let alone steer the arm; a connection that opens and closes
+cannot end a catch; a set point whose fields are not what :meth:`SetPoint.from_dict` expects is
+dropped and counted, never used.
 
-Wire format: each set point is one write of a 4-byte big-endian length followed by a msgpack map
-with the fields of :class:`SetPoint` (``{"seq", "t_frame", "t_capture", "t_sent", "x", "y", "t",
-"vx", "vy", "sigma_y", "sigma_t"}``). Maps larger than :data:`MAX_MESSAGE` are refused before their
-body is read.
-
-Layers, sans-IO style: :func:`encode` / :class:`SetPointDecoder` turn set points into bytes and
-bytes into set points; :class:`LatestSetPoint` keeps the latest and judges staleness with a time
-passed in; :class:`SetPointSender` (blocking socket) and :class:`SetPointReceiver` (asyncio server)
-are the thin I/O shells.
+Layers, sans-IO style: :class:`SetPoint` (validation), :class:`LatestSetPoint` (latest wins,
+staleness judged with a time passed in, malformed set points counted); :class:`SetPointSubscription`
+is the thin shell that feeds a holder from a node link's events.
 """
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
-import socket
+import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, fields
-from typing import Any
-
+from typing import TYPE_CHECKING, Any
 
 from services.errors import ActionError, RemoteProtocolError
-from services.protocol.framing import FrameReader, pack_map, unpack_map
+
+if TYPE_CHECKING:
+    from services.client import NodeLink
+    from services.protocol import Event
 
 __all__ = [
-    "MAX_MESSAGE",
+    "MAX_SEQ",
+    "SETPOINT_TOPIC",
     "LatestSetPoint",
+    "MalformedSetPoint",
     "SetPoint",
-    "SetPointDecoder",
-    "SetPointReceiver",
-    "SetPointSender",
+    "SetPointSubscription",
     "StreamLostError",
-    "encode",
 ]
 
-MAX_MESSAGE = 4096
-"""Largest accepted set-point message body, bytes."""
+SETPOINT_TOPIC = "setpoints"
+"""The event topic on which the node hosting ``predict`` publishes set points."""
 
+MAX_SEQ = 2**63
+"""Sequence numbers are integers in ``0 .. MAX_SEQ - 1`` (an int64 on the wire)."""
+
+MAX_FIELDS = 32
+"""A set-point map with more keys than this is refused before any field is read."""
+
+#: Largest magnitude accepted per field: metres, seconds (sim or Unix time), m/s.
+_BOUNDS: Mapping[str, float] = {
+    "t_frame": 1e10, "t_capture": 1e10, "t_sent": 1e10, "t": 1e10,
+    "x": 100.0, "y": 100.0, "vx": 100.0, "vy": 100.0, "sigma_y": 100.0, "sigma_t": 1e4,
+}
+_OPTIONAL = frozenset({"sigma_y", "sigma_t"})
 
 
 class StreamLostError(ActionError):
-    """No fresh set point: the stream never started, went stale, or its connection dropped."""
+    """No fresh set point: the stream never started, went stale, or the link to its node is down."""
+
+
+class MalformedSetPoint(RemoteProtocolError):
+    """A received set point is not a map of the expected, finite, bounded fields."""
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class SetPoint:
-    """A predicted catching point, as streamed from vision to motion.
+    """A predicted catching point, as the vision side sends it to the motion side.
 
     Coordinates are in the table frame of :mod:`sim.catching` (x towards the robot, catch line at
     x = 0); times ``t_frame`` and ``t`` are on the camera's clock (simulated time in the sim),
     ``t_capture`` and ``t_sent`` on the host's wall clock (:func:`time.time`, for latency).
 
     Attributes:
-        seq: sequence number, increasing by one per set point of the stream.
+        seq: sequence number, increasing by one per set point of a ``predict`` call, 0 .. 2**63 - 1.
         t_frame: timestamp of the camera frame the prediction used, s.
         t_capture: wall-clock time the frame was captured, s.
         t_sent: wall-clock time the set point was sent, s.
         x, y: predicted point where the ball crosses the catch line, m.
         t: predicted time of the crossing, s (camera clock).
         vx, vy: predicted ball velocity at the crossing, m/s.
-        sigma_y: 1-σ uncertainty of y, m.
-        sigma_t: 1-σ uncertainty of t, s.
+        sigma_y: 1-σ uncertainty of y, m (≥ 0).
+        sigma_t: 1-σ uncertainty of t, s (≥ 0).
     """
 
     seq: int
@@ -88,54 +101,66 @@ class SetPoint:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> SetPoint:
-        """Build from a dict; raises RemoteProtocolError on missing or mistyped fields."""
-        try:
-            kw: dict[str, Any] = {}
-            for f in fields(cls):
-                if f.name not in d:
-                    if f.name in ("sigma_y", "sigma_t"):
-                        continue
-                    raise KeyError(f.name)
-                kw[f.name] = int(d[f.name]) if f.name == "seq" else float(d[f.name])
-            return cls(**kw)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise RemoteProtocolError(f"malformed set point: {exc!r}") from exc
+    def from_dict(cls, d: object) -> SetPoint:
+        """Build from a received map, checking every field.
 
+        ``seq`` must be an ``int`` (not a bool) in ``0 .. 2**63 - 1``; every other field a finite
+        int or float within a physical bound (|x|, |y| ≤ 100 m, |vx|, |vy| ≤ 100 m/s, times
+        ≤ 1e10 s, sigmas ≥ 0); ``sigma_y``/``sigma_t`` may be left out (0); unknown keys are
+        ignored; a map of more than :data:`MAX_FIELDS` keys is refused.
 
-def encode(sp: SetPoint) -> bytes:
-    """Bytes of one set-point message (length prefix + msgpack map)."""
-    return pack_map(sp.to_dict(), MAX_MESSAGE)
-
-
-class SetPointDecoder:
-    """Turns received bytes into set points (sans-IO).
-
-    Feed whatever the socket gave with :meth:`feed`; it returns the complete set points found.
-
-    Raises:
-        RemoteProtocolError: (from :meth:`feed`) on an oversize or malformed message; the stream
-            is then unusable.
-    """
-
-    def __init__(self, max_message: int = MAX_MESSAGE) -> None:
-        self.max_message = max_message
-        self._reader = FrameReader(max_message)
-
-    def feed(self, data: bytes) -> list[SetPoint]:
-        """Add received bytes; return the set points completed by them, in order."""
-        self._reader.feed(data)
-        out: list[SetPoint] = []
-        while (body := self._reader.next_body()) is not None:
-            out.append(SetPoint.from_dict(unpack_map(body)))
-        return out
+        Raises:
+            MalformedSetPoint: naming the first field that is missing or wrong.
+        """
+        if not isinstance(d, dict):
+            raise MalformedSetPoint(f"a set point must be a map, not {type(d).__name__}")
+        if len(d) > MAX_FIELDS:
+            raise MalformedSetPoint(f"a set point has at most {MAX_FIELDS} fields, got {len(d)}")
+        kw: dict[str, Any] = {}
+        for f in fields(cls):
+            name = f.name
+            if name not in d:
+                if name in _OPTIONAL:
+                    continue
+                raise MalformedSetPoint(f"set point without {name!r}")
+            v = d[name]
+            if name == "seq":
+                if type(v) is not int or not 0 <= v < MAX_SEQ:
+                    raise MalformedSetPoint(f"set point seq must be an integer in 0..2**63-1, got {v!r:.40}")
+                kw[name] = v
+                continue
+            if type(v) not in (int, float):
+                raise MalformedSetPoint(f"set point {name} must be a number, got {type(v).__name__}")
+            x = float(v)
+            bound = _BOUNDS[name]
+            if not math.isfinite(x) or abs(x) > bound:
+                raise MalformedSetPoint(f"set point {name} = {x!r} is not finite within ±{bound:g}")
+            if name in _OPTIONAL and x < 0:
+                raise MalformedSetPoint(f"set point {name} = {x!r} is negative")
+            kw[name] = x
+        return cls(**kw)
 
 
 class LatestSetPoint:
     """Holds the latest set point of a stream (latest wins) and judges its freshness (sans-IO).
 
+    Freshness is judged on two clocks: the receiver's wall clock (time since the latest set point
+    arrived) and, when the caller passes it, the camera's clock the set points are stamped with
+    (the bus time on the motion node; simulated time in the sim). The latest set point is stale
+    when it is older than ``max_age`` on both: a simulation that runs slower than real time on a
+    loaded machine delivers frames, hence set points, further apart in wall time without anything
+    being lost, while a vision side that stopped lets both ages grow.
+
     Args:
-        max_age: a set point older than this (s, by its receive time) is stale.
+        max_age: a set point older than this (s) is stale.
+
+    Attributes:
+        latest: the latest accepted set point (``None`` before the first).
+        received_at: receive time of :attr:`latest`, s.
+        received: set points offered (well-formed or not).
+        dropped: well-formed set points not newer than the latest (by ``seq``).
+        malformed: set points refused by :meth:`SetPoint.from_dict`.
+        last_malformed: why the latest malformed one was refused.
     """
 
     def __init__(self, max_age: float = 0.2) -> None:
@@ -144,6 +169,8 @@ class LatestSetPoint:
         self.received_at: float | None = None
         self.received = 0
         self.dropped = 0
+        self.malformed = 0
+        self.last_malformed: str | None = None
         self.closed_reason: str | None = None
 
     def offer(self, sp: SetPoint, now: float) -> bool:
@@ -160,17 +187,41 @@ class LatestSetPoint:
         self.received_at = now
         return True
 
+    def offer_data(self, data: object, now: float) -> SetPoint | None:
+        """Offer a received map; returns the set point if it became the latest, else ``None``.
+
+        A malformed map is counted (:attr:`malformed`, :attr:`last_malformed`) and dropped; it never
+        raises and never changes the latest set point.
+        """
+        try:
+            sp = SetPoint.from_dict(data)
+        except MalformedSetPoint as exc:
+            self.received += 1
+            self.malformed += 1
+            self.last_malformed = str(exc)
+            return None
+        return sp if self.offer(sp, now) else None
+
     def close(self, reason: str) -> None:
-        """Mark the stream as lost (connection dropped, protocol error)."""
+        """Mark the stream as lost for good (no later set point is fresh)."""
         if self.closed_reason is None:
             self.closed_reason = reason
 
-    def get(self, now: float) -> SetPoint:
+    def age(self, now: float) -> float:
+        """Seconds since the latest set point was received (infinite before the first)."""
+        return math.inf if self.received_at is None else now - self.received_at
+
+    def get(self, now: float, camera_now: float | None = None) -> SetPoint:
         """The latest set point, if fresh at time ``now`` (s, same clock as :meth:`offer`).
+
+        Args:
+            now: the receiver's wall clock, s.
+            camera_now: the present time on the set points' camera clock (``t_frame``), s, if
+                known; then the set point is stale only if its frame is older than ``max_age`` too.
 
         Raises:
             StreamLostError: if the stream is closed, never delivered, or the latest set point is
-                older than ``max_age``.
+                older than ``max_age`` (on both clocks when ``camera_now`` is given).
         """
         if self.closed_reason is not None:
             raise StreamLostError(f"set-point stream lost: {self.closed_reason}")
@@ -178,151 +229,87 @@ class LatestSetPoint:
             raise StreamLostError("no set point received yet")
         age = now - self.received_at
         if age > self.max_age:
-            raise StreamLostError(f"set-point stream stale: last set point {age:.3f} s old")
+            if camera_now is None or not math.isfinite(camera_now):
+                raise StreamLostError(f"set-point stream stale: last set point {age:.3f} s old")
+            frame_age = camera_now - self.latest.t_frame
+            if frame_age > self.max_age:
+                raise StreamLostError(f"set-point stream stale: last set point {age:.3f} s old "
+                                      f"({frame_age:.3f} s on the camera clock)")
         return self.latest
 
 
-class SetPointSender:
-    """Sends set points over a TCP connection (blocking socket, TCP_NODELAY, one write each).
+class SetPointSubscription:
+    """Set points received as events of one node, through an authenticated node link.
+
+    :meth:`start` subscribes ``topic`` on the link (the link reconnects and resubscribes by
+    itself); each event's data is offered to :attr:`state`; :meth:`restart` gives a fresh holder
+    (a new catch only takes set points that arrive after it started).
 
     Args:
-        host, port: address of the :class:`SetPointReceiver`.
-        timeout: connect and send timeout, s.
-
-    Raises:
-        OSError: if the connection cannot be made.
-    """
-
-    def __init__(self, host: str, port: int, *, timeout: float = 2.0) -> None:
-        self._sock = socket.create_connection((host, port), timeout=timeout)
-        self._sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self.seq = 0
-
-    def send(
-        self, *, t_frame: float, t_capture: float, x: float, y: float, t: float, vx: float,
-        vy: float, sigma_y: float = 0.0, sigma_t: float = 0.0,
-    ) -> SetPoint:
-        """Stamp a set point with the next sequence number and the send time, and send it.
-
-        Raises:
-            OSError: if the connection is broken.
-        """
-        sp = SetPoint(
-            seq=self.seq, t_frame=t_frame, t_capture=t_capture, t_sent=time.time(), x=x, y=y,
-            t=t, vx=vx, vy=vy, sigma_y=sigma_y, sigma_t=sigma_t,
-        )
-        self._sock.sendall(encode(sp))
-        self.seq += 1
-        return sp
-
-    def close(self) -> None:
-        """Close the connection (the receiver then reports the stream lost)."""
-        with contextlib.suppress(OSError):
-            self._sock.shutdown(socket.SHUT_RDWR)
-        self._sock.close()
-
-
-class SetPointReceiver:
-    """asyncio TCP server receiving one set-point stream at a time (the motion node side).
-
-    Args:
-        host: address to listen on.
-        port: TCP port, 0 for any free one (see :attr:`port` after :meth:`start`).
+        link: the link to the node that publishes the set points (``ctx.node.link(name)``).
+        topic: the event topic.
         max_age: staleness limit, s (see :class:`LatestSetPoint`).
         clock: wall clock used for receive times (default :func:`time.time`).
-        on_set_point: optional callback run for each set point that becomes the latest, with the
-            set point and its receive time.
+        on_set_point: optional callback for each set point that becomes the latest, with the set
+            point and its receive time.
     """
 
     def __init__(
         self,
-        host: str = "127.0.0.1",
-        port: int = 0,
+        link: NodeLink,
+        topic: str = SETPOINT_TOPIC,
         *,
         max_age: float = 0.2,
         clock: Callable[[], float] = time.time,
         on_set_point: Callable[[SetPoint, float], None] | None = None,
     ) -> None:
-        self.host = host
-        self.port = port
+        self.link = link
+        self.topic = topic
         self.clock = clock
-        self.state = LatestSetPoint(max_age)
         self.on_set_point = on_set_point
-        self._server: asyncio.Server | None = None
-        self._writers: set[asyncio.StreamWriter] = set()
-        self._new = asyncio.Event()
-        self.connected = False
+        self.state = LatestSetPoint(max_age)
+        self.events = 0
+        """Events received on the topic since :meth:`start`."""
+        self._started = False
 
-    async def start(self) -> int:
-        """Start listening; returns the port."""
-        self._server = await asyncio.start_server(self._handle, self.host, self.port)
-        self.port = self._server.sockets[0].getsockname()[1]
-        return self.port
+    @property
+    def node(self) -> str:
+        """Name of the publishing node."""
+        return self.link.node
 
-    def latest(self) -> SetPoint:
-        """The latest fresh set point; raises StreamLostError (see :meth:`LatestSetPoint.get`)."""
-        return self.state.get(self.clock())
+    def start(self) -> None:
+        """Subscribe (idempotent); must run in the event loop of the link."""
+        if not self._started:
+            self._started = True
+            self.link.subscribe(self.topic, self._on_event)
 
-    async def wait_newer(self, seq: int, timeout: float) -> SetPoint:
-        """Wait up to ``timeout`` s for a set point with sequence number above ``seq``.
+    def restart(self) -> LatestSetPoint:
+        """A fresh holder (same ``max_age``); returns it."""
+        self.state = LatestSetPoint(self.state.max_age)
+        return self.state
+
+    def latest(self, camera_now: float | None = None) -> SetPoint:
+        """The latest fresh set point (``camera_now``: see :meth:`LatestSetPoint.get`).
 
         Raises:
-            StreamLostError: if none arrives in time or the stream is lost.
+            StreamLostError: stale or none yet; the message says whether the link is down.
         """
         try:
-            async with asyncio.timeout(timeout):
-                while True:
-                    sp = self.state.latest
-                    if sp is not None and sp.seq > seq and self.state.closed_reason is None:
-                        return sp
-                    if self.state.closed_reason is not None:
-                        raise StreamLostError(f"set-point stream lost: {self.state.closed_reason}")
-                    self._new.clear()
-                    await self._new.wait()
-        except TimeoutError:
-            raise StreamLostError(f"no set point newer than {seq} within {timeout} s") from None
+            return self.state.get(self.clock(), camera_now)
+        except StreamLostError as exc:
+            if not self.link.connected:
+                raise StreamLostError(f"{exc} (link to node {self.node} is down)") from None
+            raise
 
-    async def close(self) -> None:
-        """Close the server and every connection."""
-        for w in list(self._writers):
-            w.close()
-        if self._server is not None:
-            self._server.close()
-            with contextlib.suppress(Exception):
-                async with asyncio.timeout(2.0):
-                    await self._server.wait_closed()
+    def close(self) -> None:
+        """Unsubscribe."""
+        if self._started:
+            self._started = False
+            self.link.unsubscribe(self.topic, self._on_event)
 
-    async def _handle(self, reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        sock = writer.get_extra_info("socket")
-        if sock is not None:
-            sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-        self._writers.add(writer)
-        self.state = _carry_over(self.state)
-        self.connected = True
-        decoder = SetPointDecoder()
-        reason = "sender closed the connection"
-        try:
-            while True:
-                data = await reader.read(65536)
-                if not data:
-                    break
-                now = self.clock()
-                for sp in decoder.feed(data):
-                    if self.state.offer(sp, now) and self.on_set_point is not None:
-                        self.on_set_point(sp, now)
-                self._new.set()
-        except RemoteProtocolError as exc:
-            reason = str(exc)
-        except (ConnectionError, OSError) as exc:
-            reason = f"connection error: {exc!r}"
-        finally:
-            self.connected = False
-            self.state.close(reason)
-            self._new.set()
-            self._writers.discard(writer)
-            writer.close()
-
-
-def _carry_over(old: LatestSetPoint) -> LatestSetPoint:
-    """A fresh holder for a new connection (new sender, sequence numbers start again)."""
-    return LatestSetPoint(old.max_age)
+    def _on_event(self, event: Event) -> None:
+        self.events += 1
+        now = self.clock()
+        sp = self.state.offer_data(event.data, now)
+        if sp is not None and self.on_set_point is not None:
+            self.on_set_point(sp, now)

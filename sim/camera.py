@@ -31,10 +31,10 @@ from typing import Any
 import cv2
 import numpy as np
 
-from services.vision import Homography, Roi, fit_homography, locate_threshold
 from services.devices.framegrabber import MAX_HEADER, Frame
 from services.errors import ProtocolError
 from services.protocol.framing import pack_map, recv_frame, unpack_map
+from services.vision import Homography, Roi, fit_homography, locate_threshold
 
 __all__ = [
     "AnalyticRenderer",
@@ -233,6 +233,12 @@ class AnalyticRenderer:
         self.background = bg
         self._noise = _NoiseBank(bg.shape, intensity_sigma, self.rng)  # type: ignore[arg-type]
 
+    def reseed(self, seed: int | Sequence[int]) -> None:
+        """Restart the noise (grey levels and position jitter) from ``seed``: the sim reseeds at
+        each throw, so that a throw's frames get the same noise whenever it happens."""
+        self.rng = np.random.default_rng(seed)
+        self._noise.rng = self.rng
+
     def noiseless_background(self) -> np.ndarray:
         """(H, W, 3) uint8 BGR background without ball and without noise."""
         return self.background.copy()
@@ -282,6 +288,10 @@ class TinyRenderer:
         self._noise = _NoiseBank(
             (camera.height, camera.width, 3), intensity_sigma, np.random.default_rng(seed)
         )
+
+    def reseed(self, seed: int | Sequence[int]) -> None:
+        """Restart the grey-level noise from ``seed`` (see :meth:`AnalyticRenderer.reseed`)."""
+        self._noise.rng = np.random.default_rng(seed)
 
     def render(self) -> np.ndarray:
         """Render the present state of the world: (H, W, 3) uint8 BGR."""

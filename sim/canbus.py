@@ -2,7 +2,7 @@
 a socketcand-protocol gateway on loopback so that another process can use the bus with
 python-can (``can.Bus(interface="socketcand", host=..., port=..., channel="can0")``).
 
-Frame layout, units and state machine: :mod:`sim.canframes`.
+Frame layout, units and state machine: :mod:`services.devices.cia402`.
 
 Threads: the world calls :meth:`SimDrives.step` from its own (simulation) thread every 1 ms of
 simulated time; only that thread touches pybullet. Frames from clients reach the devices through
@@ -11,14 +11,18 @@ per connection, a reader and a writer thread.
 
 Drive model (per joint): a target received in RPDO1 is latched at the next SYNC (every 2 ms of
 simulated time) and interpolated linearly over the cycle; the demand goes to pybullet's position
-motor with the joint's speed and torque limits. If ``|demand - actual|`` exceeds
-:data:`FOLLOWING_ERROR_LIMIT` the drive faults (CiA 402 FAULT, statusword bit 13) and holds where it
-is. A drive that is not enabled holds its position (the PUMA's brakes).
+motor with the joint's speed and torque limits. A missing target is extrapolated at the last demand
+velocity for a bounded number of cycles (the RPDO-timeout watchdog), and the master's heartbeat is
+watched (the consumer-heartbeat watchdog). If ``|demand - actual|`` exceeds
+:data:`FOLLOWING_ERROR_LIMIT`, or a watchdog runs out, the drive faults: it brings the joint to rest
+on a quick-stop ramp (FAULT REACTION ACTIVE), then holds in FAULT, and says why in an EMCY frame
+(:class:`SimDrives`). A drive that is not enabled holds its position (the PUMA's brakes).
 """
 
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import socket
 import threading
@@ -28,13 +32,14 @@ from dataclasses import dataclass, field
 from typing import Any, Self
 
 from services.devices import cia402 as cf
-from sim import socketcand
 from services.robots import puma560
+from sim import socketcand
 
 __all__ = [
     "FOLLOWING_ERROR_LIMIT",
     "BusPort",
     "CanGateway",
+    "FaultRecord",
     "SimBus",
     "SimDrives",
 ]
@@ -122,6 +127,13 @@ class SimBus:
         if origin is not None:
             self._inbound.put(frame)
 
+    def wait_inbound(self, timeout: float) -> cf.CanFrame | None:
+        """The next frame sent by a port, waiting up to ``timeout`` s; ``None`` if none came."""
+        try:
+            return self._inbound.get(timeout=max(timeout, 0.0))
+        except queue.Empty:
+            return None
+
     def take_inbound(self) -> list[cf.CanFrame]:
         """Frames sent by ports since the last call (for the sim's devices)."""
         out = []
@@ -144,6 +156,31 @@ class _Drive:
     t_latch: float = 0.0
     hold: float = 0.0
     commanded: tuple[float, float] | None = None
+    missed: int = 0  # SYNC cycles in a row without a new target (extrapolated)
+    ramp_q: float = 0.0  # fault reaction: demand position, rad
+    ramp_v: float = 0.0  # fault reaction: demand velocity, rad/s
+    t_tick: float = 0.0  # time of the previous tick, s
+
+
+@dataclass(frozen=True, slots=True)
+class FaultRecord:
+    """One fault of a simulated drive, as its EMCY frame announced it.
+
+    Attributes:
+        t: bus time of the fault, s.
+        node: drive node id (1..6).
+        code: the EMCY error code.
+        reason: what happened, with numbers.
+        speed: the joint's speed when the fault reaction started, rad/s.
+        t_stopped: bus time at which the joint was at rest again (NaN while stopping), s.
+    """
+
+    t: float
+    node: int
+    code: cf.EmcyCode
+    reason: str
+    speed: float = 0.0
+    t_stopped: float = math.nan
 
 
 class SimDrives:
@@ -154,10 +191,33 @@ class SimDrives:
     :class:`CanGateway` (or use :meth:`SimBus.connect` in process); call :meth:`step` every 1 ms of
     simulated time from the simulation thread.
 
+    Watchdogs (the CiA 301/402 behaviour of a drive whose master goes silent): an enabled drive
+    that gets no target at a SYNC keeps its last demand velocity for at most
+    ``target_timeout_cycles`` cycles, then faults (EMCY 0x8250, RPDO timeout); once the master's
+    heartbeat (node :data:`services.devices.cia402.MASTER_ID`) has been seen, an enabled drive
+    that hears none for ``consumer_heartbeat_s`` of bus time faults too (EMCY 0x8130). A fault,
+    including a following error, starts the fault reaction: the joint's demand goes from where the
+    joint is, at its speed, to rest at the quick-stop deceleration ``qdd_max``; then the drive is
+    in FAULT and holds. Every fault is kept in :attr:`faults` (bus time, node, code, reason, when
+    the joint was at rest again).
+
+    Pacing (``master_wait_s`` > 0): the sim's own stepping is bursty (a camera frame takes tens of
+    milliseconds to render, then the physics catches up), while a real bus's SYNC is strictly
+    periodic. So that the master is not charged with the sim's bursts, at each SYNC at which an
+    enabled drive has no target yet the sim waits for the master's targets: up to
+    ``master_wait_s`` of wall time if the master answered the previous SYNC; once a wait has run
+    out, only until one cycle (2 ms) of wall time has passed since the previous SYNC, so that the
+    bus runs no faster than real time while the master is silent and the RPDO timeout (50 ms of
+    bus time) is at least 50 ms of wall time too. A master that answers is in step again.
+
     Args:
         bus: the bus to sit on (a new one if ``None``).
         qd_max, tau_max: per-joint speed (rad/s) and torque (N m) limits of the motors, shape (6,).
         q_min, q_max: joint limits (rad) targets are clamped to, shape (6,).
+        qdd_max: quick-stop deceleration of the fault reaction, rad/s², shape (6,).
+        target_timeout_cycles: missing targets in a row before an RPDO-timeout fault.
+        consumer_heartbeat_s: heartbeat consumer time for the master, s of bus time.
+        master_wait_s: wall time waited at a SYNC for the master's targets (0: never wait).
     """
 
     def __init__(
@@ -167,12 +227,29 @@ class SimDrives:
         tau_max: Sequence[float] = tuple(puma560.TAU_MAX),
         q_min: Sequence[float] = tuple(puma560.Q_MIN),
         q_max: Sequence[float] = tuple(puma560.Q_MAX),
+        qdd_max: Sequence[float] = tuple(puma560.QDD_MAX),
+        *,
+        target_timeout_cycles: int = cf.TARGET_TIMEOUT_CYCLES,
+        consumer_heartbeat_s: float = cf.CONSUMER_HEARTBEAT_S,
+        master_wait_s: float = 0.0,
     ) -> None:
         self.bus = bus if bus is not None else SimBus()
         self.qd_max = [float(v) for v in qd_max]
         self.tau_max = [float(v) for v in tau_max]
         self.q_min = [float(v) for v in q_min]
         self.q_max = [float(v) for v in q_max]
+        self.qdd_max = [float(v) for v in qdd_max]
+        self.target_timeout_cycles = int(target_timeout_cycles)
+        self.consumer_heartbeat_s = float(consumer_heartbeat_s)
+        self.master_wait_s = float(master_wait_s)
+        self.faults: list[FaultRecord] = []
+        self.master_waits = 0
+        """SYNCs at which the sim waited for the master's targets."""
+        self.master_misses = 0
+        """Waits that ran out (the master did not answer within ``master_wait_s``)."""
+        self._master_in_step = False
+        self._master_heartbeat: float | None = None
+        self._last_sync_wall: float | None = None
         self._client: Any = None
         self._body = -1
         self._drives: list[_Drive] = []
@@ -246,12 +323,17 @@ class SimDrives:
         states = self._client.getJointStates(self._body, [d.joint for d in self._drives])
         return [float(s[0]) for s in states]
 
+    def velocities(self) -> list[float]:
+        """Actual joint velocities, rad/s."""
+        states = self._client.getJointStates(self._body, [d.joint for d in self._drives])
+        return [float(s[1]) for s in states]
+
     # --- the 1 ms tick ---------------------------------------------------------------------------
 
     def step(self, t: float) -> None:
         """Advance the bus devices to simulated time ``t`` (s); call every 1 ms, before stepping
         the physics. Handles received frames, SYNC (every 2 ms), PDOs, heartbeats, interpolation,
-        following-error supervision and the crossfire module."""
+        the watchdogs, following-error supervision, fault reactions and the crossfire module."""
         if self._client is None:
             return
         if not self._booted:
@@ -263,25 +345,64 @@ class SimDrives:
             self._next_heartbeat = t + cf.HEARTBEAT_PERIOD_S
         for frame in self.bus.take_inbound():
             self._receive(frame, t)
-        actual = self.positions()
         assert self._next_sync is not None
         if t >= self._next_sync - 1e-9:
             self._next_sync += cf.CYCLE_S
             if t > self._next_sync:  # the caller skipped cycles: resynchronise
                 self._next_sync = t + cf.CYCLE_S
-            self._sync(t, actual)
+            if self.master_wait_s > 0:
+                self._await_master(t)
+            self._sync(t, self.positions())
         if t >= self._next_heartbeat - 1e-9:
             self._next_heartbeat = t + cf.HEARTBEAT_PERIOD_S
             for d in self._drives:
                 self.bus.transmit(cf.encode_heartbeat(d.node, d.nmt, t))
             self.bus.transmit(cf.encode_heartbeat(cf.CROSSFIRE_ID, self._crossfire_nmt, t))
-        for d, q in zip(self._drives, actual):
-            self._drive_tick(d, q, t)
+        if self._master_heartbeat is not None and t - self._master_heartbeat > self.consumer_heartbeat_s:
+            silent = t - self._master_heartbeat
+            self._master_heartbeat = None  # monitoring starts again with the next heartbeat
+            for d in self._drives:
+                if self._enabled(d):
+                    self._fault(d, t, cf.EmcyCode.HEARTBEAT_LOST,
+                                f"no heartbeat from the master for {silent:.3f} s")
+        states = self._client.getJointStates(self._body, [d.joint for d in self._drives])
+        for d, st in zip(self._drives, states):
+            self._drive_tick(d, float(st[0]), float(st[1]), t)
         if self._crossfire is not None and self._crossfire_nmt is cf.NmtState.OPERATIONAL:
             blocked = bool(self._crossfire())
             if blocked != self._crossfire_state:
                 self._crossfire_state = blocked
                 self.bus.transmit(cf.encode_crossfire(blocked, t))
+
+    @staticmethod
+    def _enabled(d: _Drive) -> bool:
+        return d.nmt is cf.NmtState.OPERATIONAL and d.sm.state is cf.DriveState.OPERATION_ENABLED
+
+    def _await_master(self, t: float) -> None:
+        """Wait (wall clock, bounded) for the master's targets (see the class docstring)."""
+        now = time.monotonic()
+        last, self._last_sync_wall = self._last_sync_wall, now
+        waiting = [d for d in self._drives if self._enabled(d) and d.pending is None]
+        if not waiting:
+            return
+        if self._master_in_step:
+            self.master_waits += 1
+            deadline = now + self.master_wait_s
+        elif last is not None:
+            deadline = last + cf.CYCLE_S  # real-time pace while the master is silent
+        else:
+            return
+        while any(d.pending is None and self._enabled(d) for d in waiting):
+            left = deadline - time.monotonic()
+            if left <= 0:
+                if self._master_in_step:
+                    self._master_in_step = False
+                    self.master_misses += 1
+                break
+            frame = self.bus.wait_inbound(left)
+            if frame is not None:
+                self._receive(frame, t)
+        self._last_sync_wall = time.monotonic()
 
     def _receive(self, frame: cf.CanFrame, t: float) -> None:
         if frame.can_id == cf.NMT_ID and len(frame.data) == 2:
@@ -299,13 +420,16 @@ class SimDrives:
             for d in self._drives:
                 if node in (0, d.node):
                     d.nmt = new
-                    if new is not cf.NmtState.OPERATIONAL:
+                    if new is not cf.NmtState.OPERATIONAL and not d.sm.faulted:
                         d.sm.on_controlword(cf.Controlword.DISABLE_VOLTAGE)
             if node in (0, cf.CROSSFIRE_ID):
                 self._crossfire_nmt = new
                 if new is cf.NmtState.OPERATIONAL and self._crossfire is not None:
                     self._crossfire_state = bool(self._crossfire())
                     self.bus.transmit(cf.encode_crossfire(self._crossfire_state, t))
+            return
+        if frame.can_id == cf.HEARTBEAT_BASE + cf.MASTER_ID:
+            self._master_heartbeat = t
             return
         node = frame.can_id - cf.RPDO1_BASE
         if 1 <= node <= len(self._drives):
@@ -317,12 +441,16 @@ class SimDrives:
             except cf.FrameError:
                 log.warning("drive %d: bad RPDO1 %s", node, frame.data.hex())
                 return
+            self._master_in_step = True
             before = d.sm.state
             after = d.sm.on_controlword(cw)
+            if before is cf.DriveState.FAULT and after is not before:
+                self.bus.transmit(cf.encode_emcy(d.node, cf.EmcyCode.NO_ERROR, 0, t))
             if after is cf.DriveState.OPERATION_ENABLED and before is not after:
                 # Bumpless start: interpolate from where the joint is.
                 q = float(self._client.getJointState(self._body, d.joint)[0])
                 d.start = d.end = q
+                d.missed = 0
             if after is cf.DriveState.OPERATION_ENABLED:
                 j = node - 1
                 d.pending = min(max(target, self.q_min[j]), self.q_max[j])
@@ -331,13 +459,21 @@ class SimDrives:
         self.bus.transmit(cf.CanFrame(cf.SYNC_ID, b"", t))
         for d, q in zip(self._drives, actual):
             if d.sm.state is cf.DriveState.OPERATION_ENABLED:
-                d.start = self._demand(d, t)
+                start = self._demand(d, t)
                 if d.pending is not None:
-                    d.end = d.pending
+                    end = d.pending
                     d.pending = None
+                    d.missed = 0
                 else:
-                    d.end = d.start
-                d.t_latch = t
+                    d.missed += 1
+                    if d.missed > self.target_timeout_cycles:
+                        self._fault(d, t, cf.EmcyCode.RPDO_TIMEOUT,
+                                    f"no target from the master for {d.missed} cycles "
+                                    f"({d.missed * cf.CYCLE_S * 1000:.0f} ms)")
+                    j = d.node - 1
+                    # CSP extrapolation: keep the last demand velocity, within the joint limits
+                    end = min(max(start + (d.end - d.start), self.q_min[j]), self.q_max[j])
+                d.start, d.end, d.t_latch = start, end, t
             if d.nmt is cf.NmtState.OPERATIONAL:
                 self.bus.transmit(cf.encode_tpdo1(d.node, d.sm.statusword, q, t))
 
@@ -346,19 +482,53 @@ class SimDrives:
         s = min(max((t - d.t_latch) / cf.CYCLE_S, 0.0), 1.0)
         return d.start + (d.end - d.start) * s
 
-    def _drive_tick(self, d: _Drive, q: float, t: float) -> None:
+    def _fault(self, d: _Drive, t: float, code: cf.EmcyCode, reason: str) -> None:
+        """Start the fault reaction of drive ``d``: quick-stop ramp from the joint's present state."""
+        if d.sm.faulted:
+            return
+        q, v = self._client.getJointState(self._body, d.joint)[:2]
+        d.ramp_q, d.ramp_v, d.t_tick = float(q), float(v), t
+        d.pending = None
+        text = f"{code.text}: {reason} at t={t:.3f} s"
+        d.sm.start_fault_reaction(text, code)
+        self.faults.append(FaultRecord(t, d.node, code, text, abs(float(v))))
+        log.warning("drive %d: %s", d.node, text)
+        self.bus.transmit(cf.encode_emcy(d.node, code, 0x01, t))
+
+    def _drive_tick(self, d: _Drive, q: float, qd: float, t: float) -> None:
         if d.sm.state is cf.DriveState.OPERATION_ENABLED:
             demand = self._demand(d, t)
             if abs(demand - q) > FOLLOWING_ERROR_LIMIT:
-                d.sm.fault(f"following error {demand - q:+.3f} rad at t={t:.3f} s")
-                log.warning("drive %d: %s", d.node, d.sm.fault_reason)
-                d.hold = q
-                self._command(d, q, 0.0)
+                self._fault(d, t, cf.EmcyCode.FOLLOWING_ERROR, f"{demand - q:+.3f} rad")
+                self._ramp(d, t)
                 return
             d.hold = demand
             self._command(d, demand, (d.end - d.start) / cf.CYCLE_S)
+        elif d.sm.state is cf.DriveState.FAULT_REACTION_ACTIVE:
+            self._ramp(d, t)
         else:
             self._command(d, d.hold, 0.0)
+
+    def _ramp(self, d: _Drive, t: float) -> None:
+        """One tick of the quick-stop ramp; at rest the drive enters FAULT and holds there."""
+        j = d.node - 1
+        dt = max(t - d.t_tick, 0.0)
+        d.t_tick = t
+        v = d.ramp_v
+        v -= math.copysign(min(abs(v), self.qdd_max[j] * dt), v)
+        d.ramp_q = min(max(d.ramp_q + v * dt, self.q_min[j]), self.q_max[j])
+        d.ramp_v = v
+        if v == 0.0:
+            d.sm.reaction_done()
+            d.hold = d.ramp_q
+            for k in range(len(self.faults) - 1, -1, -1):
+                f = self.faults[k]
+                if f.node == d.node and math.isnan(f.t_stopped):
+                    self.faults[k] = FaultRecord(f.t, f.node, f.code, f.reason, f.speed, t)
+                    break
+            self._command(d, d.hold, 0.0)
+            return
+        self._command(d, d.ramp_q, v)
 
     def _command(self, d: _Drive, position: float, velocity: float) -> None:
         if d.commanded == (position, velocity):

@@ -5,8 +5,17 @@
 ball, PUMA 560 with its cup, overhead camera, CAN bus), the vision and motion nodes placed by
 services.toml, and the coordinator running ``nets/catch.toml`` with the token flow visible. It
 prints, per run, the outcome, the prediction error at the catch line (against the simulator's
-ground truth) and the time of each primitive task. ``petrobot demo foundation`` runs the small
-two-node net ``nets/demo.toml`` instead.
+ground truth), the time of each primitive task and the reason of every error. ``petrobot demo
+foundation`` runs the small two-node net ``nets/demo.toml`` instead.
+
+Reproducibility: ``--seed S`` seeds the thrower, the camera noise, the engine's random switches and
+the learners. Without ``--journal`` every demo starts from a fresh journal (``runs/catching.sqlite``;
+the previous one is kept as ``runs/catching.prev.sqlite``), hence with fresh learners, so the same
+seed gives the same runs; with ``--journal FILE`` the learners continue from the state saved there.
+The simulator runs in real time across processes, so timings differ from one demo to the next.
+
+The node logs and the simulator's log go beside the journal, in ``logs/`` (``runs/logs/vision.log``,
+``motion.log``, ``sim.log``), said on screen.
 """
 
 from __future__ import annotations
@@ -41,7 +50,11 @@ everything.
                "+ runs_remaining", "- runs_remaining", "pause", "step", "resume" or "abort".
   foundation   nets/demo.toml: sense on node alpha, compute on alpha or beta, three runs.
 
-Every firing, action start and result goes to the journal (--journal)."""
+Every firing, action start and result goes to the journal. Without --journal each demo starts a
+fresh one (runs/catching.sqlite or runs/demo.sqlite; the previous one is kept as *.prev.sqlite), so
+the learners start afresh and --seed S reproduces a demo's outcomes and choices (the simulator runs
+in real time, so timings differ). With --journal FILE the learners continue from FILE's saved state.
+The nodes' and the simulator's logs go to logs/ beside the journal (runs/logs/NODE.log)."""
 
 
 def add_parser(subparsers: Any) -> None:
@@ -53,7 +66,8 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--runs", type=int, default=None,
                    help="tokens in runs_remaining at the start (default: the net's own, 4 for catching)")
     options.add_services(p, default=str(ROOT / "services.toml"), help="location file (default: the project's)")
-    options.add_journal(p, help="SQLite journal (default: runs/catching.sqlite or runs/demo.sqlite)")
+    options.add_journal(p, help="SQLite journal whose learner state the demo continues (default: a fresh "
+                                "runs/catching.sqlite or runs/demo.sqlite, the previous one kept as *.prev.sqlite)")
     options.add_seed(p, help="seed of the thrower, random switches and learners")
     p.add_argument("--renderer", choices=["tiny", "analytic"], default="tiny",
                    help="camera back end: pybullet's TinyRenderer (default) or the fast analytic one")
@@ -64,15 +78,42 @@ def add_parser(subparsers: Any) -> None:
 
 
 # --------------------------------------------------------------------------------------- the world
-class SimWorld:
-    """The ``petrobot sim catching`` process, its JSON event lines read by a thread."""
+def journal_for(given: str | None, default: str) -> Path:
+    """The demo's journal: ``given`` as is (its learner state is continued), else a fresh
+    ``default`` (an existing one, with its SQLite side files, is renamed ``*.prev.sqlite``)."""
+    if given:
+        path = Path(given)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        return path
+    path = Path(default)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    prev = path.with_suffix(".prev" + path.suffix)
+    for suffix in ("", "-wal", "-shm"):
+        old = Path(str(path) + suffix)
+        if old.exists():
+            old.replace(Path(str(prev) + suffix))
+        elif Path(str(prev) + suffix).exists():
+            Path(str(prev) + suffix).unlink()
+    return path
 
-    def __init__(self, args: list[str]) -> None:
+
+class SimWorld:
+    """The ``petrobot sim catching`` process, its JSON event lines read by a thread.
+
+    Args:
+        args: command-line arguments after ``sim catching``.
+        log: file for the simulator's stderr (log lines, warnings), or ``None`` to drop them.
+    """
+
+    def __init__(self, args: list[str], log: Path | None = None) -> None:
+        self._log = open(log, "w") if log is not None else None  # noqa: SIM115 (kept open for the process, closed by stop())
         self.proc = subprocess.Popen([sys.executable, "-m", "coordinator.commands.sim", "catching", *args],
-                                     cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+                                     cwd=ROOT, stdout=subprocess.PIPE,
+                                     stderr=self._log if self._log is not None else subprocess.DEVNULL, text=True)
         self.events: list[dict[str, Any]] = []
         self._ready = threading.Event()
-        threading.Thread(target=self._read, name="sim-events", daemon=True).start()
+        self._reader = threading.Thread(target=self._read, name="sim-events", daemon=True)
+        self._reader.start()
 
     def _read(self) -> None:
         assert self.proc.stdout is not None
@@ -103,6 +144,9 @@ class SimWorld:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait(timeout=5)
+        self._reader.join(timeout=5)  # the last lines ("stopped") are read before the report
+        if self._log is not None:
+            self._log.close()
 
 
 # --------------------------------------------------------------------------------------- demos
@@ -130,20 +174,24 @@ async def _catching(args: argparse.Namespace) -> int:
     camera_port = next((int(d.params["port"]) for d in camera if "port" in d.params), 7210)
     puma = [d for n in nodes for d in location.drivers_on(n) if "can_port" in d.params]
     can_port = int(puma[0].params["can_port"]) if puma else 7211
-    journal_path = Path(args.journal or "runs/catching.sqlite")
-    journal_path.parent.mkdir(parents=True, exist_ok=True)
+    journal_path = journal_for(args.journal, "runs/catching.sqlite")
+    logs = journal_path.parent / "logs"
+    logs.mkdir(parents=True, exist_ok=True)
 
     def say(text: str) -> None:
         print(f"demo: {text}", file=sys.stderr, flush=True)
 
+    say(f"seed {args.seed}; journal {journal_path}"
+        + (" (learners continue from it)" if args.journal else " (fresh: new learners)")
+        + f"; logs in {logs}/ (sim.log, {', '.join(f'{n}.log' for n in nodes)})")
     say(f"starting the simulated world (renderer {args.renderer}, camera :{camera_port}, CAN :{can_port})")
     sim = SimWorld(["--realtime", "--seed", str(args.seed), "--renderer", args.renderer, "--throws", "0",
-                    "--interval", "0", "--throw-when-home", "1.0", "--first-throw", "6",
-                    "--camera-port", str(camera_port), "--can-port", str(can_port)])
+                    "--interval", "0", "--throw-when-home", "1.0", "--first-throw", "4", "--after-camera-client",
+                    "--camera-port", str(camera_port), "--can-port", str(can_port)], log=logs / "sim.log")
     try:
         await asyncio.to_thread(sim.wait_ready, 90.0)
         say(f"starting nodes {', '.join(nodes)}")
-        async with NodeGroup(args.services, nodes, key_file=args.key_file, log_level="WARNING"):
+        async with NodeGroup(args.services, nodes, key_file=args.key_file, log_level="INFO", log_dir=logs):
             console = Console(net, live=args.live)
             report = CatchReport(console)
             with Journal(journal_path) as journal:
@@ -157,7 +205,14 @@ async def _catching(args: argparse.Namespace) -> int:
     report.match_truth([e for e in sim.events if e.get("event") == "crossing"])
     print(summary.format())
     print(report.format())
-    print(f"journal: {journal_path}")
+    for fault in (e for e in sim.events if e.get("event") == "drive_fault"):
+        print(f"  drive {fault['node']} faulted at t={fault['t']:.3f} s: {fault['reason']}; "
+              f"stopped in {fault['stop_s']:.3f} s")
+    for st in (e for e in sim.events if e.get("event") == "stopped"):
+        print(f"simulator: {st['t']:.1f} s simulated in {st['wall_s']:.1f} s ({st['slipped_s']:.1f} s slipped); "
+              f"waits for the camera client {st['camera_misses']}/{st['camera_waits']} and for the CAN master "
+              f"{st['master_misses']}/{st['master_waits']} ran out; {st['drive_faults']} drive fault(s)")
+    print(f"journal: {journal_path}; logs: {logs}/")
     return summary.exit_code
 
 
@@ -176,10 +231,10 @@ async def _foundation(args: argparse.Namespace) -> int:
     location = load_location(args.services)
     key = load_key(args.key_file)
     nodes = sorted({location.node_of(a.name) for t in net.tasks.values() for a in t.actions})
-    journal_path = Path(args.journal or "runs/demo.sqlite")
-    journal_path.parent.mkdir(parents=True, exist_ok=True)
-    print(f"demo: starting nodes {', '.join(nodes)} on this machine", file=sys.stderr, flush=True)
-    async with NodeGroup(args.services, nodes, key_file=args.key_file, log_level="WARNING"):
+    journal_path = journal_for(args.journal, "runs/demo.sqlite")
+    logs = journal_path.parent / "logs"
+    print(f"demo: starting nodes {', '.join(nodes)} on this machine (logs in {logs}/)", file=sys.stderr, flush=True)
+    async with NodeGroup(args.services, nodes, key_file=args.key_file, log_level="INFO", log_dir=logs):
         with Journal(journal_path) as journal:
             summary = await execute(net, location=location, key=key, journal=journal, seed=args.seed,
                                     net_text=net_path.read_text(encoding="utf-8"), live=args.live,
@@ -189,11 +244,17 @@ async def _foundation(args: argparse.Namespace) -> int:
     return summary.exit_code
 
 
+def _terminate(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt  # SIGTERM stops the demo as Ctrl-C does: the sim and the nodes with it
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the chosen demonstration; the exit code of the run's end state (0 completed), 2 on an error."""
     import asyncio
+    import signal
 
     demo = _catching if args.which == "catching" else _foundation
+    signal.signal(signal.SIGTERM, _terminate)
     try:
         return asyncio.run(demo(args))
     except PetrobotError as exc:

@@ -1,21 +1,32 @@
 """``petrobot sim catching``: the catching testbed's physical world as a process (paper §6).
 
 Runs the pybullet world at 1 kHz with the table, the thrower, the ball, the PUMA 560 with its cup and
-crossfire sensor, and serves the hardware-like back ends on 127.0.0.1:
+crossfire sensor, and serves the hardware-like back ends on 127.0.0.1 (``--host`` to serve another
+address, e.g. in a network namespace of its own):
 
 * the overhead camera: :class:`sim.camera.FrameServer` (grab-latest frames; its info map carries
   the calibration, made at start-up by imaging the ball at known table points);
 * the CAN bus with the six joint drives and the crossfire I/O module: a socketcand-protocol
   gateway (:class:`sim.canbus.CanGateway`) for python-can's ``socketcand`` interface.
 
-Clock modes: ``--realtime`` (default) paces simulated time to the wall clock; ``--lockstep`` runs
-without wall-clock pacing but waits, after each camera frame, until a connected camera client has
-taken it (so a slow vision node slows the world down instead of missing frames).
+Clock modes: ``--realtime`` (default) paces simulated time to the wall clock, but waits after each
+camera frame, up to ``--camera-wait-ms`` of wall time, until a connected camera client has taken it
+(so that a vision node on a loaded machine sees every frame and a throw looks the same each time);
+``--lockstep`` runs without wall-clock pacing and waits, after each camera frame, until a connected
+camera client has taken it (so a slow vision node slows the world down instead of missing frames).
+The pixel noise restarts from (``--seed``, throw number) at each throw.
+
+The CAN bus is paced to the motion node's CAN master: at each SYNC the sim waits up to
+``--master-wait-ms`` of wall time for the targets of a master that answered the previous SYNC
+(:class:`sim.canbus.SimDrives`), so that the sim's own bursts of stepping after rendering a camera
+frame are not charged to the master; a silent master is not waited for (the drives' watchdogs act).
 
 The thrower rolls a ball every ``--interval`` seconds of simulated time. Stdout gets one JSON line
 per event: ``ready`` (ports), ``throw``, ``crossing`` (ground truth of the catch-line crossing, table
-and robot base frames), ``result`` (``caught``: the ball ended in the cup) and ``stopped`` (frames,
-throws, the worst real-time lag).
+and robot base frames), ``result`` (``caught``: the ball ended in the cup), ``drive_fault`` (a
+drive's fault: bus time, node, EMCY code, reason, the joint's speed, and ``stop_s``, how long its
+quick stop took, once at rest) and ``stopped`` (frames, throws, the worst real-time lag, the
+master waits that ran out).
 """
 
 from __future__ import annotations
@@ -28,7 +39,7 @@ import sys
 import time
 from typing import Any, TextIO
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "main", "run"]
 
 DEFAULT_CAMERA_PORT = 7210
 DEFAULT_CAN_PORT = 7211
@@ -72,6 +83,9 @@ def add_parser(subparsers: Any) -> None:
                         "as a person waits for the robot to be ready (default 0: do not wait)")
     c.add_argument("--first-throw", type=float, default=3.0,
                    help="simulated time of the first throw, s (default 3)")
+    c.add_argument("--after-camera-client", action="store_true",
+                   help="count --first-throw from the moment the first camera client connects "
+                        "(so that the first ball is not thrown before anyone looks)")
     c.add_argument("--duration", type=float, default=0.0,
                    help="stop after this many simulated seconds (0: run until stopped)")
     c.add_argument("--renderer", choices=("tiny", "analytic"), default="tiny",
@@ -85,6 +99,14 @@ def add_parser(subparsers: Any) -> None:
                    help=f"TCP port of the camera frame server (default {DEFAULT_CAMERA_PORT}; 0: any)")
     c.add_argument("--can-port", type=int, default=DEFAULT_CAN_PORT,
                    help=f"TCP port of the socketcand CAN gateway (default {DEFAULT_CAN_PORT}; 0: any)")
+    c.add_argument("--host", default="127.0.0.1",
+                   help="address the camera server and the CAN gateway listen on (default 127.0.0.1)")
+    c.add_argument("--camera-wait-ms", type=float, default=100.0, metavar="MS",
+                   help="--realtime: wall time waited after each frame for a connected camera client "
+                        "to take it (default 100; 0: never wait)")
+    c.add_argument("--master-wait-ms", type=float, default=100.0, metavar="MS",
+                   help="wall time waited at each SYNC for the targets of a CAN master that answered "
+                        "the previous one (default 100; 0: never wait)")
 
 
 def _emit(out: TextIO, event: str, **data: Any) -> None:
@@ -129,14 +151,16 @@ def run(args: argparse.Namespace) -> int:
         geo = motion_control.CatchGeometry()
         q_home = motion_control.home_pose(geo)
         cw.set_joint_positions(q_home)
-        drives = SimDrives()
+        drives = SimDrives(master_wait_s=args.master_wait_ms / 1000.0)
         assert cw.robot_id is not None
         drives.attach(world.client, cw.robot_id, cw.joint_indices, crossfire=cw.crossfire)
         world.add_step_hook(drives.step)
         cam = overhead_camera(cw.table.length, cw.table.height, width=args.width, height=args.height)
         render: Any
+        renderer: TinyRenderer | AnalyticRenderer
         if args.renderer == "tiny":
             tiny = TinyRenderer(cam, world.client, intensity_sigma=args.noise, seed=args.seed)
+            renderer = tiny
 
             def render() -> np.ndarray:
                 return tiny.render()
@@ -148,6 +172,7 @@ def run(args: argparse.Namespace) -> int:
             ana = AnalyticRenderer(cam, table_length=cw.table.length, table_width=cw.table.width,
                                    table_height=cw.table.height, ball_radius=cw.ball.radius,
                                    intensity_sigma=args.noise, seed=args.seed)
+            renderer = ana
 
             def render() -> np.ndarray:
                 pos, _ = cw.ball_state()
@@ -162,11 +187,11 @@ def run(args: argparse.Namespace) -> int:
         info = camera_info(cam, hom, robot_base=cw.robot_base,
                            rolling_model=cw.ball.rolling_decel_params(), fps=args.fps,
                            table_size=(cw.table.length, cw.table.width))
-        server = FrameServer(port=args.camera_port, info=info)
+        server = FrameServer(host=args.host, port=args.camera_port, info=info)
         camera_port = server.start()
-        gateway = CanGateway(drives.bus, port=args.can_port)
+        gateway = CanGateway(drives.bus, host=args.host, port=args.can_port)
         can_port = gateway.start()
-        _emit(out, "ready", mode=args.mode, camera_port=camera_port, can_port=can_port,
+        _emit(out, "ready", mode=args.mode, host=args.host, camera_port=camera_port, can_port=can_port,
               calibration_rms_m=hom.rms_m, renderer=args.renderer, width=args.width,
               height=args.height, fps=args.fps)
         tf = cw.table_to_base()
@@ -174,17 +199,31 @@ def run(args: argparse.Namespace) -> int:
         period = 1.0 / args.fps
         seq = 0
         thrown = 0
-        next_throw = args.first_throw
+        next_throw = math.inf if args.after_camera_client else args.first_throw
         active: dict[str, Any] | None = None
         home_since: float | None = 0.0
+        reported = 0  # drives.faults already emitted (a fault is emitted once its joint is at rest)
+        camera_waits = camera_misses = 0
+        t_wall0 = time.monotonic()
         world.resync()
         while not stop["flag"] and (args.duration <= 0 or world.t < args.duration):
             world.advance(period)
+            while reported < len(drives.faults) and not math.isnan(drives.faults[reported].t_stopped):
+                f = drives.faults[reported]
+                _emit(out, "drive_fault", t=f.t, node=f.node, code=f"{int(f.code):#06x}", reason=f.reason,
+                      speed=f.speed, stop_s=f.t_stopped - f.t)
+                reported += 1
             t_wall = time.time()
             server.publish(Frame(seq, world.t, render(), t_wall))
-            if args.mode == "lockstep" and server.client_count:
-                server.wait_sent(seq, timeout=1.0)
+            if server.client_count:
+                if args.mode == "lockstep":
+                    server.wait_sent(seq, timeout=1.0)
+                elif args.camera_wait_ms > 0:
+                    camera_waits += 1
+                    camera_misses += not server.wait_sent(seq, timeout=args.camera_wait_ms / 1000.0)
             seq += 1
+            if math.isinf(next_throw) and thrown == 0 and server.client_count:
+                next_throw = world.t + args.first_throw
             if args.throw_when_home > 0:
                 at_home = bool(np.max(np.abs(cw.joint_positions() - q_home)) < HOME_TOLERANCE_RAD)
                 if not at_home:
@@ -198,6 +237,7 @@ def run(args: argparse.Namespace) -> int:
                 spec = thrower.next()
                 cw.launch(spec)
                 thrown += 1
+                renderer.reseed([args.seed, thrown])
                 active = {"n": thrown, "crossed": False}
                 _emit(out, "throw", n=thrown, t=world.t, speed=spec.speed, heading=spec.heading,
                       x0=spec.x0, y0=spec.y0)
@@ -218,8 +258,10 @@ def run(args: argparse.Namespace) -> int:
                           crossed=cr is not None)
                     cw.park()
                     active = None
-        _emit(out, "stopped", t=world.t, frames=seq, throws=thrown, max_lag_s=world.lag,
-              slipped_s=world.slipped)
+        _emit(out, "stopped", t=world.t, wall_s=time.monotonic() - t_wall0, frames=seq, throws=thrown,
+              max_lag_s=world.lag, slipped_s=world.slipped, camera_waits=camera_waits,
+              camera_misses=camera_misses, master_waits=drives.master_waits,
+              master_misses=drives.master_misses, drive_faults=len(drives.faults))
         return 0
     finally:
         if gateway is not None:

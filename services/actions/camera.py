@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from services.action import CallContext, Driver, NodeContext
+from services.devices.endpoint import DeviceEndpoint
 from services.devices.framegrabber import Frame, FrameClient
 from services.errors import ActionError
 from services.vision import Homography, PlanarTransform, Roi, RollingModel, table_roi
@@ -112,7 +113,8 @@ class CameraLink:
         self.on_frame = on_frame
         self.frame_timeout = frame_timeout
         self.frames: collections.deque[Frame] = collections.deque(maxlen=history)
-        self.background: np.ndarray | None = None
+        self._background: np.ndarray | None = None
+        self._bg_stale = False
         self._bg_samples: collections.deque[np.ndarray] = collections.deque(maxlen=5)
         self._bg_last_t = -math.inf
         self.lost: str | None = None
@@ -161,14 +163,24 @@ class CameraLink:
                 if frame.t - self._bg_last_t >= 0.3:
                     self._bg_last_t = frame.t
                     self._bg_samples.append(frame.image)
-                    if len(self._bg_samples) >= 3:
-                        self.background = np.median(np.stack(self._bg_samples), axis=0).astype(
-                            np.uint8
-                        )
+                    self._bg_stale = True
                 self._loop.call_soon_threadsafe(self._deliver, frame)
         except (ConnectionError, OSError, ValueError) as exc:
             if not self._stop.is_set():
                 self._loop.call_soon_threadsafe(self._mark_lost, f"camera lost: {exc}")
+
+    @property
+    def background(self) -> np.ndarray | None:
+        """Per-pixel median of the last frames taken at least 0.3 s apart (at least 3), or ``None``.
+
+        Computed when asked (by the background-difference locator) and kept until a new sample
+        comes, not in the grabbing thread: a median of five frames takes milliseconds that would
+        otherwise delay every frame's delivery, and with it the set points.
+        """
+        if self._bg_stale and len(self._bg_samples) >= 3:
+            self._background = np.median(np.stack(list(self._bg_samples)), axis=0).astype(np.uint8)
+            self._bg_stale = False
+        return self._background
 
     def _deliver(self, frame: Frame) -> None:
         self.frames.append(frame)
@@ -218,6 +230,13 @@ class CameraDriver(Driver):
         self.link: CameraLink | None = None
         self.config: VisionConfig | None = None
         self.tick_every = max(1, int(self.params.get("tick_every", 1)))
+
+    @classmethod
+    def device(cls, params: dict[str, Any]) -> DeviceEndpoint:
+        """The camera server this driver connects to (params ``host``, ``port``)."""
+        return DeviceEndpoint("camera server", str(params.get("host", "127.0.0.1")),
+                              int(params.get("port", DEFAULT_CAMERA_PORT)),
+                              "petrobot sim catching")
 
     async def setup(self, node: NodeContext) -> None:
         self.link = CameraLink(

@@ -6,7 +6,7 @@ services.toml (example)::
     [drivers.puma]
     node = "motion"
     impl = "services.actions.motion:PumaDriver"
-    params = { can_host = "127.0.0.1", can_port = 29536, setpoint_port = 7150 }
+    params = { can_host = "127.0.0.1", can_port = 7211 }
 
     [actions.move_home]
     node = "motion"
@@ -19,26 +19,46 @@ services.toml (example)::
     [events.ball_caught]
     node = "motion"
 
-:class:`PumaDriver` params (all optional except the CAN address):
+:class:`PumaDriver` params (all optional):
 
-* ``can_host``, ``can_port``, ``channel`` ("can0"): the sim's socketcand gateway;
-* ``setpoint_host`` ("127.0.0.1"), ``setpoint_port`` (0 = any): where the set-point stream from
-  the vision node is received (:class:`services.stream.SetPointReceiver`);
-* ``setpoint_max_age_s`` (0.2): a set point older than this means a lost stream;
+* ``can_host`` ("127.0.0.1"), ``can_port`` (7211), ``channel`` ("can0"): the sim's socketcand
+  gateway;
+* ``setpoints_from`` (default: the node services.toml places the action ``predict`` on) and
+  ``setpoint_topic`` ("setpoints"): where the set points come from, as events of that node
+  (:mod:`services.stream`); ``setpoint_max_age_s`` (0.2): a set point older than this (wall
+  clock) means a lost stream;
 * ``robot_base`` ([0.75, 0.0, 0.46, pi]): x, y, z (m), yaw (rad) of the robot base frame in the
   table frame of the set points;
 * ``edge_x``, ``table_z``, ``rim_drop``, ``tilt_deg``, ``y_min``, ``y_max``: override
   :class:`services.robots.motion_control.CatchGeometry` (base frame);
-* ``heartbeat_timeout_s`` (0.5), ``connect_timeout_s`` (5.0).
+* ``switch_interval_s`` (0.001): the node process's thread switch interval (see :meth:`PumaDriver.setup`);
+* ``heartbeat_timeout_s`` (0.5, bus time: a CAN node silent that long is lost), ``bus_silence_s``
+  (2.0, wall time: nothing at all on the bus that long and it is lost), ``connect_timeout_s`` (5.0).
 
 The driver owns a control thread that runs once per CAN SYNC (2 ms of simulated time): one
-:meth:`services.robots.motion_control.CatchServo.step` and one set of RPDO targets. The crossfire sensor's
-rising edge publishes the external event ``ball_caught`` with ``{"t": bus time}``.
+:meth:`services.robots.motion_control.CatchServo.step` per cycle elapsed on the bus (at most
+:data:`services.devices.cia402.TARGET_TIMEOUT_CYCLES`, the cycles a drive extrapolates a missing
+target, so that a late thread's next target continues where the drives' extrapolation went) and
+one set of RPDO targets. The crossfire sensor's rising edge publishes the external event
+``ball_caught`` with ``{"t": bus time}``.
+
+Faults: before every action the driver makes sure the drives are usable, the way a CiA 402 master
+does: a drive in FAULT (following error, RPDO timeout, lost master heartbeat; the drive's EMCY says
+which) is reset and enabled again (:meth:`services.devices.drives.PumaDrives.enable`) and the servo
+restarts where the arm is; a lost bus is reconnected. ``move_home`` reports a recovery in its value
+(``recovered``).
+
+Watchdog (node side): when set points stop coming during ``catch`` (none for
+``setpoint_max_age_s``, on the wall clock and on the bus clock the frames are stamped with, before
+the ball is due at the line: the vision node died, the link is cut, the publisher stopped), the servo brakes every joint to rest at its acceleration limit (a
+controlled stop, :meth:`services.robots.motion_control.CatchServo.stop`) and ``catch`` returns
+``error`` with outcome ``stream_lost``, the reason, and the stop in its value (``watchdog``). The
+drives have their own watchdog for a silent master (:mod:`sim.canbus`).
 
 Outcomes of ``catch``: success when the crossfire sensor fires; failure when the ball is missed
-(the bus clock passed the predicted rim time by ``miss_grace_s`` without a catch); error on a
-timeout, a lost set-point stream, or a lost bus. ``move_home``: success at the home pose, error on
-timeout or a lost bus.
+(the bus clock passed the predicted rim time by ``miss_grace_s`` without a catch), including a
+ball predicted too late for the arm to get there; error on a timeout, a lost set-point stream, or
+a lost bus. ``move_home``: success at the home pose, error on timeout or a lost bus.
 """
 
 from __future__ import annotations
@@ -46,31 +66,46 @@ from __future__ import annotations
 import asyncio
 import logging
 import math
+import sys
 import threading
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from services.robots import motion_control as mc
 from services.action import (
     CallContext,
     Driver,
     NodeContext,
     PrimitiveAction,
 )
-from services.results import ActionResult, Status
+from services.devices import cia402 as cf
 from services.devices.drives import BusError, PumaDrives
-from services.stream import SetPoint, SetPointReceiver, StreamLostError
+from services.devices.endpoint import DeviceEndpoint
+from services.errors import ActionError, LocationError
+from services.results import ActionResult, Status
+from services.robots import motion_control as mc
 from services.robots.puma560 import UnreachableError
+from services.stream import (
+    SETPOINT_TOPIC,
+    SetPoint,
+    SetPointSubscription,
+    StreamLostError,
+)
 
 __all__ = ["Catch", "MoveHome", "PumaDriver", "table_to_base"]
 
 log = logging.getLogger(__name__)
 
 DEFAULT_ROBOT_BASE = (0.75, 0.0, 0.46, math.pi)
-MAX_CYCLES_PER_SYNC = 10
-"""At most this many 2 ms servo steps per received SYNC (a late thread catches up, bounded)."""
+MAX_CYCLES_PER_SYNC = cf.TARGET_TIMEOUT_CYCLES
+"""At most this many 2 ms servo steps per received SYNC: a late thread catches up with the cycles
+the drives extrapolated, never further (a longer gap has faulted the drives anyway)."""
+_WALL_BACKSTOP = 3.0
+"""Catch timeouts are in bus time; wall time this many times longer ends the wait anyway."""
+STOP_TOLERANCE_RAD = 0.01
+"""The arm counts as stopped when every joint is within this of the commanded rest pose."""
 
 
 def table_to_base(
@@ -93,7 +128,7 @@ def table_to_base(
 
 
 class PumaDriver(Driver):
-    """The PUMA on its CAN bus, the servo's control thread and the set-point receiver."""
+    """The PUMA on its CAN bus, the servo's control thread and the set-point subscription."""
 
     def __init__(self, name: str, params: dict[str, Any]) -> None:
         super().__init__(name, params)
@@ -114,12 +149,14 @@ class PumaDriver(Driver):
             y_max=float(p.get("y_max", g.y_max)),
         )
         self.heartbeat_timeout = float(p.get("heartbeat_timeout_s", 0.5))
+        self.bus_silence = float(p.get("bus_silence_s", 2.0))
         self.connect_timeout = float(p.get("connect_timeout_s", 5.0))
-        self.receiver = SetPointReceiver(
-            str(p.get("setpoint_host", "127.0.0.1")),
-            int(p.get("setpoint_port", 0)),
-            max_age=float(p.get("setpoint_max_age_s", 0.2)),
-        )
+        self.setpoints_from: str | None = str(p["setpoints_from"]) if "setpoints_from" in p else None
+        self.setpoint_topic = str(p.get("setpoint_topic", SETPOINT_TOPIC))
+        self.setpoint_max_age = float(p.get("setpoint_max_age_s", 0.2))
+        self._subscription: SetPointSubscription | None = None
+        self.recoveries = 0
+        """Drive fault recoveries (fault reset and enable) since the node started."""
         self.drives: PumaDrives | None = None
         self.servo: mc.CatchServo | None = None
         self.lock = threading.Lock()
@@ -131,63 +168,143 @@ class PumaDriver(Driver):
         self._caught_t = math.nan
         self._last_crossfire = False
 
+    @classmethod
+    def device(cls, params: dict[str, Any]) -> DeviceEndpoint:
+        """The CAN gateway this driver connects to (params ``can_host``, ``can_port``)."""
+        return DeviceEndpoint("CAN gateway", str(params.get("can_host", "127.0.0.1")),
+                              int(params.get("can_port", 7211)),
+                              "petrobot sim catching")
+
     # --- lifecycle -------------------------------------------------------------------------------
 
     async def setup(self, node: NodeContext) -> None:
-        """Start the set-point receiver and try to connect to the drives (retried by actions)."""
+        """Try to connect to the drives (actions retry); set points are subscribed at the first catch.
+
+        Also shortens the interpreter's thread switch interval of the node process to
+        ``switch_interval_s`` (param, default 0.001 s; Python's is 0.005 s): the control thread
+        answers a SYNC every 2 ms and shares the interpreter with the CAN receive thread and the
+        node's event loop, so a 5 ms slice could make it miss cycles on its own.
+        """
         self._loop = asyncio.get_running_loop()
-        port = await self.receiver.start()
-        log.info("set-point receiver on %s:%d", self.receiver.host, port)
+        switch = float(self.params.get("switch_interval_s", 0.001))
+        if 0 < switch < sys.getswitchinterval():
+            sys.setswitchinterval(switch)
         try:
             await self.ensure_ready()
         except BusError as exc:
             log.warning("PUMA drives not ready yet (%s); actions will retry", exc)
 
     async def teardown(self) -> None:
-        """Stop the control thread, disable and disconnect the drives, close the receiver."""
+        """Stop the control thread, disable and disconnect the drives, unsubscribe the set points."""
+        if self._subscription is not None:
+            self._subscription.close()
         await asyncio.to_thread(self._shutdown_drives)
-        await self.receiver.close()
 
-    async def ensure_ready(self) -> None:
-        """Connect and enable the drives and start the control thread if not running.
+    def subscription(self) -> SetPointSubscription:
+        """The set-point subscription on the publishing node (made and started on first use).
 
         Raises:
-            BusError: the bus cannot be opened or the drives cannot be enabled.
+            ActionError: the driver runs on no node, or no node to take set points from is known.
         """
-        if (
-            self.drives is not None
-            and self.fault is None
-            and self._thread is not None
-            and self._thread.is_alive()
-        ):
-            return
+        if self._subscription is None:
+            if self.node is None:
+                raise ActionError("the PUMA driver is not running on a node")
+            source = self.setpoints_from
+            if source is None:
+                try:
+                    source = self.node.location.node_of("predict")
+                except LocationError as exc:
+                    raise ActionError(f"no set-point source: give the driver param setpoints_from ({exc})") from exc
+            self._subscription = SetPointSubscription(self.node.link(source), self.setpoint_topic,
+                                                      max_age=self.setpoint_max_age)
+        self._subscription.start()
+        return self._subscription
+
+    async def ensure_ready(self) -> str | None:
+        """Make the drives usable, as a CiA 402 master does, before an action moves the arm.
+
+        Connected with the control thread running and every drive operation enabled: nothing to
+        do. A drive faulted or not enabled: pause the control thread, reset the fault and enable
+        the drives again (:meth:`PumaDrives.enable`), restart the servo where the arm is. No bus, a
+        lost one (a heartbeat missing) or no control thread: reconnect (waiting up to
+        ``connect_timeout_s`` for the gateway) and enable, which resets faults too.
+
+        Returns:
+            What was recovered, in words (``None`` if nothing was wrong).
+
+        Raises:
+            BusError: the bus cannot be opened or the drives cannot be enabled (the message names
+                each drive's state and fault cause).
+        """
+        drives = self.drives
+        lost = drives.lost() if drives is not None else "not connected"
+        if drives is not None and lost is None and self.fault is None and self._thread is not None \
+                and self._thread.is_alive():
+            faults = drives.faults()
+            if not faults and drives.all_enabled():
+                return None
+            what = "; ".join(f"drive {n}: {c}" for n, c in sorted(faults.items())) or "drives not enabled"
+            log.warning("recovering the PUMA drives (%s): fault reset and enable", what)
+            await asyncio.to_thread(self._recover_drives)
+            return f"fault reset and enable ({what})"
+        why = self.fault or lost
+        if drives is not None:
+            drives.mark_lost(why or "reconnecting")
+            log.warning("reconnecting the PUMA drives (%s)", why)
         await asyncio.to_thread(self._shutdown_drives)
         await asyncio.to_thread(self._start_drives)
+        return f"bus reconnected ({why})" if drives is not None else None
 
     def _start_drives(self) -> None:
         drives = PumaDrives(
-            self.can_host, self.can_port, self.channel, heartbeat_timeout=self.heartbeat_timeout
+            self.can_host, self.can_port, self.channel, heartbeat_timeout=self.heartbeat_timeout,
+            silence_timeout=self.bus_silence,
         )
         drives.open(timeout=self.connect_timeout)
         try:
+            drives.start(timeout=self.connect_timeout)
+            drives.on_crossfire(self._on_crossfire)
+            with self.lock:
+                self.drives = drives
+                self.servo = mc.CatchServo(drives.positions(), self.geometry)
+                self.fault = None
+            self._start_thread()  # targets flow from the first enabled cycle on
             drives.enable(timeout=self.connect_timeout)
         except BusError:
+            self._stop_thread()
+            self.drives = None
             drives.close()
             raise
-        drives.on_crossfire(self._on_crossfire)
-        with self.lock:
-            self.drives = drives
-            self.servo = mc.CatchServo(drives.positions(), self.geometry)
-            self.fault = None
+
+    def _recover_drives(self) -> None:
+        """Fault reset and enable while the control loop keeps sending targets: the servo restarts
+        at the resting positions first, so the targets hold the arm still and flow from the first
+        enabled cycle on (a gap between enabling and the first target would be an RPDO timeout)."""
+        drives = self.drives
+        assert drives is not None
+        try:
+            drives.start(timeout=self.connect_timeout)
+            with self.lock:
+                self.servo = mc.CatchServo(drives.positions(), self.geometry)
+            drives.enable(timeout=self.connect_timeout)
+        except BusError as exc:
+            self.fault = f"fault recovery failed: {exc}"
+            raise BusError(self.fault) from exc
+        self.recoveries += 1
+
+    def _start_thread(self) -> None:
         self._stop.clear()
         self._thread = threading.Thread(target=self._control_loop, name="puma-control", daemon=True)
         self._thread.start()
 
-    def _shutdown_drives(self) -> None:
+    def _stop_thread(self) -> None:
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
+
+    def _shutdown_drives(self) -> None:
+        self._stop_thread()
         if self.drives is not None:
             self.drives.close()
             self.drives = None
@@ -198,10 +315,10 @@ class PumaDriver(Driver):
         t_prev: float | None = None
         while not self._stop.is_set():
             try:
-                t = drives.wait_sync(timeout=max(0.25, self.heartbeat_timeout))
-                # One servo step per SYNC cycle elapsed on the bus, so the commanded motion keeps
-                # pace with simulated time when this thread falls behind (bounded so that a
-                # target never jumps further than the drives' following-error window allows).
+                t = drives.wait_sync(timeout=self.bus_silence)
+                # One servo step per SYNC cycle elapsed on the bus, so that the next target continues
+                # where the drives' extrapolation of the missing ones took the joints (bounded by
+                # the cycles a drive extrapolates before it faults).
                 cycles = 1 if t_prev is None else round((t - t_prev) / mc.CYCLE_S)
                 t_prev = t
                 with self.lock:
@@ -211,6 +328,7 @@ class PumaDriver(Driver):
                 drives.send_targets(q)
             except BusError as exc:
                 self.fault = str(exc)
+                drives.mark_lost(str(exc))
                 log.error("PUMA control loop stopped: %s", exc)
                 return
 
@@ -234,6 +352,34 @@ class PumaDriver(Driver):
         if self.drives is None:
             raise BusError("PUMA drives are not connected")
         self.drives.check()
+
+    def stop_motion(self) -> None:
+        """Controlled stop: brake every joint to rest at its acceleration limit (from any thread)."""
+        with self.lock:
+            if self.servo is not None:
+                self.servo.stop()
+
+    async def wait_stopped(self, timeout: float) -> float:
+        """Wait until the commanded motion is at rest and the arm within
+        :data:`STOP_TOLERANCE_RAD` of it; returns the bus time (s) at that moment.
+
+        Raises:
+            BusError: the bus or a drive is lost meanwhile, or the arm is not at rest within
+                ``timeout`` s (wall clock).
+        """
+        end = time.monotonic() + timeout
+        while True:
+            self.check()
+            assert self.drives is not None
+            actual = self.drives.positions()
+            with self.lock:
+                assert self.servo is not None
+                rest = self.servo.at_goal() and bool(np.all(np.abs(actual - self.servo.q) <= STOP_TOLERANCE_RAD))
+            if rest:
+                return self.bus_time()
+            if time.monotonic() > end:
+                raise BusError(f"the arm did not come to rest within {timeout} s")
+            await asyncio.sleep(0.004)
 
     def arm_catch(self) -> None:
         """Forget earlier crossfire events (called at the start of a catch)."""
@@ -260,7 +406,10 @@ def _driver(ctx: CallContext) -> PumaDriver:
 class MoveHome(PrimitiveAction):
     """Return the cup to the home pose (middle of the catch line).
 
-    Params: ``timeout_s`` (5.0), ``tolerance_rad`` (0.01, on the actual joint positions).
+    Before moving, faulted drives are reset and enabled again (:meth:`PumaDriver.ensure_ready`).
+    Params: ``timeout_s`` (5.0, bus time, with three times as much wall time as a backstop),
+    ``tolerance_rad`` (0.01, on the actual joint positions).
+    Value: ``{"q": [6 joint angles, rad], "recovered": what was recovered or None}``.
     """
 
     async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
@@ -269,12 +418,13 @@ class MoveHome(PrimitiveAction):
         timeout = float(params.get("timeout_s", 5.0))
         tol = float(params.get("tolerance_rad", 0.01))
         try:
-            await drv.ensure_ready()
+            recovered = await drv.ensure_ready()
             home = mc.home_pose(drv.geometry)
             with drv.lock:
                 assert drv.servo is not None
                 drv.servo.set_goal(home)
-            deadline = t0 + timeout
+            t_bus0 = drv.bus_time()
+            wall_deadline = time.monotonic() + _WALL_BACKSTOP * timeout
             while True:
                 drv.check()
                 assert drv.drives is not None
@@ -282,10 +432,11 @@ class MoveHome(PrimitiveAction):
                 with drv.lock:
                     done = drv.servo.at_goal() and bool(np.all(np.abs(actual - home) <= tol))
                 if done:
-                    return ActionResult.success({"q": [float(v) for v in actual]}, cost=time.monotonic() - t0)
-                if time.monotonic() > deadline:
+                    return ActionResult.success({"q": [float(v) for v in actual], "recovered": recovered},
+                                                cost=time.monotonic() - t0)
+                if drv.bus_time() - t_bus0 > timeout or time.monotonic() > wall_deadline:
                     return ActionResult.error(f"not home after {timeout} s", outcome="timeout",
-                                              cost=time.monotonic() - t0)
+                                              value={"recovered": recovered}, cost=time.monotonic() - t0)
                 await asyncio.sleep(0.01)
         except BusError as exc:
             return ActionResult.error(str(exc), outcome="bus", cost=time.monotonic() - t0)
@@ -295,14 +446,24 @@ class Catch(PrimitiveAction):
     """Servo the cup to the latest set point until the crossfire sensor fires.
 
     Params: ``timeout_s`` (5.0; whole call), ``miss_grace_s`` (0.3; after the predicted rim time),
-    ``first_setpoint_s`` (= ``timeout_s``; wait for the stream to start), ``stream_end_s`` (0.15).
+    ``first_setpoint_s`` (= ``timeout_s``; wait for the first set point), ``stream_end_s`` (0.15),
+    ``stop_timeout_s`` (2.0; the watchdog's wait for the arm to be at rest). The timeouts are
+    seconds of bus time (the simulated time the set points and the ball live in, which a loaded
+    machine slows down), with three times as much wall time as a backstop.
 
-    The set-point stream may end (closed or stale) once the bus time is within ``stream_end_s``
-    of the predicted crossing: the predictor stops when the ball reaches the line, and the cup
-    stays at the last set point. A stream that ends earlier is lost: error ``stream_lost``.
+    The set points may stop once the bus time is within ``stream_end_s`` of the predicted
+    crossing: the predictor stops when the ball reaches the line, and the cup stays at the last
+    set point. Set points that stop earlier (none for ``setpoint_max_age_s``) trigger the
+    watchdog: a controlled stop, then error ``stream_lost``. A set point that fails validation is
+    dropped and counted (``malformed``), never used, and does not end the catch.
 
-    Value: ``{"caught", "set_points", "unreachable", "y_pred", "t_pred", "t_caught"}`` (table
-    frame, bus time). Cost: wall seconds.
+    Value: ``{"caught", "set_points", "unreachable", "malformed", "y_pred", "t_pred",
+    "t_caught", "reach_s", "lead_s", "watchdog"}`` (table frame, bus time; ``reach_s`` is the
+    servo's lower bound on the time to the goal when the last set point was aimed, ``lead_s`` the
+    time left until the rim then; ``watchdog`` is ``{"stale_s", "stale_bus_s", "stop_s", "t"}`` when
+it acted: the set points' age on the wall and bus clocks, how long the controlled stop took and
+when it started, bus time).
+    Cost: wall seconds.
     """
 
     async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
@@ -312,26 +473,37 @@ class Catch(PrimitiveAction):
         grace = float(params.get("miss_grace_s", 0.3))
         first_wait = float(params.get("first_setpoint_s", timeout))
         stream_end = float(params.get("stream_end_s", 0.15))
+        stop_timeout = float(params.get("stop_timeout_s", 2.0))
         info: dict[str, Any] = {
             "caught": False,
             "set_points": 0,
             "unreachable": 0,
+            "malformed": 0,
             "y_pred": None,
             "t_pred": None,
             "t_caught": None,
+            "reach_s": None,
+            "lead_s": None,
+            "watchdog": None,
         }
+        sub: SetPointSubscription | None = None
 
         def done(status: Status, outcome: str | None = None, reason: str | None = None) -> ActionResult:
+            if sub is not None:
+                info["malformed"] = sub.state.malformed
             return ActionResult(status=status, outcome=outcome, value=info, cost=time.monotonic() - t0,
                                 reason=reason)
 
         try:
             await drv.ensure_ready()
+            sub = drv.subscription()
+            sub.restart()
             drv.arm_catch()
-            sp = await self._first_set_point(drv, min(first_wait, timeout))
+            t_bus0 = drv.bus_time()
+            sp = await self._first_set_point(sub, drv, min(first_wait, timeout))
             used: SetPoint | None = None
             t_rim: float | None = None
-            deadline = t0 + timeout
+            wall_deadline = t0 + _WALL_BACKSTOP * timeout
             while True:
                 drv.check()
                 if drv.caught:
@@ -346,19 +518,23 @@ class Catch(PrimitiveAction):
                         t_rim = aimed
                 now_bus = drv.bus_time()
                 if t_rim is not None and now_bus > t_rim + grace:
-                    return done(Status.FAILURE, "missed", f"ball passed at t={t_rim:.3f} s without a catch")
-                if time.monotonic() > deadline:
-                    return done(Status.ERROR, "timeout", f"no catch and no miss within {timeout} s")
+                    late = info["reach_s"] is not None and info["lead_s"] is not None and info["reach_s"] > info["lead_s"]
+                    why = " (predicted too late for the arm to get there)" if late else ""
+                    return done(Status.FAILURE, "missed", f"ball passed at t={t_rim:.3f} s without a catch{why}")
+                if now_bus - t_bus0 > timeout or time.monotonic() > wall_deadline:
+                    return done(Status.ERROR, "timeout",
+                                f"no catch and no miss within {timeout} s (bus time {now_bus - t_bus0:.2f} s, "
+                                f"wall {time.monotonic() - t0:.2f} s)")
                 try:
-                    sp = drv.receiver.latest()
-                except StreamLostError:
+                    sp = sub.latest(camera_now=now_bus)
+                except StreamLostError as exc:
                     t_pred = info["t_pred"]
                     if t_pred is not None and now_bus >= t_pred - stream_end:
                         # The ball is at the line: the vision side has stopped tracking. Keep
                         # the last set point and wait for the crossfire sensor or the miss.
                         await asyncio.sleep(0.002)
                         continue
-                    raise
+                    return await self._watchdog_stop(drv, sub, exc, stop_timeout, info, done)
                 await asyncio.sleep(0.002)
         except StreamLostError as exc:
             return done(Status.ERROR, "stream_lost", str(exc))
@@ -366,21 +542,38 @@ class Catch(PrimitiveAction):
             return done(Status.ERROR, "bus", str(exc))
 
     @staticmethod
-    async def _first_set_point(drv: PumaDriver, timeout: float) -> SetPoint:
-        """The first set point received after the call started (on this or a new connection).
+    async def _watchdog_stop(drv: PumaDriver, sub: SetPointSubscription, exc: StreamLostError,
+                             stop_timeout: float, info: dict[str, Any],
+                             done: Callable[..., ActionResult]) -> ActionResult:
+        """Set points stopped mid-catch: controlled stop, then ``error`` ``stream_lost``."""
+        t_trigger = drv.bus_time()
+        stale = sub.state.age(sub.clock())
+        last = sub.state.latest
+        drv.stop_motion()
+        t_rest = await drv.wait_stopped(stop_timeout)
+        info["watchdog"] = {"stale_s": stale, "stale_bus_s": t_trigger - last.t_frame if last else None,
+                            "stop_s": t_rest - t_trigger, "t": t_trigger}
+        return done(Status.ERROR, "stream_lost",
+                    f"{exc}; watchdog stopped the arm in {t_rest - t_trigger:.3f} s (bus time)")
+
+    @staticmethod
+    async def _first_set_point(sub: SetPointSubscription, drv: PumaDriver, timeout: float) -> SetPoint:
+        """The first set point received after :meth:`SetPointSubscription.restart`.
 
         Raises:
-            StreamLostError: none within ``timeout`` s.
+            StreamLostError: none within ``timeout`` s of bus time (or three times that of wall time).
+            BusError: the bus is lost meanwhile.
         """
-        before = drv.receiver.state.latest
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            state = drv.receiver.state
-            sp = state.latest
-            if sp is not None and sp is not before and state.closed_reason is None:
+        t_bus0 = drv.bus_time()
+        end = time.monotonic() + _WALL_BACKSTOP * timeout
+        while drv.bus_time() - t_bus0 <= timeout and time.monotonic() < end:
+            sp = sub.state.latest
+            if sp is not None:
                 return sp
+            drv.check()
             await asyncio.sleep(0.002)
-        raise StreamLostError(f"no set point within {timeout} s")
+        where = "" if sub.link.connected else f" (link to node {sub.node} is down)"
+        raise StreamLostError(f"no set point within {timeout} s{where}")
 
     @staticmethod
     def _aim(drv: PumaDriver, sp: SetPoint, info: dict[str, Any]) -> float | None:
@@ -389,9 +582,12 @@ class Catch(PrimitiveAction):
             with drv.lock:
                 assert drv.servo is not None
                 target = drv.servo.aim(xb, yb, sp.t, vxb, vyb)
+                reach = drv.servo.time_to_goal()
         except UnreachableError:
             info["unreachable"] += 1
             return None
         info["y_pred"] = sp.y
         info["t_pred"] = sp.t
+        info["reach_s"] = reach
+        info["lead_s"] = target.t_rim - drv.bus_time()
         return target.t_rim

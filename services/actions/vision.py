@@ -7,20 +7,20 @@ driver had its own module).
 * Three alternative primitive actions of the *locate ball* primitive task, with different cost and
   reliability (paper §2 and §4): :class:`LocateThreshold`, :class:`LocateBgdiff`,
   :class:`LocateAverage` (k frames). Each waits for the ball on the table (params ``timeout_s``,
-  default 10) and returns ``success`` with ``{"x", "y", "t", "u", "v", "seq", "frames"}`` (table
-  frame, m) once found and inside the table, ``failure`` when no ball was seen in time, ``error``
-  when the camera is lost. Cost = measured processing time, s (CPU time of the image processing,
+  default 10, seconds of camera time) and returns ``success`` with ``{"x", "y", "t", "u", "v", "seq", "frames"}`` (table
+  frame, m) once found and inside the table, ``failure`` when no ball was seen in time (``reason``
+  in the value says so), ``error`` when the camera is lost. Cost = measured processing time, s (CPU time of the image processing,
   ``frames`` in the value). With param ``spec_m`` the result is judged against a specification
   (see *Location within specification* below); without it any detection on the table is a success.
 * :class:`Predict` (primitive task *predict*): tracks the ball frame by frame, predicts where and
-  when it crosses the catch line, and streams each prediction as a set point (table frame, as
-  :class:`services.stream.SetPoint` specifies; the motion node turns it into its base frame) to
-  the motion node over its own TCP connection (params ``stream_host``, ``stream_port``; see
-  :mod:`services.stream`). ``success`` once the ball has crossed, with the last prediction;
-  ``failure`` when the ball stops or vanishes before the line; ``error`` when the camera or the
-  stream is lost. If the node hosts no camera driver (the action was moved to another node in
-  services.toml), it opens its own connection to the camera server (params ``camera_host``,
-  ``camera_port``).
+  when it crosses the catch line, and publishes each prediction as a set point (table frame, as
+  :class:`services.stream.SetPoint` specifies; the motion node turns it into its base frame) on
+  the node's event topic ``setpoints`` (param ``topic``), to which the motion node subscribes
+  through its authenticated node link (:mod:`services.stream`). ``success`` once the ball has
+  crossed, with the last prediction; ``failure`` when the ball stops or vanishes before the line;
+  ``error`` when the camera is lost. If the node hosts no camera driver (the action was moved to
+  another node in services.toml), it opens its own connection to the camera server (params
+  ``camera_host``, ``camera_port``).
 
 Location within specification. The node has no ground truth, so a location is judged by its
 consistency with the ball's track over the next frames: after a detection at time t, the action
@@ -41,7 +41,6 @@ map (:class:`services.actions.camera.VisionConfig`).
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import math
 import time
 from typing import Any
@@ -60,7 +59,7 @@ from services.actions.camera import (
 from services.devices.framegrabber import Frame
 from services.errors import ActionError
 from services.results import ActionResult, Status
-from services.stream import SetPointSender
+from services.stream import SETPOINT_TOPIC, SetPoint
 from services.vision import (
     BallTracker,
     Detection,
@@ -80,12 +79,13 @@ __all__ = [
     "track_residual",
 ]
 
-DEFAULT_STREAM_PORT = 7220
-"""TCP port of the motion node's set-point receiver when :class:`Predict`'s params name none."""
-
-
 VERIFY_FRAMES = 10
 """Default number of frames after a detection used to judge it against ``spec_m``."""
+
+WALL_BACKSTOP = 3.0
+"""Timeouts (``timeout_s``) run on the camera clock (simulated time in the simulation, which a
+loaded machine slows down, so that a demo's outcome does not depend on the machine's load); this
+many times as much wall time ends the wait anyway."""
 
 
 def track_residual(location: tuple[float, float, float],
@@ -142,18 +142,23 @@ class _Locate(PrimitiveAction):
         timeout = float(params.get("timeout_s", 10.0))
         k = max(1, int(params.get("k", self.frames_needed)))
         loop = asyncio.get_running_loop()
-        end = loop.time() + timeout
+        wall_end = loop.time() + WALL_BACKSTOP * timeout
+        t_end: float | None = None  # on the camera clock
         seq = cam.link.frames[-1].seq if cam.link.frames else -1
         cpu = 0.0
         frames_used = 0
         try:
-            while loop.time() < end:
+            while loop.time() < wall_end:
                 batch: list[Frame] = []
                 while len(batch) < k:
                     f = await cam.link.next_frame(seq)
                     seq = f.seq
                     batch.append(f)
                 frames_used += len(batch)
+                if t_end is None:
+                    t_end = batch[0].t + timeout
+                elif batch[-1].t > t_end:
+                    break
                 c0 = time.thread_time()
                 det = self.locate(batch, cam)
                 cpu += time.thread_time() - c0
@@ -187,7 +192,8 @@ class _Locate(PrimitiveAction):
                 return ActionResult(status=Status.SUCCESS, value=value, cost=cpu)
         except CameraLostError as exc:
             return ActionResult.error(str(exc), outcome="camera_lost", cost=cpu)
-        return ActionResult(status=Status.FAILURE, outcome="no_ball", value={"frames": frames_used}, cost=cpu)
+        return ActionResult(status=Status.FAILURE, outcome="no_ball", cost=cpu,
+                            value={"frames": frames_used, "reason": f"no ball on the table within {timeout:g} s"})
 
 
 class LocateThreshold(_Locate):
@@ -245,24 +251,20 @@ class Predict(PrimitiveAction):
                 return ActionResult.error(str(exc), outcome="camera_lost")
             link, config = own_link, VisionConfig.from_info(own_link.info)
         try:
-            return await self._track(params, link, config)
+            return await self._track(params, ctx, link, config)
         finally:
             if own_link is not None:
                 await own_link.close()
 
     async def _track(
-        self, params: dict[str, Any], link: CameraLink, config: VisionConfig
+        self, params: dict[str, Any], ctx: CallContext, link: CameraLink, config: VisionConfig
     ) -> ActionResult:
-        host = str(params.get("stream_host", "127.0.0.1"))
-        port = int(params.get("stream_port", DEFAULT_STREAM_PORT))
-        try:
-            sender = await asyncio.to_thread(SetPointSender, host, port)
-        except OSError as exc:
-            return ActionResult.error(f"set-point receiver {host}:{port}: {exc}", outcome="stream_lost")
+        topic = str(params.get("topic", SETPOINT_TOPIC))
         tracker = BallTracker(config.homography, RollingPredictor(config.model, catch_x=config.catch_x))
         timeout = float(params.get("timeout_s", 10.0))
         loop = asyncio.get_running_loop()
         start = loop.time()
+        t_first: float | None = None  # camera clock
         seq = link.frames[-1].seq if link.frames else -1
         frames = sent = 0
         first: float | None = None
@@ -273,14 +275,17 @@ class Predict(PrimitiveAction):
                 frame = await link.next_frame(seq)
                 seq = frame.seq
                 frames += 1
+                if t_first is None:
+                    t_first = frame.t
                 c0 = time.thread_time()
                 det = locate_threshold(frame.image, frame.t, roi=config.roi)
                 pred = tracker.observe(det, frame.t)
                 cpu += time.thread_time() - c0
                 if pred is not None:
-                    sender.send(t_frame=frame.t, t_capture=frame.t_wall, x=pred.x, y=pred.y,
-                                t=pred.t, vx=pred.vx, vy=pred.vy, sigma_y=pred.sigma_y,
-                                sigma_t=pred.sigma_t)
+                    sp = SetPoint(seq=sent, t_frame=frame.t, t_capture=frame.t_wall, t_sent=time.time(),
+                                  x=pred.x, y=pred.y, t=pred.t, vx=pred.vx, vy=pred.vy,
+                                  sigma_y=pred.sigma_y, sigma_t=pred.sigma_t)
+                    ctx.publish(topic, sp.to_dict())
                     sent += 1
                     last = pred
                     if first is None:
@@ -299,13 +304,8 @@ class Predict(PrimitiveAction):
                 if last is not None and det is None and tracker.last_position is None:
                     return ActionResult(status=Status.FAILURE, outcome="ball_lost",
                                          value={"setpoints": sent, "frames": frames}, cost=cpu)
-                if loop.time() - start > timeout:
+                if frame.t - t_first > timeout or loop.time() - start > WALL_BACKSTOP * timeout:
                     return ActionResult(status=Status.FAILURE, outcome="no_crossing",
                                          value={"setpoints": sent, "frames": frames}, cost=cpu)
         except CameraLostError as exc:
             return ActionResult.error(str(exc), outcome="camera_lost", cost=cpu)
-        except OSError as exc:
-            return ActionResult.error(str(exc), outcome="stream_lost", cost=cpu)
-        finally:
-            with contextlib.suppress(OSError):
-                sender.close()

@@ -21,6 +21,11 @@ COB-ID     direction       payload
                            beam interrupted; sent on change and on NMT start
 0x700+id   id -> master    heartbeat: 1 byte NMT state (0x00 boot-up, 0x05 operational,
                            0x7F pre-operational), every 100 ms of simulated time
+0x77F      master -> all   the master's own heartbeat (node :data:`MASTER_ID`), every 100 ms of
+                           bus time while it commands the drives; the drives consume it
+0x080+id   id -> master    EMCY (CiA 301 emergency): error code uint16 LE, error register
+                           uint8, 5 bytes zero; sent when a drive faults (code 0x0000 when
+                           a fault reset clears it)
 =========  ==============  ===============================================================
 
 Drive node ids 1..6 are joints 1..6. Positions on the bus are int32 in units of 1e-5 rad
@@ -30,8 +35,19 @@ RPDO is latched at the next SYNC and interpolated linearly over the following 2 
 CiA 402 power state machine (minimal subset, statusword values with the "remote" bit clear):
 ``SWITCH_ON_DISABLED (0x0040) -shutdown 0x06-> READY_TO_SWITCH_ON (0x0021) -switch on 0x07->
 SWITCHED_ON (0x0023) -enable operation 0x0F-> OPERATION_ENABLED (0x0027)``; ``disable voltage
-(0x00)`` returns to SWITCH_ON_DISABLED; a following error puts the drive in FAULT (0x0008); a rising
-edge of controlword bit 7 (fault reset, 0x80) leaves FAULT for SWITCH_ON_DISABLED.
+(0x00)`` returns to SWITCH_ON_DISABLED. A fault (following error, no target from the master for
+:data:`TARGET_TIMEOUT_CYCLES` cycles, the master's heartbeat lost) starts the fault reaction: FAULT
+REACTION ACTIVE (0x000F) while the drive brings its joint to rest on a quick-stop ramp, then FAULT
+(0x0008), where it holds; the EMCY frame says why (:class:`EmcyCode`). A rising edge of controlword
+bit 7 (fault reset, 0x80) leaves FAULT for SWITCH_ON_DISABLED; a reset during the fault reaction is
+ignored. A CiA 402 master therefore recovers a faulted drive by waiting for FAULT, then sending
+``0x00`` (bit 7 low), ``0x80`` (the edge), and the enable sequence again.
+
+Cyclic synchronous position (CSP) targets: a drive that gets no new target at a SYNC keeps moving
+at its last demand velocity (extrapolation), for at most :data:`TARGET_TIMEOUT_CYCLES` cycles in a
+row; then it faults with :attr:`EmcyCode.RPDO_TIMEOUT` and stops on the ramp. A master that falls
+behind therefore steps its trajectory by the number of cycles that passed (at most that many), so
+that its next target continues where the drive's extrapolation has taken the joint.
 """
 
 from __future__ import annotations
@@ -41,28 +57,35 @@ import struct
 from dataclasses import dataclass, field
 
 __all__ = [
+    "CONSUMER_HEARTBEAT_S",
     "CROSSFIRE_ID",
     "CYCLE_S",
     "DRIVE_IDS",
+    "EMCY_BASE",
     "HEARTBEAT_BASE",
     "HEARTBEAT_PERIOD_S",
+    "MASTER_ID",
     "NMT_ID",
     "POSITION_UNIT",
     "RPDO1_BASE",
     "SYNC_ID",
+    "TARGET_TIMEOUT_CYCLES",
     "TPDO1_BASE",
     "CanFrame",
     "Cia402StateMachine",
     "Controlword",
     "DriveState",
+    "EmcyCode",
     "FrameError",
     "NmtCommand",
     "NmtState",
     "decode_crossfire",
+    "decode_emcy",
     "decode_heartbeat",
     "decode_rpdo1",
     "decode_tpdo1",
     "encode_crossfire",
+    "encode_emcy",
     "encode_heartbeat",
     "encode_rpdo1",
     "encode_tpdo1",
@@ -78,11 +101,19 @@ SYNC_ID = 0x080
 RPDO1_BASE = 0x200
 TPDO1_BASE = 0x180
 HEARTBEAT_BASE = 0x700
+EMCY_BASE = 0x080  # + node id (1..127); 0x080 itself is SYNC
 DRIVE_IDS = (1, 2, 3, 4, 5, 6)
 CROSSFIRE_ID = 0x10
+MASTER_ID = 0x7F
+"""Node id of the motion node's CAN master (its heartbeat is 0x77F)."""
 POSITION_UNIT = 1e-5  # rad per bus unit
 CYCLE_S = 0.002
 HEARTBEAT_PERIOD_S = 0.1
+TARGET_TIMEOUT_CYCLES = 25
+"""SYNC cycles in a row a drive extrapolates a missing target before it faults (50 ms)."""
+CONSUMER_HEARTBEAT_S = 0.35
+"""Heartbeat consumer time of the drives for the master's heartbeat, s of bus time (CiA 301
+object 0x1016: 3.5 periods of the master's 100 ms heartbeat)."""
 
 _INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
 
@@ -126,14 +157,41 @@ class DriveState(enum.Enum):
     READY_TO_SWITCH_ON = "ready to switch on"
     SWITCHED_ON = "switched on"
     OPERATION_ENABLED = "operation enabled"
+    FAULT_REACTION_ACTIVE = "fault reaction active"
     FAULT = "fault"
 
+
+class EmcyCode(enum.IntEnum):
+    """Emergency error codes (CiA 301 Table 21, CiA 402 for the drive-specific ones)."""
+
+    NO_ERROR = 0x0000
+    """Error reset or no error (sent when a fault reset clears the fault)."""
+    HEARTBEAT_LOST = 0x8130
+    """Life guard or heartbeat error: the master's heartbeat stopped."""
+    RPDO_TIMEOUT = 0x8250
+    """RPDO timeout: no target from the master for :data:`TARGET_TIMEOUT_CYCLES` cycles."""
+    FOLLOWING_ERROR = 0x8611
+    """Following error: the joint is further from the demand than the drive allows."""
+
+    @property
+    def text(self) -> str:
+        """What the code means, in a few words."""
+        return _EMCY_TEXT[self]
+
+
+_EMCY_TEXT = {
+    EmcyCode.NO_ERROR: "no error",
+    EmcyCode.HEARTBEAT_LOST: "the master's heartbeat was lost",
+    EmcyCode.RPDO_TIMEOUT: "no target from the master (RPDO timeout)",
+    EmcyCode.FOLLOWING_ERROR: "following error",
+}
 
 _STATUSWORDS = {
     DriveState.SWITCH_ON_DISABLED: 0x0040,
     DriveState.READY_TO_SWITCH_ON: 0x0021,
     DriveState.SWITCHED_ON: 0x0023,
     DriveState.OPERATION_ENABLED: 0x0027,
+    DriveState.FAULT_REACTION_ACTIVE: 0x000F,
     DriveState.FAULT: 0x0008,
 }
 # Masks as in CiA 402: bits 0-3, 5, 6 identify the state.
@@ -248,6 +306,25 @@ def decode_crossfire(data: bytes) -> bool:
     return bool(data[0] & 0x01)
 
 
+def encode_emcy(node: int, code: int, register: int = 0, t: float = 0.0) -> CanFrame:
+    """EMCY (0x080 + node): error code uint16 LE, error register uint8, 5 zero bytes (CiA 301)."""
+    if not 1 <= node <= 0x7F:
+        raise FrameError(f"EMCY from node {node}: node ids are 1..127")
+    return CanFrame(EMCY_BASE + node, struct.pack("<HB5x", code & 0xFFFF, register & 0xFF), t)
+
+
+def decode_emcy(data: bytes) -> tuple[int, int]:
+    """Inverse of :func:`encode_emcy`: ``(error code, error register)``.
+
+    Raises:
+        FrameError: wrong length.
+    """
+    if len(data) != 8:
+        raise FrameError(f"EMCY needs 8 bytes, got {len(data)}")
+    code, register = struct.unpack("<HB5x", data)
+    return int(code), int(register)
+
+
 def nmt_frame(command: NmtCommand, node: int = 0) -> CanFrame:
     """NMT command frame (node 0 addresses all nodes)."""
     return CanFrame(NMT_ID, bytes([int(command), node & 0x7F]))
@@ -266,6 +343,8 @@ def state_from_statusword(sw: int) -> DriveState:
     """
     if sw & 0x004F == 0x0008:
         return DriveState.FAULT
+    if sw & 0x004F == 0x000F:
+        return DriveState.FAULT_REACTION_ACTIVE
     for state, value in _STATUSWORDS.items():
         if sw & _STATE_MASK == value:
             return state
@@ -278,21 +357,26 @@ class Cia402StateMachine:
 
     Attributes:
         state: current power state.
-        fault_reason: why the drive faulted (empty when not in FAULT).
+        fault_reason: why the drive faulted (empty when not in FAULT or FAULT REACTION ACTIVE).
+        fault_code: the EMCY code of the fault (:attr:`EmcyCode.NO_ERROR` when none).
     """
 
     state: DriveState = DriveState.SWITCH_ON_DISABLED
     fault_reason: str = ""
+    fault_code: EmcyCode = EmcyCode.NO_ERROR
     _last_cw: int = field(default=0, repr=False)
 
     def on_controlword(self, cw: int) -> DriveState:
         """Apply a controlword; returns the new state. Unknown commands are ignored."""
         rising_reset = bool(cw & 0x80) and not bool(self._last_cw & 0x80)
         self._last_cw = cw
+        if self.state is DriveState.FAULT_REACTION_ACTIVE:
+            return self.state  # the drive is stopping; nothing interrupts the reaction
         if self.state is DriveState.FAULT:
             if rising_reset:
                 self.state = DriveState.SWITCH_ON_DISABLED
                 self.fault_reason = ""
+                self.fault_code = EmcyCode.NO_ERROR
             return self.state
         cmd = cw & 0x008F
         if cmd & 0x0002 == 0:  # disable voltage (bit 1 clear)
@@ -311,12 +395,30 @@ class Cia402StateMachine:
             self.state = DriveState.OPERATION_ENABLED
         return self.state
 
-    def fault(self, reason: str) -> None:
-        """Enter FAULT (e.g. on a following error)."""
+    def fault(self, reason: str, code: EmcyCode = EmcyCode.FOLLOWING_ERROR) -> None:
+        """Enter FAULT at once (no reaction ramp)."""
         self.state = DriveState.FAULT
         self.fault_reason = reason
+        self.fault_code = code
+
+    def start_fault_reaction(self, reason: str, code: EmcyCode) -> None:
+        """Enter FAULT REACTION ACTIVE (the drive stops on its ramp, then :meth:`reaction_done`)."""
+        self.state = DriveState.FAULT_REACTION_ACTIVE
+        self.fault_reason = reason
+        self.fault_code = code
+
+    def reaction_done(self) -> None:
+        """The joint is at rest: FAULT REACTION ACTIVE becomes FAULT."""
+        if self.state is DriveState.FAULT_REACTION_ACTIVE:
+            self.state = DriveState.FAULT
+
+    @property
+    def faulted(self) -> bool:
+        """True in FAULT or FAULT REACTION ACTIVE."""
+        return self.state in (DriveState.FAULT, DriveState.FAULT_REACTION_ACTIVE)
 
     @property
     def statusword(self) -> int:
-        """Statusword of the current state."""
-        return statusword(self.state, following_error=self.state is DriveState.FAULT)
+        """Statusword of the current state (bit 13 set for a following error)."""
+        following = self.faulted and self.fault_code is EmcyCode.FOLLOWING_ERROR
+        return statusword(self.state, following_error=following)

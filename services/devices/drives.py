@@ -2,13 +2,22 @@
 
 Talks to the bus through python-can's ``socketcand`` interface (the sim's gateway in
 :mod:`sim.canbus`, or any socketcand server); on real hardware the same frames would go through
-``interface="socketcan"``. Frame layout and units: :mod:`sim.canframes`.
+``interface="socketcan"``. Frame layout and units: :mod:`services.devices.cia402`.
 
 A receive thread keeps the latest actual positions and statuswords (TPDO1), heartbeat times,
-the crossfire state and the latest SYNC; :meth:`PumaDrives.wait_sync` lets a control loop run
-once per 2 ms bus cycle. Heartbeat supervision: a node whose heartbeat is older than
-``heartbeat_timeout`` seconds (wall clock), or a closed connection, makes :meth:`PumaDrives.check`
-raise :class:`BusError`.
+the drives' emergency messages (EMCY), the crossfire state and the latest SYNC;
+:meth:`PumaDrives.wait_sync` lets a control loop run once per 2 ms bus cycle. Supervision, on
+two clocks: a node whose latest heartbeat is older than ``heartbeat_timeout`` seconds of *bus* time
+(the time the SYNCs carry: a node gone silent on a live bus), a bus on which nothing at all arrived
+for ``silence_timeout`` seconds of *wall* time (the bus, or the simulation behind it, stopped), or a
+closed connection, makes :meth:`PumaDrives.check` raise :class:`BusError`; so does a drive in
+FAULT, naming the cause its EMCY gave. (A simulation slowed down by a loaded machine delivers its
+heartbeats further apart in wall time without anything being lost; judged on the wall clock alone,
+0.5 s, that stall failed catches of the demo.) The master produces its own heartbeat (node
+:data:`services.devices.cia402.MASTER_ID`, every 100 ms of bus time while it sends targets), which
+the drives consume. :meth:`PumaDrives.enable` is also the CiA 402 fault recovery: it waits out a
+running fault reaction, resets the fault (controlword 0x00, then the rising edge 0x80) and walks
+every drive to OPERATION_ENABLED again.
 """
 
 from __future__ import annotations
@@ -23,8 +32,8 @@ import can
 import numpy as np
 from numpy.typing import NDArray
 
-from services.errors import ActionError
 from services.devices import cia402 as cf
+from services.errors import ActionError
 
 __all__ = ["BusError", "PumaDrives"]
 
@@ -50,7 +59,8 @@ class PumaDrives:
     Args:
         host, port: the socketcand server (the sim's CAN gateway).
         channel: bus name on the server.
-        heartbeat_timeout: seconds without a heartbeat after which a node counts as lost.
+        heartbeat_timeout: seconds of bus time without a heartbeat after which a node counts as lost.
+        silence_timeout: seconds of wall time without any frame after which the bus counts as lost.
         clock: monotonic clock for supervision (seconds).
     """
 
@@ -62,12 +72,15 @@ class PumaDrives:
         port: int,
         channel: str = "can0",
         heartbeat_timeout: float = 0.5,
+        silence_timeout: float = 2.0,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self.host = host
         self.port = port
         self.channel = channel
         self.heartbeat_timeout = heartbeat_timeout
+        self.silence_timeout = silence_timeout
+        self._last_rx = 0.0
         self._clock = clock
         self._bus: can.BusABC | None = None
         self._thread: threading.Thread | None = None
@@ -76,11 +89,15 @@ class PumaDrives:
         self._positions = np.full(6, np.nan)
         self._statuswords = [0] * 6
         self._tpdo_seen = [False] * 6
-        self._heartbeats: dict[int, tuple[float, cf.NmtState]] = {}
+        self._heartbeats: dict[int, tuple[float, cf.NmtState]] = {}  # node -> (bus time, state)
         self._sync_count = 0
+        self._sync_returned = 0
         self._sync_t = float("nan")
         self._crossfire: bool | None = None
         self._crossfire_callbacks: list[CrossfireCallback] = []
+        self._emcy: dict[int, tuple[int, float]] = {}
+        self._expect_enabled = False
+        self._heartbeat_sent_t = -float("inf")
         self._dead: str | None = None
         self._opened_at = 0.0
         self._send_lock = threading.Lock()
@@ -97,7 +114,7 @@ class PumaDrives:
             self._bus = _connect(self.host, self.port, self.channel, timeout)
         except (OSError, can.CanError, TimeoutError, BusError) as exc:
             raise BusError(f"cannot open CAN bus {self.channel} at {self.host}:{self.port}: {exc}") from exc
-        self._opened_at = self._clock()
+        self._opened_at = self._last_rx = self._clock()
         self._stop.clear()
         self._thread = threading.Thread(target=self._rx_loop, name="puma-drives-rx", daemon=True)
         self._thread.start()
@@ -107,6 +124,7 @@ class PumaDrives:
         """Disable the drives (best effort) and disconnect."""
         if self._bus is None:
             return
+        self._expect_enabled = False
         try:
             if self._dead is None:
                 for node in self.NODES:
@@ -133,12 +151,9 @@ class PumaDrives:
             return self._positions.copy()
 
     def states(self) -> list[cf.DriveState | None]:
-        """Latest CiA 402 state of drives 1..6 (``None`` until reported)."""
+        """Latest CiA 402 state of drives 1..6 (``None`` until reported or not understood)."""
         with self._cond:
-            out: list[cf.DriveState | None] = []
-            for seen, sw in zip(self._tpdo_seen, self._statuswords):
-                out.append(cf.state_from_statusword(sw) if seen else None)
-            return out
+            return self._states_locked()
 
     @property
     def crossfire(self) -> bool | None:
@@ -154,68 +169,124 @@ class PumaDrives:
         """Call ``callback(blocked, t)`` from the receive thread on every crossfire report."""
         self._crossfire_callbacks.append(callback)
 
-    def check(self) -> None:
-        """Raise :class:`BusError` if the bus is lost, a heartbeat is missing or a drive faulted."""
+    def lost(self) -> str | None:
+        """Why the bus counts as lost (closed, marked lost, a node's heartbeat missing), or ``None``."""
         if self._dead is not None:
-            raise BusError(self._dead)
+            return self._dead
         now = self._clock()
         with self._cond:
             beats = dict(self._heartbeats)
-            states = [
-                cf.state_from_statusword(sw) if s else None
-                for s, sw in zip(self._tpdo_seen, self._statuswords)
-            ]
+            bus_now = self._sync_t
+            silent = now - self._last_rx
+        if silent > self.silence_timeout:
+            return f"nothing on the CAN bus for {silent:.2f} s (no SYNC, no heartbeats): bus lost"
         for node in (*self.NODES, cf.CROSSFIRE_ID):
             seen = beats.get(node)
-            last = seen[0] if seen else self._opened_at
-            if now - last > self.heartbeat_timeout:
-                raise BusError(f"no heartbeat from CAN node {node} for {now - last:.2f} s: bus or drive lost")
+            if seen is None:
+                if now - self._opened_at > self.silence_timeout:
+                    return f"no heartbeat from CAN node {node} since the bus was opened: node lost"
+            elif bus_now - seen[0] > self.heartbeat_timeout:
+                return (f"no heartbeat from CAN node {node} for {bus_now - seen[0]:.2f} s of bus time: "
+                        "node lost")
+        return None
+
+    def check(self) -> None:
+        """Raise :class:`BusError` if the bus is lost, a heartbeat is missing, a drive faulted, or
+        (after :meth:`enable`) a drive is no longer operation enabled; the message says which."""
+        lost = self.lost()
+        if lost is not None:
+            raise BusError(lost)
+        with self._cond:
+            states = self._states_locked()
         for node, state in zip(self.NODES, states):
-            if state is cf.DriveState.FAULT:
-                raise BusError(f"drive {node} is in FAULT (following error)")
+            if state in (cf.DriveState.FAULT, cf.DriveState.FAULT_REACTION_ACTIVE):
+                raise BusError(f"drive {node} is in FAULT ({self.fault_cause(node)})")
+            if self._expect_enabled and state is not cf.DriveState.OPERATION_ENABLED:
+                raise BusError(f"drive {node} is '{state.value if state else 'silent'}', not operation enabled")
+
+    def mark_lost(self, reason: str) -> None:
+        """Declare the connection lost (e.g. the bus went silent): later sends and checks raise
+        :class:`BusError` with ``reason``, and :meth:`close` sends nothing more on it (frames
+        queued on a connection that comes back late could otherwise reach the drives after a
+        new connection has enabled them)."""
+        self._mark_dead(reason)
+
+    def fault_cause(self, node: int) -> str:
+        """What the latest EMCY of drive ``node`` said, in words ("unknown cause" without one)."""
+        with self._cond:
+            return self._cause_locked(node)
+
+    def faults(self) -> dict[int, str]:
+        """Drives in FAULT or FAULT REACTION ACTIVE by node id, each with its EMCY cause in words."""
+        with self._cond:
+            return {n: self._cause_locked(n) for n, s in zip(self.NODES, self._states_locked())
+                    if s in (cf.DriveState.FAULT, cf.DriveState.FAULT_REACTION_ACTIVE)}
+
+    def all_enabled(self) -> bool:
+        """True when every drive reported OPERATION_ENABLED in its latest TPDO."""
+        return all(s is cf.DriveState.OPERATION_ENABLED for s in self.states())
 
     # --- commands --------------------------------------------------------------------------------
 
-    def enable(self, timeout: float = 3.0) -> None:
-        """NMT-start every node, reset faults and walk every drive to OPERATION_ENABLED.
+    def start(self, timeout: float = 3.0) -> None:
+        """NMT-start every node, send the master's heartbeat, and wait until every drive has
+        reported (TPDO1: its position and state) and no fault reaction is running any more.
 
-        Each RPDO carries the drive's own actual position as target, so enabling does not move.
+        After it, :meth:`positions` are the joints' resting positions: a control loop can start
+        from them (and send targets) before :meth:`enable`.
 
         Raises:
-            BusError: a drive did not reach OPERATION_ENABLED within ``timeout`` s, or the bus is lost.
+            BusError: not within ``timeout`` s, or the bus is lost.
         """
         self._send(cf.nmt_frame(cf.NmtCommand.START, 0))
         deadline = self._clock() + timeout
         self._wait(lambda: all(self._tpdo_seen), deadline, "no TPDO1 from every drive after NMT start")
-        steps = (
-            cf.Controlword.FAULT_RESET,
-            cf.Controlword.SHUTDOWN,
-            cf.Controlword.SWITCH_ON,
-            cf.Controlword.ENABLE_OPERATION,
+        self._send_heartbeat()
+        self._wait(lambda: not any(s is cf.DriveState.FAULT_REACTION_ACTIVE for s in self._states_locked()),
+                   deadline, "a drive's fault reaction did not end")
+
+    def enable(self, timeout: float = 3.0) -> None:
+        """:meth:`start`, then recover faulted drives and walk every drive to OPERATION_ENABLED.
+
+        The CiA 402 recovery of a faulted drive: wait until its fault reaction has brought the
+        joint to rest (FAULT), send controlword 0x00 so that bit 7 is low, then the fault reset
+        0x80 (the rising edge), then shutdown, switch on, enable operation, each checked on the
+        statuswords. Each RPDO carries the drive's own actual position as target, so enabling
+        does not move the arm. A control loop may run meanwhile, sending enable-operation RPDOs
+        with targets at the resting positions (the motion node's does, so that cyclic targets flow
+        from the first enabled cycle on): a drive it enables from SWITCHED_ON counts as switched on.
+
+        Raises:
+            BusError: a drive did not reach OPERATION_ENABLED within ``timeout`` s (its state and
+                fault cause named), or the bus is lost.
+        """
+        deadline = self._clock() + timeout
+        self.start(timeout)
+        on = cf.DriveState.OPERATION_ENABLED
+        steps: tuple[tuple[cf.Controlword, tuple[cf.DriveState, ...]], ...] = (
+            (cf.Controlword.DISABLE_VOLTAGE, ()),
+            (cf.Controlword.FAULT_RESET, (cf.DriveState.SWITCH_ON_DISABLED,)),
+            (cf.Controlword.SHUTDOWN, (cf.DriveState.READY_TO_SWITCH_ON,)),
+            (cf.Controlword.SWITCH_ON, (cf.DriveState.SWITCHED_ON, on)),
+            (cf.Controlword.ENABLE_OPERATION, (on,)),
         )
-        wanted = {
-            cf.Controlword.FAULT_RESET: None,
-            cf.Controlword.SHUTDOWN: cf.DriveState.READY_TO_SWITCH_ON,
-            cf.Controlword.SWITCH_ON: cf.DriveState.SWITCHED_ON,
-            cf.Controlword.ENABLE_OPERATION: cf.DriveState.OPERATION_ENABLED,
-        }
-        for cw in steps:
+        for cw, states in steps:
             for node in self.NODES:
                 self._send(cf.encode_rpdo1(node, cw, self._pos_or0(node)))
-            state = wanted[cw]
-            if state is not None:
+            if states:
                 self._wait(
-                    lambda s=state: all(  # type: ignore[misc]
-                        cf.state_from_statusword(sw) is s for sw in self._statuswords
-                    ),
+                    lambda ok=states: all(st in ok for st in self._states_locked()),  # type: ignore[misc]
                     deadline,
-                    f"drives did not reach '{state.value}'",
+                    f"drives did not reach '{states[0].value}'",
+                    describe=True,
                 )
             else:
                 self._wait_syncs(2, deadline)
+        self._expect_enabled = True
 
     def disable(self) -> None:
         """Disable voltage on every drive (they hold position, brakes on)."""
+        self._expect_enabled = False
         for node in self.NODES:
             self._send(cf.encode_rpdo1(node, cf.Controlword.DISABLE_VOLTAGE, self._pos_or0(node)))
 
@@ -229,23 +300,45 @@ class PumaDrives:
             raise ValueError(f"expected 6 joint targets, got {len(q)}")
         for node, target in zip(self.NODES, q):
             self._send(cf.encode_rpdo1(node, cf.Controlword.ENABLE_OPERATION, float(target)))
+        if self._sync_t - self._heartbeat_sent_t >= cf.HEARTBEAT_PERIOD_S - 1e-9:
+            self._send_heartbeat()
 
     def wait_sync(self, timeout: float = 0.1) -> float:
-        """Block until the next SYNC; returns its bus time, s.
+        """Block until a SYNC newer than the one the previous call returned; returns its bus time, s.
+
+        A SYNC that arrived since the previous call is returned at once (a control loop answers
+        every SYNC, never skips one it has not answered yet); several that arrived meanwhile count
+        as one, the latest.
 
         Raises:
             BusError: no SYNC within ``timeout`` s (wall clock), or the bus is lost.
         """
         with self._cond:
-            seen = self._sync_count
+            seen = self._sync_returned
             ok = self._cond.wait_for(lambda: self._sync_count != seen or self._dead is not None, timeout)
             if self._dead is not None:
                 raise BusError(self._dead)
             if not ok:
                 raise BusError(f"no SYNC on the CAN bus for {timeout:.3f} s")
+            self._sync_returned = self._sync_count
             return self._sync_t
 
     # --- internals -------------------------------------------------------------------------------
+
+    def _send_heartbeat(self) -> None:
+        """The master's heartbeat (NMT state operational), stamped with the bus time."""
+        t = self._sync_t
+        self._heartbeat_sent_t = -float("inf") if np.isnan(t) else t
+        self._send(cf.encode_heartbeat(cf.MASTER_ID, cf.NmtState.OPERATIONAL))
+
+    def _states_locked(self) -> list[cf.DriveState | None]:
+        out: list[cf.DriveState | None] = []
+        for seen, sw in zip(self._tpdo_seen, self._statuswords):
+            try:
+                out.append(cf.state_from_statusword(sw) if seen else None)
+            except cf.FrameError:
+                out.append(None)
+        return out
 
     def _pos_or0(self, node: int) -> float:
         q = float(self._positions[node - 1])
@@ -264,15 +357,29 @@ class PumaDrives:
             self._dead = f"CAN bus connection lost while sending: {exc}"
             raise BusError(self._dead) from exc
 
-    def _wait(self, pred: Callable[[], bool], deadline: float, what: str) -> None:
+    def _wait(self, pred: Callable[[], bool], deadline: float, what: str, describe: bool = False) -> None:
         with self._cond:
             while not pred():
                 if self._dead is not None:
                     raise BusError(self._dead)
                 left = deadline - self._clock()
                 if left <= 0:
+                    if describe:
+                        what += ": " + ", ".join(
+                            f"drive {n} {s.value if s else 'silent'}"
+                            + (f" ({self._cause_locked(n)})" if s is cf.DriveState.FAULT else "")
+                            for n, s in zip(self.NODES, self._states_locked()))
                     raise BusError(what)
                 self._cond.wait(min(left, 0.05))
+
+    def _cause_locked(self, node: int) -> str:
+        emcy = self._emcy.get(node)
+        if emcy is None or emcy[0] == cf.EmcyCode.NO_ERROR:
+            return "unknown cause"
+        try:
+            return cf.EmcyCode(emcy[0]).text
+        except ValueError:
+            return f"EMCY error code {emcy[0]:#06x}"
 
     def _wait_syncs(self, n: int, deadline: float) -> None:
         with self._cond:
@@ -304,6 +411,7 @@ class PumaDrives:
     def _handle(self, frame: cf.CanFrame) -> None:
         cid = frame.can_id
         callbacks: list[CrossfireCallback] = []
+        self._last_rx = self._clock()
         with self._cond:
             if cid == cf.SYNC_ID:
                 self._sync_count += 1
@@ -317,8 +425,11 @@ class PumaDrives:
             elif cid == cf.TPDO1_BASE + cf.CROSSFIRE_ID:
                 self._crossfire = cf.decode_crossfire(frame.data)
                 callbacks = list(self._crossfire_callbacks)
+            elif cf.EMCY_BASE + 1 <= cid <= cf.EMCY_BASE + 0x7F:
+                code, _register = cf.decode_emcy(frame.data)
+                self._emcy[cid - cf.EMCY_BASE] = (code, frame.t)
             elif cf.HEARTBEAT_BASE <= cid <= cf.HEARTBEAT_BASE + 0x7F:
-                self._heartbeats[cid - cf.HEARTBEAT_BASE] = (self._clock(), cf.decode_heartbeat(frame.data))
+                self._heartbeats[cid - cf.HEARTBEAT_BASE] = (frame.t, cf.decode_heartbeat(frame.data))
             else:
                 return
             self._cond.notify_all()

@@ -22,3 +22,5 @@ Frames and units: the *robot frame* has its origin on the floor below the midpoi
 wheels' axle, x forward, y to the left, z up; angles are counter-clockwise positive (rad); lengths
 in metres, times in seconds, wheel speeds in rad/s.
 """
+
+__all__: list[str] = []

@@ -16,8 +16,19 @@ ending to :meth:`CallTable.finish`. The rules are those of docs/protocol.md §5 
 
 The checks run in that order (a repeat is answered even when the node is busy or stopping).
 
-Kept results live behind the small :class:`ResultCache` interface (``get``, ``put``, ``expire``)
-so that a store which survives node restarts can replace the in-memory :class:`MemoryResultCache`.
+A ``query`` (:meth:`CallTable.query`) is answered the same way for a kept or running id, and with
+``unknown_call`` otherwise; it never starts anything.
+
+**Orphaned calls** (docs/protocol.md §5): a running call's waiters are the connections that sent
+its id (once each). When the last one goes (:meth:`CallTable.detach`) the call is *orphaned*; a
+repeated ``call`` or a ``query`` of its id adopts it again. :meth:`CallTable.orphans` names the
+calls orphaned for longer than a grace period so that the shell cancels them with reason
+``"caller_gone"``, except calls of ``unattended`` actions, which run to the end. Their results are
+kept either way.
+
+Kept results live behind the small :class:`ResultCache` interface (``get``, ``put``, ``expire``,
+``begin``, ``flush``) so that a store which survives node restarts
+(:class:`services.node.store.SqliteResultCache`) can replace the in-memory :class:`MemoryResultCache`.
 The in-memory cache is bounded by **bytes** and by **age**, not by count: each kept result is
 charged the length of its encoded ``result`` frame plus :data:`ENTRY_OVERHEAD` (the objects that
 hold it in memory); the oldest results are dropped when the charge exceeds ``max_bytes`` (default
@@ -37,6 +48,7 @@ from typing import Final, Generic, NamedTuple, Protocol, TypeAlias, TypeVar
 from services.protocol import Call, Result
 
 __all__ = [
+    "CALLER_GONE",
     "DEFAULT_MAX_AGE_S",
     "DEFAULT_MAX_BYTES",
     "ENTRY_OVERHEAD",
@@ -63,6 +75,8 @@ DEFAULT_MAX_AGE_S: Final = 600.0
 ENTRY_OVERHEAD: Final = 512
 """Bytes charged per kept result on top of its frame: the Python objects and the map slot that hold
 it (a small result held about 520 bytes beyond its frame length, measured on CPython 3.11)."""
+CALLER_GONE: Final = "caller_gone"
+"""The ``reason`` of a call cancelled because nobody waited for it any more."""
 
 
 class RejectReason(enum.StrEnum):
@@ -78,6 +92,8 @@ class RejectReason(enum.StrEnum):
     """``max_in_flight`` calls are running."""
     SHUTDOWN = "shutdown"
     """The node is stopping."""
+    UNKNOWN_CALL = "unknown_call"
+    """Answer to a ``query``: the node never saw the id, or no longer keeps its result."""
 
 
 # --------------------------------------------------------------------------- kept results
@@ -92,6 +108,8 @@ class KeptResult(NamedTuple):
         result: the ``result`` message sent to the callers.
         size: length of its encoded frame, bytes.
         stored_at: when it was kept, seconds on the clock the caller passes to the cache.
+        frame: the encoded frame, when the caller has it (a store that writes frames uses it
+            instead of encoding the result again; the in-memory cache does not keep it).
     """
 
     call_id: str
@@ -99,6 +117,7 @@ class KeptResult(NamedTuple):
     result: Result
     size: int
     stored_at: float
+    frame: bytes | None = None
 
 
 class ResultCache(Protocol):
@@ -120,6 +139,16 @@ class ResultCache(Protocol):
 
     def expire(self, now: float) -> int:
         """Drop the results too old at time ``now`` (s); return how many were dropped."""
+        ...
+
+    def begin(self, call_id: str, action: str, now: float) -> None:
+        """Note that ``call_id`` starts running ``action`` (a durable store journals it, so that
+        after a crash the id is answered ``node_restarted`` instead of running again)."""
+        ...
+
+    def flush(self) -> None:
+        """Make every :meth:`put` and :meth:`begin` so far durable. The node calls it before it
+        sends a result or starts an action (a no-op for a store that does not outlive the process)."""
         ...
 
 
@@ -169,6 +198,8 @@ class MemoryResultCache:
         """Keep ``kept`` as the newest result, then drop the oldest while over ``max_bytes``."""
         results = self._kept
         cid = kept.call_id
+        if kept.frame is not None:
+            kept = kept._replace(frame=None)  # the Result is kept; its bytes would be counted twice
         if cid in results:
             self.nbytes -= results.pop(cid).size + self.entry_overhead
         results[cid] = kept
@@ -192,6 +223,12 @@ class MemoryResultCache:
             n += 1
         return n
 
+    def begin(self, call_id: str, action: str, now: float) -> None:
+        """Nothing to do: a result kept in memory dies with the process anyway."""
+
+    def flush(self) -> None:
+        """Nothing to do (nothing outlives the process)."""
+
 
 # --------------------------------------------------------------------------- the table
 
@@ -201,16 +238,31 @@ class RunningCall(Generic[W]):
 
     Attributes:
         call: the ``call`` message that started it.
-        waiters: who gets its result: the first caller, then every caller that joined it.
-        cancel_requested: a ``cancel`` for it arrived (its ending is then ``"cancelled"``).
+        waiters: who gets its result, each once, in the order they came: the first caller, then
+            every caller that joined it (a dict used as an ordered set).
+        unattended: its action may finish with nobody waiting.
+        cancel_reason: why it is being cancelled (``"cancelled"``, ``"caller_gone"``), else ``None``.
+        orphaned_since: when its last waiter went (s, the shell's monotonic clock), else ``None``.
     """
 
-    __slots__ = ("call", "cancel_requested", "waiters")
+    __slots__ = ("call", "cancel_reason", "orphaned_since", "unattended", "waiters")
 
-    def __init__(self, call: Call, first: W) -> None:
+    def __init__(self, call: Call, first: W, *, unattended: bool = False) -> None:
         self.call = call
-        self.waiters: list[W] = [first]
-        self.cancel_requested = False
+        self.waiters: dict[W, None] = {first: None}
+        self.unattended = unattended
+        self.cancel_reason: str | None = None
+        self.orphaned_since: float | None = None
+
+    @property
+    def cancel_requested(self) -> bool:
+        """A cancel (by a client, or for want of one) was asked for."""
+        return self.cancel_reason is not None
+
+    def adopt(self, waiter: W) -> None:
+        """``waiter`` waits for this call too (no longer an orphan)."""
+        self.waiters[waiter] = None
+        self.orphaned_since = None
 
     def __repr__(self) -> str:
         return f"RunningCall({self.call.id!r}, {self.call.action!r}, waiters={len(self.waiters)})"
@@ -256,34 +308,42 @@ class CallTable(Generic[W]):
     Args:
         actions: names of the actions hosted here.
         local_only: those of them served only to local peers.
+        unattended: those of them that may finish when nobody waits for them.
         max_in_flight: cap on calls running at once (>= 1).
         cache: where results are kept; a :class:`MemoryResultCache` with its defaults if ``None``.
 
     Attributes:
         cache: the result cache.
         max_in_flight: the cap on running calls.
+        unattended: the actions whose calls may finish with nobody waiting (a node adds those whose
+            implementation says so).
         stopping: set by :meth:`stop`; new calls are then rejected with ``shutdown``.
 
     Raises:
-        ValueError: ``max_in_flight`` < 1, or a ``local_only`` action is not in ``actions``.
+        ValueError: ``max_in_flight`` < 1, or a ``local_only`` or ``unattended`` action is not in
+            ``actions``.
     """
 
-    __slots__ = ("_actions", "_local_only", "_running", "cache", "max_in_flight", "stopping")
+    __slots__ = ("_actions", "_local_only", "_running", "cache", "max_in_flight", "stopping", "unattended")
 
     def __init__(
         self,
         actions: Iterable[str],
         *,
         local_only: Collection[str] = (),
+        unattended: Collection[str] = (),
         max_in_flight: int = 16,
         cache: ResultCache | None = None,
     ) -> None:
         self._actions = frozenset(actions)
         self._local_only = frozenset(local_only)
+        self.unattended = frozenset(unattended)
         if max_in_flight < 1:
             raise ValueError("max_in_flight must be >= 1")
         if not self._local_only <= self._actions:
             raise ValueError(f"local_only names unknown actions: {sorted(self._local_only - self._actions)}")
+        if not self.unattended <= self._actions:
+            raise ValueError(f"unattended names unknown actions: {sorted(self.unattended - self._actions)}")
         self.max_in_flight = max_in_flight
         self.cache: ResultCache = cache if cache is not None else MemoryResultCache()
         self.stopping = False
@@ -294,11 +354,17 @@ class CallTable(Generic[W]):
         """Calls running now."""
         return len(self._running)
 
-    def admit(self, call: Call, waiter: W, *, local: bool) -> Admission[W]:
+    @property
+    def actions(self) -> tuple[str, ...]:
+        """The actions hosted here, sorted."""
+        return tuple(sorted(self._actions))
+
+    def admit(self, call: Call, waiter: W, *, local: bool, now: float = 0.0) -> Admission[W]:
         """Decide what to do with ``call`` from ``waiter`` (a local peer if ``local``).
 
         :class:`Start` and :class:`Join` change the table (the call runs, or ``waiter`` now waits
-        for it); :class:`Answer` and :class:`Reject` do not.
+        for it); :class:`Answer` and :class:`Reject` do not. A start is noted in the cache
+        (:meth:`ResultCache.begin`) at time ``now`` (s, the cache's clock).
         """
         action = call.action
         if action not in self._actions:
@@ -313,40 +379,92 @@ class CallTable(Generic[W]):
         if running is not None:
             if running.call.action != action:
                 return _REJECT[RejectReason.DUPLICATE_ID]
-            running.waiters.append(waiter)
+            running.adopt(waiter)
             return Join(running)
         if len(self._running) >= self.max_in_flight:
             return _REJECT[RejectReason.BUSY]
         if self.stopping:
             return _REJECT[RejectReason.SHUTDOWN]
-        running = RunningCall(call, waiter)
+        running = RunningCall(call, waiter, unattended=action in self.unattended)
         self._running[cid] = running
+        self.cache.begin(cid, action, now)
         return Start(running)
+
+    def query(self, call_id: str, waiter: W) -> Answer | Join[W] | Reject:
+        """What became of ``call_id``, for ``waiter``'s ``query``; never starts anything.
+
+        Returns:
+            :class:`Answer` with the kept result; :class:`Join` if it is running (``waiter`` now
+            waits for it, which adopts an orphan); else ``Reject(UNKNOWN_CALL)``.
+        """
+        kept = self.cache.get(call_id)
+        if kept is not None:
+            return Answer(kept)
+        running = self._running.get(call_id)
+        if running is None:
+            return _REJECT[RejectReason.UNKNOWN_CALL]
+        running.adopt(waiter)
+        return Join(running)
 
     def running(self, call_id: str) -> RunningCall[W] | None:
         """The running call ``call_id``, or ``None``."""
         return self._running.get(call_id)
 
-    def cancel(self, call_id: str) -> RunningCall[W] | None:
-        """Mark the running call ``call_id`` as cancelled and return it (``None`` if not running)."""
+    def cancel(self, call_id: str, reason: str = "cancelled") -> RunningCall[W] | None:
+        """Mark the running call ``call_id`` as cancelled for ``reason`` and return it (``None`` if
+        not running; the first reason given stays)."""
         running = self._running.get(call_id)
-        if running is not None:
-            running.cancel_requested = True
+        if running is not None and running.cancel_reason is None:
+            running.cancel_reason = reason
         return running
 
-    def finish(self, result: Result, *, size: int, now: float) -> RunningCall[W]:
+    def detach(self, waiter: W, now: float) -> list[RunningCall[W]]:
+        """``waiter`` went away: it waits for nothing any more.
+
+        Args:
+            waiter: the connection that closed.
+            now: the time, seconds on the shell's monotonic clock.
+
+        Returns:
+            The calls it left without any waiter (orphaned from ``now``).
+        """
+        orphaned = []
+        for running in self._running.values():  # at most max_in_flight of them
+            waiters = running.waiters
+            if waiter in waiters:
+                del waiters[waiter]
+                if not waiters:
+                    running.orphaned_since = now
+                    orphaned.append(running)
+        return orphaned
+
+    def orphans(self, now: float, grace_s: float) -> list[RunningCall[W]]:
+        """The calls to cancel now: orphaned for at least ``grace_s`` seconds, not yet cancelled,
+        and not of an ``unattended`` action. Each is marked cancelled with reason ``"caller_gone"``.
+        """
+        due = []
+        cutoff = now - grace_s
+        for running in self._running.values():
+            since = running.orphaned_since
+            if since is not None and since <= cutoff and not running.unattended and running.cancel_reason is None:
+                running.cancel_reason = CALLER_GONE
+                due.append(running)
+        return due
+
+    def finish(self, result: Result, *, size: int, now: float, frame: bytes | None = None) -> RunningCall[W]:
         """End the running call ``result.id``: keep ``result`` and return the call (its waiters).
 
         Args:
             result: the ``result`` message sent to the waiters.
             size: length of its encoded frame, bytes.
             now: the time, seconds on the cache's clock.
+            frame: the encoded frame, if the caller has it.
 
         Raises:
             KeyError: ``result.id`` is not running.
         """
         running = self._running.pop(result.id)
-        self.cache.put(KeptResult(result.id, running.call.action, result, size, now))
+        self.cache.put(KeptResult(result.id, running.call.action, result, size, now, frame))
         return running
 
     def expire(self, now: float) -> int:

@@ -1,10 +1,13 @@
 """The command line of a node process: ``python -m services.node NAME`` (or ``petrobot node NAME``).
 
-``python -m services.node NAME [--services services.toml] [--key-file F] [--log-level L]`` reads the
-location file and the shared key, starts the :class:`~services.node.server.Node` named ``NAME``,
-prints ``node NAME listening on HOST:PORT`` to stderr when it accepts connections, and runs until
-SIGTERM or SIGINT. Exit codes: 0 after a clean stop, 1 when the node cannot start (address in use,
-an action or driver that cannot be built), 2 for a bad services file, node name or key.
+``python -m services.node NAME [--services services.toml] [--key-file F] [--state-dir DIR]
+[--volatile] [--synchronous normal|full] [--log-level L]`` reads the location file and the shared
+key(s), opens the node's result store (an SQLite file in its state directory, so that a repeated
+call id is answered with its first result across restarts: :mod:`services.node.store`), starts the
+:class:`~services.node.server.Node` named ``NAME``, prints ``node NAME listening on HOST:PORT`` to
+stderr when it accepts connections, and runs until SIGTERM or SIGINT. Exit codes: 0 after a clean
+stop, 1 when the node cannot start (address in use, an action or driver that cannot be built), 2
+for a bad services file, node name, key or state directory.
 """
 
 from __future__ import annotations
@@ -15,12 +18,16 @@ import gc
 import logging
 import signal
 import sys
+import time
 from collections.abc import Sequence
 
-from services.errors import PetrobotError
-from services.keys import load_key
-from services.location import load_location
+from services.errors import LocationError, PetrobotError
+from services.keys import load_keys
+from services.location import parse_location
+from services.node.calls import ResultCache
 from services.node.server import Node
+from services.node.store import SqliteResultCache, default_state_dir
+from services.node.watch import digest_of
 
 __all__ = ["build_parser", "main", "run_node"]
 
@@ -36,6 +43,14 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument("--key-file", default=None, metavar="FILE",
                    help="shared key file (default: $PETROBOT_KEY, else $PETROBOT_KEY_FILE, "
                         "else ~/.config/petrobot/key, created if missing)")
+    p.add_argument("--state-dir", default=None, metavar="DIR",
+                   help="where the node keeps call results across restarts (default: state_dir of "
+                        "[nodes.NAME], else $XDG_STATE_HOME/petrobot/NAME, i.e. ~/.local/state/petrobot/NAME)")
+    p.add_argument("--volatile", action="store_true",
+                   help="keep call results in memory only: after a restart a repeated call id runs again")
+    p.add_argument("--synchronous", default="normal", choices=["normal", "full"],
+                   help="normal (default): results survive the node process dying; full: also a power "
+                        "cut, at the cost of an fsync per group commit")
     p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"],
                    help="log level of the stderr log (default: INFO: one line per connection, call, result)")
     return p
@@ -63,9 +78,21 @@ def run_node(args: argparse.Namespace) -> int:
     logging.basicConfig(level=args.log_level, stream=sys.stderr, force=True,
                         format=f"%(asctime)s {args.name} %(levelname)s %(message)s")
     try:
-        location = load_location(args.services)
-        key = load_key(args.key_file)
-        node = Node(args.name, location, key)
+        try:
+            with open(args.services, "rb") as fh:
+                data = fh.read()
+            text = data.decode("utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise LocationError(f"{args.services}: cannot read location file: {exc}") from exc
+        location = parse_location(text, path=args.services)
+        location.address(args.name)
+        keys = load_keys(args.key_file)
+        results: ResultCache | None = None
+        if not args.volatile:
+            state_dir = args.state_dir or location.nodes[args.name].state_dir or default_state_dir(args.name)
+            results = SqliteResultCache(state_dir, now=time.time(), synchronous=args.synchronous.upper())
+        node = Node(args.name, location, keys[0], previous_keys=keys[1:], results=results,
+                    location_digest=digest_of(data))
     except PetrobotError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

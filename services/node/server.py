@@ -1,37 +1,54 @@
-"""The node's asyncio shell: the :class:`Node` server, its connections and its actions' lifecycle.
+"""The node's asyncio shell: the :class:`Node` server and its actions' lifecycle.
 
 A node hosts the primitive actions services.toml places on it (docs/protocol.md, "Calls"). This
 module does the I/O only; the decisions are made by the sans-IO cores beside it:
 
-* :class:`services.node.calls.CallTable` admits or rejects each call, joins repeats and keeps
-  results (bounded by bytes and by age);
+* :class:`services.node.calls.CallTable` admits or rejects each call, joins repeats, answers
+  queries, tracks orphaned calls and keeps results (bounded by bytes and by age; in an SQLite file
+  that survives restarts when the node runs from the command line, :mod:`services.node.store`);
 * :class:`services.node.fanout.Fanout` numbers published events and fans them out, holding a
   bounded backlog for a subscriber whose writes are paused;
-* :class:`services.protocol.Connection` parses and encodes the frames of each connection.
+* :class:`services.node.guard.ConnectionGuard` and :class:`~services.node.guard.AuthThrottle`
+  decide which connections may stay (caps, handshake deadline, failed logins);
+* :class:`services.protocol.Connection` parses and encodes the frames of each connection
+  (:class:`services.node.peer.Peer` is one connection; :class:`services.node.listener.Listener`
+  accepts them).
 
 What the shell adds:
 
 * each admitted call runs as its own task; the deadline (``deadline_ms``) cuts it off with status
-  ``error`` and reason ``"deadline"``; a ``cancel`` cuts it off with reason ``"cancelled"``;
-  stopping the node with ``"node shutdown"``;
-* a peer is local when its IP address equals the IP address on which this node accepted the
-  connection (a process on the same host connecting to that address gets it as its source address);
+  ``error`` and reason ``"deadline"``; a ``cancel`` cuts it off with reason ``"cancelled"``; a call
+  nobody has waited for during ``peer_timeout_s`` with ``"caller_gone"`` (unless its action is
+  unattended); stopping the node with ``"node shutdown"``;
+* with a durable store, a call's start is committed before its action runs (at the end of the read
+  that brought the call: its task starts on the next loop iteration) and its result before it is
+  sent (at once when no other call runs, else once per loop iteration for all the calls that
+  finished in it);
+* a peer is local when its address is one of this host's own addresses
+  (:mod:`services.node.locality`);
 * an action that raises gives status ``error`` with the exception text; the node keeps running;
   a result that cannot be encoded (not msgpack-able, over the frame cap) becomes an ``error``
   result saying so;
-* a peer silent for ``peer_timeout_s`` (default 2 s; clients ping every 0.25 s) is dropped; kept
-  results past their age are dropped by the same periodic task;
+* a peer silent for ``peer_timeout_s`` (default 2 s; clients ping every 0.25 s) is dropped; a
+  connection that has not finished its handshake ``caps.handshake_timeout_s`` after it was
+  accepted is dropped, however many bytes it trickles in; kept results past their age are dropped
+  by the same periodic task;
 * a bad frame closes that one connection with ``bye``; the node goes on.
 
-Logs (stderr): one INFO line per connection, call and result.
+Logs (stderr): one INFO line per authenticated connection, call and result; text from peers is
+escaped and shortened (:func:`services.protocol.shown`) and lines a peer can provoke at will
+(refused logins, bad frames, rejected calls, dropped handshakes) are rate-limited per address
+(:class:`services.node.logs.LogLimiter`).
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
+import os
+import resource
 import time
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -47,13 +64,15 @@ from services.action import (
 )
 from services.actions.memory import MemoryStore, NoMemory, RemoteMemory, memory_actions
 from services.client import NodeLink
-from services.errors import AuthenticationError, PetrobotError, ProtocolError
+from services.errors import PetrobotError, ProtocolError
+from services.keys import check_key
 from services.location import MEMORY_ACTIONS, Location
 from services.node.calls import (
     DEFAULT_MAX_AGE_S,
     DEFAULT_MAX_BYTES,
     Answer,
     CallTable,
+    Join,
     MemoryResultCache,
     Reject,
     ResultCache,
@@ -66,146 +85,41 @@ from services.node.fanout import (
     DEFAULT_MAX_TOPICS,
     Fanout,
 )
+from services.node.guard import (
+    DEFAULT_CAPS,
+    AuthThrottle,
+    Caps,
+    ConnectionGuard,
+    budget_caps,
+)
+from services.node.listener import Listener
+from services.node.locality import Locality
+from services.node.logs import LogLimiter
+from services.node.peer import Peer
+from services.node.watch import LocationWatch, digest_of
 from services.protocol import (
     DEFAULT_MAX_FRAME,
     Accepted,
-    Auth,
-    Bye,
     Call,
-    Cancel,
-    Connection,
     Feedback,
-    Message,
-    Ping,
-    Pong,
+    Offer,
+    Query,
     Rejected,
     Result,
-    Role,
-    State,
-    Subscribe,
-    Unsubscribe,
     encode_frame,
+    shown,
 )
 from services.results import ActionResult, Status
-from services.wire import FramedConnection
+from services.wire import server_context
 
-__all__ = ["Node"]
+__all__ = ["DEFAULT_MAX_OUTPUT", "Node"]
 
 log = logging.getLogger("petrobot.node")
 
 ActionRun = Callable[[dict[str, Any], CallContext], Awaitable[Any]]
 
-_WRITE_HIGH_WATER = 256 * 1024
-
-
-class _Peer(FramedConnection):
-    """One accepted connection."""
-
-    def __init__(self, node: Node) -> None:
-        super().__init__(Connection(Role.SERVER, node._key, name=node.name, max_frame=node.max_frame), node._loop)
-        self.node = node
-        self.peer_host = "?"
-        self.local = False
-        self.closed = False
-
-    def __repr__(self) -> str:
-        return f"{self.conn.peer or '?'}@{self.peer_host}"
-
-    # ---- asyncio callbacks
-
-    def connection_made(self, transport: asyncio.BaseTransport) -> None:
-        super().connection_made(transport)
-        assert isinstance(transport, asyncio.Transport)
-        transport.set_write_buffer_limits(high=_WRITE_HIGH_WATER)
-        peer = transport.get_extra_info("peername")
-        here = transport.get_extra_info("sockname")
-        self.peer_host = peer[0] if peer else "?"
-        self.local = bool(peer and here and peer[0] == here[0])
-        self.node._peers.add(self)
-        self._flush()  # hello
-
-    def data_received(self, data: bytes) -> None:
-        if self.closed:
-            return  # bye sent: whatever follows is ignored
-        self.last_rx = self.loop.time()
-        conn = self.conn
-        conn.receive_data(data)
-        try:
-            while (msg := conn.next_message()) is not None:
-                self._handle(msg)
-        except ProtocolError as exc:
-            if isinstance(exc, AuthenticationError):
-                log.warning("refused %s: %s", self.peer_host, exc)
-                self.close("auth_failed")
-            else:
-                log.warning("bad frame from %r: %s", self, exc)
-                self.close(f"protocol_error: {exc}")
-            return
-        self._schedule_flush()
-
-    def connection_lost(self, exc: Exception | None) -> None:
-        if not self.closed:
-            self.closed = True
-            log.info("connection from %r closed%s", self, f": {exc}" if exc else "")
-        self.node._peers.discard(self)
-        self.node._fanout.remove(self)
-
-    def pause_writing(self) -> None:
-        self.node._fanout.pause(self)
-
-    def resume_writing(self) -> None:
-        for ev in self.node._fanout.resume(self):
-            self.send(ev)
-
-    # ---- output
-
-    @property
-    def open(self) -> bool:
-        """Messages other than ``bye`` may be sent: not closed, handshake done."""
-        return not self.closed and self.conn.state is State.OPEN
-
-    def send(self, msg: Message) -> None:
-        if self.closed:
-            return
-        super().send(msg)
-
-    def close(self, reason: str) -> None:
-        """Send ``bye`` with ``reason`` and close this connection only."""
-        if self.closed:
-            return
-        try:
-            self.conn.send(Bye(reason=reason))
-        except ProtocolError:
-            pass
-        self._flush()
-        self.closed = True
-        log.info("closing connection from %r: %s", self, reason)
-        if self.transport is not None:
-            self.transport.close()
-
-    # ---- input
-
-    def _handle(self, msg: Message) -> None:
-        node = self.node
-        if type(msg) is Call:
-            node._on_call(self, msg)
-        elif type(msg) is Cancel:
-            node._on_cancel(msg.id)
-        elif type(msg) is Ping:
-            self.send(Pong(seq=msg.seq))
-        elif type(msg) is Subscribe:
-            refusal = node._fanout.subscribe(self, msg.topic)
-            if refusal is not None:
-                log.warning("subscription of %r to %.64r refused: %s", self, msg.topic, refusal.value)
-        elif type(msg) is Unsubscribe:
-            node._fanout.unsubscribe(self, msg.topic)
-        elif type(msg) is Bye:
-            log.info("%r said bye: %s", self, msg.reason)
-            self.closed = True
-            if self.transport is not None:
-                self.transport.close()
-        elif type(msg) is Auth:
-            log.info("connection from %r authenticated", self)
+DEFAULT_MAX_OUTPUT = 1024 * 1024
+"""Bytes that may wait to go out to one peer before the node stops reading from it."""
 
 
 class Node:
@@ -214,19 +128,29 @@ class Node:
     Args:
         name: node name in services.toml.
         location: the parsed services.toml.
-        key: shared key.
-        peer_timeout_s: drop a peer silent for this long, seconds.
+        key: shared key (at least 16 bytes).
+        previous_keys: older keys still accepted while a new one is rolled out.
+        peer_timeout_s: drop a peer silent for this long, seconds; also the grace period of an
+            orphaned call before it is cancelled.
         result_bytes: cap on the bytes of kept results (frames plus bookkeeping), bytes.
         result_ttl_s: how long a result is kept, seconds.
         results: where results are kept; a :class:`~services.node.calls.MemoryResultCache` with
-            ``result_bytes`` and ``result_ttl_s`` if ``None`` (else the two are ignored).
+            ``result_bytes`` and ``result_ttl_s`` if ``None`` (else the two are ignored). A store
+            other than the in-memory one is flushed before each action starts and each result is
+            sent, and closed when the node stops.
         event_backlog: events held for a subscriber whose writes are paused (older ones dropped).
         max_topics: topics one connection may subscribe to.
         max_topic_bytes: longest topic name a connection may subscribe to, bytes of UTF-8.
-        max_frame: frame size cap, bytes.
+        max_frame: frame size cap once authenticated, bytes.
+        caps: connection caps (fitted under the file-descriptor limit at start).
+        max_output: bytes waiting to go out to one peer before the node stops reading from it.
+        location_digest: hex SHA-256 of the services.toml bytes ``location`` was parsed from
+            (default: the digest of the file at ``location.path`` now, if it exists).
+        locality: decides which peers are on this host (default: :class:`Locality`).
 
     Raises:
         LocationError: ``name`` is not a node of ``location``.
+        SharedKeyError: a key is shorter than 16 bytes.
     """
 
     def __init__(
@@ -235,6 +159,7 @@ class Node:
         location: Location,
         key: bytes,
         *,
+        previous_keys: Sequence[bytes] = (),
         peer_timeout_s: float = 2.0,
         result_bytes: int = DEFAULT_MAX_BYTES,
         result_ttl_s: float = DEFAULT_MAX_AGE_S,
@@ -243,6 +168,10 @@ class Node:
         max_topics: int = DEFAULT_MAX_TOPICS,
         max_topic_bytes: int = DEFAULT_MAX_TOPIC_BYTES,
         max_frame: int = DEFAULT_MAX_FRAME,
+        caps: Caps = DEFAULT_CAPS,
+        max_output: int = DEFAULT_MAX_OUTPUT,
+        location_digest: str | None = None,
+        locality: Locality | None = None,
     ) -> None:
         self.name = name
         self.location = location
@@ -252,26 +181,52 @@ class Node:
         self.max_in_flight = self.spec.max_in_flight
         self.peer_timeout_s = peer_timeout_s
         self.max_frame = max_frame
-        self._key = key
+        self.max_output = max_output
+        self._key = check_key(key)
+        self._previous_keys = tuple(check_key(k, "a previous key") for k in previous_keys)
+        self.tls_binding = self.spec.tls.mode == "psk"
         self._loop: asyncio.AbstractEventLoop = None  # type: ignore[assignment]
-        self._server: asyncio.Server | None = None
-        self._peers: set[_Peer] = set()
+        self._listener: Listener | None = None
+        self._peers: set[Peer] = set()
         self._actions: dict[str, PrimitiveAction] = {}
         self._placements = {a.name: a for a in location.actions_on(name)}
         self._drivers: dict[str, Driver] = {}
         if results is None:
             results = MemoryResultCache(max_bytes=result_bytes, max_age_s=result_ttl_s)
-        self._calls: CallTable[_Peer] = CallTable(
+        self._durable = not isinstance(results, MemoryResultCache)
+        self._calls: CallTable[Peer] = CallTable(
             self._placements, local_only=[a for a, p in self._placements.items() if p.local_only],
+            unattended=[a for a, p in self._placements.items() if p.unattended],
             max_in_flight=self.max_in_flight, cache=results,
         )
         self._tasks: dict[str, asyncio.Task[None]] = {}
-        self._fanout: Fanout[_Peer] = Fanout(backlog=event_backlog, max_topics=max_topics,
-                                             max_topic_bytes=max_topic_bytes)
+        self._unsent: list[tuple[RunningCall[Peer], bytes]] = []  # results waiting for the next commit
+        self._commit_scheduled = False
+        self._fanout: Fanout[Peer] = Fanout(backlog=event_backlog, max_topics=max_topics,
+                                            max_topic_bytes=max_topic_bytes)
+        self._guard: ConnectionGuard[Peer] = ConnectionGuard(caps)
+        self._throttle = AuthThrottle()
+        self._limited = LogLimiter(log)
+        self._locality = locality if locality is not None else Locality()
+        if location_digest is None and os.path.isfile(location.path):
+            with open(location.path, "rb") as fh:
+                location_digest = digest_of(fh.read())
+        self.watch = LocationWatch(location.path, location_digest)
         self._links: dict[str, NodeLink] = {}
         self._reaper: asyncio.Task[None] | None = None
+        self._checkpointing: asyncio.Task[None] | None = None  # the store's checkpoint, in a thread
         self._stopping = False
         self.context: NodeContext | None = None
+
+    @property
+    def caps(self) -> Caps:
+        """The connection caps in force (after :meth:`start`, fitted under the descriptor limit)."""
+        return self._guard.caps
+
+    @property
+    def results(self) -> ResultCache:
+        """Where results are kept."""
+        return self._calls.cache
 
     # ---- lifecycle
 
@@ -280,7 +235,7 @@ class Node:
 
         Raises:
             ActionError: an impl cannot be imported or built.
-            OSError: the address is in use.
+            OSError: the address is in use, or a TLS file cannot be read.
         """
         self._loop = asyncio.get_running_loop()
         memory: MemoryAPI
@@ -310,14 +265,23 @@ class Node:
                 self._actions[aname] = memory_actions(store)[aname]
             else:
                 self._actions[aname] = make_action(self._placements[aname].impl, aname)
+        self._calls.unattended |= {a for a, action in self._actions.items() if action.unattended}
         for action in self._actions.values():
             await action.setup(self.context)
-        self._server = await self._loop.create_server(lambda: _Peer(self), self.host, self.port, reuse_address=True)
-        sock = self._server.sockets[0]
-        self.port = sock.getsockname()[1]
+        soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+        self._guard.caps = budget_caps(self._guard.caps, soft, _open_fds())
+        self._listener = Listener(
+            self._loop, self.host, self.port, lambda host, now: Peer(self, host, now), self._guard,
+            self._throttle, self._limited, server_context(self.spec.tls),
+        )
+        self.port = self._listener.port
         self._reaper = self._loop.create_task(self._reap())
-        log.info("node %s hosts actions: %s; drivers: %s", self.name,
-                 ", ".join(sorted(self._actions)) or "none", ", ".join(sorted(self._drivers)) or "none")
+        caps = self._guard.caps
+        log.info("node %s hosts actions: %s; drivers: %s; caps: %d open (%d per address), %d in handshake "
+                 "(%d per address)%s", self.name, ", ".join(sorted(self._actions)) or "none",
+                 ", ".join(sorted(self._drivers)) or "none", caps.max_open, caps.max_open_per_host,
+                 caps.max_pending, caps.max_pending_per_host,
+                 f"; TLS {self.spec.tls.mode}" if self.spec.tls.mode != "off" else "")
 
     async def stop(self) -> None:
         """Stop: refuse new connections, cancel running calls, say bye, tear down actions and drivers."""
@@ -325,8 +289,8 @@ class Node:
             return
         self._stopping = True
         self._calls.stop()
-        if self._server is not None:
-            self._server.close()
+        if self._listener is not None:
+            self._listener.close()
         if self._reaper is not None:
             self._reaper.cancel()
         tasks = list(self._tasks.values())
@@ -334,6 +298,8 @@ class Node:
             t.cancel("node shutdown")
         if tasks:
             await asyncio.wait(tasks, timeout=2.0)
+        if self._durable:
+            self.commit()  # the results of the calls just cancelled, before the peers go
         for peer in list(self._peers):
             peer.close("shutdown")
         for link in self._links.values():
@@ -348,8 +314,14 @@ class Node:
                 await drv.teardown()
             except Exception:
                 log.exception("teardown of driver %s failed", drv.name)
-        if self._server is not None:
-            await self._server.wait_closed()
+        if self._checkpointing is not None:
+            await asyncio.wait([self._checkpointing])  # its thread uses the store's file
+        close = getattr(self._calls.cache, "close", None)
+        if close is not None:
+            try:
+                close()
+            except Exception:
+                log.exception("closing the result store failed")
         log.info("node %s stopped", self.name)
 
     # ---- node services for actions and drivers
@@ -366,21 +338,64 @@ class Node:
             try:
                 peer.send(ev)
             except ProtocolError as exc:
-                log.warning("cannot send event %s to %r: %s", topic, peer, exc)
+                self._limited.log(logging.WARNING, ("event", topic), "cannot send event %s to %r: %s",
+                                  shown(topic), peer, exc)
 
     def link(self, node: str) -> NodeLink:
         """Shared link from this node to ``node``."""
         link = self._links.get(node)
         if link is None:
-            link = NodeLink(node, self.location.address(node), self._key, name=f"node:{self.name}")
+            link = NodeLink(node, self.location.address(node), self._key, name=f"node:{self.name}",
+                            tls=self.location.nodes[node].tls)
             self._links[node] = link
         return link
 
+    # ---- connections
+
+    def _offer(self) -> Offer:
+        return Offer(actions=self._calls.actions, location=self.watch.digest,
+                     location_changed=self.watch.changed())
+
+    def _authenticated(self, peer: Peer) -> None:
+        if not self._guard.authenticate(peer):
+            self._limited.log(logging.WARNING, ("open cap", peer.peer_host),
+                              "refused %r: too many connections (%d open)", peer, self._guard.open)
+            peer.conn.data_to_send()  # the welcome the connection queued is not sent: only the bye
+            peer.close("overloaded")
+            return
+        peer.authenticated = True
+        transport = peer.transport
+        here = transport.get_extra_info("sockname") if transport is not None else None
+        peer.local = self._locality.is_local(peer.peer_host, here[0] if here else "")
+        if peer.conn.key_index:
+            self._limited.log(logging.WARNING, "previous key", "%r authenticated with a previous key: "
+                              "finish the key rotation", peer)
+        log.info("connection from %r authenticated", peer)
+
+    def _login_failed(self, peer: Peer, exc: Exception) -> None:
+        self._throttle.failed(peer.peer_host, self._loop.time())
+        self._limited.log(logging.WARNING, ("auth", peer.peer_host), "refused %s: %s", peer.peer_host, exc)
+
+    def _gone(self, peer: Peer) -> None:
+        """``peer`` closed or went away: forget it (once), and orphan the calls it alone waited for."""
+        if peer.forgotten:
+            return
+        peer.forgotten = True
+        self._guard.close(peer)
+        self._peers.discard(peer)
+        self._fanout.remove(peer)
+        if not peer.authenticated:
+            return
+        for rec in self._calls.detach(peer, self._loop.time()):
+            log.info("call %s %s lost its last caller: %s", shown(rec.call.id, 64), shown(rec.call.action, 64),
+                     "it may finish unattended" if rec.unattended
+                     else f"cancelled in {self.peer_timeout_s:g} s unless it is asked for again")
+
     # ---- calls
 
-    def _on_call(self, peer: _Peer, call: Call) -> None:
+    def _on_call(self, peer: Peer, call: Call) -> None:
         cid = call.id
-        verdict = self._calls.admit(call, peer, local=peer.local)
+        verdict = self._calls.admit(call, peer, local=peer.local, now=time.time())
         if type(verdict) is Start:
             action = self._actions[call.action]
             run = action.fn if type(action) is FunctionAction else action.run
@@ -389,29 +404,64 @@ class Node:
             peer.send(Accepted(id=cid))
         elif type(verdict) is Reject:
             reason = verdict.reason.value
-            log.info("call %s (%s) from %r rejected: %s", cid, call.action, peer, reason)
+            self._limited.log(logging.INFO, ("rejected", peer.peer_host), "call %s (%s) from %r rejected: %s",
+                              shown(cid, 64), shown(call.action, 64), peer, reason)
             peer.send(Rejected(id=cid, reason=reason))
         elif type(verdict) is Answer:
             peer.send(Accepted(id=cid))
             peer.send(verdict.kept.result)
-            log.info("call %s (%s) from %r: repeated, answered with the first result", cid, call.action, peer)
+            log.info("call %s (%s) from %r: repeated, answered with the first result", shown(cid, 64),
+                     shown(call.action, 64), peer)
         else:  # Join: the peer now waits for the running call's result too
             peer.send(Accepted(id=cid))
-            log.info("call %s (%s) from %r: repeated while running, joined", cid, call.action, peer)
+            log.info("call %s (%s) from %r: repeated while running, joined", shown(cid, 64),
+                     shown(call.action, 64), peer)
 
-    def _on_cancel(self, cid: str) -> None:
+    def _on_query(self, peer: Peer, query: Query) -> None:
+        cid = query.id
+        verdict = self._calls.query(cid, peer)
+        if type(verdict) is Answer:
+            peer.send(Accepted(id=cid))
+            peer.send(verdict.kept.result)
+            log.info("query %s from %r: answered with its result", shown(cid, 64), peer)
+        elif type(verdict) is Join:
+            peer.send(Accepted(id=cid))
+            log.info("query %s from %r: still running, joined", shown(cid, 64), peer)
+        else:
+            assert type(verdict) is Reject
+            peer.send(Rejected(id=cid, reason=verdict.reason.value))
+            self._limited.log(logging.INFO, ("query", peer.peer_host), "query %s from %r: %s", shown(cid, 64),
+                              peer, verdict.reason.value)
+
+    def _on_cancel(self, cid: str, reason: str = "cancelled") -> None:
         task = self._tasks.get(cid)
-        if task is not None and not task.done():
-            self._calls.cancel(cid)
-            task.cancel("cancelled")
-            log.info("call %s: cancel requested", cid)
+        if task is not None and not task.done() and self._calls.cancel(cid, reason) is not None:
+            task.cancel(reason)
+            log.info("call %s: %s", shown(cid, 64), "cancel requested" if reason == "cancelled" else reason)
 
-    async def _run(self, rec: RunningCall[_Peer], run: ActionRun, defaults: Any, peer: _Peer) -> None:
+    def commit(self) -> None:
+        """Make every start and result so far durable, then send the results that waited for it.
+
+        Called at the end of each read from a peer (the calls it started begin on the next loop
+        iteration, after this), and once per loop iteration in which calls finished.
+        """
+        self._commit_scheduled = False
+        try:
+            self._calls.cache.flush()
+        except Exception as exc:  # noqa: BLE001 - a failing disk must not stop the calls
+            self._limited.log(logging.ERROR, "store", "cannot write the result store: %s", exc)
+        unsent, self._unsent = self._unsent, []
+        for rec, frame in unsent:
+            for peer in rec.waiters:
+                if peer.open:
+                    peer.send_frame(frame)
+
+    async def _run(self, rec: RunningCall[Peer], run: ActionRun, defaults: Any, peer: Peer) -> None:
         call = rec.call
         loop = self._loop
         info = log.isEnabledFor(logging.INFO)
         if info:
-            log.info("call %s %s from %r", call.id, call.action, peer)
+            log.info("call %s %s from %r", shown(call.id, 64), shown(call.action, 64), peer)
         params = {**defaults, **call.params} if defaults else call.params
         deadline = None if call.deadline_ms is None else loop.time() + call.deadline_ms / 1000.0
         assert self.context is not None
@@ -436,66 +486,99 @@ class Node:
                     out = ActionResult.error("deadline")
             record = out if isinstance(out, ActionResult) else ActionResult.success(out)
         except asyncio.CancelledError:
-            record = ActionResult.error("cancelled" if rec.cancel_requested else "node shutdown")
+            record = ActionResult.error(rec.cancel_reason or "node shutdown")
         except Exception as exc:  # noqa: BLE001 - any action failure becomes an error result
             record = ActionResult.error(f"{exc.__class__.__name__}: {exc}")
-            log.warning("call %s %s raised %s", call.id, call.action, record.reason)
+            log.warning("call %s %s raised %s", shown(call.id, 64), call.action, shown(record.reason, 200))
         record = replace(record, wall_s=time.perf_counter() - t0, cpu_s=max(0.0, time.process_time() - c0))
         self._finish(rec, Result(id=call.id, result=record), info)
 
-    def _finish(self, rec: RunningCall[_Peer], result: Result, info: bool) -> None:
-        """Send ``result`` to every waiter still connected, then keep it, charged its frame length."""
+    def _finish(self, rec: RunningCall[Peer], result: Result, info: bool) -> None:
+        """Keep ``result`` (charged its frame length) and send it to every waiter still connected,
+        after the next commit if results are durable."""
         cid = result.id
         self._tasks.pop(cid, None)
-        size = 0
+        try:
+            frame = encode_frame(result, self.max_frame)
+        except ProtocolError as exc:  # value not msgpack-able, too big...
+            result = _unsendable(result, exc)
+            frame = encode_frame(result, self.max_frame)
+        durable = self._durable
+        self._calls.finish(result, size=len(frame), now=time.time(), frame=frame if durable else None)
+        if durable:
+            self._unsent.append((rec, frame))
+            if not self._tasks:  # no other call runs: nothing to wait for to share the commit
+                self.commit()
+            elif not self._commit_scheduled:
+                self._commit_scheduled = True
+                self._loop.call_soon(self.commit)
+        else:
+            for peer in rec.waiters:
+                if peer.open:
+                    peer.send_frame(frame)
+        if info:
+            r = result.result
+            log.info("result %s %s: %s%s (%.3f s)", shown(cid, 64), shown(rec.call.action, 64), r.status.value,
+                     f" ({shown(r.reason, 200)})" if r.reason else "", r.wall_s)
+
+    def _feedback(self, rec: RunningCall[Peer], data: Any) -> None:
+        msg = Feedback(id=rec.call.id, data=data)
         for peer in rec.waiters:
             if not peer.open:
                 continue
-            try:
-                n = peer.send_counted(result)
-            except ProtocolError as exc:  # value not msgpack-able, too big...
-                result = _unsendable(result, exc)
-                n = peer.send_counted(result)
-            size = size or n
-        if not size:  # nobody left to tell: measure it for the cache all the same
-            try:
-                size = len(encode_frame(result, self.max_frame))
-            except ProtocolError as exc:
-                result = _unsendable(result, exc)
-                size = len(encode_frame(result, self.max_frame))
-        self._calls.finish(result, size=size, now=self._loop.time())
-        if info:
-            r = result.result
-            log.info("result %s %s: %s%s (%.3f s)", cid, rec.call.action, r.status.value,
-                     f" ({r.reason})" if r.reason else "", r.wall_s)
-
-    def _feedback(self, rec: RunningCall[_Peer], data: Any) -> None:
-        msg = Feedback(id=rec.call.id, data=data)
-        for peer in rec.waiters:
-            if peer.open:
+            if peer.reading:
                 peer.send(msg)
+            else:
+                peer.dropped_feedback += 1
 
-    # ---- peers and kept results
+    # ---- periodic work
 
     async def _reap(self) -> None:
-        """Every ``peer_timeout_s / 4`` (at most 0.5 s): expire kept results, drop silent peers."""
+        """Every ``peer_timeout_s / 4`` (at most 0.5 s): drop silent peers and overdue handshakes,
+        cancel orphaned calls past their grace period, expire kept results."""
         period = min(0.5, self.peer_timeout_s / 4)
+        checkpoint: Callable[[], None] | None = getattr(self._calls.cache, "checkpoint", None)
         while True:
             before = self._loop.time()
             await asyncio.sleep(period)
             now = self._loop.time()
-            self._calls.expire(now)
+            try:
+                self._calls.expire(time.time())
+            except Exception as exc:  # noqa: BLE001 - keep reaping whatever the store does
+                self._limited.log(logging.ERROR, "store", "cannot expire results: %s", exc)
+            previous = self._checkpointing
+            if checkpoint is not None and (previous is None or previous.done()):
+                if previous is not None and not previous.cancelled() and previous.exception():
+                    self._limited.log(logging.ERROR, "store", "checkpoint failed: %s", previous.exception())
+                self._checkpointing = self._loop.create_task(asyncio.to_thread(checkpoint))
             if now - before > 2 * period:
                 continue  # our loop was blocked: peers' frames may be waiting unread
+            for peer in list(self._guard.overdue(now)):
+                self._limited.log(logging.INFO, ("handshake timeout", peer.peer_host),
+                                  "dropping %s: no handshake within %g s", peer.peer_host,
+                                  self._guard.caps.handshake_timeout_s)
+                peer.evict("handshake_timeout")
             cutoff = now - self.peer_timeout_s
             for peer in list(self._peers):
-                if peer.last_rx < cutoff and not peer.closed:
+                if peer.authenticated and peer.last_rx < cutoff and not peer.closed:
                     log.info("dropping %r: silent for %.1f s", peer, self.peer_timeout_s)
                     peer.close("heartbeat_timeout")
-                    self._peers.discard(peer)
+            for rec in self._calls.orphans(now, self.peer_timeout_s):
+                task = self._tasks.get(rec.call.id)
+                if task is not None and not task.done():
+                    log.info("call %s %s: nobody asked for it for %g s: cancelling it (%s)", shown(rec.call.id, 64),
+                             shown(rec.call.action, 64), self.peer_timeout_s, rec.cancel_reason)
+                    task.cancel(rec.cancel_reason)
+
+
+def _open_fds() -> int:
+    try:
+        return len(os.listdir("/proc/self/fd"))
+    except OSError:
+        return 16
 
 
 def _unsendable(result: Result, exc: Exception) -> Result:
     """The error result that replaces ``result`` when it cannot be encoded."""
     return Result(id=result.id, result=replace(result.result, status=Status.ERROR, outcome=None, value=None,
-                                               reason=f"result not sendable: {exc}"))
+                                               reason=f"result not sendable: {shown(str(exc), 200)}"))

@@ -6,7 +6,9 @@ docs/protocol.md is the normative specification; this package implements it, in 
   stream and the frame grabber);
 * :mod:`~services.protocol.messages` — the message dataclasses and their validated map codec;
 * :mod:`~services.protocol.handshake` — the mutual HMAC handshake;
-* :mod:`~services.protocol.connection` — the connection state machine fed with bytes.
+* :mod:`~services.protocol.connection` — the connection state machine fed with bytes;
+
+and :mod:`~services.protocol.untrusted`, which makes text received from a peer safe to log.
 
 The design follows h11 and websockets: a :class:`Connection` turns received bytes into message
 objects and message objects into bytes; the asyncio shells live in :mod:`services.wire`,
@@ -15,7 +17,15 @@ objects and message objects into bytes; the asyncio shells live in :mod:`service
 
 from __future__ import annotations
 
-from services.protocol.connection import DEFAULT_MAX_FRAME, HANDSHAKE, Connection, State
+from services.protocol.connection import (
+    DEFAULT_MAX_FRAME,
+    HANDSHAKE,
+    MAX_AUTH_FRAME,
+    MAX_WELCOME_FRAME,
+    Connection,
+    Offer,
+    State,
+)
 from services.protocol.framing import FrameReader, frame, pack_map, unpack_map
 from services.protocol.handshake import MAC_BYTES, PROTOCOL_VERSION, Role, handshake_mac
 from services.protocol.messages import (
@@ -33,6 +43,7 @@ from services.protocol.messages import (
     Message,
     Ping,
     Pong,
+    Query,
     Rejected,
     Result,
     Subscribe,
@@ -41,12 +52,15 @@ from services.protocol.messages import (
     from_map,
     to_map,
 )
+from services.protocol.untrusted import shown
 
 __all__ = [
     "CLIENT_SENDS",
     "DEFAULT_MAX_FRAME",
     "HANDSHAKE",
     "MAC_BYTES",
+    "MAX_AUTH_FRAME",
+    "MAX_WELCOME_FRAME",
     "NONCE_BYTES",
     "PROTOCOL_VERSION",
     "SERVER_SENDS",
@@ -61,8 +75,10 @@ __all__ = [
     "FrameReader",
     "Hello",
     "Message",
+    "Offer",
     "Ping",
     "Pong",
+    "Query",
     "Rejected",
     "Result",
     "Role",
@@ -75,6 +91,7 @@ __all__ = [
     "from_map",
     "handshake_mac",
     "pack_map",
+    "shown",
     "to_map",
     "unpack_map",
 ]

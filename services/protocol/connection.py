@@ -14,20 +14,30 @@ Rules of this file:
   (:data:`~services.protocol.messages.CLIENT_SENDS`, :data:`~services.protocol.messages.SERVER_SENDS`).
 * ``bye`` may be sent once in any state and moves the connection to CLOSED; so does receiving it,
   the end of the stream, or any protocol error.
+* Before OPEN a frame may be at most ``handshake_max_frame`` bytes (a node: :data:`MAX_AUTH_FRAME`,
+  4 KiB, what an ``auth`` needs; a client: :data:`MAX_WELCOME_FRAME`, 1 MiB, for a ``welcome``
+  listing many actions); ``max_frame`` applies once OPEN. An unauthenticated peer cannot make
+  this endpoint buffer more than that.
 """
 
 from __future__ import annotations
 
 import enum
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
 from typing import Final
 
 import msgpack
 
 from services.errors import AuthenticationError, LocalProtocolError, RemoteProtocolError
 from services.protocol.framing import FrameReader, pack_map, unpack_map
-from services.protocol.handshake import PROTOCOL_VERSION, Role, handshake_mac, macs_equal
+from services.protocol.handshake import (
+    PROTOCOL_VERSION,
+    Role,
+    handshake_mac,
+    macs_equal,
+)
 from services.protocol.messages import (
     CLIENT_SENDS,
     NONCE_BYTES,
@@ -40,11 +50,32 @@ from services.protocol.messages import (
     from_map,
     to_map,
 )
+from services.protocol.untrusted import shown
 
-__all__ = ["DEFAULT_MAX_FRAME", "HANDSHAKE", "Connection", "State"]
+__all__ = ["DEFAULT_MAX_FRAME", "HANDSHAKE", "MAX_AUTH_FRAME", "MAX_WELCOME_FRAME", "Connection", "Offer", "State"]
 
 DEFAULT_MAX_FRAME: Final = 16 * 1024 * 1024
 """Default cap on a frame body, in bytes (16 MiB)."""
+MAX_AUTH_FRAME: Final = 4096
+"""A node's cap on a frame body before the connection is OPEN, bytes: an ``auth`` (or ``bye``)."""
+MAX_WELCOME_FRAME: Final = 1024 * 1024
+"""A client's cap on a frame body before the connection is OPEN, bytes: a ``welcome`` with its
+list of actions."""
+
+
+@dataclass(frozen=True, slots=True)
+class Offer:
+    """What a node tells an authenticated client in ``welcome`` besides its MAC (docs/protocol.md §3).
+
+    Attributes:
+        actions: the primitive actions the node offers, sorted.
+        location: hex SHA-256 of the services.toml bytes the node loaded, or ``None``.
+        location_changed: the node's services.toml on disk differs from what it loaded.
+    """
+
+    actions: tuple[str, ...] | None = None
+    location: str | None = None
+    location_changed: bool = False
 
 
 class State(enum.Enum):
@@ -82,8 +113,19 @@ class Connection:
         role: which end this is.
         key: the shared key (bytes; 32 random bytes recommended).
         name: this endpoint's name (node name for a server, client name for a client).
-        max_frame: cap on received and sent frame bodies, bytes.
+        max_frame: cap on received and sent frame bodies once OPEN, bytes.
         nonce: this side's 16-byte nonce; fresh random bytes when ``None`` (pass one in tests).
+        handshake_max_frame: cap on received frame bodies before OPEN, bytes (default
+            :data:`MAX_AUTH_FRAME` for a server, :data:`MAX_WELCOME_FRAME` for a client).
+        previous_keys: server only: older keys still accepted in ``auth`` while a new key is rolled
+            out (docs/protocol.md §3, "Key rotation"); ``key`` is tried first.
+        offer: server only: called once the client is authenticated, for the contents of ``welcome``.
+
+    Attributes:
+        binding: TLS channel binding covered by both MACs (set it before the handshake messages
+            are processed; empty on plain TCP).
+        welcome: client: the server's ``welcome`` once OPEN, else ``None``.
+        key_index: server: which key verified the client (0 = ``key``, 1.. = ``previous_keys``).
 
     Raises:
         LocalProtocolError: the nonce is not 16 bytes.
@@ -97,19 +139,30 @@ class Connection:
         name: str,
         max_frame: int = DEFAULT_MAX_FRAME,
         nonce: bytes | None = None,
+        handshake_max_frame: int | None = None,
+        previous_keys: Sequence[bytes] = (),
+        offer: Callable[[], Offer] | None = None,
     ) -> None:
         self.role = role
         self.name = name
         self.max_frame = max_frame
         self.peer: str | None = None
         """The peer's name once known (from ``hello`` or ``auth``)."""
+        self.binding = b""
+        self.welcome: Welcome | None = None
+        self.key_index = 0
+        self._keys = (key, *previous_keys)
         self._key = key
+        self._offer = offer
         self._nonce = nonce if nonce is not None else os.urandom(NONCE_BYTES)
         if len(self._nonce) != NONCE_BYTES:
             raise LocalProtocolError(f"nonce must be {NONCE_BYTES} bytes")
         self._server_nonce = b""
-        self._reader = FrameReader(max_frame)
+        if handshake_max_frame is None:
+            handshake_max_frame = MAX_WELCOME_FRAME if role is Role.CLIENT else MAX_AUTH_FRAME
+        self._reader = FrameReader(min(max_frame, handshake_max_frame))
         self._out: list[bytes] = []
+        self._out_bytes = 0
         self._packer = msgpack.Packer(use_bin_type=True)
         self._bye_sent = False
         self._may_send = CLIENT_SENDS if role is Role.CLIENT else SERVER_SENDS
@@ -126,9 +179,16 @@ class Connection:
 
     def _queue(self, msg: Message) -> None:
         try:
-            self._out.append(pack_map(to_map(msg), self.max_frame, self._packer))
+            data = pack_map(to_map(msg), self.max_frame, self._packer)
         except LocalProtocolError as exc:
             raise LocalProtocolError(f"{msg.TYPE}: {exc}") from None
+        self._out.append(data)
+        self._out_bytes += len(data)
+
+    @property
+    def bytes_to_send(self) -> int:
+        """Bytes queued for the peer and not yet collected by :meth:`data_to_send`."""
+        return self._out_bytes
 
     def send(self, msg: Message) -> None:
         """Queue ``msg`` for sending; collect the bytes with :meth:`data_to_send`.
@@ -158,6 +218,7 @@ class Connection:
             return b""
         out = self._out[0] if len(self._out) == 1 else b"".join(self._out)
         self._out.clear()
+        self._out_bytes = 0
         return out
 
     # ---- input
@@ -210,19 +271,37 @@ class Connection:
             raise RemoteProtocolError(f"unexpected {msg.TYPE} in state {state.name}")
         if isinstance(msg, Hello):
             if msg.version != PROTOCOL_VERSION:
-                raise RemoteProtocolError(f"server speaks protocol version {msg.version}, we speak {PROTOCOL_VERSION}")
+                raise RemoteProtocolError(f"server speaks protocol version {shown(msg.version)}, "
+                                          f"we speak {PROTOCOL_VERSION}")
             self.peer = msg.node
             self._server_nonce = msg.nonce
-            mac = handshake_mac(self._key, Role.CLIENT, msg.nonce, self._nonce)
+            mac = handshake_mac(self._key, Role.CLIENT, msg.nonce, self._nonce, self.binding)
             self._queue(Auth(client=self.name, nonce=self._nonce, mac=mac))
         elif isinstance(msg, Auth):
-            expect = handshake_mac(self._key, Role.CLIENT, self._nonce, msg.nonce)
-            if not macs_equal(expect, msg.mac):
-                raise AuthenticationError(f"client {msg.client!r} failed authentication (wrong key?)")
-            self.peer = msg.client
-            self._queue(Welcome(mac=handshake_mac(self._key, Role.SERVER, self._nonce, msg.nonce)))
+            self._verify_auth(msg)
         elif isinstance(msg, Welcome):
-            expect = handshake_mac(self._key, Role.SERVER, self._server_nonce, self._nonce)
+            expect = handshake_mac(self._key, Role.SERVER, self._server_nonce, self._nonce, self.binding)
             if not macs_equal(expect, msg.mac):
-                raise AuthenticationError(f"node {self.peer!r} failed authentication (wrong key?)")
+                raise AuthenticationError(f"node {shown(self.peer)} failed authentication (wrong key?)")
+            self.welcome = msg
         self.state = after
+        if after is State.OPEN:
+            self._reader.max_frame = self.max_frame
+
+    def _verify_auth(self, msg: Auth) -> None:
+        # every key is tried (each comparison in constant time), so the time taken does not say which matched
+        matched = -1
+        for i, key in enumerate(self._keys):
+            if macs_equal(handshake_mac(key, Role.CLIENT, self._nonce, msg.nonce, self.binding), msg.mac) and matched < 0:
+                matched = i
+        if matched < 0:
+            raise AuthenticationError(f"client {shown(msg.client)} failed authentication (wrong key?)")
+        self.peer = msg.client
+        self.key_index = matched
+        key = self._keys[matched]
+        offer = self._offer() if self._offer is not None else Offer()
+        self._queue(Welcome(
+            mac=handshake_mac(key, Role.SERVER, self._nonce, msg.nonce, self.binding),
+            actions=list(offer.actions) if offer.actions is not None else None,
+            location=offer.location, location_changed=offer.location_changed,
+        ))

@@ -12,6 +12,7 @@ are in, before any of the body is buffered: a peer cannot make the reader hold m
 
 from __future__ import annotations
 
+import re
 import socket
 from struct import Struct
 from typing import Any, Final
@@ -56,18 +57,48 @@ def pack_map(obj: dict[str, Any], max_frame: int, packer: msgpack.Packer | None 
     return _LEN.pack(len(body)) + body
 
 
+def _no_ext(code: int, data: bytes) -> Any:
+    raise ValueError(f"extension type {code} is not used by the protocol")
+
+
+# The timestamp extension (type -1) is decoded by msgpack itself, without the ext hook; its three
+# encodings start with these bytes. They may also occur inside strings or binary data: only a body
+# holding one is searched for a decoded Timestamp.
+_TIMESTAMP_MARKS: Final = re.compile(b"\xd6\xff|\xd7\xff|\xc7\x0c\xff")
+
+
+def _has_timestamp(obj: Any) -> bool:
+    stack = [obj]
+    while stack:
+        item = stack.pop()
+        kind = type(item)
+        if kind is msgpack.Timestamp:
+            return True
+        if kind is dict:
+            stack.extend(item.values())
+        elif kind is list:
+            stack.extend(item)
+    return False
+
+
 def unpack_map(body: bytes) -> dict[str, Any]:
     """Decode one frame body that must be a msgpack map.
 
+    Map keys must be strings or byte strings (any other key type is refused by the decoder);
+    extension types, the msgpack timestamp included, are refused.
+
     Raises:
-        RemoteProtocolError: the body is not valid msgpack, or not a map.
+        RemoteProtocolError: the body is not valid msgpack, not a map, or holds an extension type or
+            a map key of another type.
     """
     try:
-        obj = msgpack.unpackb(body, raw=False)
+        obj = msgpack.unpackb(body, raw=False, ext_hook=_no_ext)
     except Exception as exc:  # noqa: BLE001 - msgpack raises several unrelated types for bad input
-        raise RemoteProtocolError(f"bad msgpack body: {exc.__class__.__name__}: {exc}") from None
+        raise RemoteProtocolError(f"bad msgpack body: {exc.__class__.__name__}: {str(exc)[:200]}") from None
     if type(obj) is not dict:
         raise RemoteProtocolError("frame body is not a msgpack map")
+    if b"\xff" in body and _TIMESTAMP_MARKS.search(body) and _has_timestamp(obj):
+        raise RemoteProtocolError("bad msgpack body: extension type -1 (timestamp) is not used by the protocol")
     return obj
 
 

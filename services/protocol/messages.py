@@ -16,6 +16,8 @@ from operator import attrgetter
 from typing import Any, ClassVar, Final
 
 from services.errors import ActionError, RemoteProtocolError
+from services.protocol.handshake import MAC_BYTES
+from services.protocol.untrusted import shown
 from services.results import ActionResult
 
 __all__ = [
@@ -33,6 +35,7 @@ __all__ = [
     "Message",
     "Ping",
     "Pong",
+    "Query",
     "Rejected",
     "Result",
     "Subscribe",
@@ -45,6 +48,15 @@ __all__ = [
 NONCE_BYTES: Final = 16
 """Length of handshake nonces, in bytes."""
 
+
+def _int(value: Any) -> bool:
+    """An integer and not a boolean (msgpack ``true`` decodes as a Python ``bool``, a subclass of ``int``)."""
+    return type(value) is int
+
+
+def _number(value: Any) -> bool:
+    """An integer or a float, not a boolean."""
+    return type(value) is int or type(value) is float
 
 
 def _need(cond: bool, what: str) -> None:
@@ -76,9 +88,9 @@ class Hello(Message):
     nonce: bytes
 
     def check(self) -> None:
-        _need(isinstance(self.node, str), "hello.node must be a string")
-        _need(type(self.version) is int, "hello.version must be an integer")
-        _need(isinstance(self.nonce, bytes) and len(self.nonce) == NONCE_BYTES, "hello.nonce must be 16 bytes")
+        _need(type(self.node) is str, "hello.node must be a string")
+        _need(_int(self.version), "hello.version must be an integer")
+        _need(type(self.nonce) is bytes and len(self.nonce) == NONCE_BYTES, "hello.nonce must be 16 bytes")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -91,20 +103,35 @@ class Auth(Message):
     mac: bytes
 
     def check(self) -> None:
-        _need(isinstance(self.client, str), "auth.client must be a string")
-        _need(isinstance(self.nonce, bytes) and len(self.nonce) == NONCE_BYTES, "auth.nonce must be 16 bytes")
-        _need(isinstance(self.mac, bytes), "auth.mac must be bytes")
+        _need(type(self.client) is str, "auth.client must be a string")
+        _need(type(self.nonce) is bytes and len(self.nonce) == NONCE_BYTES, "auth.nonce must be 16 bytes")
+        _need(type(self.mac) is bytes and len(self.mac) == MAC_BYTES, "auth.mac must be 32 bytes")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Welcome(Message):
-    """Server → client: the server's MAC, proving it holds the key too."""
+    """Server → client: the server's MAC, proving it holds the key too, and what the node serves.
+
+    Attributes:
+        mac: the server's MAC (:func:`~services.protocol.handshake.handshake_mac`).
+        actions: the primitive actions this node offers, sorted; ``None`` if the node does not say.
+        location: hex SHA-256 of the services.toml bytes the node loaded, or ``None``.
+        location_changed: the node's services.toml on disk differs from what it loaded.
+    """
 
     TYPE: ClassVar[str] = "welcome"
     mac: bytes
+    actions: list[str] | None = None
+    location: str | None = None
+    location_changed: bool = False
 
     def check(self) -> None:
-        _need(isinstance(self.mac, bytes), "welcome.mac must be bytes")
+        _need(type(self.mac) is bytes and len(self.mac) == MAC_BYTES, "welcome.mac must be 32 bytes")
+        acts = self.actions
+        _need(acts is None or (type(acts) is list and all(type(a) is str for a in acts)),
+              "welcome.actions must be a list of strings or nil")
+        _need(self.location is None or type(self.location) is str, "welcome.location must be a string or nil")
+        _need(type(self.location_changed) is bool, "welcome.location_changed must be a boolean")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -126,10 +153,10 @@ class Call(Message):
         if (type(self.id) is str and self.id and type(self.action) is str and type(self.params) is dict
                 and (d is None or (type(d) is int and d >= 0))):
             return  # the common case, in one test
-        _need(isinstance(self.id, str) and self.id != "", "call.id must be a non-empty string")
-        _need(isinstance(self.action, str), "call.action must be a string")
-        _need(isinstance(self.params, dict), "call.params must be a map")
-        _need(d is None or (isinstance(d, int) and d >= 0), "call.deadline_ms must be a non-negative integer or nil")
+        _need(type(self.id) is str and self.id != "", "call.id must be a non-empty string")
+        _need(type(self.action) is str, "call.action must be a string")
+        _need(type(self.params) is dict, "call.params must be a map")
+        _need(d is None or (_int(d) and d >= 0), "call.deadline_ms must be a non-negative integer or nil")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -140,7 +167,7 @@ class Accepted(Message):
     id: str
 
     def check(self) -> None:
-        _need(isinstance(self.id, str), "accepted.id must be a string")
+        _need(type(self.id) is str, "accepted.id must be a string")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -152,8 +179,8 @@ class Rejected(Message):
     reason: str
 
     def check(self) -> None:
-        _need(isinstance(self.id, str), "rejected.id must be a string")
-        _need(isinstance(self.reason, str), "rejected.reason must be a string")
+        _need(type(self.id) is str, "rejected.id must be a string")
+        _need(type(self.reason) is str, "rejected.reason must be a string")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -165,7 +192,7 @@ class Feedback(Message):
     data: Any = None
 
     def check(self) -> None:
-        _need(isinstance(self.id, str), "feedback.id must be a string")
+        _need(type(self.id) is str, "feedback.id must be a string")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -193,7 +220,22 @@ class Cancel(Message):
     id: str
 
     def check(self) -> None:
-        _need(isinstance(self.id, str), "cancel.id must be a string")
+        _need(type(self.id) is str, "cancel.id must be a string")
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class Query(Message):
+    """Client → server: what became of call ``id``? Never starts anything (docs/protocol.md §5).
+
+    Answered like a repeated ``call``: ``accepted`` and the kept ``result``, or ``accepted`` and the
+    result when the running call ends (the querier joins it), or ``rejected{reason: "unknown_call"}``.
+    """
+
+    TYPE: ClassVar[str] = "query"
+    id: str
+
+    def check(self) -> None:
+        _need(type(self.id) is str and self.id != "", "query.id must be a non-empty string")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -204,7 +246,7 @@ class Ping(Message):
     seq: int
 
     def check(self) -> None:
-        _need(type(self.seq) is int, "ping.seq must be an integer")
+        _need(_int(self.seq), "ping.seq must be an integer")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -215,7 +257,7 @@ class Pong(Message):
     seq: int
 
     def check(self) -> None:
-        _need(type(self.seq) is int, "pong.seq must be an integer")
+        _need(_int(self.seq), "pong.seq must be an integer")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -226,7 +268,7 @@ class Subscribe(Message):
     topic: str
 
     def check(self) -> None:
-        _need(isinstance(self.topic, str), "subscribe.topic must be a string")
+        _need(type(self.topic) is str, "subscribe.topic must be a string")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -237,12 +279,12 @@ class Unsubscribe(Message):
     topic: str
 
     def check(self) -> None:
-        _need(isinstance(self.topic, str), "unsubscribe.topic must be a string")
+        _need(type(self.topic) is str, "unsubscribe.topic must be a string")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
 class Event(Message):
-    """Server → client: one external event (a pulse, DESIGN.md §3).
+    """Server → client: one external event (a pulse: docs/protocol.md §9; the paper's external events).
 
     Attributes:
         topic: event name without the ``ext:`` prefix.
@@ -258,9 +300,9 @@ class Event(Message):
     data: Any = None
 
     def check(self) -> None:
-        _need(isinstance(self.topic, str), "event.topic must be a string")
-        _need(isinstance(self.t, (int, float)), "event.t must be a number")
-        _need(type(self.seq) is int, "event.seq must be an integer")
+        _need(type(self.topic) is str, "event.topic must be a string")
+        _need(_number(self.t), "event.t must be a number")
+        _need(_int(self.seq), "event.seq must be an integer")
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -271,14 +313,14 @@ class Bye(Message):
     reason: str
 
     def check(self) -> None:
-        _need(isinstance(self.reason, str), "bye.reason must be a string")
+        _need(type(self.reason) is str, "bye.reason must be a string")
 
 
 _TYPES: Final[dict[str, type[Message]]] = {
     cls.TYPE: cls
     for cls in (
         Hello, Auth, Welcome, Call, Accepted, Rejected, Feedback, Result,
-        Cancel, Ping, Pong, Subscribe, Unsubscribe, Event, Bye,
+        Cancel, Query, Ping, Pong, Subscribe, Unsubscribe, Event, Bye,
     )
 }
 _FIELDS: Final[dict[type[Message], tuple[str, ...]]] = {
@@ -292,7 +334,7 @@ _REQUIRED: Final[dict[type[Message], frozenset[str]]] = {
     for cls in _TYPES.values()
 }
 
-CLIENT_SENDS: Final = frozenset({Call, Cancel, Ping, Pong, Subscribe, Unsubscribe, Bye})
+CLIENT_SENDS: Final = frozenset({Call, Cancel, Query, Ping, Pong, Subscribe, Unsubscribe, Bye})
 """Message classes a client may send once OPEN."""
 SERVER_SENDS: Final = frozenset({Accepted, Rejected, Feedback, Result, Ping, Pong, Event, Bye})
 """Message classes a server may send once OPEN."""
@@ -324,14 +366,15 @@ def to_map(msg: Message) -> dict[str, Any]:
 
 def _result_from_map(obj: dict[str, Any]) -> Result:
     cid = obj.get("id")
-    _need(type(cid) is str, "result.id must be a string")
+    if type(cid) is not str:
+        raise RemoteProtocolError("result.id must be a string")
     _need("status" in obj, "result lacks field(s) status")
     kw = {k: obj[k] for k in _RESULT_FIELDS if k in obj and obj[k] is not None}
     _need(type(kw.get("status")) is str, "result.status must be a string")
     try:
         record = ActionResult(**kw)
     except (ActionError, TypeError) as exc:
-        raise RemoteProtocolError(f"bad result: {exc}") from None
+        raise RemoteProtocolError(f"bad result: {shown(str(exc))}") from None
     return Result(id=cid, result=record)
 
 
@@ -346,7 +389,7 @@ def from_map(obj: dict[str, Any]) -> Message:
         return _result_from_map(obj)
     cls = _TYPES.get(tag) if isinstance(tag, str) else None
     if cls is None:
-        raise RemoteProtocolError(f"unknown message type {tag!r}")
+        raise RemoteProtocolError(f"unknown message type {shown(tag)}")
     try:
         msg = cls(**obj)
     except TypeError:

@@ -270,6 +270,18 @@ class CatchServo:
         self.goal = target.q.copy()
         return target
 
+    def stop(self) -> Array:
+        """Controlled stop: the new goal is where each joint comes to rest braking at ``QDD_MAX``
+        from its commanded velocity (within the joint limits); returns that goal, shape (6,), rad.
+
+        :meth:`step` then decelerates every joint at most at its acceleration limit, without
+        overshoot, so the stop takes at most max(|qd| / QDD_MAX) plus a few cycles.
+        """
+        brake = self.qd * np.abs(self.qd) / (2.0 * np.asarray(puma560.QDD_MAX))
+        self.goal = np.clip(self.q + brake, puma560.Q_MIN, puma560.Q_MAX)
+        self.target = None
+        return self.goal.copy()
+
     def step(self) -> Array:
         """Advance one cycle; returns the commanded joint positions, shape (6,), rad."""
         self.q, self.qd = step_toward(self.q, self.qd, self.goal, self.dt)

@@ -137,10 +137,11 @@ class Cluster:
         return self._location
 
     def env(self) -> dict[str, str]:
-        """Environment for child processes (key file, import path)."""
+        """Environment for child processes (key file, import path, the nodes' state under ``tmp``)."""
         env = dict(os.environ)
         env.pop("PETROBOT_KEY", None)
         env["PETROBOT_KEY_FILE"] = str(self.key_file)
+        env["XDG_STATE_HOME"] = str(self.tmp / "state")  # each test's nodes keep results of their own
         env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
         return env
 

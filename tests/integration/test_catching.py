@@ -47,7 +47,7 @@ impl = "services.actions.vision:LocateAverage"
 [actions.predict]
 node = "PREDICT_NODE"
 impl = "services.actions.vision:Predict"
-params = {{ stream_port = {port[stream]}, camera_port = {port[camera]} }}
+params = {{ camera_port = {port[camera]} }}
 
 [events.image_sampling_tick]
 node = "vision"
@@ -55,7 +55,7 @@ node = "vision"
 [drivers.puma]
 node = "motion"
 impl = "services.actions.motion:PumaDriver"
-params = {{ can_port = {port[can]}, setpoint_port = {port[stream]} }}
+params = {{ can_port = {port[can]} }}
 
 [actions.move_home]
 node = "motion"
@@ -130,7 +130,9 @@ def test_a_vision_node_killed_mid_run_turns_the_catch_into_an_error_and_takes_th
     journal = tmp_path / "j.sqlite"
     catch = journal_rows(journal, "SELECT status, outcome FROM action_result WHERE task='catch'")
     assert catch == [("error", "stream_lost")], out
+    assert "watchdog stopped the arm" in out, out  # the report shows the reason
     fired = [t for (t,) in journal_rows(journal, "SELECT transition FROM firing ORDER BY seq")]
     assert "catch_failed" in fired, out
     assert fired[-1] == "at_home", out  # the error branch returns the robot home; no token is lost
-    assert "final marking: {'aborted_runs': 1, 'camera_free': 1, 'robot_ready': 1}" in out, out
+    assert "final marking: {'aborted_runs': 1, 'camera_free': 1, 'home_retries_left': 3, 'robot_ready': 1}" in out, out
+    assert (tmp_path / "logs" / "motion.log").exists() and (tmp_path / "logs" / "sim.log").exists()

@@ -10,6 +10,7 @@ import time
 
 import pytest
 from conftest import Cluster
+from waiting import eventually, log_says
 
 from services.client import NodeLink
 from services.protocol import Bye, Connection, Role
@@ -65,9 +66,9 @@ async def test_a_repeated_call_id_is_not_run_twice(cluster: Cluster) -> None:
 async def test_a_repeat_from_a_new_connection_while_running_joins_the_first_run(cluster: Cluster) -> None:
     cluster.start("alpha")
     async with cluster.client() as c1, cluster.client() as c2:
-        t1 = asyncio.create_task(c1.call("wait", {"seconds": 0.4}, call_id="same"))
-        await asyncio.sleep(0.1)
-        r2 = await c2.call("wait", {"seconds": 0.4}, call_id="same")
+        t1 = asyncio.create_task(c1.call("wait", {"seconds": 1.0}, call_id="same"))
+        await log_says(cluster, "alpha", "call same wait from")
+        r2 = await c2.call("wait", {"seconds": 1.0}, call_id="same")
         r1 = await t1
     assert r1.status == r2.status == "success"
     assert r1.wall_s == r2.wall_s
@@ -77,21 +78,20 @@ async def test_a_repeat_from_a_new_connection_while_running_joins_the_first_run(
 async def test_a_call_past_its_deadline_ends_in_error(cluster: Cluster) -> None:
     cluster.start("alpha")
     async with cluster.client() as client:
-        t0 = time.monotonic()
-        res = await client.call("wait", {"seconds": 5}, deadline_s=0.3)
-    assert (res.status, res.reason) == ("error", "deadline")
-    assert time.monotonic() - t0 < 1.5
+        res = await client.call("wait", {"seconds": 30}, deadline_s=0.3)
+    assert (res.status, res.reason) == ("error", "deadline")  # the node's deadline, not the client's
+    assert res.wall_s < 30
 
 
 async def test_cancel_stops_a_running_call(cluster: Cluster) -> None:
     cluster.start("alpha")
     feedback: list[object] = []
     async with cluster.client() as client:
-        task = asyncio.create_task(client.call("wait", {"seconds": 5, "step": 0.05}, call_id="c1",
+        task = asyncio.create_task(client.call("wait", {"seconds": 30, "step": 0.05}, call_id="c1",
                                                on_feedback=feedback.append))
-        await asyncio.sleep(0.3)
+        await eventually("progress feedback arrived", lambda: bool(feedback))
         assert await client.cancel("c1")
-        res = await asyncio.wait_for(task, 2)
+        res = await asyncio.wait_for(task, 20)
     assert (res.status, res.reason) == ("error", "cancelled")
     assert feedback, "progress feedback arrived before the cancel"
 
@@ -108,16 +108,17 @@ async def test_more_calls_than_the_in_flight_cap_are_rejected_busy(cluster: Clus
     assert statuses == [("error", "busy"), ("success", None), ("success", None)]
 
 
-async def test_a_local_only_action_refuses_a_caller_from_another_address(cluster: Cluster) -> None:
+async def test_a_local_only_action_serves_callers_from_any_address_of_the_node_host(cluster: Cluster) -> None:
+    # the node binds a loopback alias; a caller on the same host comes from 127.0.0.1 or another alias
+    cluster.write_services(
+        '[nodes.alpha]\nhost = "127.0.0.5"\nport = {port[alpha]}\n'
+        '[actions.private_echo]\nnode = "alpha"\nimpl = "services.actions.demo:echo"\nlocal_only = true\n'
+    )
     cluster.start("alpha")
-    async with cluster.client() as local:
-        assert (await local.call("private_echo", {"a": 1})).status == "success"
-    # a source address other than the one the node was reached on counts as another host
-    async with cluster.client(local_addr=("127.0.0.2", 0)) as remote:
-        refused = await remote.call("private_echo", {"a": 1})
-        allowed = await remote.call("echo", {"a": 1})
-    assert (refused.status, refused.reason) == ("error", "local_only")
-    assert allowed.status == "success"
+    for source in ("127.0.0.1", "127.0.0.2", "127.0.0.5"):
+        async with cluster.client(local_addr=(source, 0)) as client:
+            res = await client.call("private_echo", {"from": source})
+        assert (res.status, res.value) == ("success", {"from": source}), source
 
 
 async def test_an_action_exception_is_an_error_result_and_the_node_goes_on(cluster: Cluster) -> None:
@@ -139,33 +140,28 @@ async def test_unknown_action_on_a_node_is_rejected(cluster: Cluster) -> None:
     assert (res.status, res.reason) == ("error", "unknown_action")
 
 
-async def test_a_node_killed_mid_call_gives_an_error_within_1_5_s(cluster: Cluster) -> None:
+async def test_a_node_killed_mid_call_gives_an_error_at_once_not_a_hang(cluster: Cluster) -> None:
     cluster.start("alpha", "beta")
     async with cluster.client() as client:
-        task = asyncio.create_task(client.call("slow", {"seconds": 10}))
-        await asyncio.sleep(0.3)
-        t0 = time.monotonic()
+        task = asyncio.create_task(client.call("slow", {"seconds": 60}, call_id="doomed"))
+        await log_says(cluster, "beta", "call doomed slow from")
         cluster.kill("beta")
-        res = await asyncio.wait_for(task, 3)
-        elapsed = time.monotonic() - t0
-        assert res.status == "error" and res.reason is not None
-        assert elapsed < 1.5
+        res = await asyncio.wait_for(task, 20)
+        assert (res.status, res.reason) == ("error", "connection lost")  # the closed socket, not a timer
         assert (await client.call("echo")).status == "success"  # the other node is untouched
 
 
-async def test_a_frozen_node_misses_heartbeats_and_its_calls_fail_within_1_5_s(cluster: Cluster) -> None:
+async def test_a_frozen_node_misses_heartbeats_and_its_calls_fail_not_hang(cluster: Cluster) -> None:
     cluster.start("beta")
     async with cluster.client() as client:
-        task = asyncio.create_task(client.call("slow", {"seconds": 10}))
-        await asyncio.sleep(0.3)
-        t0 = time.monotonic()
+        task = asyncio.create_task(client.call("slow", {"seconds": 60}, call_id="frozen"))
+        await log_says(cluster, "beta", "call frozen slow from")
         cluster.kill("beta", signal.SIGSTOP)
         try:
-            res = await asyncio.wait_for(task, 3)
+            res = await asyncio.wait_for(task, 20)
         finally:
             cluster.kill("beta", signal.SIGCONT)
-        assert res.status == "error" and "heartbeat" in (res.reason or "")
-        assert time.monotonic() - t0 < 1.5
+        assert (res.status, res.reason) == ("error", "heartbeat timeout")
 
 
 async def test_a_down_node_gives_an_error_and_a_restarted_node_is_reached_again(cluster: Cluster) -> None:
@@ -173,11 +169,9 @@ async def test_a_down_node_gives_an_error_and_a_restarted_node_is_reached_again(
     async with cluster.client(connect_timeout_s=0.3) as client:
         assert (await client.call("echo")).status == "success"
         cluster.kill("alpha")
-        await asyncio.sleep(0.1)  # let the loop see the connection drop
-        t0 = time.monotonic()
+        await eventually("the client saw the connection drop", lambda: not client.link("alpha").connected)
         down = await client.call("echo")
         assert down.status == "error" and "unreachable" in (down.reason or "")
-        assert time.monotonic() - t0 < 1.0
         cluster.start("alpha")
         up = await client.call("echo", {"back": True})
     assert (up.status, up.value) == ("success", {"back": True})
@@ -222,30 +216,23 @@ async def test_subscribers_get_driver_and_action_events_and_resubscribe_after_re
     async with cluster.client() as client:
         client.subscribe("ext:tick", lambda ev: ticks.append(ev.seq))
         client.subscribe("shout", lambda ev: shouts.append(ev.data))
-        for _ in range(60):
-            if len(ticks) >= 3:
-                break
-            await asyncio.sleep(0.05)
-        assert len(ticks) >= 3 and ticks == sorted(ticks)
+        await eventually("three ticks", lambda: len(ticks) >= 3)
+        assert ticks == sorted(ticks)
         await client.call("announce", {"topic": "shout", "data": "hello"})
-        await asyncio.sleep(0.1)
+        await eventually("the shout", lambda: bool(shouts))
         assert shouts == ["hello"]
         cluster.restart("beta")
         ticks.clear()
-        for _ in range(60):
-            if len(ticks) >= 2:
-                break
-            await asyncio.sleep(0.05)
-        assert len(ticks) >= 2, "resubscribed after the restart"
+        await eventually("ticks again: resubscribed after the restart", lambda: len(ticks) >= 2)
 
 
 async def test_sigterm_stops_a_node_cleanly(cluster: Cluster) -> None:
     cluster.start("alpha")
     async with cluster.client() as client:
-        task = asyncio.create_task(client.call("wait", {"seconds": 10}))
-        await asyncio.sleep(0.2)
+        task = asyncio.create_task(client.call("wait", {"seconds": 60}, call_id="interrupted"))
+        await log_says(cluster, "alpha", "call interrupted wait from")
         code = await asyncio.to_thread(cluster.stop, "alpha")
-        res = await asyncio.wait_for(task, 3)
+        res = await asyncio.wait_for(task, 20)
     assert code == 0
     assert res.status == "error"
     assert "stopped" in cluster.log("alpha")
@@ -258,9 +245,10 @@ async def test_up_starts_every_node_and_stops_them_all_on_sigterm(cluster: Clust
     cluster.write_services()
     script = ("import argparse, sys; from coordinator.commands import up; p = argparse.ArgumentParser(); "
               "up.add_parser(p.add_subparsers()); a = p.parse_args(sys.argv[1:]); sys.exit(a.func(a))")
+    logs = cluster.tmp / "logs"
     proc = subprocess.Popen(  # noqa: ASYNC220 - starting a process does not block
         [sys.executable, "-c", script, "up", "--services", str(cluster.services_path),
-         "--key-file", str(cluster.key_file)],
+         "--key-file", str(cluster.key_file), "--log-dir", str(logs)],
         env=cluster.env(), stderr=subprocess.PIPE, text=True,
     )
     try:
@@ -270,16 +258,17 @@ async def test_up_starts_every_node_and_stops_them_all_on_sigterm(cluster: Clust
         while time.monotonic() < deadline:
             line = await asyncio.to_thread(proc.stderr.readline)
             lines.append(line)
-            if line.startswith("up: 2 node(s) listening") or not line:
+            if line.startswith("up: 2 node(s) running") or not line:
                 break
-        assert any(ln.startswith("[alpha] node alpha listening on") for ln in lines), lines
+        assert any(ln.startswith("up: node alpha listening on") for ln in lines), lines
         async with cluster.client() as client:
             a, b = await asyncio.gather(client.call("echo", {"via": "up"}), client.call("compute_primes"))
         assert a.status == b.status == "success"
         proc.send_signal(signal.SIGTERM)
         _, rest = await asyncio.to_thread(proc.communicate, timeout=15)
         assert proc.returncode == 0
-        assert "up: all nodes stopped" in rest and "[beta ]" in rest
+        assert "up: all nodes stopped" in rest
+        assert "node beta listening on" in (logs / "beta.log").read_text()  # the node logs go to files
         with socket.socket() as s:  # the nodes are gone: their ports are free again
             # as a server binds: connections the node closed may sit in TIME_WAIT on its port, which
             # only a live listener, not SO_REUSEADDR, would make a bind fail on

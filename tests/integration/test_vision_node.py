@@ -1,5 +1,5 @@
-"""The vision node against a real `sim catching` process: locate, predict, set-point stream, tick
-events, and a lost camera turning predict into an error (all on 127.0.0.1)."""
+"""The vision node against a real `sim catching` process: locate, predict, set points published as
+node events, tick events, and a lost camera turning predict into an error (all on 127.0.0.1)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 from conftest import ROOT, Cluster
 
-from services.stream import SetPointReceiver
+from services.stream import SETPOINT_TOPIC, LatestSetPoint
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -44,7 +44,6 @@ impl = "services.actions.vision:LocateAverage"
 [actions.predict]
 node = "vision"
 impl = "services.actions.vision:Predict"
-params = {{ stream_port = {port[stream]} }}
 
 [events.image_sampling_tick]
 node = "vision"
@@ -100,40 +99,44 @@ def sim_factory(cluster: Cluster):
         s.kill()
 
 
-async def test_vision_node_locates_the_ball_and_streams_its_predicted_crossing(
+def _holder(client: Any, node: str) -> LatestSetPoint:
+    """Set points published by ``node`` (topic "setpoints"), kept latest-wins in a holder."""
+    holder = LatestSetPoint(max_age=1e9)
+    client.link(node).subscribe(SETPOINT_TOPIC, lambda ev: holder.offer_data(ev.data, time.time()))
+    return holder
+
+
+async def test_vision_node_locates_the_ball_and_publishes_its_predicted_crossing_as_set_points(
     cluster: Cluster, sim_factory
 ) -> None:
     cluster.write_services(VISION_SERVICES)
     sim = sim_factory("--first-throw", "2.5")
     await asyncio.to_thread(sim.wait_event, "ready", 60.0)
-    recv = SetPointReceiver(port=cluster.ports["stream"])
-    await recv.start()
-    try:
-        cluster.start("vision", timeout=30.0)
-        ticks: list[Any] = []
-        async with cluster.client() as client:
-            client.subscribe("image_sampling_tick", lambda *a: ticks.append(a))
-            loc = await client.call("locate_threshold", {"timeout_s": 15.0})
-            assert loc.status == "success", loc
-            assert -1.5 < loc.value["x"] < 0.0 and abs(loc.value["y"]) < 0.38
-            assert loc.cost is not None and loc.cost > 0
-            for action in ("locate_bgdiff", "locate_average"):
-                res = await client.call(action, {"timeout_s": 5.0})
-                assert res.status == "success", res
-            avg = await client.call("locate_average", {"timeout_s": 5.0, "k": 3})
-            assert avg.value["frames"] >= 3
-            pred = await client.call("predict", {"timeout_s": 15.0})
-            assert pred.status == "success", pred
-        crossing = await asyncio.to_thread(sim.wait_event, "crossing", 10.0)
-        assert abs(pred.value["y"] - crossing["y"]) < 0.01
-        assert abs(pred.value["t"] - crossing["t"]) < 0.03
-        assert pred.value["setpoints"] >= 10
-        sp = recv.state.latest
-        assert sp is not None and sp.seq == pred.value["setpoints"] - 1
-        assert abs(sp.y - crossing["y"]) < 0.01  # set points are in the table frame
-        assert len(ticks) > 10
-    finally:
-        await recv.close()
+    cluster.start("vision", timeout=30.0)
+    ticks: list[Any] = []
+    async with cluster.client() as client:
+        recv = _holder(client, "vision")
+        client.subscribe("image_sampling_tick", lambda *a: ticks.append(a))
+        loc = await client.call("locate_threshold", {"timeout_s": 15.0})
+        assert loc.status == "success", loc
+        assert -1.5 < loc.value["x"] < 0.0 and abs(loc.value["y"]) < 0.38
+        assert loc.cost is not None and loc.cost > 0
+        for action in ("locate_bgdiff", "locate_average"):
+            res = await client.call(action, {"timeout_s": 5.0})
+            assert res.status == "success", res
+        avg = await client.call("locate_average", {"timeout_s": 5.0, "k": 3})
+        assert avg.value["frames"] >= 3
+        pred = await client.call("predict", {"timeout_s": 15.0})
+        assert pred.status == "success", pred
+    crossing = await asyncio.to_thread(sim.wait_event, "crossing", 10.0)
+    assert abs(pred.value["y"] - crossing["y"]) < 0.01
+    assert abs(pred.value["t"] - crossing["t"]) < 0.03
+    assert pred.value["setpoints"] >= 10
+    sp = recv.latest
+    assert sp is not None and sp.seq == pred.value["setpoints"] - 1, (recv.received, recv.last_malformed)
+    assert recv.malformed == 0
+    assert abs(sp.y - crossing["y"]) < 0.01  # set points are in the table frame
+    assert len(ticks) > 10
 
 
 async def test_a_camera_lost_mid_prediction_makes_predict_an_error_until_it_comes_back(
@@ -142,35 +145,27 @@ async def test_a_camera_lost_mid_prediction_makes_predict_an_error_until_it_come
     cluster.write_services(VISION_SERVICES)
     sim = sim_factory("--first-throw", "100")
     await asyncio.to_thread(sim.wait_event, "ready", 60.0)
-    recv = SetPointReceiver(port=cluster.ports["stream"])
-    await recv.start()
-    try:
-        cluster.start("vision", timeout=30.0)
-        async with cluster.client() as client:
-            call = asyncio.create_task(client.call("predict", {"timeout_s": 30.0}))
-            await asyncio.sleep(1.0)
-            sim.kill()
-            t0 = time.monotonic()
-            res = await asyncio.wait_for(call, 15.0)
-            assert (res.status, res.outcome) == ("error", "camera_lost"), res
-            assert time.monotonic() - t0 < 5.0
-            # the sim comes back on the same port: the next call reconnects the camera
-            sim2 = sim_factory("--first-throw", "0.5")
-            await asyncio.to_thread(sim2.wait_event, "ready", 60.0)
-            again = await client.call("locate_threshold", {"timeout_s": 10.0})
-            assert again.status == "success", again
-    finally:
-        await recv.close()
+    cluster.start("vision", timeout=30.0)
+    async with cluster.client() as client:
+        call = asyncio.create_task(client.call("predict", {"timeout_s": 30.0}))
+        await asyncio.sleep(1.0)
+        sim.kill()
+        res = await asyncio.wait_for(call, 20.0)  # well before the call's own 30 s timeout
+        assert (res.status, res.outcome) == ("error", "camera_lost"), res
+        # the sim comes back on the same port: the next call reconnects the camera
+        sim2 = sim_factory("--first-throw", "0.5")
+        await asyncio.to_thread(sim2.wait_event, "ready", 60.0)
+        again = await client.call("locate_threshold", {"timeout_s": 10.0})
+        assert again.status == "success", again
 
 
-async def test_predict_moved_to_a_node_without_the_camera_driver_still_streams(
+async def test_predict_moved_to_a_node_without_the_camera_driver_still_publishes_set_points(
     cluster: Cluster, sim_factory
 ) -> None:
     moved = VISION_SERVICES.replace(
         '''[actions.predict]
 node = "vision"
-impl = "services.actions.vision:Predict"
-params = {{ stream_port = {port[stream]} }}''',
+impl = "services.actions.vision:Predict"''',
         '''[nodes.motion]
 host = "127.0.0.1"
 port = {port[motion]}
@@ -178,22 +173,18 @@ port = {port[motion]}
 [actions.predict]
 node = "motion"
 impl = "services.actions.vision:Predict"
-params = {{ stream_port = {port[stream]}, camera_port = {port[camera]} }}''',
+params = {{ camera_port = {port[camera]} }}''',
     )
     assert moved != VISION_SERVICES
     cluster.write_services(moved)
     sim = sim_factory("--first-throw", "2.0")
     await asyncio.to_thread(sim.wait_event, "ready", 60.0)
-    recv = SetPointReceiver(port=cluster.ports["stream"])
-    await recv.start()
-    try:
-        cluster.start("vision", "motion", timeout=30.0)
-        async with cluster.client() as client:
-            pred = await client.call("predict", {"timeout_s": 15.0})
-        assert pred.status == "success", pred
-        assert " predict from " in cluster.log("motion") and " predict from " not in cluster.log("vision")
-        crossing = await asyncio.to_thread(sim.wait_event, "crossing", 10.0)
-        assert abs(pred.value["y"] - crossing["y"]) < 0.01
-        assert recv.state.received >= 10
-    finally:
-        await recv.close()
+    cluster.start("vision", "motion", timeout=30.0)
+    async with cluster.client() as client:
+        recv = _holder(client, "motion")  # the set points come from the node that hosts predict
+        pred = await client.call("predict", {"timeout_s": 15.0})
+    assert pred.status == "success", pred
+    assert " predict from " in cluster.log("motion") and " predict from " not in cluster.log("vision")
+    crossing = await asyncio.to_thread(sim.wait_event, "crossing", 10.0)
+    assert abs(pred.value["y"] - crossing["y"]) < 0.01
+    assert recv.received >= 10 and recv.malformed == 0

@@ -17,7 +17,7 @@ from sim.canbus import SimDrives
 class SimRig:
     """A pybullet PUMA with SimDrives, stepped by hand or by a real-time thread."""
 
-    def __init__(self, tmp_path, q0=K.Q_HOME, crossfire: Callable[[], bool] | None = None):
+    def __init__(self, tmp_path, q0=K.Q_HOME, crossfire: Callable[[], bool] | None = None, **drive_options):
         self.pb = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
         self.pb.setGravity(0, 0, -9.81)
         self.pb.setPhysicsEngineParameter(fixedTimeStep=0.001)
@@ -25,7 +25,7 @@ class SimRig:
         for j, q in zip(joints, q0):
             self.pb.resetJointState(body, j, float(q))
         self.crossfire_state = False
-        self.drives = SimDrives()
+        self.drives = SimDrives(**drive_options)
         self.drives.attach(self.pb, body, joints, crossfire=crossfire or (lambda: self.crossfire_state))
         self.t = 0.0
         self.lock = threading.Lock()
@@ -55,6 +55,8 @@ class SimRig:
                 ahead = (self.t - sim0) - (time.monotonic() - t0)
                 if ahead > 0:
                     time.sleep(ahead)
+                elif ahead < -0.1:  # too far behind: slip instead of racing (as sim.world does)
+                    t0, sim0 = time.monotonic(), self.t
 
         self._thread = threading.Thread(target=loop, daemon=True)
         self._thread.start()

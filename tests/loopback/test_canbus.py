@@ -11,10 +11,10 @@ import pytest
 from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_message
 from puma_rig import SimRig
 
-from services.devices.drives import BusError, PumaDrives
 from services.devices import cia402 as cf
-from sim import socketcand
+from services.devices.drives import BusError, PumaDrives
 from services.robots import puma560 as P
+from sim import socketcand
 from sim.canbus import CanGateway
 
 # --- pure encoding -------------------------------------------------------------------------------
@@ -47,6 +47,32 @@ def test_wrong_payload_lengths_are_refused():
         cf.CanFrame(0x800, b"")
     with pytest.raises(cf.FrameError):
         cf.CanFrame(0x100, bytes(9))
+
+
+def test_emcy_frames_have_the_cia_301_layout_and_a_text_for_each_code():
+    frame = cf.encode_emcy(3, cf.EmcyCode.RPDO_TIMEOUT, 0x01)
+    assert (frame.can_id, frame.data) == (0x083, bytes([0x50, 0x82, 0x01, 0, 0, 0, 0, 0]))
+    assert cf.decode_emcy(frame.data) == (0x8250, 0x01)
+    assert all(code.text for code in cf.EmcyCode)
+    with pytest.raises(cf.FrameError):
+        cf.decode_emcy(b"\x00" * 6)
+    with pytest.raises(cf.FrameError):
+        cf.encode_emcy(0, cf.EmcyCode.NO_ERROR)  # 0x080 is SYNC
+
+
+def test_a_fault_reaction_ignores_controlwords_until_the_joint_is_at_rest():
+    sm = cf.Cia402StateMachine()
+    for cw in (cf.Controlword.SHUTDOWN, cf.Controlword.SWITCH_ON, cf.Controlword.ENABLE_OPERATION):
+        sm.on_controlword(cw)
+    sm.start_fault_reaction("no target", cf.EmcyCode.RPDO_TIMEOUT)
+    assert cf.state_from_statusword(sm.statusword) is cf.DriveState.FAULT_REACTION_ACTIVE
+    assert sm.statusword & 0x2000 == 0  # not a following error
+    sm.on_controlword(cf.Controlword.DISABLE_VOLTAGE)
+    assert sm.on_controlword(cf.Controlword.FAULT_RESET) is cf.DriveState.FAULT_REACTION_ACTIVE
+    sm.reaction_done()
+    sm.on_controlword(cf.Controlword.DISABLE_VOLTAGE)
+    assert sm.on_controlword(cf.Controlword.FAULT_RESET) is cf.DriveState.SWITCH_ON_DISABLED
+    assert sm.fault_code is cf.EmcyCode.NO_ERROR
 
 
 def test_heartbeat_crossfire_and_nmt_frames_have_the_cia_301_layout():
@@ -198,14 +224,15 @@ def test_enabled_drives_follow_targets_and_report_them_after_each_sync(rig):
     q = np.asarray(rig.drives.positions())
     goal = q + np.array([0.05, -0.05, 0.05, 0.1, -0.1, 0.1])
     # ramp at a speed within the limits, one target per 2 ms cycle
-    for k in range(1, 101):
+    for k in range(1, 251):  # a CSP master sends a target every cycle, also at rest
         for node in cf.DRIVE_IDS:
-            target = q[node - 1] + (goal[node - 1] - q[node - 1]) * k / 100
+            target = q[node - 1] + (goal[node - 1] - q[node - 1]) * min(k, 100) / 100
             port.send(cf.encode_rpdo1(node, cf.Controlword.ENABLE_OPERATION, target))
         rig.step(2)
-    rig.step(300)
     assert np.allclose(rig.drives.positions(), goal, atol=2e-3)
     port.recv_all()
+    for node in cf.DRIVE_IDS:
+        port.send(cf.encode_rpdo1(node, cf.Controlword.ENABLE_OPERATION, goal[node - 1]))
     rig.step(2)
     tpdos = {f.can_id: cf.decode_tpdo1(f.data) for f in port.recv_all() if 0x181 <= f.can_id <= 0x186}
     assert sorted(tpdos) == list(range(0x181, 0x187))
@@ -220,16 +247,144 @@ def test_a_target_jump_faults_the_drive_on_following_error_and_it_holds(rig):
     _enable_in_process(rig, port)
     q = rig.drives.positions()
     port.send(cf.encode_rpdo1(2, cf.Controlword.ENABLE_OPERATION, q[1] + 1.0))
-    rig.step(100)
+    rig.step(400)
     states = rig.drives.states()
     assert states[1] is cf.DriveState.FAULT
     assert "following error" in rig.drives.fault_reasons()[1]
+    emcy = [cf.decode_emcy(f.data) for f in port.recv_all() if f.can_id == cf.EMCY_BASE + 2]
+    assert emcy and emcy[0][0] == cf.EmcyCode.FOLLOWING_ERROR
     held = rig.drives.positions()[1]
     rig.step(200)
     assert rig.drives.positions()[1] == pytest.approx(held, abs=5e-3)
     port.send(cf.encode_rpdo1(2, cf.Controlword.FAULT_RESET, held))
     rig.step(4)
     assert rig.drives.states()[1] is cf.DriveState.SWITCH_ON_DISABLED
+
+
+def _move_and_go_silent(rig, port, speed: float, cycles: int = 100) -> tuple[np.ndarray, float]:
+    """Drive joint 4 at ``speed`` rad/s (targets every cycle), then stop sending; returns the
+    positions and the bus time of the last target."""
+    _enable_in_process(rig, port)
+    q0 = np.asarray(rig.drives.positions())
+    q = q0.copy()
+    for k in range(1, cycles + 1):
+        q[3] += speed * min(k / 50, 1.0) * cf.CYCLE_S  # up to speed over 0.1 s, within the limits
+        for node in cf.DRIVE_IDS:
+            port.send(cf.encode_rpdo1(node, cf.Controlword.ENABLE_OPERATION, q[node - 1]))
+        rig.step(2)
+    return q, rig.t
+
+
+def test_a_drive_missing_a_few_targets_keeps_its_last_velocity_and_does_not_fault(rig):
+    port = rig.drives.bus.connect()
+    _move_and_go_silent(rig, port, speed=2.0)
+    before = rig.drives.positions()[3]
+    rig.step(20)  # ten cycles without a target (fewer than TARGET_TIMEOUT_CYCLES)
+    moved = rig.drives.positions()[3] - before
+    assert moved == pytest.approx(2.0 * 0.020, abs=0.01)  # it went on at about 2 rad/s
+    assert rig.drives.states() == [cf.DriveState.OPERATION_ENABLED] * 6
+    assert rig.drives.faults == []
+
+
+def test_a_master_gone_silent_makes_every_enabled_drive_stop_on_its_ramp_fault_and_say_why(rig):
+    port = rig.drives.bus.connect()
+    _q, t_last = _move_and_go_silent(rig, port, speed=4.0)
+    port.recv_all()
+    rig.step(1000)
+    assert rig.drives.states() == [cf.DriveState.FAULT] * 6
+    faults = rig.drives.faults
+    assert {f.code for f in faults} == {cf.EmcyCode.RPDO_TIMEOUT} and len(faults) == 6
+    wrist = next(f for f in faults if f.node == 4)
+    timeout_s = (cf.TARGET_TIMEOUT_CYCLES + 1) * cf.CYCLE_S
+    assert wrist.t - t_last == pytest.approx(timeout_s, abs=2 * cf.CYCLE_S)
+    # the quick stop: from about 4 rad/s at QDD_MAX = 20 rad/s^2 in about 0.2 s
+    assert wrist.speed == pytest.approx(4.0, abs=0.4)
+    assert wrist.t_stopped - wrist.t == pytest.approx(wrist.speed / P.QDD_MAX[3], abs=0.01)
+    emcy = {f.can_id - cf.EMCY_BASE: cf.decode_emcy(f.data)[0] for f in port.recv_all()
+            if cf.EMCY_BASE < f.can_id <= cf.EMCY_BASE + 6}
+    assert emcy == {n: cf.EmcyCode.RPDO_TIMEOUT for n in cf.DRIVE_IDS}
+    at_rest = rig.drives.positions()
+    rig.step(200)
+    assert np.allclose(rig.drives.positions(), at_rest, atol=2e-3)  # it holds in FAULT
+
+
+def test_the_master_heartbeat_is_watched_once_it_has_been_seen(rig):
+    port = rig.drives.bus.connect()
+    _enable_in_process(rig, port)
+    q = rig.drives.positions()
+
+    def cycle(heartbeat: bool) -> None:
+        for node in cf.DRIVE_IDS:
+            port.send(cf.encode_rpdo1(node, cf.Controlword.ENABLE_OPERATION, q[node - 1]))
+        if heartbeat:
+            port.send(cf.encode_heartbeat(cf.MASTER_ID, cf.NmtState.OPERATIONAL))
+        rig.step(2)
+
+    for _ in range(300):  # no heartbeat yet: not watched
+        cycle(False)
+    assert rig.drives.faults == []
+    for k in range(100):  # heartbeats every 100 ms
+        cycle(k % 50 == 0)
+    for _ in range(200):  # targets go on, heartbeats stop: 0.4 s > the consumer time
+        cycle(False)
+    assert {f.code for f in rig.drives.faults} == {cf.EmcyCode.HEARTBEAT_LOST}
+    assert all(s is cf.DriveState.FAULT for s in rig.drives.states())
+
+
+def test_the_sim_waits_for_a_master_in_step_and_stops_waiting_for_a_silent_one(tmp_path):
+    import threading
+
+    rig = SimRig(tmp_path, master_wait_s=0.5)
+    try:
+        port = rig.drives.bus.connect()
+        _enable_in_process(rig, port)
+        q = rig.drives.positions()
+        silent = threading.Event()
+
+        def master() -> None:  # answers each SYNC after 20 ms of wall time, until silenced
+            while not silent.is_set():
+                f = port.recv(timeout=0.1)
+                if f is None or f.can_id != cf.SYNC_ID:
+                    continue
+                time.sleep(0.02)
+                if not silent.is_set():
+                    for node in cf.DRIVE_IDS:
+                        port.send(cf.encode_rpdo1(node, cf.Controlword.ENABLE_OPERATION, q[node - 1]))
+
+        th = threading.Thread(target=master, daemon=True)
+        th.start()
+        rig.step(20)  # ten SYNCs: each waits for the late master's targets
+        assert rig.drives.master_misses == 0 and rig.drives.master_waits >= 9
+        assert rig.drives.faults == []
+        silent.set()
+        th.join(timeout=5)
+        port.recv_all()
+        waits = rig.drives.master_waits
+        t0 = time.monotonic()
+        rig.step(100)  # the master is silent now: one wait runs out, then the bus keeps real time
+        assert rig.drives.master_misses == 1 and rig.drives.master_waits == waits + 1
+        # 0.5 s for the wait that ran out, then about 2 ms per SYNC: never faster than real time,
+        # so the RPDO timeout (26 cycles) is at least 50 ms of wall time after the last answer too
+        assert time.monotonic() - t0 >= 0.5 + 0.045
+        assert {f.code for f in rig.drives.faults} == {cf.EmcyCode.RPDO_TIMEOUT}
+    finally:
+        rig.close()
+
+
+@pytest.mark.timeout(60)
+def test_puma_drives_recover_faulted_drives_by_fault_reset_and_enable(served):
+    rig, _, port = served
+    with PumaDrives("127.0.0.1", port, heartbeat_timeout=0.8) as drives:
+        drives.enable()
+        deadline = time.monotonic() + 10  # no targets: the drives' watchdog faults them
+        while time.monotonic() < deadline and not drives.faults():
+            time.sleep(0.01)
+        assert drives.faults(), rig.drives.states()
+        with pytest.raises(BusError, match=r"FAULT \(no target from the master \(RPDO timeout\)\)"):
+            drives.check()
+        drives.enable()
+        assert drives.states() == [cf.DriveState.OPERATION_ENABLED] * 6
+        assert drives.faults() == {}
 
 
 def test_disabled_drives_hold_the_arm_against_gravity(rig):
@@ -320,21 +475,38 @@ def test_puma_drives_enable_servo_and_report_crossfire_over_the_gateway(served):
 @pytest.mark.timeout(30)
 def test_a_silent_bus_is_reported_as_lost_heartbeat(served):
     rig, _, port = served
-    with PumaDrives("127.0.0.1", port, heartbeat_timeout=0.3) as drives:
+    with PumaDrives("127.0.0.1", port, heartbeat_timeout=0.3, silence_timeout=0.4) as drives:
         drives.enable()
         drives.check()
         rig.running.clear()  # the sim stops: no SYNC, no heartbeat
-        time.sleep(0.5)
-        with pytest.raises(BusError, match="heartbeat"):
+        time.sleep(0.6)
+        with pytest.raises(BusError, match="no SYNC, no heartbeats"):
             drives.check()
+        drives.wait_sync(timeout=0.1)  # the last SYNC before the stop, not answered yet
         with pytest.raises(BusError, match="SYNC"):
             drives.wait_sync(timeout=0.1)
 
 
 @pytest.mark.timeout(30)
+def test_a_simulation_that_stalls_for_a_while_is_not_a_lost_bus(served):
+    rig, _, port = served
+    with PumaDrives("127.0.0.1", port, heartbeat_timeout=0.3, silence_timeout=3.0) as drives:
+        drives.enable()
+        q = drives.positions()
+        rig.running.clear()  # a loaded machine: the sim gets no CPU for longer than the heartbeat period
+        time.sleep(0.8)
+        assert drives.lost() is None  # heartbeats are judged on the bus clock, which stood still too
+        rig.running.set()
+        for _ in range(100):
+            drives.wait_sync(timeout=2.0)
+            drives.send_targets(q)
+        drives.check()
+
+
+@pytest.mark.timeout(30)
 def test_a_closed_gateway_makes_the_drives_report_a_dead_bus(served):
     _rig, gw, port = served
-    drives = PumaDrives("127.0.0.1", port, heartbeat_timeout=0.3).open()
+    drives = PumaDrives("127.0.0.1", port, heartbeat_timeout=0.3, silence_timeout=0.4).open()
     try:
         drives.enable()
         gw.stop()

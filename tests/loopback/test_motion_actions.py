@@ -1,32 +1,49 @@
 """Motion node actions (services/actions/motion.py) against the simulated PUMA over the CAN gateway,
-with a real set-point stream (services/stream.py). The ball is not simulated here: the crossfire
+with set points published by a real vision node on 127.0.0.1 and received through the motion
+node's authenticated link (services/stream.py). The ball is not simulated here: the crossfire
 sensor reports a catch when the cup's rim sits where the set point said the ball would fall."""
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import math
-import threading
+import socket
 import time
+from typing import Any
 
 import numpy as np
 import pytest
 from puma_rig import SimRig
 
-from services.robots import motion_control as mc
 from services.action import CallContext, NodeContext
 from services.actions.motion import Catch, MoveHome, PumaDriver, table_to_base
+from services.client import NodeLink
+from services.devices import cia402 as cf
 from services.location import parse_location
-from services.stream import SetPointSender
+from services.node.server import Node
+from services.robots import motion_control as mc
 from services.robots import puma560 as P
+from services.stream import SetPoint
 from sim.canbus import CanGateway
 
 ROBOT_BASE = (0.75, 0.0, 0.46, math.pi)
+KEY = bytes(range(32))
 LOCATION = """
+[nodes.vision]
+host = "127.0.0.1"
+port = {vision}
+
 [nodes.motion]
 host = "127.0.0.1"
-port = 7199
+port = {motion}
 """
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
 
 
 def test_table_frame_set_points_map_into_the_robot_base_frame():
@@ -36,31 +53,37 @@ def test_table_frame_set_points_map_into_the_robot_base_frame():
 
 
 class Bench:
-    """Sim rig + gateway + PumaDriver on a NodeContext, and a set-point sender thread."""
+    """Sim rig + gateway + PumaDriver on a NodeContext, and a vision node publishing set points."""
 
     def __init__(self, tmp_path):
         self.rim_goal: np.ndarray | None = None
         self.t_rim = math.inf
         self.catchable = True
-        self.rig = SimRig(tmp_path, crossfire=self._crossfire)
+        self.rig = SimRig(tmp_path, crossfire=self._crossfire, master_wait_s=0.05)
         self.gw = CanGateway(self.rig.drives.bus)
         self.can_port = self.gw.start()
         self.rig.start()
         self.events: list[tuple[str, object]] = []
-        self.driver = PumaDriver(
-            "puma", {"can_port": self.can_port, "robot_base": list(ROBOT_BASE), "heartbeat_timeout_s": 0.8}
-        )
+        self.location = parse_location(LOCATION.format(vision=_free_port(), motion=_free_port()))
+        self.vision = Node("vision", self.location, KEY)
+        self._links: dict[str, NodeLink] = {}
+        self.driver = PumaDriver("puma", {"can_port": self.can_port, "robot_base": list(ROBOT_BASE),
+                                          "heartbeat_timeout_s": 0.8, "setpoints_from": "vision"})
         self.ctx = NodeContext(
             name="motion",
-            location=parse_location(LOCATION),
+            location=self.location,
             drivers={"puma": self.driver},
-            memory=None,
+            memory=None,  # type: ignore[arg-type]
             publish=lambda topic, data: self.events.append((topic, data)),
-            link=None,
-        )  # type: ignore[arg-type]
+            link=self._link,
+        )
         self.driver.bind(self.ctx)
-        self._stop = threading.Event()
-        self._sender: threading.Thread | None = None
+        self._sender: asyncio.Task[None] | None = None
+
+    def _link(self, name: str) -> NodeLink:
+        if name not in self._links:
+            self._links[name] = NodeLink(name, self.location.address(name), KEY, name="node:motion")
+        return self._links[name]
 
     def _crossfire(self) -> bool:
         if self.rim_goal is None or not self.catchable or self.rig.t < self.t_rim:
@@ -79,36 +102,54 @@ class Bench:
             feedback=lambda data: None,
         )
 
-    def stream(self, y: float, lead_s: float, stop_after_s: float | None = None) -> None:
-        """Stream set points at 100 Hz for a ball crossing the catch line lead_s from now."""
+    def stream(self, y: float, lead_s: float, stop_after_s: float | None = None,
+               bad: dict[str, Any] | None = None) -> None:
+        """Publish set points at 100 Hz (wall) for a ball crossing the catch line lead_s from now;
+        with ``bad``, every third set point has these fields replaced (malformed)."""
         t_cross = self.rig.t + lead_s
         vx = 0.9
         xb, yb, vxb, vyb = table_to_base(0.0, y, vx, 0.0, ROBOT_BASE)
         target = mc.catch_target(xb, yb, t_cross, vxb, vyb, P.Q_HOME, self.driver.geometry)
         self.rim_goal, self.t_rim = target.rim, target.t_rim
-        sender = SetPointSender("127.0.0.1", self.driver.receiver.port)
 
-        def run() -> None:
+        async def run() -> None:
             t0 = time.monotonic()
-            try:
-                while not self._stop.is_set():
-                    if stop_after_s is not None and time.monotonic() - t0 > stop_after_s:
-                        return
-                    sender.send(
-                        t_frame=self.rig.t, t_capture=time.time(), x=0.0, y=y, t=t_cross, vx=vx, vy=0.0
-                    )
-                    time.sleep(0.01)
-            finally:
-                sender.close()
+            seq = 0
+            while stop_after_s is None or time.monotonic() - t0 <= stop_after_s:
+                sp = SetPoint(seq=seq, t_frame=self.rig.t, t_capture=time.time(), t_sent=time.time(),
+                              x=0.0, y=y, t=t_cross, vx=vx, vy=0.0).to_dict()
+                if bad is not None and seq % 3 == 2:
+                    sp.update(bad)
+                self.vision.publish("setpoints", sp)
+                seq += 1
+                await asyncio.sleep(0.01)
 
-        self._sender = threading.Thread(target=run, daemon=True)
-        self._sender.start()
+        self._sender = asyncio.get_running_loop().create_task(run())
+
+    async def stop_stream(self) -> None:
+        if self._sender is not None:
+            self._sender.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._sender
+            self._sender = None
+
+    async def start(self) -> None:
+        await self.vision.start()
+        await self.driver.setup(self.ctx)
+        self.driver.subscription()  # subscribe now: the first set points are not lost to the handshake
+        link = self._link("vision")
+        end = time.monotonic() + 10
+        while not link.connected:
+            assert time.monotonic() < end, "the motion side did not connect to the vision node"
+            await asyncio.sleep(0.01)
+        await asyncio.sleep(0.1)
 
     async def close(self) -> None:
-        self._stop.set()
-        if self._sender is not None:
-            self._sender.join(timeout=2)
+        await self.stop_stream()
         await self.driver.teardown()
+        for link in self._links.values():
+            await link.close()
+        await self.vision.stop()
         self.gw.stop()
         self.rig.close()
 
@@ -116,9 +157,16 @@ class Bench:
 @pytest.fixture
 async def bench(tmp_path):
     b = Bench(tmp_path)
-    await b.driver.setup(b.ctx)
+    await b.start()
     yield b
     await b.close()
+
+
+async def _until(pred, what: str, timeout: float = 20.0) -> None:
+    end = time.monotonic() + timeout
+    while not pred():
+        assert time.monotonic() < end, f"no {what} within {timeout} s"
+        await asyncio.sleep(0.01)
 
 
 @pytest.mark.timeout(60)
@@ -142,10 +190,61 @@ async def test_a_missed_ball_is_a_failure_once_it_has_passed(bench):
 
 
 @pytest.mark.timeout(60)
-async def test_a_stream_that_stops_before_the_ball_arrives_is_an_error(bench):
-    bench.stream(y=0.0, lead_s=3.0, stop_after_s=0.3)
+async def test_a_ball_predicted_too_late_for_the_arm_is_a_miss_and_faults_no_drive(bench):
+    bench.catchable = False
+    bench.stream(y=0.34, lead_s=0.12)  # the far end of the catch line, 0.12 s ahead: out of reach in time
+    out = await Catch().run({"timeout_s": 5.0, "miss_grace_s": 0.2}, bench.call("catch"))
+    assert out.status == "failure" and out.outcome == "missed", out
+    assert out.value["reach_s"] > out.value["lead_s"], out.value
+    assert "too late" in (out.reason or "")
+    await bench.stop_stream()
+    home = await MoveHome().run({"timeout_s": 5.0}, bench.call("move_home"))
+    assert home.status == "success" and home.value["recovered"] is None, home
+    assert bench.rig.drives.faults == []
+    assert bench.rig.drives.states() == [cf.DriveState.OPERATION_ENABLED] * 6
+
+
+@pytest.mark.timeout(60)
+async def test_set_points_that_stop_mid_catch_make_the_watchdog_stop_the_arm_and_the_catch_an_error(bench):
+    bench.stream(y=0.3, lead_s=3.0, stop_after_s=0.3)
     out = await Catch().run({"timeout_s": 5.0}, bench.call("catch"))
     assert out.status == "error" and out.outcome == "stream_lost", out
+    dog = out.value["watchdog"]
+    assert dog is not None and dog["stale_s"] > 0.2 and dog["stop_s"] >= 0.0, out.value
+    assert "watchdog stopped the arm" in (out.reason or "")
+    # at rest where it stopped, not at the goal it was heading for
+    q = np.asarray(bench.rig.drives.positions())
+    await asyncio.sleep(0.2)
+    assert np.allclose(bench.rig.drives.positions(), q, atol=5e-3)
+    assert bench.rig.drives.faults == []
+
+
+@pytest.mark.timeout(60)
+async def test_malformed_set_points_are_dropped_and_counted_without_ending_the_catch(bench):
+    bench.stream(y=0.1, lead_s=0.9, bad={"seq": float("inf"), "y": float("nan")})
+    out = await Catch().run({"timeout_s": 5.0}, bench.call("catch"))
+    assert out.status == "success" and out.outcome == "caught", out
+    assert out.value["malformed"] >= 3 and out.value["y_pred"] == pytest.approx(0.1)
+
+
+@pytest.mark.timeout(60)
+async def test_strangers_connecting_to_the_vision_node_during_a_catch_change_nothing(bench):
+    from services.errors import AuthenticationError
+
+    bench.stream(y=-0.15, lead_s=1.2)
+    catch = asyncio.create_task(Catch().run({"timeout_s": 5.0}, bench.call("catch")))
+    await asyncio.sleep(0.3)
+    host, port = bench.location.address("vision")
+    for _ in range(10):  # connect, then close at once (this ended a catch when set points had their own port)
+        with socket.create_connection((host, port), timeout=2.0):
+            pass
+    intruder = NodeLink("vision", (host, port), bytes(32), name="intruder", connect_timeout_s=1.0)
+    with pytest.raises(AuthenticationError):  # no key, no connection: nothing can be injected
+        await intruder.connect()
+    await intruder.close()
+    out = await catch
+    assert out.status == "success" and out.value["y_pred"] == pytest.approx(-0.15), out
+    assert out.value["malformed"] == 0
 
 
 @pytest.mark.timeout(60)
@@ -161,6 +260,23 @@ async def test_move_home_returns_the_cup_to_mid_catch_line(bench):
     out = await MoveHome().run({"timeout_s": 5.0}, bench.call("move_home"))
     assert out.status == "success", out
     assert np.allclose(bench.rig.drives.positions(), mc.home_pose(bench.driver.geometry), atol=0.01)
+
+
+@pytest.mark.timeout(60)
+async def test_move_home_resets_drives_that_faulted_when_the_master_went_silent(bench):
+    drives = bench.driver.drives
+    assert drives is not None
+    drives.send_targets = lambda q: None  # the master stops commanding (its thread keeps running)
+    await _until(lambda: all(s is cf.DriveState.FAULT for s in bench.rig.drives.states()), "drive faults")
+    assert {f.code for f in bench.rig.drives.faults} == {cf.EmcyCode.RPDO_TIMEOUT}
+    del drives.send_targets
+    out = await MoveHome().run({"timeout_s": 5.0}, bench.call("move_home"))
+    assert out.status == "success", out
+    assert "fault reset" in out.value["recovered"] and "RPDO timeout" in out.value["recovered"]
+    assert bench.rig.drives.states() == [cf.DriveState.OPERATION_ENABLED] * 6
+    assert bench.driver.recoveries == 1
+    again = await MoveHome().run({"timeout_s": 5.0}, bench.call("move_home"))
+    assert again.status == "success" and again.value["recovered"] is None, again
 
 
 @pytest.mark.timeout(60)
@@ -180,11 +296,11 @@ async def test_a_stream_that_ends_as_the_ball_reaches_the_line_keeps_the_last_se
 
 
 @pytest.mark.timeout(60)
-async def test_a_new_catch_waits_for_the_next_stream_after_the_last_one_closed(bench):
+async def test_a_new_catch_waits_for_the_next_stream_after_the_last_one_ended(bench):
     bench.stream(y=0.1, lead_s=0.6, stop_after_s=0.55)
     first = await Catch().run({"timeout_s": 5.0}, bench.call("catch"))
     assert first.status == "success", first
-    bench._sender.join(timeout=2)
+    await bench.stop_stream()
     second = asyncio.create_task(Catch().run({"timeout_s": 5.0}, bench.call("catch")))
     await asyncio.sleep(0.3)
     assert not second.done()

@@ -1,52 +1,85 @@
-"""Set-point stream: codec and latest-wins holder without sockets, then over 127.0.0.1."""
+"""Set points: validation and the latest-wins holder without sockets, then published as events of
+a node on 127.0.0.1 and received through an authenticated node link (services/stream.py)."""
 
 from __future__ import annotations
 
 import asyncio
-import struct
+import math
+import socket
+import time
 
-import msgpack
 import pytest
 
-from services.errors import RemoteProtocolError
+from services.client import NodeLink
+from services.errors import AuthenticationError
+from services.location import parse_location
+from services.node.server import Node
 from services.stream import (
+    MAX_SEQ,
     LatestSetPoint,
+    MalformedSetPoint,
     SetPoint,
-    SetPointDecoder,
-    SetPointReceiver,
-    SetPointSender,
+    SetPointSubscription,
     StreamLostError,
-    encode,
 )
 
+KEY = bytes(range(32))
 
-def _sp(seq: int, y: float = 0.1) -> SetPoint:
-    return SetPoint(seq=seq, t_frame=0.5, t_capture=10.0, t_sent=10.001, x=0.75, y=y, t=1.2,
+
+def _sp(seq: int, y: float = 0.1, t_frame: float = 0.5) -> SetPoint:
+    return SetPoint(seq=seq, t_frame=t_frame, t_capture=10.0, t_sent=10.001, x=0.75, y=y, t=1.2,
                     vx=-0.9, vy=0.05, sigma_y=0.001, sigma_t=0.002)
 
 
-def test_set_points_survive_encoding_split_into_arbitrary_chunks():
-    data = b"".join(encode(_sp(i, 0.01 * i)) for i in range(5))
-    dec = SetPointDecoder()
-    got = []
-    for k in range(0, len(data), 7):
-        got += dec.feed(data[k : k + 7])
-    assert got == [_sp(i, 0.01 * i) for i in range(5)]
+# --- validation (no sockets) --------------------------------------------------------------------
 
 
-def test_an_oversize_message_is_refused_before_its_body_arrives():
-    dec = SetPointDecoder(max_message=100)
-    with pytest.raises(RemoteProtocolError):
-        dec.feed(struct.pack(">I", 101))
+def test_a_set_point_survives_its_dict_form():
+    assert SetPoint.from_dict(_sp(7).to_dict()) == _sp(7)
+    bare = {k: v for k, v in _sp(3).to_dict().items() if not k.startswith("sigma")}
+    assert SetPoint.from_dict(bare).sigma_y == 0.0
 
 
-def test_a_message_that_is_not_a_set_point_is_a_remote_protocol_error():
-    body = msgpack.packb({"seq": 1, "x": "far"})
-    with pytest.raises(RemoteProtocolError):
-        SetPointDecoder().feed(struct.pack(">I", len(body)) + body)
-    body = msgpack.packb([1, 2, 3])
-    with pytest.raises(RemoteProtocolError):
-        SetPointDecoder().feed(struct.pack(">I", len(body)) + body)
+@pytest.mark.parametrize(("field", "value", "says"), [
+    ("seq", float("inf"), "seq"),  # crashed the old receiver with OverflowError
+    ("seq", -1, "seq"),
+    ("seq", MAX_SEQ, "seq"),
+    ("seq", True, "seq"),
+    ("seq", 1.0, "seq"),
+    ("y", float("nan"), "y"),
+    ("t", float("inf"), "t"),
+    ("x", 1e6, "x"),
+    ("vx", "fast", "vx"),
+    ("t_frame", None, "t_frame"),
+    ("sigma_t", -0.1, "negative"),
+])
+def test_a_set_point_with_a_bad_field_is_refused_naming_it(field, value, says):
+    data = _sp(1).to_dict()
+    data[field] = value
+    with pytest.raises(MalformedSetPoint, match=says):
+        SetPoint.from_dict(data)
+
+
+def test_a_set_point_that_is_not_a_map_of_few_fields_is_refused():
+    with pytest.raises(MalformedSetPoint, match="map"):
+        SetPoint.from_dict([1, 2, 3])
+    huge = {**_sp(1).to_dict(), **{f"k{i}": 0 for i in range(40)}}
+    with pytest.raises(MalformedSetPoint, match="at most"):
+        SetPoint.from_dict(huge)
+    missing = _sp(1).to_dict()
+    del missing["t"]
+    with pytest.raises(MalformedSetPoint, match="without 't'"):
+        SetPoint.from_dict(missing)
+
+
+def test_a_malformed_set_point_is_dropped_and_counted_and_the_latest_stays():
+    h = LatestSetPoint(max_age=0.1)
+    assert h.offer_data(_sp(2).to_dict(), now=1.0) == _sp(2)
+    assert h.offer_data({**_sp(3).to_dict(), "seq": float("inf")}, now=1.01) is None
+    assert h.offer_data("garbage", now=1.02) is None
+    assert h.malformed == 2 and h.last_malformed is not None and "map" in h.last_malformed
+    assert h.get(1.05) == _sp(2)
+    assert h.offer_data(_sp(4).to_dict(), now=1.06) == _sp(4)
 
 
 def test_the_latest_set_point_wins_and_older_ones_are_dropped():
@@ -70,33 +103,101 @@ def test_a_stale_never_started_or_closed_stream_is_lost():
         h.get(1.0)
 
 
-async def test_set_points_stream_over_tcp_and_a_closed_sender_loses_the_stream():
-    recv = SetPointReceiver(max_age=0.5)
-    port = await recv.start()
-    try:
-        sender = await asyncio.to_thread(SetPointSender, "127.0.0.1", port)
-        for i in range(10):
-            sender.send(t_frame=0.02 * i, t_capture=0.0, x=0.75, y=0.01 * i, t=1.0, vx=-1.0, vy=0.0)
-        sp = await recv.wait_newer(8, timeout=2.0)
-        assert sp.seq == 9 and sp.y == pytest.approx(0.09)
-        assert recv.latest().seq == 9
-        sender.close()
-        async with asyncio.timeout(2.0):
-            while recv.connected:
-                await asyncio.sleep(0.01)
-        with pytest.raises(StreamLostError, match="closed"):
-            recv.latest()
-        with pytest.raises(StreamLostError):
-            await recv.wait_newer(9, timeout=0.5)
-    finally:
-        await recv.close()
+def test_a_slow_camera_clock_keeps_a_set_point_fresh_that_the_wall_clock_alone_would_call_stale():
+    h = LatestSetPoint(max_age=0.2)
+    h.offer(_sp(0, t_frame=5.0), now=100.0)
+    # 0.5 s of wall time but only 0.1 s on the camera clock: a simulation running slowly
+    assert h.get(100.5, camera_now=5.1).seq == 0
+    with pytest.raises(StreamLostError, match="camera clock"):
+        h.get(100.5, camera_now=5.3)
+    assert h.age(100.5) == pytest.approx(0.5)
 
 
-async def test_waiting_for_a_set_point_that_never_comes_times_out():
-    recv = SetPointReceiver()
-    await recv.start()
+# --- over a node on 127.0.0.1 -------------------------------------------------------------------
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.fixture
+async def vision():
+    node = Node("vision", parse_location(f'[nodes.vision]\nhost = "127.0.0.1"\nport = {_free_port()}\n'), KEY)
+    await node.start()
+    yield node
+    await node.stop()
+
+
+async def _wait(pred, what: str, timeout: float = 10.0) -> None:
+    end = time.monotonic() + timeout
+    while not pred():
+        assert time.monotonic() < end, f"no {what} within {timeout} s"
+        await asyncio.sleep(0.01)
+
+
+async def test_set_points_published_by_a_node_reach_the_subscription_and_a_bad_one_is_only_counted(vision):
+    link = NodeLink("vision", ("127.0.0.1", vision.port), KEY, name="node:motion")
+    sub = SetPointSubscription(link, max_age=5.0)
+    sub.start()
     try:
-        with pytest.raises(StreamLostError, match="within"):
-            await recv.wait_newer(-1, timeout=0.1)
+        await _wait(lambda: link.connected, "connection")
+        await asyncio.sleep(0.1)  # the subscription reaches the node
+        for i in range(5):
+            vision.publish("setpoints", _sp(i, 0.01 * i).to_dict())
+        vision.publish("setpoints", {**_sp(5).to_dict(), "seq": float("inf")})
+        vision.publish("setpoints", {**_sp(6).to_dict(), "x": float("nan")})
+        vision.publish("setpoints", _sp(7, 0.07).to_dict())
+        await _wait(lambda: sub.state.latest is not None and sub.state.latest.seq == 7, "set point 7")
+        assert sub.latest().y == pytest.approx(0.07)
+        assert sub.state.malformed == 2 and sub.events == 8
+        fresh = sub.restart()
+        with pytest.raises(StreamLostError, match="no set point"):
+            sub.latest()
+        vision.publish("setpoints", _sp(0, -0.2).to_dict())  # a new predict call starts at seq 0
+        await _wait(lambda: fresh.latest is not None, "set point of the new stream")
+        assert sub.latest().y == pytest.approx(-0.2)
     finally:
-        await recv.close()
+        sub.close()
+        await link.close()
+
+
+async def test_a_peer_without_the_key_cannot_inject_and_a_connect_then_close_ends_nothing(vision):
+    link = NodeLink("vision", ("127.0.0.1", vision.port), KEY, name="node:motion")
+    sub = SetPointSubscription(link, max_age=5.0)
+    sub.start()
+    try:
+        await _wait(lambda: link.connected, "connection")
+        await asyncio.sleep(0.1)
+        vision.publish("setpoints", _sp(1).to_dict())
+        await _wait(lambda: sub.state.latest is not None, "the first set point")
+        stranger = NodeLink("vision", ("127.0.0.1", vision.port), bytes(32), name="intruder", connect_timeout_s=2.0)
+        with pytest.raises(AuthenticationError):
+            await stranger.connect()
+        await stranger.close()
+        for _ in range(20):  # connect, then close at once
+            with socket.create_connection(("127.0.0.1", vision.port), timeout=2.0):
+                pass
+        raw = socket.create_connection(("127.0.0.1", vision.port), timeout=2.0)
+        raw.sendall(b"\x00\x00\x00\x10not a frame at all")  # garbage: that one connection is closed
+        raw.close()
+        vision.publish("setpoints", _sp(2, 0.3).to_dict())
+        await _wait(lambda: sub.state.latest is not None and sub.state.latest.seq == 2, "set point 2")
+        assert link.connected and sub.state.malformed == 0
+        assert sub.latest().y == pytest.approx(0.3)
+    finally:
+        sub.close()
+        await link.close()
+
+
+async def test_a_subscription_says_so_when_its_link_is_down():
+    link = NodeLink("vision", ("127.0.0.1", _free_port()), KEY, name="node:motion", connect_timeout_s=0.2)
+    sub = SetPointSubscription(link)
+    sub.start()
+    try:
+        with pytest.raises(StreamLostError, match="link to node vision is down"):
+            sub.latest()
+        assert math.isinf(sub.state.age(time.time()))
+    finally:
+        sub.close()
+        await link.close()

@@ -1,4 +1,4 @@
-"""The catching world: ball physics against theory (DESIGN.md §5 facts), thrower, cup, clock."""
+"""The catching world: ball physics against theory (the facts in docs/catching.md), thrower, cup, clock."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def test_rolling_friction_alone_decelerates_at_three_fifths_g_mu_over_r(world):
 
 
 def test_sliding_launch_turns_to_rolling_at_three_fifths_of_the_launch_speed(world):
-    # DESIGN.md §5: "slide-to-roll at 1.5 m/s launch gives 0.90 m/s after ~0.2 s, matching theory".
+    # Slide-to-roll at a 1.5 m/s launch gives 0.90 m/s after ~0.2 s, as theory says.
     # Thin shell: v_roll = v0 / (1 + 2/3) = 0.6 v0 after t = v0 / (2.5 mu g), mu the combined
     # friction coefficient (Bullet multiplies the two bodies' coefficients).
     cw = CatchingWorld(world, drag=False)
@@ -79,7 +79,7 @@ def test_ball_rolls_as_the_rolling_model_with_drag_predicts(world):
 
 
 def test_the_drag_coefficient_matches_the_design_estimate():
-    # DESIGN.md §5: air drag ~0.14 v^2 m/s^2 on a free ball
+    # docs/catching.md, the ball: air drag ~0.14 v^2 m/s^2 on a free ball
     assert BallSpec().drag_k == pytest.approx(0.14, abs=0.015)
 
 

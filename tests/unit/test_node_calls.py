@@ -34,14 +34,14 @@ def result(cid: str, value: object = None) -> Result:
 
 def finish(t: CallTable[str], cid: str, now: float = 0.0, value: object = None) -> list[str]:
     res = result(cid, value)
-    return t.finish(res, size=len(encode_frame(res)), now=now).waiters
+    return list(t.finish(res, size=len(encode_frame(res)), now=now).waiters)
 
 
 def test_a_new_call_starts_and_its_caller_waits_for_it() -> None:
     t = table()
     verdict = t.admit(call("c1"), "p1", local=True)
     assert isinstance(verdict, Start)
-    assert verdict.running.call == call("c1") and verdict.running.waiters == ["p1"]
+    assert verdict.running.call == call("c1") and list(verdict.running.waiters) == ["p1"]
     assert t.in_flight == 1 and t.running("c1") is verdict.running
 
 
@@ -128,7 +128,8 @@ def test_finishing_an_id_that_is_not_running_is_a_key_error() -> None:
 
 
 def test_rejection_reasons_are_the_wire_strings() -> None:
-    assert [r.value for r in RejectReason] == ["unknown_action", "local_only", "duplicate_id", "busy", "shutdown"]
+    assert [r.value for r in RejectReason] == [
+        "unknown_action", "local_only", "duplicate_id", "busy", "shutdown", "unknown_call"]
 
 
 def test_a_local_only_action_that_is_not_hosted_is_a_value_error() -> None:
@@ -219,6 +220,12 @@ def test_any_store_with_get_put_and_expire_can_keep_the_results() -> None:
             self.expired_at.append(now)
             return 0
 
+        def begin(self, call_id: str, action: str, now: float) -> None:
+            pass
+
+        def flush(self) -> None:
+            pass
+
     store = DictStore()
     before_restart = CallTable[str](["echo"], cache=store)
     before_restart.admit(call("c1"), "p", local=True)
@@ -228,3 +235,88 @@ def test_any_store_with_get_put_and_expire_can_keep_the_results() -> None:
     assert isinstance(verdict, Answer) and verdict.kept.result.result.value == 7
     after_restart.expire(2.0)
     assert store.expired_at == [2.0]
+
+
+# --------------------------------------------------------------------------- queries and orphaned calls
+
+
+def test_a_query_answers_a_kept_result_joins_a_running_call_and_never_starts_anything() -> None:
+    t = table()
+    t.admit(call("done"), "p1", local=True)
+    finish(t, "done", value=3)
+    t.admit(call("busy", "wait"), "p1", local=True)
+    kept = t.query("done", "q")
+    assert isinstance(kept, Answer) and kept.kept.result == result("done", 3)
+    joined = t.query("busy", "q")
+    assert isinstance(joined, Join) and list(joined.running.waiters) == ["p1", "q"]
+    assert t.query("never", "q") == Reject(RejectReason.UNKNOWN_CALL)
+    assert t.in_flight == 1 and t.running("never") is None
+
+
+def test_a_caller_waits_once_however_often_it_repeats_or_queries_an_id() -> None:
+    t = table()
+    t.admit(call("c1"), "p1", local=True)
+    for _ in range(1000):
+        t.admit(call("c1"), "p1", local=True)
+        t.query("c1", "p1")
+    assert finish(t, "c1") == ["p1"]
+
+
+def test_a_call_whose_last_caller_left_is_cancelled_after_the_grace_period() -> None:
+    t = table()
+    t.admit(call("c1", "wait"), "p1", local=True)
+    t.admit(call("c1", "wait"), "p2", local=True)
+    assert t.detach("p1", now=10.0) == []  # p2 still waits
+    orphaned = t.detach("p2", now=11.0)
+    assert [r.call.id for r in orphaned] == ["c1"] and orphaned[0].orphaned_since == 11.0
+    assert t.orphans(now=12.9, grace_s=2.0) == []
+    due = t.orphans(now=13.0, grace_s=2.0)
+    assert [r.call.id for r in due] == ["c1"] and due[0].cancel_reason == "caller_gone"
+    assert t.orphans(now=20.0, grace_s=2.0) == []  # named once
+
+
+def test_asking_for_an_orphan_again_adopts_it() -> None:
+    t = table()
+    t.admit(call("c1", "wait"), "p1", local=True)
+    t.admit(call("c2", "wait"), "p1", local=True)
+    t.detach("p1", now=0.0)
+    assert isinstance(t.query("c1", "p2"), Join)
+    assert isinstance(t.admit(call("c2", "wait"), "p3", local=True), Join)
+    assert t.orphans(now=100.0, grace_s=2.0) == []
+
+
+def test_an_unattended_action_runs_on_without_its_caller_and_keeps_its_result() -> None:
+    t = CallTable[str](["wait", "move"], unattended=["move"])
+    t.admit(call("m1", "move"), "p1", local=True)
+    t.admit(call("w1", "wait"), "p1", local=True)
+    t.detach("p1", now=0.0)
+    assert [r.call.id for r in t.orphans(now=100.0, grace_s=2.0)] == ["w1"]
+    assert finish(t, "m1", value="moved") == []  # nobody to tell, but the result is kept
+    kept = t.query("m1", "later")
+    assert isinstance(kept, Answer) and kept.kept.result.result.value == "moved"
+
+
+def test_a_cancel_keeps_its_first_reason() -> None:
+    t = table()
+    t.admit(call("c1"), "p", local=True)
+    t.cancel("c1", "caller_gone")
+    running = t.cancel("c1")
+    assert running is not None and running.cancel_reason == "caller_gone" and running.cancel_requested
+
+
+def test_starts_are_noted_in_the_cache() -> None:
+    begun: list[tuple[str, str, float]] = []
+
+    class Recorder(MemoryResultCache):
+        def begin(self, call_id: str, action: str, now: float) -> None:
+            begun.append((call_id, action, now))
+
+    t = CallTable[str](["echo"], cache=Recorder())
+    t.admit(call("c1"), "p", local=True, now=5.0)
+    t.admit(call("c1"), "q", local=True, now=6.0)  # a join starts nothing
+    assert begun == [("c1", "echo", 5.0)]
+
+
+def test_unattended_names_must_be_hosted() -> None:
+    with pytest.raises(ValueError, match="unattended"):
+        CallTable(["echo"], unattended=["move"])

@@ -8,9 +8,8 @@ import struct
 import msgpack
 import pytest
 
-from services.errors import AuthenticationError, LocalProtocolError, RemoteProtocolError
 from services import protocol
-from services.results import ActionResult, Status
+from services.errors import AuthenticationError, LocalProtocolError, RemoteProtocolError
 from services.protocol import (
     PROTOCOL_VERSION,
     Accepted,
@@ -35,6 +34,7 @@ from services.protocol import (
     encode_frame,
     handshake_mac,
 )
+from services.results import ActionResult, Status
 
 KEY = b"k" * 32
 CLIENT_NONCE = bytes(range(16))
@@ -310,3 +310,201 @@ def test_an_unencodable_value_is_a_local_error_and_the_connection_goes_on() -> N
         pair.server.send(Result(id="1", result=ActionResult(status=Status.SUCCESS, value={1, 2})))
     pair.server.send(Result(id="1", result=ActionResult(status=Status.ERROR, reason="result not sendable")))
     assert pair.to_client() == [Result(id="1", result=ActionResult(status=Status.ERROR, reason="result not sendable"))]
+
+
+# --------------------------------------------------------------------------- hostile bytes
+
+
+def received(conn: Connection, body: object) -> Message | None:
+    data = msgpack.packb(body, use_bin_type=True)
+    conn.receive_data(struct.pack(">I", len(data)) + data)
+    return conn.next_message()
+
+
+@pytest.mark.parametrize(
+    ("body", "match"),
+    [
+        ({"type": "call", "id": "1", "action": "x", "deadline_ms": True}, "deadline_ms"),
+        ({"type": "call", "id": "1", "action": "x", "deadline_ms": 1.5}, "deadline_ms"),
+        ({"type": "ping", "seq": False}, "ping.seq"),
+        ({"type": "pong", "seq": 1.0}, "pong.seq"),
+        ({"type": "call", "id": "1", "action": "x", "params": []}, "params"),
+        ({"type": "query", "id": ""}, "query.id"),
+        ({"type": "cancel", "id": None}, "cancel.id"),
+        ({"type": "subscribe", "topic": b"tick"}, "topic"),
+    ],
+)
+def test_booleans_floats_and_bytes_are_not_taken_for_integers_or_strings(body: object, match: str) -> None:
+    pair = ConnectionPair()
+    pair.handshake()
+    with pytest.raises(RemoteProtocolError, match=match):
+        received(pair.server, body)
+
+
+def test_a_result_with_boolean_durations_is_refused_and_absent_fields_take_their_defaults() -> None:
+    pair = ConnectionPair()
+    pair.handshake()
+    with pytest.raises(RemoteProtocolError, match="durations"):
+        received(pair.client, {"type": "result", "id": "1", "status": "success", "wall_s": True})
+    pair = ConnectionPair()
+    pair.handshake()
+    got = received(pair.client, {"type": "result", "id": "2", "status": "failure"})
+    assert got == Result(id="2", result=ActionResult(status=Status.FAILURE, value=None, wall_s=0.0, cpu_s=0.0))
+
+
+def test_an_event_time_must_be_a_number_not_a_boolean() -> None:
+    pair = ConnectionPair()
+    pair.handshake()
+    with pytest.raises(RemoteProtocolError, match="event.t"):
+        received(pair.client, {"type": "event", "topic": "a", "t": True, "seq": 1})
+
+
+@pytest.mark.parametrize("mac", [b"", b"\0" * 31, b"\0" * 33, "x" * 32])
+def test_an_auth_mac_that_is_not_32_bytes_is_a_protocol_error_not_a_failed_login(mac: object) -> None:
+    server = Connection(Role.SERVER, KEY, name="alpha", nonce=SERVER_NONCE)
+    with pytest.raises(RemoteProtocolError, match="auth.mac must be 32 bytes") as err:
+        received(server, {"type": "auth", "client": "c", "nonce": CLIENT_NONCE, "mac": mac})
+    assert not isinstance(err.value, AuthenticationError)
+
+
+def test_extension_types_and_timestamps_are_refused() -> None:
+    pair = ConnectionPair()
+    pair.handshake()
+    for value in (msgpack.ExtType(5, b"ab"), msgpack.Timestamp(1, 0)):
+        data = msgpack.packb({"type": "call", "id": "1", "action": "x", "params": {"v": value}}, use_bin_type=True)
+        pair.server.receive_data(struct.pack(">I", len(data)) + data)
+        with pytest.raises(RemoteProtocolError, match="extension type"):
+            pair.server.next_message()
+        pair = ConnectionPair()
+        pair.handshake()
+    # the timestamp's marker bytes inside binary data are data, not a timestamp
+    assert received(pair.server, {"type": "call", "id": "1", "action": "x", "params": {"b": b"\xd6\xff\0\0\0\1"}}) \
+        == Call(id="1", action="x", params={"b": b"\xd6\xff\0\0\0\1"})
+
+
+def test_map_keys_other_than_strings_and_bytes_are_refused_anywhere_in_the_frame() -> None:
+    pair = ConnectionPair()
+    pair.handshake()
+    with pytest.raises(RemoteProtocolError, match="map key"):
+        received(pair.server, {"type": "call", "id": "1", "action": "x", "params": {1: 2}})
+    other = ConnectionPair()
+    other.handshake()
+    assert received(other.server, {"type": "call", "id": "1", "action": "x", "params": {b"k": 2}}) \
+        == Call(id="1", action="x", params={b"k": 2})
+
+
+def test_a_deeply_nested_value_is_a_protocol_error_not_a_crash() -> None:
+    pair = ConnectionPair()
+    pair.handshake()
+    inner = b"\x91" * 100_000 + b"\xc0"
+    head = msgpack.packb({"type": "call", "id": "1", "action": "x"}, use_bin_type=True)
+    body = b"\x84" + head[1:] + msgpack.packb("params") + inner
+    pair.server.receive_data(struct.pack(">I", len(body)) + body)
+    with pytest.raises(RemoteProtocolError, match="bad msgpack"):
+        pair.server.next_message()
+
+
+def test_before_authentication_a_node_buffers_at_most_4_kib_of_a_frame() -> None:
+    server = Connection(Role.SERVER, KEY, name="alpha", max_frame=16 << 20)
+    server.receive_data(struct.pack(">I", protocol.MAX_AUTH_FRAME + 1))
+    with pytest.raises(RemoteProtocolError, match="oversize frame: 4097 bytes announced, cap is 4096"):
+        server.next_message()
+
+
+def test_after_authentication_the_full_frame_cap_applies() -> None:
+    pair = ConnectionPair(max_frame=1 << 20)
+    pair.handshake()
+    pair.client.send(Call(id="1", action="x", params={"blob": b"x" * 100_000}))
+    assert [type(m) for m in pair.to_server()] == [Call]
+
+
+def test_a_client_accepts_a_welcome_larger_than_a_node_accepts_an_auth() -> None:
+    offer = protocol.Offer(actions=tuple(f"action_{i:05d}" for i in range(2000)), location="ab" * 32)
+    client = Connection(Role.CLIENT, KEY, name="coord", nonce=CLIENT_NONCE)
+    server = Connection(Role.SERVER, KEY, name="alpha", nonce=SERVER_NONCE, offer=lambda: offer)
+    client.receive_data(server.data_to_send())
+    client.next_message()
+    server.receive_data(client.data_to_send())
+    server.next_message()
+    welcome_frame = server.data_to_send()
+    assert len(welcome_frame) > protocol.MAX_AUTH_FRAME
+    client.receive_data(welcome_frame)
+    welcome = client.next_message()
+    assert isinstance(welcome, Welcome) and client.state is State.OPEN
+    assert client.welcome == welcome and welcome.actions == list(offer.actions)
+    assert (welcome.location, welcome.location_changed) == ("ab" * 32, False)
+
+
+def test_welcome_tells_the_actions_and_the_services_digest_and_old_welcomes_still_parse() -> None:
+    offer = protocol.Offer(actions=("echo", "wait"), location="d" * 64, location_changed=True)
+    pair = ConnectionPair()
+    pair.server = Connection(Role.SERVER, KEY, name="alpha", nonce=SERVER_NONCE, offer=lambda: offer)
+    pair.handshake()
+    assert pair.client.welcome == Welcome(mac=pair.client.welcome.mac, actions=["echo", "wait"],  # type: ignore[union-attr]
+                                          location="d" * 64, location_changed=True)
+    mac = handshake_mac(KEY, Role.SERVER, SERVER_NONCE, CLIENT_NONCE)
+    v1 = msgpack.packb({"type": "welcome", "mac": mac}, use_bin_type=True)
+    assert protocol.from_map(protocol.unpack_map(v1)) == Welcome(mac=mac, actions=None, location=None,
+                                                                  location_changed=False)
+
+
+def test_a_query_travels_from_client_to_node_only() -> None:
+    pair = ConnectionPair()
+    pair.handshake()
+    pair.client.send(protocol.Query(id="c7"))
+    assert pair.to_server() == [protocol.Query(id="c7")]
+    with pytest.raises(LocalProtocolError):
+        pair.server.send(protocol.Query(id="c7"))
+
+
+def test_a_node_accepts_a_previous_key_during_rotation_and_answers_with_it() -> None:
+    old, new = b"o" * 32, b"n" * 32
+    client = Connection(Role.CLIENT, old, name="coord", nonce=CLIENT_NONCE)
+    server = Connection(Role.SERVER, new, name="alpha", nonce=SERVER_NONCE, previous_keys=[old])
+    client.receive_data(server.data_to_send())
+    client.next_message()
+    server.receive_data(client.data_to_send())
+    assert isinstance(server.next_message(), Auth) and server.key_index == 1
+    client.receive_data(server.data_to_send())
+    assert isinstance(client.next_message(), Welcome) and client.state is State.OPEN
+    stranger = Connection(Role.CLIENT, b"s" * 32, name="coord", nonce=CLIENT_NONCE)
+    server = Connection(Role.SERVER, new, name="alpha", nonce=SERVER_NONCE, previous_keys=[old])
+    stranger.receive_data(server.data_to_send())
+    stranger.next_message()
+    server.receive_data(stranger.data_to_send())
+    with pytest.raises(AuthenticationError):
+        server.next_message()
+
+
+def test_macs_over_different_tls_channel_bindings_do_not_verify() -> None:
+    pair = ConnectionPair()
+    pair.client.binding = b"client side of a relay"
+    pair.server.binding = b"node side of a relay"
+    pair.to_client()
+    with pytest.raises(AuthenticationError):
+        pair.to_server()
+    same = ConnectionPair()
+    same.client.binding = same.server.binding = b"one TLS session"
+    same.handshake()
+    assert same.client.state is State.OPEN
+    assert handshake_mac(KEY, Role.CLIENT, SERVER_NONCE, CLIENT_NONCE, b"") == \
+        handshake_mac(KEY, Role.CLIENT, SERVER_NONCE, CLIENT_NONCE)  # plain TCP: the version-1 MAC
+
+
+def test_protocol_errors_show_untrusted_text_escaped_and_short() -> None:
+    pair = ConnectionPair()
+    pair.handshake()
+    with pytest.raises(RemoteProtocolError) as err:
+        received(pair.server, {"type": "x\n2026-01-01 forged line\x1b[2J" + "y" * 10_000})
+    text = str(err.value)
+    assert "\n" not in text and "\x1b" not in text and len(text) < 300
+    assert "\\n2026-01-01 forged line\\x1b[2J" in text
+
+
+def test_shown_escapes_control_characters_and_truncates() -> None:
+    assert protocol.shown("ok") == "ok"
+    assert protocol.shown("a\nb\r\t\x00\x1b\u2028\\") == "a\\nb\\r\\t\\x00\\x1b\\u2028\\\\"
+    long = protocol.shown("z" * 1000, 10)
+    assert long == "z" * 10 + "…(+990 chars)"
+    assert protocol.shown(b"\n" * 100, 4) == "b'\\n\\n\\n\\n'…(+96 bytes)"
+    assert len(protocol.shown(list(range(100_000)))) < 400

@@ -1,7 +1,7 @@
-"""The calling side of the protocol: :class:`ServiceClient` (the coordinator) and :class:`NodeLink`.
+"""One authenticated, self-healing connection to one node: :class:`NodeLink`.
 
-A thin asyncio shell around :class:`services.protocol.Connection` (docs/protocol.md). Where an
-action runs comes only from services.toml (:class:`services.location.Location`).
+A thin asyncio shell around :class:`services.protocol.Connection` (docs/protocol.md), over TCP or
+TLS (:mod:`services.wire`).
 
 Failure model: :meth:`NodeLink.call` never raises for node trouble. A node that cannot be reached,
 dies during a call, rejects the call or stops answering heartbeats turns the call into a
@@ -9,6 +9,10 @@ dies during a call, rejects the call or stops answering heartbeats turns the cal
 three heartbeat periods without any frame (0.75 s with the default 0.25 s), so every running call on
 it ends within about 1 s. The next call reconnects, retrying with exponential backoff
 (50 ms doubling to 0.5 s) for at most ``connect_timeout_s``.
+
+A call given up on that way may still be running on the node: the node cancels it (reason
+``"caller_gone"``) once nobody has asked for it during its heartbeat window, unless its action is
+unattended. :meth:`NodeLink.query` asks the node what became of it, without running anything.
 """
 
 from __future__ import annotations
@@ -17,12 +21,14 @@ import asyncio
 import contextlib
 import itertools
 import logging
+import os
+import ssl
 import uuid
 from collections.abc import Callable
-from typing import Any, Self
+from typing import Any
 
 from services.errors import AuthenticationError, ProtocolError, RemoteProtocolError
-from services.location import Location
+from services.location import TlsSettings
 from services.protocol import (
     DEFAULT_MAX_FRAME,
     Accepted,
@@ -36,6 +42,7 @@ from services.protocol import (
     Message,
     Ping,
     Pong,
+    Query,
     Rejected,
     Result,
     Role,
@@ -43,11 +50,12 @@ from services.protocol import (
     Subscribe,
     Unsubscribe,
     Welcome,
+    shown,
 )
 from services.results import ActionResult
-from services.wire import FramedConnection
+from services.wire import FramedConnection, client_context
 
-__all__ = ["EventCallback", "FeedbackCallback", "NodeLink", "ServiceClient"]
+__all__ = ["UNKNOWN_CALL", "EventCallback", "FeedbackCallback", "NodeLink", "describe"]
 
 log = logging.getLogger("petrobot.client")
 
@@ -57,6 +65,8 @@ FeedbackCallback = Callable[[Any], None]
 """Called with the ``data`` of each feedback message of a call; must not block."""
 
 _DEADLINE_GRACE_S = 1.0
+UNKNOWN_CALL = "unknown_call"
+"""The node's answer to a query for an id it never saw or no longer keeps."""
 
 
 class _Pending:
@@ -74,7 +84,7 @@ class _Wire(FramedConnection):
 
     def __init__(self, link: NodeLink) -> None:
         super().__init__(Connection(Role.CLIENT, link._key, name=link.name, max_frame=link.max_frame),
-                         asyncio.get_running_loop())
+                         asyncio.get_running_loop(), tls_binding=link.tls.mode == "psk")
         self.link = link
         self.opened: asyncio.Future[None] = self.loop.create_future()
         self.closed = False
@@ -89,8 +99,8 @@ class _Wire(FramedConnection):
             while (msg := conn.next_message()) is not None:
                 self._handle(msg)
         except ProtocolError as exc:
-            reason = "auth_failed" if isinstance(exc, AuthenticationError) else f"protocol_error: {exc}"
-            log.warning("node %s: %s", self.link.node, exc)
+            reason = "auth_failed" if isinstance(exc, AuthenticationError) else f"protocol_error: {shown(str(exc), 200)}"
+            log.warning("node %s: %s", self.link.node, shown(str(exc), 200))
             self.abort(exc, reason)
             return
         self._flush()
@@ -119,7 +129,7 @@ class _Wire(FramedConnection):
                 try:
                     p.on_feedback(msg.data)
                 except Exception:
-                    log.exception("feedback callback of call %s failed", msg.id)
+                    log.exception("feedback callback of call %s failed", shown(msg.id))
         elif kind is Rejected:
             assert isinstance(msg, Rejected)
             p = link._pending.pop(msg.id, None)
@@ -131,7 +141,7 @@ class _Wire(FramedConnection):
                 try:
                     cb(msg)
                 except Exception:
-                    log.exception("event callback for %s failed", msg.topic)
+                    log.exception("event callback for %s failed", shown(msg.topic))
         elif kind is Ping:
             self.send(Pong(seq=msg.seq))  # type: ignore[attr-defined]
         elif kind is Pong:
@@ -139,6 +149,8 @@ class _Wire(FramedConnection):
         elif kind is Hello:
             pass  # the connection answered with auth by itself
         elif kind is Welcome:
+            assert isinstance(msg, Welcome)
+            link._welcomed(msg)
             if not self.opened.done():
                 self.opened.set_result(None)
         elif kind is Bye:
@@ -146,7 +158,7 @@ class _Wire(FramedConnection):
             if msg.reason.startswith("auth_failed") and not self.opened.done():
                 exc: Exception = AuthenticationError(f"node {link.node} refused our key (auth_failed)")
             else:
-                exc = ConnectionError(f"node said bye: {msg.reason}")
+                exc = ConnectionError(f"node said bye: {shown(msg.reason, 200)}")
             self.abort(exc, None)
 
     # ---- teardown
@@ -188,6 +200,13 @@ class NodeLink:
         connect_timeout_s: budget for (re)connecting at the start of a call.
         local_addr: optional ``(host, port)`` to bind the client socket to (tests of local-only).
         max_frame: frame size cap, bytes.
+        tls: TLS settings of the connection to this node (default: plain TCP).
+
+    Attributes:
+        offered_actions: the actions the node said it offers (sorted), once connected; ``None``
+            before, or if the node does not say.
+        location_digest: hex SHA-256 of the services.toml the node loaded, once connected.
+        location_changed: the node's services.toml changed on disk since it loaded it.
     """
 
     def __init__(
@@ -201,9 +220,15 @@ class NodeLink:
         connect_timeout_s: float = 1.0,
         local_addr: tuple[str, int] | None = None,
         max_frame: int = DEFAULT_MAX_FRAME,
+        tls: TlsSettings | None = None,
     ) -> None:
         self.node = node
         self.address = address
+        self.tls = tls if tls is not None else TlsSettings()
+        self._ssl = client_context(self.tls)
+        self.offered_actions: tuple[str, ...] | None = None
+        self.location_digest: str | None = None
+        self.location_changed = False
         self.name = name
         self.heartbeat_s = heartbeat_s
         self.connect_timeout_s = connect_timeout_s
@@ -262,11 +287,9 @@ class NodeLink:
         wire = self._wire
         if wire is None or wire.closed or wire.conn.state is not State.OPEN:
             try:
-                wire = await self._ensure_connected()
-            except AuthenticationError as exc:
-                return ActionResult.error(f"authentication failed: {exc}")
-            except (TimeoutError, OSError, ProtocolError) as exc:
-                return ActionResult.error(f"node {self.node} unreachable: {_describe(exc)}")
+                wire = await self._open_wire()
+            except _Unreachable as exc:
+                return exc.result
         if cid in self._pending:
             return ActionResult.error(f"call id {cid} is already waiting on this link")
         loop = asyncio.get_running_loop()
@@ -292,6 +315,46 @@ class NodeLink:
             if self._pending.pop(cid, None) is not None:
                 self._send_cancel(cid)
             raise
+
+    async def query(self, call_id: str, *, cancel: bool = False) -> ActionResult | None:
+        """Ask the node what became of call ``call_id``; nothing is ever started (docs/protocol.md §5).
+
+        Args:
+            call_id: the id of a call made earlier, on this link or elsewhere.
+            cancel: first ask the node to cancel the call if it still runs (for a call the caller
+                gave up on: its result then says ``"cancelled"`` unless it had already ended).
+
+        Returns:
+            The call's result (waiting for it if the call still runs); ``None`` if the node never
+            saw the id or no longer keeps its result; an ``error`` result for node trouble, as
+            :meth:`call` gives.
+        """
+        try:
+            wire = await self._open_wire()
+        except _Unreachable as exc:
+            return exc.result
+        if self.offered_actions is None:  # a node that does not list its actions predates query
+            return ActionResult.error(f"node {self.node} does not answer queries (an older node: restart it "
+                                      "with this version)")
+        if call_id in self._pending:
+            return ActionResult.error(f"call id {call_id} is already waiting on this link")
+        fut: asyncio.Future[ActionResult] = asyncio.get_running_loop().create_future()
+        self._pending[call_id] = _Pending(fut, "", None)
+        try:
+            if cancel:
+                wire.send(Cancel(id=call_id))
+            wire.send(Query(id=call_id))
+        except ProtocolError as exc:
+            self._pending.pop(call_id, None)
+            return ActionResult.error(f"cannot send query: {exc}")
+        try:
+            result = await fut
+        except asyncio.CancelledError:
+            self._pending.pop(call_id, None)
+            raise
+        if result.status == "error" and result.reason == UNKNOWN_CALL:
+            return None
+        return result
 
     async def cancel(self, call_id: str) -> bool:
         """Ask the node to cancel ``call_id``; its result then comes back with reason ``"cancelled"``.
@@ -356,6 +419,22 @@ class NodeLink:
 
     # ---- internals
 
+    async def _open_wire(self) -> _Wire:
+        wire = self._wire
+        if wire is not None and not wire.closed and wire.conn.state is State.OPEN:
+            return wire
+        try:
+            return await self._ensure_connected()
+        except AuthenticationError as exc:
+            raise _Unreachable(ActionResult.error(f"authentication failed: {exc}")) from None
+        except (TimeoutError, OSError, ProtocolError) as exc:
+            raise _Unreachable(ActionResult.error(f"node {self.node} unreachable: {describe(exc)}")) from None
+
+    def _welcomed(self, msg: Welcome) -> None:
+        self.offered_actions = tuple(msg.actions) if msg.actions is not None else None
+        self.location_digest = msg.location
+        self.location_changed = msg.location_changed
+
     def _send_cancel(self, cid: str) -> bool:
         w = self._wire
         if w is None or w.closed or w.conn.state is not State.OPEN:
@@ -394,8 +473,10 @@ class NodeLink:
     async def _connect_once(self, timeout: float) -> _Wire:
         loop = asyncio.get_running_loop()
         host, port = self.address
+        tls_name = (self.tls.server_name or host) if self.tls.mode == "certificate" else None
         async with asyncio.timeout(timeout):
-            _, wire = await loop.create_connection(lambda: _Wire(self), host, port, local_addr=self.local_addr)
+            _, wire = await loop.create_connection(lambda: _Wire(self), host, port, local_addr=self.local_addr,
+                                                   ssl=self._ssl, server_hostname=tls_name)
             try:
                 await wire.opened
             except BaseException:
@@ -460,127 +541,23 @@ class NodeLink:
 
     def _fail_all(self, reason: str) -> None:
         pending, self._pending = self._pending, {}
-        for cid, p in pending.items():
+        for p in pending.values():
             if not p.future.done():
                 p.future.set_result(ActionResult.error(reason))
 
 
-def _describe(exc: BaseException) -> str:
+class _Unreachable(Exception):
+    """The link could not be opened; ``result`` says why, as an error result."""
+
+    def __init__(self, result: ActionResult) -> None:
+        super().__init__(result.reason)
+        self.result = result
+
+
+def describe(exc: BaseException) -> str:
+    """A connection error in words: ``timed out``, the OS's text for its errno, or its message."""
     if isinstance(exc, asyncio.TimeoutError):
         return "timed out"
+    if isinstance(exc, OSError) and exc.errno and not isinstance(exc, ssl.SSLError):
+        return f"{os.strerror(exc.errno)} (errno {exc.errno})"
     return str(exc) or exc.__class__.__name__
-
-
-class ServiceClient:
-    """Call primitive actions by name; services.toml says where each runs.
-
-    Use as an async context manager::
-
-        async with ServiceClient(load_location("services.toml"), load_key()) as client:
-            res = await client.call("echo", {"x": 1})
-
-    Args:
-        location: the parsed services.toml.
-        key: the shared key.
-        name: client name sent to nodes.
-        heartbeat_s: ping period per node connection.
-        connect_timeout_s: reconnect budget at the start of a call.
-    """
-
-    def __init__(
-        self,
-        location: Location,
-        key: bytes,
-        *,
-        name: str = "coordinator",
-        heartbeat_s: float = 0.25,
-        connect_timeout_s: float = 1.0,
-        local_addr: tuple[str, int] | None = None,
-    ) -> None:
-        self.location = location
-        self.name = name
-        self.heartbeat_s = heartbeat_s
-        self.connect_timeout_s = connect_timeout_s
-        self.local_addr = local_addr
-        self._key = key
-        self._links: dict[str, NodeLink] = {}
-        self._call_node: dict[str, str] = {}
-
-    async def __aenter__(self) -> Self:
-        return self
-
-    async def __aexit__(self, *exc: object) -> None:
-        await self.close()
-
-    def link(self, node: str) -> NodeLink:
-        """The (lazily created) link to ``node``.
-
-        Raises:
-            LocationError: unknown node.
-        """
-        link = self._links.get(node)
-        if link is None:
-            link = NodeLink(
-                node, self.location.address(node), self._key, name=self.name,
-                heartbeat_s=self.heartbeat_s, connect_timeout_s=self.connect_timeout_s,
-                local_addr=self.local_addr,
-            )
-            self._links[node] = link
-        return link
-
-    async def call(
-        self,
-        action: str,
-        params: dict[str, Any] | None = None,
-        *,
-        call_id: str | None = None,
-        deadline_s: float | None = None,
-        on_feedback: FeedbackCallback | None = None,
-    ) -> ActionResult:
-        """Call ``action`` on the node services.toml places it on (see :meth:`NodeLink.call`).
-
-        ``deadline_s`` defaults to the action's ``deadline_s`` in services.toml.
-
-        Raises:
-            LocationError: ``action`` is not in services.toml (a configuration error, not node trouble).
-        """
-        spec = self.location.action(action)
-        if deadline_s is None:
-            deadline_s = spec.deadline_s
-        link = self.link(spec.node)
-        cid = call_id if call_id is not None else link.new_call_id()
-        self._call_node[cid] = spec.node
-        try:
-            return await link.call(action, params, call_id=cid, deadline_s=deadline_s, on_feedback=on_feedback)
-        finally:
-            self._call_node.pop(cid, None)
-
-    async def cancel(self, call_id: str) -> bool:
-        """Cancel a running call by id (the call then returns ``error`` with reason ``"cancelled"``).
-
-        Returns:
-            True if the call was running and a cancel was sent.
-        """
-        node = self._call_node.get(call_id)
-        if node is None:
-            return False
-        return await self._links[node].cancel(call_id)
-
-    def subscribe(self, topic: str, callback: EventCallback) -> None:
-        """Deliver external event ``topic`` to ``callback``, from the node services.toml names.
-
-        Raises:
-            LocationError: no node publishes ``topic``.
-        """
-        self.link(self.location.publisher_of(topic)).subscribe(topic, callback)
-
-    def unsubscribe(self, topic: str, callback: EventCallback | None = None) -> None:
-        """Stop delivering ``topic`` to ``callback`` (or to all callbacks)."""
-        self.link(self.location.publisher_of(topic)).unsubscribe(topic, callback)
-
-    async def close(self) -> None:
-        """Close every node link."""
-        links = list(self._links.values())
-        self._links.clear()
-        for link in links:
-            await link.close()

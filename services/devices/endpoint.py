@@ -1,0 +1,33 @@
+"""Where a driver's device is served: what ``petrobot up`` checks before starting a node.
+
+A driver whose device sits behind a TCP server (the camera server, the CAN gateway; in the
+simulation both are served by ``petrobot sim catching``) says so with a class method
+``device(params) -> DeviceEndpoint``. Pure: no sockets here.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["DeviceEndpoint"]
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceEndpoint:
+    """The TCP server a driver needs.
+
+    Attributes:
+        what: what it is, in a few words ("camera server").
+        host: its address.
+        port: its TCP port.
+        served_by: what serves it when the hardware is simulated, in words.
+    """
+
+    what: str
+    host: str
+    port: int
+    served_by: str
+
+    def describe(self) -> str:
+        """``"camera server 127.0.0.1:7210"``."""
+        return f"{self.what} {self.host}:{self.port}"
