@@ -42,6 +42,8 @@ log = logging.getLogger("petrobot.web")
 
 #: Shortest time between two frames, seconds.
 DEFAULT_PERIOD_S = 0.02
+#: Shortest time between two looks at the nodes' health, seconds.
+HEALTH_PERIOD_S = 1.0
 #: Most action starts/ends, operator notes or pulses one frame lists (a burst beyond is counted).
 MAX_LISTED = 200
 
@@ -119,6 +121,8 @@ class LiveFeed:
         self._errors: collections.deque[dict[str, Any]] = collections.deque(maxlen=20)
         self._results: collections.deque[dict[str, Any]] = collections.deque(maxlen=40)
         self._last_frame = 0.0
+        self._sent_nodes: dict[str, Any] = {}
+        self._health_at = 0.0
 
     # ------------------------------------------------------------------ the observer
     def __call__(self, event: RunEvent) -> None:
@@ -142,6 +146,19 @@ class LiveFeed:
         very object given to :meth:`Runtime.command`)."""
         self._replies[id(command)] = (command, reply)
 
+    def nodes(self) -> dict[str, Any]:
+        """The nodes' health as the run's client reports it (``ServiceClient.health``): node →
+        ``{"connected", "heartbeat_rtt_s", "in_flight"}``; ``{}`` for a client that cannot say."""
+        health = getattr(self.runtime.client, "health", None)
+        if not callable(health):
+            return {}
+        try:
+            nodes = health()
+        except Exception:
+            log.exception("reading the nodes' health failed")
+            return {}
+        return {node: {**h, "heartbeat_rtt_s": _round(h.get("heartbeat_rtt_s"), 4)} for node, h in nodes.items()}
+
     def snapshot(self) -> dict[str, Any]:
         """The run as it stands, for a page that has just connected."""
         runtime = self.runtime
@@ -158,7 +175,7 @@ class LiveFeed:
         return {"run": runtime.run_id, "marking": engine.marking.to_dict(), "firings": engine.fired,
                 "paused": engine.paused, "state": self.state, "running": running, "latched": self._latched(),
                 "learner": views, "operator": list(self._operator), "errors": list(self._errors),
-                "results": list(self._results),
+                "results": list(self._results), "nodes": self.nodes(),
                 "server_time": now}
 
     # ------------------------------------------------------------------ frames
@@ -177,7 +194,14 @@ class LiveFeed:
         marking = engine.marking.to_dict()
         changed = {p: n for p, n in marking.items() if self._sent_marking.get(p) != n}
         changed.update({p: 0 for p in self._sent_marking if p not in marking})
-        if not events and not changed:
+        nodes = None
+        now_mono = time.monotonic()
+        if now_mono - self._health_at >= HEALTH_PERIOD_S:
+            self._health_at = now_mono
+            looked = self.nodes()
+            if looked != self._sent_nodes:
+                nodes = self._sent_nodes = looked
+        if not events and not changed and nodes is None:
             return None
         self._sent_marking = marking
         fired: collections.Counter[str] = collections.Counter()
@@ -249,6 +273,8 @@ class LiveFeed:
             frame["operator"] = operator
         if pulses:
             frame["pulses"] = dict(pulses)
+        if nodes is not None:
+            frame["nodes"] = nodes
         if state is not None or "state" not in frame:
             frame["state"] = self.state
         return frame
@@ -288,7 +314,8 @@ class LiveFeed:
         """Coalesce and send frames until cancelled: a first event after a quiet spell goes out
         at once, later ones at most every ``period_s``."""
         while True:
-            await self._wake.wait()
+            with contextlib.suppress(TimeoutError):  # a quiet run still gets its nodes' health
+                await asyncio.wait_for(self._wake.wait(), HEALTH_PERIOD_S)
             self._wake.clear()
             wait = self._last_frame + self.period_s - time.monotonic()
             if wait > 0:

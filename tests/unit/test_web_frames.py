@@ -171,3 +171,41 @@ async def test_every_added_observer_sees_every_event_and_a_failing_one_stops_not
     assert summary.end_state == "completed"
     assert [type(e) for e in first.events] == [type(e) for e in second.events]
     assert sum(isinstance(e, ActionEnded) and e.result.status is Status.SUCCESS for e in second.events) == 2
+
+
+class HealthyClient(FakeClient):
+    """A fake client that reports its nodes' health like ``ServiceClient.health``."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.nodes = {"alpha": {"connected": True, "heartbeat_rtt_s": 0.00123456, "in_flight": 1}}
+
+    def health(self) -> dict[str, Any]:
+        return {node: dict(h) for node, h in self.nodes.items()}
+
+
+async def test_the_nodes_health_is_in_the_snapshot_and_a_frame_carries_it_when_it_changes(tmp_path: Path):
+    with Journal(tmp_path / "j.sqlite") as journal:
+        client = HealthyClient()
+        runtime = Runtime(loads_net(CYCLE), client, journal)
+        feed = LiveFeed(runtime)
+        assert feed.snapshot()["nodes"] == {"alpha": {"connected": True, "heartbeat_rtt_s": 0.0012, "in_flight": 1}}
+        sent = frames_of(feed)
+        feed.flush()                      # nothing happened, but the health was never sent
+        assert sent[-1]["nodes"]["alpha"]["connected"] is True
+        count = len(sent)
+        feed.flush()                      # unchanged (and looked at less than a second ago): no frame
+        assert len(sent) == count
+        client.nodes["alpha"] = {"connected": False, "heartbeat_rtt_s": None, "in_flight": 0}
+        feed._health_at = 0.0             # as if a second had passed
+        feed.flush()
+        assert sent[-1]["nodes"] == {"alpha": {"connected": False, "heartbeat_rtt_s": None, "in_flight": 0}}
+
+
+async def test_a_client_without_health_gives_an_empty_node_table(tmp_path: Path):
+    with Journal(tmp_path / "j.sqlite") as journal:
+        feed = LiveFeed(Runtime(loads_net(CYCLE), FakeClient(), journal))
+        assert feed.snapshot()["nodes"] == {}
+        sent = frames_of(feed)
+        feed.flush()
+        assert sent == []

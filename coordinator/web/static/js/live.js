@@ -25,6 +25,13 @@ export function initLive(app) {
   let scheduled = false;
   let lastPanel = 0;
 
+  // the server's node → {connected, heartbeat_rtt_s, in_flight}, as the health table reads it
+  function toHealth(nodes) {
+    if (!nodes) return null;
+    const list = Object.entries(nodes).map(([node, h]) => ({ node, connected: h.connected, rtt_s: h.heartbeat_rtt_s, in_flight: h.in_flight }));
+    return list.length ? { nodes: list } : { note: "this run's client does not report node health" };
+  }
+
   function nowServer() { return Date.now() / 1000 + live.offset; }
 
   /** Take a whole snapshot (welcome, run start, resync). */
@@ -40,6 +47,7 @@ export function initLive(app) {
     live.operator = snapshot.operator || [];
     live.errors = snapshot.errors || [];
     live.results = snapshot.results || [];
+    live.health = toHealth(snapshot.nodes);
     live.offset = (snapshot.server_time || Date.now() / 1000) - Date.now() / 1000;
     live.ended = END_STATES.has(live.state.state);
     if (app.mode === "live") paint(true);
@@ -75,6 +83,7 @@ export function initLive(app) {
       for (const o of f.operator || []) live.operator.push(o);
       if (f.pulses) for (const [e, n] of Object.entries(f.pulses)) live.pulses[e] = (live.pulses[e] || 0) + n;
       if (f.state) live.state = f.state;
+      if (f.nodes) live.health = toHealth(f.nodes);
       live.firings = f.firings;
       live.paused = f.paused;
     }
@@ -87,7 +96,7 @@ export function initLive(app) {
       app.graph.setMarking(changed);
       if (fired.size) app.graph.flash(fired);
       paintDetails(frames.some((f) => f.started || f.ended || f.latched));
-      const fresh = frames.find((f) => f.learner || f.operator || f.state);
+      const fresh = frames.find((f) => f.learner || f.operator || f.state || f.nodes);
       if (fresh) renderPanelsSoon(true);
       if (oldest !== null) {
         // measured after this repaint's work: the drawing below shows these firings
