@@ -314,8 +314,11 @@ class LiveFeed:
         """Coalesce and send frames until cancelled: a first event after a quiet spell goes out
         at once, later ones at most every ``period_s``."""
         while True:
-            with contextlib.suppress(TimeoutError):  # a quiet run still gets its nodes' health
-                await asyncio.wait_for(self._wake.wait(), HEALTH_PERIOD_S)
+            # a quiet run still gets its nodes' health; asyncio.timeout, not wait_for, whose 3.11
+            # version can swallow the cancellation that stops this task
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(HEALTH_PERIOD_S):
+                    await self._wake.wait()
             self._wake.clear()
             wait = self._last_frame + self.period_s - time.monotonic()
             if wait > 0:

@@ -209,3 +209,16 @@ async def test_a_client_without_health_gives_an_empty_node_table(tmp_path: Path)
         sent = frames_of(feed)
         feed.flush()
         assert sent == []
+
+
+async def test_the_frame_task_stops_when_cancelled_even_as_an_event_wakes_it(tmp_path: Path):
+    with Journal(tmp_path / "j.sqlite") as journal:
+        feed = LiveFeed(Runtime(loads_net(CYCLE), FakeClient(), journal))
+        task = asyncio.get_running_loop().create_task(feed.run())
+        for _ in range(3):
+            await asyncio.sleep(0)            # the task waits for events
+        feed._wake.set()                      # an event wakes it in the very step it is cancelled
+        task.cancel()
+        done, _ = await asyncio.wait({task}, timeout=TIMEOUT_S)
+        assert done, "the frame task swallowed its cancellation and went on"
+        assert task.cancelled()
