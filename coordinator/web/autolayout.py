@@ -5,12 +5,14 @@ written by hand) needs a drawing at once, for a thousand nodes too. :func:`layer
 places and transitions in layers top to bottom, in the spirit of Sugiyama's method: arcs that close
 cycles are turned around (a depth-first search from the initially marked places), every node goes
 one layer below its deepest predecessor, and a few barycentre sweeps order each layer to cut
-crossings. It is O((V + E) · sweeps) in pure Python: tens of milliseconds for 1,000 nodes. The page
+crossings; a drawing far taller than wide (long chains) is folded into bands side by side. It
+is O((V + E) · sweeps) in pure Python: tens of milliseconds for 1,000 nodes. The page
 can tidy a small net further with ELK; hand-placed positions saved in the file always win.
 """
 
 from __future__ import annotations
 
+import math
 from collections import defaultdict
 from collections.abc import Iterable, Mapping
 
@@ -19,6 +21,8 @@ __all__ = ["layered_layout"]
 #: Distance between layers and between neighbours in a layer, drawing units.
 LAYER_GAP = 110.0
 NODE_GAP = 150.0
+#: A drawing more than this many times taller than wide is folded into bands side by side.
+FOLD_RATIO = 3.0
 
 
 def layered_layout(nodes: Iterable[str], arcs: Iterable[tuple[str, str]], *, first: Iterable[str] = (),
@@ -105,13 +109,20 @@ def layered_layout(nodes: Iterable[str], arcs: Iterable[tuple[str, str]], *, fir
             row.sort(key=centre)
             for i, n in enumerate(row):
                 index[n] = i
-    # 4. coordinates: each layer centred on x = 0
+    # 4. coordinates: each layer centred in its band; a drawing far taller than wide (long chains)
+    #    is folded into bands side by side, so that it fits a screen at a readable zoom
     fixed = dict(fixed or {})
     shift = (max((x for x, _ in fixed.values()), default=-NODE_GAP) + 2 * NODE_GAP) if fixed else 0.0
     widest = max((len(r) for r in layers.values()), default=1)
+    height = len(layers) * LAYER_GAP
+    width = widest * NODE_GAP
+    bands = max(1, math.ceil(math.sqrt(height / (FOLD_RATIO * width)))) if height > FOLD_RATIO * width else 1
+    rows = math.ceil(len(layers) / bands) if layers else 1
+    band_width = width + 2 * NODE_GAP
     out: dict[str, tuple[float, float]] = {}
     for d, row in layers.items():
-        offset = (widest - len(row)) * NODE_GAP / 2
+        band, d_in = divmod(d, rows)
+        offset = band * band_width + (widest - len(row)) * NODE_GAP / 2
         for i, n in enumerate(row):
-            out[n] = fixed.get(n, (shift + offset + i * NODE_GAP, d * LAYER_GAP))
+            out[n] = fixed.get(n, (shift + offset + i * NODE_GAP, d_in * LAYER_GAP))
     return out

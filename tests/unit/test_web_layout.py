@@ -87,3 +87,16 @@ def test_pnml_positions_travel_in_the_standard_graphics_element():
 def test_a_pnml_document_the_reader_refuses_has_no_positions():
     assert pnml_layout('<!DOCTYPE x [<!ENTITY a "b">]><pnml/>') == {}
     assert pnml_layout(b"\xff\xfe not xml") == {}
+
+
+def test_a_long_chain_without_positions_is_folded_into_bands_that_fit_a_screen():
+    from coordinator.web.autolayout import layered_layout
+
+    nodes = [f"n{k}" for k in range(400)]
+    arcs = [(nodes[k], nodes[k + 1]) for k in range(399)]
+    pos = layered_layout(nodes, arcs, first=["n0"])
+    xs = [x for x, _ in pos.values()]
+    ys = [y for _, y in pos.values()]
+    assert len(set(pos.values())) == 400                    # no two nodes on one spot
+    assert max(ys) - min(ys) <= 4 * (max(xs) - min(xs))       # not one column 400 layers tall
+    assert pos["n0"][1] < pos["n1"][1]                        # still top to bottom within a band
