@@ -244,7 +244,7 @@ export function initEditor(app) {
     const outcome = el("input", { type: "text", value: "ok", size: 8, title: "ok, error, success, failure or a named outcome" });
     const topic = el("input", { type: "text", placeholder: "topic", size: 14 });
     const add = el("button", {}, "link");
-    const box = el("div", { class: "chips" }, kind, taskSel, el("span", {}, "."), outcome, topic, add);
+    const box = el("div", { class: "chips event-adder" }, kind, taskSel, el("span", {}, "."), outcome, topic, add);
     function update() {
       const isInt = kind.value === "int";
       taskSel.hidden = !isInt; outcome.hidden = !isInt; box.children[2].hidden = !isInt; topic.hidden = isInt;

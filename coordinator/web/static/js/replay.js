@@ -27,6 +27,7 @@ export function initReplay(app) {
     catch (e) { panel.replaceChildren(el("p", { class: "node-bad" }, String(e.message || e))); return; }
     rp.runs = data.runs;
     rp.live = data.live;
+    rp.journal = data.journal;
     renderRuns(data);
   }
   app.loadRuns = loadRuns;
@@ -71,8 +72,9 @@ export function initReplay(app) {
     app.replayDraft = data.draft;
     app.setMode("replay");
     seek(rp.records.length);
+    app.message(`run ${runId}: ${rp.records.length} records, ${rp.errors.length} errors; drag the slider or use the arrows`);
     for (const n of data.notes || []) app.message(n);
-    if (rp.runs.length) renderRuns({ journal: true, runs: rp.runs, live: rp.live });
+    if (rp.runs.length) renderRuns({ journal: rp.journal, runs: rp.runs, live: rp.live });
   }
   app.openReplay = open;
 
