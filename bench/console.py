@@ -13,7 +13,9 @@ Debian's chromium (headless, through Playwright) on the console's page.
   screen frame (``requestAnimationFrame``).
 * **throughput ratio**: the run alternates phases of ``--phase`` seconds with the console's observer
   removed from the runtime and added back (the page stays connected); the ratio is the firing rate
-  of the attached phases over that of the detached ones, in the same run.
+  of the attached phases over that of the detached ones, in the same run (also the median over
+  each detached phase and the attached one after it: short interleaved phases and many of them,
+  because other processes on a shared machine move the rate by more than the console does).
 * **memory**: the page's JavaScript heap after a forced garbage collection, every ``--sample``
   seconds, and the number of DOM nodes, from the start to the end of the run (``--minutes``).
 * **open 1,000 nodes**: ``petrobot console`` serves a net of 500 places and 500 transitions without
@@ -200,11 +202,14 @@ def measure_run(browser: Any, args: argparse.Namespace) -> dict[str, Any]:
     def pct(q: float) -> float | None:
         return round(latencies[min(len(latencies) - 1, int(q * len(latencies)))], 4) if latencies else None
 
+    pairs = [(a, b) for a, b in zip(phases, phases[1:]) if not a["attached"] and b["attached"]]
+    pair_ratios = sorted((b["firings"] / b["seconds"]) / max(1e-9, a["firings"] / a["seconds"]) for a, b in pairs)
     heap = [m["heap_mb"] for m in memory]
     return {"latency_p50_s": pct(0.50), "latency_p99_s": pct(0.99), "latency_max_s": pct(1.0),
             "repaints_measured": len(latencies), "frames_received": frames, "repaints": paints,
             "firings_per_s_detached": round(rate(False)), "firings_per_s_attached": round(rate(True)),
             "throughput_ratio": round(rate(True) / max(1e-9, rate(False)), 3), "phases": len(phases),
+            "throughput_ratio_median_pair": round(statistics.median(pair_ratios), 3) if pair_ratios else None,
             "run_minutes": args.minutes, "memory": memory, "heap_first_mb": heap[0], "heap_last_mb": heap[-1],
             "heap_max_mb": max(heap), "page_errors": errors}
 
@@ -250,7 +255,7 @@ def measure_open(browser: Any, pairs: int) -> dict[str, Any]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=10.0, help="length of the attached run, minutes")
-    ap.add_argument("--phase", type=float, default=5.0, help="length of one attached or detached phase, seconds")
+    ap.add_argument("--phase", type=float, default=1.0, help="length of one attached or detached phase, seconds")
     ap.add_argument("--sample", type=float, default=30.0, help="seconds between two samples of the page's memory")
     ap.add_argument("--rings", type=int, default=4, help="rings of the run's net")
     ap.add_argument("--length", type=int, default=10, help="transitions per ring")
