@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import itertools
 import json
 import os
 import shutil
@@ -202,7 +203,7 @@ def measure_run(browser: Any, args: argparse.Namespace) -> dict[str, Any]:
     def pct(q: float) -> float | None:
         return round(latencies[min(len(latencies) - 1, int(q * len(latencies)))], 4) if latencies else None
 
-    pairs = [(a, b) for a, b in zip(phases, phases[1:]) if not a["attached"] and b["attached"]]
+    pairs = [(a, b) for a, b in itertools.pairwise(phases) if not a["attached"] and b["attached"]]
     pair_ratios = sorted((b["firings"] / b["seconds"]) / max(1e-9, a["firings"] / a["seconds"]) for a, b in pairs)
     heap = [m["heap_mb"] for m in memory]
     return {"latency_p50_s": pct(0.50), "latency_p99_s": pct(0.99), "latency_max_s": pct(1.0),

@@ -83,7 +83,7 @@ def test_a_net_drawn_with_the_mouse_and_saved_passes_petrobot_check(page: Page, 
     page.wait("document.body.dataset.saved === 'drawn.toml'", what="the save")
     saved = tmp_path / "drawn.toml"
     check = subprocess.run([sys.executable, "-m", "coordinator.cli", "check", str(saved), "--services",
-                            str(ROOT / "services.toml")], cwd=ROOT, capture_output=True, text=True, timeout=120)
+                            str(ROOT / "services.toml")], cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
     assert check.returncode == 0, check.stdout + check.stderr
     net = load_any(saved)
     assert net.place("p1").kind.value == "resource" and net.initial_marking["p1"] == 1

@@ -4,14 +4,10 @@ from the client's read-only ``health()``, here against a real node on 127.0.0.1.
 from __future__ import annotations
 
 import asyncio
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+from node_rig import KEY, eventually, running_node
 
-from node_rig import KEY, eventually, running_node  # noqa: E402
-
-from services.client import ServiceClient  # noqa: E402
+from services.client import ServiceClient
 
 
 async def test_the_client_reports_each_nodes_connection_heartbeat_round_trip_and_calls_in_flight():
