@@ -107,7 +107,8 @@ async def serve(args: argparse.Namespace) -> None:
     loop = asyncio.get_running_loop()
     with Journal(tmp / "bench.sqlite") as journal:
         runtime = Runtime(net, _NoNodes(), journal, net_text=net_path.read_text(encoding="utf-8"))
-        server = ConsoleServer(ConsoleConfig(root=tmp, nets=[net_path], journal=tmp / "bench.sqlite"))
+        server = ConsoleServer(ConsoleConfig(root=tmp, nets=[net_path], journal=tmp / "bench.sqlite",
+                                             period_s=args.period))
         print(json.dumps({"url": await server.start()}), flush=True)
         feed = server.attach_run(runtime, net_path)
         await loop.run_in_executor(None, sys.stdin.readline)  # the page is live
@@ -117,7 +118,9 @@ async def serve(args: argparse.Namespace) -> None:
         end = time.monotonic() + args.minutes * 60
         while time.monotonic() < end and not run.done():
             attached = not attached
-            if attached:
+            if args.null:
+                pass  # the noise floor: the console stays attached in both kinds of phase
+            elif attached:
                 runtime.add_observer(feed)
             else:
                 runtime.remove_observer(feed)
@@ -126,7 +129,7 @@ async def serve(args: argparse.Namespace) -> None:
             phases.append({"attached": attached, "firings": runtime.engine.fired - f0,
                            "seconds": time.perf_counter() - t0})
             print(json.dumps({"phase": phases[-1]}), flush=True)
-        if not attached:
+        if not attached and not args.null:
             runtime.add_observer(feed)
         from coordinator.operator import Command, OperatorCommand
 
@@ -153,7 +156,7 @@ def js_heap(page: Any, cdp: Any) -> dict[str, float]:
 def measure_run(browser: Any, args: argparse.Namespace) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         child = subprocess.Popen([sys.executable, __file__, "--serve", tmp, "--minutes", str(args.minutes),
-                                  "--phase", str(args.phase), "--rings", str(args.rings), "--length", str(args.length)],
+                                  "--phase", str(args.phase), *(["--null"] if args.null else []), "--period", str(args.period), "--rings", str(args.rings), "--length", str(args.length)],
                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                                  env={**os.environ, "PYTHONPATH": str(ROOT)})
         assert child.stdin is not None and child.stdout is not None
@@ -236,8 +239,8 @@ def measure_open(browser: Any, pairs: int) -> dict[str, Any]:
             page.wait_for_function("() => document.body.dataset.ready === '1'", timeout=TIMEOUT_S * 1000)
             t0 = time.perf_counter()
             page.goto(url)
-            page.wait_for_function("() => document.body.dataset.ready === '1' && "
-                                   "window.petrobot.graph.cy.nodes().length >= 1000", timeout=TIMEOUT_S * 1000)
+            page.wait_for_function("(arg) => document.body.dataset.ready === '1' && "
+                                   "window.petrobot.graph.cy.nodes().length >= 2 * arg", arg=pairs, timeout=TIMEOUT_S * 1000)
             ready = time.perf_counter() - t0
             nodes = page.evaluate("() => window.petrobot.graph.cy.nodes().length")
             box = page.locator("#cy").bounding_box()
@@ -261,6 +264,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rings", type=int, default=4, help="rings of the run's net")
     ap.add_argument("--length", type=int, default=10, help="transitions per ring")
     ap.add_argument("--open-pairs", type=int, default=500, help="places (and transitions) of the net opened")
+    ap.add_argument("--period", type=float, default=0.02, help="shortest time between two live frames, seconds")
+    ap.add_argument("--null", action="store_true",
+                    help="never detach the console (the ratio then shows the noise floor of the machine)")
     ap.add_argument("--skip-run", action="store_true", help="only measure opening the large net")
     ap.add_argument("--json", action="store_true", help="print the results as one JSON object")
     ap.add_argument("--serve", metavar="DIR", help=argparse.SUPPRESS)

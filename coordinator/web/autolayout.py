@@ -23,6 +23,8 @@ LAYER_GAP = 110.0
 NODE_GAP = 150.0
 #: A drawing more than this many times taller than wide is folded into bands side by side.
 FOLD_RATIO = 3.0
+#: ... and has more layers than this (a small net reads best as one column).
+FOLD_MIN_LAYERS = 30
 
 
 def layered_layout(nodes: Iterable[str], arcs: Iterable[tuple[str, str]], *, first: Iterable[str] = (),
@@ -116,7 +118,8 @@ def layered_layout(nodes: Iterable[str], arcs: Iterable[tuple[str, str]], *, fir
     widest = max((len(r) for r in layers.values()), default=1)
     height = len(layers) * LAYER_GAP
     width = widest * NODE_GAP
-    bands = max(1, math.ceil(math.sqrt(height / (FOLD_RATIO * width)))) if height > FOLD_RATIO * width else 1
+    folding = len(layers) > FOLD_MIN_LAYERS and height > FOLD_RATIO * width
+    bands = max(1, math.ceil(math.sqrt(height / (FOLD_RATIO * width)))) if folding else 1
     rows = math.ceil(len(layers) / bands) if layers else 1
     band_width = width + 2 * NODE_GAP
     out: dict[str, tuple[float, float]] = {}

@@ -218,7 +218,13 @@ export class Graph {
   /** Flash the given transitions for a moment (coalesced: one timer). */
   flash(ids) {
     const cy = this.cy;
-    cy.batch(() => { for (const id of ids) { this.flashing.add(id); cy.getElementById(id).addClass("fired"); } });
+    cy.batch(() => {
+      for (const id of ids) {
+        if (this.flashing.has(id)) continue;  // still lit from an earlier frame
+        this.flashing.add(id);
+        cy.getElementById(id).addClass("fired");
+      }
+    });
     clearTimeout(this.flashTimer);
     this.flashTimer = setTimeout(() => {
       cy.batch(() => { for (const id of this.flashing) cy.getElementById(id).removeClass("fired"); });

@@ -95,7 +95,10 @@ export function initLive(app) {
     if (app.mode === "live") {
       app.graph.setMarking(changed);
       if (fired.size) app.graph.flash(fired);
-      paintDetails(frames.some((f) => f.started || f.ended || f.latched));
+      // badges and panels only when actions started, ended or latched: a run firing thousands of
+      // transitions a second repaints tokens and flashes, not the whole drawing's decorations
+      const detail = frames.some((f) => f.started || f.ended || f.latched);
+      if (detail) paintDetails(true); else header();
       const fresh = frames.find((f) => f.learner || f.operator || f.state || f.nodes);
       if (fresh) renderPanelsSoon(true);
       if (oldest !== null) {
@@ -154,6 +157,7 @@ export function initLive(app) {
     if (Date.now() - lastPanel > 450) renderPanels();
   }, 250);
 
+  let lastButtons = "";
   function header() {
     const s = live.state.state || "";
     const state = document.getElementById("run-state");
@@ -165,6 +169,9 @@ export function initLive(app) {
     waiting.textContent = live.state.reason ? live.state.reason : "";
     waiting.title = (live.state.detail || []).join("\n");
     const control = app.control && !live.ended;
+    const key = `${control}|${live.paused}|${live.ended}`;
+    if (key === lastButtons) return;
+    lastButtons = key;
     const note = !app.control ? "read-only: open the URL with its token to steer the run" : live.ended ? "the run has ended" : "";
     for (const b of document.querySelectorAll("#live-bar button")) {
       const cmd = b.dataset.cmd;
