@@ -47,8 +47,10 @@ def _missing(reason: str) -> None:
                 "(pip install playwright) to run the console's browser tests")
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def browser() -> Iterator[Any]:
+    """Chromium, one per test module: Playwright's sync API keeps an event loop running in this
+    thread while it is open, so it must be closed before the asyncio tests of later modules run."""
     path = chromium_path()
     if path is None:
         _missing("no chromium browser found")
