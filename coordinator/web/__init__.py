@@ -20,3 +20,5 @@ The terminal view (:mod:`coordinator.console`) and this one observe the same run
 (:meth:`coordinator.runtime.Runtime.add_observer`); commands from either take the same engine path
 and land in the same journal.
 """
+
+__all__: list[str] = []  # the modules above are imported by name; the package itself exports nothing
