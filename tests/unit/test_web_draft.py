@@ -142,3 +142,10 @@ def test_exports_are_the_command_lines_formats_with_the_drawing():
     broken["arcs"].append({"from": "idle", "to": "nowhere"})
     with pytest.raises(FileRefused, match="problems"):
         export_draft(broken, "pnml")
+
+
+def test_a_net_with_rate_expressions_and_reset_arcs_survives_the_page_unchanged():
+    text = (ROOT / "nets" / "examples" / "fms.toml").read_text(encoding="utf-8")
+    net = loads_net(text)
+    assert loads_net(draft_to_toml(draft_of_text(text))[0]) == net
+    assert loads_net(draft_to_toml(draft_of_net(net))[0]) == net
