@@ -13,6 +13,7 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 COMMANDS = (
     "demo",      # the catching demo on localhost (the README's first command)
     "run",       # execute a task net on the nodes
+    "console",   # the operator console in a browser: draw, follow, steer, replay
     "runs",      # the runs of a journal: outcome, duration, firings, errors
     "show",      # one run of a journal in order
     "node",      # run one node (a host's primitive-action server)

@@ -151,6 +151,7 @@ class Runtime:
         recovered: state rebuilt by :meth:`Journal.recover` to resume an interrupted run.
         net_text: source text of the net, stored in the journal with the run.
         observer: called with each :mod:`coordinator.events` record (for displays); must not block.
+            More observers (the web console next to the terminal one) join with :meth:`add_observer`.
         max_firings_per_tick: firings between two turns of the event loop (inputs already queued
             are served between every two firings regardless).
         operator: an operator can send commands (:meth:`command`): a run that only an operator
@@ -193,6 +194,7 @@ class Runtime:
         self.journal = journal
         self.learner = learner
         self.observer = observer
+        self._observers: tuple[Observer, ...] = ()  # replaced, never changed in place: safe to emit
         self.operator = operator
         self.linger = linger
         self._per_tick = max(1, max_firings_per_tick)
@@ -238,6 +240,15 @@ class Runtime:
         self._t0 = time.monotonic()
 
     # ------------------------------------------------------------------ public controls
+    def add_observer(self, observer: Observer) -> None:
+        """Also call ``observer`` with each event, after :attr:`observer` and the observers added
+        before it (each must not block; one that raises is logged and the others still run)."""
+        self._observers = (*self._observers, observer)
+
+    def remove_observer(self, observer: Observer) -> None:
+        """Stop calling an observer added with :meth:`add_observer` (no error if it is not there)."""
+        self._observers = tuple(o for o in self._observers if o != observer)
+
     def command(self, cmd: OperatorCommand) -> None:
         """Queue an operator command; it is served before the next firing (call it from the loop's
         thread: another thread uses ``loop.call_soon_threadsafe(runtime.command, cmd)``)."""
@@ -666,4 +677,9 @@ class Runtime:
             try:
                 self.observer(event)
             except Exception:  # a display must never stop the run
+                log.exception("observer failed on %s", type(event).__name__)
+        for observer in self._observers:
+            try:
+                observer(event)
+            except Exception:
                 log.exception("observer failed on %s", type(event).__name__)

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from coordinator.commands import options
+from coordinator.commands.console import add_listen_options
 from services.errors import PetrobotError
 
 __all__ = ["add_parser", "run"]
@@ -88,6 +89,11 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--wait", action="store_true",
                    help="wait for the operator even when nobody can type (no terminal, --no-input): the run "
                         "then ends on --max-seconds or Ctrl-C instead of ending waiting_for_operator")
+    p.add_argument("--console", metavar="[HOST:]PORT", default=None,
+                   help="also serve the web console attached to this run (petrobot console; port 0 picks a free "
+                        "one): prints its address with the token that gives control; the page is an operator, "
+                        "so the run waits for it as with --wait")
+    add_listen_options(p)
     p.set_defaults(func=run)
 
 
@@ -97,7 +103,6 @@ def run(args: argparse.Namespace) -> int:
 
     from coordinator.journal import Journal
     from coordinator.netfile import load_any
-    from coordinator.session import execute
     from services.keys import load_key
     from services.location import load_location
 
@@ -115,10 +120,10 @@ def run(args: argparse.Namespace) -> int:
         read_input = not args.no_input and sys.stdin.isatty()
         goal = options.parse_pairs(args.goal, "--goal", int) or None
         with Journal(args.journal) as journal:
-            summary = asyncio.run(execute(
-                net, location=location, key=key, journal=journal, seed=args.seed, resume=args.resume,
-                net_text=text, live=args.live, quiet=args.quiet, read_input=read_input,
-                max_seconds=args.max_seconds, wait=args.wait, linger=True, goal=goal, degraded=args.degraded))
+            summary = asyncio.run(_execute(args, net, location=location, key=key, journal=journal, seed=args.seed,
+                                           resume=args.resume, net_text=text, live=args.live, quiet=args.quiet,
+                                           read_input=read_input, max_seconds=args.max_seconds, wait=args.wait,
+                                           linger=True, goal=goal, degraded=args.degraded))
     except PetrobotError as exc:
         print(f"petrobot run: {exc}", file=sys.stderr)
         return 2
@@ -129,3 +134,25 @@ def run(args: argparse.Namespace) -> int:
     print(f"journal: {args.journal}   (petrobot show {summary.run_id} --journal {args.journal})")
     logging.getLogger("petrobot").debug("run finished")
     return summary.exit_code
+
+
+async def _execute(args: argparse.Namespace, net: Any, **kwargs: Any) -> Any:
+    """:func:`coordinator.session.execute`, with the web console attached when ``--console`` is given."""
+    from coordinator.session import execute
+
+    if not args.console:
+        return await execute(net, **kwargs)
+    from coordinator.commands.console import start_console
+    from coordinator.web.attach import WebAttachedConsole
+
+    server = await start_console(nets=[Path(args.net)], journal=Path(args.journal), services=args.services,
+                                 listen=args.console, bind_any=args.bind_any, root=Path.cwd())
+    console = WebAttachedConsole(net, server, Path(args.net), live=kwargs.get("live"), quiet=kwargs.get("quiet", False))
+    kwargs["wait"] = True  # the page is an operator
+    summary = None
+    try:
+        summary = await execute(net, console=console, **kwargs)
+        return summary
+    finally:
+        ended = f"the run ended ({summary.end_state})" if summary is not None else "the run stopped"
+        await server.close(ended)

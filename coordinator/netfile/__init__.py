@@ -9,6 +9,7 @@
 * :mod:`~coordinator.netfile.writer` — :func:`dump_net`, :func:`save_net` (canonical TOML),
   :func:`format_value`, :func:`format_key`;
 * :mod:`~coordinator.netfile.placement` — :func:`check_net`, a net against ``services.toml``;
+* :mod:`~coordinator.netfile.layout` — the drawing's positions kept in a net file (:func:`load_layout`);
 * :mod:`~coordinator.netfile.pnml` — PNML import and export (ISO/IEC 15909-2);
 * :mod:`~coordinator.netfile.dot` — a Graphviz picture of a net;
 * :mod:`~coordinator.netfile.formats` — :func:`load_any`, any of them by suffix.
@@ -17,6 +18,7 @@ Imports point one way: ``formats`` → ``loader``, ``pnml`` → ``writer`` → `
 """
 
 from coordinator.netfile.formats import load_any
+from coordinator.netfile.layout import Layout, load_layout, loads_layout
 from coordinator.netfile.loader import lint_net, load_net, loads_net
 from coordinator.netfile.placement import check_net
 from coordinator.netfile.schema import FORMAT_VERSION
@@ -25,6 +27,7 @@ from coordinator.netfile.writer import dump_net, format_key, format_value, save_
 
 __all__ = [
     "FORMAT_VERSION",
+    "Layout",
     "SourceMap",
     "check_net",
     "dump_net",
@@ -32,7 +35,9 @@ __all__ = [
     "format_value",
     "lint_net",
     "load_any",
+    "load_layout",
     "load_net",
+    "loads_layout",
     "loads_net",
     "save_net",
 ]

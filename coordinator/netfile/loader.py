@@ -40,6 +40,7 @@ from coordinator.net import (
     Transition,
     TransitionKind,
 )
+from coordinator.netfile.layout import position_problem
 from coordinator.netfile.limits import (
     MAX_DESCRIPTION,
     MAX_LABEL,
@@ -191,6 +192,11 @@ class _Loader:
         value: str = self.get(table, key, "str", what, section, ident, default)
         self.check(text_problem(value, f"{key} of {what}", limit, lines=lines), self.smap.key(section, ident, key))
         return value
+
+    def position(self, table: Mapping[str, Any], what: str, section: str, ident: Any) -> None:
+        """Check the drawing position ``pos = [x, y]`` (kept in the file, not in the net: layout.py)."""
+        if "pos" in table:
+            self.check(position_problem(table["pos"], what), self.smap.key(section, ident, "pos"))
 
     def build(self, line: int | None, make: Callable[[], _T]) -> _T:
         """Call a model constructor; turn its NetError into a problem at ``line``."""
@@ -404,6 +410,7 @@ class _Loader:
             raise self.fail(f"{what} has a negative initial marking ({tokens})", self.smap.key("place", index, "tokens"))
         self.check(count_problem(tokens, f"initial marking of {what}", 0), self.smap.key("place", index, "tokens"))
         label = self.text(table, "label", what, "place", index, "", MAX_LABEL)
+        self.position(table, what, "place", index)
         capacity = self.get(table, "capacity", "int", what, "place", index)
         if capacity is not None and capacity < 0:
             raise self.fail(f"{what} has a negative capacity ({capacity})", self.smap.key("place", index, "capacity"))
@@ -483,6 +490,7 @@ class _Loader:
                             f"{_brief(servers_value)}", self.smap.key(sec, index, "servers"))
         hidden = self.get(table, "hidden", "bool", what, sec, index, False)
         label = self.text(table, "label", what, sec, index, "", MAX_LABEL)
+        self.position(table, what, sec, index)
         for key in ("inputs", "outputs", "inhibitors"):
             arcs = self.get(table, key, "table", what, sec, index, {})
             self.transition_arcs.append((index, tid, key, arcs))

@@ -20,7 +20,7 @@ Every problem raises :class:`~coordinator.errors.NetError` (syntax errors and no
 Reference: ISO/IEC 15909-2:2011, *Petri net Markup Language*; Hillah, Kordon, Petrucci, Trèves,
 "PNML Framework", 2010.
 
-Length: about 680 lines because reading and writing share one table of petrobot's tool-specific
+Length: about 690 lines because reading and writing share one table of petrobot's tool-specific
 elements and are tested as a round trip; splitting them would split that table.
 """
 
@@ -29,7 +29,7 @@ from __future__ import annotations
 import math
 import re
 import xml.parsers.expat
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from functools import partial
 from pathlib import Path
 from typing import Any, TypeVar
@@ -572,11 +572,19 @@ def _attrs(pairs: dict[str, str | None]) -> str:
     return "".join(f" {k}={quoteattr(v)}" for k, v in pairs.items() if v is not None)
 
 
-def dump_pnml(net: PetriNet) -> str:
+def _graphics(layout: Mapping[str, tuple[float, float]] | None, ident: str) -> list[str]:
+    if layout is None or ident not in layout:
+        return []
+    x, y = layout[ident]
+    return [f'        <graphics><position x="{_num(round(float(x), 1))}" y="{_num(round(float(y), 1))}"/></graphics>']
+
+
+def dump_pnml(net: PetriNet, layout: Mapping[str, tuple[float, float]] | None = None) -> str:
     """Write a net as a PNML document (2009 grammar, one page, petrobot tool-specific data).
 
     Arc ids are generated (``a1``, ``a2``... made unique against node ids); the net's ``id`` is
-    ``net`` and its name label carries :attr:`PetriNet.name`.
+    ``net`` and its name label carries :attr:`PetriNet.name`. ``layout`` (id → (x, y),
+    :mod:`~coordinator.netfile.layout`) adds ``<graphics><position>`` to the nodes it names.
 
     Returns:
         The XML text, UTF-8, with an XML declaration.
@@ -622,6 +630,7 @@ def dump_pnml(net: PetriNet) -> str:
     for place in net.places:
         out.append(f"      <place id={quoteattr(place.id)}>")
         out.append(f"        <name><text>{escape(place.label or place.id)}</text></name>")
+        out += _graphics(layout, place.id)
         tokens = net.initial_marking[place.id]
         if tokens:
             out.append(f"        <initialMarking><text>{tokens}</text></initialMarking>")
@@ -633,6 +642,7 @@ def dump_pnml(net: PetriNet) -> str:
     for t in net.transitions:
         out.append(f"      <transition id={quoteattr(t.id)}>")
         out.append(f"        <name><text>{escape(t.label or t.id)}</text></name>")
+        out += _graphics(layout, t.id)
         head = f'        <toolspecific tool="{TOOL}" version="{TOOL_VERSION}"' + _attrs({
             "kind": t.kind.value, "priority": str(t.priority), "weight": _num(t.weight),
             "rate": None if t.rate is None else _num(t.rate), "rate_expr": t.rate_expr,

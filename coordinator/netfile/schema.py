@@ -25,13 +25,13 @@ TOP_KEYS = ("net", "place", "task", "transition", "arc")
 #: Keys of ``[net]``.
 NET_KEYS = ("name", "description", "format", "home")
 #: Keys of a ``[[place]]``.
-PLACE_KEYS = ("id", "kind", "tokens", "label", "capacity", "task")
+PLACE_KEYS = ("id", "kind", "tokens", "label", "capacity", "task", "pos")
 #: Keys of a ``[task.<name>]``.
 TASK_KEYS = ("actions", "deadline_s", "learner", "mean_time_s", "reliability", "params")
 #: Keys of an action table in ``actions``.
 ACTION_KEYS = ("name", "params", "cost")
 #: Keys of a ``[[transition]]``.
 TRANSITION_KEYS = ("id", "label", "events", "priority", "weight", "kind", "rate", "servers", "hidden",
-                   "inputs", "outputs", "inhibitors")
+                   "inputs", "outputs", "inhibitors", "pos")
 #: Keys of an ``[[arc]]``.
 ARC_KEYS = ("from", "to", "weight", "inhibitor", "reset")

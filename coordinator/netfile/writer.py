@@ -93,14 +93,23 @@ def _inline(items: Iterable[tuple[str, Any]]) -> str:
     return "{ " + ", ".join(pairs) + " }" if pairs else "{}"
 
 
-def dump_net(net: PetriNet) -> str:
+def _pos(layout: Mapping[str, tuple[float, float]] | None, ident: str) -> list[str]:
+    if layout is None or ident not in layout:
+        return []
+    x, y = layout[ident]
+    return [f"pos = [{format_value(round(float(x), 1))}, {format_value(round(float(y), 1))}]"]
+
+
+def dump_net(net: PetriNet, layout: Mapping[str, tuple[float, float]] | None = None) -> str:
     """Write a net as canonical TOML (docs/netfile.md, "Canonical form").
 
     Sections in the order ``[net]``, ``[[place]]`` (net order), ``[task.*]`` (definition order),
     ``[[transition]]`` (net order) with their arcs as ``inputs``/``outputs``/``inhibitors`` tables
     (keys in place order), then one ``[[arc]]`` table per reset arc (transition order, then place
     order); keys equal to their default are left out; a rate or weight expression is written as a
-    string. ``loads_net(dump_net(n)) == n``.
+    string. ``loads_net(dump_net(n)) == n``. ``layout`` (id → (x, y),
+    :mod:`~coordinator.netfile.layout`) adds the drawing's ``pos = [x, y]`` to the places and
+    transitions it names, rounded to 0.1 drawing unit.
 
     Raises:
         NetError: if a parameter value cannot be written in TOML.
@@ -125,6 +134,7 @@ def dump_net(net: PetriNet) -> str:
             out.append(f"label = {format_value(place.label)}")
         if place.capacity is not None:
             out.append(f"capacity = {place.capacity}")
+        out += _pos(layout, place.id)
     for task in net.tasks.values():
         out += ["", f"[task.{format_key(task.name)}]"]
         if all(not a.params and a.cost is None for a in task.actions):
@@ -168,6 +178,7 @@ def dump_net(net: PetriNet) -> str:
             out.append("servers = " + ('"infinite"' if t.servers is None else str(t.servers)))
         if t.hidden:
             out.append("hidden = true")
+        out += _pos(layout, t.id)
         for key, table in (("inputs", inputs), ("outputs", outputs), ("inhibitors", inhibitors)):
             if table[t.id] or key != "inhibitors":
                 out.append(f"{key} = {_inline(_place_order(net, table[t.id]))}")
@@ -177,14 +188,14 @@ def dump_net(net: PetriNet) -> str:
     return "\n".join(out) + "\n"
 
 
-def save_net(net: PetriNet, path: str | Path) -> None:
-    """Write :func:`dump_net` of ``net`` to ``path`` (UTF-8).
+def save_net(net: PetriNet, path: str | Path, layout: Mapping[str, tuple[float, float]] | None = None) -> None:
+    """Write :func:`dump_net` of ``net`` (with ``layout``'s positions) to ``path`` (UTF-8).
 
     Raises:
         NetFileError: if the file cannot be written.
         NetError: as :func:`dump_net`.
     """
-    text = dump_net(net)
+    text = dump_net(net, layout)
     try:
         Path(path).write_text(text, encoding="utf-8")
     except OSError as exc:

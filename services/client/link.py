@@ -145,7 +145,10 @@ class _Wire(FramedConnection):
         elif kind is Ping:
             self.send(Pong(seq=msg.seq))  # type: ignore[attr-defined]
         elif kind is Pong:
-            pass
+            sent = link._ping_sent
+            if sent is not None and sent[0] == msg.seq:  # type: ignore[attr-defined]
+                link._rtt_s = self.loop.time() - sent[1]
+                link._ping_sent = None
         elif kind is Hello:
             pass  # the connection answered with auth by itself
         elif kind is Welcome:
@@ -245,6 +248,8 @@ class NodeLink:
         self._ids = itertools.count(1)
         self._id_prefix = uuid.uuid4().hex[:16]
         self._ping_seq = itertools.count(1)
+        self._ping_sent: tuple[int, float] | None = None  # the last ping: (seq, loop time)
+        self._rtt_s: float | None = None
 
     # ---- public API
 
@@ -253,6 +258,16 @@ class NodeLink:
         """True while an authenticated connection is open."""
         w = self._wire
         return w is not None and not w.closed and w.conn.state is State.OPEN
+
+    def health(self) -> dict[str, Any]:
+        """What an operator's view shows of this link (read-only; no I/O).
+
+        Returns:
+            ``{"connected": bool, "heartbeat_rtt_s": float | None, "in_flight": int}``: whether an
+            authenticated connection is open, the round trip of the last answered heartbeat
+            (seconds; ``None`` before one was answered) and the calls sent and not yet answered.
+        """
+        return {"connected": self.connected, "heartbeat_rtt_s": self._rtt_s, "in_flight": len(self._pending)}
 
     def new_call_id(self) -> str:
         """A fresh call id, unique across clients (random prefix + counter)."""
@@ -509,8 +524,10 @@ class NodeLink:
                 w.abort(ConnectionError("heartbeat timeout"), "heartbeat_timeout")
                 continue
             if w.conn.state is State.OPEN:
+                seq = next(self._ping_seq)
                 try:
-                    w.send(Ping(seq=next(self._ping_seq)))
+                    w.send(Ping(seq=seq))
+                    self._ping_sent = (seq, loop.time())
                 except ProtocolError:
                     pass
 

@@ -93,6 +93,20 @@ class ServiceClient:
             self._links[node] = link
         return link
 
+    def health(self) -> dict[str, dict[str, Any]]:
+        """Each node of services.toml as an operator's view shows it (read-only; no I/O).
+
+        Returns:
+            node name → :meth:`NodeLink.health` (a node never called yet: not connected, no
+            round trip, no call in flight).
+        """
+        out: dict[str, dict[str, Any]] = {}
+        for node in self.location.nodes:
+            link = self._links.get(node)
+            out[node] = link.health() if link is not None else {"connected": False, "heartbeat_rtt_s": None,
+                                                                "in_flight": 0}
+        return out
+
     async def call(
         self,
         action: str,

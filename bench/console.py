@@ -1,0 +1,302 @@
+#!/usr/bin/env python3
+"""The web console under load: firing-to-screen latency, the engine's rate with the console attached,
+opening a 1,000-node net, and the page's memory over a long run, in a headless browser.
+
+Two processes, as in use: a *run* process (``--serve``, started by this script) runs an endless net
+of rings (``--rings`` R rings of ``--length`` L plain transitions: no node, no primitive task) in the
+asyncio runtime with a journal, and serves the web console attached to it; this process drives
+Debian's chromium (headless, through Playwright) on the console's page.
+
+* **latency**: the page records, after each repaint, how long ago (server wall clock) the oldest
+  firing it shows was fired (``window.petrobotStats``); p50 and p99 over every repaint of the
+  attached phases. Frames are coalesced server-side (≤ one per 20 ms) and applied at most once per
+  screen frame (``requestAnimationFrame``).
+* **throughput ratio**: the run alternates phases of ``--phase`` seconds with the console's observer
+  removed from the runtime and added back (the page stays connected); the ratio is the firing rate
+  of the attached phases over that of the detached ones, in the same run (also the median over
+  each detached phase and the attached one after it: short interleaved phases and many of them,
+  because other processes on a shared machine move the rate by more than the console does).
+* **memory**: the page's JavaScript heap after a forced garbage collection, every ``--sample``
+  seconds, and the number of DOM nodes, from the start to the end of the run (``--minutes``).
+* **open 1,000 nodes**: ``petrobot console`` serves a net of 500 places and 500 transitions without
+  positions; the time from navigation to the page being ready (laid out, drawn, two frames later),
+  then to a click on a transition showing it in the inspector.
+
+Usage: python bench/console.py [--minutes M] [--phase S] [--rings R] [--length L] [--json]
+(needs /usr/bin/chromium or $PETROBOT_CHROMIUM, and the playwright package).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import itertools
+import json
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+                 "--disable-component-update", "--disable-sync", "--disable-dev-shm-usage"]
+TIMEOUT_S = 120.0
+
+
+# ---------------------------------------------------------------------- nets
+def ring_toml(rings: int, length: int) -> str:
+    """R rings of L places and L transitions, one token per ring, laid out as rows."""
+    lines = ['[net]', f'name = "rings{rings}x{length}"', 'description = "console bench: endless rings"', '']
+    for r in range(rings):
+        for k in range(length):
+            tokens = "tokens = 1\n" if k == 0 else ""
+            lines.append(f'[[place]]\nid = "p{r}_{k}"\n{tokens}pos = [{k * 120.0}, {r * 160.0}]\n')
+    for r in range(rings):
+        for k in range(length):
+            lines.append(f'[[transition]]\nid = "t{r}_{k}"\npos = [{k * 120.0 + 60}, {r * 160.0 + 60}]\n'
+                         f'inputs = {{ p{r}_{k} = 1 }}\noutputs = {{ p{r}_{(k + 1) % length} = 1 }}\n')
+    return "\n".join(lines)
+
+
+def big_toml(pairs: int) -> str:
+    """``pairs`` places and ``pairs`` transitions in 20 parallel chains, no positions (the server lays
+    them out)."""
+    lines = ['[net]', f'name = "big{2 * pairs}"', 'description = "console bench: a large net to open"', '']
+    chains = 20
+    per = pairs // chains
+    for c in range(chains):
+        for k in range(per):
+            lines.append(f'[[place]]\nid = "p{c}_{k}"\n' + ("tokens = 1\n" if k == 0 else ""))
+    for c in range(chains):
+        for k in range(per):
+            nxt = f"p{c}_{(k + 1) % per}"
+            extra = f", p{(c + 1) % chains}_{k} = 1" if k % 10 == 5 else ""
+            lines.append(f'[[transition]]\nid = "t{c}_{k}"\ninputs = {{ p{c}_{k} = 1 }}\n'
+                         f'outputs = {{ {nxt} = 1{extra} }}\n')
+    return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------- the run process
+class _NoNodes:
+    """A service client for nets without primitive tasks or external events."""
+
+    location = None
+
+    def subscribe(self, topic: str, callback: object) -> None:
+        raise AssertionError("the bench net has no external event")
+
+
+async def serve(args: argparse.Namespace) -> None:
+    """Run the rings with the console attached; phases on the orders read from stdin."""
+    from coordinator.journal import Journal
+    from coordinator.netfile import load_any
+    from coordinator.runtime import Runtime
+    from coordinator.web.server import ConsoleConfig, ConsoleServer
+
+    tmp = Path(args.serve)
+    net_path = tmp / "rings.toml"
+    net_path.write_text(ring_toml(args.rings, args.length), encoding="utf-8")
+    net = load_any(net_path)
+    loop = asyncio.get_running_loop()
+    with Journal(tmp / "bench.sqlite") as journal:
+        runtime = Runtime(net, _NoNodes(), journal, net_text=net_path.read_text(encoding="utf-8"))
+        server = ConsoleServer(ConsoleConfig(root=tmp, nets=[net_path], journal=tmp / "bench.sqlite",
+                                             period_s=args.period))
+        print(json.dumps({"url": await server.start()}), flush=True)
+        feed = server.attach_run(runtime, net_path)
+        await loop.run_in_executor(None, sys.stdin.readline)  # the page is live
+        run = loop.create_task(runtime.run())
+        phases: list[dict[str, Any]] = []
+        attached = True
+        end = time.monotonic() + args.minutes * 60
+        while time.monotonic() < end and not run.done():
+            attached = not attached
+            if args.null:
+                pass  # the noise floor: the console stays attached in both kinds of phase
+            elif attached:
+                runtime.add_observer(feed)
+            else:
+                runtime.remove_observer(feed)
+            f0, t0 = runtime.engine.fired, time.perf_counter()
+            await asyncio.sleep(min(args.phase, max(0.0, end - time.monotonic())))
+            phases.append({"attached": attached, "firings": runtime.engine.fired - f0,
+                           "seconds": time.perf_counter() - t0})
+            print(json.dumps({"phase": phases[-1]}), flush=True)
+        if not attached and not args.null:
+            runtime.add_observer(feed)
+        from coordinator.operator import Command, OperatorCommand
+
+        runtime.command(OperatorCommand(Command.ABORT))
+        await asyncio.wait_for(run, TIMEOUT_S)
+        await server.close("the bench is over")
+    print(json.dumps({"phases": phases}), flush=True)
+
+
+# ---------------------------------------------------------------------- the browser side
+def chromium() -> str:
+    path = os.environ.get("PETROBOT_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
+    if not path:
+        sys.exit("bench/console.py: no chromium (apt-get install chromium, or set PETROBOT_CHROMIUM)")
+    return path
+
+
+def js_heap(page: Any, cdp: Any) -> dict[str, float]:
+    cdp.send("HeapProfiler.collectGarbage")
+    metrics = {m["name"]: m["value"] for m in cdp.send("Performance.getMetrics")["metrics"]}
+    return {"heap_mb": round(metrics.get("JSHeapUsedSize", 0) / 2**20, 2), "dom_nodes": int(metrics.get("Nodes", 0))}
+
+
+def measure_run(browser: Any, args: argparse.Namespace) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory() as tmp:
+        child = subprocess.Popen([sys.executable, __file__, "--serve", tmp, "--minutes", str(args.minutes),
+                                  "--phase", str(args.phase), *(["--null"] if args.null else []), "--period", str(args.period), "--rings", str(args.rings), "--length", str(args.length)],
+                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                                 env={**os.environ, "PYTHONPATH": str(ROOT)})
+        assert child.stdin is not None and child.stdout is not None
+        url = json.loads(child.stdout.readline())["url"]
+        context = browser.new_context(viewport={"width": 1400, "height": 900})
+        page = context.new_page()
+        errors: list[str] = []
+        page.on("pageerror", lambda e: errors.append(str(e)))
+        page.goto(url)
+        page.wait_for_function("() => window.petrobot && window.petrobot.mode === 'live'", timeout=TIMEOUT_S * 1000)
+        cdp = context.new_cdp_session(page)
+        cdp.send("Performance.enable")
+        memory = [{"t_s": 0.0, **js_heap(page, cdp)}]
+        page.evaluate("() => window.petrobotStats.reset()")
+        child.stdin.write("go\n")
+        child.stdin.flush()
+        t0 = time.monotonic()
+        next_sample = args.sample
+        phases: list[dict[str, Any]] = []
+        import selectors
+
+        sel = selectors.DefaultSelector()
+        sel.register(child.stdout, selectors.EVENT_READ)
+        while True:
+            if sel.select(timeout=1.0):
+                line = child.stdout.readline()
+                if not line:
+                    break
+                msg = json.loads(line)
+                if "phases" in msg:
+                    phases = msg["phases"]
+                    break
+            if time.monotonic() - t0 >= next_sample:
+                memory.append({"t_s": round(time.monotonic() - t0, 1), **js_heap(page, cdp)})
+                next_sample += args.sample
+        memory.append({"t_s": round(time.monotonic() - t0, 1), **js_heap(page, cdp)})
+        latencies = sorted(page.evaluate("() => window.petrobotStats.latencies()"))
+        frames = page.evaluate("() => window.petrobotStats.frames")
+        paints = page.evaluate("() => window.petrobotStats.paints")
+        context.close()
+        child.wait(timeout=TIMEOUT_S)
+
+    def rate(attached: bool) -> float:
+        chosen = [p for p in phases if p["attached"] is attached]
+        return sum(p["firings"] for p in chosen) / max(1e-9, sum(p["seconds"] for p in chosen))
+
+    def pct(q: float) -> float | None:
+        return round(latencies[min(len(latencies) - 1, int(q * len(latencies)))], 4) if latencies else None
+
+    pairs = [(a, b) for a, b in itertools.pairwise(phases) if not a["attached"] and b["attached"]]
+    pair_ratios = sorted((b["firings"] / b["seconds"]) / max(1e-9, a["firings"] / a["seconds"]) for a, b in pairs)
+    heap = [m["heap_mb"] for m in memory]
+    return {"latency_p50_s": pct(0.50), "latency_p99_s": pct(0.99), "latency_max_s": pct(1.0),
+            "repaints_measured": len(latencies), "frames_received": frames, "repaints": paints,
+            "firings_per_s_detached": round(rate(False)), "firings_per_s_attached": round(rate(True)),
+            "throughput_ratio": round(rate(True) / max(1e-9, rate(False)), 3), "phases": len(phases),
+            "throughput_ratio_median_pair": round(statistics.median(pair_ratios), 3) if pair_ratios else None,
+            "run_minutes": args.minutes, "memory": memory, "heap_first_mb": heap[0], "heap_last_mb": heap[-1],
+            "heap_max_mb": max(heap), "page_errors": errors}
+
+
+def measure_open(browser: Any, pairs: int) -> dict[str, Any]:
+    with tempfile.TemporaryDirectory() as tmp:
+        net = Path(tmp) / "big.toml"
+        net.write_text(big_toml(pairs), encoding="utf-8")
+        proc = subprocess.Popen([sys.executable, "-m", "coordinator.cli", "console", str(net), "--listen", "0",
+                                 "--root", tmp], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+        assert proc.stdout is not None
+        try:
+            url = ""
+            for line in proc.stdout:
+                if line.startswith("petrobot console: http://"):
+                    url = line.split()[-1]
+                    break
+            context = browser.new_context(viewport={"width": 1400, "height": 900})
+            page = context.new_page()
+            # warm the browser's cache of the page's scripts as a returning operator would have it
+            page.goto(url.split("?")[0] + "?token=none")
+            page.wait_for_function("() => document.body.dataset.ready === '1'", timeout=TIMEOUT_S * 1000)
+            t0 = time.perf_counter()
+            page.goto(url)
+            page.wait_for_function("(arg) => document.body.dataset.ready === '1' && "
+                                   "window.petrobot.graph.cy.nodes().length >= 2 * arg", arg=pairs, timeout=TIMEOUT_S * 1000)
+            ready = time.perf_counter() - t0
+            nodes = page.evaluate("() => window.petrobot.graph.cy.nodes().length")
+            box = page.locator("#cy").bounding_box()
+            pos = page.evaluate("() => window.petrobot.graph.cy.getElementById('t3_7').renderedPosition()")
+            page.mouse.click(box["x"] + pos["x"], box["y"] + pos["y"])
+            page.wait_for_function("() => document.getElementById('panel-inspect').textContent.includes('t3_7')",
+                                   timeout=TIMEOUT_S * 1000)
+            clicked = time.perf_counter() - t0
+            context.close()
+        finally:
+            proc.terminate()
+            proc.wait(timeout=30)
+    return {"open_1000_nodes_s": round(ready, 3), "open_then_click_s": round(clicked, 3), "open_nodes": nodes}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--minutes", type=float, default=10.0, help="length of the attached run, minutes")
+    ap.add_argument("--phase", type=float, default=1.0, help="length of one attached or detached phase, seconds")
+    ap.add_argument("--sample", type=float, default=30.0, help="seconds between two samples of the page's memory")
+    ap.add_argument("--rings", type=int, default=4, help="rings of the run's net")
+    ap.add_argument("--length", type=int, default=10, help="transitions per ring")
+    ap.add_argument("--open-pairs", type=int, default=500, help="places (and transitions) of the net opened")
+    ap.add_argument("--period", type=float, default=0.02, help="shortest time between two live frames, seconds")
+    ap.add_argument("--null", action="store_true",
+                    help="never detach the console (the ratio then shows the noise floor of the machine)")
+    ap.add_argument("--skip-run", action="store_true", help="only measure opening the large net")
+    ap.add_argument("--json", action="store_true", help="print the results as one JSON object")
+    ap.add_argument("--serve", metavar="DIR", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.serve:
+        asyncio.run(serve(args))
+        return 0
+    from playwright.sync_api import sync_playwright
+
+    result: dict[str, Any] = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+                              "load_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count()}
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=chromium(), headless=True, args=CHROMIUM_ARGS)
+        try:
+            result.update(measure_open(browser, args.open_pairs))
+            if not args.skip_run:
+                result.update(measure_run(browser, args))
+        finally:
+            browser.close()
+    result["load_1min_after"] = round(os.getloadavg()[0], 2)
+    if args.json:
+        print(json.dumps(result, indent=1))
+    else:
+        for key, value in result.items():
+            if key != "memory":
+                print(f"{key:26} {value}")
+        for m in result.get("memory", []):
+            print(f"  memory at {m['t_s']:7.1f} s: heap {m['heap_mb']:7.2f} MB, {m['dom_nodes']} DOM nodes")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

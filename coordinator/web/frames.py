@@ -1,0 +1,334 @@
+"""Following a run in the browser: the runtime's events coalesced into frames (paper section 5).
+
+:class:`LiveFeed` is a runtime observer (:meth:`coordinator.runtime.Runtime.add_observer`). Being
+called costs the run one list append: nothing is serialised while the engine fires. A coalescing
+task (:meth:`LiveFeed.run`) wakes at most every ``period_s`` (20 ms: under one repaint of a 60 Hz
+screen and a bit), takes what piled up, and builds one *frame*: the marking's changes (the latest
+marking wins), the transitions fired since the last frame with their counts, the primitive
+actions started and ended, the learners that changed (probabilities, R̂, C, J per action), the run's
+state and the operator commands applied or refused. One JSON text per frame goes to every page.
+A run firing thousands of transitions a second thus sends ≤ 50 small frames a second.
+
+:func:`learner_view` is the learner panel's row data; :func:`result_json` one ended action.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import contextlib
+import json
+import logging
+import time
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from coordinator.events import (
+    ActionEnded,
+    ActionStarted,
+    LearnerUpdated,
+    OperatorApplied,
+    OperatorRefused,
+    PulseDelivered,
+    RunEvent,
+    RunStateChanged,
+    TransitionFired,
+)
+from coordinator.operator import OperatorCommand
+
+__all__ = ["DEFAULT_PERIOD_S", "LiveFeed", "learner_view", "result_json"]
+
+log = logging.getLogger("petrobot.web")
+
+#: Shortest time between two frames, seconds.
+DEFAULT_PERIOD_S = 0.02
+#: Shortest time between two looks at the nodes' health, seconds.
+HEALTH_PERIOD_S = 1.0
+#: Most action starts/ends, operator notes or pulses one frame lists (a burst beyond is counted).
+MAX_LISTED = 200
+
+
+def _round(value: float | None, digits: int = 6) -> float | None:
+    return None if value is None else round(float(value), digits)
+
+
+def learner_view(automaton: Any) -> dict[str, Any]:
+    """A learning automaton's state for the learner panel (section 4).
+
+    Args:
+        automaton: a :class:`coordinator.learning.LearningAutomaton` (``probabilities``,
+            ``estimates``, ``rho``, ``steps``, ``scheme``).
+
+    Returns:
+        ``{"scheme", "steps", "rho", "actions": [{"name", "p", "trials", "successes", "R", "C",
+        "J"}]}``: probability of choosing each action, its trials and successes, R̂ = successes /
+        trials, C its cost (a-priori or mean measured), J = 1 − R̂ + ρC (section 3); ``None`` where
+        nothing is known yet.
+    """
+    probabilities = automaton.probabilities
+    estimates = automaton.estimates
+    rows = []
+    for name, est in estimates.items():
+        rows.append({"name": name, "p": _round(probabilities.get(name)), "trials": est.trials,
+                     "successes": est.successes, "R": _round(est.reliability), "C": _round(est.cost),
+                     "J": _round(est.j)})
+    return {"scheme": automaton.scheme, "steps": automaton.steps, "rho": _round(automaton.rho), "actions": rows}
+
+
+def result_json(instance: str, task: str, action: str, node: str | None, result: Any, t_wall: float
+                ) -> dict[str, Any]:
+    """One ended primitive action, as frames and replays list it."""
+    return {"i": instance, "task": task, "action": action, "node": node, "status": result.status.value,
+            "outcome": result.outcome, "reason": result.reason, "wall_s": _round(result.wall_s), "t": t_wall}
+
+
+def _command_json(command: OperatorCommand | str) -> dict[str, Any]:
+    if isinstance(command, str):
+        return {"command": "invalid", "text": command}
+    return {"command": command.command.value, "place": command.place,
+            "count": command.count if command.place is not None else None}
+
+
+class LiveFeed:
+    """Coalesces one run's events into frames for the pages watching it.
+
+    Args:
+        runtime: the run (a :class:`coordinator.runtime.Runtime`): its engine's marking, running
+            actions and learner are read when a frame is built.
+        period_s: shortest time between two frames, seconds.
+        clock: wall clock, Unix seconds (frames carry the server's time).
+
+    Use: ``runtime.add_observer(feed)``, start ``feed.run()`` as a task, :meth:`subscribe` a sink
+    per page (called with each frame's JSON text; it must not block).
+    """
+
+    def __init__(self, runtime: Any, *, period_s: float = DEFAULT_PERIOD_S,
+                 clock: Callable[[], float] = time.time) -> None:
+        self.runtime = runtime
+        self.period_s = period_s
+        self.clock = clock
+        self._events: list[RunEvent] = []
+        self._wake = asyncio.Event()
+        self._sinks: list[Callable[[str], None]] = []
+        self._sent_marking: dict[str, int] = runtime.engine.marking.to_dict()
+        self._seq = 0
+        self._replies: dict[int, tuple[OperatorCommand, Callable[[bool, str], None]]] = {}
+        #: the run's state as its events tell it, with reason and detail
+        self.state: dict[str, Any] = {"state": "starting", "reason": "", "detail": []}
+        self.ended = False
+        self._learner: dict[str, dict[str, Any]] = {}
+        self._operator: collections.deque[dict[str, Any]] = collections.deque(maxlen=20)
+        self._errors: collections.deque[dict[str, Any]] = collections.deque(maxlen=20)
+        self._results: collections.deque[dict[str, Any]] = collections.deque(maxlen=40)
+        self._last_frame = 0.0
+        self._sent_nodes: dict[str, Any] = {}
+        self._health_at = 0.0
+
+    # ------------------------------------------------------------------ the observer
+    def __call__(self, event: RunEvent) -> None:
+        """Take one event (called by the runtime: one append, and a wake-up after a quiet spell)."""
+        self._events.append(event)
+        if len(self._events) == 1:
+            self._wake.set()
+
+    # ------------------------------------------------------------------ pages
+    def subscribe(self, sink: Callable[[str], None]) -> None:
+        """Send every later frame's JSON text to ``sink``."""
+        self._sinks.append(sink)
+
+    def unsubscribe(self, sink: Callable[[str], None]) -> None:
+        """Stop sending frames to ``sink``."""
+        with contextlib.suppress(ValueError):
+            self._sinks.remove(sink)
+
+    def expect_reply(self, command: OperatorCommand, reply: Callable[[bool, str], None]) -> None:
+        """Call ``reply(accepted, reason)`` when the runtime applies or refuses ``command`` (the
+        very object given to :meth:`Runtime.command`)."""
+        self._replies[id(command)] = (command, reply)
+
+    def nodes(self) -> dict[str, Any]:
+        """The nodes' health as the run's client reports it (``ServiceClient.health``): node →
+        ``{"connected", "heartbeat_rtt_s", "in_flight"}``; ``{}`` for a client that cannot say."""
+        health = getattr(self.runtime.client, "health", None)
+        if not callable(health):
+            return {}
+        try:
+            nodes = health()
+        except Exception:
+            log.exception("reading the nodes' health failed")
+            return {}
+        return {node: {**h, "heartbeat_rtt_s": _round(h.get("heartbeat_rtt_s"), 4)} for node, h in nodes.items()}
+
+    def snapshot(self) -> dict[str, Any]:
+        """The run as it stands, for a page that has just connected."""
+        runtime = self.runtime
+        engine = runtime.engine
+        now = self.clock()
+        running = [{"i": f.start.instance, "task": f.start.task, "place": f.start.place, "action": f.start.action,
+                    "node": f.node, "t": now - f.elapsed_s} for f in runtime.running()]
+        learner = runtime.learner
+        views = dict(self._learner)
+        if learner is not None:
+            for task in getattr(learner, "tasks", ()):
+                with contextlib.suppress(Exception):
+                    views[task] = learner_view(learner.automaton(task))
+        return {"run": runtime.run_id, "marking": engine.marking.to_dict(), "firings": engine.fired,
+                "paused": engine.paused, "state": self.state, "running": running, "latched": self._latched(),
+                "learner": views, "operator": list(self._operator), "errors": list(self._errors),
+                "results": list(self._results), "nodes": self.nodes(),
+                "server_time": now}
+
+    # ------------------------------------------------------------------ frames
+    def _latched(self) -> dict[str, list[list[Any]]]:
+        out: dict[str, list[list[Any]]] = {}
+        for inst in self.runtime.engine.ended_instances():
+            events = sorted(f"int:{inst.task}.{o}" for o in inst.outcomes)
+            out.setdefault(inst.place, []).append([inst.id, inst.action, events])
+        return out
+
+    def build_frame(self) -> dict[str, Any] | None:
+        """Take the events piled up since the last frame and return the next frame, or ``None``
+        when nothing changed."""
+        events, self._events = self._events, []
+        engine = self.runtime.engine
+        marking = engine.marking.to_dict()
+        changed = {p: n for p, n in marking.items() if self._sent_marking.get(p) != n}
+        changed.update({p: 0 for p in self._sent_marking if p not in marking})
+        nodes = None
+        now_mono = time.monotonic()
+        if now_mono - self._health_at >= HEALTH_PERIOD_S:
+            self._health_at = now_mono
+            looked = self.nodes()
+            if looked != self._sent_nodes:
+                nodes = self._sent_nodes = looked
+        if not events and not changed and nodes is None:
+            return None
+        self._sent_marking = marking
+        fired: collections.Counter[str] = collections.Counter()
+        t_first = t_last = None
+        started: list[dict[str, Any]] = []
+        ended: list[dict[str, Any]] = []
+        operator: list[dict[str, Any]] = []
+        pulses: collections.Counter[str] = collections.Counter()
+        learner_tasks: dict[str, Mapping[str, Any]] = {}
+        state = None
+        latched = False
+        for event in events:
+            if isinstance(event, TransitionFired):
+                fired[event.firing.transition] += 1
+                if t_first is None:
+                    t_first = event.t_wall
+                t_last = event.t_wall
+                latched = latched or bool(event.firing.instances)
+            elif isinstance(event, ActionStarted):
+                if len(started) < MAX_LISTED:
+                    started.append({"i": event.instance, "task": event.task, "place": event.place,
+                                    "action": event.action, "node": event.node, "t": event.t_wall})
+            elif isinstance(event, ActionEnded):
+                latched = True
+                item = result_json(event.instance, event.task, event.action, event.node, event.result, event.t_wall)
+                if len(ended) < MAX_LISTED:
+                    ended.append(item)
+                self._results.append(item)
+                if item["status"] == "error":
+                    self._errors.append(item)
+            elif isinstance(event, LearnerUpdated):
+                learner_tasks[event.task] = event.state
+            elif isinstance(event, (OperatorApplied, OperatorRefused)):
+                ok = isinstance(event, OperatorApplied)
+                reason = "" if ok else event.reason  # type: ignore[union-attr]
+                note = {**_command_json(event.command), "ok": ok, "reason": reason, "t": event.t_wall}
+                self._operator.append(note)
+                if len(operator) < MAX_LISTED:
+                    operator.append(note)
+                pending = self._replies.pop(id(event.command), None)
+                if pending is not None and pending[0] is event.command:
+                    with contextlib.suppress(Exception):
+                        pending[1](ok, reason)
+            elif isinstance(event, RunStateChanged):
+                state = {"state": event.state, "reason": event.reason, "detail": list(event.detail)}
+            elif isinstance(event, PulseDelivered):
+                pulses[event.event] += 1
+        if state is not None:
+            self.state = state
+        elif fired and self.state["state"] == "waiting":
+            self.state = {"state": "running", "reason": "", "detail": []}
+        frame: dict[str, Any] = {"type": "frame", "seq": self._seq + 1, "t": self.clock(), "firings": engine.fired,
+                                 "paused": engine.paused}
+        self._seq += 1
+        if changed:
+            frame["marking"] = changed
+        if fired:
+            frame["fired"] = dict(fired)
+            frame["t_fired"] = [t_first, t_last]
+        if started:
+            frame["started"] = started
+        if ended:
+            frame["ended"] = ended
+        if latched:
+            frame["latched"] = self._latched()
+        if learner_tasks:
+            frame["learner"] = {task: self._learner_of(task, state_dict) for task, state_dict in learner_tasks.items()}
+        if operator:
+            frame["operator"] = operator
+        if pulses:
+            frame["pulses"] = dict(pulses)
+        if nodes is not None:
+            frame["nodes"] = nodes
+        if state is not None or "state" not in frame:
+            frame["state"] = self.state
+        return frame
+
+    def _learner_of(self, task: str, state: Mapping[str, Any]) -> dict[str, Any]:
+        learner = self.runtime.learner
+        try:
+            view = learner_view(learner.automaton(task)) if learner is not None else None
+        except Exception:
+            view = None
+        if view is None:
+            from coordinator.learning.state import automaton_from_state
+
+            try:
+                view = learner_view(automaton_from_state(state))
+            except Exception:
+                view = {"scheme": state.get("scheme"), "steps": state.get("steps"), "rho": None, "actions": []}
+        self._learner[task] = view
+        return view
+
+    def flush(self) -> None:
+        """Build a frame now and send it to every page (when something changed)."""
+        frame = self.build_frame()
+        if frame is None:
+            return
+        self._last_frame = time.monotonic()
+        text = json.dumps(frame, separators=(",", ":"), default=str)
+        for sink in list(self._sinks):
+            try:
+                sink(text)
+            except Exception:  # a page that fails is dropped by its own handler; never the run
+                log.exception("a page's frame sink failed")
+        if self.state["state"] in _END_STATES:
+            self.ended = True
+
+    async def run(self) -> None:
+        """Coalesce and send frames until cancelled: a first event after a quiet spell goes out
+        at once, later ones at most every ``period_s``."""
+        while True:
+            # a quiet run still gets its nodes' health; asyncio.timeout, not wait_for, whose 3.11
+            # version can swallow the cancellation that stops this task
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(HEALTH_PERIOD_S):
+                    await self._wake.wait()
+            self._wake.clear()
+            wait = self._last_frame + self.period_s - time.monotonic()
+            if wait > 0:
+                await asyncio.sleep(wait)
+            try:
+                self.flush()
+            except Exception:
+                log.exception("building a frame failed")
+            if self._events:
+                self._wake.set()
+
+
+_END_STATES = frozenset({"completed", "stuck", "waiting_for_operator", "aborted", "deadline", "interrupted"})

@@ -1,0 +1,590 @@
+"""The web console's server: aiohttp on the coordinator's own event loop (paper section 5).
+
+:class:`ConsoleServer` serves the page (HTML, CSS, its scripts and the vendored libraries, all from
+the package: nothing comes from another site), a small JSON API (open a net file, list the runs of
+the journal, a run's timeline, export a drawing) and one WebSocket per page (:mod:`.protocol`):
+live frames of an attached run (:class:`~coordinator.web.frames.LiveFeed`), operator commands,
+validation, saving and analyses.
+
+Security (docs/console.md, "Security"):
+
+* control needs the per-server secret token (in the URL the server prints, like a notebook
+  server's); a page without it is read-only: it follows the run but its commands and saves are
+  refused, and it opens only the nets the console was started with;
+* every request's ``Host`` must name this server (127.0.0.1, localhost or [::1] with its port,
+  unless bound to another address with ``bind_any``): a DNS-rebinding page is refused;
+* a WebSocket's ``Origin``, when the client sends one (browsers always do), must be this page's;
+* every response carries a Content-Security-Policy allowing scripts from this server only, and
+  refuses framing, sniffing and referrers;
+* a malformed or hostile WebSocket message closes that socket with a reason; the run is not
+  touched. Each page has a bounded outbound queue: a page that cannot keep up gets a fresh
+  snapshot instead of an ever-growing backlog.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import collections
+import contextlib
+import hmac
+import ipaddress
+import json
+import logging
+import secrets
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from aiohttp import WSCloseCode, WSMsgType, web
+
+from coordinator.errors import JournalError
+from coordinator.operator import Command, OperatorCommand
+from coordinator.web.analysis import run_analysis
+from coordinator.web.draft import validate_draft
+from coordinator.web.files import (
+    FileRefused,
+    export_draft,
+    inside,
+    list_nets,
+    open_net,
+    save_draft,
+)
+from coordinator.web.frames import LiveFeed
+from coordinator.web.protocol import (
+    CLOSE_POLICY,
+    MAX_MESSAGE_BYTES,
+    PROTOCOL_VERSION,
+    ClientMessage,
+    ProtocolViolation,
+    parse_client_message,
+)
+
+__all__ = ["STATIC", "ConsoleConfig", "ConsoleServer", "is_loopback"]
+
+log = logging.getLogger("petrobot.web")
+
+#: The page's files (package data).
+STATIC = Path(__file__).resolve().parent / "static"
+
+CSP = ("default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; "
+       "connect-src 'self'; font-src 'self'; base-uri 'none'; form-action 'none'; frame-ancestors 'none'")
+"""Content-Security-Policy of every response: scripts, styles and connections from this server only."""
+
+#: Frames and messages waiting for one page before it is resynchronised with a snapshot instead.
+MAX_QUEUE = 64
+#: Most messages a page may send in :data:`RATE_WINDOW_S` seconds.
+MAX_MESSAGES = 600
+RATE_WINDOW_S = 10.0
+
+
+def is_loopback(host: str) -> bool:
+    """Whether ``host`` (an address or ``localhost``) is a loopback address."""
+    if host in ("localhost", ""):
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+@dataclass
+class ConsoleConfig:
+    """What a console serves.
+
+    Attributes:
+        root: folder the page may open and save net files in.
+        nets: net files opened at the start (any reader may view these).
+        journal: the journal replays and ``perf``/``learn`` read, or ``None``.
+        location: the parsed ``services.toml`` placement is checked against, or ``None``.
+        host, port: where to listen (port 0: any free port).
+        bind_any: allow a host that is not a loopback address.
+        token: the secret that gives control; a fresh random one when ``None``.
+        period_s: shortest time between two live frames, seconds.
+    """
+
+    root: Path = field(default_factory=Path.cwd)
+    nets: list[Path] = field(default_factory=list)
+    journal: Path | None = None
+    location: Any = None
+    host: str = "127.0.0.1"
+    port: int = 0
+    bind_any: bool = False
+    token: str | None = None
+    period_s: float = 0.02
+
+
+class ConsoleServer:
+    """The console: start it, print :attr:`url`, attach a run, close it.
+
+    Raises:
+        ValueError: the host is not a loopback address and ``bind_any`` is not set.
+    """
+
+    def __init__(self, config: ConsoleConfig) -> None:
+        if not config.bind_any and not is_loopback(config.host):
+            raise ValueError(f"{config.host} is not a loopback address: binding to it exposes the console "
+                             "to the network; pass --bind-any to do so anyway")
+        self.config = config
+        self.token = config.token or secrets.token_urlsafe(24)
+        self.root = config.root.resolve()
+        self.pages: set[_Page] = set()
+        self.feed: LiveFeed | None = None
+        self.runtime: Any = None
+        self.live_net: dict[str, Any] | None = None
+        self._feed_task: asyncio.Task[None] | None = None
+        self._runner: web.AppRunner | None = None
+        self.port = 0
+        self._preloaded = {self._shown(p): p for p in config.nets}
+        self.app = self._make_app()
+
+    # ------------------------------------------------------------------ life cycle
+    def _shown(self, path: Path) -> str:
+        try:
+            return str(path.resolve().relative_to(self.root))
+        except ValueError:
+            return str(path)
+
+    @property
+    def url(self) -> str:
+        """The address to open, with the control token."""
+        host = self.config.host
+        shown = "127.0.0.1" if host in ("", "0.0.0.0") else f"[{host}]" if ":" in host and not host.startswith("[") \
+            else host
+        return f"http://{shown}:{self.port}/?token={self.token}"
+
+    async def start(self) -> str:
+        """Listen; return :attr:`url`.
+
+        Raises:
+            OSError: the address cannot be bound.
+        """
+        self._runner = web.AppRunner(self.app, access_log=None, handle_signals=False, shutdown_timeout=1.0)
+        await self._runner.setup()
+        site = web.TCPSite(self._runner, self.config.host, self.config.port)
+        await site.start()
+        addresses = self._runner.addresses  # the bound socket tells the port chosen for port 0
+        self.port = int(addresses[0][1]) if addresses else self.config.port
+        return self.url
+
+    async def close(self, reason: str = "the console is closing") -> None:
+        """Say goodbye to every page, close their sockets and stop listening."""
+        if self.feed is not None:
+            with contextlib.suppress(Exception):
+                self.feed.flush()
+        for page in list(self.pages):
+            await page.close(WSCloseCode.GOING_AWAY, reason, bye=True)
+        if self._feed_task is not None:
+            self._feed_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._feed_task
+        if self.runtime is not None and self.feed is not None:
+            self.runtime.remove_observer(self.feed)
+        if self._runner is not None:
+            await self._runner.cleanup()
+
+    def attach_run(self, runtime: Any, net_path: Path | None = None) -> LiveFeed:
+        """Follow a run (a :class:`coordinator.runtime.Runtime`, before or after it starts): its events
+        go to the pages as frames, and pages with the token steer it."""
+        self.runtime = runtime
+        self.feed = LiveFeed(runtime, period_s=self.config.period_s)
+        runtime.add_observer(self.feed)
+        self._feed_task = asyncio.get_running_loop().create_task(self.feed.run(), name="console-frames")
+        net = None
+        if net_path is not None:
+            with contextlib.suppress(FileRefused):
+                net = open_net(net_path, self.config.location, shown_as=self._shown(net_path))
+        if net is None:
+            from coordinator.web.draft import draft_of_net
+            from coordinator.web.files import with_layout
+
+            draft = with_layout(draft_of_net(runtime.net))
+            net = {"path": runtime.net.name, "name": runtime.net.name, "draft": draft,
+                   "validation": validate_draft(draft, runtime.net.name, self.config.location).to_json(),
+                   "laid_out": True}
+        self.live_net = net
+        for page in list(self.pages):
+            page.subscribe_live()
+            page.send({"type": "run", "live": self.feed.snapshot(), "net": net})
+        return self.feed
+
+    # ------------------------------------------------------------------ the app
+    def _make_app(self) -> web.Application:
+        app = web.Application(middlewares=[self._guard], client_max_size=MAX_MESSAGE_BYTES)
+        app.router.add_get("/", self._index)
+        app.router.add_get("/ws", self._websocket)
+        app.router.add_get("/api/nets", self._api_nets)
+        app.router.add_get("/api/net", self._api_net)
+        app.router.add_get("/api/runs", self._api_runs)
+        app.router.add_get("/api/replay", self._api_replay)
+        app.router.add_post("/api/export", self._api_export)
+        app.router.add_static("/static/", STATIC, follow_symlinks=False, show_index=False)
+        return app
+
+    def allowed_hosts(self) -> set[str]:
+        """``Host`` header values naming this server."""
+        port = self.port
+        hosts = {f"127.0.0.1:{port}", f"localhost:{port}", f"[::1]:{port}"}
+        host = self.config.host
+        if host not in ("", "0.0.0.0", "::"):
+            hosts.add(f"[{host}]:{port}" if ":" in host and not host.startswith("[") else f"{host}:{port}")
+        return hosts
+
+    def has_token(self, given: str | None) -> bool:
+        """Whether ``given`` is the control token (compared in constant time)."""
+        return given is not None and hmac.compare_digest(given.encode(), self.token.encode())
+
+    @web.middleware
+    async def _guard(self, request: web.Request, handler: Callable[[web.Request], Awaitable[web.StreamResponse]]
+                     ) -> web.StreamResponse:
+        host = request.headers.get("Host", "")
+        if not self.config.bind_any and host not in self.allowed_hosts():
+            return self._secure(web.Response(status=421, text="this console answers to its own address only"))
+        try:
+            response = await handler(request)
+        except web.HTTPException as exc:  # 404s and the like carry the headers too
+            self._secure(exc)
+            raise
+        return self._secure(response)
+
+    @staticmethod
+    def _secure(response: web.StreamResponse) -> web.StreamResponse:
+        if not response.prepared:
+            headers = response.headers
+            headers["Content-Security-Policy"] = CSP
+            headers["X-Content-Type-Options"] = "nosniff"
+            headers["Referrer-Policy"] = "no-referrer"
+            headers["X-Frame-Options"] = "DENY"
+            headers["Cache-Control"] = "no-store"
+        return response
+
+    async def _index(self, request: web.Request) -> web.StreamResponse:
+        return web.FileResponse(STATIC / "index.html")
+
+    def _error(self, status: int, text: str) -> web.Response:
+        return web.json_response({"error": text}, status=status)
+
+    def _control(self, request: web.Request) -> bool:
+        return self.has_token(request.headers.get("X-Petrobot-Token"))
+
+    async def _api_nets(self, request: web.Request) -> web.StreamResponse:
+        opened = list(self._preloaded)
+        files = await asyncio.to_thread(list_nets, self.root) if self._control(request) else []
+        return web.json_response({"opened": opened, "files": files, "root": str(self.root),
+                                  "journal": self._shown(self.config.journal) if self.config.journal else None})
+
+    async def _api_net(self, request: web.Request) -> web.StreamResponse:
+        path = request.query.get("path", "")
+        target = self._preloaded.get(path)
+        if target is None:
+            if not self._control(request):
+                return self._error(403, "read-only console: only the nets it was started with can be opened "
+                                        "(open the URL with its token)")
+            try:
+                target = inside(self.root, path)
+            except FileRefused as exc:
+                return self._error(400, str(exc))
+        try:
+            net = await asyncio.to_thread(open_net, target, self.config.location, shown_as=self._shown(target))
+        except FileRefused as exc:
+            return self._error(400, str(exc))
+        return web.json_response(net)
+
+    def _journal(self) -> Path | None:
+        if self.config.journal is not None:
+            return self.config.journal
+        journal = getattr(self.runtime, "journal", None)
+        path = getattr(journal, "path", None)
+        return Path(path) if path and path != ":memory:" else None
+
+    async def _api_runs(self, request: web.Request) -> web.StreamResponse:
+        from coordinator.journal import JournalReader
+        from coordinator.web.replay import runs_json
+
+        path = self._journal()
+        if path is None:
+            return web.json_response({"journal": None, "runs": []})
+
+        def read() -> list[dict[str, Any]]:
+            with JournalReader.open(path) as reader:
+                return runs_json(reader)
+        try:
+            runs = await asyncio.to_thread(read)
+        except JournalError as exc:
+            return self._error(400, str(exc))
+        live = getattr(self.runtime, "run_id", None)
+        return web.json_response({"journal": self._shown(path), "runs": runs, "live": live})
+
+    async def _api_replay(self, request: web.Request) -> web.StreamResponse:
+        from coordinator.journal import JournalReader
+        from coordinator.web.replay import replay_json
+
+        path = self._journal()
+        run = request.query.get("run", "")
+        if path is None:
+            return self._error(404, "no journal: start the console with --journal FILE")
+        fallback = self.live_net["draft"] if self.live_net else None
+
+        def read() -> dict[str, Any]:
+            with JournalReader.open(path) as reader:
+                found = run
+                if run == "last":
+                    runs = reader.runs()
+                    if not runs:
+                        raise JournalError(f"{path}: no runs")
+                    found = runs[-1].id
+                opened = fallback
+                if opened is None:
+                    row = reader.run(found)
+                    for shown, p in self._preloaded.items():
+                        with contextlib.suppress(Exception):
+                            candidate = open_net(p, None, shown_as=shown)
+                            if candidate["draft"].get("net", {}).get("name", p.stem) == row.net_name:
+                                opened = candidate["draft"]
+                                break
+                return replay_json(reader, found, fallback=opened)
+        try:
+            data = await asyncio.to_thread(read)
+        except JournalError as exc:
+            return self._error(404, str(exc))
+        if data["draft"] is not None:
+            from coordinator.web.files import with_layout
+
+            if self.live_net is not None and data["draft"].get("net", {}).get("name") == \
+                    self.live_net["draft"].get("net", {}).get("name"):
+                data["draft"] = self.live_net["draft"]
+            else:
+                data["draft"] = await asyncio.to_thread(with_layout, data["draft"])
+        return web.json_response(data)
+
+    async def _api_export(self, request: web.Request) -> web.StreamResponse:
+        fmt = request.query.get("format", "toml")
+        try:
+            body = await request.text()
+            draft = parse_client_message(json.dumps({"type": "validate", "id": 0, "draft": json.loads(body)}))
+        except (ValueError, ProtocolViolation) as exc:
+            return self._error(400, f"not a drawing: {exc}")
+        hidden = request.query.get("hidden", "1") != "0"
+        try:
+            text, media = await asyncio.to_thread(export_draft, draft.fields["draft"], fmt, hidden=hidden)
+        except FileRefused as exc:
+            return self._error(400, str(exc))
+        return web.Response(text=text, content_type=media, charset="utf-8")
+
+    async def _websocket(self, request: web.Request) -> web.StreamResponse:
+        origin = request.headers.get("Origin")
+        if origin is not None and origin != f"http://{request.headers.get('Host', '')}":
+            return web.Response(status=403, text="cross-origin WebSocket refused")
+        # aiohttp's own limit sits above the protocol's, so that an oversized message is closed here, with a
+        # reason; beyond aiohttp's limit it closes the socket itself (code 1009)
+        ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES + (1 << 20), compress=False, heartbeat=30.0)
+        await ws.prepare(request)
+        page = _Page(self, ws)
+        self.pages.add(page)
+        try:
+            await page.serve()
+        finally:
+            self.pages.discard(page)
+            page.stop()
+        return ws
+
+    # ------------------------------------------------------------------ what a page learns first
+    def welcome(self, control: bool) -> dict[str, Any]:
+        return {"type": "welcome", "v": PROTOCOL_VERSION, "control": control, "server_time": time.time(),
+                "nets": list(self._preloaded), "journal": self._shown(self._journal()) if self._journal() else None,
+                "services": self.config.location is not None,
+                "live": self.feed.snapshot() if self.feed is not None else None,
+                "net": self.live_net if self.feed is not None else None}
+
+
+class _Page:
+    """One page's WebSocket: its reading loop, its bounded outbound queue and sender task."""
+
+    def __init__(self, server: ConsoleServer, ws: web.WebSocketResponse) -> None:
+        self.server = server
+        self.ws = ws
+        self.control = False
+        self.greeted = False
+        self._frames: collections.deque[str] = collections.deque()
+        self._replies: collections.deque[str] = collections.deque()
+        self._resync = False
+        self._ready = asyncio.Event()
+        self._sender: asyncio.Task[None] | None = None
+        self._tasks: set[asyncio.Task[Any]] = set()
+        self._recent: collections.deque[float] = collections.deque()
+        self._closing = False
+        self._live = False
+
+    # ------------------------------------------------------------------ outbound
+    def send(self, message: dict[str, Any]) -> None:
+        """Queue a message (never dropped)."""
+        self._replies.append(json.dumps(message, separators=(",", ":"), default=str))
+        self._ready.set()
+
+    def offer_frame(self, text: str) -> None:
+        """Queue a live frame; past :data:`MAX_QUEUE` waiting, drop them all for one snapshot."""
+        if len(self._frames) >= MAX_QUEUE:
+            self._frames.clear()
+            self._resync = True
+        else:
+            self._frames.append(text)
+        self._ready.set()
+
+    def subscribe_live(self) -> None:
+        if not self._live and self.server.feed is not None:
+            self._live = True
+            self.server.feed.subscribe(self.offer_frame)
+
+    async def _send_loop(self) -> None:
+        ws = self.ws
+        while not ws.closed:
+            await self._ready.wait()
+            self._ready.clear()
+            while (self._replies or self._frames or self._resync) and not ws.closed:
+                if self._replies:
+                    text = self._replies.popleft()
+                elif self._resync and self.server.feed is not None:
+                    self._resync = False
+                    self._frames.clear()
+                    text = json.dumps({"type": "snapshot", **self.server.feed.snapshot()}, separators=(",", ":"),
+                                      default=str)
+                elif self._frames:
+                    text = self._frames.popleft()
+                else:
+                    self._resync = False
+                    continue
+                try:
+                    await ws.send_str(text)
+                except (ConnectionError, RuntimeError):
+                    return
+
+    # ------------------------------------------------------------------ inbound
+    async def serve(self) -> None:
+        self._sender = asyncio.get_running_loop().create_task(self._send_loop())
+        async for msg in self.ws:
+            if msg.type == WSMsgType.TEXT:
+                data = msg.data
+                if len(data.encode("utf-8")) > MAX_MESSAGE_BYTES:
+                    await self.close(1009, f"message larger than {MAX_MESSAGE_BYTES} bytes")
+                    break
+                try:
+                    self._count()
+                    await self.handle(parse_client_message(data))
+                except ProtocolViolation as exc:
+                    log.info("closing a console WebSocket: %s", exc.reason)
+                    await self.close(exc.code, exc.reason)
+                    break
+            elif msg.type == WSMsgType.BINARY:
+                await self.close(CLOSE_POLICY, "binary frames are not part of the protocol")
+                break
+            elif msg.type == WSMsgType.ERROR:
+                break
+
+    def _count(self) -> None:
+        now = time.monotonic()
+        self._recent.append(now)
+        while self._recent and self._recent[0] < now - RATE_WINDOW_S:
+            self._recent.popleft()
+        if len(self._recent) > MAX_MESSAGES:
+            raise ProtocolViolation(f"more than {MAX_MESSAGES} messages in {RATE_WINDOW_S:g} s")
+
+    async def close(self, code: int, reason: str, *, bye: bool = False) -> None:
+        if self._closing:
+            return
+        self._closing = True
+        if bye and not self.ws.closed:
+            with contextlib.suppress(Exception):
+                await self.ws.send_str(json.dumps({"type": "bye", "reason": reason}))
+        with contextlib.suppress(Exception):
+            await self.ws.close(code=code, message=reason.encode("utf-8")[:123])
+
+    def stop(self) -> None:
+        if self.server.feed is not None:
+            self.server.feed.unsubscribe(self.offer_frame)
+        for task in (self._sender, *self._tasks):
+            if task is not None:
+                task.cancel()
+
+    def _spawn(self, coro: Awaitable[Any]) -> None:
+        task = asyncio.ensure_future(coro)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    def reply(self, msg: ClientMessage, **fields: Any) -> None:
+        self.send({"type": "reply", "id": msg.id, "to": msg.type, **fields})
+
+    async def handle(self, msg: ClientMessage) -> None:
+        server = self.server
+        if msg.type == "hello":
+            if self.greeted:
+                raise ProtocolViolation("hello twice")
+            self.greeted = True
+            self.control = server.has_token(msg.fields["token"])
+            self.send(server.welcome(self.control))
+            self.subscribe_live()
+            return
+        if not self.greeted:
+            raise ProtocolViolation("the first message must be hello")
+        if msg.type == "ping":
+            self.reply(msg, ok=True, t=msg.fields["t"], server_time=time.time())
+        elif msg.type == "command":
+            self._command(msg)
+        elif msg.type == "validate":
+            result = await asyncio.to_thread(validate_draft, msg.fields["draft"], "drawing.toml", server.config.location)
+            self.reply(msg, ok=True, validation=result.to_json())
+        elif msg.type == "save":
+            await self._save(msg)
+        elif msg.type == "analyze":
+            if not self.control:
+                self.reply(msg, ok=False, reason=_READ_ONLY)
+            elif any(not t.done() for t in self._tasks):
+                self.reply(msg, ok=False, reason="an analysis is already running")
+            else:
+                self._spawn(self._analyze(msg))
+
+    def _command(self, msg: ClientMessage) -> None:
+        server = self.server
+        if not self.control:
+            self.reply(msg, ok=False, reason=_READ_ONLY)
+            return
+        if server.runtime is None or server.feed is None:
+            self.reply(msg, ok=False, reason="no run is attached to this console (petrobot run NET --console PORT)")
+            return
+        if server.feed.ended:
+            self.reply(msg, ok=False, reason=f"the run has ended ({server.feed.state['state']})")
+            return
+        f = msg.fields
+        command = OperatorCommand(f["command"], f.get("place"), f.get("count", 1)) \
+            if f["command"] in (Command.INSERT, Command.REMOVE) else OperatorCommand(f["command"])
+        server.feed.expect_reply(command, lambda ok, reason: self.reply(msg, ok=ok, reason=reason,
+                                                                       command=str(command)))
+        server.runtime.command(command)
+
+    async def _save(self, msg: ClientMessage) -> None:
+        server = self.server
+        if not self.control:
+            self.reply(msg, ok=False, reason=_READ_ONLY)
+            return
+        try:
+            target = inside(server.root, msg.fields["path"], suffixes=(".toml", ".pnml"))
+            saved = await asyncio.to_thread(save_draft, msg.fields["draft"], target, server.config.location)
+        except FileRefused as exc:
+            self.reply(msg, ok=False, reason=str(exc))
+            return
+        saved["path"] = server._shown(Path(saved["path"]))
+        self.reply(msg, ok=True, **saved)
+
+    async def _analyze(self, msg: ClientMessage) -> None:
+        server = self.server
+        journal = server._journal()
+        try:
+            report = await run_analysis(msg.fields["kind"], msg.fields["draft"], journal=str(journal) if journal else None,
+                                        run=msg.fields.get("run"), cwd=server.root)
+        except Exception as exc:  # an analysis that cannot start is reported, never raised into the loop
+            self.reply(msg, ok=False, reason=f"{type(exc).__name__}: {exc}")
+            return
+        self.reply(msg, ok=True, report=report)
+
+
+_READ_ONLY = "read-only: this page was opened without the console's token (open the URL petrobot printed)"

@@ -1,0 +1,347 @@
+// The console page: modes (design, live, replay), the connection, files, and the glue between panels.
+
+import { Graph, nextLabelMode } from "./graph.js";
+import { History, clone, emptyDraft, findNode } from "./net.js";
+import { initEditor } from "./editor.js";
+import { initLive } from "./live.js";
+import { initReplay } from "./replay.js";
+import { initAnalysis, renderProblems } from "./panels.js";
+import { Link, api } from "./ws.js";
+import { el } from "./ui.js";
+
+const params = new URLSearchParams(location.search);
+const token = params.get("token");
+
+const app = {
+  token, control: false, mode: "design", servicesKnown: false, validation: null,
+  design: { draft: null, path: null, history: new History(), dirty: false },
+  liveNet: null, replayDraft: null, journal: null, nets: [],
+};
+window.petrobot = app;  // for the browser tests and bench/console.py
+
+app.graph = new Graph(document.getElementById("cy"));
+
+// ------------------------------------------------------------------ messages
+let messageTimer = null;
+app.message = (text, kind = "") => {
+  const m = document.getElementById("message");
+  m.textContent = text;
+  m.className = "message " + kind;
+  clearTimeout(messageTimer);
+  messageTimer = setTimeout(() => { if (m.textContent === text) { m.textContent = ""; m.className = "message"; } }, 9000);
+};
+app.hint = (text) => { document.getElementById("hint").textContent = text; };
+
+// ------------------------------------------------------------------ drafts and modes
+app.currentDraft = () => (app.mode === "design" ? app.design.draft : app.mode === "live" ? app.liveNet?.draft : app.replayDraft);
+
+function redraw({ fit = false } = {}) {
+  const draft = app.currentDraft();
+  if (!draft) { app.graph.sync(emptyDraft()); return; }
+  const marking = app.mode === "live" && app.live ? { ...app.live.marking } : null;
+  app.graph.sync(draft, { marking, fit });
+  if (app.mode === "design") app.graph.setBadges(new Map());
+  else if (app.mode === "live") liveView.paint(false);
+  else app.replaySeek && app.replaySeek();
+  document.getElementById("net-name").textContent = draft.net?.name || "untitled";
+}
+app.redraw = redraw;
+
+app.setMode = (mode) => {
+  if (mode === "live" && !app.liveNet) return;
+  const changed = mode !== app.mode;
+  app.mode = mode;
+  document.body.classList.remove("mode-design", "mode-live", "mode-replay");
+  document.body.classList.add(`mode-${mode}`);
+  document.querySelectorAll("#modes .mode").forEach((b) => b.classList.toggle("active", b.dataset.mode === mode));
+  if (mode !== "design") editor.setTool("select");
+  redraw({ fit: changed });
+  if (changed) app.selectTab(mode === "design" ? "inspect" : mode === "live" ? "run" : "timeline");
+  if (mode === "replay" && !app.replay.data) app.loadRuns();
+  if (mode === "live") liveView.renderPanels();
+  editor.renderInspector();
+  editor.renderTasks();
+  analysis.render();
+  if (mode === "design") { document.getElementById("run-state").textContent = "design"; document.getElementById("run-state").className = "run-state"; document.getElementById("firings").textContent = ""; }
+};
+
+app.selectTab = (name) => {
+  document.querySelectorAll("#tabs .tab").forEach((b) => b.classList.toggle("active", b.dataset.tab === name));
+  document.querySelectorAll("#side .panel").forEach((p) => p.classList.toggle("active", p.id === `panel-${name}`));
+  if (name === "timeline" && !app.replay.runs.length) app.loadRuns();
+};
+document.querySelectorAll("#tabs .tab").forEach((b) => b.addEventListener("click", () => app.selectTab(b.dataset.tab)));
+document.querySelectorAll("#modes .mode").forEach((b) => b.addEventListener("click", () => app.setMode(b.dataset.mode)));
+
+/** Change the current draft: fn(draft) edits it in place (return false to cancel). */
+app.edit = (fn, { structural = true } = {}) => {
+  const draft = app.currentDraft();
+  if (!draft) return;
+  if (structural && app.mode !== "design") { app.message("switch to Design to change the net"); return; }
+  const before = clone(draft);
+  if (fn(draft) === false) return;
+  if (app.mode === "design") { app.design.history.record(before); app.design.dirty = true; }
+  redraw();
+  if (structural) { editor.renderInspector(); editor.renderTasks(); }
+  validateSoon();
+  updateButtons();
+};
+
+app.undo = () => {
+  if (app.mode !== "design") return;
+  const prev = app.design.history.undo(app.design.draft);
+  if (!prev) { app.message("nothing to undo"); return; }
+  app.design.draft = prev;
+  afterReplace();
+};
+app.redo = () => {
+  if (app.mode !== "design") return;
+  const next = app.design.history.redo(app.design.draft);
+  if (!next) { app.message("nothing to redo"); return; }
+  app.design.draft = next;
+  afterReplace();
+};
+function afterReplace() {
+  app.graph.cy.elements().unselect();
+  redraw();
+  editor.renderInspector();
+  editor.renderTasks();
+  validateSoon();
+  updateButtons();
+}
+
+function updateButtons() {
+  document.getElementById("undo").disabled = !app.design.history.canUndo;
+  document.getElementById("redo").disabled = !app.design.history.canRedo;
+  document.getElementById("save").disabled = !app.control;
+  document.getElementById("save").title = app.control ? "save to the net file (Ctrl+S)" : "read-only: saving needs the console's token";
+  document.querySelector('#modes [data-mode="live"]').disabled = !app.liveNet;
+  document.querySelector('#modes [data-mode="replay"]').disabled = !app.journal;
+}
+
+// ------------------------------------------------------------------ validation (server side: one implementation)
+let validateTimer = null;
+let validating = false;
+let again = false;
+function validateSoon(delay = 250) {
+  clearTimeout(validateTimer);
+  validateTimer = setTimeout(validate, delay);
+}
+async function validate() {
+  const draft = app.currentDraft();
+  if (!draft || !app.link.open) return;
+  if (validating) { again = true; return; }
+  validating = true;
+  const reply = await app.link.request("validate", { draft });
+  validating = false;
+  if (reply.ok) {
+    app.validation = reply.validation;
+    renderProblems(app);
+    editor.renderTasks();
+    document.body.dataset.checked = String(Date.now());
+  }
+  if (again) { again = false; validate(); }
+}
+app.validate = validate;
+
+app.focus = (problem) => {
+  const cy = app.graph.cy;
+  if (!problem.id) return;
+  let target = cy.getElementById(problem.id);
+  if (target.empty()) target = cy.getElementById("arc:" + problem.id);
+  if (problem.kind === "task") { app.selectTab("tasks"); return; }
+  if (target.nonempty()) {
+    cy.elements().unselect();
+    target.select();
+    cy.animate({ center: { eles: target }, duration: 200 });
+    app.selectTab("inspect");
+  }
+};
+
+// ------------------------------------------------------------------ files
+app.openNet = async (path) => {
+  let net;
+  try { net = await api(`/api/net?path=${encodeURIComponent(path)}`, token); }
+  catch (e) { app.message(String(e.message || e), "bad"); return; }
+  app.design = { draft: net.draft, path: net.path, history: new History(), dirty: false };
+  app.validation = net.validation;
+  app.setMode("design");
+  redraw({ fit: true });
+  renderProblems(app);
+  editor.renderInspector();
+  editor.renderTasks();
+  updateButtons();
+  app.message(`opened ${net.path}${net.laid_out ? " (no positions in the file: laid out automatically)" : ""}`);
+  markReady();
+};
+
+function dialog(id) {
+  const d = document.getElementById(id);
+  d.querySelectorAll("[data-close]").forEach((b) => { b.onclick = () => d.close(); });
+  d.showModal();
+  return d;
+}
+
+document.getElementById("open").addEventListener("click", async () => {
+  const d = dialog("open-dialog");
+  const list = document.getElementById("open-list");
+  const input = document.getElementById("open-path");
+  list.replaceChildren(el("li", { class: "small" }, "..."));
+  let data = { opened: app.nets, files: [] };
+  try { data = await api("/api/nets", token); } catch (e) { /* the opened nets still show */ }
+  const files = [...new Set([...data.opened, ...data.files])];
+  list.replaceChildren(...files.map((f) => {
+    const li = el("li", {}, f);
+    li.addEventListener("click", () => { input.value = f; list.querySelectorAll("li").forEach((x) => x.classList.toggle("sel", x === li)); });
+    li.addEventListener("dblclick", () => { d.close(); app.openNet(f); });
+    return li;
+  }));
+  if (!app.control) list.append(el("li", { class: "small" }, "read-only: only the nets the console was started with"));
+  document.getElementById("open-go").onclick = () => { d.close(); if (input.value.trim()) app.openNet(input.value.trim()); };
+});
+
+app.save = async (path = null) => {
+  if (!app.control) { app.message("read-only: saving needs the console's token", "bad"); return; }
+  const draft = app.currentDraft();
+  if (!draft) return;
+  const current = app.mode === "design" ? app.design.path : app.mode === "live" ? app.liveNet?.path : null;
+  if (!path) {
+    const d = dialog("save-dialog");
+    const input = document.getElementById("save-path");
+    input.value = current && /\.(toml|pnml)$/.test(current) ? current : `${draft.net.name || "untitled"}.toml`;
+    document.getElementById("save-note").textContent = app.validation && app.validation.problems.length
+      ? `the net has ${app.validation.problems.length} problem(s): it is saved as drawn, in TOML` : "";
+    document.getElementById("save-go").onclick = () => { d.close(); app.save(input.value.trim()); };
+    input.focus();
+    return;
+  }
+  const reply = await app.link.request("save", { path, draft });
+  if (!reply.ok) { app.message(`not saved: ${reply.reason}`, "bad"); return; }
+  if (app.mode === "design") { app.design.path = reply.path; app.design.dirty = false; }
+  app.validation = reply.validation;
+  renderProblems(app);
+  const n = reply.validation.problems.length;
+  app.message(`saved ${reply.path}${n ? ` with ${n} problem${n === 1 ? "" : "s"}` : ": petrobot check finds no problem"}`, n ? "bad" : "ok");
+  document.body.dataset.saved = reply.path;
+};
+document.getElementById("save").addEventListener("click", () => app.save());
+
+document.getElementById("new").addEventListener("click", () => {
+  app.design = { draft: emptyDraft(), path: null, history: new History(), dirty: false };
+  app.validation = null;
+  app.setMode("design");
+  renderProblems(app);
+  validateSoon(0);
+  updateButtons();
+});
+
+document.getElementById("export").addEventListener("click", () => {
+  const d = dialog("export-dialog");
+  for (const fmt of ["toml", "pnml", "dot", "png"]) {
+    document.getElementById(`exp-${fmt}`).onclick = async () => {
+      d.close();
+      const draft = app.currentDraft();
+      if (!draft) return;
+      const name = draft.net.name || "net";
+      if (fmt === "png") { download(app.graph.png(), `${name}.png`); return; }
+      try {
+        const text = await api(`/api/export?format=${fmt}&hidden=${app.graph.showHidden ? 1 : 0}`, token,
+                               { method: "POST", body: draft, text: true });
+        download(URL.createObjectURL(new Blob([text], { type: "text/plain" })), `${name}.${fmt}`);
+      } catch (e) { app.message(`export: ${e.message || e}`, "bad"); }
+    };
+  }
+});
+
+function download(href, name) {
+  const a = el("a", { href, download: name });
+  document.body.append(a);
+  a.click();
+  a.remove();
+}
+
+document.getElementById("toggle-hidden").addEventListener("click", (ev) => {
+  app.graph.setShowHidden(!app.graph.showHidden);
+  ev.currentTarget.classList.toggle("on", !app.graph.showHidden);
+  app.message(app.graph.showHidden ? "error-recovery branches shown" : "error-recovery branches hidden");
+});
+document.getElementById("labels").addEventListener("click", () => {
+  app.graph.labelMode = nextLabelMode(app.graph.labelMode);
+  redraw();
+  app.message({ events: "transitions labelled with their events", both: "transitions labelled with their events and names",
+                names: "transitions labelled with their names" }[app.graph.labelMode]);
+});
+document.getElementById("fit").addEventListener("click", () => app.graph.fit());
+document.getElementById("tidy").addEventListener("click", async () => {
+  const n = app.graph.cy.nodes().length;
+  if (n > 400) { app.message("Tidy lays out nets of up to 400 elements; this one keeps its layout", "bad"); return; }
+  const positions = await app.graph.tidy();
+  app.edit((d) => {
+    for (const [id, xy] of Object.entries(positions)) { const node = findNode(d, id); if (node) node.item.pos = xy; }
+  }, { structural: false });
+});
+
+function markReady() {
+  requestAnimationFrame(() => requestAnimationFrame(() => {
+    document.body.dataset.ready = "1";
+    window.petrobotReadyAt = performance.now();
+  }));
+}
+
+// ------------------------------------------------------------------ the connection
+const editor = initEditor(app);
+const liveView = initLive(app);
+initReplay(app);
+const analysis = initAnalysis(app);
+
+app.link = new Link(token, {
+  onOpen() {
+    const l = document.getElementById("link");
+    l.textContent = "connected"; l.className = "link up";
+  },
+  onClose(reason, final) {
+    const l = document.getElementById("link");
+    l.textContent = final ? "closed" : "reconnecting"; l.className = "link down";
+    app.message(reason, final ? "" : "bad");
+    document.body.dataset.closed = reason;
+  },
+  welcome(msg) {
+    app.control = msg.control;
+    app.nets = msg.nets;
+    app.journal = msg.journal;
+    app.servicesKnown = msg.services;
+    const access = document.getElementById("access");
+    access.textContent = msg.control ? "control" : "read-only";
+    access.className = "access" + (msg.control ? " control" : "");
+    access.title = msg.control ? "this page may steer the run and save files" : "opened without the console's token: the page follows but cannot steer or save";
+    updateButtons();
+    if (msg.live && msg.net) {
+      startLive(msg.live, msg.net);
+    } else if (!app.design.draft) {
+      if (msg.nets.length) app.openNet(msg.nets[0]);
+      else { app.design.draft = emptyDraft(); app.setMode("design"); validateSoon(0); markReady(); }
+    }
+    analysis.render();
+  },
+  run(msg) { startLive(msg.live, msg.net); },
+  frame(msg) { liveView.onFrame(msg); },
+  snapshot(msg) { liveView.load(msg); },
+  health(msg) { liveView.setHealth(msg); },
+  bye(msg) { app.message(msg.reason); },
+});
+
+function startLive(snapshot, net) {
+  app.liveNet = net;
+  if (!app.design.draft) { app.design = { draft: clone(net.draft), path: net.path, history: new History(), dirty: false }; }
+  app.validation = net.validation;
+  liveView.load(snapshot);
+  updateButtons();
+  app.setMode("live");
+  renderProblems(app);
+  markReady();
+}
+
+app.setMode("design");
+app.selectTab("inspect");
+app.link.connect();
+updateButtons();
