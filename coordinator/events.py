@@ -20,6 +20,7 @@ from services.results import ActionResult, Status
 
 __all__ = [
     "ActionEnded",
+    "ActionFeedback",
     "ActionStarted",
     "CallReconciled",
     "LearnerUpdated",
@@ -103,6 +104,25 @@ class ActionEnded:
 
 
 @dataclass(frozen=True, slots=True)
+class ActionFeedback:
+    """A running primitive action sent feedback (progress, an estimate) through its node.
+
+    Not journaled: feedback is for the operator's eyes (paper section 5); results are what count.
+
+    Attributes:
+        instance, task, action: the running call (``instance`` is the call id).
+        data: the feedback as the action sent it (msgpack-decoded: maps, lists, numbers, strings).
+    """
+
+    run: str
+    instance: str
+    task: str
+    action: str
+    data: Any
+    t_wall: float = field(default_factory=_now)
+
+
+@dataclass(frozen=True, slots=True)
 class CallReconciled:
     """A node told, afterwards, the fate of a call the runtime had given up on (already journaled).
 
@@ -180,8 +200,8 @@ class LearnerUpdated:
     t_wall: float = field(default_factory=_now)
 
 
-RunEvent = (RunStateChanged | TransitionFired | ActionStarted | ActionEnded | CallReconciled | PulseDelivered
-            | OperatorApplied | OperatorRefused | LearnerUpdated)
+RunEvent = (RunStateChanged | TransitionFired | ActionStarted | ActionFeedback | ActionEnded | CallReconciled
+            | PulseDelivered | OperatorApplied | OperatorRefused | LearnerUpdated)
 """Any event of a run."""
 
 Observer = Callable[[RunEvent], None]

@@ -47,6 +47,7 @@ from coordinator.engine.rest import at_rest, home_marking, work_places
 from coordinator.errors import EngineError
 from coordinator.events import (
     ActionEnded,
+    ActionFeedback,
     ActionStarted,
     CallReconciled,
     LearnerUpdated,
@@ -635,13 +636,21 @@ class Runtime:
     async def _call(self, start: StartAction) -> None:
         try:
             result: ActionResult = await self.client.call(start.action, dict(start.params), call_id=start.instance,
-                                                          deadline_s=start.deadline_s)
+                                                          deadline_s=start.deadline_s,
+                                                          on_feedback=self._feedback_to_observers(start))
         except asyncio.CancelledError:
             raise
         except Exception as exc:  # a configuration error (action not placed): an error status
             result = ActionResult.error(f"{type(exc).__name__}: {exc}")
         self._inbox.append(_Completed(start.instance, result))
         self._wake.set()
+
+    def _feedback_to_observers(self, start: StartAction) -> Callable[[Any], None]:
+        """The call's feedback callback: each feedback becomes an :class:`ActionFeedback` event."""
+        def feedback(data: Any) -> None:
+            if start.instance in self._inflight:
+                self._emit(ActionFeedback(self.run_id, start.instance, start.task, start.action, data))
+        return feedback
 
     def _on_result(self, instance: str, result: ActionResult) -> None:
         flight = self._inflight.pop(instance, None)

@@ -25,6 +25,7 @@ from typing import Any
 
 from coordinator.events import (
     ActionEnded,
+    ActionFeedback,
     ActionStarted,
     LearnerUpdated,
     OperatorApplied,
@@ -36,7 +37,7 @@ from coordinator.events import (
 )
 from coordinator.operator import OperatorCommand
 
-__all__ = ["DEFAULT_PERIOD_S", "LiveFeed", "learner_view", "result_json"]
+__all__ = ["DEFAULT_PERIOD_S", "FEEDBACK_CHARS", "LiveFeed", "feedback_text", "learner_view", "result_json"]
 
 log = logging.getLogger("petrobot.web")
 
@@ -46,6 +47,17 @@ DEFAULT_PERIOD_S = 0.02
 HEALTH_PERIOD_S = 1.0
 #: Most action starts/ends, operator notes or pulses one frame lists (a burst beyond is counted).
 MAX_LISTED = 200
+#: Feedback shown per running action: its JSON text, cut to this many characters.
+FEEDBACK_CHARS = 160
+
+
+def feedback_text(data: Any) -> str:
+    """A running action's feedback as short text for the page (JSON, cut to :data:`FEEDBACK_CHARS`)."""
+    try:
+        text = data if isinstance(data, str) else json.dumps(data, default=repr, separators=(", ", ": "))
+    except (TypeError, ValueError):
+        text = repr(data)
+    return text if len(text) <= FEEDBACK_CHARS else text[:FEEDBACK_CHARS - 1] + "\u2026"
 
 
 def _round(value: float | None, digits: int = 6) -> float | None:
@@ -208,6 +220,7 @@ class LiveFeed:
         t_first = t_last = None
         started: list[dict[str, Any]] = []
         ended: list[dict[str, Any]] = []
+        feedback: dict[str, str] = {}
         operator: list[dict[str, Any]] = []
         pulses: collections.Counter[str] = collections.Counter()
         learner_tasks: dict[str, Mapping[str, Any]] = {}
@@ -224,7 +237,11 @@ class LiveFeed:
                 if len(started) < MAX_LISTED:
                     started.append({"i": event.instance, "task": event.task, "place": event.place,
                                     "action": event.action, "node": event.node, "t": event.t_wall})
+            elif isinstance(event, ActionFeedback):
+                if event.instance in feedback or len(feedback) < MAX_LISTED:
+                    feedback[event.instance] = feedback_text(event.data)  # the latest per action wins
             elif isinstance(event, ActionEnded):
+                feedback.pop(event.instance, None)
                 latched = True
                 item = result_json(event.instance, event.task, event.action, event.node, event.result, event.t_wall)
                 if len(ended) < MAX_LISTED:
@@ -265,6 +282,8 @@ class LiveFeed:
             frame["started"] = started
         if ended:
             frame["ended"] = ended
+        if feedback:
+            frame["feedback"] = feedback
         if latched:
             frame["latched"] = self._latched()
         if learner_tasks:

@@ -34,11 +34,14 @@ class FakeClient:
         results: action → its result, or a function of the call's params giving it.
         blocking: actions whose calls wait until :meth:`release` or a cancel.
         topics: external event topics that can be subscribed to (others raise LocationError).
+        feedback: feedback data each action sends (in order) before its result.
     """
 
     def __init__(self, results: dict[str, ActionResult | Callable[[dict[str, Any]], ActionResult]] | None = None,
-                 *, blocking: set[str] = frozenset(), topics: set[str] = frozenset()) -> None:
+                 *, blocking: set[str] = frozenset(), topics: set[str] = frozenset(),
+                 feedback: dict[str, list[Any]] | None = None) -> None:
         self.results = dict(results or {})
+        self.feedback = dict(feedback or {})
         self.blocking = set(blocking)
         self.location = FakeLocation(set(self.results) | self.blocking)
         self.topics = set(topics)
@@ -48,9 +51,12 @@ class FakeClient:
         self._held: dict[str, asyncio.Future[ActionResult]] = {}
         self.started = asyncio.Event()
 
-    async def call(self, action: str, params: dict[str, Any], *, call_id: str, deadline_s: float | None = None
-                   ) -> ActionResult:
+    async def call(self, action: str, params: dict[str, Any], *, call_id: str, deadline_s: float | None = None,
+                   on_feedback: Callable[[Any], None] | None = None) -> ActionResult:
         self.calls.append((action, call_id))
+        if on_feedback is not None and action in self.feedback:
+            for data in self.feedback[action]:
+                on_feedback(data)
         self.started.set()
         if action in self.blocking:
             future: asyncio.Future[ActionResult] = asyncio.get_running_loop().create_future()

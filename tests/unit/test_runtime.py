@@ -273,6 +273,21 @@ async def test_abort_cancels_the_running_actions_and_ends_the_run(tmp_path: Path
     assert result.status == "error" and "cancelled" in (result.reason or "")
 
 
+async def test_feedback_of_a_running_action_reaches_the_observers_as_events(tmp_path: Path):
+    from coordinator.events import ActionEnded, ActionFeedback
+
+    client = FakeClient({"act": ActionResult.success()}, feedback={"act": [{"progress": 0.5}, {"progress": 1.0}]})
+    seen: list[RunEvent] = []
+    with Journal(tmp_path / "j.sqlite") as journal:
+        runtime = Runtime(tasks(), client, journal, observer=seen.append)
+        await asyncio.wait_for(runtime.run(max_seconds=30), TIMEOUT_S)
+    feedback = [e for e in seen if isinstance(e, ActionFeedback)]
+    assert [e.data for e in feedback][:2] == [{"progress": 0.5}, {"progress": 1.0}]
+    assert feedback[0].task and feedback[0].action == "act"
+    ended = next(i for i, e in enumerate(seen) if isinstance(e, ActionEnded))
+    assert seen.index(feedback[0]) < ended
+
+
 # ---------------------------------------------------------------------- waiting and coming to rest
 @pytest.mark.parametrize("gate, hold, command", [
     (0, 0, OperatorCommand(Command.INSERT, "gate", 1)),
@@ -450,8 +465,8 @@ async def test_a_resumed_run_counts_the_results_before_its_interruption_in_its_s
     though the run's first call had succeeded before Ctrl-C."""
 
     class SucceedsThenHolds(FakeClient):
-        async def call(self, action: str, params: dict[str, Any], *, call_id: str, deadline_s: float | None = None
-                       ) -> ActionResult:
+        async def call(self, action: str, params: dict[str, Any], *, call_id: str, deadline_s: float | None = None,
+                       on_feedback: Any = None) -> ActionResult:
             if not self.calls:
                 self.calls.append((action, call_id))
                 return ActionResult(status=Status.SUCCESS, wall_s=0.5)

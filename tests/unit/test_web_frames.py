@@ -110,6 +110,29 @@ async def test_actions_latched_events_and_learners_travel_in_frames(tmp_path: Pa
     assert feed.snapshot()["errors"][0]["reason"] == "node down"
 
 
+async def test_the_latest_feedback_of_each_running_action_travels_in_frames_cut_to_size(tmp_path: Path):
+    from coordinator.events import ActionFeedback
+    from coordinator.web.frames import FEEDBACK_CHARS
+
+    net = loads_net(TASKS.replace("RUNS", "1").replace("ACTION", "echo") + RECOVER)
+    with Journal(tmp_path / "j.sqlite") as journal:
+        runtime = Runtime(net, FakeClient({"echo": ActionResult.success()}), journal)
+        feed = LiveFeed(runtime)
+        sent = frames_of(feed)
+        feed(ActionStarted(runtime.run_id, "r-1", "work", "working", "echo", "fake"))
+        feed(ActionFeedback(runtime.run_id, "r-1", "work", "echo", {"progress": 0.25}))
+        feed(ActionFeedback(runtime.run_id, "r-1", "work", "echo", {"progress": 0.5}))
+        feed.flush()
+        feed(ActionFeedback(runtime.run_id, "r-1", "work", "echo", {"log": "x" * 1000}))
+        feed.flush()
+        feed(ActionFeedback(runtime.run_id, "r-1", "work", "echo", {"progress": 1.0}))
+        feed(ActionEnded(runtime.run_id, "r-1", "work", "echo", "fake", ActionResult.success()))
+        feed.flush()
+    assert sent[0]["feedback"] == {"r-1": '{"progress": 0.5}'}  # the latest wins
+    assert len(sent[1]["feedback"]["r-1"]) == FEEDBACK_CHARS
+    assert "feedback" not in sent[2] and sent[2]["ended"][0]["i"] == "r-1"  # ended: no stale feedback
+
+
 def test_the_learner_view_gives_the_automatons_own_estimates():
     net = loads_net(TASKS.replace("RUNS", "1").replace('actions = ["ACTION"]', """actions = [
     { name = "fast", cost = 1.0 }, { name = "slow", cost = 3.0 },

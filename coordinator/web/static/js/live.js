@@ -73,6 +73,7 @@ export function initLive(app) {
       if (f.marking) Object.assign(changed, f.marking);
       if (f.fired) { for (const t of Object.keys(f.fired)) fired.add(t); if (oldest === null) oldest = f.t_fired[0]; }
       for (const s of f.started || []) live.running.set(s.i, s);
+      for (const [i, text] of Object.entries(f.feedback || {})) { const r = live.running.get(i); if (r) r.feedback = text; }
       for (const r of f.ended || []) {
         live.running.delete(r.i);
         live.results.push(r);
@@ -97,7 +98,7 @@ export function initLive(app) {
       if (fired.size) app.graph.flash(fired);
       // badges and panels only when actions started, ended or latched: a run firing thousands of
       // transitions a second repaints tokens and flashes, not the whole drawing's decorations
-      const detail = frames.some((f) => f.started || f.ended || f.latched);
+      const detail = frames.some((f) => f.started || f.ended || f.latched || f.feedback);
       if (detail) paintDetails(true); else header();
       const fresh = frames.find((f) => f.learner || f.operator || f.state || f.nodes);
       if (fresh) renderPanelsSoon(true);
@@ -120,7 +121,8 @@ export function initLive(app) {
     const now = nowServer();
     for (const r of live.running.values()) {
       const prev = map.get(r.place);
-      const line = `\u25B6 ${r.action} @ ${r.node || "not placed"}  ${seconds(Math.max(0, now - r.t))}`;
+      const line = `\u25B6 ${r.action} @ ${r.node || "not placed"}  ${seconds(Math.max(0, now - r.t))}` +
+        (r.feedback ? `\n  ${r.feedback.length > 48 ? r.feedback.slice(0, 47) + "\u2026" : r.feedback}` : "");
       map.set(r.place, { text: prev ? `${prev.text}\n${line}` : line, latched: false });
     }
     for (const [place, items] of Object.entries(live.latched)) {
@@ -202,11 +204,12 @@ export function initLive(app) {
     panel.append(el("h4", {}, "running primitive actions"));
     if (!live.running.size) panel.append(el("p", { class: "empty" }, "none"));
     else {
-      const t = el("table", { class: "grid" }, el("tr", {}, ...["task", "action", "node", "elapsed"].map((h) => el("th", {}, h))));
+      const t = el("table", { class: "grid" }, el("tr", {}, ...["task", "action", "node", "elapsed", "feedback"].map((h) => el("th", {}, h))));
       const now = nowServer();
       for (const r of live.running.values()) {
         t.append(el("tr", {}, el("td", {}, r.task), el("td", { class: "mono" }, r.action),
-          el("td", {}, r.node || el("span", { class: "unplaced" }, "not placed")), el("td", { class: "num" }, seconds(now - r.t))));
+          el("td", {}, r.node || el("span", { class: "unplaced" }, "not placed")), el("td", { class: "num" }, seconds(now - r.t)),
+          el("td", { class: "small mono feedback" }, r.feedback || "")));
       }
       panel.append(t);
     }
