@@ -48,6 +48,14 @@ everything.
                catching set points to the motion node over TCP; motion node: catch and move home
                over the CAN drives. A 4-run experiment by default (--runs). While it runs, type
                "+ runs_remaining", "- runs_remaining", "pause", "step", "resume" or "abort".
+  mobile       the paper's Figs. 2-3: a differential-drive robot follows a track on a chessboard
+               floor, crosses interruptions guided by a beacon and stops on the T mark
+               (nets/courses/fig2.toml by default, --course). Perception node: follow the track
+               (three alternative detectors, chosen by the learner), find and approach the beacon,
+               reacquire the track, stop at the T, streaming steering set points to the drive node,
+               which drives the wheels over the CAN bus and stops them if the set points stop.
+               Prints a report (completion, time, speed, cross-track error, interruptions, stop
+               error, per-task statistics) and writes a top view of the driven path.
   foundation   nets/demo.toml: sense on node alpha, compute on alpha or beta, three runs.
 
 Every firing, action start and result goes to the journal. Without --journal each demo starts a
@@ -61,7 +69,7 @@ def add_parser(subparsers: Any) -> None:
     """Register ``demo`` on the ``petrobot`` sub-command parser."""
     p = subparsers.add_parser("demo", help="run a demonstration on localhost (sim + nodes + coordinator)",
                               description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("which", nargs="?", default="catching", choices=["catching", "foundation"],
+    p.add_argument("which", nargs="?", default="catching", choices=["catching", "mobile", "foundation"],
                    help="which demonstration (default: %(default)s)")
     p.add_argument("--runs", type=int, default=None,
                    help="tokens in runs_remaining at the start (default: the net's own, 4 for catching)")
@@ -71,6 +79,11 @@ def add_parser(subparsers: Any) -> None:
     options.add_seed(p, help="seed of the thrower, random switches and learners")
     p.add_argument("--renderer", choices=["tiny", "analytic"], default="tiny",
                    help="camera back end: pybullet's TinyRenderer (default) or the fast analytic one")
+    p.add_argument("--course", default=None,
+                   help="mobile: course file (default nets/courses/fig2.toml)")
+    p.add_argument("--net", default=None, help="mobile: task net (default nets/mobile.toml)")
+    p.add_argument("--noise", choices=["default", "noisy", "scuffed", "harsh", "clean"], default="default",
+                   help="mobile: image condition of the downward camera (default: default)")
     options.add_key_file(p)
     options.add_max_seconds(p, default=300.0)
     options.add_view(p)
@@ -98,16 +111,17 @@ def journal_for(given: str | None, default: str) -> Path:
 
 
 class SimWorld:
-    """The ``petrobot sim catching`` process, its JSON event lines read by a thread.
+    """The ``petrobot sim WORLD`` process, its JSON event lines read by a thread.
 
     Args:
-        args: command-line arguments after ``sim catching``.
+        args: command-line arguments after ``sim WORLD``.
         log: file for the simulator's stderr (log lines, warnings), or ``None`` to drop them.
+        world: ``catching`` or ``mobile``.
     """
 
-    def __init__(self, args: list[str], log: Path | None = None) -> None:
+    def __init__(self, args: list[str], log: Path | None = None, world: str = "catching") -> None:
         self._log = open(log, "w") if log is not None else None  # noqa: SIM115 (kept open for the process, closed by stop())
-        self.proc = subprocess.Popen([sys.executable, "-m", "coordinator.commands.sim", "catching", *args],
+        self.proc = subprocess.Popen([sys.executable, "-m", "coordinator.commands.sim", world, *args],
                                      cwd=ROOT, stdout=subprocess.PIPE,
                                      stderr=self._log if self._log is not None else subprocess.DEVNULL, text=True)
         self.events: list[dict[str, Any]] = []
@@ -253,7 +267,9 @@ def run(args: argparse.Namespace) -> int:
     import asyncio
     import signal
 
-    demo = _catching if args.which == "catching" else _foundation
+    from coordinator.mobile_demo import run_mobile
+
+    demo = {"catching": _catching, "mobile": run_mobile}.get(args.which, _foundation)
     signal.signal(signal.SIGTERM, _terminate)
     try:
         return asyncio.run(demo(args))
