@@ -4,7 +4,8 @@ Starts the world (``petrobot sim mobile``: the course, the robot, the downward c
 beacon sensor, the wheel drives on the CAN bus), the nodes services.toml places the net's actions
 on (``perception``, ``drive``), and runs the course's task net (``nets/mobile.toml``, or ``--net``)
 with the live token flow; then prints the report and writes a top-view PNG of the course with the
-driven path beside the journal.
+driven path beside the journal, and the world's JSON event lines (ground truth: ``pose`` every 0.1 s of
+simulated time, each stamped with the wall clock it was read at, ``t_wall``) as ``*.truth.jsonl``.
 
 The report comes from :mod:`sim.mobile.report` (``render_report``, ``write_top_view``) when that
 module is present; otherwise :func:`basic_report` gives the numbers this module measures itself
@@ -16,6 +17,7 @@ relative to the T mark, and per-primitive-task statistics.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import sys
 from collections import defaultdict
@@ -167,6 +169,8 @@ async def run_mobile(args: argparse.Namespace) -> int:
     finally:
         sim.stop()
     poses = [e for e in sim.events if e.get("event") == "pose"]
+    truth = journal_path.with_suffix(".truth.jsonl")
+    truth.write_text("".join(json.dumps(e) + "\n" for e in sim.events), encoding="utf-8")
     print(summary.format())
     png = journal_path.with_suffix(".png")
     report: str | None = None
@@ -185,5 +189,6 @@ async def run_mobile(args: argparse.Namespace) -> int:
     for st in (e for e in sim.events if e.get("event") == "stopped"):
         print(f"simulator: {st['t']:.1f} s simulated in {st['wall_s']:.1f} s ({st['slipped_s']:.1f} s slipped); "
               f"{st['drive_faults']} drive fault(s)")
-    print(f"journal: {journal_path}; logs: {logs}/" + (f"; top view: {png}" if png.exists() else ""))
+    print(f"journal: {journal_path}; logs: {logs}/; ground truth: {truth}"
+          + (f"; top view: {png}" if png.exists() else ""))
     return summary.exit_code

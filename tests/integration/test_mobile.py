@@ -1,0 +1,166 @@
+"""The mobile robot end to end across processes: the world (``petrobot sim mobile``), the perception
+node, the drive node and the coordinator (``petrobot demo mobile``), on 127.0.0.1, in real time on a
+short course (a straight, a blank square, a straight, the T).
+
+The course net is the minimal sequential net ``tests/data/mobile_min.toml`` (the same primitive tasks,
+actions and outcomes as ``nets/mobile.toml``). Ground truth comes from the world's ``pose`` lines, which
+the demo writes beside the journal (``*.truth.jsonl``)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(300)]
+
+ROOT = Path(__file__).resolve().parents[2]
+NET = ROOT / "tests" / "data" / "mobile_min.toml"
+COURSE = ROOT / "tests" / "data" / "course_short.toml"
+
+SERVICES = """
+[nodes.perception]
+host = "127.0.0.1"
+port = {port[perception]}
+
+[nodes.drive]
+host = "127.0.0.1"
+port = {port[drive]}
+
+[drivers.mobile_camera]
+node = "perception"
+impl = "services.actions.mobile:PerceptionDriver"
+params = {{ port = {port[camera]} }}
+
+[actions.follow_centroid]
+node = "perception"
+impl = "services.actions.mobile:FollowCentroid"
+
+[actions.follow_ransac]
+node = "perception"
+impl = "services.actions.mobile:FollowRansac"
+
+[actions.follow_scanline]
+node = "perception"
+impl = "services.actions.mobile:FollowScanline"
+
+[actions.find_beacon]
+node = "perception"
+impl = "services.actions.mobile:FindBeaconAction"
+
+[actions.goto_beacon]
+node = "perception"
+impl = "services.actions.mobile:GotoBeaconAction"
+
+[actions.reacquire_track]
+node = "perception"
+impl = "services.actions.mobile:ReacquireTrackAction"
+
+[actions.stop_at_t]
+node = "perception"
+impl = "services.actions.mobile:StopAtTAction"
+
+[drivers.wheels]
+node = "drive"
+impl = "services.actions.mobile:DriveDriver"
+params = {{ can_port = {port[can]} }}
+
+[actions.stop_robot]
+node = "drive"
+impl = "services.actions.mobile:StopRobot"
+"""
+
+WATCHDOG_STALE_S = 0.25
+RAMP_STOP_S = 0.8 / 2.0  # 0.8 m/s on the drives' 2 m/s² ramp
+POSE_PERIOD_S = 0.1
+
+
+def demo(cluster: Any, tmp_path: Path) -> subprocess.Popen[str]:
+    cluster.write_services(SERVICES)
+    cmd = [sys.executable, "-m", "coordinator.cli", "demo", "mobile", "--renderer", "analytic",
+           "--course", str(COURSE), "--net", str(NET), "--services", str(cluster.services_path),
+           "--journal", str(tmp_path / "j.sqlite"), "--key-file", str(cluster.key_file), "--lines",
+           "--max-seconds", "200"]
+    return subprocess.Popen(cmd, cwd=ROOT, env=cluster.env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, stdin=subprocess.DEVNULL)
+
+
+def rows(path: Path, sql: str) -> list[tuple[Any, ...]]:
+    with sqlite3.connect(path) as db:
+        return db.execute(sql).fetchall()
+
+
+def truth(tmp_path: Path) -> list[dict[str, Any]]:
+    lines = (tmp_path / "j.truth.jsonl").read_text().splitlines()
+    return [json.loads(x) for x in lines if x.startswith("{")]
+
+
+def test_a_short_course_with_one_interruption_is_completed_across_processes(cluster: Any, tmp_path: Path):
+    proc = demo(cluster, tmp_path)
+    out, _ = proc.communicate(timeout=250)
+    assert proc.returncode == 0, out
+    assert "course completed" in out, out
+    journal = tmp_path / "j.sqlite"
+    results = rows(journal, "SELECT task, node, status, outcome FROM action_result ORDER BY rowid")
+    assert [(t, s, o) for t, _, s, o in results] == [
+        ("follow_track", "success", "interruption"), ("find_beacon", "success", "found"),
+        ("goto_beacon", "success", None), ("reacquire_track", "success", None),
+        ("follow_track", "success", "end"), ("stop_at_t", "success", None)], out
+    assert {n for _, n, _, _ in results} == {"perception"}
+    poses = [e for e in truth(tmp_path) if e["event"] == "pose"]
+    x, y = poses[-1]["x"], poses[-1]["y"]
+    assert math.hypot(x - 7.0, y - 1.0) < 0.1, (x, y)  # stopped on the T mark (ground truth)
+    on_track = [abs(p["offset"]) for p in poses if p["tile"] is not None and not p["blank"]]
+    assert max(on_track) < 0.03, max(on_track)
+
+
+def test_killing_the_perception_node_mid_course_stops_the_robot_within_the_watchdog_bound_and_takes_the_error_branch(
+        cluster: Any, tmp_path: Path):
+    proc = demo(cluster, tmp_path)
+    assert proc.stdout is not None
+    lines: list[str] = []
+    end = time.monotonic() + 150
+    for line in proc.stdout:
+        lines.append(line)
+        if "start follow_track -> follow_ransac on perception" in line:
+            break
+        assert time.monotonic() < end, "".join(lines)
+    time.sleep(1.3)  # the robot is at cruise speed on the first straight
+    found = subprocess.run(["pgrep", "-f", f"services.node perception --services {cluster.services_path}"],
+                           capture_output=True, text=True)
+    pids = [int(p) for p in found.stdout.split()]
+    assert pids, "".join(lines)
+    t_kill = time.time()
+    for pid in pids:
+        os.kill(pid, signal.SIGKILL)
+    rest, _ = proc.communicate(timeout=150)
+    out = "".join(lines) + rest
+    journal = tmp_path / "j.sqlite"
+    follow = rows(journal, "SELECT status FROM action_result WHERE task='follow_track'")
+    assert follow == [("error",)], out
+    fired = [t for (t,) in rows(journal, "SELECT transition FROM firing ORDER BY seq")]
+    assert "follow_failed" in fired, out
+    assert fired[-1] == "robot_stopped", out  # the error branch brakes the robot and ends the run
+    stop = rows(journal, "SELECT status FROM action_result WHERE task='stop_robot'")
+    assert stop == [("success",)], out
+    poses = [e for e in truth(tmp_path) if e["event"] == "pose"]
+    before = [p for p in poses if p["t_wall"] <= t_kill]
+    assert before and before[-1]["v"] > 0.5, before[-3:]  # it was driving when the node died
+    t_kill_sim = before[-1]["t"]
+    rest_poses = [p for p in poses if p["t"] > t_kill_sim and p["v"] < 0.01]
+    assert rest_poses, poses[-5:]
+    stopped_after = rest_poses[0]["t"] - t_kill_sim
+    # watchdog: stale after 0.25 s, then the ramp; plus one ground-truth period on each side
+    bound = WATCHDOG_STALE_S + RAMP_STOP_S + 2 * POSE_PERIOD_S
+    assert stopped_after <= bound, (stopped_after, bound)
+    print(f"robot at rest {stopped_after:.2f} s of simulated time after the perception node was killed "
+          f"(bound {bound:.2f} s)")
