@@ -248,8 +248,7 @@ class FollowTrack:
         if self.gap.update(False, pose.s):
             if m.last_line is None:
                 return Step(m.stop(t), "lost", False, "no track seen")
-            lp, ln = m.last_line
-            off = ln.lateral_at(p.look_ahead)
+            off = m.last_line[1].lateral_at(p.look_ahead)
             if abs(off) > LOST_OFFSET:
                 return Step(m.stop(t), "lost", False,
                             f"track slid out of view ({off * 1000:+.0f} mm off at the look-ahead when last seen)")

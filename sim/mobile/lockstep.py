@@ -125,9 +125,7 @@ class TaskSequence:
         kind, task = self._kind, self._task
         if kind == "follow_track":
             step = task.step(t, pose, image)
-        elif kind == "find_beacon":
-            step = task.step(t, pose, beacons)
-        elif kind == "goto_beacon":
+        elif kind == "find_beacon" or kind == "goto_beacon":
             step = task.step(t, pose, beacons)
         elif kind == "reacquire_track":
             step = task.step(t, pose, image, beacons)

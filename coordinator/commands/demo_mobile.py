@@ -30,7 +30,7 @@ from services.results import Status
 
 __all__ = ["MobileRunLog", "basic_report", "run_mobile"]
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 KINDS = {"S": "straight", "L": "arc", "R": "arc", "E": "end"}
 
 
@@ -59,8 +59,9 @@ def _stop_pose(poses: list[dict[str, Any]]) -> tuple[float, float, float] | None
 
 def basic_report(course: Any, poses: list[dict[str, Any]], log: MobileRunLog, final: dict[str, int]) -> str:
     """The demo's report from ground truth and the run's events (see the module docstring)."""
-    lines = ["", f"mobile robot on course {course.name} ({course.length:.1f} m, "
-             f"{sum(t.blank for t in course.tiles)} interruptions)"]
+    head = (f"mobile robot on course {course.name} ({course.length:.1f} m, "
+            f"{sum(t.blank for t in course.tiles)} interruptions)")
+    lines = ["", head]
     completed = final.get("completed_runs", final.get("completed", 0)) > 0
     moving = [p for p in poses if (p.get("v") or 0.0) > 0.02]
     t0 = float(moving[0]["t"]) if moving else math.nan
@@ -112,7 +113,7 @@ async def run_mobile(args: argparse.Namespace) -> int:
     """The mobile demo (see the module docstring); returns the run's exit code."""
     import asyncio
 
-    from coordinator.commands.demo import SimWorld, journal_for
+    from coordinator.commands.simworld import SimWorld, journal_for
     from coordinator.console import Console
     from coordinator.journal import Journal
     from coordinator.netfile import load_net
@@ -175,7 +176,9 @@ async def run_mobile(args: argparse.Namespace) -> int:
     png = journal_path.with_suffix(".png")
     report: str | None = None
     try:
-        from sim.mobile import report as course_report  # the course report module, when present
+        from sim.mobile import (
+            report as course_report,  # the course report module, when present
+        )
     except ImportError:
         course_report = None  # type: ignore[assignment]
     path = [(float(p["t"]), float(p["x"]), float(p["y"]), float(p["heading"])) for p in poses]
