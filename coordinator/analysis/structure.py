@@ -27,6 +27,11 @@ component, so it can fire infinitely often; L4 live — t labels an edge in ever
 (a component no edge leaves), so from every reachable marking t can still fire. The net is
 reversible iff the graph is strongly connected; the home states are the states of the terminal
 component when there is exactly one.
+
+Length: about 700 lines because :func:`analyse` is one decision procedure (graph, then LP bounds,
+then invariants, then coverability, each step deciding what the previous one left open) and its
+result types and graph passes are read together with it; the LP, invariants, siphons and the
+search live in their own modules.
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ from typing import Any
 from coordinator.commands import options
 from services.errors import PetrobotError
 
-__all__ = ["SimWorld", "add_parser", "run"]
+__all__ = ["SimWorld", "add_parser", "journal_for", "run"]
 
 ROOT = Path(__file__).resolve().parents[2]
 

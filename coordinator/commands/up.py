@@ -19,7 +19,7 @@ from typing import Any
 from coordinator.commands import options
 from services.errors import PetrobotError
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "missing_devices", "run"]
 
 DESCRIPTION = """\
 Start nodes of the location file as subprocesses on this machine and stay in the foreground until

@@ -8,6 +8,7 @@ bad MAC); it never opens without a valid MAC and never buffers more than one cap
 from __future__ import annotations
 
 import itertools
+import math
 import struct
 from typing import Any
 
@@ -140,3 +141,30 @@ def test_an_open_connection_survives_any_map_or_closes_with_a_remote_error(body:
     for side in (server, client):
         side.receive_data(data)
         drain(side)
+
+
+SETPOINT_FIELDS = ["seq", "t_frame", "t_capture", "t_sent", "x", "y", "t", "vx", "vy", "sigma_y", "sigma_t"]
+setpoint_maps = st.one_of(
+    values,
+    st.dictionaries(st.sampled_from(SETPOINT_FIELDS + ["extra"]), scalars, max_size=12),
+    st.fixed_dictionaries({f: st.one_of(st.floats(allow_nan=True, allow_infinity=True),
+                                         st.integers(min_value=-(2**64), max_value=2**64))
+                           for f in SETPOINT_FIELDS}),
+)
+
+
+@FUZZ
+@given(maps=st.lists(setpoint_maps, min_size=1, max_size=6))
+def test_any_received_set_point_map_is_taken_with_finite_fields_or_counted_as_malformed(maps: list[Any]) -> None:
+    from services.stream import LatestSetPoint
+
+    latest = LatestSetPoint(max_age=0.2)
+    for i, data in enumerate(maps):
+        before = latest.latest
+        sp = latest.offer_data(data, now=float(i))
+        if sp is None:
+            assert latest.latest is before
+        else:
+            assert latest.latest is sp and 0 <= sp.seq < 2**63
+            assert all(math.isfinite(getattr(sp, f)) for f in SETPOINT_FIELDS[1:])
+    assert latest.received == len(maps)
