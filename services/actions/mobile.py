@@ -18,12 +18,15 @@ action                primitive task       outcomes (``int:<task>.<outcome>``)
 ``stop_at_t``         ``stop_at_t``        success (``ok``), error
 ====================  ===================  ========================================================
 
-A follow action's value: ``{detector, frames, seen, distance_m, cross_track_proxy_m, note,
+A follow action's value: ``{detector, frames, seen, dropouts, distance_m, cross_track_proxy_m, note,
 setpoints}`` (``cross_track_proxy_m``: RMS of the detected line's lateral offset at the camera's view
 centre, the node's own measure of how well it followed; the world's ground truth is the
-simulator's); its cost is the CPU time of its image processing, s. It is a success when it ended
-with ``interruption`` or ``end`` (the specification: the segment ended with a correct outcome and the
-detector did not lose the track); ``lost`` is a failure.
+simulator's); its cost is the CPU time of its image processing, s. **Specification**
+(:meth:`services.mobile.tasks.FollowTrack.judge`): the segment ended with ``interruption`` or ``end``
+and the detector lost the track at most ``max_dropouts`` times (param, default 0) on the way — a
+loss shorter than the 6 cm gap after which the track was seen again, so it was there all along.
+Within it the action is a success; otherwise a failure *with the same outcome* (the net branches on
+the outcome, the learner counts the failure); ``lost`` is a failure.
 
 Every action ends ``error`` when the camera is lost (no frame for ``frame_timeout_s``, 1 s), when the
 drive node's odometry stops (none for ``odometry_timeout_s``, 1 s: node dead, link cut), when the
@@ -298,6 +301,10 @@ class _Streaming(PrimitiveAction):
     def value(self, task: Any) -> dict[str, Any]:
         return {}
 
+    def judge(self, task: Any, step: Step, params: dict[str, Any]) -> tuple[bool, str]:
+        """Whether the ended task met its specification (default: its outcome says so)."""
+        return step.success, step.note
+
     def step(self, task: Any, frame: Frame, pose: Pose2D, beacons: list[BeaconObservation] | None) -> Step:
         raise NotImplementedError
 
@@ -368,9 +375,10 @@ class _Streaming(PrimitiveAction):
             if step.outcome is not None:
                 named = None if step.outcome == "ok" else step.outcome
                 value = result_value(step.note)
-                if step.success:
+                ok, why = self.judge(task, step, params)
+                if ok:
                     return ActionResult.success(value, outcome=named, cost=cpu)
-                return ActionResult.failure(value, outcome=named, cost=cpu, reason=step.note)
+                return ActionResult.failure(value, outcome=named, cost=cpu, reason=why or step.note)
 
 
 class _Follow(_Streaming):
@@ -381,7 +389,11 @@ class _Follow(_Streaming):
         return FollowTrack(memory, self.detector)
 
     def value(self, task: FollowTrack) -> dict[str, Any]:
-        return {"detector": self.detector, "seen": task.seen, "distance_m": task.distance}
+        return {"detector": self.detector, "seen": task.seen, "dropouts": task.dropouts, "distance_m": task.distance}
+
+    def judge(self, task: FollowTrack, step: Step, params: dict[str, Any]) -> tuple[bool, str]:
+        assert step.outcome is not None
+        return task.judge(step.outcome, int(params.get("max_dropouts", 0)))
 
     def step(self, task: FollowTrack, frame: Frame, pose: Pose2D, beacons: list[BeaconObservation] | None) -> Step:
         if beacons is not None:

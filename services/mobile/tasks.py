@@ -212,9 +212,11 @@ class FollowTrack:
         self.gap = GapMonitor(memory.params.gap)
         self.frames = 0
         self.seen = 0
+        self.dropouts = 0
         self.distance = 0.0
         self._s0: float | None = None
         self._end_hits = 0
+        self._missing = False
 
     def start(self, pose: Pose2D) -> None:
         """Start at ``pose`` (the gap counts from here)."""
@@ -239,12 +241,16 @@ class FollowTrack:
         line = m.track(self.detector.detect(image))
         if line is not None:
             self.seen += 1
+            if self._missing:
+                self.dropouts += 1  # the track was there all along: the detector lost it for a while
+                self._missing = False
             self.gap.update(True, pose.s)
             m.last_line = (pose, line)
             if line.confidence >= 0.5:
                 m.heading = pose.theta + line.heading
             m.curvature = m.pursuit.curvature(line)
             return Step(m.steering.command(t, p.cruise, m.curvature))
+        self._missing = self.seen > 0
         if self.gap.update(False, pose.s):
             if m.last_line is None:
                 return Step(m.stop(t), "lost", False, "no track seen")
@@ -256,6 +262,21 @@ class FollowTrack:
             return Step(m.steering.command(t, p.approach_speed, m.curvature), "interruption", True,
                         f"no track for {self.gap.missing(pose.s):.3f} m")
         return Step(m.steering.command(t, p.cruise, m.curvature))
+
+
+    def judge(self, outcome: str, max_dropouts: int = 0) -> tuple[bool, str]:
+        """The follow segment against its specification: it ended with ``interruption`` or ``end``
+        and the detector lost the track at most ``max_dropouts`` times on the way (a loss shorter
+        than the gap, after which the track was seen again: it was there all along).
+
+        Returns:
+            (within specification, why not in words or "").
+        """
+        if outcome not in ("interruption", "end"):
+            return False, f"ended {outcome}"
+        if self.dropouts > max_dropouts:
+            return False, f"the detector lost the track {self.dropouts} times (at most {max_dropouts} allowed)"
+        return True, ""
 
 
 class FindBeacon:

@@ -56,6 +56,7 @@ class TaskRecord:
     note: str = ""
     frames: int = 0
     cpu_s: float = 0.0
+    dropouts: int = 0
 
 
 class TaskSequence:
@@ -137,6 +138,10 @@ class TaskSequence:
         if step.outcome is None:
             return step.setpoint
         rec.t1, rec.outcome, rec.success, rec.note = t, step.outcome, step.success, step.note
+        if kind == "follow_track":
+            rec.success, why = task.judge(step.outcome)
+            rec.note = why or rec.note
+            rec.dropouts = task.dropouts
         nxt = {
             ("follow_track", "interruption"): "find_beacon",
             ("follow_track", "end"): "stop_at_t",
