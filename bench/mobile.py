@@ -31,6 +31,12 @@ Reported (JSON keys):
   (``load_average_1min``), so ``sim_speed_x_cpu`` gives simulated seconds per CPU second of this
   process as well.
 
+With the nodes' action code (the default) the ``follow_track`` segments are also judged against
+their specification as the follow actions judge them (ended with ``interruption`` or ``end``, no
+detector dropout): ``follow_segments``, ``follow_spec_rate`` (share within it), ``follow_dropouts``
+and ``follow_cpu_ms_per_frame`` (the follow action's cost per frame: detector, end-mark detector,
+steering).
+
 ``--timing`` adds the per-call cost of the cameras, detectors and a physics step.
 
 ``--detectors N`` instead measures the three track detectors frame by frame against ground truth
@@ -283,10 +289,16 @@ def main(argv: list[str] | None = None) -> int:
     else:
         courses = [random_course(args.seed * 1_000_003 + k) for k in range(args.courses)]
     t_all = time.perf_counter()
+    sequences: list[TaskSequence] = []
+
+    def task_sequence(*a: Any, **kw: Any) -> TaskSequence:
+        sequences.append(TaskSequence(*a, **kw))
+        return sequences[-1]
+
     for k, course in enumerate(courses):
         with _stdout_to_stderr():
             r = run_course(
-                course, params=params, mission_factory=None if args.mission == "phase1" else TaskSequence, camera=args.camera, noise=CONDITIONS[args.noise],
+                course, params=params, mission_factory=None if args.mission == "phase1" else task_sequence, camera=args.camera, noise=CONDITIONS[args.noise],
                 seed=args.seed * 7919 + k, latency=args.latency,
             )
         results.append(r)
@@ -307,6 +319,13 @@ def main(argv: list[str] | None = None) -> int:
         "cruise_m_s": args.cruise, "latency_s": args.latency, "look_ahead_m": args.look_ahead,
         "mission": args.mission,
     })
+    follows = [x for seq in sequences for x in seq.records if x.task == "follow_track" and x.outcome]
+    if follows:
+        frames = sum(x.frames for x in follows)
+        out["follow_segments"] = len(follows)
+        out["follow_spec_rate"] = sum(x.success for x in follows) / len(follows)
+        out["follow_dropouts"] = sum(x.dropouts for x in follows)
+        out["follow_cpu_ms_per_frame"] = 1000.0 * sum(x.cpu_s for x in follows) / frames if frames else math.nan
     if args.timing:
         with _stdout_to_stderr():
             out["timing_ms"] = _timing(sorted(DETECTORS))

@@ -191,6 +191,7 @@ async def run_mobile(args: argparse.Namespace) -> int:
               f"stopped in {fault['stop_s']:.3f} s")
     for st in (e for e in sim.events if e.get("event") == "stopped"):
         print(f"simulator: {st['t']:.1f} s simulated in {st['wall_s']:.1f} s ({st['slipped_s']:.1f} s slipped); "
+              f"waits for the camera client {st.get('camera_misses', 0)}/{st.get('camera_waits', 0)} ran out; "
               f"{st['drive_faults']} drive fault(s)")
     print(f"journal: {journal_path}; logs: {logs}/; ground truth: {truth}"
           + (f"; top view: {png}" if png.exists() else ""))

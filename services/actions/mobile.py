@@ -608,7 +608,12 @@ class DriveDriver(Driver):
                         self.odometry.reset(Pose2D(t=t))
                         self._odo_started = True
                     self.pose = self.odometry.update(float(q[0]), float(q[1]), t)
+                    stops = self.input.watchdog_stops
                     left, right = self.input.wheels(time.monotonic(), t)
+                    if self.input.watchdog_stops != stops:
+                        wall_age, bus_age = self.input.age(time.monotonic(), t)
+                        log.warning("watchdog: no steering set point for %.3f s (wall) / %.3f s (bus time): "
+                                    "stopping the wheels (stop %d)", wall_age, bus_age, self.input.watchdog_stops)
                 drives.send_velocities(left, right)
                 n += 1
                 if n % 2 == 0 and self._loop is not None:

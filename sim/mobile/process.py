@@ -15,8 +15,12 @@ physics) and serves the robot's hardware on ``--host`` (127.0.0.1):
 
 Stdout gets one JSON line per event: ``ready`` (ports, course), ``pose`` (ground truth every
 ``--pose-every`` s: t, x, y, heading, speed, tile, path length, cross-track offset), ``drive_fault``,
-``stopped`` (frames, real-time lag). Clock: ``--realtime`` (default) paces simulated time to the
-wall clock; ``--lockstep`` waits after each frame until a connected camera client took it.
+``stopped`` (frames, real-time lag, camera waits). Clock: ``--realtime`` (default) paces simulated
+time to the wall clock, but waits after each frame, up to ``--camera-wait-ms`` (100) of wall time,
+until a connected camera client has taken it (as the catching world does: a perception node slowed
+down by a loaded machine then sees every frame and the world waits for it instead of driving on
+under stale set points); ``--lockstep`` waits after each frame until a connected camera client took
+it.
 """
 
 from __future__ import annotations
@@ -58,6 +62,10 @@ def add_arguments(c: argparse.ArgumentParser) -> None:
     c.add_argument("--camera-port", type=int, default=DEFAULT_CAMERA_PORT, help="frame server port (0: any)")
     c.add_argument("--can-port", type=int, default=DEFAULT_CAN_PORT, help="CAN gateway port (0: any)")
     c.add_argument("--host", default="127.0.0.1", help="address the servers listen on (default 127.0.0.1)")
+    c.add_argument("--camera-wait-ms", type=float, default=100.0, metavar="MS",
+                   help="--realtime: wall time waited after each frame for a connected camera client to take "
+                        "it (default 100; 0: never wait), so that a perception node slowed down by a loaded "
+                        "machine sees every frame instead of the world running away from it")
 
 
 def _emit(out: TextIO, event: str, **data: Any) -> None:
@@ -131,6 +139,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         seq = 0
         reported = 0
         last_xy: tuple[float, float] | None = None
+        camera_waits = camera_misses = 0
         t_wall0 = time.monotonic()
         world.resync()
         while not stop["flag"] and (args.duration <= 0 or world.t < args.duration):
@@ -144,8 +153,12 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 scan_seq += 1
             frame = cam.grab(pose, t)
             server.publish(Frame(seq, t, frame.image, time.time(), {"beacon": scan} if scan else None))
-            if server.client_count and args.mode == "lockstep":
-                server.wait_sent(seq, timeout=1.0)
+            if server.client_count:
+                if args.mode == "lockstep":
+                    server.wait_sent(seq, timeout=1.0)
+                elif args.camera_wait_ms > 0:
+                    camera_waits += 1
+                    camera_misses += not server.wait_sent(seq, timeout=args.camera_wait_ms / 1000.0)
             seq += 1
             if t >= next_pose - 1e-9:
                 next_pose += args.pose_every
@@ -161,7 +174,8 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                       speed=f.speed, stop_s=f.t_stopped - f.t)
                 reported += 1
         _emit(out, "stopped", t=world.t, wall_s=time.monotonic() - t_wall0, frames=seq,
-              max_lag_s=world.lag, slipped_s=world.slipped, drive_faults=len(can.faults))
+              max_lag_s=world.lag, slipped_s=world.slipped, drive_faults=len(can.faults),
+              camera_waits=camera_waits, camera_misses=camera_misses)
         return 0
     finally:
         if gateway is not None:

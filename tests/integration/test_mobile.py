@@ -104,11 +104,20 @@ def truth(tmp_path: Path) -> list[dict[str, Any]]:
     return [json.loads(x) for x in lines if x.startswith("{")]
 
 
+def logs(tmp_path: Path) -> str:
+    out = []
+    for name in ("perception", "drive", "sim"):
+        path = tmp_path / "logs" / f"{name}.log"
+        if path.exists():
+            out.append(f"--- {name}.log (tail)\n" + "\n".join(path.read_text(errors="replace").splitlines()[-25:]))
+    return "\n".join(out)
+
+
 def test_a_short_course_with_one_interruption_is_completed_across_processes(cluster: Any, tmp_path: Path):
     proc = demo(cluster, tmp_path)
     out, _ = proc.communicate(timeout=250)
-    assert proc.returncode == 0, out
-    assert "course completed" in out, out
+    assert proc.returncode == 0, out + logs(tmp_path)
+    assert "course completed" in out, out + logs(tmp_path)
     journal = tmp_path / "j.sqlite"
     results = rows(journal, "SELECT task, node, status, outcome FROM action_result ORDER BY rowid")
     assert [(t, s, o) for t, _, s, o in results] == [
@@ -162,5 +171,6 @@ def test_killing_the_perception_node_mid_course_stops_the_robot_within_the_watch
     # watchdog: stale after 0.25 s, then the ramp; plus one ground-truth period on each side
     bound = WATCHDOG_STALE_S + RAMP_STOP_S + 2 * POSE_PERIOD_S
     assert stopped_after <= bound, (stopped_after, bound)
+    assert "watchdog: no steering set point" in (tmp_path / "logs" / "drive.log").read_text(), out
     print(f"robot at rest {stopped_after:.2f} s of simulated time after the perception node was killed "
           f"(bound {bound:.2f} s)")
