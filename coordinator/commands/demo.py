@@ -80,6 +80,8 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--net", default=None, help="mobile: task net (default nets/mobile.toml)")
     p.add_argument("--noise", choices=["default", "noisy", "scuffed", "harsh", "clean"], default="default",
                    help="mobile: image condition of the downward camera (default: default)")
+    p.add_argument("--truth-every", type=float, default=0.1, metavar="S",
+                   help="mobile: period of the world's ground-truth pose lines, s of simulated time (default 0.1)")
     options.add_key_file(p)
     options.add_max_seconds(p, default=300.0)
     options.add_view(p)

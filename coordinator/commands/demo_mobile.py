@@ -153,7 +153,8 @@ async def run_mobile(args: argparse.Namespace) -> int:
         f"camera :{cam_port}, CAN :{can_port}")
     sim = SimWorld(["--realtime", "--seed", str(args.seed), "--renderer", args.renderer,
                     "--noise", args.noise, "--course", course_path, "--camera-port", str(cam_port),
-                    "--can-port", str(can_port)], log=logs / "sim.log", world="mobile")
+                    "--can-port", str(can_port), "--pose-every", str(args.truth_every)],
+                   log=logs / "sim.log", world="mobile")
     try:
         await asyncio.to_thread(sim.wait_ready, 90.0)
         say(f"starting nodes {', '.join(nodes)}")

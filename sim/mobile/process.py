@@ -14,12 +14,14 @@ physics) and serves the robot's hardware on ``--host`` (127.0.0.1):
   (:class:`sim.canbus.CanGateway`, ``--can-port``, 7221).
 
 Stdout gets one JSON line per event: ``ready`` (ports, course), ``pose`` (ground truth every
-``--pose-every`` s: t, x, y, heading, speed, tile, path length, cross-track offset), ``drive_fault``,
+``--pose-every`` s: t, the wall clock it was taken at, x, y, heading, speed over the last period,
+tile, path length, cross-track offset), ``drive_fault``,
 ``stopped`` (frames, real-time lag, camera waits). Clock: ``--realtime`` (default) paces simulated
 time to the wall clock, but waits after each frame, up to ``--camera-wait-ms`` (100) of wall time,
 until a connected camera client has taken it (as the catching world does: a perception node slowed
 down by a loaded machine then sees every frame and the world waits for it instead of driving on
-under stale set points); ``--lockstep`` waits after each frame until a connected camera client took
+under stale set points); once a wait has run out it waits again only after the client has taken
+a frame (a frozen client costs one wait, then the world runs in real time); ``--lockstep`` waits after each frame until a connected camera client took
 it.
 """
 
@@ -139,7 +141,9 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         seq = 0
         reported = 0
         last_xy: tuple[float, float] | None = None
+        last_t = world.t
         camera_waits = camera_misses = 0
+        camera_in_step = True
         t_wall0 = time.monotonic()
         world.resync()
         while not stop["flag"] and (args.duration <= 0 or world.t < args.duration):
@@ -156,16 +160,18 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             if server.client_count:
                 if args.mode == "lockstep":
                     server.wait_sent(seq, timeout=1.0)
-                elif args.camera_wait_ms > 0:
+                elif args.camera_wait_ms > 0 and (camera_in_step or server.wait_sent(seq - 1, timeout=0.0)):
+                    # wait only for a client that took the previous frame: a frozen one costs one wait
                     camera_waits += 1
-                    camera_misses += not server.wait_sent(seq, timeout=args.camera_wait_ms / 1000.0)
+                    camera_in_step = server.wait_sent(seq, timeout=args.camera_wait_ms / 1000.0)
+                    camera_misses += not camera_in_step
             seq += 1
             if t >= next_pose - 1e-9:
                 next_pose += args.pose_every
                 here = mw.where(pose[0], pose[1])
-                speed = 0.0 if last_xy is None else math.hypot(pose[0] - last_xy[0], pose[1] - last_xy[1]) / args.pose_every
-                last_xy = (pose[0], pose[1])
-                _emit(out, "pose", t=round(t, 4), x=pose[0], y=pose[1], heading=pose[2], v=speed,
+                speed = 0.0 if last_xy is None else math.hypot(pose[0] - last_xy[0], pose[1] - last_xy[1]) / (t - last_t)
+                last_xy, last_t = (pose[0], pose[1]), t
+                _emit(out, "pose", t=round(t, 4), wall=time.time(), x=pose[0], y=pose[1], heading=pose[2], v=speed,
                       tile=None if here is None else here[0].index, blank=None if here is None else here[0].blank,
                       s=None if here is None else here[1], offset=None if here is None else here[2])
             while reported < len(can.faults) and not math.isnan(can.faults[reported].t_stopped):
