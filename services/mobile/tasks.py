@@ -58,7 +58,8 @@ DETECTORS = ("centroid", "ransac", "scanline")
 
 LOST_OFFSET = 0.06
 """When the track vanishes, it was an interruption if the robot last saw it ahead (within this
-lateral distance of the robot's axis at the look-ahead, m): a painted track ends at a blank square's
+lateral distance of the robot's axis at the look-ahead, or at the nearest end of the stretch of
+track last seen, m): a painted track ends at a blank square's
 edge straight ahead of a robot that follows it; a track last seen further off slid out of the view
 sideways: the robot is off the track (outcome ``lost``)."""
 
@@ -254,10 +255,11 @@ class FollowTrack:
         if self.gap.update(False, pose.s):
             if m.last_line is None:
                 return Step(m.stop(t), "lost", False, "no track seen")
-            off = m.last_line[1].lateral_at(p.look_ahead)
+            ln = m.last_line[1]
+            off = ln.lateral_at(min(max(p.look_ahead, ln.x_min), ln.x_max))
             if abs(off) > LOST_OFFSET:
                 return Step(m.stop(t), "lost", False,
-                            f"track slid out of view ({off * 1000:+.0f} mm off at the look-ahead when last seen)")
+                            f"track slid out of view ({off * 1000:+.0f} mm off the robot's axis when last seen)")
             m.interruptions += 1
             return Step(m.steering.command(t, p.approach_speed, m.curvature), "interruption", True,
                         f"no track for {self.gap.missing(pose.s):.3f} m")
