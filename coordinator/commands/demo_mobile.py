@@ -185,14 +185,15 @@ async def run_mobile(args: argparse.Namespace) -> int:
     path = [(float(p["t"]), float(p["x"]), float(p["y"]), float(p["heading"])) for p in poses]
     if course_report is not None:
         report = course_report.render_report(course, path, log.actions, _stop_pose(poses))
-        course_report.write_top_view(course, path, png)
+        course_report.write_top_view(course, path, str(png))
     print(report if report is not None else basic_report(course, poses, log, summary.final_marking))
     for fault in (e for e in sim.events if e.get("event") == "drive_fault"):
         print(f"  wheel drive {fault['node']} faulted at t={fault['t']:.3f} s: {fault['reason']}; "
               f"stopped in {fault['stop_s']:.3f} s")
     for st in (e for e in sim.events if e.get("event") == "stopped"):
         print(f"simulator: {st['t']:.1f} s simulated in {st['wall_s']:.1f} s ({st['slipped_s']:.1f} s slipped); "
-              f"waits for the camera client {st.get('camera_misses', 0)}/{st.get('camera_waits', 0)} ran out; "
+              f"waits for the camera client {st.get('camera_misses', 0)}/{st.get('camera_waits', 0)} and for the "
+              f"CAN master {st.get('master_misses', 0)}/{st.get('master_waits', 0)} ran out; "
               f"{st['drive_faults']} drive fault(s)")
     print(f"journal: {journal_path}; logs: {logs}/; ground truth: {truth}"
           + (f"; top view: {png}" if png.exists() else ""))

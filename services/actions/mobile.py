@@ -18,7 +18,8 @@ action                primitive task       outcomes (``int:<task>.<outcome>``)
 ``stop_at_t``         ``stop_at_t``        success (``ok``), error
 ====================  ===================  ========================================================
 
-A follow action's value: ``{detector, frames, seen, dropouts, distance_m, cross_track_proxy_m, note,
+Every streaming action's value has ``t0`` and ``t``, the simulated times of its first and last
+frame. A follow action's value: ``{detector, frames, seen, dropouts, distance_m, cross_track_proxy_m, note,
 setpoints}`` (``cross_track_proxy_m``: RMS of the detected line's lateral offset at the camera's view
 centre, the node's own measure of how well it followed; the world's ground truth is the
 simulator's); its cost is the CPU time of its image processing, s. **Specification**
@@ -326,11 +327,13 @@ class _Streaming(PrimitiveAction):
         stops_base: int | None = None
         seq = drv.frame.seq if drv.frame is not None else -1
         t0: float | None = None
+        t_last: float | None = None
         lateral: list[float] = []
         drv.take_scans()  # the scans of earlier actions are in the memory already
 
         def result_value(note: str) -> dict[str, Any]:
-            out = {"task": self.task, "frames": sent, "setpoints": sent, "note": note, "cpu_s": cpu}
+            out = {"task": self.task, "frames": sent, "setpoints": sent, "note": note, "cpu_s": cpu,
+                   "t0": t0, "t": t_last}
             out.update(self.value(task))
             if lateral:
                 out["cross_track_proxy_m"] = math.sqrt(sum(x * x for x in lateral) / len(lateral))
@@ -343,6 +346,7 @@ class _Streaming(PrimitiveAction):
                                           value=result_value("camera lost"), cost=cpu)
             seq = frame.seq
             t0 = frame.t if t0 is None else t0
+            t_last = frame.t
             odo = drv.odometry
             if odo is None or time.monotonic() - drv.odometry_wall > odo_timeout:
                 memory.stop(frame.t)
@@ -471,7 +475,7 @@ class StopAtTAction(_Streaming):
         return StopAtT(memory)
 
     def value(self, task: StopAtT) -> dict[str, Any]:
-        return {"remaining_m": task.remaining}
+        return {"remaining_m": task.remaining if math.isfinite(task.remaining) else None}
 
     def step(self, task: StopAtT, frame: Frame, pose: Pose2D, beacons: list[BeaconObservation] | None) -> Step:
         return task.step(frame.t, pose, _grey(frame))
@@ -666,9 +670,12 @@ def _drive(ctx: CallContext) -> DriveDriver:
 
 
 class StopRobot(PrimitiveAction):
-    """``stop_robot``: brake to rest; success once both wheels are at rest (< ``rest_speed``,
-    0.05 rad/s), with ``{t, watchdog_stops, dropped}`` in the value; error on a lost bus or
-    ``timeout_s`` (5 s, wall clock)."""
+    """``stop_robot``: brake to rest (the latest set point is forgotten); success once both wheels
+    turn slower than ``rest_speed`` (0.05 rad/s), with ``{t, watchdog_stops, dropped, faults}`` in the
+    value. A faulted drive holds its wheel at rest too: the robot is stopped, the value names the
+    fault, and the driver resets it in the background (``recovered`` in a later call's value). Error
+    when the bus is lost (no wheel speed known) or the wheels do not come to rest within ``timeout_s``
+    (5 s, wall clock)."""
 
     unattended = True
 
@@ -680,16 +687,17 @@ class StopRobot(PrimitiveAction):
         while True:
             with drv.lock:
                 drv.input.hold()
-            try:
-                drv.check()
-            except BusError as exc:
-                return ActionResult.error(f"bus: {exc}")
-            assert drv.drives is not None
-            speeds = drv.drives.velocities()
-            if all(math.isfinite(float(s)) and abs(float(s)) < rest for s in speeds):
-                inp = drv.input
-                return ActionResult.success({"t": drv.drives.sim_time, "watchdog_stops": inp.watchdog_stops,
-                                             "dropped": inp.malformed + inp.stale + inp.out_of_order})
+            drives = drv.drives
+            lost = "wheel drives are not connected" if drives is None else (drv.fault or drives.lost())
+            if lost is None and drives is not None:
+                speeds = drives.velocities()
+                if all(math.isfinite(float(s)) and abs(float(s)) < rest for s in speeds):
+                    inp = drv.input
+                    return ActionResult.success({
+                        "t": drives.sim_time, "watchdog_stops": inp.watchdog_stops,
+                        "dropped": inp.malformed + inp.stale + inp.out_of_order,
+                        "faults": {str(k): v for k, v in drives.faults().items()}})
             if time.monotonic() > end:
-                return ActionResult.error(f"the wheels did not come to rest within {timeout} s")
+                return ActionResult.error(f"bus: {lost}" if lost else
+                                          f"the wheels did not come to rest within {timeout} s")
             await asyncio.sleep(0.01)

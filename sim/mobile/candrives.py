@@ -17,12 +17,16 @@ reaction is a quick stop: target 0 on the drive's ramp until the wheel is at res
 
 The world calls :meth:`SimWheelCan.step` from its step hook before every physics step; SYNC goes
 out every :data:`CYCLE_S` of simulated time (the sim is the SYNC producer, as on the PUMA's bus).
+With ``master_wait_s`` > 0 (the world process in real time) the world waits at each SYNC, bounded,
+for the targets of a master that answered the previous one, as the PUMA's bus does: a drive node
+starved for a moment by a loaded machine then slows the world instead of faulting its drives.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import time
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -35,8 +39,8 @@ log = logging.getLogger(__name__)
 
 CYCLE_S = 0.008
 """SYNC period of the mobile robot's bus, s (125 Hz: two physics steps of 4 ms)."""
-TARGET_TIMEOUT_CYCLES = 20
-"""SYNC cycles without an RPDO before an enabled wheel drive faults (160 ms)."""
+TARGET_TIMEOUT_CYCLES = 25
+"""SYNC cycles without an RPDO before an enabled wheel drive faults (200 ms)."""
 REST_SPEED = 0.05
 """A wheel turning slower than this is at rest (end of the fault reaction), rad/s."""
 
@@ -76,13 +80,19 @@ class SimWheelCan:
 
     def __init__(self, wheels: WheelActuator, bus: SimBus | None = None, *, cycle_s: float = CYCLE_S,
                  target_timeout_cycles: int = TARGET_TIMEOUT_CYCLES,
-                 consumer_heartbeat_s: float = cf.CONSUMER_HEARTBEAT_S) -> None:
+                 consumer_heartbeat_s: float = cf.CONSUMER_HEARTBEAT_S, master_wait_s: float = 0.0) -> None:
         self.wheels = wheels
         self.bus = bus if bus is not None else SimBus()
         self.cycle_s = float(cycle_s)
         self.target_timeout_cycles = int(target_timeout_cycles)
         self.consumer_heartbeat_s = float(consumer_heartbeat_s)
+        self.master_wait_s = float(master_wait_s)
         self.faults: list[FaultRecord] = []
+        self.master_waits = 0
+        """SYNCs at which the world waited for the master's targets."""
+        self.master_misses = 0
+        """Waits that ran out."""
+        self._master_in_step = False
         self._drives = [_Wheel(node) for node in cf.WHEEL_IDS]
         self._booted = False
         self._next_sync = 0.0
@@ -108,6 +118,8 @@ class SimWheelCan:
             self._next_sync += self.cycle_s
             if t > self._next_sync:
                 self._next_sync = t + self.cycle_s
+            if self.master_wait_s > 0:
+                self._await_master(t)
             self._sync(t)
         if t >= self._next_heartbeat - 1e-9:
             self._next_heartbeat = t + cf.HEARTBEAT_PERIOD_S
@@ -131,6 +143,26 @@ class SimWheelCan:
                         break
             targets.append(d.target if d.sm.state is cf.DriveState.OPERATION_ENABLED else 0.0)
         self.wheels.set_velocity(targets[0], targets[1])
+
+    def _await_master(self, t: float) -> None:
+        """At a SYNC, wait (wall clock, at most ``master_wait_s``) for the targets of a master that
+        answered the previous SYNC, so that the world's bursts of stepping are not charged to a
+        master in another process; a master that missed a wait is not waited for again until it
+        answers (its drives' RPDO timeout then runs on real time)."""
+        waiting = [d for d in self._drives if self._enabled(d) and not d.got_target]
+        if not waiting or not self._master_in_step:
+            return
+        self.master_waits += 1
+        deadline = time.monotonic() + self.master_wait_s
+        while any(self._enabled(d) and not d.got_target for d in waiting):
+            left = deadline - time.monotonic()
+            if left <= 0:
+                self._master_in_step = False
+                self.master_misses += 1
+                return
+            frame = self.bus.wait_inbound(left)
+            if frame is not None:
+                self._receive(frame, t)
 
     @staticmethod
     def _enabled(d: _Wheel) -> bool:
@@ -175,6 +207,7 @@ class SimWheelCan:
         if after is cf.DriveState.OPERATION_ENABLED:
             d.target = velocity if before is cf.DriveState.OPERATION_ENABLED else 0.0
             d.got_target = True
+            self._master_in_step = True
         else:
             d.target = 0.0
 

@@ -64,6 +64,9 @@ def add_arguments(c: argparse.ArgumentParser) -> None:
     c.add_argument("--camera-port", type=int, default=DEFAULT_CAMERA_PORT, help="frame server port (0: any)")
     c.add_argument("--can-port", type=int, default=DEFAULT_CAN_PORT, help="CAN gateway port (0: any)")
     c.add_argument("--host", default="127.0.0.1", help="address the servers listen on (default 127.0.0.1)")
+    c.add_argument("--master-wait-ms", type=float, default=100.0, metavar="MS",
+                   help="--realtime: wall time waited at each SYNC for the targets of a CAN master that answered "
+                        "the previous one (default 100; 0: never wait)")
     c.add_argument("--camera-wait-ms", type=float, default=100.0, metavar="MS",
                    help="--realtime: wall time waited after each frame for a connected camera client to take "
                         "it (default 100; 0: never wait), so that a perception node slowed down by a loaded "
@@ -114,7 +117,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         cam_model = mw.camera_model()
         cam = (mw.tiny_camera if args.renderer == "tiny" else mw.analytic_camera)(cam_model, noise=noise, seed=args.seed)
         sensor = mw.beacon_sensor(seed=args.seed + 1)
-        can = SimWheelCan(mw.robot.drives)
+        can = SimWheelCan(mw.robot.drives, master_wait_s=args.master_wait_ms / 1000.0 if args.mode == "realtime" else 0.0)
         world.add_step_hook(can.step)
         info = {
             "camera": asdict(cam_model),
@@ -181,7 +184,8 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 reported += 1
         _emit(out, "stopped", t=world.t, wall_s=time.monotonic() - t_wall0, frames=seq,
               max_lag_s=world.lag, slipped_s=world.slipped, drive_faults=len(can.faults),
-              camera_waits=camera_waits, camera_misses=camera_misses)
+              camera_waits=camera_waits, camera_misses=camera_misses, master_waits=can.master_waits,
+              master_misses=can.master_misses)
         return 0
     finally:
         if gateway is not None:

@@ -154,3 +154,19 @@ def test_the_masters_heartbeat_lost_faults_the_enabled_drives():
     rig.run(0.1, each_sync=lambda: rig.velocity(2.0, 2.0))
     rig.run(0.6, each_sync=targets_without_heartbeat)
     assert rig.can.faults and rig.can.faults[0].code is cf.EmcyCode.HEARTBEAT_LOST
+
+
+def test_the_world_waits_for_a_master_in_step_at_each_sync_but_not_again_for_one_that_missed():
+    rig = Rig()
+    rig.can.master_wait_s = 0.05
+    rig.enable()
+    rig.run(0.05, each_sync=lambda: rig.velocity(4.0, 4.0))
+    misses = rig.can.master_misses
+    rig.run(0.2, each_sync=lambda: rig.velocity(4.0, 4.0))
+    assert rig.can.master_misses == misses
+    rig.run(0.5)  # the master goes silent: one wait runs out, then no more waiting
+    assert rig.can.master_misses == misses + 1
+    waits = rig.can.master_waits
+    rig.run(0.1)
+    assert rig.can.master_waits == waits
+    assert [f.code for f in rig.can.faults] == [cf.EmcyCode.RPDO_TIMEOUT] * 2
