@@ -81,5 +81,5 @@ def test_an_unknown_detector_is_refused():
 
 
 def test_run_tasks_is_run_course_with_the_task_sequence():
-    r = run_tasks(course_from_codes("S S E".split()), seed=1)
+    r = run_tasks(course_from_codes(["S", "S", "E"]), seed=1)
     assert r.completed, r.reason
