@@ -189,3 +189,36 @@ def test_losing_the_perception_node_mid_course_stops_the_robot_within_the_watchd
         assert "watchdog: no steering set point" in (tmp_path / "logs" / "drive.log").read_text(), out
     print(f"robot at rest {stopped_after:.2f} s of simulated time after the perception node was {sig!r} "
           f"(bound {bound:.2f} s)")
+
+
+def test_killing_the_drive_node_mid_course_stops_the_wheels_on_their_rpdo_timeout_and_the_running_action_errs(
+        cluster: Any, tmp_path: Path):
+    proc = demo(cluster, tmp_path)
+    assert proc.stdout is not None
+    lines: list[str] = []
+    end = time.monotonic() + 150
+    for line in proc.stdout:
+        lines.append(line)
+        if "start follow_track -> follow_ransac on perception" in line:
+            break
+        assert time.monotonic() < end, "".join(lines)
+    time.sleep(1.3)
+    found = subprocess.run(["pgrep", "-f", f"services.node drive --services {cluster.services_path}"],
+                           check=False, capture_output=True, text=True)
+    pids = [int(p) for p in found.stdout.split()]
+    assert pids, "".join(lines)
+    for pid in pids:
+        os.kill(pid, signal.SIGKILL)
+    rest, _ = proc.communicate(timeout=150)
+    out = "".join(lines) + rest
+    journal = tmp_path / "j.sqlite"
+    follow = rows(journal, "SELECT status, reason FROM action_result WHERE task='follow_track'")
+    assert len(follow) == 1 and follow[0][0] == "error", out
+    assert "drive node silent" in follow[0][1], out  # the perception node noticed, no hang
+    fired = [t for (t,) in rows(journal, "SELECT transition FROM firing ORDER BY seq")]
+    assert "follow_failed" in fired, out
+    faults = [e for e in truth(tmp_path) if e["event"] == "drive_fault"]
+    assert {f["node"] for f in faults} == {1, 2}, out  # both wheel drives stopped on their own
+    assert all(f["code"] == "0x8250" for f in faults), faults  # RPDO timeout
+    poses = [e for e in truth(tmp_path) if e["event"] == "pose"]
+    assert poses[-1]["v"] < 0.01, poses[-3:]
