@@ -65,7 +65,7 @@ def add_arguments(c: argparse.ArgumentParser) -> None:
     c.add_argument("--can-port", type=int, default=DEFAULT_CAN_PORT, help="CAN gateway port (0: any)")
     c.add_argument("--host", default="127.0.0.1", help="address the servers listen on (default 127.0.0.1)")
     c.add_argument("--master-wait-ms", type=float, default=100.0, metavar="MS",
-                   help="--realtime: wall time waited at each SYNC for the targets of a CAN master that answered "
+                   help="wall time waited at each SYNC for the targets of a CAN master that answered "
                         "the previous one (default 100; 0: never wait)")
     c.add_argument("--camera-wait-ms", type=float, default=100.0, metavar="MS",
                    help="--realtime: wall time waited after each frame for a connected camera client to take "
@@ -117,7 +117,7 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         cam_model = mw.camera_model()
         cam = (mw.tiny_camera if args.renderer == "tiny" else mw.analytic_camera)(cam_model, noise=noise, seed=args.seed)
         sensor = mw.beacon_sensor(seed=args.seed + 1)
-        can = SimWheelCan(mw.robot.drives, master_wait_s=args.master_wait_ms / 1000.0 if args.mode == "realtime" else 0.0)
+        can = SimWheelCan(mw.robot.drives, master_wait_s=args.master_wait_ms / 1000.0)
         world.add_step_hook(can.step)
         info = {
             "camera": asdict(cam_model),
