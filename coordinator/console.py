@@ -5,8 +5,10 @@ marking (places with tokens, by kind), the running primitive actions with their 
 time, what the run waits for, the last error with its reason, the last firings, and the fate of
 the operator's last command (a refusal stays on screen until the next command); elsewhere (a
 pipe, CI, a log file) it prints one line per firing (the places it took tokens from and gave
-tokens to), action start and result (with the action's reason), state change and operator
-command, and counts the pulses of external events that fired nothing instead of printing each.
+tokens to), action start and result (with the action's reason), what a node said afterwards about
+a call the run had given up on (printed even when quiet if it is not what the net assumed), state
+change and operator command, and counts the pulses of external events that fired nothing instead
+of printing each.
 :func:`read_operator_commands` turns lines typed on standard input into operator commands
 (insert/remove tokens in control places, pause, step, resume, abort, end; end of input is end).
 """
@@ -21,10 +23,10 @@ import time
 from collections.abc import Mapping
 from typing import Any, Protocol, TextIO
 
-from coordinator.net import PetriNet, PlaceKind
 from coordinator.events import (
     ActionEnded,
     ActionStarted,
+    CallReconciled,
     OperatorApplied,
     OperatorRefused,
     PulseDelivered,
@@ -32,7 +34,9 @@ from coordinator.events import (
     RunStateChanged,
     TransitionFired,
 )
+from coordinator.net import PetriNet, PlaceKind
 from coordinator.operator import USAGE, Command, OperatorCommand, parse_operator_command
+from coordinator.reconcile import describe as describe_reconciliation
 from coordinator.runtime import Runtime
 from services.results import Status
 
@@ -99,7 +103,8 @@ class Console:
         line = self._describe(event)
         if line is None:
             return
-        urgent = isinstance(event, (RunStateChanged, OperatorApplied, OperatorRefused))
+        urgent = isinstance(event, (RunStateChanged, OperatorApplied, OperatorRefused)) or (
+            isinstance(event, CallReconciled) and event.differs)
         error = isinstance(event, ActionEnded) and event.result.status is Status.ERROR
         if not self.live and (not self.quiet or urgent or error):
             self._flush_pulses()
@@ -131,6 +136,9 @@ class Console:
             self.operator_note = f"applied: {event.command}"
         elif isinstance(event, ActionEnded) and event.result.status is Status.ERROR:
             self.last_error = f"{event.task}/{event.action} on {event.node or '?'}: {event.result.reason or 'error'}"
+        elif isinstance(event, CallReconciled) and event.differs:
+            self.last_error = describe_reconciliation(event.node, event.action, event.assumed, event.result,
+                                                      event.lost)
         elif isinstance(event, RunStateChanged):
             self.waiting = (event.reason, event.detail) if event.state == "waiting" else None
             self.run_state = "running" if event.state in ("started", "resumed") else event.state
@@ -158,6 +166,9 @@ class Console:
             why = f": {r.reason}" if r.reason else ""
             return (f"done  {event.task}/{event.action} on {event.node or '?'}: {r.status.value}{extra}"
                     f" in {r.wall_s:.3f} s{why}")
+        if isinstance(event, CallReconciled):
+            text = describe_reconciliation(event.node, event.action, event.assumed, event.result, event.lost)
+            return f"reconciled {event.task}: {text} [{event.instance}]"
         if isinstance(event, OperatorRefused):
             return f"operator {event.command} refused: {event.reason}"
         if isinstance(event, OperatorApplied):

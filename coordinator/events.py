@@ -15,11 +15,13 @@ from typing import Any
 
 from coordinator.engine import Firing
 from coordinator.operator import OperatorCommand
-from services.results import ActionResult
+from coordinator.reconcile import differs
+from services.results import ActionResult, Status
 
 __all__ = [
     "ActionEnded",
     "ActionStarted",
+    "CallReconciled",
     "LearnerUpdated",
     "Observer",
     "OperatorApplied",
@@ -101,6 +103,35 @@ class ActionEnded:
 
 
 @dataclass(frozen=True, slots=True)
+class CallReconciled:
+    """A node told, afterwards, the fate of a call the runtime had given up on (already journaled).
+
+    Attributes:
+        instance, task, action, node: the call (``instance`` is the call id).
+        assumed: the status the net went on with, or ``None`` if no result was journaled.
+        result: the node's final result, or ``None`` if the node does not know the call (it never
+            ran, or its result is no longer kept).
+        lost: why the runtime had given up on the call, in words (``"heartbeat timeout"``), or ``""``.
+    """
+
+    run: str
+    instance: str
+    task: str
+    action: str
+    node: str | None
+    assumed: Status | None
+    result: ActionResult | None
+    lost: str = ""
+    t_wall: float = field(default_factory=_now)
+
+    @property
+    def differs(self) -> bool:
+        """True when the node's final status is not the one the net went on with
+        (:func:`coordinator.reconcile.differs`)."""
+        return differs(self.assumed, None if self.result is None else self.result.status)
+
+
+@dataclass(frozen=True, slots=True)
 class PulseDelivered:
     """An external event arrived as a pulse; ``fired`` transitions fired on it."""
 
@@ -149,7 +180,7 @@ class LearnerUpdated:
     t_wall: float = field(default_factory=_now)
 
 
-RunEvent = (RunStateChanged | TransitionFired | ActionStarted | ActionEnded | PulseDelivered
+RunEvent = (RunStateChanged | TransitionFired | ActionStarted | ActionEnded | CallReconciled | PulseDelivered
             | OperatorApplied | OperatorRefused | LearnerUpdated)
 """Any event of a run."""
 

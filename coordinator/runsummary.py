@@ -76,10 +76,17 @@ class RunSummary:
         final_marking: the marking at the end (places with tokens).
         firings: firings in the run (a resumed run counts those before the interruption too).
         duration_s: wall-clock time of this execution, seconds.
-        actions: results per (primitive task, primitive action).
+        actions: results per (primitive task, primitive action) (a resumed run counts those before
+            the interruption too).
         errors: every error of the run, in words, in order (a call's reason, a refused subscription).
         note: why the run ended in its state, in words.
         detail: one line per stuck place, operator option or awaited event behind ``note``.
+        reconciled: calls given up on (node trouble) whose node told their fate afterwards.
+        differed: one line per reconciled call whose final status on its node is not the one the
+            net went on with ("node beta finished slow with success after the coordinator declared
+            it lost").
+        unreconciled: one line per call given up on whose node could not be asked before the run
+            ended (the journal keeps the coordinator's error for it).
     """
 
     run_id: str
@@ -91,6 +98,9 @@ class RunSummary:
     errors: list[str]
     note: str = ""
     detail: tuple[str, ...] = ()
+    reconciled: int = 0
+    differed: tuple[str, ...] = ()
+    unreconciled: tuple[str, ...] = ()
 
     @property
     def calls(self) -> int:
@@ -126,6 +136,14 @@ class RunSummary:
             for st in self.actions.values():
                 lines.append(f"{st.task:<14}{st.action:<22}{st.node:<10}{st.calls:>6}{st.success:>5}"
                              f"{st.failure:>5}{st.error:>5}{st.mean_wall_s:>9.3f}")
+        if self.reconciled:
+            lines.append(f"reconciled: {self.reconciled} call{'' if self.reconciled == 1 else 's'} given up on, "
+                         f"{len(self.differed)} of them ended on the node otherwise than the net assumed")
+            lines.extend(f"  - {d}" for d in self.differed)
+        if self.unreconciled:
+            lines.append(f"not reconciled: {len(self.unreconciled)} call{'' if len(self.unreconciled) == 1 else 's'} "
+                         "given up on; their nodes could not be asked:")
+            lines.extend(f"  - {u}" for u in self.unreconciled)
         for err in self.errors[:max_errors]:
             lines.append(f"error: {err}")
         if len(self.errors) > max_errors:

@@ -16,6 +16,11 @@ what it waits for with a ``RunStateChanged("waiting", ...)`` event, or it ends i
 :data:`~coordinator.runsummary.END_STATES` (at home: ``completed``; tokens left away from home:
 ``stuck``, naming the places; only an absent operator could help: ``waiting_for_operator``).
 
+A call the runtime gives up on (node trouble ended it with an error no node sent) is reconciled
+with its node (:mod:`coordinator.reconcile`): as soon as the node can be reached again, at the end
+of the run, and when the run is resumed, the node is asked for the call's final result, which is
+journaled (a ``reconciliation`` record) and reported (:class:`~coordinator.events.CallReconciled`).
+
 The runtime owns no policy: which action translates a primitive task comes from the learner
 (section 4) passed in, or the first action of the task.
 """
@@ -43,6 +48,7 @@ from coordinator.errors import EngineError
 from coordinator.events import (
     ActionEnded,
     ActionStarted,
+    CallReconciled,
     LearnerUpdated,
     Observer,
     OperatorApplied,
@@ -55,6 +61,7 @@ from coordinator.events import (
 from coordinator.journal import Journal, Recovered
 from coordinator.net import PetriNet
 from coordinator.operator import Command, OperatorCommand
+from coordinator.reconcile import GivenUp, Reconciler, describe, given_up, never_sent
 from coordinator.runsummary import END_STATES, EXIT_CODES, ActionStats, RunSummary
 from services.errors import LocationError
 from services.results import ActionResult, Status
@@ -155,6 +162,9 @@ class Runtime:
         goal: place → tokens: a run at rest whose marking holds at least these tokens has reached
             the net's goal and ends ``completed`` like one at home (a net that does not come back
             to its home marking, e.g. one that runs once).
+        reconcile_s: at the end of the run, how long to wait for the nodes of calls given up on
+            (and not reconciled yet) to tell their fate, seconds; those still unknown then are
+            named in the run's note and summary.
 
     Raises:
         EngineError: ``goal`` names a place the net does not have.
@@ -176,6 +186,7 @@ class Runtime:
         linger: bool = False,
         cancel_grace_s: float = 3.0,
         goal: Mapping[str, int] | None = None,
+        reconcile_s: float = 5.0,
     ) -> None:
         self.net = net
         self.client = client
@@ -214,7 +225,16 @@ class Runtime:
         self._end_requested = False
         self._last_wait: _Wait | None = None
         self.stats: dict[tuple[str, str], ActionStats] = {}
+        if recovered is not None:  # a resumed run counts the results before its interruption too
+            for row in journal.results(self.run_id):
+                self.stats.setdefault((row.task, row.action), ActionStats(row.task, row.action, row.node or "?")).record(
+                    ActionResult(status=row.status, wall_s=row.wall_s or 0.0))
         self.errors: list[str] = []
+        self._reconciler = Reconciler(client, self._reconciled)
+        self._reconcile_s = reconcile_s
+        self._reissued: set[str] = set()
+        #: what nodes said about the calls given up on, in the order they said it
+        self.reconciled: list[CallReconciled] = []
         self._t0 = time.monotonic()
 
     # ------------------------------------------------------------------ public controls
@@ -264,6 +284,7 @@ class Runtime:
                 params = dict(self._recovered.params.get(inst.id, task.action(inst.action).params))
                 self._dispatch(StartAction(inst.id, inst.task, inst.place, inst.action, params, task.deadline_s),
                                journal=False)
+            self._reconcile_journaled()
         else:
             self._emit(RunStateChanged(self.run_id, "started"))
         self._handle(self.engine.start())
@@ -271,6 +292,7 @@ class Runtime:
         end = _End("interrupted", "the coordinator stopped; petrobot run --resume continues the run")
         try:
             end = await self._loop(max_seconds)
+            await self._settle_calls()
         except (asyncio.CancelledError, KeyboardInterrupt):
             end = _End("interrupted", "interrupted; petrobot run --resume continues the run")
             await self._cancel_on_nodes(1.0)
@@ -285,10 +307,76 @@ class Runtime:
                 note += f" | every one of the {calls} primitive-action calls ended in error"
             if self.errors:
                 note += f" | last errors: {'; '.join(self.errors[-3:])}"
+            unreconciled = self._unreconciled()
+            self._reconciler.abandon()
+            differed = [describe(e.node, e.action, e.assumed, e.result, e.lost) for e in self.reconciled if e.differs]
+            if differed:
+                note += f" | reconciled differently: {'; '.join(differed[-3:])}"
+            if unreconciled:
+                note += f" | not reconciled: {'; '.join(unreconciled[-3:])}"
             self.journal.end_run(self.run_id, end.state, note)
             self._emit(RunStateChanged(self.run_id, end.state, end.note, detail=end.detail))
         return RunSummary(self.run_id, end.state, self.engine.marking.to_dict(), self.engine.fired,
-                          time.monotonic() - self._t0, self.stats, self.errors, end.note, end.detail)
+                          time.monotonic() - self._t0, self.stats, self.errors, end.note, end.detail,
+                          reconciled=len(self.reconciled), differed=tuple(differed),
+                          unreconciled=tuple(unreconciled))
+
+    # ------------------------------------------------------------------ reconciliation
+    def _follow_up(self, instance: str, start: StartAction, node: str | None, result: ActionResult | None) -> None:
+        """After a call ended (``result``), or was left running at the end of the run (``None``): if
+        its fate on its node is unknown, have the node asked (reconciliation); if the node answered,
+        its other calls given up on can be asked now."""
+        reissued = instance in self._reissued
+        self._reissued.discard(instance)
+        if node is None:
+            return
+        if result is not None:
+            if not given_up(result):
+                self._reconciler.node_answered(node)
+                return
+            if never_sent(result, node) and not reissued:
+                return
+        self._reconciler.add(GivenUp(instance, start.task, start.action, node,
+                                     None if result is None else result.status,
+                                     "" if result is None else result.reason or ""))
+
+    def _reconcile_journaled(self) -> None:
+        """On resume: reconcile the calls of this run given up on before (by an earlier coordinator
+        too) that no node has told the fate of yet."""
+        done = {r.instance for r in self.journal.reconciliations(self.run_id)}
+        for row in self.journal.results(self.run_id):
+            if row.instance in done or row.node is None or row.status is not Status.ERROR:
+                continue
+            seen = ActionResult(status=Status.ERROR, reason=row.reason, wall_s=row.wall_s or 0.0, cpu_s=row.cpu_s or 0.0)
+            if given_up(seen):
+                self._reconciler.add(GivenUp(row.instance, row.task, row.action, row.node, row.status,
+                                             row.reason or ""))
+
+    def _reconciled(self, call: GivenUp, truth: ActionResult | None) -> None:
+        self.journal.reconciliation(self.run_id, call.instance, call.task, call.action, call.node, call.assumed,
+                                    truth)
+        event = CallReconciled(self.run_id, call.instance, call.task, call.action, call.node, call.assumed, truth,
+                               call.lost)
+        self.reconciled.append(event)
+        if event.differs:
+            log.info("%s [%s]", describe(call.node, call.action, call.assumed, truth, call.lost), call.instance)
+        self._emit(event)
+
+    async def _settle_calls(self) -> None:
+        """At the end of the run: give up on the calls still running (an abort or the deadline did
+        not see their results in time), then let the nodes tell the fate of every call given up on."""
+        for instance, flight in list(self._inflight.items()):
+            if flight.call is not None:
+                flight.call.cancel()  # the client sends the node a cancel
+            del self._inflight[instance]
+            self._follow_up(instance, flight.start, flight.node, None)
+        if self._reconciler.pending:
+            await self._reconciler.settle(self._reconcile_s)
+
+    def _unreconciled(self) -> list[str]:
+        trouble = self._reconciler.trouble
+        return [f"{c.action} on {c.node} [{c.instance}]" + (f": {trouble[c.instance]}" if c.instance in trouble else "")
+                for c in self._reconciler.pending]
 
     async def _loop(self, max_seconds: float | None) -> _End:
         engine = self.engine
@@ -528,6 +616,8 @@ class Runtime:
                                       node, start.params)
         flight = InFlight(start, node, time.monotonic())
         self._inflight[start.instance] = flight
+        if not journal:
+            self._reissued.add(start.instance)  # an earlier coordinator may have sent it
         self._emit(ActionStarted(self.run_id, start.instance, start.task, start.place, start.action, node))
         flight.call = asyncio.get_running_loop().create_task(self._call(start))
 
@@ -548,6 +638,7 @@ class Runtime:
             return
         start, node = flight.start, flight.node
         self.journal.action_result(self.run_id, instance, start.task, start.action, node, result)
+        self._follow_up(instance, start, node, result)
         key = (start.task, start.action)
         self.stats.setdefault(key, ActionStats(start.task, start.action, node or "?")).record(result)
         if result.status is Status.ERROR:

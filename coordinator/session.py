@@ -1,8 +1,16 @@
 """A session: a task net run to its end on the nodes of a location file (paper sections 2, 4, 5).
 
-* :func:`execute` runs a net: the learners (section 4, restored from the journal), the runtime, the
-  console and the operator's commands;
-* :func:`build_learner` makes the learners of a net, restored from the journal.
+* :func:`execute` runs a net: a preflight of its actions on their nodes, the learners (section 4,
+  restored from the journal), the runtime, the console and the operator's commands;
+* :func:`build_learner` makes the learners of a net, restored from the journal;
+* :func:`net_actions` names every primitive action a net may call.
+
+Preflight: before the first firing, every primitive action of the net (every alternative of every
+primitive task) must be placed in services.toml and offered by a reachable node that loaded the same
+services.toml (:meth:`services.client.ServiceClient.preflight`). Otherwise the run does not start:
+:class:`NodesNotReady` lists the problems and nothing is journaled, unless ``degraded`` asks to
+start anyway (the calls of the missing actions then end in error and the net takes its error
+branches).
 
 ``petrobot run`` and ``demo`` are thin commands over these (the nodes themselves:
 :mod:`coordinator.nodegroup`).
@@ -22,7 +30,27 @@ from services.client import ServiceClient
 from services.errors import PetrobotError
 from services.location import Location
 
-__all__ = ["build_learner", "execute"]
+__all__ = ["NodesNotReady", "build_learner", "execute", "net_actions"]
+
+
+class NodesNotReady(PetrobotError):
+    """The preflight found actions of the net that no reachable node offers; the run did not start.
+
+    Attributes:
+        problems: one sentence per problem (an action not placed, a node unreachable or refusing
+            our key, an action its node does not offer, a node running another services.toml).
+    """
+
+    def __init__(self, problems: list[str]) -> None:
+        self.problems = list(problems)
+        n = len(self.problems)
+        super().__init__(f"the nodes are not ready for this net ({n} problem{'' if n == 1 else 's'}); "
+                         "nothing was run (--degraded starts anyway):\n" + "\n".join(f"  - {p}" for p in self.problems))
+
+
+def net_actions(net: PetriNet) -> list[str]:
+    """Every primitive action of ``net`` (each alternative of each primitive task), in net order."""
+    return list(dict.fromkeys(a.name for task in net.tasks.values() for a in task.actions))
 
 
 def build_learner(net: PetriNet, seed: int, journal: JournalReader) -> Learner:
@@ -43,7 +71,8 @@ async def execute(net: PetriNet, *, location: Location, key: bytes, journal: Jou
                   resume: bool = False, net_text: str | None = None, live: bool | None = None,
                   quiet: bool = False, read_input: bool = False, max_seconds: float | None = None,
                   observer: Observer | None = None, console: Console | None = None,
-                  wait: bool = False, linger: bool = False, goal: dict[str, int] | None = None) -> RunSummary:
+                  wait: bool = False, linger: bool = False, goal: dict[str, int] | None = None,
+                  degraded: bool = False) -> RunSummary:
     """Run ``net`` to its end and return the :class:`~coordinator.runtime.RunSummary`.
 
     ``console`` (a :class:`~coordinator.console.Console`, made from ``live``/``quiet`` if not given)
@@ -57,8 +86,13 @@ async def execute(net: PetriNet, *, location: Location, key: bytes, journal: Jou
     the home marking while a control place could start more, until ``end``/Ctrl-D. ``goal`` (place →
     tokens) is a marking that ends the run ``completed`` even away from home.
 
+    Before the first firing (of a new or a resumed run) the nodes are checked (the module's
+    "Preflight"); with ``degraded`` the problems are printed on the console's stream and the run
+    starts anyway.
+
     Raises:
-        PetrobotError: nothing to resume; a bad learner configuration; the nodes cannot be reached.
+        NodesNotReady: the preflight found problems and ``degraded`` is False (nothing journaled).
+        PetrobotError: nothing to resume; a bad learner configuration.
     """
     recovered = None
     if resume:
@@ -68,10 +102,15 @@ async def execute(net: PetriNet, *, location: Location, key: bytes, journal: Jou
         recovered = journal.recover(net, run_id)
     learner = build_learner(net, recovered.seed if recovered else seed, journal)
     async with ServiceClient(location, key) as client:
+        problems = await client.preflight(net_actions(net))
+        console = console or Console(net, live=live, quiet=quiet)
+        if problems and not degraded:
+            raise NodesNotReady(problems)
+        for problem in problems:
+            print(f"petrobot: starting degraded: {problem}", file=console.stream, flush=True)
         operator = read_input or wait
         runtime = Runtime(net, client, journal, seed=seed, learner=learner, recovered=recovered,
                           net_text=net_text, operator=operator, linger=operator and linger, goal=goal)
-        console = console or Console(net, live=live, quiet=quiet)
         console.attach(runtime)
         if observer is not None:
             runtime.observer = observer

@@ -19,11 +19,24 @@ __all__ = ["add_parser", "run"]
 DESCRIPTION = """\
 Execute a task net. Every primitive action is called on the node that services.toml places it
 on; start the nodes first (`petrobot up` starts every node of services.toml on this machine).
+Before the first firing the run checks that every primitive action of the net is placed in
+services.toml and offered by a reachable node started from the same services.toml; if not, it
+names each problem and exits 2 without running or journaling anything (--degraded starts anyway:
+the calls of the missing actions then end in error and the net takes its error branches).
 The token flow is shown live on a terminal (line by line otherwise); type operator commands
 and Enter:  + PLACE [N] (insert tokens in a control place), - PLACE [N] (remove), pause, step,
 resume, abort, end. Every firing, action start, result and operator command (refused ones too)
 is journaled in SQLite before it takes effect; --resume continues the last unfinished or
 interrupted run of the net from the journal.
+
+Calls given up on: when a node is lost during a call (killed, frozen, cut off), the call ends in
+error at once and the net takes its error branch. The node cancels such a call once its caller
+has been gone for its heartbeat window (2 s), unless the action is placed `unattended = true`.
+As soon as the node can be reached again (and at the end of the run, and on --resume) the run
+asks it what became of the call, cancelling it if it still runs (an unattended one is waited
+for), and journals the node's answer as a reconciliation (`petrobot show RUN`); a node that ran
+the call otherwise than the net assumed is reported on the console ("node beta finished slow with
+success after the coordinator declared it lost").
 
 Waiting: when nothing can fire the run waits for its running primitive actions and for external
 events that would let a transition fire. When only the operator could move it on (paused, or a
@@ -41,7 +54,8 @@ end states and exit codes:
                              or meets --goal
   1    stuck                 tokens left away from home (a primitive-task place whose outcome no
                              transition takes, a resource not returned); the places are named
-  2    (no run)              bad net, services.toml, key or journal; nothing to resume
+  2    (no run)              bad net, services.toml, key or journal; nothing to resume; the
+                             nodes are not ready for the net (without --degraded)
   3    waiting_for_operator  only an operator command could go on and nobody can type one
   4    deadline              --max-seconds ran out while the run was going (a run waiting at home
                              for the operator ends completed)
@@ -68,6 +82,9 @@ def add_parser(subparsers: Any) -> None:
     p.add_argument("--goal", action="append", metavar="PLACE=N",
                    help="the run has reached its goal when it comes to rest with at least N tokens in PLACE "
                         "(repeatable): it ends completed even away from home (a net that runs once)")
+    p.add_argument("--degraded", action="store_true",
+                   help="start even when the preflight finds actions no reachable node offers (they then "
+                        "end in error); without it such a run exits 2 and journals nothing")
     p.add_argument("--wait", action="store_true",
                    help="wait for the operator even when nobody can type (no terminal, --no-input): the run "
                         "then ends on --max-seconds or Ctrl-C instead of ending waiting_for_operator")
@@ -101,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
             summary = asyncio.run(execute(
                 net, location=location, key=key, journal=journal, seed=args.seed, resume=args.resume,
                 net_text=text, live=args.live, quiet=args.quiet, read_input=read_input,
-                max_seconds=args.max_seconds, wait=args.wait, linger=True, goal=goal))
+                max_seconds=args.max_seconds, wait=args.wait, linger=True, goal=goal, degraded=args.degraded))
     except PetrobotError as exc:
         print(f"petrobot run: {exc}", file=sys.stderr)
         return 2

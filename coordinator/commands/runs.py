@@ -20,8 +20,9 @@ def add_parser(subparsers: Any) -> None:
         description="List the runs recorded in a journal, oldest first: run id, net, start time, duration, end "
                     "state (completed, stuck, waiting_for_operator, aborted, deadline, interrupted; '-' while "
                     "unfinished), firings, primitive-action calls with their errors and failures, operator "
-                    "commands (refused ones in brackets) and why the run ended. `petrobot show RUN` gives one "
-                    "run in detail. The journal is opened read-only. Exit status 0, or 1 on an unreadable "
+                    "commands (refused ones in brackets) and why the run ended, after the number of calls given "
+                    "up on that ended on their node otherwise than the net assumed, if any. `petrobot show RUN` "
+                    "gives one run in detail. The journal is opened read-only. Exit status 0, or 1 on an unreadable "
                     "journal.")
     options.add_journal(p, default="runs/journal.sqlite", help="SQLite journal (default: %(default)s)")
     p.add_argument("--net", metavar="NAME", help="only the runs of this net")
@@ -40,7 +41,7 @@ def report(args: argparse.Namespace) -> list[dict[str, Any]]:
         "ended_wall": s.run.ended_wall, "duration_s": round(s.duration_s, 3), "end_state": s.run.end_state,
         "firings": s.firings, "calls": s.calls, "errors": s.errors, "failures": s.failures,
         "operator_commands": s.operator_commands, "refused": s.refused, "note": s.run.note or "",
-        "resumable": s.run.resumable,
+        "resumable": s.run.resumable, "reconciled": s.reconciled, "differed": s.differed,
     } for s in stats if args.net is None or s.run.net_name == args.net]
 
 
@@ -55,6 +56,8 @@ def render(rows: list[dict[str, Any]]) -> str:
         end = r["end_state"] or ("- (resumable)" if r["resumable"] else "-")
         oper = f"{r['operator_commands']}" + (f"[{r['refused']}]" if r["refused"] else "")
         note = r["note"].split(" | ")[0]
+        if r.get("differed"):
+            note = f"[{r['differed']} reconciled differently] {note}"
         note = note if len(note) <= 70 else note[:67] + "..."
         lines.append(f"{r['run']:<13} {r['net'][:14]:<14} {started:<19} {r['duration_s']:>8.2f} {end:<21} "
                      f"{r['firings']:>8} {r['calls']:>6} {r['errors']:>5} {r['failures']:>5} {oper:>7}  {note}")

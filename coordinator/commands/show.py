@@ -1,5 +1,6 @@
 """``petrobot show RUN``: one run of a journal in order — firings, calls with their reasons,
-operator commands (refused ones with why) — and how it ended."""
+operator commands (refused ones with why), what nodes said afterwards about the calls the run had
+given up on (reconciliations) — and how it ended."""
 
 from __future__ import annotations
 
@@ -25,7 +26,9 @@ def add_parser(subparsers: Any) -> None:
         description="Show one run of a journal: how it ended and why, then every record in the order it was "
                     "written — firings (places that gave and took tokens), primitive-action starts and results "
                     "(status, outcome, duration and the action's reason), operator commands (refused ones with "
-                    "the refusal) — and the errors counted by reason. RUN is a run id or a unique prefix of one "
+                    "the refusal), reconciliations (what a node said afterwards about a call the run had given "
+                    "up on when the node was lost, marked DIFFERS when the node's final status is not the one "
+                    "the net went on with) — and the errors counted by reason. RUN is a run id or a unique prefix of one "
                     "(`petrobot runs` lists them), or `last`. The journal is opened read-only. Exit status 0, or "
                     "1 on an unreadable journal or an unknown run.")
     p.add_argument("run_id", metavar="RUN", help="run id, a unique prefix of one, or 'last'")
@@ -57,7 +60,15 @@ def find_run(journal: JournalReader, wanted: str) -> RunRow:
 
 def describe(record: Record, t0: float) -> str:
     """One line for a record, stamped with its time since the run started (s)."""
-    from coordinator.journal import FiringRow, OperatorRow, ResultRow, StartRow
+    from coordinator.journal import (
+        FiringRow,
+        OperatorRow,
+        ReconciliationRow,
+        ResultRow,
+        StartRow,
+    )
+    from coordinator.reconcile import describe as describe_reconciliation
+    from services.results import ActionResult
 
     stamp = f"{record.t_wall - t0:9.3f}s  "
     if isinstance(record, FiringRow):
@@ -73,6 +84,12 @@ def describe(record: Record, t0: float) -> str:
         why = f": {record.reason}" if record.reason else ""
         return (f"{stamp}result   {record.task}/{record.action} on {record.node or '?'}: "
                 f"{record.status.value}{extra}{wall}{why} [{record.instance}]")
+    if isinstance(record, ReconciliationRow):
+        node_said = None if record.status is None else ActionResult(
+            status=record.status, outcome=record.outcome, reason=record.reason, wall_s=record.wall_s or 0.0)
+        mark = "DIFFERS  " if record.differs else ""
+        return (f"{stamp}reconcile {mark}{record.task}/{record.action}: "
+                f"{describe_reconciliation(record.node, record.action, record.assumed, node_said)} [{record.instance}]")
     if isinstance(record, OperatorRow):
         what = record.command + (f" {record.place} {record.count}" if record.place is not None else "")
         if record.accepted:
@@ -83,11 +100,17 @@ def describe(record: Record, t0: float) -> str:
 
 def report(args: argparse.Namespace) -> dict[str, Any]:
     """The run and its records as a JSON-ready dict (raises JournalError)."""
-    from coordinator.journal import FiringRow, JournalReader, ResultRow
+    from coordinator.journal import (
+        FiringRow,
+        JournalReader,
+        ReconciliationRow,
+        ResultRow,
+    )
 
     with JournalReader.open(args.journal) as journal:
         row = find_run(journal, args.run_id)
         records = [r for r in journal.timeline(row.id) if not (args.no_firings and isinstance(r, FiringRow))]
+    reconciled = [r for r in records if isinstance(r, ReconciliationRow)]
     reasons = collections.Counter(f"{r.task}/{r.action}: {r.reason or 'no reason given'}"
                                   for r in records if isinstance(r, ResultRow) and r.status == "error")
     return {
@@ -95,6 +118,7 @@ def report(args: argparse.Namespace) -> dict[str, Any]:
         "ended_wall": row.ended_wall, "end_state": row.end_state, "note": row.note or "",
         "records": [{"kind": type(r).__name__.removesuffix("Row").lower(), **_fields(r)} for r in records],
         "error_reasons": dict(reasons.most_common()),
+        "reconciled": len(reconciled), "differed": sum(r.differs for r in reconciled),
         "_lines": [describe(r, row.started_wall) for r in records],
     }
 
@@ -122,6 +146,10 @@ def render(rep: dict[str, Any]) -> str:
     for part in (rep["note"] or "").split(" | "):
         if part:
             lines.append(f"  {part}")
+    if rep.get("reconciled"):
+        n = rep["reconciled"]
+        lines.append(f"  {n} call{'' if n == 1 else 's'} given up on reconciled with {'its' if n == 1 else 'their'} "
+                     f"node{'' if n == 1 else 's'}; {rep['differed']} ended otherwise than the net assumed")
     lines.append("")
     lines.extend(rep["_lines"] or ["  (no records)"])
     if rep["error_reasons"]:

@@ -21,6 +21,7 @@ from coordinator.journal.records import (
     FiringRow,
     LearnerState,
     OperatorRow,
+    ReconciliationRow,
     Recovered,
     ResultRow,
     RunRow,
@@ -33,7 +34,7 @@ from services.results import Status, latched_events
 
 __all__ = ["JournalReader", "Record", "read_results"]
 
-Record = FiringRow | StartRow | ResultRow | OperatorRow
+Record = FiringRow | StartRow | ResultRow | OperatorRow | ReconciliationRow
 """Any record of a run, as :meth:`JournalReader.timeline` gives them."""
 
 _STATUSES = frozenset(s.value for s in Status)
@@ -65,6 +66,10 @@ class JournalReader:
             raise JournalError(f"{path}: cannot read the journal: {exc}") from exc
         # a version-1 journal (read-only) has no accepted/reason: every command it holds was applied
         self._operator_cols = ("accepted, reason" if {"accepted", "reason"} <= have else "1, NULL")
+        try:  # a journal of version 1 or 2 (read-only) has no reconciliation table
+            self._reconciliation = bool(db.execute("PRAGMA table_info(reconciliation)").fetchall())
+        except sqlite3.DatabaseError as exc:
+            raise JournalError(f"{path}: cannot read the journal: {exc}") from exc
 
     @classmethod
     def open(cls, path: str | Path) -> JournalReader:
@@ -149,14 +154,20 @@ class JournalReader:
             "FROM action_result GROUP BY run")}
         commands = {r: (n, x, t) for r, n, x, t in self._query(
             f"SELECT run, COUNT(*), {refused}, MAX(t_wall) FROM operator GROUP BY run")}
+        reconciled: dict[str, tuple[int, int]] = {}
+        for rec in self.reconciliations():
+            n, d = reconciled.get(rec.run, (0, 0))
+            reconciled[rec.run] = (n + 1, d + int(rec.differs))
         out = []
         for row in self.runs():
             nf, tf = firings.get(row.id, (0, None))
             nc, ne, nfail, tc = calls.get(row.id, (0, 0, 0, None))
             no, nx, to = commands.get(row.id, (0, 0, None))
+            nr, nd = reconciled.get(row.id, (0, 0))
             last = max([row.started_wall] + [float(t) for t in (tf, tc, to) if t is not None])
             out.append(RunStats(row, firings=int(nf), calls=int(nc), errors=int(ne or 0), failures=int(nfail or 0),
-                                operator_commands=int(no), refused=int(nx or 0), last_wall=last))
+                                operator_commands=int(no), refused=int(nx or 0), last_wall=last,
+                                reconciled=nr, differed=nd))
         return out
 
     # ------------------------------------------------------------------ records of runs
@@ -201,16 +212,44 @@ class JournalReader:
         return [OperatorRow(r, str(c), p, n, float(tw), bool(ok), why, int(e))
                 for r, c, p, n, tw, ok, why, e in rows]
 
+    def reconciliations(self, run: str | None = None) -> list[ReconciliationRow]:
+        """What nodes said afterwards about the calls the coordinator gave up on, in journal order
+        (none in a journal written before reconciliation existed).
+
+        Raises:
+            JournalError: the database cannot be read.
+        """
+        if not self._reconciliation:
+            return []
+        where, args = _where_run(run)
+        rows = self._query("SELECT run, instance, task, action, node, assumed, status, outcome, reason, cost, wall_s, "
+                           f"cpu_s, value, t_wall, entry FROM reconciliation{where} ORDER BY entry", args)
+        return [ReconciliationRow(r, i, t, a, n, Status(was) if was in _STATUSES else None,
+                                  Status(st) if st in _STATUSES else None, o, why, c, w, cpu, _loads(v), float(tw),
+                                  int(e))
+                for r, i, t, a, n, was, st, o, why, c, w, cpu, v, tw, e in rows]
+
+    def final_words(self, run: str | None = None) -> dict[str, ResultRow | ReconciliationRow]:
+        """The journal's last word on each call id (instance) that has one: its reconciliation if a
+        node told its fate after the coordinator gave up on it, else its result.
+
+        Raises:
+            JournalError: the database cannot be read.
+        """
+        words: dict[str, ResultRow | ReconciliationRow] = {r.instance: r for r in self.results(run)}
+        words.update((r.instance, r) for r in self.reconciliations(run))
+        return words
+
     def timeline(self, run: str) -> list[Record]:
-        """Every record of ``run`` — firings, action starts, results, operator commands — in the
-        order they were written (``entry``).
+        """Every record of ``run`` — firings, action starts, results, operator commands,
+        reconciliations — in the order they were written (``entry``).
 
         Raises:
             JournalError: if the journal has no run ``run``.
         """
         self.run(run)
         records: list[Record] = [*self.firings(run), *self.starts(run), *self.results(run),
-                                 *self.operator_commands(run)]
+                                 *self.operator_commands(run), *self.reconciliations(run)]
         records.sort(key=lambda r: (r.entry, r.t_wall))
         return records
 

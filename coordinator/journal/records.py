@@ -15,8 +15,11 @@ from typing import Any
 from coordinator.engine import Instance
 from coordinator.net import Marking
 from coordinator.performance import ActionRecord
+from coordinator.reconcile import differs
+from services.results import Status
 
-__all__ = ["FiringRow", "LearnerState", "OperatorRow", "Recovered", "ResultRow", "RunRow", "RunStats", "StartRow"]
+__all__ = ["FiringRow", "LearnerState", "OperatorRow", "ReconciliationRow", "Recovered", "ResultRow", "RunRow", "RunStats",
+           "StartRow"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +68,8 @@ class RunStats:
         calls: primitive-action results journaled; errors, failures: those with that status.
         refused: operator commands refused.
         last_wall: time of its last record (the start when it has none), Unix s.
+        reconciled: calls given up on whose fate a node told afterwards; differed: those whose
+            final status on the node is not the one the net went on with.
     """
 
     run: RunRow
@@ -75,6 +80,8 @@ class RunStats:
     operator_commands: int
     refused: int
     last_wall: float
+    reconciled: int = 0
+    differed: int = 0
 
     @property
     def duration_s(self) -> float:
@@ -150,6 +157,55 @@ class OperatorRow:
     accepted: bool = True
     reason: str | None = None
     entry: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class ReconciliationRow:
+    """What a node said, when asked afterwards, about a call the coordinator had given up on.
+
+    The coordinator gives up on a call when node trouble (a lost connection, missed heartbeats, an
+    unanswered deadline) ends it with an ``error`` result the node did not send; the net goes on
+    with that error. When the node is reachable again the coordinator cancels the call if it still
+    runs and asks the node for its final result (docs/protocol.md §5, ``query``).
+
+    Attributes:
+        run, instance, task, action, node: the call (``instance`` is the call id).
+        assumed: the status the net went on with (the journaled result's), or ``None`` when no
+            result was journaled (the run ended, on abort or deadline, before one came).
+        status: the node's final status, or ``None`` when the node does not know the call (it
+            never ran, or its result is no longer kept).
+        outcome, reason, cost, wall_s, cpu_s, value: the node's result (``None`` when unknown).
+        t_wall: when the node's answer was journaled.
+        entry: order among every record of the journal.
+    """
+
+    run: str
+    instance: str
+    task: str
+    action: str
+    node: str | None
+    assumed: Status | None
+    status: Status | None
+    outcome: str | None
+    reason: str | None
+    cost: float | None
+    wall_s: float | None
+    cpu_s: float | None
+    value: Any
+    t_wall: float
+    entry: int = 0
+
+    @property
+    def known(self) -> bool:
+        """True when the node knew the call (it ran, or started and died with the node)."""
+        return self.status is not None
+
+    @property
+    def differs(self) -> bool:
+        """True when the node's final status is not the one the net went on with
+        (:func:`coordinator.reconcile.differs`: a call the node never ran, or ended in error,
+        agrees with an ``error`` and with no result at all)."""
+        return differs(self.assumed, self.status)
 
 
 @dataclass(frozen=True, slots=True)

@@ -9,6 +9,8 @@ in which they were written, so a run can be replayed in order)::
     action_result(entry, run, instance, task, action, node, status, outcome, cost, wall_s, cpu_s,
                   t_wall, reason, value)
     operator(entry, run, command, place, count, t_wall, accepted, reason)
+    reconciliation(entry, run, instance, task, action, node, assumed, status, outcome, reason, cost,
+                   wall_s, cpu_s, value, t_wall)
     learner_state(task, scheme, state, updated_wall)
 
 JSON columns: ``consumed``/``produced`` (place → tokens), ``instances`` (list of ids), ``params``
@@ -17,12 +19,17 @@ and ``value`` (JSON of the call's parameters and returned value, when JSON can h
 ``started_wall``, ``ended_wall`` and ``updated_wall`` are Unix times in seconds; ``wall_s`` and
 ``cpu_s`` are durations in seconds measured on the node. ``learner_state`` holds the latest state
 of each primitive task's automaton, across runs. ``operator.accepted`` is 1 for a command that was
-applied, 0 for one that was refused, with the refusal in ``reason``.
+applied, 0 for one that was refused, with the refusal in ``reason``. A ``reconciliation`` row is
+what a node said, when asked afterwards, about a call the coordinator had given up on (node trouble):
+``assumed`` is the status the net went on with (NULL if no result was journaled), ``status`` the
+node's final status (NULL if the node does not know the call: it never ran, or its result expired).
 
 Schema versions (``PRAGMA user_version``): 1 (no version set) had one ``entry`` sequence per table
-and no ``accepted``/``reason``; 2 (:data:`SCHEMA_VERSION`) is the above. :func:`migrate` brings a
-version-1 journal to version 2 when it is opened for writing (entries renumbered in the order of
-their times); a read-only reader reads both. The user-facing description: ``docs/journal.md``.
+and no ``accepted``/``reason``; 2 added them; 3 (:data:`SCHEMA_VERSION`) added ``reconciliation``.
+:func:`migrate` brings an older journal to version 3 when it is opened for writing (a version-1
+journal's entries renumbered in the order of their times); a read-only reader reads every version
+(a journal without ``reconciliation`` has no reconciliations). The user-facing description:
+``docs/journal.md``.
 
 Only :mod:`coordinator.journal` reads and writes these tables; every other module goes through
 :class:`~coordinator.journal.reader.JournalReader` and :class:`~coordinator.journal.writer.Journal`.
@@ -34,9 +41,10 @@ import sqlite3
 
 from coordinator.errors import JournalError
 
-__all__ = ["COLUMNS", "DDL", "SCHEMA_VERSION", "check_schema", "migrate", "schema_version"]
+__all__ = ["ADDED_IN_3", "COLUMNS", "DDL", "RECORD_TABLES", "SCHEMA_VERSION", "check_schema", "migrate",
+           "schema_version"]
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 """The version this code writes (``PRAGMA user_version``)."""
 
 DDL = """
@@ -62,6 +70,11 @@ CREATE TABLE IF NOT EXISTS operator (
     entry INTEGER PRIMARY KEY, run TEXT NOT NULL, command TEXT NOT NULL, place TEXT, count INTEGER,
     t_wall REAL NOT NULL, accepted INTEGER NOT NULL DEFAULT 1, reason TEXT
 );
+CREATE TABLE IF NOT EXISTS reconciliation (
+    entry INTEGER PRIMARY KEY, run TEXT NOT NULL, instance TEXT NOT NULL, task TEXT NOT NULL,
+    action TEXT NOT NULL, node TEXT, assumed TEXT, status TEXT, outcome TEXT, reason TEXT, cost REAL,
+    wall_s REAL, cpu_s REAL, value TEXT, t_wall REAL NOT NULL
+);
 CREATE TABLE IF NOT EXISTS learner_state (
     task TEXT PRIMARY KEY, scheme TEXT, state TEXT NOT NULL, updated_wall REAL NOT NULL
 );
@@ -70,6 +83,7 @@ CREATE INDEX IF NOT EXISTS start_run ON action_start(run);
 CREATE INDEX IF NOT EXISTS result_run ON action_result(run);
 CREATE INDEX IF NOT EXISTS result_action ON action_result(task, action);
 CREATE INDEX IF NOT EXISTS operator_run ON operator(run);
+CREATE INDEX IF NOT EXISTS reconciliation_run ON reconciliation(run, instance);
 """
 """The tables and their indexes (idempotent: ``IF NOT EXISTS``)."""
 
@@ -80,6 +94,8 @@ COLUMNS: dict[str, tuple[str, ...]] = {
     "action_result": ("entry", "run", "instance", "task", "action", "node", "status", "outcome", "cost",
                       "wall_s", "cpu_s", "t_wall", "reason", "value"),
     "operator": ("entry", "run", "command", "place", "count", "t_wall", "accepted", "reason"),
+    "reconciliation": ("entry", "run", "instance", "task", "action", "node", "assumed", "status", "outcome",
+                       "reason", "cost", "wall_s", "cpu_s", "value", "t_wall"),
     "learner_state": ("task", "scheme", "state", "updated_wall"),
 }
 """Table → its columns, as :data:`DDL` creates them."""
@@ -87,7 +103,10 @@ COLUMNS: dict[str, tuple[str, ...]] = {
 ADDED_IN_2: dict[str, tuple[str, ...]] = {"operator": ("accepted", "reason")}
 """Columns a version-1 journal lacks (a reader of such a journal supplies their defaults)."""
 
-RECORD_TABLES = ("firing", "action_start", "action_result", "operator")
+ADDED_IN_3 = ("reconciliation",)
+"""Tables a journal of version 1 or 2 lacks (a reader of such a journal finds no rows in them)."""
+
+RECORD_TABLES = ("firing", "action_start", "action_result", "operator", "reconciliation")
 """The tables whose rows share the ``entry`` sequence."""
 
 
@@ -102,7 +121,8 @@ def migrate(db: sqlite3.Connection, path: str) -> int:
     Version 1 → 2: adds ``operator.accepted`` (1 for every old command: only applied commands were
     journaled) and ``operator.reason``, and renumbers ``entry`` in one sequence over the record
     tables, ordered by ``t_wall`` (then firing, start, result, operator, then the old entry), which
-    is the order the records were written in. A fresh journal only gets its version set.
+    is the order the records were written in. Version 2 → 3: adds the (empty) ``reconciliation``
+    table. A fresh journal only gets its version set.
 
     Returns:
         The version the journal had.
@@ -120,12 +140,16 @@ def migrate(db: sqlite3.Connection, path: str) -> int:
             return version
         db.execute("BEGIN IMMEDIATE")
         try:
-            have = {row[1] for row in db.execute("PRAGMA table_info(operator)")}
-            if "accepted" not in have:
-                db.execute("ALTER TABLE operator ADD COLUMN accepted INTEGER NOT NULL DEFAULT 1")
-            if "reason" not in have:
-                db.execute("ALTER TABLE operator ADD COLUMN reason TEXT")
-            _renumber(db)
+            if version < 2:
+                have = {row[1] for row in db.execute("PRAGMA table_info(operator)")}
+                if "accepted" not in have:
+                    db.execute("ALTER TABLE operator ADD COLUMN accepted INTEGER NOT NULL DEFAULT 1")
+                if "reason" not in have:
+                    db.execute("ALTER TABLE operator ADD COLUMN reason TEXT")
+            for statement in _RECONCILIATION_DDL:  # version 3 (also made by DDL: idempotent)
+                db.execute(statement)
+            if version < 2:
+                _renumber(db)
             db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
             db.execute("COMMIT")
         except BaseException:
@@ -134,6 +158,11 @@ def migrate(db: sqlite3.Connection, path: str) -> int:
         return version
     except sqlite3.DatabaseError as exc:
         raise JournalError(f"{path}: cannot migrate the journal: {exc}") from exc
+
+
+_RECONCILIATION_DDL = tuple(
+    part.strip() for part in DDL.split(";")
+    if "reconciliation" in part and part.strip().startswith(("CREATE TABLE", "CREATE INDEX")))
 
 
 def _renumber(db: sqlite3.Connection) -> None:
@@ -155,7 +184,7 @@ def _renumber(db: sqlite3.Connection) -> None:
 
 def check_schema(db: sqlite3.Connection, path: str) -> None:
     """Check that an open database has every journal table with (at least) its columns (those of
-    version 1 suffice: a reader reads both versions).
+    version 1 suffice: a reader reads every version; the tables added since may be missing).
 
     Raises:
         JournalError: naming ``path``, if a table or a column is missing, or the file cannot be
@@ -164,6 +193,8 @@ def check_schema(db: sqlite3.Connection, path: str) -> None:
     try:
         for table, columns in COLUMNS.items():
             have = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
+            if not have and table in ADDED_IN_3:
+                continue
             if not have:
                 raise JournalError(f"{path}: not a petrobot journal (no table {table!r})")
             missing = [c for c in columns if c not in have and c not in ADDED_IN_2.get(table, ())]

@@ -1,7 +1,8 @@
 """Writing the journal: an SQLite (WAL) log of every run of a task net (paper sections 3 to 5).
 
 Every firing, action start, action result and operator command is written — and committed —
-before it takes effect, so that ``petrobot run --resume`` can rebuild the marking and the live
+before it takes effect (and, later, what a node said about a call the coordinator had given up on:
+a reconciliation), so that ``petrobot run --resume`` can rebuild the marking and the live
 instances of an interrupted run (:meth:`JournalReader.recover`). The same tables feed the
 quantitative analysis (reliability and durations per primitive action, section 3) and learning
 (section 4). The tables: :mod:`coordinator.journal.schema`.
@@ -30,7 +31,7 @@ from coordinator.errors import JournalError
 from coordinator.journal.reader import JournalReader
 from coordinator.journal.schema import DDL, RECORD_TABLES, check_schema, migrate
 from coordinator.net import PetriNet
-from services.results import ActionResult
+from services.results import ActionResult, Status
 
 __all__ = ["Journal"]
 
@@ -169,6 +170,22 @@ class Journal(JournalReader):
             "reason, value",
             (run, instance, task, action, node, result.status.value, result.outcome, result.cost, result.wall_s,
              result.cpu_s, time.time(), result.reason, _json(result.value)),
+        )
+
+    def reconciliation(self, run: str, instance: str, task: str, action: str, node: str | None,
+                       assumed: Status | None, result: ActionResult | None) -> None:
+        """Record what node ``node`` said about a call the coordinator had given up on: its final
+        ``result``, or ``None`` when the node does not know the call (never ran, or no longer kept);
+        ``assumed`` is the status the net went on with (``None`` if no result was journaled)."""
+        if result is None:
+            values: tuple[Any, ...] = (None,) * 7
+        else:
+            values = (result.status.value, result.outcome, result.reason, result.cost, result.wall_s, result.cpu_s,
+                      _json(result.value))
+        self._record(
+            "reconciliation", "run, instance, task, action, node, assumed, status, outcome, reason, cost, wall_s, "
+            "cpu_s, value, t_wall",
+            (run, instance, task, action, node, None if assumed is None else assumed.value, *values, time.time()),
         )
 
     def operator(self, run: str, command: str, place: str | None = None, count: int | None = None, *,

@@ -303,7 +303,7 @@ def test_catching_across_hosts_survives_cut_links_with_the_watchdogs_and_recover
     assert co.wait(timeout=180) == 0, "\n".join(out.seen[-40:])
     out.drain()
     text = "\n".join(out.seen)
-    assert "dead after" in text and "home_retries_left': 3" in text, text[-3000:]
+    assert "completed after" in text and "home_retries_left': 3" in text, text[-3000:]
 
     catches = _results(journal, "catch")
     assert catches[0][:2] == ("error", "stream_lost")

@@ -307,3 +307,55 @@ def test_a_run_ending_with_tokens_away_from_home_exits_non_zero_and_names_the_pl
     assert proc.wait(timeout=TIMEOUT_S) == 1, out.text
     assert "stuck after 1 firings" in out.text
     assert "a: 0 tokens (home 1)" in out.text and "b: 1 token (home 0)" in out.text
+
+
+def test_a_run_whose_nodes_are_not_running_is_refused_before_its_first_firing_and_journals_nothing(
+        cluster: Any, tmp_path: Path):
+    """Before: the whole net played on "unreachable" errors and exited 0."""
+    cluster.write_services(SERVICES)  # no node started
+    net = tmp_path / "slow.toml"
+    net.write_text(SLOW)
+    journal = tmp_path / "j.sqlite"
+    proc = petrobot(cluster, "run", str(net), "--journal", str(journal), "--lines")
+    out = Output(proc)
+    assert proc.wait(timeout=TIMEOUT_S) == 2, out.text
+    host, port = cluster.location.address("beta")
+    assert "the nodes are not ready for this net (1 problem); nothing was run (--degraded starts anyway)" in out.text
+    assert f"  - node beta at {host}:{port} is unreachable: " in out.text
+    assert "fire" not in out.text
+    with JournalReader.open(journal) as reader:
+        assert reader.runs() == []
+
+
+def test_a_run_refuses_nodes_started_before_services_toml_was_edited_and_says_which(cluster: Any, tmp_path: Path):
+    """Before: calls failed with unknown_action and the net took its error branch, exit status 0."""
+    cluster.write_services(SERVICES)
+    cluster.start("alpha", "beta")
+    moved = cluster.services_path.read_text().replace('[actions.slow]\nnode = "beta"', '[actions.slow]\nnode = "alpha"')
+    cluster.services_path.write_text(moved)  # the nodes still run the old placement
+    net = tmp_path / "slow.toml"
+    net.write_text(SLOW)
+    journal = tmp_path / "j.sqlite"
+    proc = petrobot(cluster, "run", str(net), "--journal", str(journal), "--lines")
+    out = Output(proc)
+    assert proc.wait(timeout=TIMEOUT_S) == 2, out.text
+    assert "node alpha does not offer 'slow'" in out.text
+    assert "node alpha's services.toml changed on disk since it started: restart it" in out.text
+    with JournalReader.open(journal) as reader:
+        assert reader.runs() == []
+
+
+def test_with_degraded_a_run_starts_without_its_nodes_and_exits_non_zero_when_every_call_errored(
+        cluster: Any, tmp_path: Path):
+    cluster.write_services(SERVICES)  # no node started
+    net = tmp_path / "slow.toml"
+    net.write_text(SLOW)
+    journal = tmp_path / "j.sqlite"
+    proc = petrobot(cluster, "run", str(net), "--journal", str(journal), "--lines", "--degraded")
+    out = Output(proc)
+    assert proc.wait(timeout=TIMEOUT_S) == 6, out.text
+    assert "petrobot: starting degraded: node beta at " in out.text
+    assert "every one of the 2 primitive-action calls ended in error" in out.text
+    with JournalReader.open(journal) as reader:
+        (run,) = reader.runs()
+        assert run.end_state == "completed" and reader.reconciliations() == []  # the calls never left

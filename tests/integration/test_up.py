@@ -127,7 +127,7 @@ def test_up_starts_the_nodes_that_need_no_simulator_and_the_readme_session_runs(
         ran = _petrobot(cluster, tmp_path, "run", str(ROOT / "nets" / "demo.toml"), "--services",
                         str(cluster.services_path), "--journal", str(tmp_path / "j.sqlite"), "--lines")
         assert ran.returncode == 0, ran.stdout + ran.stderr
-        assert "dead after" in ran.stdout
+        assert "completed after" in ran.stdout
         logs = tmp_path / "runs" / "logs"
         assert "node alpha listening on" in (logs / "alpha.log").read_text()
         assert " coin from " in (logs / "alpha.log").read_text()  # the calls are logged there, not on screen

@@ -10,6 +10,7 @@ import pytest
 from coordinator.engine import Engine, Firing, StartAction
 from coordinator.errors import JournalError
 from coordinator.journal import Journal, JournalReader
+from coordinator.journal.schema import SCHEMA_VERSION
 from coordinator.netfile import loads_net
 from services.results import ActionResult, Status
 
@@ -262,7 +263,7 @@ def test_a_journal_of_version_1_is_read_as_it_is_and_migrated_when_opened_for_wr
         journal.operator("r1", "remove", "nope", 1, accepted=False, reason="no place 'nope'")
         assert journal.timeline("r1")[-1].entry == 7
     with sqlite3.connect(path) as db:
-        assert db.execute("PRAGMA user_version").fetchone()[0] == 2
+        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
     with JournalReader.open(path) as reader:
         refused = reader.operator_commands()[-1]
         assert (refused.command, refused.accepted, refused.reason) == ("remove", False, "no place 'nope'")
@@ -311,3 +312,57 @@ def test_run_stats_count_what_each_run_did(tmp_path: Path):
     assert (a.firings, a.calls, a.errors, a.failures, a.operator_commands, a.refused) == (2, 2, 1, 1, 2, 1)
     assert a.duration_s >= 0 and a.run.end_state == "stuck"
     assert (b.firings, b.calls, b.errors, b.operator_commands) == (0, 0, 0, 0) and b.duration_s == 0
+
+
+def version_2_journal(path: Path) -> Path:
+    """A journal as petrobot wrote it before reconciliations: version 2, no reconciliation table."""
+    net = loads_net(NET)
+    with Journal(path) as journal:
+        run = journal.begin_run(net, run_id="r2")
+        _, starts = journaled_engine(journal, net, run)
+        journal.action_result(run, starts[0].instance, "w", "a", "alpha", ActionResult.error("heartbeat timeout"))
+    with sqlite3.connect(path) as db:
+        db.execute("DROP TABLE reconciliation")
+        db.execute("PRAGMA user_version=2")
+    return path
+
+
+def test_a_journal_of_version_2_is_read_without_reconciliations_and_migrated_when_opened_for_writing(
+        tmp_path: Path):
+    path = version_2_journal(tmp_path / "v2.sqlite")
+    with JournalReader.open(path) as reader:
+        assert reader.reconciliations() == []
+        assert [type(r).__name__ for r in reader.timeline("r2")][-1] == "ResultRow"
+        assert reader.run_stats()[0].reconciled == 0
+    with sqlite3.connect(path) as db:  # reading changed nothing
+        assert not db.execute("SELECT name FROM sqlite_master WHERE name='reconciliation'").fetchall()
+    with Journal(path) as journal:
+        journal.reconciliation("r2", "r2-1", "w", "a", "alpha", Status.ERROR, ActionResult.success(7))
+        assert [r.entry for r in journal.timeline("r2")] == [1, 2, 3, 4, 5, 6]
+    with sqlite3.connect(path) as db:
+        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 3
+
+
+def test_a_reconciliation_is_the_journals_last_word_on_a_call_and_says_whether_it_differs(tmp_path: Path):
+    net = loads_net(NET)
+    with Journal(tmp_path / "j.sqlite") as journal:
+        run = journal.begin_run(net)
+        _, (first, second) = journaled_engine(journal, net, run)
+        lost = ActionResult.error("heartbeat timeout")
+        journal.action_result(run, first.instance, "w", "a", "beta", lost)
+        journal.action_result(run, second.instance, "w", "a", "beta", lost)
+        journal.reconciliation(run, first.instance, "w", "a", "beta", Status.ERROR,
+                               ActionResult(status=Status.SUCCESS, value={"waited_s": 2.0}, wall_s=2.0, cpu_s=0.01))
+        journal.reconciliation(run, second.instance, "w", "a", "beta", Status.ERROR, None)
+    with JournalReader.open(tmp_path / "j.sqlite") as reader:
+        finished, never = reader.reconciliations(run)
+        words = reader.final_words(run)
+        (stats,) = reader.run_stats()
+        kinds = [type(r).__name__ for r in reader.timeline(run)][-4:]
+    assert (finished.assumed, finished.status, finished.value, finished.wall_s) == (
+        Status.ERROR, Status.SUCCESS, {"waited_s": 2.0}, 2.0)
+    assert finished.differs and finished.known
+    assert (never.status, never.known, never.differs) == (None, False, False)  # never ran: agrees with error
+    assert words[first.instance] == finished and words[second.instance] == never
+    assert (stats.reconciled, stats.differed) == (2, 1)
+    assert kinds == ["ResultRow", "ResultRow", "ReconciliationRow", "ReconciliationRow"]

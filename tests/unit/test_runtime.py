@@ -18,7 +18,7 @@ from coordinator.journal import FiringRow, Journal, JournalReader, OperatorRow
 from coordinator.netfile import loads_net
 from coordinator.operator import Command, OperatorCommand
 from coordinator.runtime import Runtime
-from services.results import ActionResult
+from services.results import ActionResult, Status
 from tests.unit.runtime_fakes import FakeClient
 
 TIMEOUT_S = 60.0  # generous bound of every wait: a failing test fails, a slow machine passes
@@ -442,6 +442,40 @@ async def test_an_interrupted_run_is_resumed_and_reissues_the_call_it_interrupte
         assert journal.run(run_id).end_state == "completed"
     assert summary.end_state == "completed" and summary.final_marking == {"robot": 1, "done": 2}
     assert done.calls[0][1] == interrupted  # the same call id: a node that kept its result answers it
+
+
+async def test_a_resumed_run_counts_the_results_before_its_interruption_in_its_summary_and_exit_code(
+        tmp_path: Path):
+    """Before: a resumed run whose only new call errored said "every call ended in error" (exit 6)
+    though the run's first call had succeeded before Ctrl-C."""
+
+    class SucceedsThenHolds(FakeClient):
+        async def call(self, action: str, params: dict[str, Any], *, call_id: str, deadline_s: float | None = None
+                       ) -> ActionResult:
+            if not self.calls:
+                self.calls.append((action, call_id))
+                return ActionResult(status=Status.SUCCESS, wall_s=0.5)
+            return await super().call(action, params, call_id=call_id, deadline_s=deadline_s)
+
+    path = tmp_path / "j.sqlite"
+    net = tasks(runs=2)
+    first = SucceedsThenHolds(blocking={"act"})
+    with Journal(path) as journal:
+        runtime = Runtime(net, first, journal)
+        run = asyncio.create_task(runtime.run())
+        while len(first.calls) < 2:
+            await asyncio.wait_for(first.started.wait(), TIMEOUT_S)
+            first.started.clear()
+        run.cancel()
+        await asyncio.gather(run, return_exceptions=True)
+    with Journal(path) as journal:
+        again = Runtime(net, FakeClient({"act": ActionResult.error("drive 1 is in FAULT")}), journal,
+                        recovered=journal.recover(net, runtime.run_id))
+        summary = await asyncio.wait_for(again.run(), TIMEOUT_S)
+        note = journal.run(runtime.run_id).note or ""
+    assert summary.end_state == "completed" and summary.calls == 2
+    assert not summary.all_calls_failed and summary.exit_code == 0
+    assert "every one of" not in note
 
 
 def test_the_reader_thread_turns_end_of_input_into_end(tmp_path: Path):

@@ -70,3 +70,34 @@ def test_show_names_what_is_wrong_with_an_unknown_run(tmp_path: Path, capsys: py
     assert "no run 'zzz'" in capsys.readouterr().err
     assert main(["show", "", "--journal", str(path)]) == 1
     assert "names 2 runs" in capsys.readouterr().err
+
+
+def test_show_and_runs_tell_what_a_node_said_about_a_call_the_run_had_given_up_on(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]):
+    from tests.unit.test_runtime_reconcile import RAN, AskableClient
+
+    path = tmp_path / "j.sqlite"
+
+    async def go() -> str:
+        with Journal(path) as journal:
+            client = AskableClient({"act": ActionResult.error("heartbeat timeout")})
+            runtime = Runtime(tasks(), client, journal)
+            client.truth[f"{runtime.run_id}-1"] = RAN
+            await runtime.run()
+            return runtime.run_id
+
+    run = asyncio.run(go())
+    assert main(["show", run, "--journal", str(path), "--no-firings"]) == 0
+    text = capsys.readouterr().out
+    assert "1 call given up on reconciled with its node; 1 ended otherwise than the net assumed" in text
+    assert (f"reconcile DIFFERS  work/act: node fake finished act with success after the coordinator declared it "
+            f"lost [{run}-1]") in text
+    assert main(["show", run, "--journal", str(path), "--json"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    (rec,) = [r for r in rep["records"] if r["kind"] == "reconciliation"]
+    assert (rec["assumed"], rec["status"], rep["reconciled"], rep["differed"]) == ("error", "success", 1, 1)
+    assert main(["runs", "--journal", str(path), "--json"]) == 0
+    (row,) = json.loads(capsys.readouterr().out)
+    assert (row["reconciled"], row["differed"]) == (1, 1)
+    assert main(["runs", "--journal", str(path)]) == 0
+    assert "[1 reconciled differently] at the home marking" in capsys.readouterr().out

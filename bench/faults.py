@@ -1,0 +1,609 @@
+"""Fault campaign: does the journal agree with the nodes' own record of what ran, whatever breaks?
+
+Usage::
+
+    python bench/faults.py [--rounds 10] [--scenarios node-sigkill,...] [--seed S] [--json] [--keep DIR]
+    python bench/faults.py check --journal J --node NAME=STATE_DIR[:LOG] ... [--run RUN] [--json]
+
+**The campaign** runs each scenario ``--rounds`` times with real processes on 127.0.0.1: two nodes
+(``python -m services.node``: ``alpha`` hosts ``echo`` and the global memory, ``beta`` hosts
+``slow`` and the ``unattended`` action ``move``, both 1 s waits) and the coordinator
+(``python -m coordinator.cli run``) running a net of two runs of sense (alpha) → work (``slow``)
+→ carry (``move``), every task with an error branch. In each round a fault hits at a random moment
+inside a call on ``beta`` (the round's target: its first or second ``slow`` or ``move`` call, the
+action alternating from round to round, 0.05–0.7 s after the node logged the call):
+
+* ``node-sigkill``: SIGKILL the node; start it again 0.5–3 s later;
+* ``node-sigstop``: SIGSTOP the node for 1–3 s (longer than the coordinator's heartbeat window),
+  then SIGCONT;
+* ``node-restart``: SIGTERM the node (an orderly stop) and start it again at once;
+* ``coordinator-sigkill``: SIGKILL the coordinator, then ``petrobot run --resume``;
+* ``coordinator-sigint``: SIGINT (Ctrl-C) the coordinator, then ``petrobot run --resume``.
+
+When the run is over the nodes are stopped and :func:`check` compares the journal with the nodes'
+result stores and logs. Per scenario it prints: rounds, faults that hit inside a call, the hit
+call's error branch taken, calls reconciled (and those whose node did otherwise than the net
+assumed), disagreements (must be 0), calls run twice (must be 0), resumed runs completed, and the
+coordinator's exit codes. The exit status is 0 when there is no disagreement, no call ran twice
+and every round ended its run, else 1.
+
+**check** compares any journal with nodes' state directories (and their logs, for calls started
+twice): every call id the journal started is either absent from every node (it never ran there,
+or the node no longer keeps it) or its final status on the node equals the journal's last word on
+it (the reconciliation if there is one, else the result); no node started a call id twice (its
+log has one ``call ID ACTION from`` line per start).
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import os
+import random
+import re
+import secrets
+import signal
+import socket
+import sqlite3
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from coordinator.journal import JournalReader
+from services.protocol import Result, from_map, unpack_map
+from services.protocol.framing import HEADER_BYTES
+
+__all__ = ["SCENARIOS", "Agreement", "NodeRecord", "Rig", "campaign", "check", "node_starts", "node_store",
+           "run_round"]
+
+SCENARIOS = ("node-sigkill", "node-sigstop", "node-restart", "coordinator-sigkill", "coordinator-sigint")
+TIMEOUT_S = 120.0  # generous bound of every wait: a failing round fails, a loaded machine passes
+
+# ------------------------------------------------------------------------------------ agreement
+
+
+@dataclass(frozen=True)
+class NodeRecord:
+    """What a node's result store says about one call id: its final ``status`` and ``reason``.
+
+    A call found started but not finished (the node died during it and was not started again
+    since) is ``error``/``node_restarted``: that is what the node answers for it once restarted.
+    """
+
+    node: str
+    call_id: str
+    action: str
+    status: str
+    reason: str | None
+
+
+_CALL_LINE = re.compile(r" call (\S+) ([^\s(]\S*) from ")
+
+
+def node_store(node: str, state_dir: str | os.PathLike[str]) -> dict[str, NodeRecord]:
+    """Every call id node ``node`` keeps in the result store of ``state_dir``, read-only."""
+    path = Path(state_dir) / "results.sqlite3"
+    if not path.exists():
+        return {}
+    db = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=10.0)
+    try:
+        rows = db.execute("SELECT call_id, action, frame FROM calls").fetchall()
+    finally:
+        db.close()
+    out = {}
+    for cid, action, frame in rows:
+        if frame is None:
+            out[cid] = NodeRecord(node, cid, action, "error", "node_restarted")
+            continue
+        msg = from_map(unpack_map(bytes(frame)[HEADER_BYTES:]))
+        assert isinstance(msg, Result)
+        out[cid] = NodeRecord(node, cid, action, msg.result.status.value, msg.result.reason)
+    return out
+
+
+def node_starts(log_text: str) -> collections.Counter[str]:
+    """How many times a node's log says it started each call id (``call ID ACTION from PEER``)."""
+    return collections.Counter(m.group(1) for m in _CALL_LINE.finditer(log_text))
+
+
+@dataclass
+class Agreement:
+    """The comparison of a journal with the nodes (see :func:`check`).
+
+    Attributes:
+        calls: call ids the journal started.
+        ran: those that some node keeps.
+        agreed: those whose final status on the node is the journal's last word.
+        disagreements: one line per call whose node and journal disagree (or that the journal has
+            no last word on, although a node ran it).
+        twice: one line per call id a node started more than once.
+        reconciled: reconciliations journaled; differed: those in which the node had done
+            otherwise than the net assumed.
+    """
+
+    calls: int = 0
+    ran: int = 0
+    agreed: int = 0
+    disagreements: list[str] = field(default_factory=list)
+    twice: list[str] = field(default_factory=list)
+    reconciled: int = 0
+    differed: int = 0
+
+    @property
+    def ok(self) -> bool:
+        """No disagreement and no call started twice."""
+        return not self.disagreements and not self.twice
+
+
+def check(journal: str | os.PathLike[str], nodes: Mapping[str, tuple[str | os.PathLike[str], str | None]],
+          run: str | None = None) -> Agreement:
+    """Compare ``journal`` (one run, or all) with ``nodes``: name → (state directory, log text or ``None``).
+
+    Raises:
+        JournalError: the journal cannot be read.
+    """
+    stores = {name: node_store(name, state) for name, (state, _) in nodes.items()}
+    with JournalReader.open(journal) as reader:
+        starts = reader.starts(run)
+        words = reader.final_words(run)
+        recs = reader.reconciliations(run)
+    out = Agreement(reconciled=len(recs), differed=sum(r.differs for r in recs))
+    for start in {s.instance: s for s in starts}.values():
+        out.calls += 1
+        kept = [store[start.instance] for store in stores.values() if start.instance in store]
+        if not kept:
+            continue
+        out.ran += 1
+        if len(kept) > 1:
+            out.disagreements.append(f"{start.instance}: kept by several nodes: {', '.join(k.node for k in kept)}")
+            continue
+        (truth,) = kept
+        word = words.get(start.instance)
+        said = None if word is None or word.status is None else word.status.value
+        if said == truth.status:
+            out.agreed += 1
+            continue
+        journal_says = "nothing" if word is None else (
+            f"{said} ({word.reason})" if said is not None else "the node did not know it")
+        out.disagreements.append(f"{start.instance} {start.action}: the journal says {journal_says}, node "
+                                 f"{truth.node} says {truth.status} ({truth.reason})")
+    for name, (_, log) in nodes.items():
+        if log is None:
+            continue
+        for cid, n in sorted(node_starts(log).items()):
+            if n > 1:
+                out.twice.append(f"node {name} started {cid} {n} times")
+    return out
+
+
+# ------------------------------------------------------------------------------------ the rig
+
+SERVICES = """
+[nodes.alpha]
+host = "127.0.0.1"
+port = {alpha}
+
+[nodes.beta]
+host = "127.0.0.1"
+port = {beta}
+
+[memory]
+node = "alpha"
+
+[actions.echo]
+node = "alpha"
+impl = "services.actions.demo:echo"
+
+[actions.slow]
+node = "beta"
+impl = "services.actions.demo:wait"
+
+[actions.move]
+node = "beta"
+impl = "services.actions.demo:wait"
+unattended = true
+"""
+
+NET = """
+[net]
+name = "faults"
+
+[[place]]
+id = "runs"
+kind = "control"
+tokens = 2
+
+[[place]]
+id = "robot"
+kind = "resource"
+tokens = 1
+
+[[place]]
+id = "sensing"
+kind = "primitive_task"
+task = "sense"
+
+[[place]]
+id = "working"
+kind = "primitive_task"
+task = "work"
+
+[[place]]
+id = "carrying"
+kind = "primitive_task"
+task = "carry"
+
+[[place]]
+id = "done"
+
+[[place]]
+id = "failed"
+
+[task.sense]
+actions = [{ name = "echo", params = { x = 1 } }]
+deadline_s = 30.0
+
+[task.work]
+actions = [{ name = "slow", params = { seconds = CALL_S } }]
+deadline_s = 30.0
+
+[task.carry]
+actions = [{ name = "move", params = { seconds = CALL_S } }]
+deadline_s = 30.0
+
+[[transition]]
+id = "start"
+inputs = { runs = 1, robot = 1 }
+outputs = { sensing = 1 }
+
+[[transition]]
+id = "sensed"
+events = ["int:sense.ok"]
+inputs = { sensing = 1 }
+outputs = { working = 1 }
+
+[[transition]]
+id = "sense_error"
+events = ["int:sense.error"]
+hidden = true
+inputs = { sensing = 1 }
+outputs = { robot = 1, failed = 1 }
+
+[[transition]]
+id = "worked"
+events = ["int:work.ok"]
+inputs = { working = 1 }
+outputs = { carrying = 1 }
+
+[[transition]]
+id = "work_error"
+events = ["int:work.error"]
+hidden = true
+inputs = { working = 1 }
+outputs = { robot = 1, failed = 1 }
+
+[[transition]]
+id = "carried"
+events = ["int:carry.ok"]
+inputs = { carrying = 1 }
+outputs = { robot = 1, done = 1 }
+
+[[transition]]
+id = "carry_error"
+events = ["int:carry.error"]
+hidden = true
+inputs = { carrying = 1 }
+outputs = { robot = 1, failed = 1 }
+"""
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def wait_until(what: str, cond: Callable[[], Any], timeout_s: float = TIMEOUT_S) -> Any:
+    """Poll ``cond`` until it returns something true; fail naming ``what`` after ``timeout_s``."""
+    end = time.monotonic() + timeout_s
+    while not (got := cond()):
+        if time.monotonic() > end:
+            raise TimeoutError(f"not true after {timeout_s:g} s: {what}")
+        time.sleep(0.02)
+    return got
+
+
+class Rig:
+    """Two node processes and the coordinator's command line in a directory of their own.
+
+    Args:
+        workdir: where services.toml, the key, the net, the journal, the nodes' state directories
+            and every process's output go.
+        call_s: how long each call of ``slow`` and ``move`` lasts on the node, seconds.
+    """
+
+    def __init__(self, workdir: Path, *, call_s: float = 1.0) -> None:
+        self.dir = workdir
+        workdir.mkdir(parents=True, exist_ok=True)
+        self.key_file = workdir / "key"
+        self.key_file.write_text(secrets.token_hex(32) + "\n")
+        self.key_file.chmod(0o600)
+        self.services = workdir / "services.toml"
+        self.services.write_text(SERVICES.format(alpha=_free_port(), beta=_free_port()))
+        self.net = workdir / "faults.toml"
+        self.net.write_text(NET.replace("CALL_S", repr(float(call_s))))
+        self.journal = workdir / "journal.sqlite"
+        self.nodes: dict[str, subprocess.Popen[bytes]] = {}
+        self.coordinator: subprocess.Popen[bytes] | None = None
+        self._runs = 0
+
+    def env(self) -> dict[str, str]:
+        env = dict(os.environ)
+        env.pop("PETROBOT_KEY", None)
+        env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+        return env
+
+    def state_dir(self, name: str) -> Path:
+        return self.dir / "state" / name
+
+    def node_log_path(self, name: str) -> Path:
+        return self.dir / f"{name}.log"
+
+    def node_log(self, name: str) -> str:
+        path = self.node_log_path(name)
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def start_node(self, name: str) -> None:
+        """Start node ``name`` (its log appended to ``NAME.log``) and wait until it listens."""
+        before = self.node_log(name).count(f"node {name} listening on ")
+        with open(self.node_log_path(name), "ab") as log:
+            self.nodes[name] = subprocess.Popen(
+                [sys.executable, "-m", "services.node", name, "--services", str(self.services), "--key-file",
+                 str(self.key_file), "--state-dir", str(self.state_dir(name))],
+                cwd=ROOT, env=self.env(), stdout=log, stderr=subprocess.STDOUT)
+        proc = self.nodes[name]
+
+        def listening() -> bool:
+            if proc.poll() is not None:
+                raise RuntimeError(f"node {name} exited with {proc.returncode}:\n{self.node_log(name)[-2000:]}")
+            return self.node_log(name).count(f"node {name} listening on ") > before
+
+        wait_until(f"node {name} listening", listening)
+
+    def signal_node(self, name: str, sig: int) -> None:
+        self.nodes[name].send_signal(sig)
+
+    def stop_node(self, name: str) -> None:
+        """SIGTERM node ``name`` (SIGKILL if it does not stop) and reap it."""
+        proc = self.nodes[name]
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGCONT)
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(timeout=10)
+
+    def run(self, *extra: str) -> subprocess.Popen[bytes]:
+        """Start ``petrobot run`` on the net (its output in ``run-N.out``)."""
+        self._runs += 1
+        out = open(self.dir / f"run-{self._runs}.out", "wb")  # noqa: SIM115 - closed by the child's end
+        self.coordinator = subprocess.Popen(
+            [sys.executable, "-m", "coordinator.cli", "run", str(self.net), "--services", str(self.services),
+             "--key-file", str(self.key_file), "--journal", str(self.journal), "--lines", "--no-input", *extra],
+            cwd=ROOT, env=self.env(), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        out.close()
+        return self.coordinator
+
+    def output(self, n: int) -> str:
+        path = self.dir / f"run-{n}.out"
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def close(self) -> None:
+        """Stop every process still running."""
+        if self.coordinator is not None and self.coordinator.poll() is None:
+            self.coordinator.kill()
+            self.coordinator.wait(timeout=10)
+        for name in list(self.nodes):
+            self.stop_node(name)
+
+    def check(self) -> Agreement:
+        return check(self.journal, {n: (self.state_dir(n), self.node_log(n)) for n in self.nodes})
+
+
+# ------------------------------------------------------------------------------------ one round
+
+
+@dataclass
+class Round:
+    """What one round of a scenario did and found."""
+
+    scenario: str
+    target: str = ""  # the call id the fault hit
+    inside: bool = False  # the fault hit while the target call ran on its node
+    error_branch: bool = False  # the journal's result for the target is an error
+    reconciled: int = 0
+    differed: int = 0
+    disagreements: list[str] = field(default_factory=list)
+    twice: list[str] = field(default_factory=list)
+    resumed_completed: bool | None = None  # coordinator scenarios: the resumed run ended completed
+    exit_code: int | None = None  # of the last coordinator process
+    end_state: str | None = None
+    notes: list[str] = field(default_factory=list)
+
+
+def _calls_on(log: str, action: str) -> list[str]:
+    return [m.group(1) for m in _CALL_LINE.finditer(log) if m.group(2) == action]
+
+
+def run_round(scenario: str, workdir: Path, rng: random.Random, *, action: str | None = None,
+              call_s: float = 1.0) -> Round:
+    """Run one round of ``scenario`` in ``workdir`` (see the module docstring) and check it.
+
+    ``action`` is the target's action (``slow`` or ``move``; default: chosen by ``rng``); ``call_s``
+    the duration of each ``slow`` and ``move`` call, seconds (the fault comes 0.05–0.7 s after the
+    node logged the target's start).
+    """
+    if scenario not in SCENARIOS:
+        raise ValueError(f"unknown scenario {scenario!r} (one of {', '.join(SCENARIOS)})")
+    rig = Rig(workdir, call_s=call_s)
+    result = Round(scenario)
+    action = action or rng.choice(("slow", "move"))
+    nth = rng.randrange(2)
+    try:
+        rig.start_node("alpha")
+        rig.start_node("beta")
+        first = rig.run()
+        target = wait_until(f"call #{nth + 1} of {action} on beta",
+                            lambda: (calls := _calls_on(rig.node_log("beta"), action)) and len(calls) > nth
+                            and calls[nth])
+        result.target = target
+        time.sleep(rng.uniform(0.05, 0.7))
+        result.inside = f"result {target} " not in rig.node_log("beta")
+        last = first
+        if scenario == "node-sigkill":
+            rig.signal_node("beta", signal.SIGKILL)
+            rig.nodes["beta"].wait(timeout=30)
+            time.sleep(rng.uniform(0.5, 3.0))
+            rig.start_node("beta")
+        elif scenario == "node-restart":
+            rig.stop_node("beta")
+            rig.start_node("beta")
+        elif scenario == "node-sigstop":
+            rig.signal_node("beta", signal.SIGSTOP)
+            time.sleep(rng.uniform(1.0, 3.0))
+            rig.signal_node("beta", signal.SIGCONT)
+        else:
+            first.send_signal(signal.SIGKILL if scenario == "coordinator-sigkill" else signal.SIGINT)
+            code = first.wait(timeout=TIMEOUT_S)
+            expected = -signal.SIGKILL if scenario == "coordinator-sigkill" else 130
+            if code != expected:
+                result.notes.append(f"the interrupted coordinator exited {code}, not {expected}")
+            last = rig.run("--resume")
+        result.exit_code = last.wait(timeout=TIMEOUT_S)
+        if scenario.startswith("coordinator"):
+            result.resumed_completed = result.exit_code == 0
+    finally:
+        rig.close()
+    with JournalReader.open(rig.journal) as reader:
+        runs = reader.runs()
+        result.end_state = runs[-1].end_state if runs else None
+        if len(runs) != 1:
+            result.notes.append(f"{len(runs)} runs in the journal")
+        hit = [r for r in reader.results() if r.instance == result.target]
+        result.error_branch = bool(hit) and hit[-1].status.value == "error"
+    agreement = rig.check()
+    result.reconciled, result.differed = agreement.reconciled, agreement.differed
+    result.disagreements, result.twice = agreement.disagreements, agreement.twice
+    return result
+
+
+def campaign(rounds: int, scenarios: tuple[str, ...] = SCENARIOS, *, seed: int = 0,
+             keep: Path | None = None, progress: Callable[[Round], None] | None = None) -> dict[str, Any]:
+    """Run ``rounds`` rounds of each scenario; return the counts per scenario and every round."""
+    rng = random.Random(seed)
+    table: dict[str, dict[str, Any]] = {}
+    every: list[dict[str, Any]] = []
+    base = keep or Path(tempfile.mkdtemp(prefix="petrobot-faults-"))
+    for scenario in scenarios:
+        row = {"rounds": 0, "inside_call": 0, "error_branch": 0, "reconciled": 0, "differed": 0,
+               "disagreements": 0, "run_twice": 0, "resumed_completed": None, "exit_codes": {}}
+        codes: collections.Counter[str] = collections.Counter()
+        for i in range(rounds):
+            done = run_round(scenario, base / f"{scenario}-{i}", rng, action=("slow", "move")[i % 2])
+            row["rounds"] += 1
+            row["inside_call"] += done.inside
+            row["error_branch"] += done.error_branch
+            row["reconciled"] += done.reconciled
+            row["differed"] += done.differed
+            row["disagreements"] += len(done.disagreements)
+            row["run_twice"] += len(done.twice)
+            if done.resumed_completed is not None:
+                row["resumed_completed"] = (row["resumed_completed"] or 0) + done.resumed_completed
+            codes[str(done.exit_code)] += 1
+            every.append(asdict(done))
+            if progress is not None:
+                progress(done)
+        row["exit_codes"] = dict(sorted(codes.items()))
+        table[scenario] = row
+    return {"date": time.strftime("%Y-%m-%d %H:%M"), "seed": seed, "rounds": rounds,
+            "load": os.getloadavg(), "cpus": os.cpu_count(), "scenarios": table, "runs": every,
+            "workdir": str(base) if keep else None}
+
+
+def render(report: dict[str, Any]) -> str:
+    """The per-scenario table as Markdown."""
+    lines = [("| scenario | rounds | fault inside a call | error branch taken | reconciled (node did otherwise) | "
+              "disagreements | calls run twice | resumed runs completed | exit codes |"),
+             "|---|---|---|---|---|---|---|---|---|"]
+    for name, r in report["scenarios"].items():
+        resumed = "–" if r["resumed_completed"] is None else f"{r['resumed_completed']}/{r['rounds']}"
+        codes = ", ".join(f"{c}×{n}" for c, n in r["exit_codes"].items())
+        lines.append(f"| {name} | {r['rounds']} | {r['inside_call']} | {r['error_branch']} | {r['reconciled']} "
+                     f"({r['differed']}) | {r['disagreements']} | {r['run_twice']} | {resumed} | {codes} |")
+    return "\n".join(lines)
+
+
+def _parse_nodes(specs: list[str]) -> dict[str, tuple[str, str | None]]:
+    nodes = {}
+    for spec in specs:
+        name, sep, rest = spec.partition("=")
+        if not sep or not name:
+            raise SystemExit(f"--node {spec!r}: expected NAME=STATE_DIR[:LOG]")
+        state, _, log = rest.partition(":")
+        nodes[name] = (state, Path(log).read_text(errors="replace") if log else None)
+    return nodes
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("what", nargs="?", default="campaign", choices=["campaign", "check"])
+    parser.add_argument("--rounds", type=int, default=10, help="rounds per scenario (default: %(default)s)")
+    parser.add_argument("--scenarios", default=",".join(SCENARIOS), help="comma-separated scenarios (default: all)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the fault moments (default: %(default)s)")
+    parser.add_argument("--keep", type=Path, help="keep every round's files (journal, logs, stores) under this directory")
+    parser.add_argument("--journal", help="check: the journal")
+    parser.add_argument("--node", action="append", default=[], metavar="NAME=STATE_DIR[:LOG]",
+                        help="check: a node's state directory and, optionally, its log file (repeatable)")
+    parser.add_argument("--run", help="check: only this run of the journal")
+    parser.add_argument("--json", action="store_true", help="print JSON")
+    args = parser.parse_args(argv)
+    if args.what == "check":
+        if not args.journal or not args.node:
+            parser.error("check needs --journal and at least one --node")
+        agreement = check(args.journal, _parse_nodes(args.node), args.run)
+        if args.json:
+            print(json.dumps({**asdict(agreement), "ok": agreement.ok}, indent=2))
+        else:
+            print(f"{agreement.calls} calls started, {agreement.ran} kept by a node, {agreement.agreed} agree; "
+                  f"{agreement.reconciled} reconciled ({agreement.differed} differed from what the net assumed)")
+            for line in agreement.disagreements + agreement.twice:
+                print(f"  {line}")
+        return 0 if agreement.ok else 1
+    scenarios = tuple(s for s in args.scenarios.split(",") if s)
+
+    def progress(done: Round) -> None:
+        bad = done.disagreements + done.twice + done.notes
+        print(f"{done.scenario:<20} {done.target:<16} inside={int(done.inside)} error_branch={int(done.error_branch)} "
+              f"reconciled={done.reconciled} differed={done.differed} exit={done.exit_code} "
+              f"{done.end_state}{'  ' + '; '.join(bad) if bad else ''}", file=sys.stderr, flush=True)
+
+    report = campaign(args.rounds, scenarios, seed=args.seed, keep=args.keep, progress=progress)
+    print(json.dumps(report, indent=2) if args.json else render(report))
+    table = report["scenarios"].values()
+    ended = all(r["end_state"] is not None for r in report["runs"])
+    return 0 if ended and all(r["disagreements"] == 0 and r["run_twice"] == 0 for r in table) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
