@@ -49,6 +49,10 @@ class DriveDriver(Driver):
         self.geometry = DriveGeometry(wheel_radius=float(p.get("wheel_radius", 0.05)),
                                       track_width=float(p.get("track_width", 0.30)))
         self.input = SteeringInput(float(p.get("stale_s", 0.25)))
+        self.latencies: list[float] = []
+        """Frame capture → set point received, s (wall clocks of one host), logged every
+        ``latency_every`` (param, 500) set points."""
+        self.latency_every = int(p.get("latency_every", 500))
         self.odometry = Odometry(self.geometry)
         self.drives: WheelCanDrives | None = None
         self.fault: str | None = None
@@ -190,7 +194,18 @@ class DriveDriver(Driver):
     def _on_setpoint(self, event: Any) -> None:
         with self.lock:
             bus = self.drives.sim_time if self.drives is not None else math.nan
-            self.input.offer(event.data, time.monotonic(), bus)
+            sp = self.input.offer(event.data, time.monotonic(), bus)
+        if sp is None:
+            return
+        t_capture = event.data.get("t_capture") if isinstance(event.data, dict) else None
+        if isinstance(t_capture, float) and math.isfinite(t_capture):
+            self.latencies.append(time.time() - t_capture)
+            if len(self.latencies) >= self.latency_every:
+                lat = sorted(self.latencies)
+                log.info("steering latency, frame capture -> drive node, over %d set points: p50 %.1f ms, "
+                         "p99 %.1f ms, max %.1f ms", len(lat), 1000 * lat[len(lat) // 2],
+                         1000 * lat[min(len(lat) - 1, int(0.99 * len(lat)))], 1000 * lat[-1])
+                self.latencies.clear()
 
     def check(self) -> None:
         """Raise :class:`BusError` when the drives are not usable."""

@@ -318,7 +318,7 @@ class _Streaming(PrimitiveAction):
             line = memory.last_line
             if self.uses_image and line is not None and line[0] is not None and line[0].t == frame.t:
                 lateral.append(line[1].lateral_at(memory.camera.x_centre))
-            ctx.publish(topic, setpoint_to_dict(step.setpoint, time.time()))
+            ctx.publish(topic, setpoint_to_dict(step.setpoint, time.time(), frame.t_wall or None))
             if first_seq is None:
                 first_seq = step.setpoint.seq
             sent += 1

@@ -4,9 +4,10 @@ watchdog (pure: no clocks of its own, no I/O).
 Set points travel as authenticated events of the perception node on topic :data:`STEERING_TOPIC`
 (``ctx.publish``; the drive node subscribes through its node link, as the catching testbed's
 motion node takes its set points). Each event's data is a map
-``{seq, t, v, curvature, left, right, t_sent}``: sequence number (int, 0..2⁶³−1, increasing over the
+``{seq, t, v, curvature, left, right, t_sent[, t_capture]}``: sequence number (int, 0..2⁶³−1, increasing over the
 whole stream), the camera frame's time on the simulation clock (s), speed (m/s), curvature (1/m),
-the wheel speeds (rad/s, positive forward) and the sender's wall clock (s; latency only).
+the wheel speeds (rad/s, positive forward), the sender's wall clock and the frame's capture wall
+clock (s; latency only, not checked beyond being ignored when unusable).
 
 :class:`SteeringInput` (the drive node's side) checks each field (:func:`parse_setpoint`): a set point
 that is malformed (missing or non-numeric field, bool, non-finite, out of range), **stale** (its
@@ -64,10 +65,14 @@ class MalformedSetPoint(ValueError):
     """A set point (or odometry message) that fails validation; the message names the field."""
 
 
-def setpoint_to_dict(sp: SetPoint, t_sent: float) -> dict[str, Any]:
-    """The event data of set point ``sp`` (``t_sent``: the sender's wall clock, s)."""
-    return {"seq": sp.seq, "t": sp.t, "v": sp.v, "curvature": sp.curvature, "left": sp.left,
-            "right": sp.right, "t_sent": t_sent}
+def setpoint_to_dict(sp: SetPoint, t_sent: float, t_capture: float | None = None) -> dict[str, Any]:
+    """The event data of set point ``sp`` (``t_sent``: the sender's wall clock, s; ``t_capture``: the
+    wall clock at which its frame was captured, s, when known: for latency only)."""
+    out = {"seq": sp.seq, "t": sp.t, "v": sp.v, "curvature": sp.curvature, "left": sp.left,
+           "right": sp.right, "t_sent": t_sent}
+    if t_capture is not None:
+        out["t_capture"] = t_capture
+    return out
 
 
 def _number(d: dict[Any, Any], key: str, bound: float, *, non_negative: bool = False) -> float:
