@@ -60,7 +60,10 @@ class PerceptionDriver(Driver):
 
     Params: ``host`` ("127.0.0.1"), ``port`` (7220): the world's frame server; ``drive_node``
     (default: the node services.toml places ``stop_robot`` on): whose odometry to follow;
-    ``connect_timeout_s`` (10).
+    ``connect_timeout_s`` (10); ``consume_wait_s`` (0.05): after handing a frame to the actions the
+    grabbing thread waits up to this long for an action to take it before it grabs the next, so that
+    the world (which waits for its camera client after each frame) slows down with a node slowed down
+    by load instead of running away from it.
     """
 
     def __init__(self, name: str, params: dict[str, Any]) -> None:
@@ -81,6 +84,8 @@ class PerceptionDriver(Driver):
         self._new_frame = asyncio.Event()
         self._new_odometry = asyncio.Event()
         self._stop = threading.Event()
+        self._consumed = threading.Event()
+        self.consume_wait = float(self.params.get("consume_wait_s", 0.05))
         self._thread: threading.Thread | None = None
         self._link: Any = None
 
@@ -138,7 +143,12 @@ class PerceptionDriver(Driver):
                 continue
             seq = frame.seq
             if self._loop is not None:
+                self._consumed.clear()
                 self._loop.call_soon_threadsafe(self._deliver, frame)
+                # grab the next frame once an action took this one (at most consume_wait_s later):
+                # the world waits for its camera client, so a node slowed down by load slows the
+                # world instead of falling behind it
+                self._consumed.wait(self.consume_wait)
         if client is not None:
             client.close()
 
@@ -217,6 +227,7 @@ class PerceptionDriver(Driver):
                 await asyncio.wait_for(self._new_frame.wait(), left)
             except TimeoutError:
                 return None
+        self._consumed.set()
         return self.frame
 
     def take_scans(self) -> list[BeaconObservation] | None:
