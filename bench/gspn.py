@@ -9,6 +9,9 @@ Models, from the Model Checking Contest's PNML (found where the tests find them,
   transitions (machine grabs, joins, end/join switches; weights 1) and the others exponential of
   rate 1/s (our rates, not the paper's): N = 5, 6, 7 give 152,712, 537,768 and 1,639,440 tangible
   markings plus vanishing ones, which are eliminated.
+* ``fms-md``: the same FMS structure with the marking-dependent rates and the weights of
+  ``nets/examples/fms.toml`` (``--fms-md``, default N = 5): the same markings, and the build time
+  shows what evaluating the rate expressions on every edge costs against the constant-rate FMS.
 
 The baseline is a dense numpy LU solve of the same steady-state system where it still fits
 (Kanban N = 2), run beside SuperLU and BiCGSTAB in the same process; ratios are printed.
@@ -21,14 +24,15 @@ in Python, in the same run; the values must agree.
 
 The models are found where the tests find them (``tests/unit/mcc_models.py``) or in ``--mcc DIR``.
 
-Usage: ``python bench/gspn.py [--json] [--kanban 2 3 4 5] [--fms 5 6 7] [--tol 1e-8] [--measure-kanban N]
-[--mcc DIR]``.
+Usage: ``python bench/gspn.py [--json] [--kanban 2 3 4 5] [--fms 5 6 7] [--fms-md 5] [--tol 1e-8]
+[--measure-kanban N] [--mcc DIR]``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from dataclasses import replace
@@ -43,6 +47,7 @@ from coordinator.analysis import ctmc
 from coordinator.analysis.expr import Node, compile_expr
 from coordinator.analysis.gspn import compile_measure, tangible_chain
 from coordinator.net import PetriNet, TransitionKind
+from coordinator.netfile import load_net
 from coordinator.netfile.pnml import load_pnml
 
 #: the Model Checking Contest models: $PETROBOT_MCC, else tests/data/mcc in this repository (``--mcc`` overrides)
@@ -53,7 +58,11 @@ FMS_IMMEDIATE = frozenset({"tM1", "tM2", "tM3", "tx", "tP1e", "tP1j", "tP2e", "t
 
 
 def model(name: str, n: int) -> PetriNet:
-    """``kanban`` or ``fms`` with N tokens per pallet place, GSPN attributes as in the docstring."""
+    """``kanban``, ``fms`` or ``fms-md`` with N tokens per pallet place, GSPN attributes as in the
+    docstring."""
+    if name == "fms-md":
+        net = load_net(Path(__file__).resolve().parents[1] / "nets" / "examples" / "fms.toml")
+        return net.with_initial_marking({**net.initial_marking, "P1": n, "P2": n, "P3": n})
     if name == "kanban":
         base, immediate = load_pnml(MCC / "Kanban-PT-00005" / "model.pnml"), frozenset()
         m0 = {p: n for p in base.initial_marking}
@@ -138,6 +147,8 @@ def main() -> int:
                         help="kanbans per cell of the Kanban cases solved iteratively (default: 2 3 4 5)")
     parser.add_argument("--fms", type=int, nargs="*", default=[5, 6, 7],
                         help="parts per pallet place of the FMS cases (default: 5 6 7)")
+    parser.add_argument("--fms-md", type=int, nargs="*", default=[5],
+                        help="parts per pallet place of the FMS cases with marking-dependent rates (default: 5)")
     parser.add_argument("--tol", type=float, default=1e-8, help="target residual ||pi Q||_inf (default 1e-8)")
     parser.add_argument("--measure-kanban", type=int, default=4, metavar="N",
                         help="Kanban N of the reward-measure case (default 4; 0 skips it)")
@@ -149,6 +160,7 @@ def main() -> int:
     rows = [case("kanban", 2, "dense", args.tol), case("kanban", 2, "direct", args.tol)]
     rows += [case("kanban", n, "bicgstab", args.tol) for n in args.kanban]
     rows += [case("fms", n, "bicgstab", args.tol) for n in args.fms]
+    rows += [case("fms-md", n, "bicgstab", args.tol) for n in args.fms_md]
     dense = rows[0]["solve_seconds"]
     for row in rows[1:]:
         if row["tangible_markings"] == rows[0]["tangible_markings"] and row["solve_seconds"] > 0:

@@ -5,6 +5,7 @@ Usage::
     python bench/mobile.py --courses 100 --seed 1 [--json] [--detector ransac|centroid|scanline]
         [--camera analytic|tiny] [--noise default|noisy|scuffed|harsh] [--latency 0.0]
         [--cruise 0.8] [--look-ahead 0.26] [--course FILE.toml] [--timing] [--detectors N]
+    python bench/mobile.py --learn --condition clean|noisy|harsh ...   (bench/mobile_learning.py)
 
 Paper section 6 ("Mobile Robot Task"). For every course of a seeded generator
 (:func:`sim.mobile.course.random_course`: 8–16 tiles, 0–3 interruptions) — or the course file given
@@ -250,6 +251,11 @@ def _detector_bench(frames: int, seed: int, look_ahead: float = 0.26) -> dict[st
 
 
 def main(argv: list[str] | None = None) -> int:
+    args_in = sys.argv[1:] if argv is None else argv
+    if "--learn" in args_in:  # learning the follow_track detector: bench/mobile_learning.py
+        from bench.mobile_learning import main as learn_main
+
+        return learn_main(args_in)
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--courses", type=int, default=100, help="number of random courses")
     ap.add_argument("--seed", type=int, default=1, help="seed of the course generator and the noise")

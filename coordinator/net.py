@@ -6,14 +6,20 @@ there means a primitive action of that primitive task is running), *control* (ed
 operator, e.g. ``runs_remaining``) or *plain*. Its transitions carry the events linked to them
 (``int:<task>.<outcome>`` raised by a primitive task, ``ext:<topic>`` raised by a sensor or device),
 a priority and a weight for conflict resolution and, for the GSPN view (section 2, "Quantitative
-Performance Evaluation"), a kind (immediate or exponential), a rate and a server semantics.
+Performance Evaluation"), a kind (immediate or exponential), a rate and a server semantics. A rate
+or a weight may instead be a marking expression (``rate_expr = "min(1, #Np / 3) * #P"``, the
+language of :mod:`coordinator.expr`): its value in the current marking, with no server multiplier.
 
 A :class:`Marking` maps place ids to token counts. It is immutable and hashable; places with zero
 tokens are not stored, so ``Marking({"p": 0}) == Marking({})``.
 
-Firing rule (ordinary P/T semantics with inhibitor arcs): transition *t* is enabled in marking *M*
-when ``M(p) >= W(p, t)`` for every input place *p* and ``M(q) < I(q, t)`` for every inhibitor arc
-of weight ``I(q, t)``; firing gives ``M' = M - Pre[:, t] + Post[:, t]``. The interpreted-net
+Firing rule (ordinary P/T semantics with inhibitor and reset arcs): transition *t* is enabled in
+marking *M* when ``M(p) >= W(p, t)`` for every input place *p* and ``M(q) < I(q, t)`` for every
+inhibitor arc of weight ``I(q, t)`` (reset arcs play no part in enabling); firing consumes the
+input arcs, then empties every place *r* with a reset arc r → t, then produces the output arcs:
+``M'(p) = M(p) - Pre[p, t] + Post[p, t]`` off the reset places and ``M'(r) = Post[r, t]`` on them.
+A reset arc may sit beside an input, output or inhibitor arc between the same place and
+transition; each keeps its meaning (docs/netfile.md, "Reset arcs"). The interpreted-net
 execution semantics (events, busy tokens of running primitive actions) are in
 :mod:`coordinator.engine`; this module is the structure they share with the analyses.
 
@@ -34,6 +40,7 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 from coordinator.errors import NetError, NotEnabledError
+from coordinator.expr import ExprError, Node, check_places, evaluate, parse
 
 if TYPE_CHECKING:
     import numpy as np
@@ -110,6 +117,10 @@ class TransitionKind(enum.Enum):
     EXPONENTIAL = "exponential"
 
 
+def _shown(text: str) -> str:
+    return repr(text if len(text) <= 80 else text[:77] + "...")
+
+
 def _check_id(what: str, value: str) -> None:
     if not isinstance(value, str) or not _ID_RE.match(value):
         raise NetError(
@@ -161,6 +172,20 @@ class Transition:
             semantics, or any k ≥ 1 for k-server semantics.
         hidden: an error-recovery branch that displays may hide (section 2).
         label: text for displays; defaults to the id.
+        rate_expr: a marking-dependent rate instead of ``rate`` (exponential transitions): a
+            number expression of :mod:`coordinator.expr` whose value in marking M, in 1/s, is the
+            firing rate of the transition when it is enabled in M; no server multiplier applies
+            (``servers`` stays 1: write it into the expression, e.g. ``"min(#q, 3) * 2"``). A
+            value of 0 means the transition does not fire in M; a negative or non-finite value is an
+            error of the analysis that meets it.
+        weight_expr: a marking-dependent weight instead of ``weight``: its value in the current
+            marking is the weight of the random switch; it must be > 0 wherever the transition
+            takes part in a switch (the engine, the simulator and the GSPN analysis raise
+            otherwise).
+
+    Raises:
+        NetError: on a bad value or combination, or an expression that does not parse (with its
+            column).
     """
 
     id: str
@@ -172,6 +197,8 @@ class Transition:
     servers: int | None = 1
     hidden: bool = False
     label: str = ""
+    rate_expr: str | None = None
+    weight_expr: str | None = None
 
     def __post_init__(self) -> None:
         _check_id("transition", self.id)
@@ -181,13 +208,55 @@ class Transition:
             raise NetError(f"transition {self.id!r} lists an event twice")
         if not self.weight > 0:
             raise NetError(f"transition {self.id!r} has weight {self.weight}; weights must be > 0")
-        if self.kind is TransitionKind.EXPONENTIAL:
+        if self.weight_expr is not None:
+            self._parsed("weight")
+            if self.weight != 1.0:
+                raise NetError(f"transition {self.id!r} gives both a weight ({self.weight}) and a weight "
+                               "expression; give one")
+        if self.rate_expr is not None:
+            self._parsed("rate")
+            if self.kind is not TransitionKind.EXPONENTIAL:
+                raise NetError(f"immediate transition {self.id!r} cannot have a rate")
+            if self.rate is not None:
+                raise NetError(f"transition {self.id!r} gives both a rate ({self.rate}) and a rate expression; "
+                               "give one")
+            if self.servers != 1:
+                raise NetError(f"transition {self.id!r} has a rate expression and servers = "
+                               f"{'infinite' if self.servers is None else self.servers}: a marking-dependent "
+                               "rate is the whole rate, write the servers into it (e.g. \"min(#q, 3) * 2\")")
+        elif self.kind is TransitionKind.EXPONENTIAL:
             if self.rate is None or not self.rate > 0:
                 raise NetError(f"exponential transition {self.id!r} needs a rate > 0 (1/s)")
         elif self.rate is not None:
             raise NetError(f"immediate transition {self.id!r} cannot have a rate")
         if self.servers is not None and self.servers < 1:
             raise NetError(f"transition {self.id!r} has servers={self.servers}; use >= 1 or 'infinite'")
+
+    def _parsed(self, what: str) -> Node:
+        text = self.rate_expr if what == "rate" else self.weight_expr
+        assert text is not None
+        if not isinstance(text, str):
+            raise NetError(f"{what} expression of transition {self.id!r} must be a string, not {text!r}")
+        try:
+            return parse(text, kind="num")
+        except ExprError as exc:
+            raise NetError(f"{what} of transition {self.id!r}: {exc.message} (column {exc.column} of "
+                           f"{_shown(text)})") from None
+
+    @property
+    def rate_tree(self) -> Node | None:
+        """The parsed :attr:`rate_expr`, or ``None`` (parsed on each call: compile it once)."""
+        return None if self.rate_expr is None else self._parsed("rate")
+
+    @property
+    def weight_tree(self) -> Node | None:
+        """The parsed :attr:`weight_expr`, or ``None`` (parsed on each call: compile it once)."""
+        return None if self.weight_expr is None else self._parsed("weight")
+
+    @property
+    def marking_dependent(self) -> bool:
+        """True when the rate or the weight is a marking expression."""
+        return self.rate_expr is not None or self.weight_expr is not None
 
     @property
     def external_events(self) -> tuple[str, ...]:
@@ -210,18 +279,32 @@ class Arc:
         weight: multiplicity, ≥ 1.
         inhibitor: an inhibitor arc (place → transition only): the transition is disabled while the
             place holds ``weight`` tokens or more.
+        reset: a reset ("flush") arc (place → transition only, weight 1): firing the transition
+            empties the place after its input arcs have consumed; it plays no part in enabling.
     """
 
     source: str
     target: str
     weight: int = 1
     inhibitor: bool = False
+    reset: bool = False
 
     def __post_init__(self) -> None:
         if not isinstance(self.weight, int) or isinstance(self.weight, bool) or self.weight < 1:
             raise NetError(
                 f"arc {self.source} -> {self.target} has weight {self.weight!r}; weights are integers >= 1"
             )
+        if self.reset and self.inhibitor:
+            raise NetError(f"arc {self.source} -> {self.target} cannot be both a reset and an inhibitor arc; "
+                           "give two arcs")
+        if self.reset and self.weight != 1:
+            raise NetError(f"reset arc {self.source} -> {self.target} has weight {self.weight}; a reset arc "
+                           "empties its place whatever it holds, so it takes no weight")
+
+    @property
+    def kind(self) -> str:
+        """``"normal"``, ``"inhibitor"`` or ``"reset"``."""
+        return "inhibitor" if self.inhibitor else "reset" if self.reset else "normal"
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -422,7 +505,8 @@ class PetriNet:
         if both:
             raise NetError(f"id {sorted(both)[0]!r} is both a place and a transition")
         pset, tset = set(place_ids), set(trans_ids)
-        seen_arcs: set[tuple[str, str, bool]] = set()
+        seen_arcs: set[tuple[str, str, str]] = set()
+        resets = False
         for arc in self.arcs:
             src_p, src_t = arc.source in pset, arc.source in tset
             dst_p, dst_t = arc.target in pset, arc.target in tset
@@ -438,10 +522,27 @@ class PetriNet:
                 )
             if arc.inhibitor and not src_p:
                 raise NetError(f"inhibitor arc {arc.source} -> {arc.target} must go from a place to a transition")
-            key = (arc.source, arc.target, arc.inhibitor)
+            if arc.reset and not src_p:
+                raise NetError(f"reset arc {arc.source} -> {arc.target} must go from a place to a transition")
+            resets = resets or arc.reset
+            key = (arc.source, arc.target, arc.kind)
             if key in seen_arcs:
-                raise NetError(f"arc {arc.source} -> {arc.target} is given twice; use one arc with a weight")
+                what = "arc" if arc.kind == "normal" else f"{arc.kind} arc"
+                raise NetError(f"{what} {arc.source} -> {arc.target} is given twice"
+                               + ("; use one arc with a weight" if arc.kind != "reset" else ""))
             seen_arcs.add(key)
+        self.__dict__["has_resets"] = resets  # the cached property, known at no extra cost here
+        for t in self.transitions:
+            for what, text in (("rate", t.rate_expr), ("weight", t.weight_expr)):
+                if text is None:
+                    continue
+                tree = t.rate_tree if what == "rate" else t.weight_tree
+                assert tree is not None
+                try:
+                    check_places(tree, text, pset)
+                except ExprError as exc:
+                    raise NetError(f"{what} of transition {t.id!r}: {exc.message} (column {exc.column} of "
+                                   f"{_shown(text)})") from None
         for marking, what in ((self.initial_marking, "initial"), (self.home_marking, "home")):
             if marking is None:
                 continue
@@ -460,7 +561,8 @@ class PetriNet:
 
         Returns:
             ``(element id, problem)`` pairs, empty when the net is a valid task net:
-            every primitive-task place has at least one normal exit (a transition linked to
+            no reset arc empties a primitive-task place; every primitive-task place has at least one
+            normal exit (a transition linked to
             ``int:<task>.<outcome>`` with outcome ≠ ``error``) and one error exit
             (``int:<task>.error``); every ``int:`` event names a primitive task that has a place
             among the transition's input places; at most one ``ext:`` event per transition
@@ -469,6 +571,11 @@ class PetriNet:
         problems: list[tuple[str, str]] = []
         inputs = self.input_places
         for t in self.transitions:
+            for pid in self.reset_places[t.id]:
+                if self.place(pid).kind is PlaceKind.PRIMITIVE_TASK:
+                    problems.append((t.id, f"transition {t.id!r} has a reset arc from primitive-task place "
+                                           f"{pid!r}: its tokens are running primitive actions, which a reset "
+                                           "cannot take away; consume them with input arcs"))
             if len(t.external_events) > 1:
                 problems.append((t.id, f"transition {t.id!r} links {len(t.external_events)} external events; "
                                        "external events are pulses, link at most one"))
@@ -541,7 +648,8 @@ class PetriNet:
     @cached_property
     def input_places(self) -> Mapping[str, Mapping[str, int]]:
         """Transition id → {input place id: arc weight} (normal arcs only)."""
-        return self._adjacency(lambda a: a.source in self.place_index and not a.inhibitor, "target", "source")
+        return self._adjacency(lambda a: a.source in self.place_index and not a.inhibitor and not a.reset,
+                               "target", "source")
 
     @cached_property
     def output_places(self) -> Mapping[str, Mapping[str, int]]:
@@ -552,6 +660,25 @@ class PetriNet:
     def inhibitor_places(self) -> Mapping[str, Mapping[str, int]]:
         """Transition id → {place id: inhibitor threshold}."""
         return self._adjacency(lambda a: a.inhibitor, "target", "source")
+
+    @cached_property
+    def reset_places(self) -> Mapping[str, tuple[str, ...]]:
+        """Transition id → ids of the places its reset arcs empty, in arc order."""
+        table: dict[str, list[str]] = {t.id: [] for t in self.transitions}
+        for arc in self.arcs:
+            if arc.reset:
+                table[arc.target].append(arc.source)
+        return MappingProxyType({k: tuple(v) for k, v in table.items()})
+
+    @cached_property
+    def has_resets(self) -> bool:
+        """True when the net has at least one reset arc."""
+        return any(arc.reset for arc in self.arcs)
+
+    @cached_property
+    def marking_dependent(self) -> bool:
+        """True when some transition has a rate or weight expression."""
+        return any(t.marking_dependent for t in self.transitions)
 
     def _adjacency(self, keep: Any, tkey: str, pkey: str) -> Mapping[str, Mapping[str, int]]:
         table: dict[str, dict[str, int]] = {t.id: {} for t in self.transitions}
@@ -586,8 +713,14 @@ class PetriNet:
         return self._matrix(self.inhibitor_places)
 
     @cached_property
+    def reset(self) -> np.ndarray:
+        """Reset matrix, shape (|P|, |T|), int64: 1 where a reset arc p → t empties p, else 0."""
+        return self._matrix({tid: {pid: 1 for pid in pids} for tid, pids in self.reset_places.items()})
+
+    @cached_property
     def incidence(self) -> np.ndarray:
-        """Incidence matrix C = Post − Pre, shape (|P|, |T|), int64."""
+        """Incidence matrix C = Post − Pre, shape (|P|, |T|), int64 (reset arcs are not in it: with them,
+        the change of a firing depends on the marking; see :meth:`fire`)."""
         out: np.ndarray = self.post - self.pre
         out.flags.writeable = False
         return out
@@ -666,9 +799,38 @@ class PetriNet:
         data = dict(marking)
         for pid, w in self.input_places[transition_id].items():
             data[pid] = data.get(pid, 0) - w
+        for pid in self.reset_places[transition_id]:
+            data[pid] = 0
         for pid, w in self.output_places[transition_id].items():
             data[pid] = data.get(pid, 0) + w
         return Marking(data)
+
+    def expression_problems(self, marking: Mapping[str, int] | None = None) -> list[tuple[str, str, str]]:
+        """Check the rate and weight expressions in one marking (the initial one by default).
+
+        Only transitions enabled there are checked, since an expression is used only where its
+        transition is enabled: a rate must be finite and ≥ 0, a weight finite and > 0.
+
+        Returns:
+            ``(transition id, "rate" or "weight", problem)`` triples, empty when all is well.
+        """
+        where = self.initial_marking if marking is None else marking
+        out: list[tuple[str, str, str]] = []
+        for t in self.transitions:
+            if not t.marking_dependent or not self.enabled(where, t.id):
+                continue
+            for what, tree, positive in (("rate", t.rate_tree, False), ("weight", t.weight_tree, True)):
+                if tree is None:
+                    continue
+                value = float(evaluate(tree, where))
+                bad = value != value or value in (float("inf"), float("-inf")) or value < 0 or (positive and value == 0)
+                if bad:
+                    need = "> 0" if positive else ">= 0"
+                    out.append((t.id, what, f"the {what} of transition {t.id!r} is {value:g} in the "
+                                           f"{'initial ' if marking is None else ''}marking "
+                                           f"{Marking(where).to_dict()}, where it is enabled; it must be "
+                                           f"finite and {need}"))
+        return out
 
     # ------------------------------------------------------------------ derived nets
     def with_initial_marking(self, marking: Mapping[str, int]) -> PetriNet:

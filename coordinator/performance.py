@@ -12,7 +12,7 @@ Formulas used here, each with its source:
 * primitive action (paper section 3): ``R(a) = n_success(a) / n(a)`` over the journal's results
   (``failure`` and ``error`` both fail the specifications, section 4); ``C(a)`` the a-priori cost of
   the action in the net file or, when measured, the mean of ``wall_s``, ``cpu_s`` or ``cost`` over its
-  results; ``ρ = 1 / max_a C(a)`` per primitive task; ``J(a) = 1 − R(a) + ρ C(a)``.
+  results; ``ρ = 1 / max_a C(a)`` per primitive task unless its learner declares ``rho``; ``J(a) = 1 − R(a) + ρ C(a)``.
 * primitive task: with a probability ``p(a)`` of choosing each action, ``R = Σ p(a) R(a)``,
   ``C = Σ p(a) C(a)`` and ``J = 1 − R + ρ C = Σ p(a) J(a)`` (J is linear in R and C). By default
   ``p`` puts all its mass on the action of least J: the estimator automaton of section 4 converges
@@ -228,7 +228,8 @@ def action_performance(
             source = ("journal" if recs else "apriori") + "/" + ("journal" if values else "apriori")
             rows.append((spec.name, len(recs), counts, rel, cost, source))
         known = [c for *_, c, _ in rows if c is not None]
-        rho = rho_for(known) if known else 0.0
+        declared = task.learner.get("rho")
+        rho = float(declared) if declared is not None else (rho_for(known) if known else 0.0)
         out[name] = {
             a: ActionPerformance(
                 task=name, action=a, runs=n, successes=c["success"], failures=c["failure"],

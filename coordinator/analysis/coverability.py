@@ -9,8 +9,13 @@ graph is not expanded again. The net is bounded iff no node holds ω; a place is
 holds ω in it, and then its bound is the largest count any node gives it.
 
 Karp–Miller is only sound for nets without inhibitor arcs (with them boundedness is undecidable);
-:func:`karp_miller` refuses such nets. :func:`covering_witness` works on any net: it needs the pumped
-difference to be zero on every place read by an inhibitor arc, which makes the repetition legal.
+:func:`karp_miller` refuses such nets, and nets with reset arcs too: with resets the acceleration is
+unsound (a pumped place can be emptied again, so ω overstates it) and the construction need not
+terminate, and boundedness of reset nets is undecidable in general (Dufourd, Finkel, Schnoebelen,
+"Reset nets between decidability and undecidability", ICALP 1998). :func:`covering_witness` works
+on any net: it needs the pumped difference to be zero on every place read by an inhibitor arc, which
+makes the repetition legal, and growth on a place that the repeated firings do not reset, which
+keeps it growing.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from coordinator.analysis.matrices import sparse_net
+from coordinator.analysis.matrices import SparseNet, sparse_net
 from coordinator.analysis.statespace import StateSpace
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet
@@ -111,11 +116,14 @@ def karp_miller(net: PetriNet, *, max_nodes: int = 200_000, seconds: float = 60.
         The :class:`Coverability` graph.
 
     Raises:
-        AnalysisError: if the net has inhibitor arcs (Karp–Miller is unsound for them).
+        AnalysisError: if the net has inhibitor or reset arcs (Karp–Miller is unsound for them).
     """
     sn = sparse_net(net)
     if sn.inhibitor.nnz:
         raise AnalysisError("Karp–Miller coverability is unsound for nets with inhibitor arcs")
+    if sn.n_resets:
+        raise AnalysisError("Karp–Miller coverability is unsound for nets with reset arcs (a pumped place can be "
+                            "emptied again; boundedness of reset nets is undecidable in general)")
     n_t = sn.n_transitions
     pre, inc = sn.pre, sn.incidence
     inputs = [list(zip(pre.indices[pre.indptr[t]:pre.indptr[t + 1]].tolist(),
@@ -199,13 +207,33 @@ class CoveringWitness:
     growing: list[str]
 
 
+def _reset_masks(space: StateSpace, sn: SparseNet, rplaces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per state, as uint64 bit sets over ``rplaces`` (at most 64 places): the reset places emptied by
+    the tree edge into the state (``edge_mask``, 0 for M0), and a copy to accumulate along paths."""
+    assert sn.reset is not None
+    col = np.full(sn.n_places, -1, np.int64)
+    col[rplaces] = np.arange(rplaces.size)
+    per_t = np.zeros(sn.n_transitions, np.uint64)
+    for t in range(sn.n_transitions):
+        for p in sn.reset.indices[sn.reset.indptr[t]:sn.reset.indptr[t + 1]]:
+            per_t[t] |= np.uint64(1) << np.uint64(col[int(p)])
+    into = space.parent_edge
+    edge_mask = np.where(into >= 0, per_t[space.transition[np.maximum(into, 0)]], np.uint64(0)).astype(np.uint64)
+    return edge_mask, edge_mask.copy()
+
+
 def covering_witness(space: StateSpace, *, max_work: int = 200_000_000, block_bytes: int = 1 << 26) -> CoveringWitness | None:
     """Look for a state that strictly covers one of its ancestors on the breadth-first tree.
 
     Vectorised: all states are compared with their k-th tree ancestor for k = 1, 2, ... until no
     state has one or ``max_work`` element comparisons are spent; states are taken in blocks whose
     int64 differences stay below ``block_bytes``, so a wide net never needs an (N, |P|) copy. Sound
-    on every net: a pair counts only if the difference is zero on the places read by inhibitor arcs.
+    on every net: a pair counts only if the difference is zero on the places read by inhibitor arcs
+    (their counts then follow the same course when the loop repeats) and some place grows that no
+    transition of the loop empties by a reset arc (a place the loop resets ends each repetition with
+    the same count, whatever it started with; the others gain the difference again each time). With
+    more than 64 reset places the paths are not tracked and the difference must be zero on all of
+    them.
     Not complete: None means "no witness found", not "bounded".
 
     Args:
@@ -221,7 +249,16 @@ def covering_witness(space: StateSpace, *, max_work: int = 200_000_000, block_by
     if n < 2 or space.parent_edge.shape[0] != n:
         return None
     par = np.where(space.parent_edge >= 0, space.src[np.maximum(space.parent_edge, 0)], -1).astype(np.int64)
-    inhibited = np.flatnonzero(sparse_net(space.net).inhibitor.getnnz(axis=1) > 0)
+    sn = sparse_net(space.net)
+    inhibited = np.flatnonzero(sn.inhibitor.getnnz(axis=1) > 0).astype(np.int64)
+    rplaces = sn.reset_places()
+    edge_mask = seen = np.zeros(0, np.uint64)
+    if rplaces.size > 64:  # too many to track per path: ask for no change on any of them
+        inhibited = np.union1d(inhibited, rplaces).astype(np.int64)
+        rplaces = rplaces[:0]
+    elif rplaces.size:
+        edge_mask, seen = _reset_masks(space, sn, rplaces)
+    bits = np.arange(rplaces.size, dtype=np.uint64)
     anc = par.copy()
     alive = np.flatnonzero(anc >= 0)
     work = 0
@@ -231,7 +268,10 @@ def covering_witness(space: StateSpace, *, max_work: int = 200_000_000, block_by
             part = alive[lo:lo + step]
             a = anc[part]
             diff = states[part].astype(np.int64) - states[a].astype(np.int64)
-            ok = (diff >= 0).all(axis=1) & (diff > 0).any(axis=1)
+            grows = diff > 0
+            if rplaces.size:  # a place the loop resets does not grow when the loop repeats
+                grows[:, rplaces] &= ((seen[part][:, None] >> bits[None, :]) & np.uint64(1)) == 0
+            ok = (diff >= 0).all(axis=1) & grows.any(axis=1)
             if inhibited.size:
                 ok &= (diff[:, inhibited] == 0).all(axis=1)
             hit = np.flatnonzero(ok)
@@ -239,9 +279,11 @@ def covering_witness(space: StateSpace, *, max_work: int = 200_000_000, block_by
                 i, j = int(part[hit[0]]), int(a[hit[0]])
                 full_i = space.firing_sequence(i)
                 full_j = space.firing_sequence(j)
-                grow = [space.net.places[int(p)].id for p in np.flatnonzero(diff[hit[0]] > 0)]
+                grow = [space.net.places[int(p)].id for p in np.flatnonzero(grows[hit[0]])]
                 return CoveringWitness(prefix=full_j, loop=full_i[len(full_j):], growing=grow)
         work += alive.size * n_p
+        if rplaces.size:
+            seen[alive] |= edge_mask[anc[alive]]
         anc[alive] = par[anc[alive]]
         alive = alive[anc[alive] >= 0]
     return None

@@ -6,9 +6,17 @@ G. Franceschinis, *Modelling with Generalized Stochastic Petri Nets*, Wiley, 199
 * Exponential transitions fire after an exponential delay; with enabling degree
   ``d(M, t) = min_p floor(M(p) / W(p, t))`` the firing rate in marking M is
   ``rate(t) * min(d, k)`` for k-server semantics (k = 1: single server) and ``rate(t) * d`` for
-  infinite-server semantics.
+  infinite-server semantics. A marking-dependent rate (``rate_expr``) is the expression's value in
+  M, with no server multiplier (as GreatSPN's marking-dependent rates); it must be finite and ≥ 0
+  in every reachable tangible marking that enables the transition, and 0 means the transition does
+  not fire there (its edge is dropped, and so are the markings only such edges reach).
 * In a *vanishing* marking (an immediate transition enabled) only the immediate transitions of the
-  highest priority fire, transition *t* with probability ``w(t) / sum w`` (random switch).
+  highest priority fire, transition *t* with probability ``w(t) / sum w`` (random switch); a
+  marking-dependent weight (``weight_expr``) is evaluated in that marking and must be finite and
+  > 0 there (:class:`AnalysisError` naming the transition and the marking otherwise).
+* Reset arcs empty their places when their transition fires (:mod:`coordinator.net`); the
+  reachability graph honours them, and nothing else here depends on them (they do not change
+  enabling degrees).
 * Vanishing markings are eliminated: with ``P_VV``, ``P_VT`` the switching probabilities among
   vanishing markings and into tangible ones, and ``R_TT``, ``R_TV`` the rates out of tangible
   markings, the tangible chain has rates ``R_TT + R_TV (I - P_VV)^-1 P_VT``. A set of vanishing
@@ -36,7 +44,7 @@ import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from coordinator.analysis import ctmc
-from coordinator.analysis.expr import Compiled, ExprError, compile_expr
+from coordinator.analysis.expr import Compiled, ExprError, bind, compile_expr
 from coordinator.analysis.gspn_graph import GSPNGraph, explore_gspn
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet, TransitionKind
@@ -75,7 +83,8 @@ class TangibleChain:
 
     Attributes:
         net: the GSPN.
-        graph: the full reachability graph (tangible and vanishing markings).
+        graph: the reachability graph (tangible and vanishing markings; without the edges whose
+            marking-dependent rate is 0 and the markings only they reach).
         tangible: graph indices of the tangible markings, shape (n,); state *i* of ``q`` is
             ``graph.states[tangible[i]]``.
         q: generator (n, n) in 1/s.
@@ -112,11 +121,43 @@ class TangibleChain:
         return np.atleast_1d(spla.spsolve(sp.csc_matrix(a.T), flow_in))
 
 
+def _expression_values(net: PetriNet, g: GSPNGraph, edges: np.ndarray, what: str) -> np.ndarray:
+    """Values of the rate (``what == "rate"``) or weight expressions on ``edges`` (indices into the
+    graph's edges, all of transitions that have such an expression), evaluated in each edge's
+    source marking, as float64; raises on a value a rate or a weight may not take."""
+    out = np.empty(edges.size)
+    places = [p.id for p in net.places]
+    trans = g.transition[edges]
+    for j in np.unique(trans).tolist():
+        t = net.transitions[j]
+        text = t.rate_expr if what == "rate" else t.weight_expr
+        tree = t.rate_tree if what == "rate" else t.weight_tree
+        assert text is not None and tree is not None
+        sel = edges[trans == j]
+        values = np.asarray(bind(tree, text, places)(g.states[g.src[sel]]), dtype=np.float64)
+        bad = ~np.isfinite(values) | (values < 0 if what == "rate" else values <= 0)
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            need = "finite and >= 0" if what == "rate" else "finite and > 0"
+            marking = net.marking(g.states[g.src[sel[k]]]).to_dict()
+            raise AnalysisError(f"the {what} of transition {t.id!r} ({text}) is {values[k]:g} in marking {marking}, "
+                                f"where the transition is enabled; a {what} expression must be {need} there")
+        out[trans == j] = values
+    return out
+
+
 def _edge_values(net: PetriNet, g: GSPNGraph) -> np.ndarray:
-    """Rates of edges out of tangible markings, switching probabilities out of vanishing ones."""
+    """Rates of edges out of tangible markings, switching probabilities out of vanishing ones.
+
+    Raises:
+        AnalysisError: a rate expression negative or not finite, or a weight expression not > 0 or
+            not finite, where its transition is enabled.
+    """
     rate = np.array([t.rate or 0.0 for t in net.transitions])
     weight = np.array([t.weight for t in net.transitions])
     servers = np.array([0 if t.servers is None else t.servers for t in net.transitions])
+    rate_expr = np.array([t.rate_expr is not None for t in net.transitions], dtype=bool)
+    weight_expr = np.array([t.weight_expr is not None for t in net.transitions], dtype=bool)
     out = np.empty(g.src.size)
     timed = ~g.vanishing[g.src]
     if timed.any():
@@ -124,12 +165,37 @@ def _edge_values(net: PetriNet, g: GSPNGraph) -> np.ndarray:
         deg = enabling_degree(net, g.states[g.src[timed]], tt)
         k = servers[tt]
         out[timed] = rate[tt] * np.where(k == 0, deg, np.minimum(deg, k))
+        if rate_expr.any():
+            sel = np.flatnonzero(timed & rate_expr[g.transition])
+            if sel.size:
+                out[sel] = _expression_values(net, g, sel, "rate")
     imm = ~timed
     if imm.any():
         w = weight[g.transition[imm]]
+        if weight_expr.any():
+            imm_edges = np.flatnonzero(imm)
+            marked = weight_expr[g.transition[imm_edges]]
+            if marked.any():
+                w = w.copy()
+                w[marked] = _expression_values(net, g, imm_edges[marked], "weight")
         total = np.bincount(g.src[imm], weights=w, minlength=g.states.shape[0])
         out[imm] = w / total[g.src[imm]]
     return out
+
+
+def _prune(g: GSPNGraph, value: np.ndarray) -> tuple[GSPNGraph, np.ndarray]:
+    """Drop the edges out of tangible markings whose rate is 0 (a marking-dependent rate that is 0
+    there), then the markings no longer reachable from M0; return the graph and edge values kept."""
+    keep = g.vanishing[g.src] | (value > 0)
+    n = g.states.shape[0]
+    adj = sp.csr_matrix((np.ones(int(keep.sum())), (g.src[keep], g.dst[keep])), shape=(n, n))
+    reached = np.sort(breadth_first_order(adj, 0, directed=True, return_predecessors=False))
+    new_index = np.full(n, -1, dtype=np.int64)
+    new_index[reached] = np.arange(reached.size)
+    keep &= new_index[g.src] >= 0
+    graph = GSPNGraph(states=g.states[reached], src=new_index[g.src[keep]], dst=new_index[g.dst[keep]],
+                      transition=g.transition[keep], vanishing=g.vanishing[reached])
+    return graph, value[keep]
 
 
 def _check_traps(g: GSPNGraph, v_index: np.ndarray, nv: int, net: PetriNet) -> None:
@@ -196,7 +262,8 @@ def tangible_chain(net: PetriNet, *, graph: GSPNGraph | None = None, max_states:
         :class:`TangibleChain`.
 
     Raises:
-        AnalysisError: on a state limit, a timeless trap, or no tangible marking.
+        AnalysisError: on a state limit, a timeless trap, no tangible marking, or a rate or weight
+            expression with a value it may not take (see the module docstring).
     """
     g = graph if graph is not None else explore_gspn(net, max_states=max_states)
     n_all = g.states.shape[0]
@@ -213,6 +280,15 @@ def tangible_chain(net: PetriNet, *, graph: GSPNGraph | None = None, max_states:
     if nv:
         _check_traps(g, v_index, nv, net)
     value = _edge_values(net, g)
+    if not (value[~van[g.src]] > 0).all():
+        g, value = _prune(g, value)
+        n_all, van = g.states.shape[0], g.vanishing
+        tangible, vanishing = np.flatnonzero(~van), np.flatnonzero(van)
+        n, nv = tangible.size, vanishing.size
+        t_index = np.full(n_all, -1, dtype=np.int64)
+        t_index[tangible] = np.arange(n)
+        v_index = np.full(n_all, -1, dtype=np.int64)
+        v_index[vanishing] = np.arange(nv)
     sv, dv = van[g.src], van[g.dst]
 
     def block(mask: np.ndarray, rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int]) -> sp.csr_matrix:
@@ -245,8 +321,10 @@ class GSPNResult:
         mean_tokens: long-run mean token count per place.
         probability_nonempty: long-run probability that each place holds a token.
         throughput: long-run firings per second of each transition (0 for terminating nets).
-        utilisation: per exponential transition, long-run probability that it is enabled.
-        busy_servers: per exponential transition, long-run mean of ``min(degree, k)``.
+        utilisation: per exponential transition, long-run probability that it is enabled (with a
+            rate > 0, for a marking-dependent rate).
+        busy_servers: per exponential transition of constant rate, long-run mean of
+            ``min(degree, k)`` (a marking-dependent rate has no servers to count).
         bottlenecks: exponential transitions ranked (see :func:`analyse`), each with its score.
         residual: ``||pi Q||_inf`` of the long-run distribution.
         method: steady-state method used.
@@ -371,7 +449,8 @@ def analyse(net: PetriNet, *, chain: TangibleChain | None = None, method: str = 
     Bottleneck ranking: for a net that runs forever, exponential transitions with finitely many
     servers are ranked by utilisation ``E[min(d, k)] / k`` (the fraction of server capacity in use):
     a transition near 1 is saturated and bounds the throughput of everything that depends on it;
-    infinite-server transitions are pure delays and never saturate, so they are left out. For a net
+    infinite-server transitions are pure delays and never saturate, so they are left out, and so are
+    transitions with a marking-dependent rate (no server count to saturate). For a net
     that terminates, transitions are ranked by the expected time they are enabled before the net
     stops, as a share of the mean time to absorption: where the task spends its time.
 
@@ -402,6 +481,7 @@ def analyse(net: PetriNet, *, chain: TangibleChain | None = None, method: str = 
     places = [p.id for p in net.places]
     tids = [t.id for t in net.transitions]
     timed = np.array([t.kind is TransitionKind.EXPONENTIAL for t in net.transitions])
+    constant = np.array([t.rate_expr is None for t in net.transitions])
     rate = np.array([t.rate or 1.0 for t in net.transitions])
     servers = [t.servers for t in net.transitions]
     nv = chain.vanishing_count
@@ -419,7 +499,7 @@ def analyse(net: PetriNet, *, chain: TangibleChain | None = None, method: str = 
         "probability_nonempty": dict(zip(places, (pi @ (tokens > 0)).tolist(), strict=True)),
         "throughput": dict(zip(tids, thr.tolist(), strict=True)),
         "utilisation": {tids[i]: float(enabled[i]) for i in np.flatnonzero(timed)},
-        "busy_servers": {tids[i]: float(busy[i]) for i in np.flatnonzero(timed)},
+        "busy_servers": {tids[i]: float(busy[i]) for i in np.flatnonzero(timed & constant)},
         "residual": steady.residual, "method": steady.method,
     }
     bottlenecks: list[dict[str, Any]] = []
@@ -454,7 +534,7 @@ def analyse(net: PetriNet, *, chain: TangibleChain | None = None, method: str = 
             ]
     if not bottlenecks:
         scores = []
-        for i in np.flatnonzero(timed):
+        for i in np.flatnonzero(timed & constant):
             if servers[i] is None:
                 continue
             scores.append((float(busy[i] / servers[i]), i))

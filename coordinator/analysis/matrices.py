@@ -39,8 +39,10 @@ class SparseNet:
         pre: shape (|P|, |T|), int64 CSC: weight of arc p → t.
         post: shape (|P|, |T|), int64 CSC: weight of arc t → p.
         inhibitor: shape (|P|, |T|), int64 CSC: threshold of the inhibitor arc p → t.
-        incidence: C = post − pre, shape (|P|, |T|), int64 CSC, explicit zeros removed.
+        incidence: C = post − pre, shape (|P|, |T|), int64 CSC, explicit zeros removed. Reset arcs
+            are not in it: with them a firing's change depends on the marking (see ``reset``).
         m0: the initial marking, shape (|P|,), int64.
+        reset: shape (|P|, |T|), int64 CSC: 1 where a reset arc p → t empties p (none: no entries).
     Every CSC matrix has sorted row indices within each column (canonical format).
     """
 
@@ -51,17 +53,41 @@ class SparseNet:
     inhibitor: sp.csc_matrix
     incidence: sp.csc_matrix
     m0: np.ndarray
+    reset: sp.csc_matrix | None = None
 
     @property
     def n_arcs(self) -> int:
-        """Number of arcs (normal and inhibitor)."""
-        return int(self.pre.nnz + self.post.nnz + self.inhibitor.nnz)
+        """Number of arcs (normal, inhibitor and reset)."""
+        return int(self.pre.nnz + self.post.nnz + self.inhibitor.nnz + self.n_resets)
+
+    @property
+    def n_resets(self) -> int:
+        """Number of reset arcs."""
+        return 0 if self.reset is None else int(self.reset.nnz)
 
     def consumed_or_read(self) -> np.ndarray:
-        """Boolean (|P|,): places some transition consumes from or is inhibited by."""
+        """Boolean (|P|,): places some transition consumes from, is inhibited by or resets."""
         out = np.zeros(self.n_places, dtype=bool)
         out[self.pre.indices] = True
         out[self.inhibitor.indices] = True
+        if self.reset is not None:
+            out[self.reset.indices] = True
+        return out
+
+    def reset_places(self) -> np.ndarray:
+        """Indices of the places some reset arc empties, ascending, (k,) int64."""
+        if self.reset is None or not self.reset.nnz:
+            return np.zeros(0, dtype=np.int64)
+        return np.unique(self.reset.indices).astype(np.int64)
+
+    def firing_rows(self, rows: np.ndarray, t: int) -> np.ndarray:
+        """Successors of markings ``rows`` (k, |P|) by transition t (assumed enabled), (k, |P|) int64:
+        ``M + C[:, t]``, with the places of t's reset arcs set to ``Post[p, t]``."""
+        out: np.ndarray = np.asarray(rows, dtype=np.int64) + self.incidence[:, t].toarray().ravel()[None, :]
+        if self.reset is not None and self.reset.nnz:
+            for k in range(self.reset.indptr[t], self.reset.indptr[t + 1]):
+                p = int(self.reset.indices[k])
+                out[:, p] = self.post[p, t]
         return out
 
 
@@ -110,8 +136,9 @@ def sparse_net(net: PetriNet) -> SparseNet:
     for pid, count in net.initial_marking.items():
         m0[pidx[pid]] = count
     m0.flags.writeable = False
+    reset = _csc(net, {tid: {pid: 1 for pid in pids} for tid, pids in net.reset_places.items()}, shape)
     out = SparseNet(n_places=shape[0], n_transitions=shape[1], pre=pre, post=post, inhibitor=inh,
-                    incidence=inc, m0=m0)
+                    incidence=inc, m0=m0, reset=reset)
     net.__dict__[_CACHE_KEY] = out
     return out
 

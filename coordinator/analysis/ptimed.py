@@ -16,8 +16,9 @@ probabilities are measured as relative frequencies. Here each primitive-task pla
   events the result latches (``ok`` and ``success``/``failure``, or ``error``, plus the named
   outcome: :func:`services.results.latched_events`) are enabled, the highest priority among them
   wins and equal priorities split by weight; results that enable no exit are left out, with a
-  warning. Without results, normal exits get ``R_n / n_outcomes`` per outcome and error exits
-  ``(1 - R_n) / n_error``, ``R_n`` being the task's a-priori ``reliability`` (the probability of the
+  warning. Without results, normal exits get ``R_n / n_outcomes`` per outcome (or, when any normal
+  exit of the task declares a weight other than 1, ``R_n · w / Σ w`` over the task's normal exits:
+  the a-priori shares of its outcomes) and error exits ``(1 - R_n) / n_error``, ``R_n`` being the task's a-priori ``reliability`` (the probability of the
   normal branch: success and failure both take it, section 4). The exits of one place get one
   priority (the highest among them): a priority would otherwise override the switch.
 * transitions linked to an ``ext:<topic>`` event become exponential at the topic's rate
@@ -227,8 +228,8 @@ def to_gspn(
                                 f"({', '.join(lost)}) enable no exit of place {pid!r}; left out of its random switch")
     rewired: dict[tuple[str, str], str] = {}
     for t in net.transitions:
-        weight = t.weight
-        kind, rate, servers = t.kind, t.rate, t.servers
+        weight, weight_expr = t.weight, t.weight_expr
+        kind, rate, servers, rate_expr = t.kind, t.rate, t.servers, t.rate_expr
         exits: list[tuple[str, str]] = []
         for event in t.internal_events:
             _, tname, outcome = parse_event(event)
@@ -239,6 +240,8 @@ def to_gspn(
         if t.id in dropped:
             warnings.append(f"transition {t.id!r}: no journal result takes this exit; left out of the GSPN")
             continue
+        if exits:
+            weight_expr = None  # an exit's weight is its measured or a-priori probability
         if exits and t.id in measured:
             weight = measured[t.id]
             if weight <= 0:
@@ -254,14 +257,21 @@ def to_gspn(
             else:
                 st = stats.get(tname)
                 share = st.outcomes.get(outcome, 0.0) if st is not None and st.outcomes else None
-                if share is None:
+                normal_exits = [u for u in same if all(parse_event(e)[2] != "error" for e in u.internal_events
+                                                       if parse_event(e)[1] == tname)]
+                declared = share is None and any(u.weight != 1.0 for u in normal_exits)
+                if declared:  # a-priori shares of the outcomes, written as the exits' weights
+                    share = t.weight / sum(u.weight for u in normal_exits)
+                    n_same = 1
+                elif share is None:
                     outs = {parse_event(e)[2] for u in same for e in u.internal_events
                             if parse_event(e)[1] == tname}
                     share = 1.0 / max(1, len(outs))
                     if len(outs) > 1:
                         warnings.append(f"transition {t.id!r}: no journal share of outcome {outcome!r} "
                                         f"of {tname!r}; assuming 1/{len(outs)} of the normal exits")
-                n_same = sum(1 for u in same if any(parse_event(e)[2] == outcome for e in u.internal_events))
+                if not declared:
+                    n_same = sum(1 for u in same if any(parse_event(e)[2] == outcome for e in u.internal_events))
                 weight = used_normal[tname] * share / max(1, n_same)
             if weight <= 0:
                 warnings.append(f"transition {t.id!r}: probability 0 measured; weight {MIN_WEIGHT} kept")
@@ -274,12 +284,12 @@ def to_gspn(
                 used_ext[topic], sources[event] = DEFAULT_EXT_RATE, "default"
                 warnings.append(f"external event {event!r}: no rate given; using {DEFAULT_EXT_RATE}/s")
             kind, rate, servers = TransitionKind.EXPONENTIAL, used_ext[topic], 1
+            rate_expr = None
         label = t.label or (" ".join(t.events) if t.events else "")
         priority = exit_priority.get(t.id, t.priority)
         transitions.append(replace(t, events=(), kind=kind, rate=rate, servers=servers, weight=weight,
-                                   label=label, priority=priority))
-    arcs = [Arc(source=rewired.get((a.source, a.target), a.source), target=a.target, weight=a.weight,
-                inhibitor=a.inhibitor) if not a.inhibitor else a for a in arcs
+                                   label=label, priority=priority, rate_expr=rate_expr, weight_expr=weight_expr))
+    arcs = [replace(a, source=rewired.get((a.source, a.target), a.source)) if not a.inhibitor else a for a in arcs
             if not ({a.source, a.target} & dropped)]
     gspn = PetriNet(name=f"{net.name}_gspn", places=tuple(places), transitions=tuple(transitions), arcs=tuple(arcs),
                     initial_marking=net.initial_marking, tasks=net.tasks,

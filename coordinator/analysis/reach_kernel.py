@@ -6,15 +6,21 @@ directory) and driven by :func:`coordinator.analysis.statespace.explore`, which 
 result. What they implement (the reasons and the measurements are in docs/analysis.md, section 2):
 
 * Sparse arc lists per transition (CSR: ``ptr`` of shape (|T|+1,), then place indices and values)
-  for the input arcs, the inhibitor arcs and the non-zero entries of the incidence matrix C, packed
-  in one int64 array (:func:`tables`, or built by the caller from sparse matrices). Each transition
+  for the input arcs, the inhibitor arcs, the non-zero entries of the incidence matrix C and the
+  reset arcs, packed in one int64 array (:func:`tables`, or built by the caller from sparse
+  matrices; always by the caller for a net with reset arcs). A reset arc r → t lists r with the
+  count it holds after t fires, ``Post[r, t]``, and r is left out of t's incidence list: the
+  successor is ``M + C[:, t]`` off the reset places and ``Post[r, t]`` on them. A net without reset
+  arcs has empty reset lists, and its search is a specialisation compiled without their code (an
+  argument that is ``None`` for such nets, pruned by numba when it compiles). Each transition
   with input places is listed under its first input place (its *trigger*), so a marking only tests
   the transitions whose trigger place is marked (enabling rule: Murata 1989, section II).
 * A queue that is the state array itself: states are numbered in order of discovery and expanded in
   that order, so the search is breadth-first, a level (the markings at one distance from M0) is a
   contiguous index range, and edges come out sorted by source, then transition.
 * A key per marking that is linear in it, ``key(M) = sum_p M(p) * R[p] mod 2**64``, so a
-  successor's key is ``key(M) + key(C[:, t])``: one addition per edge. While the bit widths given
+  successor's key is ``key(M) + key(C[:, t])``: one addition per edge (plus, per reset arc,
+  ``(Post[r, t] - M(r)) * R[r]``). While the bit widths given
   to the places fit in 64 bits together, ``R[p] = 2**offset[p]`` packs the marking into its key
   exactly, so a key hit is a marking hit; a count that outgrows its width repacks every key. When
   the widths no longer fit, ``R`` becomes random odd multipliers and a key hit is confirmed by
@@ -45,7 +51,8 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit, objmode, types
 
-__all__ = ["CURSOR_SIZE", "HEAD", "RUN_SIGNATURE", "cached", "load", "run", "set_progress", "tables"]
+__all__ = ["CURSOR_SIZE", "HEAD", "RESET_SIGNATURE", "RUN_SIGNATURE", "cached", "load", "load_resets", "run",
+           "set_progress", "tables"]
 
 #: status codes: graph complete, or the state limit reached and its level finished; ``budget``
 #: markings expanded; a buffer is full; a token count would exceed 2**31 - 1, the largest the int32
@@ -55,8 +62,8 @@ DONE, BUDGET, ROOM, OVERFLOW, MEMORY = 0, 1, 2, 3, 4
 N, E, NEXT, LEVEL_END, STOPPING, N_TRUNC, MAX_COUNT, EXACT, NEED, NEED_S = range(10)
 CURSOR_SIZE = 10
 #: header of the packed arc lists: offsets of in_ptr, in_p, in_w, ih_ptr, ih_p, ih_w, d_ptr, d_p,
-#: d_v and the end
-HEAD = 10
+#: d_v, r_ptr, r_p, r_v and the end
+HEAD = 13
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _INT32_MAX = 2**31 - 1
 _SEED = np.uint64(0x5EED0F9E7B)
@@ -78,15 +85,17 @@ def _report(n_states: int, n_edges: int) -> None:
 
 @njit(cache=True)
 def tables(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray) -> np.ndarray:
-    """Packed arc lists of a net from its dense matrices.
+    """Packed arc lists of a net without reset arcs from its dense matrices (a net with reset arcs
+    has its lists built by the caller, :func:`coordinator.analysis.statespace.arc_table`).
 
     Args:
         pre, inhibitor, incidence: (|P|, |T|) int64 matrices of the net.
 
     Returns:
-        A flat int64 array: :data:`HEAD` offsets, then the input arcs, the inhibitor arcs and the
-        non-zero incidence entries as CSR lists by transition (ptr (|T|+1,) relative to its list,
-        place indices ascending, values).
+        A flat int64 array: :data:`HEAD` offsets, then the input arcs, the inhibitor arcs, the
+        non-zero incidence entries and the (empty) reset arcs as CSR lists by transition (ptr
+        (|T|+1,) relative to its list, place indices ascending, values; a reset arc's value is the
+        count its place holds after the firing).
     """
     n_p, n_t = pre.shape
     # entries per transition of each matrix (row-major pass: the matrices are C-ordered)
@@ -103,7 +112,7 @@ def tables(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray) -> np.
         for t in range(n_t):
             cnt[m * (n_t + 1) + t + 1] += cnt[m * (n_t + 1) + t]
     c0, c1, c2 = cnt[n_t], cnt[2 * n_t + 1], cnt[3 * n_t + 2]
-    out = np.zeros(HEAD + 3 * (n_t + 1) + 2 * (c0 + c1 + c2), np.int64)
+    out = np.zeros(HEAD + 4 * (n_t + 1) + 2 * (c0 + c1 + c2), np.int64)
     out[0] = HEAD
     out[1] = out[0] + n_t + 1
     out[2] = out[1] + c0
@@ -114,6 +123,9 @@ def tables(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray) -> np.
     out[7] = out[6] + n_t + 1
     out[8] = out[7] + c2
     out[9] = out[8] + c2
+    out[10] = out[9] + n_t + 1  # reset lists: ptr all zero, no entries
+    out[11] = out[10]
+    out[12] = out[11]
     for m in range(3):
         for t in range(n_t + 1):
             out[out[3 * m] + t] = cnt[m * (n_t + 1) + t]
@@ -213,7 +225,8 @@ def _rekey(tab: np.ndarray, width: np.ndarray, mult: np.ndarray, dkey: np.ndarra
 def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.ndarray, use_prio: bool,
             states: np.ndarray, table: np.ndarray, dst: np.ndarray, tr: np.ndarray, out_ptr: np.ndarray,
             parent: np.ndarray, trunc: np.ndarray, cursor: np.ndarray, width: np.ndarray, mult: np.ndarray,
-            succ: np.ndarray, dkey: np.ndarray, enabled: np.ndarray, max_states: int, budget: int) -> int:
+            succ: np.ndarray, dkey: np.ndarray, enabled: np.ndarray, max_states: int, budget: int,
+            resets: np.ndarray | None) -> int:
     """Expand markings in breadth-first order, at most ``budget`` of them, from ``cursor[NEXT]``,
     in the given buffers (never reallocated here: ``ROOM`` says one is full, and ``cursor[NEED]``
     how many successors the state waiting to be expanded has).
@@ -241,6 +254,9 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
     in_ptr, in_p, in_w = tab[tab[0]:tab[1]], tab[tab[1]:tab[2]], tab[tab[2]:tab[3]]
     ih_ptr, ih_p, ih_w = tab[tab[3]:tab[4]], tab[tab[4]:tab[5]], tab[tab[5]:tab[6]]
     d_ptr, d_p, d_v = tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]]
+    r_ptr, r_p, r_v = tab[tab[9]:tab[10]], tab[tab[10]:tab[11]], tab[tab[11]:tab[12]]
+    # ``resets is not None`` is decided when numba compiles: a net without reset arcs passes None
+    # and runs a specialisation of this function without their code
     n, e, i = cursor[N], cursor[E], cursor[NEXT]
     level_end, stopping, n_trunc = cursor[LEVEL_END], cursor[STOPPING], cursor[N_TRUNC]
     top = cursor[MAX_COUNT]
@@ -318,6 +334,15 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                     if exact and v >> width[q]:
                         width[q] = _bit_length(v)
                         repack = True
+            r0 = r1 = 0
+            if resets is not None:
+                r0, r1 = r_ptr[t], r_ptr[t + 1]
+                for b in range(r0, r1):  # reset places end with r_v tokens
+                    v = r_v[b]
+                    top = max(top, v)
+                    if exact and v >> width[r_p[b]]:
+                        width[r_p[b]] = _bit_length(v)
+                        repack = True
             if top > _INT32_MAX:
                 status = OVERFLOW
                 break
@@ -326,11 +351,18 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                 exact = cursor[EXACT] != 0
                 key_i = _key(states, i, n_p, mult)
             key = key_i + dkey[t]
+            if resets is not None:
+                for b in range(r0, r1):
+                    q = r_p[b]
+                    key += (np.uint64(r_v[b]) - np.uint64(states[base + q])) * mult[q]  # modulo 2**64
             if not exact:
                 for p in range(n_p):
                     succ[p] = states[base + p]
                 for b in range(d_ptr[t], d_ptr[t + 1]):
                     succ[d_p[b]] += d_v[b]
+                if resets is not None:
+                    for b in range(r0, r1):
+                        succ[r_p[b]] = r_v[b]
             s = _slot(key, bits)
             j = -1
             while table[2 * s + 1] != 0:
@@ -360,6 +392,9 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                     states[jb + p] = states[base + p]
                 for b in range(d_ptr[t], d_ptr[t + 1]):
                     states[jb + d_p[b]] += d_v[b]
+                if resets is not None:
+                    for b in range(r0, r1):
+                        states[jb + r_p[b]] = r_v[b]
                 table[2 * s] = key
                 table[2 * s + 1] = np.uint64(j + 1)
                 parent[j] = e
@@ -401,14 +436,17 @@ def _target(cap: int, need: int, unit: int | np.int64, held: int | np.int64, max
     return int(want) if want >= need else -1
 
 
-#: the one signature :func:`run` is compiled for (read-only matrices, marking and priorities, as a
-#: net holds them; callers pass exactly these types, so a call never goes through numba's slower
-#: type-conversion path and nothing is compiled twice). :func:`load` compiles it, or loads it from
-#: the cache, and then forbids further compilations.
+#: the signature :func:`run` is compiled for (read-only matrices, marking and priorities, as a
+#: net holds them, and ``resets`` None: a net without reset arcs; callers pass exactly these types,
+#: so a call never goes through numba's slower type-conversion path and nothing is compiled twice).
+#: :func:`load` compiles it, or loads it from the cache, and then forbids further compilations;
+#: :func:`load_resets` does the same for :data:`RESET_SIGNATURE`, the search of nets with reset
+#: arcs, on the first such net.
 _RO2 = types.Array(types.int64, 2, "C", readonly=True)
 _RO1 = types.Array(types.int64, 1, "C", readonly=True)
 RUN_SIGNATURE = (_RO2, _RO2, _RO2, types.int64[::1], _RO1, _RO1, types.boolean, types.int64, types.int64,
-                 types.int64)
+                 types.int64, types.none)
+RESET_SIGNATURE = (*RUN_SIGNATURE[:-1], types.int64[::1])
 
 
 def cached() -> bool | None:
@@ -428,20 +466,31 @@ def cached() -> bool | None:
 
 def load() -> None:
     """Make :func:`run` ready: loaded from the cache or compiled (and cached) for its signature."""
-    if not run.overloads:
+    if RUN_SIGNATURE not in run.overloads:
         run.compile(RUN_SIGNATURE)
     run.disable_compile()
+
+
+def load_resets() -> None:
+    """Make :func:`run` ready for nets with reset arcs (:data:`RESET_SIGNATURE`): loaded from the
+    cache or compiled (and cached) the first time such a net is explored."""
+    if RESET_SIGNATURE not in run.overloads:
+        run.disable_compile(False)
+        try:
+            run.compile(RESET_SIGNATURE)
+        finally:
+            run.disable_compile()
 
 
 @njit(cache=True)
 def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.ndarray, m0: np.ndarray,
         prio: np.ndarray, use_prio: bool, max_states: int, max_bytes: int,
-        report_every: int) -> tuple:  # type: ignore[type-arg]
+        report_every: int, resets: np.ndarray | None) -> tuple:  # type: ignore[type-arg]
     """The whole breadth-first search of a net (see the module docstring).
 
     Args:
-        pre, inhibitor, incidence: (|P|, |T|) int64 matrices of the net, read only if ``tab`` is
-            empty.
+        pre, inhibitor, incidence: (|P|, |T|) int64 matrices of a net without reset arcs, read only
+            if ``tab`` is empty.
         tab: packed arc lists (layout of :func:`tables`), or an empty array to build them from the
             matrices.
         m0: (|P|,) int64 initial marking.
@@ -452,6 +501,8 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         max_bytes: byte budget of the search's buffers (see the module docstring).
         report_every: call the progress hook (:func:`set_progress`) every this many expanded
             markings and at the end; 0 for never.
+        resets: ``None`` for a net without reset arcs (the search is compiled without their code),
+            else any array (``tab``): the reset lists of ``tab`` are applied.
 
     Returns:
         ``(status, states, dst, tr, parent, expanded, out_ptr, complete, max_count)``: DONE,
@@ -536,7 +587,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     while top <= _INT32_MAX:
         status = _search(arcs, trig_ptr, trig_t, prio, use_prio, states, table, dst, tr, out_ptr, parent,
                          trunc, cursor, width, mult, succ, dkey, enabled, max_states,
-                         max(1, next_report - cursor[NEXT]))
+                         max(1, next_report - cursor[NEXT]), resets)
         if status == ROOM:
             n, e, k, ks = cursor[N], cursor[E], cursor[NEED], cursor[NEED_S]
             if n + ks > cap:

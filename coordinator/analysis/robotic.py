@@ -32,13 +32,16 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
+from coordinator.analysis.environment import retry_loops, with_environment
 from coordinator.analysis.statespace import StateSpace, default_max_bytes
 from coordinator.analysis.structure import (
     Analysis,
     analyse,
     graph_liveness,
     record_only_places,
+    without_places,
 )
+from coordinator.errors import NotEnabledError
 from coordinator.net import PetriNet, PlaceKind, parse_event
 
 __all__ = [
@@ -210,6 +213,21 @@ def _why_not(a: Analysis) -> str:
     return "infinite" if a.bounded is False else "too large"
 
 
+def _full_marking(space: StateSpace, index: int, original: PetriNet) -> dict[str, int]:
+    """The marking of state ``index`` on every place of ``original``: a graph explored without the
+    record-only places gives them back by replaying the state's firing sequence."""
+    if len(space.net.places) == len(original.places):
+        return space.marking(index).to_dict()
+    full, _ = with_environment(original)
+    m = full.initial_marking
+    try:
+        for t in space.firing_sequence(index):
+            m = full.fire(m, t)
+    except (NotEnabledError, KeyError):  # not expected: the sequence is one of the full net's too
+        return space.marking(index).to_dict()
+    return m.to_dict()
+
+
 def recoverability(a: Analysis, original: PetriNet) -> Verdict:
     """The *error recoverable* verdict: every reachable marking can reach the home condition."""
     space = _behaviour_space(a)
@@ -250,7 +268,7 @@ def recoverability(a: Analysis, original: PetriNet) -> Verdict:
     after = set(after_error.tolist())
     shown = list(bad_after_error[:_MAX_WITNESSES]) + [i for i in bad[:_MAX_WITNESSES] if i not in after]
     for i in shown[:_MAX_WITNESSES]:
-        witness["examples"].append({"marking": space.marking(int(i)).to_dict(),
+        witness["examples"].append({"marking": _full_marking(space, int(i), original),
                                     "firing_sequence": space.firing_sequence(int(i)),
                                     "after_error_branch": bool(int(i) in after)})
     first = witness["examples"][0]
@@ -288,9 +306,11 @@ def controllability(a: Analysis, original: PetriNet) -> Verdict:
     else:
         levels, labels, terminal = graph_liveness(space.n_states, n_t + 1, src, dst, tr, out_ptr=space.out_ptr)
     levels = levels[:n_t]
-    dead = [ids[j] for j in range(n_t) if levels[j] == 0]
-    not_live = [ids[j] for j in range(n_t) if 0 < levels[j] < 4]
-    witness: dict[str, Any] = {"liveness": {ids[j]: LEVEL_NAMES[int(levels[j])] for j in range(n_t)},
+    # only the task's own transitions are judged, not the operator's (see environment.py)
+    own = [j for j in range(n_t) if ids[j] in original.transition_index]
+    dead = [ids[j] for j in own if levels[j] == 0]
+    not_live = [ids[j] for j in own if 0 < levels[j] < 4]
+    witness: dict[str, Any] = {"liveness": {ids[j]: LEVEL_NAMES[int(levels[j])] for j in own},
                                "dead_transitions": dead, "not_live_transitions": not_live,
                                "finished_task_restarted": restarted, "examples": []}
     scope = " (a finished task counted as restarted from its initial marking)" if restarted else ""
@@ -306,7 +326,7 @@ def controllability(a: Analysis, original: PetriNet) -> Verdict:
         cand = np.flatnonzero(in_term & ~np.isin(labels, comps_with))
         if cand.size:
             i = int(cand[0])
-            witness["examples"].append({"transition": tid, "marking": space.marking(i).to_dict(),
+            witness["examples"].append({"transition": tid, "marking": _full_marking(space, i, original),
                                         "firing_sequence": space.firing_sequence(i)})
     parts = []
     if dead:
@@ -320,15 +340,28 @@ def controllability(a: Analysis, original: PetriNet) -> Verdict:
     return Verdict(False, text + ".", witness)
 
 
-def robotic_reading(a: Analysis, original: PetriNet) -> dict[str, Verdict]:
+def robotic_reading(a: Analysis, original: PetriNet, env: Analysis | None = None) -> dict[str, Verdict]:
     """Return the three verdicts ``stable``, ``error_recoverable``, ``controllable`` of a task net.
 
     Args:
-        a: the :func:`~coordinator.analysis.structure.analyse` result.
+        a: the :func:`~coordinator.analysis.structure.analyse` result of the net as written.
         original: the interpreted net (its events name the error branches; its home marking).
+        env: the analysis of the net with the operator as its environment
+            (:func:`~coordinator.analysis.environment.with_environment`), when it has control
+            places; recovery and control are then judged on it, stability on ``a``.
     """
-    return {"stable": stability(a), "error_recoverable": recoverability(a, original),
-            "controllable": controllability(a, original)}
+    behaviour = a if env is None else env
+    return {"stable": stability(a), "error_recoverable": recoverability(behaviour, original),
+            "controllable": controllability(behaviour, original)}
+
+
+def _environment_note(limits: dict[str, int], dropped: list[str]) -> str:
+    places = ", ".join(f"{p} (up to {k})" for p, k in limits.items())
+    text = (f" The operator is modelled as the environment: at any time it may add tokens to the control "
+            f"place{'s' if len(limits) > 1 else ''} {places}")
+    if dropped:
+        text += f" (its markings counted without the record-only places {_names(dropped, 4)})"
+    return text + "."
 
 
 def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None = None,
@@ -348,7 +381,12 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
     ``sources`` (property → what decided it: the explicit search or the structure), ``undecided``
     (properties left null), ``structural_conflicts``, ``interpretation_problems``, ``notes`` and
     ``robotic`` (``stable``, ``error_recoverable``, ``controllable``: each ``{holds, explanation,
-    witness}``). ``None`` (JSON null) means "not decided".
+    witness}``; error recovery and control judged with the operator as the environment when the net
+    has control places), ``environment`` (``modelled``, ``control_places``: place → the most tokens
+    the operator may bring it up to, ``transitions``: the operator's transitions, ``states`` and
+    ``edges`` of the graph with them, see :mod:`coordinator.analysis.environment`) and ``retries``
+    (``retries``: each retry with ``bounded``, ``unbounded``: the retries that can fire for ever).
+    ``None`` (JSON null) means "not decided".
 
     Args:
         net: the task net.
@@ -358,7 +396,15 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
     """
     budget = default_max_bytes() if max_bytes is None else int(max_bytes)
     a = analyse(net, max_states=max_states, max_bytes=budget, progress=progress)
-    verdicts = robotic_reading(a, net)
+    records = record_only_places(net)
+    env_net, limits = with_environment(without_places(net, records))
+    env = analyse(env_net, max_states=max_states, max_bytes=budget, progress=progress) if limits else None
+    verdicts = robotic_reading(a, net, env)
+    if limits:
+        note = _environment_note(limits, records)
+        verdicts = {k: (v if k == "stable" else Verdict(v.holds, v.explanation + note, v.witness))
+                    for k, v in verdicts.items()}
+    retries = retry_loops(_behaviour_space(env if env is not None else a), net)
     truncated: dict[str, Any] | None = None
     if not a.complete and a.space is not None:
         truncated = {"by": a.stopped_by, "states_found": a.states, "edges_found": a.edges,
@@ -409,6 +455,11 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
         "interpretation_problems": [{"element": e, "problem": p} for e, p in net.interpretation_problems()],
         "notes": a.notes,
         "robotic": {k: v.to_dict() for k, v in verdicts.items()},
+        "environment": {"modelled": bool(limits), "control_places": limits,
+                        "transitions": [t.id for t in env_net.transitions[len(net.transitions):]],
+                        "states": None if env is None else env.states,
+                        "edges": None if env is None else env.edges},
+        "retries": retries,
     }
 
 

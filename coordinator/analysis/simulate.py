@@ -8,6 +8,13 @@ the earliest server to finish fires its transition; a server that loses its enab
 With exponential delays this is exactly the CTMC of the GSPN. Immediate transitions fire in zero
 time, the highest priority first, among equals at random in proportion to their weights.
 
+A marking-dependent rate (``rate_expr``) runs one exponential clock whose rate is the expression's
+value in the current marking; the clock is drawn again after every event (exact, since the
+exponential law is memoryless), and a value of 0 stops it. A marking-dependent weight is evaluated
+in the marking where the switch happens. Reset arcs empty their places when their transition fires.
+A delay given in ``delays`` for a transition with a rate expression replaces the expression (one
+server).
+
 Estimates come with Student-t confidence intervals: batch means over one long run after a warm-up
 for long-run measures, independent replications for terminating nets (A. M. Law, *Simulation
 Modeling and Analysis*, 5th ed., McGraw-Hill, 2015, ch. 9).
@@ -24,6 +31,7 @@ import numpy as np
 from scipy import stats
 
 from coordinator.errors import AnalysisError
+from coordinator.expr import scalar
 from coordinator.net import PetriNet, TransitionKind
 
 __all__ = [
@@ -152,19 +160,29 @@ class _Sim:
         self.net = net
         self.rng = rng
         pre, inh, inc = np.asarray(net.pre), np.asarray(net.inhibitor), np.asarray(net.incidence)
+        post, reset = np.asarray(net.post), np.asarray(net.reset)
         n_t = len(net.transitions)
         self.inputs = [[(int(p), int(pre[p, t])) for p in np.flatnonzero(pre[:, t])] for t in range(n_t)]
         self.inhib = [[(int(p), int(inh[p, t])) for p in np.flatnonzero(inh[:, t])] for t in range(n_t)]
-        self.delta = [[(int(p), int(inc[p, t])) for p in np.flatnonzero(inc[:, t])] for t in range(n_t)]
+        self.delta = [[(int(p), int(inc[p, t])) for p in np.flatnonzero(inc[:, t]) if not reset[p, t]]
+                      for t in range(n_t)]
+        self.resets = [[(int(p), int(post[p, t])) for p in np.flatnonzero(reset[:, t])] for t in range(n_t)]
         self.timed = [t.kind is TransitionKind.EXPONENTIAL for t in net.transitions]
         self.servers = [t.servers for t in net.transitions]
         self.priority = [t.priority for t in net.transitions]
         self.weight = [t.weight for t in net.transitions]
+        index = net.place_index.__getitem__
+        self.weight_fn = {j: scalar(t.weight_tree, index) for j, t in enumerate(net.transitions)
+                          if t.weight_tree is not None}
         delays = dict(delays or {})
+        self.rate_fn = {j: scalar(t.rate_tree, index) for j, t in enumerate(net.transitions)
+                        if t.rate_tree is not None and t.id not in delays}
         self.delay: list[Delay | None] = []
         for t in net.transitions:
-            if t.kind is TransitionKind.EXPONENTIAL:
-                self.delay.append(delays.get(t.id) or Delay.exponential(float(t.rate or 0.0)))
+            if t.kind is TransitionKind.EXPONENTIAL and t.id in delays:
+                self.delay.append(delays[t.id])
+            elif t.kind is TransitionKind.EXPONENTIAL and t.rate_expr is None:
+                self.delay.append(Delay.exponential(float(t.rate or 0.0)))
             else:
                 self.delay.append(None)
         self.marking = [int(v) for v in net.initial_vector]
@@ -188,6 +206,19 @@ class _Sim:
     def fire(self, t: int) -> None:
         for p, c in self.delta[t]:
             self.marking[p] += c
+        for p, after in self.resets[t]:
+            self.marking[p] = after
+
+    def value(self, t: int, what: str) -> float:
+        """The rate or weight expression of transition t in the current marking, checked."""
+        fn = self.rate_fn[t] if what == "rate" else self.weight_fn[t]
+        v = float(fn(self.marking))
+        if not math.isfinite(v) or v < 0 or (what == "weight" and v == 0):
+            need = "finite and >= 0" if what == "rate" else "finite and > 0"
+            raise AnalysisError(f"the {what} of transition {self.net.transitions[t].id!r} is {v:g} in marking "
+                                f"{self.net.marking(self.marking).to_dict()}, where the transition is enabled; "
+                                f"a {what} expression must be {need} there")
+        return v
 
     def settle(self, fired: list[int]) -> bool:
         """Fire immediate transitions until the marking is tangible; False if it is dead."""
@@ -202,7 +233,7 @@ class _Sim:
                     cands.append(t)
             if not cands:
                 return self.schedule()
-            w = np.array([self.weight[t] for t in cands])
+            w = np.array([self.value(t, "weight") if t in self.weight_fn else self.weight[t] for t in cands])
             pick = cands[int(self.rng.choice(len(cands), p=w / w.sum()))] if len(cands) > 1 else cands[0]
             self.fire(pick)
             fired.append(pick)
@@ -218,9 +249,19 @@ class _Sim:
             if not timed:
                 continue
             d = self.degree(t)
+            clocks = self.clocks[t]
+            if t in self.rate_fn:  # one memoryless clock, drawn again at the current rate
+                rate = self.value(t, "rate") if d else 0.0
+                clocks.clear()
+                if rate > 0:
+                    when = self.now + float(self.rng.exponential(1.0 / rate))
+                    clocks.append(when)
+                    heapq.heappush(self.heap, (when, self.seq, t))
+                    self.seq += 1
+                    active = True
+                continue
             k = self.servers[t]
             want = d if k is None else min(d, k)
-            clocks = self.clocks[t]
             while len(clocks) > want:
                 clocks.remove(max(clocks))
             while len(clocks) < want:

@@ -327,16 +327,34 @@ def _enabled(tab: _NetTables, cols: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(out)
 
 
+def _reset_lists(net: PetriNet) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+    """For the search: the incidence matrix without the entries of reset pairs, and ``1 + Post[r, t]``
+    on every reset pair r → t (CSC, (|P|, |T|), int64); see :mod:`.reach_kernel`."""
+    sn = sparse_net(net)
+    assert sn.reset is not None
+    inc = sp.csc_matrix(sn.incidence - sn.incidence.multiply(sn.reset)).astype(np.int64)
+    inc.eliminate_zeros()
+    inc.sort_indices()
+    after = sp.csc_matrix(sn.reset + sn.post.multiply(sn.reset)).astype(np.int64)
+    after.sort_indices()
+    return inc, after
+
+
 def arc_table(net: PetriNet) -> np.ndarray:
     """The packed arc lists of :func:`.reach_kernel.tables` built from the sparse matrices (for nets
     whose dense matrices would be large), shape (k,), int64."""
     sn = sparse_net(net)
+    inc, after = _reset_lists(net) if net.has_resets else (sn.incidence, None)
     parts = []
-    for mat in (sn.pre, sn.inhibitor, sn.incidence):
+    for mat in (sn.pre, sn.inhibitor, inc):
         parts += [mat.indptr.astype(np.int64), mat.indices.astype(np.int64), mat.data.astype(np.int64)]
-    head = np.zeros(10, dtype=np.int64)
-    offsets = np.cumsum([10] + [p.shape[0] for p in parts])
-    head[:] = offsets[:10]
+    if after is not None:
+        parts += [after.indptr.astype(np.int64), after.indices.astype(np.int64), after.data.astype(np.int64) - 1]
+    else:
+        parts += [np.zeros(len(net.transitions) + 1, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)]
+    head = np.zeros(13, dtype=np.int64)
+    offsets = np.cumsum([13] + [p.shape[0] for p in parts])
+    head[:] = offsets[:13]
     return np.concatenate([head, *parts])
 
 
@@ -344,8 +362,8 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
             progress: Callable[[int, int], None] | None = None, max_bytes: int | None = None) -> StateSpace:
     """Build the reachability graph of ``net`` by a compiled breadth-first search.
 
-    The ordinary firing rule of :mod:`coordinator.net` is used (inhibitor arcs honoured; events,
-    weights and rates ignored). Technique and cost: :mod:`.reach_kernel` and docs/analysis.md;
+    The ordinary firing rule of :mod:`coordinator.net` is used (inhibitor arcs honoured, reset arcs
+    empty their places; events, weights and rates ignored). Technique and cost: :mod:`.reach_kernel` and docs/analysis.md;
     reachability graphs: Murata 1989, section V-A. The first call in a process loads the compiled
     search (about 0.5 s; a few seconds more the first time on a machine, to compile it).
 
@@ -383,16 +401,18 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         prio.flags.writeable = False
         if prio.shape != (n_t,):
             raise AnalysisError(f"priority has shape {prio.shape}; expected ({n_t},)")
-    if dense_is_cheap(net):
+    if dense_is_cheap(net) and not net.has_resets:
         pre, inh, inc, tab, m0 = net.pre, net.inhibitor, net.incidence, _NO_TABLE, net.initial_vector
     else:
         pre = inh = inc = _NO_MATRIX
         tab, m0 = arc_table(net), sparse_net(net).m0
+    if net.has_resets:
+        rk.load_resets()  # the search of nets with reset arcs is a second compiled specialisation
     rk.set_progress(progress)
     try:
         status, states, dst, tr, parent, expanded, out_ptr, complete, top = rk.run(
             pre, inh, inc, tab, m0, prio, use_prio, max_states, budget,
-            _PROGRESS_STATES if progress is not None else 0)
+            _PROGRESS_STATES if progress is not None else 0, tab if net.has_resets else None)
     finally:
         rk.set_progress(None)
     if status == rk.OVERFLOW:

@@ -16,6 +16,18 @@ says what decided each property, so a report can tell the explicit search from t
 Conservativeness and consistency come from linear programs (:mod:`.lp`), never from the Farkas
 enumeration, which is only there to list the minimal invariants when its budgets allow.
 
+Reset arcs (docs/analysis.md, "Reset arcs"): the reachability graph honours them, so everything
+decided on a complete graph stands. The incidence matrix C leaves them out, and what rests on C
+changes: a reset only removes tokens, so for y ≥ 0 with yᵀC ≤ 0 every reachable M still has
+y·M ≤ y·M0 (the state-equation and P-invariant *bounds* stay valid upper bounds), but y·M is no
+longer conserved. So the P-invariants listed are the semiflows of C whose support holds no reset
+place (those are still invariants), the T-invariants those with no transition that has a reset arc,
+and conservative / consistent are left undecided (their value on the net without reset arcs is in
+a note). Karp–Miller is not run on a net with reset arcs (unsound, and boundedness is undecidable
+for reset nets): when the graph is too large and the bounds do not settle boundedness, it stays
+undecided unless a pumping witness proves unboundedness (one whose growing places the repeated
+firings do not reset; :func:`.coverability.covering_witness`).
+
 Every analysis runs within a state limit and a byte budget (:func:`analyse`): the search stops
 with what it has when either is reached, and the passes over a complete graph run only if their
 memory need (estimated from its size) fits.
@@ -28,7 +40,7 @@ component, so it can fire infinitely often; L4 live — t labels an edge in ever
 reversible iff the graph is strongly connected; the home states are the states of the terminal
 component when there is exactly one.
 
-Length: about 700 lines because :func:`analyse` is one decision procedure (graph, then LP bounds,
+Length: about 770 lines because :func:`analyse` is one decision procedure (graph, then LP bounds,
 then invariants, then coverability, each step deciding what the previous one left open) and its
 result types and graph passes are read together with it; the LP, invariants, siphons and the
 search live in their own modules.
@@ -375,7 +387,6 @@ def _conflicts(net: PetriNet, space: StateSpace | None, *, seconds: float = 10.0
     if space is not None and space.complete and shared:
         start = time.monotonic()
         effective = {p: False for p, _ in shared}
-        inc = sn.incidence
         n_p = sn.n_places
         block = max(1, min(1 << 16, block_bytes // max(8 * n_p, 1)))
         for lo in range(0, space.n_states, block):
@@ -401,10 +412,9 @@ def _conflicts(net: PetriNet, space: StateSpace | None, *, seconds: float = 10.0
                         both = np.flatnonzero(en(a) & en(b))
                         if not both.size:
                             continue
-                        base = rows[both].astype(np.int64)
-                        col_a = inc[:, a].toarray().ravel()
-                        col_b = inc[:, b].toarray().ravel()
-                        if not (_enabled_one(sn, base + col_a, b).all() and _enabled_one(sn, base + col_b, a).all()):
+                        base = rows[both]
+                        if not (_enabled_one(sn, sn.firing_rows(base, a), b).all()
+                                and _enabled_one(sn, sn.firing_rows(base, b), a).all()):
                             effective[p] = True
                             break
                     if effective[p]:
@@ -457,12 +467,15 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     for name, inv in (("P-invariants", pinv), ("T-invariants", tinv)):
         if not inv.complete:
             notes.append(f"{name}: not enumerated ({inv.reason}); none are listed")
+    bounding_pinv = pinv  # every semiflow of C bounds the net, reset arcs or not
+    if sn.n_resets:
+        pinv, tinv, psup, tsup = _without_reset_results(net, sn, pinv, tinv, psup, tsup, notes, sources)
     total, total_done, total_cert = lp.total_bound(sn, seconds=lp_seconds)
     structural = Structural(p_support=psup, t_support=tsup, total_bound=total, total_certified=total_cert)
     if not total_done:
         notes.append("the state-equation LP of the total token count did not finish in time")
-    sbounds = structural_bounds(net, pinv)
-    by_invariants = bool(pinv.complete and (sbounds >= 0).all())
+    sbounds = structural_bounds(net, bounding_pinv)
+    by_invariants = bool(bounding_pinv.complete and (sbounds >= 0).all())
     structurally_bounded = total is not None or by_invariants
     has_inhibitors = bool(sn.inhibitor.nnz)
     graph_bytes = budget // 2
@@ -506,12 +519,12 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     seen_max = space.states.max(axis=0).astype(np.int64) if space.n_states else np.zeros(len(ids), np.int64)
     if structurally_bounded:
         bounded = True
-        flows = tuple(v for v in pinv.vectors) + ((psup.semiflow,) if psup.semiflow is not None else ())
+        flows = tuple(v for v in bounding_pinv.vectors) + ((psup.semiflow,) if psup.semiflow is not None else ())
         pb = lp.place_bounds(sn, seconds=lp_seconds, seen=seen_max, semiflows=flows)
         structural = replace(structural, place_bounds=pb)
         notes.extend(pb.notes)
         upper = pb.bounds.copy()
-        if pinv.complete:
+        if bounding_pinv.complete:
             both = (sbounds >= 0) & ((upper < 0) | (sbounds < upper))
             upper[both] = sbounds[both]
         place_bounds = {pid: (int(b) if b >= 0 else None) for pid, b in zip(ids, upper)}
@@ -537,7 +550,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                 sources["max_token_per_marking"] = "explored markings reach the state-equation bound"
         notes.append(f"the net is bounded ({sources['bounded']}); the place bounds listed are upper bounds, "
                      f"exact for {len(exact)} of {len(ids)} places (reached by an explored marking)")
-    elif not has_inhibitors:
+    elif not has_inhibitors and not sn.n_resets:
         node_bytes = 96 * max(len(ids), 1) + 256
         nodes = max(1, min(max_coverability_nodes, (budget // 4) // node_bytes))
         cover = karp_miller(net, max_nodes=nodes, seconds=coverability_seconds)
@@ -577,8 +590,11 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                          "net: boundedness is not decided")
     else:
         if witness is None:
-            notes.append("the net has inhibitor arcs, its reachability graph exceeds the limit and the state "
-                         "equation does not bound it: boundedness is undecidable in general and was not decided")
+            arcs = "inhibitor and reset" if has_inhibitors and sn.n_resets else (
+                "inhibitor" if has_inhibitors else "reset")
+            notes.append(f"the net has {arcs} arcs, its reachability graph exceeds the limit and the state "
+                         "equation does not bound it: boundedness is undecidable in general and was not decided "
+                         "(Karp-Miller coverability is unsound for such nets and was not run)")
     if witness is not None:
         bounded = False
         sources["bounded"] = "pumping witness (a firing sequence that can repeat for ever)"
@@ -654,6 +670,41 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         conflicts=conflicts, notes=notes, projection=projection, sources=sources, structural=structural,
         exact_bounds=exact, stopped_by=space.stopped_by, stable_marking_partial=stable_known,
     )
+
+
+def _without_reset_results(net: PetriNet, sn: SparseNet, pinv: Invariants, tinv: Invariants, psup: Support,
+                           tsup: Support, notes: list[str],
+                           sources: dict[str, str]) -> tuple[Invariants, Invariants, Support, Support]:
+    """What the structural results of C still say on a net with reset arcs (module docstring): the
+    P-semiflows avoiding reset places, the T-semiflows avoiding transitions with reset arcs, and
+    conservative / consistent left undecided, each with a note."""
+    reset = sn.reset
+    assert reset is not None
+    rplaces = sn.reset_places()
+    rtrans = np.flatnonzero(np.diff(reset.indptr) > 0)
+    names = ", ".join(net.places[int(p)].id for p in rplaces)
+    keep_p = ~pinv.vectors[:, rplaces].any(axis=1) if pinv.vectors.size else np.zeros(0, dtype=bool)
+    keep_t = ~tinv.vectors[:, rtrans].any(axis=1) if tinv.vectors.size else np.zeros(0, dtype=bool)
+    dropped_p = int((~keep_p).sum())
+    dropped_t = int((~keep_t).sum())
+    notes.append(f"the net has reset arcs (emptying {names}): its incidence matrix leaves them out, so the "
+                 "structural results are those of the net without them, read with care: upper bounds from the "
+                 "state equation and the P-semiflows still hold (a reset only removes tokens), but no weighted "
+                 "token count through a reset place is conserved")
+    if dropped_p:
+        notes.append(f"{dropped_p} P-semiflow(s) of the net without reset arcs hold a reset place: they only bound "
+                     "the net (y·M <= y·M0) and are not listed as P-invariants")
+    if dropped_t:
+        notes.append(f"{dropped_t} T-semiflow(s) of the net without reset arcs hold a transition with a reset arc: "
+                     "firing them need not return to the same marking; they are not listed as T-invariants")
+    for key, sup in (("conservative", psup), ("consistent", tsup)):
+        if sup.covered is not None:
+            value = "yes" if sup.all_covered else "no"
+            notes.append(f"{key}: not decided with reset arcs (the net without them: {value})")
+        sources.pop(key, None)
+    pinv = replace(pinv, vectors=pinv.vectors[keep_p] if pinv.vectors.size else pinv.vectors)
+    tinv = replace(tinv, vectors=tinv.vectors[keep_t] if tinv.vectors.size else tinv.vectors)
+    return pinv, tinv, replace(psup, covered=None), replace(tsup, covered=None)
 
 
 def _omega_marking(net: PetriNet, row: np.ndarray) -> dict[str, int]:

@@ -118,6 +118,24 @@ def render(rep: dict[str, Any]) -> str:
         v = rep["robotic"][key]
         lines.append(f"  {title + ':':<19}{_yes(v['holds'])}")
         lines.append(f"    {v['explanation']}")
+    env = rep.get("environment") or {}
+    if env.get("modelled"):
+        places = ", ".join(f"{p} (up to {k})" for p, k in env["control_places"].items())
+        lines.append(f"  environment:       the operator may add tokens to {places} at any time; recovery and "
+                     f"control judged with it ({env['states']:,} markings)")
+    else:
+        lines.append("  environment:       no control places: nothing for the operator to add")
+    retries = (rep.get("retries") or {}).get("retries", [])
+    for r in retries:
+        if r["bounded"] is None:
+            lines.append(f"  retry {r['transition']} (task {r['task']}): bound not decided")
+        elif r["bounded"]:
+            lines.append(f"  retry {r['transition']} (task {r['task']}): bounded (no loop of error branches repeats it)")
+        else:
+            ex = r.get("example")
+            where = f" (e.g. after {' '.join(ex['firing_sequence']) or 'the initial marking'})" if ex else ""
+            lines.append(f"  retry {r['transition']} (task {r['task']}): UNBOUNDED: it can fire for ever while nothing "
+                         f"else happens{where}; bound it with a counter place")
     lines.append("")
     lines.append("properties")
     lines.append(f"  bounded:            {_yes(rep['bounded'])}")

@@ -17,7 +17,13 @@ Rules of this module:
   afterwards the pulse is gone.
 * Among transitions that can fire at the same instant, the highest priority wins; ties are broken
   by a random switch on the weights, drawn from a generator seeded at construction, so a run is
-  reproducible.
+  reproducible. A weight that is a marking expression is evaluated in the current marking (tokens
+  of running instances included) when a switch needs it; it must be finite and > 0 there, or the
+  engine raises :class:`~coordinator.errors.EngineError` naming the transition and the marking.
+* A transition with reset arcs empties their places when it fires, after its input arcs have
+  consumed and before its output arcs produce; the :class:`Firing` it decides records in
+  ``consumed`` every token it removes (input arcs and resets), so the journal replays it as is. A
+  reset arc may not empty a primitive-task place (its tokens are running instances).
 * A token entering a primitive-task place starts one instance: the engine asks its chooser (the
   learner of section 4) which primitive action to run and emits :class:`StartAction`.
 * Operator commands (section 5): insert/remove tokens in control places, pause, step (fire exactly
@@ -40,6 +46,7 @@ from __future__ import annotations
 
 import random
 from collections.abc import Callable, Iterable, Mapping
+from types import MappingProxyType
 
 from coordinator.engine.effects import (
     CancelAction,
@@ -74,7 +81,8 @@ class Engine:
         marking: start from this marking instead of the net's initial marking.
 
     Raises:
-        EngineError: if ``marking`` names an unknown place.
+        EngineError: if ``marking`` names an unknown place, or a reset arc empties a primitive-task
+            place.
     """
 
     def __init__(
@@ -122,6 +130,13 @@ class Engine:
         self._task_outputs = tables.task_outputs
         self._consumed_map = tables.consumed_map
         self._produced_map = tables.produced_map
+        self._resets = tables.resets
+        self._weight_fn = tables.weight_fn
+        for tid, pids in tables.resets.items():
+            for pid in pids:
+                if pid in tables.task_of:
+                    raise EngineError(f"transition {tid!r} has a reset arc from primitive-task place {pid!r}: "
+                                      "a reset cannot take away running primitive actions")
         self._task_inputs = tables.task_inputs
         self._pulse_of = tables.pulse_of
         #: every transition has the same priority and weight: a conflict is a uniform draw
@@ -350,10 +365,22 @@ class Engine:
         if len(best) == 1:
             return best[0]
         best.sort(key=self._order.__getitem__)
-        weights = [self._weight[t] for t in best]
+        weights = [self._weight_now(t) for t in best] if self._weight_fn else [self._weight[t] for t in best]
         if min(weights) == max(weights):
             return best[self._rng.randrange(len(best))]
         return self._rng.choices(best, weights=weights)[0]
+
+    def _weight_now(self, tid: str) -> float:
+        """The weight of ``tid`` in the current marking (its expression's value, if it has one)."""
+        fn = self._weight_fn.get(tid)
+        if fn is None:
+            return self._weight[tid]
+        value = float(fn(self._counts))
+        if not (value > 0 and value != float("inf")):
+            raise EngineError(f"the weight of transition {tid!r} is {value:g} in marking {self.marking.to_dict()}; "
+                              "a weight expression must be finite and > 0 where its transition takes part in a "
+                              "random switch")
+        return value
 
     def _decide(self, tid: str) -> Firing:
         instances: list[str] = []
@@ -364,8 +391,21 @@ class Engine:
                 if task is not None:
                     need = needs.get(task)
                     instances.extend([i.id for i in self._ended[pid] if not need or need <= i.outcomes][:w])
-        return Firing(self._fired + 1, tid, self._consumed_map[tid], self._produced_map[tid],
+        return Firing(self._fired + 1, tid, self._consumed_now(tid), self._produced_map[tid],
                       tuple(instances), self._pulse_of[tid])
+
+    def _consumed_now(self, tid: str) -> Mapping[str, int]:
+        """What firing ``tid`` removes in the current marking: its input arcs, plus what is left in
+        the places of its reset arcs."""
+        consumed = self._consumed_map[tid]
+        if not self._resets[tid]:
+            return consumed
+        removed = dict(consumed)
+        for pid in self._resets[tid]:
+            left = self._counts[pid] - removed.get(pid, 0)
+            if left:
+                removed[pid] = removed.get(pid, 0) + left
+        return MappingProxyType(removed)
 
     def apply(self, firing: Firing) -> list[Effect]:
         """Apply a firing decided by :meth:`next_firing` (or read back from the journal).
@@ -383,6 +423,9 @@ class Engine:
                 raise NotEnabledError(f"unknown transition {tid!r}")
             if not self._can_fire(tid) or (self._ext[tid] is not None and firing.pulse is None):
                 raise NotEnabledError(f"transition {tid!r} cannot fire in {self.marking!r}")
+            if self._resets[tid] and dict(firing.consumed) != dict(self._consumed_now(tid)):
+                raise NotEnabledError(f"firing {tid!r} removes {dict(firing.consumed)}, but its reset arcs would "
+                                      f"remove {dict(self._consumed_now(tid))} in {self.marking!r} (stale decision)")
             for iid in firing.instances:
                 inst = self._instances.get(iid)
                 if inst is None or inst.running:

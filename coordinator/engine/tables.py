@@ -8,10 +8,12 @@ it changes during a run. Pure: no I/O.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import MappingProxyType
+from typing import Any
 
+from coordinator.expr import Scalar, scalar
 from coordinator.net import PetriNet, PlaceKind, parse_event
 
 __all__ = ["EngineTables"]
@@ -43,8 +45,14 @@ class EngineTables:
         touch: tid → indices of the transitions its firing may enable or disable.
         task_outputs: tid → its output arcs into primitive-task places.
         task_inputs: tid → whether an input place is a primitive-task place.
-        consumed_map, produced_map: tid → read-only {pid: weight} of a :class:`Firing`.
-        uniform: every transition has the same priority and weight (a conflict is a uniform draw).
+        consumed_map, produced_map: tid → read-only {pid: weight} of a :class:`Firing` (for a
+            transition with reset arcs, ``consumed_map`` holds its input arcs only: the engine adds
+            what the resets remove when it decides a firing).
+        resets: tid → ids of the places its reset arcs empty (most transitions: ``()``).
+        weight_fn: tid → its weight expression compiled for the engine's counts (a dict place id →
+            tokens), for the transitions whose weight is an expression.
+        uniform: every transition has the same priority and a constant, equal weight (a conflict is
+            a uniform draw).
     """
 
     tids: tuple[str, ...]
@@ -68,6 +76,8 @@ class EngineTables:
     consumed_map: Mapping[str, Mapping[str, int]]
     produced_map: Mapping[str, Mapping[str, int]]
     uniform: bool
+    resets: Mapping[str, tuple[str, ...]]
+    weight_fn: Mapping[str, Callable[[Any], Scalar]]
 
     @classmethod
     def compile(cls, net: PetriNet) -> EngineTables:
@@ -85,6 +95,12 @@ class EngineTables:
                 per_task.setdefault(task, set()).add(outcome)
             needs[t.id] = {k: frozenset(v) for k, v in per_task.items()}
         task_of = {p.id: p.task for p in net.places if p.kind is PlaceKind.PRIMITIVE_TASK and p.task is not None}
+        resets = {t.id: net.reset_places[t.id] for t in transitions}
+        weight_fn: dict[str, Callable[[Any], Scalar]] = {}
+        for t in transitions:
+            tree = t.weight_tree
+            if tree is not None:
+                weight_fn[t.id] = scalar(tree)
         deps: dict[str, set[str]] = {p.id: set() for p in net.places}
         for t in transitions:
             for pid, _ in inputs[t.id] + inhib[t.id]:
@@ -113,11 +129,14 @@ class EngineTables:
             task_place_ids=tuple(p.id for p in net.places if p.kind is PlaceKind.PRIMITIVE_TASK),
             control=frozenset(p.id for p in net.places if p.kind is PlaceKind.CONTROL),
             dependents=dependents,
-            touch={t.id: frozenset(j for pid, _ in inputs[t.id] + outputs[t.id] for j in dependents[pid])
+            touch={t.id: frozenset(j for pid in [p for p, _ in inputs[t.id] + outputs[t.id]] + list(resets[t.id])
+                                   for j in dependents[pid])
                    for t in transitions},
             task_outputs={t.id: tuple((pid, w) for pid, w in outputs[t.id] if pid in task_of) for t in transitions},
             task_inputs={t.id: any(pid in task_of for pid, _ in inputs[t.id]) for t in transitions},
             consumed_map={t.id: MappingProxyType(dict(inputs[t.id])) for t in transitions},
             produced_map={t.id: MappingProxyType(dict(outputs[t.id])) for t in transitions},
-            uniform=len({(t.priority, t.weight) for t in transitions}) <= 1,
+            uniform=len({(t.priority, t.weight) for t in transitions}) <= 1 and not weight_fn,
+            resets=resets,
+            weight_fn=weight_fn,
         )

@@ -36,6 +36,7 @@ from coordinator.errors import JournalError
 from coordinator.learning.validation import (
     check_actions,
     check_cost_source,
+    check_rho,
     check_costs,
     check_rate,
     check_warmup,
@@ -82,6 +83,10 @@ class LearningAutomaton(ABC):
         cost_source: ``"apriori"`` (J uses ``costs``; ρ = 1 / max C(a)) or ``"measured"`` (J uses
             the mean measured cost of each action; ρ = 1 / max over actions of those means).
             Default: ``"apriori"`` when ``costs`` is given, else ``"measured"``.
+        rho: ρ ≥ 0 in 1/cost-unit, the weight of cost against reliability; ``None`` (default) for
+            the paper's typical ρ = 1 / max C(a). The paper asks that ρ keep the cost from
+            overwhelming the reliability: a task whose failures cost much more than its actions'
+            running costs (a failed segment ends a course) declares a smaller ρ.
         seed: seed of the automaton's own ``numpy`` generator (used when ``choose`` gets none).
 
     Raises:
@@ -96,11 +101,13 @@ class LearningAutomaton(ABC):
         *,
         costs: Mapping[str, float] | None = None,
         cost_source: str | None = None,
+        rho: float | None = None,
         seed: int = 0,
     ) -> None:
         self._actions = check_actions(actions)
         self._costs = check_costs(costs, self._actions)
         self._cost_source = check_cost_source(cost_source, self._costs)
+        self._rho = None if rho is None else check_rho(rho)
         self._seed = int(seed)
         self._rng = np.random.default_rng(self._seed)
         n = len(self._actions)
@@ -135,10 +142,13 @@ class LearningAutomaton(ABC):
 
     @property
     def rho(self) -> float:
-        """ρ = 1 / max C(a) (section 3): from the a-priori costs, or from the measured means.
+        """ρ of J = 1 − R + ρC (section 3): as configured, else 1 / max C(a) of the a-priori costs
+        or of the measured means.
 
-        0.0 while no cost is known or every cost is 0.
+        0.0 while no cost is known or every cost is 0 (and no ρ is configured).
         """
+        if self._rho is not None:
+            return self._rho
         if self._cost_source == "apriori":
             assert self._costs is not None
             return rho_for(self._costs.values())
@@ -271,7 +281,7 @@ class LearningAutomaton(ABC):
             "scheme": self.scheme,
             "actions": list(self._actions),
             "costs": None if self._costs is None else dict(self._costs),
-            "config": self._config(),
+            "config": self._config() if self._rho is None else {**self._config(), "rho": self._rho},
             "seed": self._seed,
             "probabilities": list(self._p),
             "trials": list(self._trials),
@@ -333,9 +343,10 @@ class RateAutomaton(LearningAutomaton):
         warmup: int,
         costs: Mapping[str, float] | None = None,
         cost_source: str | None = None,
+        rho: float | None = None,
         seed: int = 0,
     ) -> None:
-        super().__init__(actions, costs=costs, cost_source=cost_source, seed=seed)
+        super().__init__(actions, costs=costs, cost_source=cost_source, rho=rho, seed=seed)
         self._rate = check_rate(rate)
         self._warmup = check_warmup(warmup)
 

@@ -41,6 +41,7 @@ def make_learner(
     * ``cost_source``: ``"apriori"`` or ``"measured"`` (see :class:`LearningAutomaton`).
     * ``estimator``: for ``"pursuit"``, ``"optimistic"`` (default) or ``"mean"``.
     * ``action``: for ``"fixed"``, the action to run (default the first).
+    * ``rho``: ρ ≥ 0 of J = 1 − R + ρC (default 1 / max C(a), paper section 3).
 
     Args:
         config: the keys above.
@@ -63,11 +64,11 @@ def automaton_for(spec: LearnerSpec, seed: int = 0) -> LearningAutomaton:
     """A fresh automaton of a checked configuration, seeded with ``seed``."""
     if spec.scheme == "fixed":
         return FixedChoice(spec.actions, action=spec.action, costs=spec.costs, cost_source=spec.cost_source,
-                           seed=seed)
+                           rho=spec.rho, seed=seed)
     assert spec.rate is not None and spec.warmup is not None
     if spec.scheme == "pursuit":
         assert spec.estimator is not None
         return PursuitAutomaton(spec.actions, rate=spec.rate, warmup=spec.warmup, estimator=spec.estimator,
-                                costs=spec.costs, cost_source=spec.cost_source, seed=seed)
+                                costs=spec.costs, cost_source=spec.cost_source, rho=spec.rho, seed=seed)
     return LinearRewardInaction(spec.actions, rate=spec.rate, warmup=spec.warmup, costs=spec.costs,
-                                cost_source=spec.cost_source, seed=seed)
+                                cost_source=spec.cost_source, rho=spec.rho, seed=seed)

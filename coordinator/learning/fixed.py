@@ -38,9 +38,10 @@ class FixedChoice(LearningAutomaton):
         action: str | None = None,
         costs: Mapping[str, float] | None = None,
         cost_source: str | None = None,
+        rho: float | None = None,
         seed: int = 0,
     ) -> None:
-        super().__init__(actions, costs=costs, cost_source=cost_source, seed=seed)
+        super().__init__(actions, costs=costs, cost_source=cost_source, rho=rho, seed=seed)
         self._index = self._actions.index(check_fixed_action(action, self._actions))
         self._p = [0.0] * len(self._actions)
         self._p[self._index] = 1.0

@@ -56,10 +56,11 @@ class LinearRewardInaction(RateAutomaton):
         warmup: int = DEFAULT_WARMUP["lri"],
         costs: Mapping[str, float] | None = None,
         cost_source: str | None = None,
+        rho: float | None = None,
         seed: int = 0,
     ) -> None:
         super().__init__(actions, rate=rate, warmup=warmup, costs=costs, cost_source=cost_source,
-                         seed=seed)
+                         rho=rho, seed=seed)
 
     def reward(self, i: int, success: bool, cost: float | None) -> float:
         """Reward strength r = 1 − (j − j_lo)/(j_hi − j_lo) ∈ [0, 1] of one result of action ``i``.

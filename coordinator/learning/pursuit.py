@@ -73,10 +73,11 @@ class PursuitAutomaton(RateAutomaton):
         estimator: str = "optimistic",
         costs: Mapping[str, float] | None = None,
         cost_source: str | None = None,
+        rho: float | None = None,
         seed: int = 0,
     ) -> None:
         super().__init__(actions, rate=rate, warmup=warmup, costs=costs, cost_source=cost_source,
-                         seed=seed)
+                         rho=rho, seed=seed)
         self._estimator = check_estimator(estimator)
         self._r_tilde: list[float | None] = [None] * len(self._actions)
 

@@ -31,6 +31,7 @@ __all__ = [
     "check_estimator",
     "check_fixed_action",
     "check_rate",
+    "check_rho",
     "check_warmup",
     "learner_spec",
 ]
@@ -49,7 +50,7 @@ ESTIMATORS: tuple[str, ...] = ("optimistic", "mean")
 
 #: Keys a ``learner`` table may hold (``learner`` and ``learning_rate`` are aliases).
 CONFIG_KEYS: tuple[str, ...] = ("scheme", "learner", "rate", "learning_rate", "warmup", "cost_source",
-                                "action", "estimator")
+                                "action", "estimator", "rho")
 
 
 class LearnerConfigError(NetError, ValueError):
@@ -127,6 +128,17 @@ def check_cost_source(cost_source: str | None, costs: Mapping[str, float] | None
     return cost_source
 
 
+def check_rho(rho: Any) -> float:
+    """The weight ρ ≥ 0 of cost in J = 1 − R + ρC (paper section 3), as a float.
+
+    Raises:
+        LearnerConfigError: not a finite number ≥ 0.
+    """
+    if isinstance(rho, bool) or not isinstance(rho, (int, float)) or not math.isfinite(rho) or rho < 0:
+        raise LearnerConfigError(f"rho must be a finite number >= 0 (1/cost-unit), got {rho!r}")
+    return float(rho)
+
+
 def check_rate(rate: Any) -> float:
     """A learning rate λ ∈ (0, 1] as a float.
 
@@ -190,6 +202,7 @@ class LearnerSpec:
         warmup: warm-up trials per action (``None`` for ``"fixed"``).
         estimator: reliability estimator (``"pursuit"`` only, else ``None``).
         action: the action of a ``"fixed"`` learner, else ``None``.
+        rho: the configured ρ of J, or ``None`` for 1 / max C(a).
     """
 
     scheme: str
@@ -200,6 +213,7 @@ class LearnerSpec:
     warmup: int | None = None
     estimator: str | None = None
     action: str | None = None
+    rho: float | None = None
 
 
 def learner_spec(
@@ -242,6 +256,7 @@ def learner_spec(
         raise LearnerConfigError(f"unknown learner {scheme!r}; choose one of {', '.join(SCHEMES)}")
     rate = config.get("rate", config.get("learning_rate"))
     cost_source = config.get("cost_source")
+    rho = check_rho(config["rho"]) if "rho" in config else None
     if isinstance(seed, bool) or not isinstance(seed, int):
         raise LearnerConfigError(f"seed must be an integer, got {seed!r}")
     if scheme == "fixed":
@@ -251,7 +266,7 @@ def learner_spec(
         checked = check_costs(costs, names)
         check_cost_source(cost_source, checked)
         action = check_fixed_action(config.get("action"), names)
-        return LearnerSpec("fixed", names, checked, cost_source, action=action)
+        return LearnerSpec("fixed", names, checked, cost_source, action=action, rho=rho)
     if "action" in config:
         raise LearnerConfigError(f"'action' applies only to learner 'fixed', not {scheme!r}")
     rate = DEFAULT_RATES[scheme] if rate is None else check_rate(rate)
@@ -261,4 +276,5 @@ def learner_spec(
     checked = check_costs(costs, names)
     check_cost_source(cost_source, checked)
     estimator = check_estimator(config.get("estimator", "optimistic")) if scheme == "pursuit" else None
-    return LearnerSpec(scheme, names, checked, cost_source, rate=rate, warmup=warmup, estimator=estimator)
+    return LearnerSpec(scheme, names, checked, cost_source, rate=rate, warmup=warmup, estimator=estimator,
+                       rho=rho)

@@ -10,7 +10,9 @@ Conventions (after the usual Petri-net drawings and the GSPN ones of Ajmone Mars
   immediate transitions are filled, exponential ones are white and show their rate (1/s);
 * error-recovery branches (``hidden`` transitions, paper section 2) are dashed and grey, or left
   out with ``show_hidden=False`` together with the places that only they touch;
-* inhibitor arcs end in a hollow circle (``arrowhead=odot``); arc weights other than 1 label the arc.
+* inhibitor arcs end in a hollow circle (``arrowhead=odot``); reset arcs are dashed with a double
+  arrowhead (``arrowhead=normalnormal``) and labelled ``reset``; arc weights other than 1 label the arc;
+* a marking-dependent rate or weight is shown as its expression.
 
 Render with ``dot -Tsvg net.dot -o net.svg`` (Graphviz is not a dependency of petrobot).
 """
@@ -56,12 +58,17 @@ def _transition_node(t: Transition) -> str:
     lines = [t.label or t.id, *t.events]
     if t.priority:
         lines.append(f"priority {t.priority}")
-    if t.weight != 1.0:
+    if t.weight_expr is not None:
+        lines.append(f"weight {t.weight_expr}")
+    elif t.weight != 1.0:
         lines.append(f"weight {t.weight:g}")
     attrs = {"shape": "box", "label": "\n".join(lines), "tooltip": f"transition {t.id}"}
     if t.kind is TransitionKind.EXPONENTIAL:
         servers = "inf" if t.servers is None else str(t.servers)
-        attrs["label"] += f"\nrate {t.rate:g}/s" + ("" if t.servers == 1 else f", {servers} servers")
+        if t.rate_expr is not None:
+            attrs["label"] += f"\nrate {t.rate_expr} /s"
+        else:
+            attrs["label"] += f"\nrate {t.rate:g}/s" + ("" if t.servers == 1 else f", {servers} servers")
         attrs["style"] = "solid"
     else:
         attrs["style"] = "filled"
@@ -118,6 +125,10 @@ def to_dot(net: PetriNet, marking: Mapping[str, int] | None = None, show_hidden:
             attrs["label"] = str(arc.weight)
         if arc.inhibitor:
             attrs["arrowhead"] = "odot"
+        if arc.reset:
+            attrs["arrowhead"] = "normalnormal"
+            attrs["style"] = "dashed"
+            attrs["label"] = "reset"
         if tid in hidden_ids:
             attrs["style"] = "dashed"
             attrs["color"] = "gray50"

@@ -3,7 +3,11 @@
 A net file describes an interpreted Petri net of a robotic task (paper section 2): ``[net]``,
 ``[[place]]`` tables, ``[task.<name>]`` tables mapping each primitive task to its alternative
 primitive actions, ``[[transition]]`` tables whose ``inputs``/``outputs``/``inhibitors`` tables
-give the arcs, and optionally ``[[arc]]`` tables (``from``/``to``/``weight``/``inhibitor``).
+give the arcs, and optionally ``[[arc]]`` tables (``from``/``to``/``weight``/``inhibitor``/``reset``).
+A transition's ``rate`` and ``weight`` are numbers or marking expressions (strings in the language of
+:mod:`coordinator.expr`); an expression's problems are reported at the line of its key with their
+column, and one that is negative, zero (a weight) or not finite in the initial marking, where its
+transition is enabled, is reported too.
 
 Every problem is a :class:`~coordinator.errors.NetError` naming the file, the 1-based line
 (:class:`~coordinator.netfile.source_map.SourceMap`) and the problem. A primitive task's
@@ -22,6 +26,8 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from coordinator.errors import NetError, NetFileError
+from coordinator.expr import MAX_LENGTH as MAX_EXPRESSION
+from coordinator.expr import ExprError, Node, check_places, parse
 from coordinator.learning.validation import learner_spec
 from coordinator.net import (
     ActionSpec,
@@ -98,6 +104,10 @@ class _Loader:
         self.problems: list[NetError] = []
         self.declared: dict[str, set[str]] = {"place": set(), "transition": set()}
         self.seen: dict[str, set[str]] = {"place": set(), "transition": set()}
+        # (transition index, key, tree, text) of every rate or weight expression, checked against
+        # the places once they are all known
+        self.expressions: list[tuple[int, str, Node, str]] = []
+        self.transition_rows: dict[str, int] = {}
 
     # ---------------------------------------------------------------- reporting
     def report(self, problem: str, line: int | None) -> None:
@@ -117,16 +127,17 @@ class _Loader:
 
     def get(self, table: Mapping[str, Any], key: str, kind: str, what: str, section: str, ident: Any,
             default: Any = None) -> Any:
-        """Fetch ``table[key]`` checking its type; ``kind`` is str|int|num|bool|table|array."""
+        """Fetch ``table[key]`` checking its type; ``kind`` is str|int|num|bool|table|array|numexpr."""
         if key not in table:
             return default
         value = table[key]
         ok = {"str": isinstance(value, str), "int": _is_int(value), "num": _is_num(value),
               "bool": isinstance(value, bool), "table": isinstance(value, dict),
-              "array": isinstance(value, list)}[kind]
+              "array": isinstance(value, list), "numexpr": _is_num(value) or isinstance(value, str)}[kind]
         if not ok:
             wanted = {"str": "a string", "int": "an integer", "num": "a number", "bool": "true or false",
-                      "table": "a table", "array": "an array"}[kind]
+                      "table": "a table", "array": "an array",
+                      "numexpr": "a number or a marking expression (a string)"}[kind]
             raise self.fail(f"{key} of {what} must be {wanted}, not {_type_name(value)} ({_brief(value)})",
                             self.smap.key(section, ident, key))
         return value
@@ -143,6 +154,36 @@ class _Loader:
         if value is not None:
             self.check(finite_problem(value, f"{key} of {what}"), self.smap.key(section, ident, key))
         return value
+
+    def number_or_expression(self, table: Mapping[str, Any], key: str, what: str, index: int,
+                             default: float | None) -> tuple[float | None, str | None]:
+        """Fetch a transition's ``rate`` or ``weight``: ``(number, None)`` or ``(None, expression)``;
+        the expression is parsed and type-checked here (its places are checked later)."""
+        value = self.get(table, key, "numexpr", what, "transition", index, default)
+        line = self.smap.key("transition", index, key)
+        if not isinstance(value, str):
+            if value is not None:
+                self.check(finite_problem(value, f"{key} of {what}"), line)
+            return value, None
+        self.check(text_problem(value, f"{key} expression of {what}", MAX_EXPRESSION), line)
+        try:
+            tree = parse(value, kind="num")
+        except ExprError as exc:
+            raise self.fail(f"{key} of {what}: {exc.message} (column {exc.column} of {_brief(value)})",
+                            line) from None
+        self.expressions.append((index, key, tree, value))
+        return None, value
+
+    def check_expressions(self, places: Mapping[str, Place]) -> None:
+        """Report the rate and weight expressions that name places the net does not have."""
+        known = set(places) | self.declared["place"]
+        for index, key, tree, text in self.expressions:
+            try:
+                check_places(tree, text, known)
+            except ExprError as exc:
+                tid = self.doc["transition"][index].get("id")
+                self.report(f"{key} of transition {tid!r}: {exc.message} (column {exc.column} of {_brief(text)})",
+                            self.smap.key("transition", index, key))
 
     def text(self, table: Mapping[str, Any], key: str, what: str, section: str, ident: Any,
              default: str, limit: int, lines: bool = False) -> str:
@@ -191,6 +232,7 @@ class _Loader:
                             self.smap.ids.get(("transition", tid)))
         arcs = self.load_arcs(places, transitions)
         self.check_places(places, tasks)
+        self.check_expressions(places)
         if home is not None:
             for pid in home:
                 if pid not in places and pid not in self.declared["place"]:
@@ -205,6 +247,8 @@ class _Loader:
         except NetError as exc:
             self.report(exc.problem, None)
             return None
+        for tid, key, problem in net.expression_problems():
+            self.report(problem, self.smap.key("transition", self.transition_rows[tid], key))
         if interpreted:
             for ident, problem in net.interpretation_problems():
                 self.report(problem, self.smap.of_id(ident))
@@ -409,8 +453,8 @@ class _Loader:
                                 f"{what} links {_brief(event)}: {problem}", self.smap.key(sec, index, "events"))
         priority = self.get(table, "priority", "int", what, sec, index, 0)
         self.check(priority_problem(priority, f"priority of {what}"), self.smap.key(sec, index, "priority"))
-        weight = self.real(table, "weight", what, sec, index, 1.0)
-        if not weight > 0:
+        weight, weight_expr = self.number_or_expression(table, "weight", what, index, 1.0)
+        if weight is not None and not weight > 0:
             raise self.fail(f"{what} has weight {weight}; weights must be > 0", self.smap.key(sec, index, "weight"))
         kind_text = self.get(table, "kind", "str", what, sec, index, "immediate")
         try:
@@ -418,12 +462,16 @@ class _Loader:
         except ValueError:
             raise self.fail(f"{what} has unknown kind {kind_text!r} (use immediate or exponential)",
                             self.smap.key(sec, index, "kind")) from None
-        rate = self.real(table, "rate", what, sec, index)
-        if rate is not None and kind is TransitionKind.IMMEDIATE:
+        if "rate" in table and kind is TransitionKind.IMMEDIATE:
             raise self.fail(f"immediate {what} cannot have a rate (add kind = \"exponential\")",
                             self.smap.key(sec, index, "rate"))
+        rate, rate_expr = self.number_or_expression(table, "rate", what, index, None)
         if rate is not None and not rate > 0:
             raise self.fail(f"rate of {what} is {rate}; it must be > 0 (1/s)", self.smap.key(sec, index, "rate"))
+        if rate_expr is not None and table.get("servers", 1) != 1:
+            raise self.fail(f"{what} has a rate expression and servers = {_brief(table.get('servers'))}: a "
+                            "marking-dependent rate is the whole rate (no server multiplier); write the servers "
+                            "into the expression, e.g. \"min(#queue, 3) * 2\"", self.smap.key(sec, index, "servers"))
         servers_value = table.get("servers", 1)
         if servers_value == "infinite":
             servers: int | None = None
@@ -438,9 +486,11 @@ class _Loader:
         for key in ("inputs", "outputs", "inhibitors"):
             arcs = self.get(table, key, "table", what, sec, index, {})
             self.transition_arcs.append((index, tid, key, arcs))
+        self.transition_rows[tid] = index
         return self.build(self.smap.element(sec, index), lambda: Transition(
-            id=tid, events=tuple(events), priority=priority, weight=float(weight), kind=kind,
-            rate=None if rate is None else float(rate), servers=servers, hidden=hidden, label=label))
+            id=tid, events=tuple(events), priority=priority, weight=1.0 if weight is None else float(weight),
+            kind=kind, rate=None if rate is None else float(rate), servers=servers, hidden=hidden, label=label,
+            rate_expr=rate_expr, weight_expr=weight_expr))
 
     # ---------------------------------------------------------------- arcs
     def arc_weight(self, weight: Any, what: str, line: int | None) -> int:
@@ -451,17 +501,20 @@ class _Loader:
 
     def load_arcs(self, places: Mapping[str, Place], transitions: Mapping[str, Transition]) -> list[Arc]:
         arcs: list[Arc] = []
-        seen: dict[tuple[str, str, bool], int | None] = {}
+        seen: dict[tuple[str, str, str], int | None] = {}
 
-        def add(source: str, target: str, weight: int, inhibitor: bool, line: int | None) -> None:
-            key = (source, target, inhibitor)
+        def add(source: str, target: str, weight: int, inhibitor: bool, line: int | None,
+                reset: bool = False) -> None:
+            arc = Arc(source=source, target=target, weight=weight, inhibitor=inhibitor, reset=reset)
+            key = (source, target, arc.kind)
             if key in seen:
-                kind = "inhibitor arc" if inhibitor else "arc"
+                kind = "arc" if arc.kind == "normal" else f"{arc.kind} arc"
                 first = f" (first at line {seen[key]})" if seen[key] else ""
-                self.report(f"{kind} {source} -> {target} is given twice{first}; use one arc with a weight", line)
+                advice = "; use one arc with a weight" if not reset else ""
+                self.report(f"{kind} {source} -> {target} is given twice{first}{advice}", line)
                 return
             seen[key] = line
-            arcs.append(Arc(source=source, target=target, weight=weight, inhibitor=inhibitor))
+            arcs.append(arc)
 
         for index, tid, key, table in self.transition_arcs:
             line = self.smap.key("transition", index, key)
@@ -519,7 +572,18 @@ class _Loader:
         if inhibitor and source not in places:
             raise self.fail(f"inhibitor arc {source} -> {target} must go from a place to a transition",
                             self.smap.key("arc", index, "inhibitor"))
-        add(source, target, weight, inhibitor, line)
+        reset = self.get(table, "reset", "bool", "an [[arc]]", "arc", index, False)
+        if reset:
+            reset_line = self.smap.key("arc", index, "reset")
+            if source not in places:
+                raise self.fail(f"reset arc {source} -> {target} must go from a place to a transition", reset_line)
+            if inhibitor:
+                raise self.fail(f"arc {source} -> {target} cannot be both a reset and an inhibitor arc; give two "
+                                "[[arc]] tables", reset_line)
+            if "weight" in table:
+                raise self.fail(f"reset arc {source} -> {target} takes no weight: it empties its place whatever "
+                                "it holds", self.smap.key("arc", index, "weight"))
+        add(source, target, weight, inhibitor, line, reset)
 
 
 def _default_name(path: str) -> str:

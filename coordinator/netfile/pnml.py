@@ -4,12 +4,13 @@ Reads the 2009 grammar (``<pnml><net type=".../ptnet"><page><place>...``, labels
 ``<text>``), the older dialect that writes ``<value>`` instead of ``<text>`` and puts nodes straight
 under ``<net>`` without a ``<page>`` (PIPE-style ``"Default,3"`` markings included), nested or
 multiple pages (flattened; reference places and transitions resolved to the nodes they stand for),
-and ``<type value="inhibitor"/>`` on arcs. Ids of places and transitions are kept. Duplicate arcs
+and ``<type value="inhibitor"/>`` or ``<type value="reset"/>`` on arcs. Ids of places and transitions are kept. Duplicate arcs
 between the same place and transition are merged by adding their weights.
 
 The interpretation that plain PNML cannot express (place kinds, primitive tasks and their actions,
-events, priorities, weights, GSPN timing, hidden branches, inhibitor arcs, labels, the home marking)
-travels in ``<toolspecific tool="petrobot" version="1">`` elements, so that a net written by
+events, priorities, weights, GSPN timing, hidden branches, inhibitor and reset arcs, labels, the home
+marking) travels in ``<toolspecific tool="petrobot" version="1">`` elements (a marking-dependent rate
+or weight in its ``rate_expr`` or ``weight_expr`` attribute; docs/netfile.md, section 7), so that a net written by
 :func:`dump_pnml` reads back equal (``loads_pnml(dump_pnml(n)) == n``). A model without them -
 any Model Checking Contest model - loads as a net of plain places and immediate transitions.
 
@@ -19,7 +20,7 @@ Every problem raises :class:`~coordinator.errors.NetError` (syntax errors and no
 Reference: ISO/IEC 15909-2:2011, *Petri net Markup Language*; Hillah, Kordon, Petrucci, Trèves,
 "PNML Framework", 2010.
 
-Length: about 640 lines because reading and writing share one table of petrobot's tool-specific
+Length: about 680 lines because reading and writing share one table of petrobot's tool-specific
 elements and are tested as a round trip; splitting them would split that table.
 """
 
@@ -36,6 +37,8 @@ from xml.etree import ElementTree as ET
 from xml.sax.saxutils import escape, quoteattr
 
 from coordinator.errors import NetError, NetFileError
+from coordinator.expr import MAX_LENGTH as MAX_EXPRESSION
+from coordinator.expr import ExprError, check_places, parse
 from coordinator.net import (
     ActionSpec,
     Arc,
@@ -172,6 +175,7 @@ class _Reader:
         self.lines = lines
         self.path = path
         self.elements: dict[str, ET.Element] = {}  # places, transitions and tasks by id or name
+        self.place_ids: set[str] = set()
 
     def error(self, problem: str, elem: ET.Element | None) -> NetError:
         return NetError(problem, path=self.path, line=self.lines.get(elem) if elem is not None else None)
@@ -204,14 +208,15 @@ class _Reader:
             raise self.error(f"{what} is {value}; the limit is {maximum}", elem)
         return value
 
-    def number(self, text: str | None, what: str, elem: ET.Element) -> float | None:
-        """Parse an optional finite float attribute."""
+    def number(self, text: str | None, what: str, elem: ET.Element, expression_key: str | None = None) -> float | None:
+        """Parse an optional finite float attribute (``expression_key``: where an expression goes instead)."""
         if text is None:
             return None
         try:
             value = float(text)
         except ValueError:
-            raise self.error(f"{what} {_brief(text)} is not a number", elem) from None
+            hint = f" (a marking expression goes in the {expression_key} attribute)" if expression_key else ""
+            raise self.error(f"{what} {_brief(text)} is not a number{hint}", elem) from None
         problem = finite_problem(value, what)
         if problem is not None:
             raise self.error(problem, elem)
@@ -271,6 +276,7 @@ class _Reader:
         refs: dict[str, tuple[str, ET.Element]] = {}
         self.collect(net, places, transitions, arcs, refs)
         self.elements = {**places, **transitions}
+        self.place_ids = set(places)
 
         tool = self.tool(net)
         tasks = self.read_tasks(tool) if tool is not None else {}
@@ -296,10 +302,13 @@ class _Reader:
                         raise self.error(f"home marking puts tokens in unknown place {_brief(place)}", tok)
                     counts[place] = self.integer(tok.get("count"), "home token count", tok, 0)
                 home = self.guarded(home_elem, lambda: Marking(counts))
-        return self.guarded(net, lambda: PetriNet(
+        result = self.guarded(net, lambda: PetriNet(
             name=name, places=tuple(place_objs), transitions=tuple(trans_objs), arcs=tuple(arc_objs),
             initial_marking=Marking(marking), tasks=tasks, description=description, home_marking=home,
         ))
+        for tid, _, problem in result.expression_problems():
+            raise self.error(problem, self.elements.get(tid))
+        return result
 
     def collect(self, container: ET.Element, places: dict[str, ET.Element],
                 transitions: dict[str, ET.Element], arcs: list[ET.Element],
@@ -384,8 +393,10 @@ class _Reader:
         servers_text = tool.get("servers", "1")
         servers = None if servers_text == "infinite" else self.integer(
             servers_text, f"servers of transition {tid!r}", tool, 1)
-        rate = self.number(tool.get("rate"), f"rate of transition {tid!r}", tool)
-        weight = self.number(tool.get("weight", "1.0"), f"weight of transition {tid!r}", tool)
+        rate = self.number(tool.get("rate"), f"rate of transition {tid!r}", tool, "rate_expr")
+        weight = self.number(tool.get("weight", "1.0"), f"weight of transition {tid!r}", tool, "weight_expr")
+        rate_expr = self.expression(tool.get("rate_expr"), "rate", tid, tool)
+        weight_expr = self.expression(tool.get("weight_expr"), "weight", tid, tool)
         hidden = tool.get("hidden", "false")
         if hidden not in ("true", "false"):
             raise self.error(f"transition {tid!r}: hidden must be 'true' or 'false', not {_brief(hidden)}", tool)
@@ -395,7 +406,20 @@ class _Reader:
         return self.guarded(elem, lambda: Transition(
             id=tid, events=tuple(events), priority=priority, weight=1.0 if weight is None else weight,
             kind=kind, rate=rate, servers=servers, hidden=hidden == "true", label=label,
+            rate_expr=rate_expr, weight_expr=weight_expr,
         ))
+
+    def expression(self, text: str | None, what: str, tid: str, elem: ET.Element) -> str | None:
+        """Check a ``rate_expr`` or ``weight_expr`` attribute: limits, syntax, type, place ids."""
+        if text is None:
+            return None
+        self.text(text, f"{what} expression of transition {tid!r}", elem, MAX_EXPRESSION)
+        try:
+            check_places(parse(text, kind="num"), text, self.place_ids)
+        except ExprError as exc:
+            raise self.error(f"{what} of transition {tid!r}: {exc.message} (column {exc.column} of "
+                             f"{_brief(text)})", elem) from None
+        return text
 
     def read_arcs(self, arcs: list[ET.Element], refs: dict[str, tuple[str, ET.Element]],
                   places: dict[str, ET.Element], transitions: dict[str, ET.Element]) -> list[Arc]:
@@ -408,8 +432,8 @@ class _Reader:
                 raise self.error(f"arc {_brief(elem.get('id'))} refers to unknown node {_brief(node)}", elem)
             return node
 
-        merged: dict[tuple[str, str, bool], int] = {}
-        first_elem: dict[tuple[str, str, bool], ET.Element] = {}
+        merged: dict[tuple[str, str, str], int] = {}
+        first_elem: dict[tuple[str, str, str], ET.Element] = {}
         for elem in arcs:
             source = resolve(elem.get("source") or "", elem)
             target = resolve(elem.get("target") or "", elem)
@@ -421,16 +445,24 @@ class _Reader:
             weight = 1 if not text else self.integer(text, f"weight of arc {elem.get('id')!r}", elem, 1)
             tool = self.tool(elem)
             type_elem = elem.find("type")
-            inhibitor = (tool is not None and tool.get("inhibitor") == "true") or (
-                type_elem is not None and (type_elem.get("value") or _label_text(type_elem)) == "inhibitor")
-            key = (source, target, inhibitor)
-            merged[key] = merged.get(key, 0) + weight
+            arc_type = None if type_elem is None else (type_elem.get("value") or _label_text(type_elem))
+            inhibitor = (tool is not None and tool.get("inhibitor") == "true") or arc_type == "inhibitor"
+            reset = (tool is not None and tool.get("reset") == "true") or arc_type == "reset"
+            if inhibitor and reset:
+                raise self.error(f"arc {elem.get('id')!r} cannot be both a reset and an inhibitor arc", elem)
+            if reset and weight != 1:
+                raise self.error(f"reset arc {elem.get('id')!r} has weight {weight}; a reset arc empties its place "
+                                 "whatever it holds, so it takes no weight", elem)
+            if reset and source not in places:
+                raise self.error(f"reset arc {elem.get('id')!r} must go from a place to a transition", elem)
+            key = (source, target, "inhibitor" if inhibitor else "reset" if reset else "normal")
+            merged[key] = 1 if reset else merged.get(key, 0) + weight
             if merged[key] > MAX_COUNT:
                 raise self.error(f"arcs {source} -> {target} add up to weight {merged[key]}; the limit is "
                                  f"{MAX_COUNT}", elem)
             first_elem.setdefault(key, elem)
         return [self.guarded(first_elem[key], partial(Arc, source=key[0], target=key[1], weight=w,
-                                                      inhibitor=key[2]))
+                                                      inhibitor=key[2] == "inhibitor", reset=key[2] == "reset"))
                 for key, w in merged.items()]
 
     # ---------------------------------------------------------------- tasks
@@ -603,7 +635,8 @@ def dump_pnml(net: PetriNet) -> str:
         out.append(f"        <name><text>{escape(t.label or t.id)}</text></name>")
         head = f'        <toolspecific tool="{TOOL}" version="{TOOL_VERSION}"' + _attrs({
             "kind": t.kind.value, "priority": str(t.priority), "weight": _num(t.weight),
-            "rate": None if t.rate is None else _num(t.rate),
+            "rate": None if t.rate is None else _num(t.rate), "rate_expr": t.rate_expr,
+            "weight_expr": t.weight_expr,
             "servers": "infinite" if t.servers is None else str(t.servers),
             "hidden": "true" if t.hidden else "false", "label": t.label or None,
         })
@@ -624,6 +657,8 @@ def dump_pnml(net: PetriNet) -> str:
             out.append(f"        <inscription><text>{arc.weight}</text></inscription>")
         if arc.inhibitor:
             out.append(f'        <toolspecific tool="{TOOL}" version="{TOOL_VERSION}" inhibitor="true"/>')
+        if arc.reset:
+            out.append(f'        <toolspecific tool="{TOOL}" version="{TOOL_VERSION}" reset="true"/>')
         out.append("      </arc>")
     out += ["    </page>", "  </net>", "</pnml>", ""]
     return "\n".join(out)

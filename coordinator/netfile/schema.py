@@ -34,4 +34,4 @@ ACTION_KEYS = ("name", "params", "cost")
 TRANSITION_KEYS = ("id", "label", "events", "priority", "weight", "kind", "rate", "servers", "hidden",
                    "inputs", "outputs", "inhibitors")
 #: Keys of an ``[[arc]]``.
-ARC_KEYS = ("from", "to", "weight", "inhibitor")
+ARC_KEYS = ("from", "to", "weight", "inhibitor", "reset")

@@ -98,7 +98,9 @@ def dump_net(net: PetriNet) -> str:
 
     Sections in the order ``[net]``, ``[[place]]`` (net order), ``[task.*]`` (definition order),
     ``[[transition]]`` (net order) with their arcs as ``inputs``/``outputs``/``inhibitors`` tables
-    (keys in place order); keys equal to their default are left out. ``loads_net(dump_net(n)) == n``.
+    (keys in place order), then one ``[[arc]]`` table per reset arc (transition order, then place
+    order); keys equal to their default are left out; a rate or weight expression is written as a
+    string. ``loads_net(dump_net(n)) == n``.
 
     Raises:
         NetError: if a parameter value cannot be written in TOML.
@@ -152,11 +154,15 @@ def dump_net(net: PetriNet) -> str:
             out.append(f"events = {format_value(list(t.events))}")
         if t.priority:
             out.append(f"priority = {t.priority}")
-        if t.weight != 1.0:
+        if t.weight_expr is not None:
+            out.append(f"weight = {format_value(t.weight_expr)}")
+        elif t.weight != 1.0:
             out.append(f"weight = {format_value(float(t.weight))}")
         if t.kind is not TransitionKind.IMMEDIATE:
             out.append(f"kind = {format_value(t.kind.value)}")
-        if t.rate is not None:
+        if t.rate_expr is not None:
+            out.append(f"rate = {format_value(t.rate_expr)}")
+        elif t.rate is not None:
             out.append(f"rate = {format_value(float(t.rate))}")
         if t.servers != 1:
             out.append("servers = " + ('"infinite"' if t.servers is None else str(t.servers)))
@@ -165,6 +171,9 @@ def dump_net(net: PetriNet) -> str:
         for key, table in (("inputs", inputs), ("outputs", outputs), ("inhibitors", inhibitors)):
             if table[t.id] or key != "inhibitors":
                 out.append(f"{key} = {_inline(_place_order(net, table[t.id]))}")
+    for t in net.transitions:
+        for pid in sorted(net.reset_places[t.id], key=net.place_index.__getitem__):
+            out += ["", "[[arc]]", f"from = {format_value(pid)}", f"to = {format_value(t.id)}", "reset = true"]
     return "\n".join(out) + "\n"
 
 

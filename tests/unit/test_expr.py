@@ -104,3 +104,33 @@ def test_the_parser_never_evaluates_python() -> None:
 
 def test_places_read_are_listed_once_in_order() -> None:
     assert compile_expr("#p2 + #p1 * #p2 > #p3", PLACES).places == ("p2", "p1", "p3")
+
+
+@pytest.mark.parametrize("text", CASES)
+def test_the_one_marking_evaluator_of_the_engine_agrees_with_the_vectorised_one(text: str) -> None:
+    from coordinator.expr import evaluate
+
+    rng = np.random.default_rng(11)
+    rows = rng.integers(0, 4, size=(100, len(PLACES)))
+    got = compile_expr(text, PLACES)(rows)
+    tree = parse(text)
+    for i, r in enumerate(rows.tolist()):
+        value = evaluate(tree, {p: c for p, c in zip(PLACES, r) if c})  # missing places hold 0
+        assert value == got[i] or (value != value and got[i] != got[i]), (text, r)
+
+
+def test_the_net_model_and_the_analyses_share_one_parser() -> None:
+    import coordinator.analysis.expr as vectorised
+    import coordinator.expr as language
+
+    assert vectorised.parse is language.parse and vectorised.ExprError is language.ExprError
+
+
+@pytest.mark.parametrize("text, words", [
+    ("1" + " + 1" * 300, "nested more than"),
+    ("(" * 60 + "1" + ")" * 60, "nested more than"),
+    ("1" * 5000, "characters long"),
+])
+def test_hostile_expressions_are_refused_by_the_limits(text: str, words: str) -> None:
+    with pytest.raises(ExprError, match=words):
+        parse(text)

@@ -146,6 +146,52 @@ def test_measured_costs_set_rho_from_the_largest_mean_cost() -> None:
     assert auto.estimates["a"].j == pytest.approx(0.0 + 0.2 / 0.8)
 
 
+def test_a_declared_rho_weighs_cost_in_j_and_survives_a_state_round_trip() -> None:
+    costs = {"a": 0.29, "b": 0.18}
+    auto = make_learner({"scheme": "pursuit", "rho": 0.5}, ["a", "b"], costs, seed=3)
+    assert auto.rho == 0.5  # not 1 / 0.29
+    auto.update("a", "success")
+    auto.update("b", "failure")
+    assert auto.estimates["a"].j == pytest.approx(0.0 + 0.5 * 0.29)
+    assert auto.estimates["b"].j == pytest.approx(1.0 + 0.5 * 0.18)
+    again = automaton_from_state(state_from_json(state_to_json(auto.state_dict())))
+    assert again.rho == 0.5
+    assert make_learner({"scheme": "pursuit"}, ["a", "b"], costs).rho == pytest.approx(1 / 0.29)
+
+
+def test_perf_uses_the_rho_a_task_declares() -> None:
+    from coordinator.performance import action_performance
+
+    net = loads_net("""
+[[place]]
+id = "p"
+tokens = 1
+[[place]]
+id = "run"
+kind = "primitive_task"
+task = "t"
+[[transition]]
+id = "go"
+inputs = { p = 1 }
+outputs = { run = 1 }
+[[transition]]
+id = "back"
+inputs = { run = 1 }
+outputs = { p = 1 }
+events = ["int:t.ok"]
+[[transition]]
+id = "recover"
+inputs = { run = 1 }
+outputs = { p = 1 }
+events = ["int:t.error"]
+[task.t]
+actions = [{ name = "a", cost = 2.0 }, { name = "b", cost = 4.0 }]
+learner = { scheme = "pursuit", rho = 0.1 }
+""")
+    perf = action_performance(net, [])
+    assert perf["t"]["a"].rho == pytest.approx(0.1)
+
+
 # -- persistence and reproducibility --------------------------------------------------------------
 
 
@@ -272,6 +318,8 @@ def test_fixed_choice_always_runs_the_named_action() -> None:
     ({}, {"a": 1.0, "b": 1.0, "zz": 2.0}, "unknown primitive actions: zz"),
     ({}, {"a": -1.0, "b": 1.0}, ">= 0"),
     ({"cost_source": "apriori"}, None, "needs costs"),
+    ({"rho": -0.5}, None, "rho must be a finite number >= 0"),
+    ({"rho": True}, None, "rho must be"),
 ])
 def test_invalid_learner_configuration_gets_a_clear_error(config: dict[str, Any], costs: dict[str, float] | None,
                                                           words: str) -> None:

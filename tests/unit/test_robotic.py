@@ -279,7 +279,9 @@ def test_finite_experiment_recovers_when_its_resources_come_back_whatever_the_co
     rec = rep["robotic"]["error_recoverable"]
     assert rec["holds"] is True and "not counting runs_remaining, found, aborted" in rec["explanation"]
     ctl = rep["robotic"]["controllable"]
-    assert ctl["holds"] is True and ctl["witness"]["finished_task_restarted"] is True
+    # the operator (the environment) gives the finished experiment new runs: no restart is needed
+    assert ctl["holds"] is True and ctl["witness"]["finished_task_restarted"] is False
+    assert rep["environment"]["control_places"] == {"runs_remaining": 2}
 
 
 def test_task_that_counts_its_runs_for_ever_is_unstable_but_recoverable_and_controllable() -> None:

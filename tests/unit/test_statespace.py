@@ -184,8 +184,9 @@ MCC_MODELS = sorted(p.name for p in MCC.iterdir() if (p / "model.pnml").exists()
 
 def reference_space(net: PetriNet, max_states: int = 10**9, priority: np.ndarray | None = None) -> dict[str, object]:
     """Breadth-first search over tuples and a dict with explore's numbering, edge order, parent
-    edges and truncation (the level in progress is finished, edges to new markings dropped)."""
+    edges and truncation; a reset place ends a firing with ``Post[p, t]`` tokens (the level in progress is finished, edges to new markings dropped)."""
     pre, inh, inc = net.pre.T.tolist(), net.inhibitor.T.tolist(), net.incidence.T.tolist()
+    post, rst = net.post.T.tolist(), net.reset.T.tolist()
     states = [tuple(net.initial_vector.tolist())]
     seen = {states[0]: 0}
     src: list[int] = []
@@ -204,7 +205,7 @@ def reference_space(net: PetriNet, max_states: int = 10**9, priority: np.ndarray
                 top = max(int(priority[t]) for t in enabled)
                 enabled = [t for t in enabled if int(priority[t]) == top]
             for t in enabled:
-                succ = tuple(a + d for a, d in zip(m, inc[t]))
+                succ = tuple(post[t][p] if rst[t][p] else a + d for p, (a, d) in enumerate(zip(m, inc[t])))
                 j = seen.get(succ)
                 if j is None:
                     if len(states) == max_states:
