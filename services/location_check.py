@@ -18,6 +18,7 @@ import inspect
 import ipaddress
 import os
 import socket
+from collections.abc import Collection
 from typing import Any
 
 from services.errors import LocationError
@@ -95,12 +96,18 @@ def host_problem(host: str, port: int) -> str | None:
     return None
 
 
-def check_location(location: Location, lines: TomlLines) -> list[LocationError]:
+def check_location(location: Location, lines: TomlLines,
+                   actions: Collection[str] | None = None) -> list[LocationError]:
     """Check that every impl of ``location`` imports and is of the right kind, and every host resolves.
+
+    With ``actions``, only the impls of those actions and of the drivers on the nodes that host them
+    are imported (``petrobot check NET`` checks what the net needs, without importing the device
+    stacks of every other testbed); hosts are all checked.
 
     Args:
         location: a parsed location file.
         lines: the lines of its text (:meth:`TomlLines.scan`), for the messages.
+        actions: names of the actions to check, or ``None`` for all of them.
 
     Returns:
         Every problem, sorted by line, each a :class:`LocationError` reading ``FILE:LINE: problem``.
@@ -115,16 +122,20 @@ def check_location(location: Location, lines: TomlLines) -> list[LocationError]:
 
     for name, node in location.nodes.items():
         report(host_problem(node.host, node.port), f"[nodes.{name}]", "nodes", name, "host")
+    wanted = set(location.actions) if actions is None else set(actions) & set(location.actions)
+    nodes = {location.actions[name].node for name in wanted}
     for name, action in location.actions.items():
-        if name not in MEMORY_ACTIONS:
+        if name not in MEMORY_ACTIONS and name in wanted:
             report(action_impl_problem(action.impl), f"[actions.{name}]", "actions", name, "impl")
     for name, driver in location.drivers.items():
-        report(driver_impl_problem(driver.impl), f"[drivers.{name}]", "drivers", name, "impl")
+        if actions is None or driver.node in nodes:
+            report(driver_impl_problem(driver.impl), f"[drivers.{name}]", "drivers", name, "impl")
     return [LocationError(message) for _, message in sorted(found, key=lambda item: item[0])]
 
 
-def check_location_file(path: str | os.PathLike[str]) -> tuple[Location | None, list[LocationError]]:
-    """Load a location file and run :func:`check_location` on it.
+def check_location_file(path: str | os.PathLike[str],
+                        actions: Collection[str] | None = None) -> tuple[Location | None, list[LocationError]]:
+    """Load a location file and run :func:`check_location` on it (for ``actions``, or all).
 
     Returns:
         ``(location, problems)``: ``(None, [the parse error])`` when the file does not load, else
@@ -137,4 +148,4 @@ def check_location_file(path: str | os.PathLike[str]) -> tuple[Location | None, 
         return None, [exc]
     except TextProblem as exc:  # the file changed between the two reads
         return None, [LocationError(f"{os.fspath(path)}: {exc.problem}")]
-    return location, check_location(location, lines)
+    return location, check_location(location, lines, actions)

@@ -37,8 +37,9 @@ def add_parser(subparsers: Any) -> None:
             "(arcs join a place and a transition, known ids, integer weights >= 1), the interpreted-net "
             "rules (every primitive-task place has a normal and an error exit, well-formed int:/ext: "
             "events); and the location file: its keys, names and addresses, that every host resolves, "
-            "that every action's impl imports and names a PrimitiveAction or an async function and "
-            "every driver's impl a Driver subclass, and that every primitive action of the net is "
+            "that the impl of every action the net uses (every action with --services-only) imports "
+            "and names a PrimitiveAction or an async function and the drivers of their nodes a Driver "
+            "subclass, and that every primitive action of the net is "
             "placed on a node and every external event has a publisher. The impl modules are imported "
             "into this process (as a node would import them): check only location files you trust. "
             "Prints OK with a summary, or each problem as FILE:LINE: PROBLEM and exits with status 2."),
@@ -98,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
         services = DEFAULT_SERVICES
     placed = "; placement not checked (no services.toml)"
     if services is not None:
-        location, errors = check_location_file(services)
+        needed = None if net is None else {a.name for task in net.tasks.values() for a in task.actions}
+        location, errors = check_location_file(services, needed)
         problems += [str(e) for e in errors]
         placed = ""
         if location is not None and net is not None:

@@ -413,6 +413,17 @@ def test_check_finds_missing_modules_non_callable_impls_bad_drivers_and_unresolv
     assert "is a function, neither" in text and "is a class that is not a Driver" in text
 
 
+def test_check_of_a_net_imports_only_the_impls_the_net_uses(monkeypatch: pytest.MonkeyPatch) -> None:
+    _no_dns(monkeypatch)
+    path = HOSTILE / "services_broken_impls.toml"
+    location, problems = check_location_file(path, {"missing_attr"})
+    assert location is not None
+    found = [str(p).split(": ", 2)[1] for p in problems]
+    assert found == ["[nodes.beta]", "[actions.missing_attr]", "[drivers.not_a_driver]"]  # its node: alpha
+    _, none_used = check_location_file(path, set())
+    assert [str(p).split(": ", 2)[1] for p in none_used] == ["[nodes.beta]"]
+
+
 def test_check_accepts_the_project_location_files(monkeypatch: pytest.MonkeyPatch) -> None:
     _no_dns(monkeypatch)
     for path in (ROOT / "services.toml", SERVICES):
