@@ -11,9 +11,10 @@ Paper section 6 ("Mobile Robot Task"). For every course of a seeded generator
 (:func:`sim.mobile.course.random_course`: 8–16 tiles, 0–3 interruptions) — or the course file given
 with ``--course`` — one process builds the pybullet world (250 Hz physics), renders the downward
 camera (analytic floor-map warp with blur, vignetting, gain and grey-level noise by default), scans
-the beacon sensor at 20 Hz and runs the mission (:class:`sim.mobile.harness.MobileMission`: the
-pure algorithms of :mod:`services.mobile` called in process) at 50 Hz: follow the track, cross
-interruptions by the beacon, stop on the T mark.
+the beacon sensor at 20 Hz and runs, at 50 Hz, the primitive actions the perception node runs
+(:mod:`services.mobile.tasks`: follow the track, find the beacon, go to it, reacquire the track, stop
+at the T), called in process and sequenced as the task net does (:class:`sim.mobile.lockstep.TaskSequence`);
+``--mission phase1`` runs phase 1's in-process :class:`sim.mobile.harness.MobileMission` instead.
 
 Reported (JSON keys):
 
@@ -30,6 +31,12 @@ Reported (JSON keys):
   construction excluded; reported separately as ``build_s``); it depends on the machine's load
   (``load_average_1min``), so ``sim_speed_x_cpu`` gives simulated seconds per CPU second of this
   process as well.
+
+With the nodes' action code (the default) the ``follow_track`` segments are also judged against
+their specification as the follow actions judge them (ended with ``interruption`` or ``end``, no
+detector dropout): ``follow_segments``, ``follow_spec_rate`` (share within it), ``follow_dropouts``
+and ``follow_cpu_ms_per_frame`` (the follow action's cost per frame: detector, end-mark detector,
+steering).
 
 ``--timing`` adds the per-call cost of the cameras, detectors and a physics step.
 
@@ -66,6 +73,7 @@ from sim.mobile.course import CourseError, random_course
 from sim.mobile.coursefile import load_course
 from sim.mobile.floor import FloorMap
 from sim.mobile.harness import MissionParams, RunResult, run_course
+from sim.mobile.lockstep import TaskSequence
 from sim.mobile.sensors import AnalyticCamera, ImageNoise, robot_camera
 from sim.mobile.world import DEFAULT_DT, MobileWorld
 from sim.world import World
@@ -261,6 +269,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--detectors", type=int, metavar="N", help="frame-level detector benchmark on N frames instead")
     ap.add_argument("--noise", choices=sorted(CONDITIONS), default="default", help="image condition of the runs")
     ap.add_argument("--latency", type=float, default=0.0, help="frame-to-drive set-point delay, s")
+    ap.add_argument("--mission", choices=["nodes", "phase1"], default="nodes",
+                    help="nodes (default): the nodes' primitive actions (services.mobile.tasks) sequenced as "
+                         "the net does; phase1: the in-process MobileMission of phase 1")
     args = ap.parse_args(argv)
     if args.detectors:
         res = _detector_bench(args.detectors, args.seed)
@@ -284,10 +295,16 @@ def main(argv: list[str] | None = None) -> int:
     else:
         courses = [random_course(args.seed * 1_000_003 + k) for k in range(args.courses)]
     t_all = time.perf_counter()
+    sequences: list[TaskSequence] = []
+
+    def task_sequence(*a: Any, **kw: Any) -> TaskSequence:
+        sequences.append(TaskSequence(*a, **kw))
+        return sequences[-1]
+
     for k, course in enumerate(courses):
         with _stdout_to_stderr():
             r = run_course(
-                course, params=params, camera=args.camera, noise=CONDITIONS[args.noise],
+                course, params=params, mission_factory=None if args.mission == "phase1" else task_sequence, camera=args.camera, noise=CONDITIONS[args.noise],
                 seed=args.seed * 7919 + k, latency=args.latency,
             )
         results.append(r)
@@ -306,7 +323,15 @@ def main(argv: list[str] | None = None) -> int:
         "load_average_1min": os.getloadavg()[0],  # the machine's load: wall-clock speed depends on it
         "seed": args.seed, "detector": args.detector, "camera": args.camera, "noise": args.noise,
         "cruise_m_s": args.cruise, "latency_s": args.latency, "look_ahead_m": args.look_ahead,
+        "mission": args.mission,
     })
+    follows = [x for seq in sequences for x in seq.records if x.task == "follow_track" and x.outcome]
+    if follows:
+        frames = sum(x.frames for x in follows)
+        out["follow_segments"] = len(follows)
+        out["follow_spec_rate"] = sum(x.success for x in follows) / len(follows)
+        out["follow_dropouts"] = sum(x.dropouts for x in follows)
+        out["follow_cpu_ms_per_frame"] = 1000.0 * sum(x.cpu_s for x in follows) / frames if frames else math.nan
     if args.timing:
         with _stdout_to_stderr():
             out["timing_ms"] = _timing(sorted(DETECTORS))

@@ -453,8 +453,10 @@ class FrameServer:
                 img = np.ascontiguousarray(frame.image)
                 h, w = img.shape[:2]
                 ch = img.shape[2] if img.ndim == 3 else 1
-                header = {"seq": frame.seq, "t": frame.t, "t_wall": frame.t_wall, "width": w, "height": h,
+                header: dict[str, Any] = {"seq": frame.seq, "t": frame.t, "t_wall": frame.t_wall, "width": w, "height": h,
                           "channels": ch, "nbytes": img.nbytes}
+                if frame.meta:
+                    header["meta"] = frame.meta
                 conn.sendall(pack_map(header, MAX_HEADER) + img.tobytes())
                 with self._cond:
                     self._last_sent = max(self._last_sent, frame.seq)

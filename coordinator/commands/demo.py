@@ -22,11 +22,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
-import subprocess
 import sys
-import threading
-import time
 from pathlib import Path
 from typing import Any
 
@@ -48,6 +44,14 @@ everything.
                catching set points to the motion node over TCP; motion node: catch and move home
                over the CAN drives. A 4-run experiment by default (--runs). While it runs, type
                "+ runs_remaining", "- runs_remaining", "pause", "step", "resume" or "abort".
+  mobile       the paper's Figs. 2-3: a differential-drive robot follows a track on a chessboard
+               floor, crosses interruptions guided by a beacon and stops on the T mark
+               (nets/courses/fig2.toml by default, --course). Perception node: follow the track
+               (three alternative detectors, chosen by the learner), find and approach the beacon,
+               reacquire the track, stop at the T, streaming steering set points to the drive node,
+               which drives the wheels over the CAN bus and stops them if the set points stop.
+               Prints a report (completion, time, speed, cross-track error, interruptions, stop
+               error, per-task statistics) and writes a top view of the driven path.
   foundation   nets/demo.toml: sense on node alpha, compute on alpha or beta, three runs.
 
 Every firing, action start and result goes to the journal. Without --journal each demo starts a
@@ -61,7 +65,7 @@ def add_parser(subparsers: Any) -> None:
     """Register ``demo`` on the ``petrobot`` sub-command parser."""
     p = subparsers.add_parser("demo", help="run a demonstration on localhost (sim + nodes + coordinator)",
                               description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("which", nargs="?", default="catching", choices=["catching", "foundation"],
+    p.add_argument("which", nargs="?", default="catching", choices=["catching", "mobile", "foundation"],
                    help="which demonstration (default: %(default)s)")
     p.add_argument("--runs", type=int, default=None,
                    help="tokens in runs_remaining at the start (default: the net's own, 4 for catching)")
@@ -71,82 +75,20 @@ def add_parser(subparsers: Any) -> None:
     options.add_seed(p, help="seed of the thrower, random switches and learners")
     p.add_argument("--renderer", choices=["tiny", "analytic"], default="tiny",
                    help="camera back end: pybullet's TinyRenderer (default) or the fast analytic one")
+    p.add_argument("--course", default=None,
+                   help="mobile: course file (default nets/courses/fig2.toml)")
+    p.add_argument("--net", default=None, help="mobile: task net (default nets/mobile.toml)")
+    p.add_argument("--noise", choices=["default", "noisy", "scuffed", "harsh", "clean"], default="default",
+                   help="mobile: image condition of the downward camera (default: default)")
+    p.add_argument("--truth-every", type=float, default=0.1, metavar="S",
+                   help="mobile: period of the world's ground-truth pose lines, s of simulated time (default 0.1)")
     options.add_key_file(p)
     options.add_max_seconds(p, default=300.0)
     options.add_view(p)
     p.set_defaults(func=run)
 
 
-# --------------------------------------------------------------------------------------- the world
-def journal_for(given: str | None, default: str) -> Path:
-    """The demo's journal: ``given`` as is (its learner state is continued), else a fresh
-    ``default`` (an existing one, with its SQLite side files, is renamed ``*.prev.sqlite``)."""
-    if given:
-        path = Path(given)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        return path
-    path = Path(default)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    prev = path.with_suffix(".prev" + path.suffix)
-    for suffix in ("", "-wal", "-shm"):
-        old = Path(str(path) + suffix)
-        if old.exists():
-            old.replace(Path(str(prev) + suffix))
-        elif Path(str(prev) + suffix).exists():
-            Path(str(prev) + suffix).unlink()
-    return path
-
-
-class SimWorld:
-    """The ``petrobot sim catching`` process, its JSON event lines read by a thread.
-
-    Args:
-        args: command-line arguments after ``sim catching``.
-        log: file for the simulator's stderr (log lines, warnings), or ``None`` to drop them.
-    """
-
-    def __init__(self, args: list[str], log: Path | None = None) -> None:
-        self._log = open(log, "w") if log is not None else None  # noqa: SIM115 (kept open for the process, closed by stop())
-        self.proc = subprocess.Popen([sys.executable, "-m", "coordinator.commands.sim", "catching", *args],
-                                     cwd=ROOT, stdout=subprocess.PIPE,
-                                     stderr=self._log if self._log is not None else subprocess.DEVNULL, text=True)
-        self.events: list[dict[str, Any]] = []
-        self._ready = threading.Event()
-        self._reader = threading.Thread(target=self._read, name="sim-events", daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            if line.startswith("{"):
-                try:
-                    event = json.loads(line)
-                except ValueError:
-                    continue
-                event["t_wall"] = time.time()
-                self.events.append(event)
-                if event.get("event") == "ready":
-                    self._ready.set()
-
-    def wait_ready(self, timeout_s: float) -> None:
-        end = time.monotonic() + timeout_s
-        while not self._ready.wait(0.1):
-            if self.proc.poll() is not None:
-                raise PetrobotError(f"the simulator exited with status {self.proc.returncode} before it was ready")
-            if time.monotonic() > end:
-                raise PetrobotError(f"the simulator was not ready after {timeout_s:.0f} s")
-
-    def stop(self) -> None:
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            try:
-                self.proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(timeout=5)
-        self._reader.join(timeout=5)  # the last lines ("stopped") are read before the report
-        if self._log is not None:
-            self._log.close()
+from coordinator.commands.simworld import SimWorld, journal_for
 
 
 # --------------------------------------------------------------------------------------- demos
@@ -253,7 +195,9 @@ def run(args: argparse.Namespace) -> int:
     import asyncio
     import signal
 
-    demo = _catching if args.which == "catching" else _foundation
+    from coordinator.commands.demo_mobile import run_mobile
+
+    demo = {"catching": _catching, "mobile": run_mobile}.get(args.which, _foundation)
     signal.signal(signal.SIGTERM, _terminate)
     try:
         return asyncio.run(demo(args))

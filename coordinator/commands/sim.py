@@ -1,4 +1,7 @@
-"""``petrobot sim catching``: the catching testbed's physical world as a process (paper §6).
+"""``petrobot sim catching`` / ``petrobot sim mobile``: a testbed's physical world as a process (paper §6).
+
+``petrobot sim mobile`` is the mobile robot's course (:mod:`sim.mobile.process`); the rest of this
+docstring describes the catching world.
 
 Runs the pybullet world at 1 kHz with the table, the thrower, the ball, the PUMA 560 with its cup and
 crossfire sensor, and serves the hardware-like back ends on 127.0.0.1 (``--host`` to serve another
@@ -51,7 +54,7 @@ def add_parser(subparsers: Any) -> None:
     """Register ``sim`` (with its ``catching`` world) on the ``petrobot`` sub-command parser."""
     parser = subparsers.add_parser(
         "sim",
-        help="run a simulated world (the catching testbed) as a process",
+        help="run a simulated world (the catching or the mobile testbed) as a process",
         description="Run a simulated physical world with hardware-like back ends on 127.0.0.1.",
     )
     worlds = parser.add_subparsers(dest="world", required=True, metavar="WORLD")
@@ -109,6 +112,22 @@ def add_parser(subparsers: Any) -> None:
                         "the previous one (default 100; 0: never wait)")
 
 
+    m = worlds.add_parser(
+        "mobile",
+        help="the mobile robot's course: downward camera + beacon sensor server, CAN gateway (velocity mode)",
+        description=(
+            "The mobile-robot testbed (paper section 6, Figs. 2-3): a pybullet world at 250 Hz with the "
+            "course's chessboard floor, track, beacons and a differential-drive robot. Serves the downward "
+            "camera with the beacon scans (TCP frame server) and the two wheel drives (CiA 402 profile "
+            "velocity mode on a socketcand-protocol CAN gateway) on 127.0.0.1, and prints one JSON line "
+            "per event (ready, pose: ground truth, drive_fault, stopped) on stdout."
+        ),
+    )
+    from sim.mobile.process import add_arguments as add_mobile_arguments
+
+    add_mobile_arguments(m)
+
+
 def _emit(out: TextIO, event: str, **data: Any) -> None:
     out.write(json.dumps({"event": event, **data}) + "\n")
     out.flush()
@@ -116,6 +135,10 @@ def _emit(out: TextIO, event: str, **data: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the world until stopped (or ``--duration``); returns the exit code."""
+    if args.world == "mobile":
+        from sim.mobile.process import run as run_mobile
+
+        return run_mobile(args)
     if args.world != "catching":
         print(f"unknown world {args.world!r}", file=sys.stderr)
         return 2

@@ -43,6 +43,15 @@ bit 7 (fault reset, 0x80) leaves FAULT for SWITCH_ON_DISABLED; a reset during th
 ignored. A CiA 402 master therefore recovers a faulted drive by waiting for FAULT, then sending
 ``0x00`` (bit 7 low), ``0x80`` (the edge), and the enable sequence again.
 
+Profile velocity mode (modes of operation 0x6060 = 3; the mobile robot's wheel drives, node ids
+1 = left, 2 = right): RPDO1 maps the controlword and the **target velocity** (0x60FF) instead of
+a target position, int32 LE in units of :data:`VELOCITY_UNIT` (1e-4 rad/s); TPDO1 keeps the
+statusword and the **position actual value** (0x6064, 1e-5 rad); **TPDO2** (0x280+id) carries the
+**velocity actual value** (0x606C, int32 LE, 1e-4 rad/s) and the torque actual value (0x6077,
+int16 LE, mN m), after every SYNC while operational. A target velocity holds until the next one
+(no interpolation); a drive that gets no RPDO for its RPDO timeout faults and brakes the wheel to
+rest on its quick-stop ramp (:mod:`sim.mobile.candrives`).
+
 Cyclic synchronous position (CSP) targets: a drive that gets no new target at a SYNC keeps moving
 at its last demand velocity (extrapolation), for at most :data:`TARGET_TIMEOUT_CYCLES` cycles in a
 row; then it faults with :attr:`EmcyCode.RPDO_TIMEOUT` and stops on the ramp. A master that falls
@@ -53,6 +62,7 @@ that its next target continues where the drive's extrapolation has taken the joi
 from __future__ import annotations
 
 import enum
+import math
 import struct
 from dataclasses import dataclass, field
 
@@ -71,6 +81,9 @@ __all__ = [
     "SYNC_ID",
     "TARGET_TIMEOUT_CYCLES",
     "TPDO1_BASE",
+    "TPDO2_BASE",
+    "VELOCITY_UNIT",
+    "WHEEL_IDS",
     "CanFrame",
     "Cia402StateMachine",
     "Controlword",
@@ -84,11 +97,15 @@ __all__ = [
     "decode_heartbeat",
     "decode_rpdo1",
     "decode_tpdo1",
+    "decode_tpdo2",
+    "decode_velocity_rpdo1",
     "encode_crossfire",
     "encode_emcy",
     "encode_heartbeat",
     "encode_rpdo1",
     "encode_tpdo1",
+    "encode_tpdo2",
+    "encode_velocity_rpdo1",
     "nmt_frame",
     "rad_to_units",
     "state_from_statusword",
@@ -100,6 +117,7 @@ NMT_ID = 0x000
 SYNC_ID = 0x080
 RPDO1_BASE = 0x200
 TPDO1_BASE = 0x180
+TPDO2_BASE = 0x280
 HEARTBEAT_BASE = 0x700
 EMCY_BASE = 0x080  # + node id (1..127); 0x080 itself is SYNC
 DRIVE_IDS = (1, 2, 3, 4, 5, 6)
@@ -107,6 +125,9 @@ CROSSFIRE_ID = 0x10
 MASTER_ID = 0x7F
 """Node id of the motion node's CAN master (its heartbeat is 0x77F)."""
 POSITION_UNIT = 1e-5  # rad per bus unit
+VELOCITY_UNIT = 1e-4  # rad/s per bus unit (profile velocity mode: 0x60FF, 0x606C)
+WHEEL_IDS = (1, 2)
+"""Node ids of the mobile robot's wheel drives: 1 = left, 2 = right."""
 CYCLE_S = 0.002
 HEARTBEAT_PERIOD_S = 0.1
 TARGET_TIMEOUT_CYCLES = 25
@@ -269,6 +290,56 @@ def decode_tpdo1(data: bytes) -> tuple[int, float]:
         raise FrameError(f"TPDO1 needs 6 bytes, got {len(data)}")
     sw, units = struct.unpack("<Hi", data)
     return int(sw), units_to_rad(units)
+
+
+def _velocity_units(v: float) -> int:
+    if not math.isfinite(v):
+        raise FrameError(f"velocity {v} is not a finite number")
+    units = round(v / VELOCITY_UNIT)
+    if not _INT32_MIN <= units <= _INT32_MAX:
+        raise FrameError(f"velocity {v} rad/s does not fit an int32 of 1e-4 rad/s")
+    return int(units)
+
+
+def encode_velocity_rpdo1(node: int, controlword: int, target_velocity: float) -> CanFrame:
+    """RPDO1 of a drive in profile velocity mode: controlword (uint16 LE) and target velocity
+    0x60FF (int32 LE, 1e-4 rad/s).
+
+    Raises:
+        FrameError: the velocity is not finite or does not fit.
+    """
+    return CanFrame(RPDO1_BASE + node, struct.pack("<Hi", controlword & 0xFFFF, _velocity_units(target_velocity)))
+
+
+def decode_velocity_rpdo1(data: bytes) -> tuple[int, float]:
+    """Inverse of :func:`encode_velocity_rpdo1`: ``(controlword, target velocity rad/s)``.
+
+    Raises:
+        FrameError: wrong length.
+    """
+    if len(data) != 6:
+        raise FrameError(f"RPDO1 needs 6 bytes, got {len(data)}")
+    cw, units = struct.unpack("<Hi", data)
+    return int(cw), units * VELOCITY_UNIT
+
+
+def encode_tpdo2(node: int, velocity: float, torque: float, t: float = 0.0) -> CanFrame:
+    """TPDO2 of a velocity-mode drive: velocity actual 0x606C (int32 LE, 1e-4 rad/s) and torque
+    actual 0x6077 (int16 LE, mN m, saturated)."""
+    mnm = max(-32768, min(32767, round(torque * 1000.0))) if math.isfinite(torque) else 0
+    return CanFrame(TPDO2_BASE + node, struct.pack("<ih", _velocity_units(velocity), mnm), t)
+
+
+def decode_tpdo2(data: bytes) -> tuple[float, float]:
+    """Inverse of :func:`encode_tpdo2`: ``(velocity rad/s, torque N m)``.
+
+    Raises:
+        FrameError: wrong length.
+    """
+    if len(data) != 6:
+        raise FrameError(f"TPDO2 needs 6 bytes, got {len(data)}")
+    units, mnm = struct.unpack("<ih", data)
+    return units * VELOCITY_UNIT, mnm / 1000.0
 
 
 def encode_heartbeat(node: int, state: NmtState, t: float = 0.0) -> CanFrame:

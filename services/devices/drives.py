@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 from services.devices import cia402 as cf
 from services.errors import ActionError
 
-__all__ = ["BusError", "PumaDrives"]
+__all__ = ["BusError", "PumaDrives", "WheelCanDrives"]
 
 # python-can's socketcand client logs every TCP read that splits a frame message as a warning;
 # that is ordinary stream fragmentation, not a fault.
@@ -64,7 +64,9 @@ class PumaDrives:
         clock: monotonic clock for supervision (seconds).
     """
 
-    NODES = cf.DRIVE_IDS
+    NODES: tuple[int, ...] = cf.DRIVE_IDS
+    OTHER_NODES: tuple[int, ...] = (cf.CROSSFIRE_ID,)
+    """CAN nodes besides the drives whose heartbeats are supervised."""
 
     def __init__(
         self,
@@ -86,9 +88,11 @@ class PumaDrives:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._cond = threading.Condition()
-        self._positions = np.full(6, np.nan)
-        self._statuswords = [0] * 6
-        self._tpdo_seen = [False] * 6
+        n = len(self.NODES)
+        self._positions = np.full(n, np.nan)
+        self._velocities = np.full(n, np.nan)
+        self._statuswords = [0] * n
+        self._tpdo_seen = [False] * n
         self._heartbeats: dict[int, tuple[float, cf.NmtState]] = {}  # node -> (bus time, state)
         self._sync_count = 0
         self._sync_returned = 0
@@ -128,7 +132,7 @@ class PumaDrives:
         try:
             if self._dead is None:
                 for node in self.NODES:
-                    self._send(cf.encode_rpdo1(node, cf.Controlword.DISABLE_VOLTAGE, self._pos_or0(node)))
+                    self._send(self._hold_rpdo(node, cf.Controlword.DISABLE_VOLTAGE))
         except BusError:
             pass
         self._stop.set()
@@ -180,7 +184,7 @@ class PumaDrives:
             silent = now - self._last_rx
         if silent > self.silence_timeout:
             return f"nothing on the CAN bus for {silent:.2f} s (no SYNC, no heartbeats): bus lost"
-        for node in (*self.NODES, cf.CROSSFIRE_ID):
+        for node in (*self.NODES, *self.OTHER_NODES):
             seen = beats.get(node)
             if seen is None:
                 if now - self._opened_at > self.silence_timeout:
@@ -272,7 +276,7 @@ class PumaDrives:
         )
         for cw, states in steps:
             for node in self.NODES:
-                self._send(cf.encode_rpdo1(node, cw, self._pos_or0(node)))
+                self._send(self._hold_rpdo(node, cw))
             if states:
                 self._wait(
                     lambda ok=states: all(st in ok for st in self._states_locked()),  # type: ignore[misc]
@@ -288,7 +292,7 @@ class PumaDrives:
         """Disable voltage on every drive (they hold position, brakes on)."""
         self._expect_enabled = False
         for node in self.NODES:
-            self._send(cf.encode_rpdo1(node, cf.Controlword.DISABLE_VOLTAGE, self._pos_or0(node)))
+            self._send(self._hold_rpdo(node, cf.Controlword.DISABLE_VOLTAGE))
 
     def send_targets(self, q: Sequence[float] | NDArray[np.float64]) -> None:
         """Send one RPDO1 per drive: enable-operation controlword and target, rad, shape (6,).
@@ -339,6 +343,11 @@ class PumaDrives:
             except cf.FrameError:
                 out.append(None)
         return out
+
+    def _hold_rpdo(self, node: int, cw: int) -> cf.CanFrame:
+        """An RPDO1 carrying controlword ``cw`` and a target that does not move the drive (its own
+        actual position; a velocity-mode master sends zero velocity)."""
+        return cf.encode_rpdo1(node, cw, self._pos_or0(node))
 
     def _pos_or0(self, node: int) -> float:
         q = float(self._positions[node - 1])
@@ -416,12 +425,14 @@ class PumaDrives:
             if cid == cf.SYNC_ID:
                 self._sync_count += 1
                 self._sync_t = frame.t
-            elif cf.TPDO1_BASE + 1 <= cid <= cf.TPDO1_BASE + 6:
+            elif cf.TPDO1_BASE + 1 <= cid <= cf.TPDO1_BASE + len(self.NODES):
                 i = cid - cf.TPDO1_BASE - 1
                 sw, q = cf.decode_tpdo1(frame.data)
                 self._statuswords[i] = sw
                 self._positions[i] = q
                 self._tpdo_seen[i] = True
+            elif cf.TPDO2_BASE + 1 <= cid <= cf.TPDO2_BASE + len(self.NODES):
+                self._velocities[cid - cf.TPDO2_BASE - 1] = cf.decode_tpdo2(frame.data)[0]
             elif cid == cf.TPDO1_BASE + cf.CROSSFIRE_ID:
                 self._crossfire = cf.decode_crossfire(frame.data)
                 callbacks = list(self._crossfire_callbacks)
@@ -456,3 +467,38 @@ def _connect(host: str, port: int, channel: str, timeout: float) -> can.BusABC:
                 raise BusError(f"no socketcand server at {host}:{port}: {exc}") from exc
             time.sleep(0.05)
     return can.Bus(interface="socketcand", host=host, port=port, channel=channel, tcp_tune=True)
+
+
+class WheelCanDrives(PumaDrives):
+    """The mobile robot's two wheel drives (node 1 left, node 2 right) in CiA 402 profile velocity
+    mode, as seen from the drive node: the same master (connection, supervision, NMT start, fault
+    recovery by :meth:`enable`, the master's heartbeat, :meth:`wait_sync`) with velocity RPDOs.
+
+    Frames: :mod:`services.devices.cia402` (RPDO1 = controlword + target velocity 0x60FF; TPDO1 =
+    statusword + position actual 0x6064; TPDO2 = velocity actual 0x606C). The bus has no other
+    supervised node (no crossfire module).
+    """
+
+    NODES = cf.WHEEL_IDS
+    OTHER_NODES = ()
+
+    def _hold_rpdo(self, node: int, cw: int) -> cf.CanFrame:
+        return cf.encode_velocity_rpdo1(node, cw, 0.0)
+
+    def send_velocities(self, left: float, right: float) -> None:
+        """One RPDO1 per wheel drive: enable-operation controlword and target velocity, rad/s
+        (also the master's heartbeat every 100 ms of bus time).
+
+        Raises:
+            BusError: the connection is lost.
+            FrameError: a velocity is not finite.
+        """
+        self._send(cf.encode_velocity_rpdo1(self.NODES[0], cf.Controlword.ENABLE_OPERATION, float(left)))
+        self._send(cf.encode_velocity_rpdo1(self.NODES[1], cf.Controlword.ENABLE_OPERATION, float(right)))
+        if self._sync_t - self._heartbeat_sent_t >= cf.HEARTBEAT_PERIOD_S - 1e-9:
+            self._send_heartbeat()
+
+    def velocities(self) -> NDArray[np.float64]:
+        """Latest velocity actual values (TPDO2) of the (left, right) wheels, rad/s (NaN before)."""
+        with self._cond:
+            return self._velocities.copy()

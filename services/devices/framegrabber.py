@@ -10,7 +10,8 @@ length, then a msgpack map of at most :data:`MAX_HEADER` bytes); a frame reply i
 raw image bytes. Requests: ``{"op": "grab", "after": seq, "timeout": s}`` (the latest frame newer
 than ``seq``, waiting up to ``timeout`` seconds) and ``{"op": "info"}`` (answered
 ``{"info": {...}}`` with the camera's data sheet and calibration). A frame reply is the header
-``{"seq", "t", "t_wall", "width", "height", "channels", "nbytes"}`` followed by ``nbytes`` of BGR
+``{"seq", "t", "t_wall", "width", "height", "channels", "nbytes"}`` (and ``"meta"``, a map, when the
+server attaches one) followed by ``nbytes`` of BGR
 uint8 (row-major); ``{"error": "timeout"}`` says no newer frame arrived in time.
 """
 
@@ -44,12 +45,15 @@ class Frame:
         image: (H, W, 3) uint8 BGR.
         t_wall: wall-clock time (:func:`time.time`) the frame was captured, s (0 if not stamped);
             used to measure frame-to-set-point latency across processes.
+        meta: optional msgpack-able map the server sends in the frame's header (``"meta"``), e.g.
+            the mobile robot's latest beacon scan travelling with its camera frames.
     """
 
     seq: int
     t: float
     image: np.ndarray
     t_wall: float = 0.0
+    meta: dict[str, Any] | None = None
 
 
 def _recv_exact(sock: socket.socket, n: int) -> bytes:
@@ -102,8 +106,10 @@ class FrameClient:
             raise ConnectionError(f"camera frame of {n} bytes does not match {w}x{h}x{ch}")
         data = _recv_exact(self._sock, n)
         img = np.frombuffer(data, dtype=np.uint8).reshape(h, w, ch)
+        meta = hdr.get("meta")
         return Frame(
-            seq=int(hdr["seq"]), t=float(hdr["t"]), image=img, t_wall=float(hdr.get("t_wall", 0.0))
+            seq=int(hdr["seq"]), t=float(hdr["t"]), image=img, t_wall=float(hdr.get("t_wall", 0.0)),
+            meta=meta if isinstance(meta, dict) else None,
         )
 
     def info(self, timeout: float = 2.0) -> dict[str, Any]:

@@ -354,6 +354,7 @@ def run_course(
     realtime: bool = False,
     latency: float = 0.0,
     on_tick: Any = None,
+    mission_factory: Any = None,
 ) -> RunResult:
     """Drive a course end to end in a fresh world and score the run.
 
@@ -375,6 +376,9 @@ def run_course(
             the first physics step at or after it; 0 = the next step). Stands for image transfer,
             processing and the set-point stream between nodes.
         on_tick: optional ``f(t, mission, world, set_point)`` called after every control tick.
+        mission_factory: the class sequencing the primitive actions, called like
+            :class:`MobileMission` (default); :class:`sim.mobile.lockstep.TaskSequence` runs the
+            nodes' action code instead.
 
     Returns:
         The run's score.
@@ -394,7 +398,7 @@ def run_course(
         cam_model = camera_model or mw.camera_model()
         cam = (mw.analytic_camera if camera == "analytic" else mw.tiny_camera)(cam_model, noise=noise, seed=seed)
         sensor = mw.beacon_sensor(seed=seed + 1)
-        mission = MobileMission(
+        mission = (mission_factory or MobileMission)(
             cam_model, spec, beacon_height=course.beacon.height, square=course.square,
             track_width=course.track_width, params=p,
         )

@@ -1,0 +1,257 @@
+"""The mobile robot's drive node: the wheel drives on the CAN bus, odometry, the steering set points
+with the watchdog, and ``stop_robot`` (paper section 6; overview in :mod:`services.actions.mobile`)."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import math
+import threading
+import time
+from typing import Any
+
+from services.action import CallContext, Driver, NodeContext, PrimitiveAction
+from services.devices.drives import BusError, WheelCanDrives
+from services.devices.endpoint import DeviceEndpoint
+from services.errors import ActionError, LocationError
+from services.mobile.odometry import DriveGeometry, Odometry, Pose2D
+from services.mobile.setpoints import ODOMETRY_TOPIC, STEERING_TOPIC, SteeringInput
+from services.results import ActionResult
+
+__all__ = ["DEFAULT_CAN_PORT", "DriveDriver", "StopRobot"]
+
+log = logging.getLogger("services.actions.mobile")
+
+DEFAULT_CAN_PORT = 7221
+
+
+# --------------------------------------------------------------------------------------------------
+# drive node
+# --------------------------------------------------------------------------------------------------
+class DriveDriver(Driver):
+    """The wheel drives, odometry, the steering set points and the watchdog (module docstring).
+
+    Params: ``can_host`` ("127.0.0.1"), ``can_port`` (7221), ``channel`` ("can0"); ``steering_from``
+    (default: the node of ``follow_ransac``); ``stale_s`` (0.25); ``wheel_radius`` (0.05 m),
+    ``track_width`` (0.30 m): the odometry's drive geometry; ``heartbeat_timeout_s`` (0.5),
+    ``bus_silence_s`` (2.0), ``connect_timeout_s`` (10.0).
+    """
+
+    def __init__(self, name: str, params: dict[str, Any]) -> None:
+        super().__init__(name, params)
+        p = self.params
+        self.can_host = str(p.get("can_host", "127.0.0.1"))
+        self.can_port = int(p.get("can_port", DEFAULT_CAN_PORT))
+        self.channel = str(p.get("channel", "can0"))
+        self.connect_timeout = float(p.get("connect_timeout_s", 10.0))
+        self.heartbeat_timeout = float(p.get("heartbeat_timeout_s", 0.5))
+        self.bus_silence = float(p.get("bus_silence_s", 2.0))
+        self.geometry = DriveGeometry(wheel_radius=float(p.get("wheel_radius", 0.05)),
+                                      track_width=float(p.get("track_width", 0.30)))
+        self.input = SteeringInput(float(p.get("stale_s", 0.25)))
+        self.latencies: list[float] = []
+        """Frame capture → set point received, s (wall clocks of one host), logged every
+        ``latency_every`` (param, 500) set points."""
+        self.latency_every = int(p.get("latency_every", 500))
+        self.odometry = Odometry(self.geometry)
+        self.drives: WheelCanDrives | None = None
+        self.fault: str | None = None
+        self.lock = threading.Lock()
+        self.pose = Pose2D()
+        self.speeds = (0.0, 0.0)
+        self._odo_started = False
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._link: Any = None
+        self._connecting: asyncio.Task[None] | None = None
+
+    @classmethod
+    def device(cls, params: dict[str, Any]) -> DeviceEndpoint:
+        """The CAN gateway this driver connects to."""
+        return DeviceEndpoint("mobile CAN gateway", str(params.get("can_host", "127.0.0.1")),
+                              int(params.get("can_port", DEFAULT_CAN_PORT)), "petrobot sim mobile")
+
+    async def setup(self, node: NodeContext) -> None:
+        """Subscribe to the steering set points; connect to the drives in the background."""
+        self._loop = asyncio.get_running_loop()
+        source = self.params.get("steering_from")
+        if source is None:
+            try:
+                source = node.location.node_of("follow_ransac")
+            except LocationError:
+                source = None
+        if source is not None:
+            self._link = node.link(str(source))
+            self._link.subscribe(STEERING_TOPIC, self._on_setpoint)
+        self._connecting = asyncio.create_task(self._connect_forever())
+
+    async def teardown(self) -> None:
+        """Stop the control thread and disconnect."""
+        if self._connecting is not None:
+            self._connecting.cancel()
+        if self._link is not None:
+            self._link.unsubscribe(STEERING_TOPIC, self._on_setpoint)
+        await asyncio.to_thread(self._shutdown)
+
+    async def _connect_forever(self) -> None:
+        while True:
+            if self.drives is None or self.fault is not None or (self.drives.lost() is not None):
+                try:
+                    await asyncio.to_thread(self._shutdown)
+                    await asyncio.to_thread(self._start)
+                    log.info("wheel drives enabled")
+                except BusError as exc:
+                    log.warning("wheel drives not ready (%s); retrying", exc)
+            elif self.drives.faults():
+                try:
+                    await asyncio.to_thread(self.drives.enable, self.connect_timeout)
+                    log.warning("wheel drive fault reset and enabled again")
+                except BusError as exc:
+                    log.warning("wheel drive recovery failed: %s", exc)
+            await asyncio.sleep(0.5)
+
+    def _start(self) -> None:
+        drives = WheelCanDrives(self.can_host, self.can_port, self.channel,
+                                heartbeat_timeout=self.heartbeat_timeout, silence_timeout=self.bus_silence)
+        drives.open(timeout=self.connect_timeout)
+        try:
+            drives.start(timeout=self.connect_timeout)
+            with self.lock:
+                self.drives = drives
+                self.fault = None
+                self.input.hold()
+            self._stop.clear()
+            self._thread = threading.Thread(target=self._control_loop, name="wheel-control", daemon=True)
+            self._thread.start()
+            drives.enable(timeout=self.connect_timeout)
+        except BusError:
+            self._stop.set()
+            self.drives = None
+            drives.close()
+            raise
+
+    def _shutdown(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self.drives is not None:
+            self.drives.close()
+            self.drives = None
+
+    def _control_loop(self) -> None:
+        drives = self.drives
+        assert drives is not None
+        n = 0
+        while not self._stop.is_set():
+            try:
+                t = drives.wait_sync(timeout=self.bus_silence)
+                q = drives.positions()
+                if not (math.isfinite(q[0]) and math.isfinite(q[1])):
+                    continue
+                with self.lock:
+                    if not self._odo_started:
+                        self.odometry.reset(Pose2D(t=t))
+                        self._odo_started = True
+                    self.pose = self.odometry.update(float(q[0]), float(q[1]), t)
+                    stops = self.input.watchdog_stops
+                    left, right = self.input.wheels(time.monotonic(), t)
+                    if self.input.watchdog_stops != stops:
+                        wall_age, bus_age = self.input.age(time.monotonic(), t)
+                        log.warning("watchdog: no steering set point for %.3f s (wall) / %.3f s (bus time): "
+                                    "stopping the wheels (stop %d)", wall_age, bus_age, self.input.watchdog_stops)
+                drives.send_velocities(left, right)
+                n += 1
+                if n % 2 == 0 and self._loop is not None:
+                    self._loop.call_soon_threadsafe(self._publish_odometry, t, drives.velocities())
+            except BusError as exc:
+                self.fault = str(exc)
+                drives.mark_lost(str(exc))
+                log.error("wheel control loop stopped: %s", exc)
+                return
+
+    def _publish_odometry(self, t: float, speeds: Any) -> None:
+        with self.lock:
+            pose, inp = self.pose, self.input
+            wl, wr = (float(speeds[0]), float(speeds[1])) if len(speeds) == 2 else (0.0, 0.0)
+            if not (math.isfinite(wl) and math.isfinite(wr)):
+                wl = wr = 0.0
+            self.speeds = (wl, wr)
+            v, w = self.geometry.twist(wl, wr)
+            state = "ok"
+            if self.fault is not None:
+                state = f"fault: {self.fault}"
+            elif self.drives is not None and self.drives.faults():
+                state = "fault: " + "; ".join(f"drive {k}: {c}" for k, c in self.drives.faults().items())
+            elif inp.stopped:
+                state = "watchdog"
+            data = {"t": t, "x": pose.x, "y": pose.y, "theta": pose.theta, "s": pose.s, "v": v, "w": w,
+                    "seq": inp.latest.seq if inp.latest is not None else -1, "stops": inp.watchdog_stops,
+                    "state": state}
+        self.publish(ODOMETRY_TOPIC, data)
+
+    def _on_setpoint(self, event: Any) -> None:
+        with self.lock:
+            bus = self.drives.sim_time if self.drives is not None else math.nan
+            sp = self.input.offer(event.data, time.monotonic(), bus)
+        if sp is None:
+            return
+        t_capture = event.data.get("t_capture") if isinstance(event.data, dict) else None
+        if isinstance(t_capture, float) and math.isfinite(t_capture):
+            self.latencies.append(time.time() - t_capture)
+            if len(self.latencies) >= self.latency_every:
+                lat = sorted(self.latencies)
+                log.info("steering latency, frame capture -> drive node, over %d set points: p50 %.1f ms, "
+                         "p99 %.1f ms, max %.1f ms", len(lat), 1000 * lat[len(lat) // 2],
+                         1000 * lat[min(len(lat) - 1, int(0.99 * len(lat)))], 1000 * lat[-1])
+                self.latencies.clear()
+
+    def check(self) -> None:
+        """Raise :class:`BusError` when the drives are not usable."""
+        if self.fault is not None:
+            raise BusError(self.fault)
+        if self.drives is None:
+            raise BusError("wheel drives are not connected")
+        self.drives.check()
+
+
+def _drive(ctx: CallContext) -> DriveDriver:
+    for drv in ctx.drivers.values():
+        if isinstance(drv, DriveDriver):
+            return drv
+    raise ActionError("this node hosts no wheel drive driver (services.actions.mobile:DriveDriver)")
+
+
+class StopRobot(PrimitiveAction):
+    """``stop_robot``: brake to rest (the latest set point is forgotten); success once both wheels
+    turn slower than ``rest_speed`` (0.05 rad/s), with ``{t, watchdog_stops, dropped, faults}`` in the
+    value. A faulted drive holds its wheel at rest too: the robot is stopped, the value names the
+    fault, and the driver resets it in the background (``recovered`` in a later call's value). Error
+    when the bus is lost (no wheel speed known) or the wheels do not come to rest within ``timeout_s``
+    (5 s, wall clock)."""
+
+    unattended = True
+
+    async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
+        drv = _drive(ctx)
+        rest = float(params.get("rest_speed", 0.05))
+        timeout = float(params.get("timeout_s", 5.0))
+        end = time.monotonic() + timeout
+        while True:
+            with drv.lock:
+                drv.input.hold()
+            drives = drv.drives
+            lost = "wheel drives are not connected" if drives is None else (drv.fault or drives.lost())
+            if lost is None and drives is not None:
+                speeds = drives.velocities()
+                if all(math.isfinite(float(s)) and abs(float(s)) < rest for s in speeds):
+                    inp = drv.input
+                    return ActionResult.success({
+                        "t": drives.sim_time, "watchdog_stops": inp.watchdog_stops,
+                        "dropped": inp.malformed + inp.stale + inp.out_of_order,
+                        "faults": {str(k): v for k, v in drives.faults().items()}})
+            if time.monotonic() > end:
+                return ActionResult.error(f"bus: {lost}" if lost else
+                                          f"the wheels did not come to rest within {timeout} s")
+            await asyncio.sleep(0.01)
