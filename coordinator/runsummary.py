@@ -131,10 +131,14 @@ class RunSummary:
             lines.append(f"  every one of the {self.calls} primitive-action calls ended in error")
         lines.append(f"final marking: {self.final_marking or '{}'}")
         if self.actions:
-            lines.append(f"{'task':<14}{'action':<22}{'node':<10}{'calls':>6}{'ok':>5}{'fail':>5}{'err':>5}"
+            rows = list(self.actions.values())
+            wt = max(14, *(len(st.task) + 2 for st in rows))
+            wa = max(22, *(len(st.action) + 2 for st in rows))
+            wn = max(10, *(len(st.node) + 1 for st in rows))
+            lines.append(f"{'task':<{wt}}{'action':<{wa}}{'node':<{wn}}{'calls':>6}{'ok':>5}{'fail':>5}{'err':>5}"
                          f"{'mean s':>9}")
-            for st in self.actions.values():
-                lines.append(f"{st.task:<14}{st.action:<22}{st.node:<10}{st.calls:>6}{st.success:>5}"
+            for st in rows:
+                lines.append(f"{st.task:<{wt}}{st.action:<{wa}}{st.node:<{wn}}{st.calls:>6}{st.success:>5}"
                              f"{st.failure:>5}{st.error:>5}{st.mean_wall_s:>9.3f}")
         if self.reconciled:
             lines.append(f"reconciled: {self.reconciled} call{'' if self.reconciled == 1 else 's'} given up on, "
