@@ -254,7 +254,8 @@ class _Streaming(PrimitiveAction):
     uses_beacons = False
 
     def make(self, memory: CourseMemory) -> Any:
-        raise NotImplementedError
+        """The task controller of one call (each subclass builds its own from :mod:`services.mobile.tasks`)."""
+        raise NotImplementedError(f"{type(self).__name__} defines no task controller")
 
     def value(self, task: Any) -> dict[str, Any]:
         return {}
@@ -264,7 +265,8 @@ class _Streaming(PrimitiveAction):
         return step.success, step.note
 
     def step(self, task: Any, frame: Frame, pose: Pose2D, beacons: list[BeaconObservation] | None) -> Step:
-        raise NotImplementedError
+        """Advance the controller by one camera frame (each subclass feeds its controller what it needs)."""
+        raise NotImplementedError(f"{type(self).__name__} defines no step")
 
     async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         drv = _perception(ctx)
