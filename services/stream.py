@@ -37,6 +37,9 @@ __all__ = [
     "SetPoint",
     "SetPointSubscription",
     "StreamLostError",
+    "received_map",
+    "received_number",
+    "received_seq",
 ]
 
 SETPOINT_TOPIC = "setpoints"
@@ -112,33 +115,67 @@ class SetPoint:
         Raises:
             MalformedSetPoint: naming the first field that is missing or wrong.
         """
-        if not isinstance(d, dict):
-            raise MalformedSetPoint(f"a set point must be a map, not {type(d).__name__}")
-        if len(d) > MAX_FIELDS:
-            raise MalformedSetPoint(f"a set point has at most {MAX_FIELDS} fields, got {len(d)}")
+        m = received_map(d)
         kw: dict[str, Any] = {}
         for f in fields(cls):
             name = f.name
-            if name not in d:
-                if name in _OPTIONAL:
-                    continue
-                raise MalformedSetPoint(f"set point without {name!r}")
-            v = d[name]
-            if name == "seq":
-                if type(v) is not int or not 0 <= v < MAX_SEQ:
-                    raise MalformedSetPoint(f"set point seq must be an integer in 0..2**63-1, got {v!r:.40}")
-                kw[name] = v
+            if name not in m and name in _OPTIONAL:
                 continue
-            if type(v) not in (int, float):
-                raise MalformedSetPoint(f"set point {name} must be a number, got {type(v).__name__}")
-            x = float(v)
-            bound = _BOUNDS[name]
-            if not math.isfinite(x) or abs(x) > bound:
-                raise MalformedSetPoint(f"set point {name} = {x!r} is not finite within ±{bound:g}")
-            if name in _OPTIONAL and x < 0:
-                raise MalformedSetPoint(f"set point {name} = {x!r} is negative")
-            kw[name] = x
+            if name == "seq":
+                kw[name] = received_seq(m)
+            else:
+                kw[name] = received_number(m, name, _BOUNDS[name], non_negative=name in _OPTIONAL)
         return cls(**kw)
+
+
+def received_map(d: object) -> dict[Any, Any]:
+    """A received set point's map, refused before any field is read when it is not a map or has
+    more than :data:`MAX_FIELDS` keys.
+
+    Raises:
+        MalformedSetPoint: saying which.
+    """
+    if not isinstance(d, dict):
+        raise MalformedSetPoint(f"a set point must be a map, not {type(d).__name__}")
+    if len(d) > MAX_FIELDS:
+        raise MalformedSetPoint(f"a set point has at most {MAX_FIELDS} fields, got {len(d)}")
+    return d
+
+
+def received_seq(d: Mapping[Any, Any], name: str = "seq") -> int:
+    """Field ``name`` of a received map as a sequence number: an ``int`` (not a bool) in
+    ``0 .. MAX_SEQ - 1``.
+
+    Raises:
+        MalformedSetPoint: naming the field.
+    """
+    if name not in d:
+        raise MalformedSetPoint(f"set point without {name!r}")
+    v = d[name]
+    if type(v) is not int or not 0 <= v < MAX_SEQ:
+        raise MalformedSetPoint(f"set point {name} must be an integer in 0..2**63-1, got {v!r:.40}")
+    return v
+
+
+def received_number(d: Mapping[Any, Any], name: str, bound: float, *, non_negative: bool = False) -> float:
+    """Field ``name`` of a received map as a finite number within ±``bound`` (and ≥ 0 when
+    ``non_negative``); an ``int`` or ``float``, never a bool.
+
+    Raises:
+        MalformedSetPoint: naming the field: missing, not a number, not finite, out of range or
+            negative.
+    """
+    if name not in d:
+        raise MalformedSetPoint(f"set point without {name!r}")
+    v = d[name]
+    if type(v) not in (int, float):
+        raise MalformedSetPoint(f"set point {name} must be a number, got {type(v).__name__}")
+    x = float(v)
+    if not math.isfinite(x) or abs(x) > bound:
+        raise MalformedSetPoint(f"set point {name} = {x!r} is not finite within ±{bound:g}")
+    if non_negative and x < 0:
+        raise MalformedSetPoint(f"set point {name} = {x!r} is negative")
+    return x
 
 
 class LatestSetPoint:
