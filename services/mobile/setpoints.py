@@ -31,13 +31,6 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from services.stream import (
-    MalformedSetPoint,
-    received_map,
-    received_number,
-    received_seq,
-)
-
 from .odometry import Pose2D
 from .steering import SetPoint
 
@@ -64,7 +57,12 @@ MAX_CURVATURE = 100.0
 MAX_WHEEL_SPEED = 100.0
 """|left|, |right| bound, rad/s (the drives clamp to their own, lower, limit)."""
 MAX_TIME = 1e10
-"""Times (s, simulation clock) of a valid set point or odometry message are in 0..MAX_TIME."""
+MAX_SEQ = 2**63 - 1
+MAX_KEYS = 32
+
+
+class MalformedSetPoint(ValueError):
+    """A set point (or odometry message) that fails validation; the message names the field."""
 
 
 def setpoint_to_dict(sp: SetPoint, t_sent: float, t_capture: float | None = None) -> dict[str, Any]:
@@ -77,20 +75,45 @@ def setpoint_to_dict(sp: SetPoint, t_sent: float, t_capture: float | None = None
     return out
 
 
+def _number(d: dict[Any, Any], key: str, bound: float, *, non_negative: bool = False) -> float:
+    if key not in d:
+        raise MalformedSetPoint(f"no field {key!r}")
+    v = d[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise MalformedSetPoint(f"field {key!r} is not a number: {v!r}")
+    x = float(v)
+    if not math.isfinite(x):
+        raise MalformedSetPoint(f"field {key!r} is not finite: {x}")
+    if abs(x) > bound or (non_negative and x < 0):
+        raise MalformedSetPoint(f"field {key!r} out of range: {x}")
+    return x
+
+
+def _check_map(d: object) -> dict[Any, Any]:
+    if not isinstance(d, dict):
+        raise MalformedSetPoint(f"not a map: {type(d).__name__}")
+    if len(d) > MAX_KEYS:
+        raise MalformedSetPoint(f"{len(d)} keys (at most {MAX_KEYS})")
+    return d
+
+
 def parse_setpoint(data: object) -> SetPoint:
     """Validate one set point's event data field by field (unknown keys ignored).
 
     Raises:
         MalformedSetPoint: naming the first bad field.
     """
-    d = received_map(data)
+    d = _check_map(data)
+    seq = d.get("seq")
+    if isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq <= MAX_SEQ:
+        raise MalformedSetPoint(f"field 'seq' is not an integer in 0..2^63-1: {seq!r}")
     return SetPoint(
-        seq=received_seq(d),
-        t=received_number(d, "t", MAX_TIME, non_negative=True),
-        v=received_number(d, "v", MAX_SPEED),
-        curvature=received_number(d, "curvature", MAX_CURVATURE),
-        left=received_number(d, "left", MAX_WHEEL_SPEED),
-        right=received_number(d, "right", MAX_WHEEL_SPEED),
+        seq=seq,
+        t=_number(d, "t", MAX_TIME, non_negative=True),
+        v=_number(d, "v", MAX_SPEED),
+        curvature=_number(d, "curvature", MAX_CURVATURE),
+        left=_number(d, "left", MAX_WHEEL_SPEED),
+        right=_number(d, "right", MAX_WHEEL_SPEED),
     )
 
 
@@ -112,16 +135,16 @@ def parse_odometry(data: object) -> Odometry:
     Raises:
         MalformedSetPoint: naming the first bad field.
     """
-    d = received_map(data)
-    t = received_number(d, "t", MAX_TIME, non_negative=True)
-    pose = Pose2D(received_number(d, "x", 1e6), received_number(d, "y", 1e6), received_number(d, "theta", 1e3),
-                  received_number(d, "s", 1e9), t)
+    d = _check_map(data)
+    t = _number(d, "t", MAX_TIME, non_negative=True)
+    pose = Pose2D(_number(d, "x", 1e6), _number(d, "y", 1e6), _number(d, "theta", 1e3),
+                  _number(d, "s", 1e9), t)
     seq, stops, state = d.get("seq", -1), d.get("stops", 0), d.get("state", "")
     if isinstance(seq, bool) or not isinstance(seq, int) or isinstance(stops, bool) or not isinstance(stops, int):
         raise MalformedSetPoint("fields 'seq' and 'stops' must be integers")
     if not isinstance(state, str) or len(state) > 500:
         raise MalformedSetPoint("field 'state' must be a short string")
-    return Odometry(pose, received_number(d, "v", MAX_SPEED * 10), received_number(d, "w", 1e3), seq, stops, state)
+    return Odometry(pose, _number(d, "v", MAX_SPEED * 10), _number(d, "w", 1e3), seq, stops, state)
 
 
 class SteeringInput:
