@@ -1,13 +1,16 @@
 """Following a run in the browser: the runtime's events coalesced into frames (paper section 5).
 
 :class:`LiveFeed` is a runtime observer (:meth:`coordinator.runtime.Runtime.add_observer`). Being
-called costs the run one list append: nothing is serialised while the engine fires. A coalescing
-task (:meth:`LiveFeed.run`) wakes at most every ``period_s`` (20 ms: under one repaint of a 60 Hz
-screen and a bit), takes what piled up, and builds one *frame*: the marking's changes (the latest
-marking wins), the transitions fired since the last frame with their counts, the primitive
-actions started and ended, the learners that changed (probabilities, R̂, C, J per action), the run's
-state and the operator commands applied or refused. One JSON text per frame goes to every page.
-A run firing thousands of transitions a second thus sends ≤ 50 small frames a second.
+called costs the run a counter increment per firing (no event object is kept until the frame) and
+a list append for any other event: nothing is serialised while the engine fires. A coalescing task
+(:meth:`LiveFeed.run`) wakes at most every ``period_s`` (10 ms), takes what piled up, and builds
+one *frame*: the marking's changes (the latest marking wins), the transitions fired since the last
+frame with their counts, the primitive actions started and ended, the learners that changed
+(probabilities, R̂, C, J per action), the run's state when it changed and the operator commands
+applied or refused. One JSON text per frame goes to every page. A run firing thousands of
+transitions a second thus sends ≤ 100 small frames a second; the page draws at most once per screen
+frame (60 Hz), so the oldest firing a repaint shows is at most one screen frame and one period old
+when the page receives it (bench/console.py measures the rest).
 
 :func:`learner_view` is the learner panel's row data; :func:`result_json` one ended action.
 """
@@ -41,8 +44,10 @@ __all__ = ["DEFAULT_PERIOD_S", "FEEDBACK_CHARS", "LiveFeed", "feedback_text", "l
 
 log = logging.getLogger("petrobot.web")
 
-#: Shortest time between two frames, seconds.
-DEFAULT_PERIOD_S = 0.02
+#: Shortest time between two frames, seconds: under a 60 Hz screen frame, so that a repaint shows
+#: firings at most one screen frame and this much old; 20 ms frames gave 7-8 ms more firing-to-screen
+#: latency at the median (docs/BENCHMARKS.md, web console).
+DEFAULT_PERIOD_S = 0.01
 #: Shortest time between two looks at the nodes' health, seconds.
 HEALTH_PERIOD_S = 1.0
 #: Most action starts/ends, operator notes or pulses one frame lists (a burst beyond is counted).
@@ -119,7 +124,14 @@ class LiveFeed:
         self.runtime = runtime
         self.period_s = period_s
         self.clock = clock
-        self._events: list[RunEvent] = []
+        self._events: list[RunEvent] = []  # events other than firings, in order
+        # firings since the last frame, counted as they come: a run firing thousands of
+        # transitions a second keeps no event object alive for the console
+        self._fired: dict[str, int] = {}
+        self._t_first: float | None = None
+        self._t_last: float | None = None
+        self._fired_latched = False
+        self._pending = False
         self._wake = asyncio.Event()
         self._sinks: list[Callable[[str], None]] = []
         self._sent_marking: dict[str, int] = runtime.engine.marking.to_dict()
@@ -134,13 +146,26 @@ class LiveFeed:
         self._results: collections.deque[dict[str, Any]] = collections.deque(maxlen=40)
         self._last_frame = 0.0
         self._sent_nodes: dict[str, Any] = {}
+        self._sent_state: dict[str, Any] = {}
         self._health_at = 0.0
 
     # ------------------------------------------------------------------ the observer
     def __call__(self, event: RunEvent) -> None:
-        """Take one event (called by the runtime: one append, and a wake-up after a quiet spell)."""
-        self._events.append(event)
-        if len(self._events) == 1:
+        """Take one event (called by the runtime): a firing is counted, any other event appended;
+        the first one after a frame wakes the coalescing task."""
+        if type(event) is TransitionFired:
+            firing = event.firing
+            fired = self._fired
+            fired[firing.transition] = fired.get(firing.transition, 0) + 1
+            if self._t_first is None:
+                self._t_first = event.t_wall
+            self._t_last = event.t_wall
+            if firing.instances:
+                self._fired_latched = True
+        else:
+            self._events.append(event)
+        if not self._pending:
+            self._pending = True
             self._wake.set()
 
     # ------------------------------------------------------------------ pages
@@ -202,8 +227,11 @@ class LiveFeed:
         """Take the events piled up since the last frame and return the next frame, or ``None``
         when nothing changed."""
         events, self._events = self._events, []
+        fired, t_first, t_last, latched = self._fired, self._t_first, self._t_last, self._fired_latched
+        self._fired, self._t_first, self._t_last, self._fired_latched = {}, None, None, False
+        self._pending = False
         engine = self.runtime.engine
-        marking = engine.marking.to_dict()
+        marking = engine.counts()
         changed = {p: n for p, n in marking.items() if self._sent_marking.get(p) != n}
         changed.update({p: 0 for p in self._sent_marking if p not in marking})
         nodes = None
@@ -213,11 +241,9 @@ class LiveFeed:
             looked = self.nodes()
             if looked != self._sent_nodes:
                 nodes = self._sent_nodes = looked
-        if not events and not changed and nodes is None:
+        if not events and not fired and not changed and nodes is None:
             return None
         self._sent_marking = marking
-        fired: collections.Counter[str] = collections.Counter()
-        t_first = t_last = None
         started: list[dict[str, Any]] = []
         ended: list[dict[str, Any]] = []
         feedback: dict[str, str] = {}
@@ -225,15 +251,8 @@ class LiveFeed:
         pulses: collections.Counter[str] = collections.Counter()
         learner_tasks: dict[str, Mapping[str, Any]] = {}
         state = None
-        latched = False
         for event in events:
-            if isinstance(event, TransitionFired):
-                fired[event.firing.transition] += 1
-                if t_first is None:
-                    t_first = event.t_wall
-                t_last = event.t_wall
-                latched = latched or bool(event.firing.instances)
-            elif isinstance(event, ActionStarted):
+            if isinstance(event, ActionStarted):
                 if len(started) < MAX_LISTED:
                     started.append({"i": event.instance, "task": event.task, "place": event.place,
                                     "action": event.action, "node": event.node, "t": event.t_wall})
@@ -276,7 +295,7 @@ class LiveFeed:
         if changed:
             frame["marking"] = changed
         if fired:
-            frame["fired"] = dict(fired)
+            frame["fired"] = fired
             frame["t_fired"] = [t_first, t_last]
         if started:
             frame["started"] = started
@@ -294,8 +313,8 @@ class LiveFeed:
             frame["pulses"] = dict(pulses)
         if nodes is not None:
             frame["nodes"] = nodes
-        if state is not None or "state" not in frame:
-            frame["state"] = self.state
+        if self.state != self._sent_state:  # only when it changed: a page redraws its panels then
+            frame["state"] = self._sent_state = self.state
         return frame
 
     def _learner_of(self, task: str, state: Mapping[str, Any]) -> dict[str, Any]:
@@ -346,7 +365,7 @@ class LiveFeed:
                 self.flush()
             except Exception:
                 log.exception("building a frame failed")
-            if self._events:
+            if self._pending:
                 self._wake.set()
 
 

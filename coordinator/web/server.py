@@ -51,7 +51,7 @@ from coordinator.web.files import (
     open_net,
     save_draft,
 )
-from coordinator.web.frames import LiveFeed
+from coordinator.web.frames import DEFAULT_PERIOD_S, LiveFeed
 from coordinator.web.protocol import (
     CLOSE_POLICY,
     MAX_MESSAGE_BYTES,
@@ -112,7 +112,7 @@ class ConsoleConfig:
     port: int = 0
     bind_any: bool = False
     token: str | None = None
-    period_s: float = 0.02
+    period_s: float = DEFAULT_PERIOD_S
 
 
 class ConsoleServer:

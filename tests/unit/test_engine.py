@@ -235,6 +235,16 @@ def test_next_firing_decides_without_changing_the_marking():
     assert [f.transition for f in journal] == ["arm"]
 
 
+def test_counts_is_the_marking_as_a_plain_dict_and_a_copy():
+    engine = Engine(tick_net())
+    for _ in range(3):
+        counts = engine.counts()
+        assert counts == engine.marking.to_dict() and all(n > 0 for n in counts.values())
+        counts.clear()  # the reader's own copy: the engine's marking is untouched
+        assert engine.counts() == engine.marking.to_dict()
+        engine.advance()
+
+
 def test_a_stale_firing_is_refused():
     engine = Engine(tick_net())
     firing = engine.next_firing()

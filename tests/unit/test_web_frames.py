@@ -71,6 +71,60 @@ async def test_the_observer_only_appends_and_a_burst_of_firings_becomes_one_fram
     assert "marking" not in frame  # 1,000 firings later the cycle is back where it started: nothing changed
 
 
+async def test_the_observer_keeps_no_firing_event_alive_between_frames(tmp_path: Path):
+    """A run firing thousands of transitions a second would otherwise keep as many event objects
+    alive until the next frame: a firing is counted when it comes, then let go."""
+    import gc
+
+    def alive() -> int:
+        return sum(type(o) is TransitionFired for o in gc.get_objects())
+
+    with Journal(tmp_path / "j.sqlite") as journal:
+        runtime = Runtime(loads_net(CYCLE), FakeClient(), journal)
+        feed = LiveFeed(runtime)
+        sent = frames_of(feed)
+        engine = runtime.engine
+        engine.start()
+        before = alive()
+        for _ in range(500):
+            firing = engine.next_firing()
+            assert firing is not None
+            engine.apply(firing)
+            feed(TransitionFired(runtime.run_id, firing))
+        assert alive() == before
+        feed.flush()
+    assert sent[0]["fired"] == {"there": 250, "back": 250}
+
+
+async def test_the_runs_state_travels_in_a_frame_only_when_it_changed(tmp_path: Path):
+    with Journal(tmp_path / "j.sqlite") as journal:
+        runtime = Runtime(loads_net(CYCLE), FakeClient(), journal)
+        feed = LiveFeed(runtime)
+        sent = frames_of(feed)
+        engine = runtime.engine
+        engine.start()
+
+        def fire() -> None:
+            firing = engine.next_firing()
+            assert firing is not None
+            engine.apply(firing)
+            feed(TransitionFired(runtime.run_id, firing))
+
+        feed(RunStateChanged(runtime.run_id, "started", "", detail=()))
+        fire()
+        feed.flush()
+        fire()
+        feed.flush()
+        feed(RunStateChanged(runtime.run_id, "waiting", "waiting for ext:tick", detail=("ext:tick",)))
+        feed.flush()
+        fire()  # firing again after a wait: the page is told the run is running
+        feed.flush()
+    assert sent[0]["state"]["state"] == "started"
+    assert "state" not in sent[1]  # the page redraws its panels only when something there changed
+    assert sent[2]["state"]["state"] == "waiting"
+    assert sent[3]["state"] == {"state": "running", "reason": "", "detail": []}
+
+
 async def test_a_frame_carries_only_the_places_whose_tokens_changed(tmp_path: Path):
     with Journal(tmp_path / "j.sqlite") as journal:
         runtime = Runtime(loads_net(CYCLE), FakeClient(), journal)
