@@ -159,3 +159,28 @@ def test_the_replay_of_a_finished_run_scrubs_back_and_forth_and_jumps_to_errors(
     page.screenshot("replay-error")
     page.page.click("#rp-end")
     assert page.tokens("done") == 3
+
+
+def test_the_png_export_draws_the_net_with_its_tokens(page: Page, petrobot: Any, tmp_path: Path):
+    import cv2
+
+    console = petrobot("console", str(ROOT / "nets" / "catch.toml"), "--listen", "0", "--root", str(ROOT))
+    page.page.goto(console.url())
+    page.wait("document.body.dataset.ready === '1'", what="the catching net to open")
+    page.page.click("#export")
+    with page.page.expect_download() as download:
+        page.page.click("#exp-png")
+    path = tmp_path / "catch.png"
+    download.value.save_as(path)
+    image = cv2.imread(str(path))
+    assert image is not None, "the export is not a PNG"
+    # where cytoscape's export (2 px per model unit, the drawing's bounding box) puts runs_remaining
+    at = page.eval("() => { const cy = window.petrobot.graph.cy; const bb = cy.mutableElements().boundingBox();"
+                   " const p = cy.getElementById('runs_remaining').position();"
+                   " return [(p.x - bb.x1) * 2, (p.y - bb.y1) * 2, bb.w * 2, bb.h * 2]; }")
+    assert abs(image.shape[1] - at[2]) <= 2 and abs(image.shape[0] - at[3]) <= 2
+    x, y = round(at[0]), round(at[1])
+    # its 4 tokens are dots 7 model units from the place's centre on both axes; the centre is white
+    for dx, dy in ((-7, -7), (7, -7), (-7, 7), (7, 7)):
+        assert image[y + 2 * dy, x + 2 * dx].max() < 80, f"no token dot at {(dx, dy)} in the exported PNG"
+    assert image[y, x].min() > 150

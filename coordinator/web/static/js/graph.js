@@ -1,5 +1,10 @@
 // The drawing: cytoscape.js elements made from the draft, tokens as dots, flashes of fired transitions,
 // badges of running actions. The draft stays the one source of truth; sync() makes the drawing follow it.
+//
+// Tokens live on a layer of small HTML elements above cytoscape's canvas, one per marked place, moved
+// with the viewport by one CSS transform: a run that moves tokens hundreds of times a second changes
+// a few small elements per screen frame, and cytoscape's whole-canvas redraw (and the canvas copy the
+// browser makes after it) happens only when the drawing itself changes.
 
 import { arcKey, hiddenSet } from "./net.js";
 
@@ -48,9 +53,7 @@ const STYLE = [
                                "text-background-padding": 1 } },
   { selector: "node.place", style: {
       shape: "ellipse", width: PLACE_D, height: PLACE_D, "background-color": "#fff", "border-width": 1.6,
-      "border-color": "#555", label: "data(label)", "text-valign": "bottom", "text-margin-y": 4,
-      "background-fit": "none", "background-clip": "none", "background-width": 44, "background-height": 44 } },
-  { selector: "node.place[img]", style: { "background-image": "data(img)" } },
+      "border-color": "#555", label: "data(label)", "text-valign": "bottom", "text-margin-y": 4 } },
   { selector: "node.place.resource", style: { "background-color": "#d6e6ff", "border-color": "#2f5fa7", "border-width": 2 } },
   { selector: "node.place.primitive_task", style: { "background-color": "#fff0a8", "border-color": "#9a6b00",
                                                     "border-width": 5, "border-style": "double" } },
@@ -97,6 +100,7 @@ export class Graph {
     this.showHidden = true;
     this.labelMode = "events";   // like the paper's Fig. 1: transitions named by their events
     this.tokens = new Map();      // place id -> shown count
+    this.tokenLayer = new TokenLayer(this.cy, container);
     this.flashTimer = null;
     this.flashing = new Set();
     this.badges = new Map();      // place id -> text
@@ -188,6 +192,7 @@ export class Graph {
   applyHidden() {
     const show = this.showHidden;
     this.cy.elements(".hidden-branch").style("display", show ? "element" : "none");
+    this.tokenLayer.refresh();
     this.cy.nodes(".badge").forEach((b) => {
       const place = this.cy.getElementById(b.data("place"));
       b.style("display", place.nonempty() && place.style("display") !== "none" ? "element" : "none");
@@ -198,33 +203,30 @@ export class Graph {
 
   /** Show a marking: `changes` maps place ids to counts; `full` replaces every count. */
   setMarking(changes, full = false) {
-    const cy = this.cy;
-    cy.batch(() => {
-      if (full) {
-        this.tokens.clear();
-        changes = { ...changes };
-        cy.nodes(".place").forEach((n) => { if (!(n.id() in changes)) changes[n.id()] = 0; });
-      }
-      for (const [id, n] of Object.entries(changes)) {
-        if (this.tokens.get(id) === n) continue;
-        this.tokens.set(id, n);
-        const el = cy.getElementById(id);
-        if (el.empty()) continue;
-        if (n > 0) el.data("img", tokenImage(n)); else el.removeData("img");
-      }
-    });
+    if (full) {
+      changes = { ...changes };
+      this.cy.nodes(".place").forEach((n) => { if (!(n.id() in changes)) changes[n.id()] = 0; });
+      for (const id of this.tokens.keys()) if (!(id in changes)) changes[id] = 0;
+    }
+    for (const [id, n] of Object.entries(changes)) {
+      if (this.tokens.get(id) === n) continue;
+      if (n > 0) this.tokens.set(id, n); else this.tokens.delete(id);
+      this.tokenLayer.show(id, n);
+    }
   }
 
   /** Flash the given transitions for a moment (coalesced: one timer). */
   flash(ids) {
     const cy = this.cy;
-    cy.batch(() => {
-      for (const id of ids) {
-        if (this.flashing.has(id)) continue;  // still lit from an earlier frame
-        this.flashing.add(id);
-        cy.getElementById(id).addClass("fired");
-      }
-    });
+    const lit = ids.filter((id) => !this.flashing.has(id));  // the others are still lit from an earlier frame
+    if (lit.length) {
+      cy.batch(() => {
+        for (const id of lit) {
+          this.flashing.add(id);
+          cy.getElementById(id).addClass("fired");
+        }
+      });
+    }
     clearTimeout(this.flashTimer);
     this.flashTimer = setTimeout(() => {
       cy.batch(() => { for (const id of this.flashing) cy.getElementById(id).removeClass("fired"); });
@@ -291,7 +293,91 @@ export class Graph {
     });
   }
 
-  png() { return this.cy.png({ full: true, scale: 2, bg: "#ffffff" }); }
+  /** The whole drawing as a PNG data URL (2 px per model unit), tokens included: cytoscape draws
+   *  the net, the tokens are drawn over it where cytoscape's own export put their places. */
+  async png() {
+    const cy = this.cy;
+    const scale = 2 * (window.devicePixelRatio || 1);   // cytoscape's png({scale: 2}) on this screen
+    const bb = cy.mutableElements().boundingBox();       // the region cytoscape's full export draws
+    const base = await loadImage(cy.png({ full: true, scale: 2, bg: "#ffffff" }));
+    const canvas = document.createElement("canvas");
+    canvas.width = base.width;
+    canvas.height = base.height;
+    const ctx = canvas.getContext("2d");
+    ctx.drawImage(base, 0, 0);
+    for (const [id, n] of this.tokens) {
+      const node = cy.getElementById(id);
+      if (node.empty() || !node.visible()) continue;
+      const p = node.position();
+      const img = await loadImage(tokenImage(n));
+      ctx.globalAlpha = Number(node.style("opacity")) || 1;   // faded with a hidden branch's place
+      ctx.drawImage(img, (p.x - 22 - bb.x1) * scale, (p.y - 22 - bb.y1) * scale, 44 * scale, 44 * scale);
+    }
+    return canvas.toDataURL("image/png");
+  }
+}
+
+function loadImage(src) {
+  return new Promise((resolve, reject) => {
+    const img = new Image();
+    img.onload = () => resolve(img);
+    img.onerror = () => reject(new Error("an image of the drawing did not load"));
+    img.src = src;
+  });
+}
+
+/** Tokens as small HTML elements over cytoscape's canvas: one per marked place, placed in model
+ *  coordinates on a plane that one CSS transform keeps on cytoscape's pan and zoom. */
+class TokenLayer {
+  constructor(cy, container) {
+    this.cy = cy;
+    this.layer = document.createElement("div");
+    this.layer.className = "token-layer";
+    this.plane = document.createElement("div");
+    this.plane.className = "token-plane";
+    this.layer.append(this.plane);
+    container.after(this.layer);
+    this.dots = new Map();   // place id -> element
+    cy.on("viewport resize", () => this.follow());
+    cy.on("position", "node.place", (ev) => this.place(ev.target.id()));
+    cy.on("add remove data", "node.place", (ev) => this.place(ev.target.id()));
+    cy.on("style", "node.place", (ev) => this.place(ev.target.id()));
+    this.follow();
+  }
+
+  follow() {
+    const pan = this.cy.pan(), zoom = this.cy.zoom();
+    this.plane.style.transform = `translate(${pan.x}px, ${pan.y}px) scale(${zoom})`;
+  }
+
+  /** Show ``n`` tokens on place ``id`` (0: none). */
+  show(id, n) {
+    let dot = this.dots.get(id);
+    if (!n) { if (dot) { dot.remove(); this.dots.delete(id); } return; }
+    if (!dot) {
+      dot = document.createElement("div");
+      dot.className = "tokens";
+      dot.dataset.place = id;
+      this.plane.append(dot);
+      this.dots.set(id, dot);
+      this.place(id);
+    }
+    dot.style.backgroundImage = `url("${tokenImage(n)}")`;
+  }
+
+  /** Put a place's tokens where the place is drawn (hidden with it, faded with it). */
+  place(id) {
+    const dot = this.dots.get(id);
+    if (!dot) return;
+    const node = this.cy.getElementById(id);
+    if (node.empty() || node.removed() || node.style("display") === "none") { dot.style.display = "none"; return; }
+    const p = node.position();
+    dot.style.display = "";
+    dot.style.transform = `translate(${p.x - 22}px, ${p.y - 22}px)`;
+    dot.style.opacity = node.style("opacity");
+  }
+
+  refresh() { for (const id of this.dots.keys()) this.place(id); this.follow(); }
 }
 
 function pos(item) {

@@ -1,12 +1,13 @@
-// Follow and steer a live run (paper section 5): frames from the server are applied once per screen
-// repaint (requestAnimationFrame), the latest marking winning; fired transitions flash; running actions
-// and latched events sit beside their places; control places take token insertions and removals.
+// Follow and steer a live run (paper section 5): frames from the server are applied as they arrive and
+// drawn at most once per screen repaint, the latest marking winning; fired transitions flash; running
+// actions and latched events sit beside their places; control places take token insertions and removals.
 
 import { el, fmt, seconds } from "./ui.js";
 
 const END_STATES = new Set(["completed", "stuck", "waiting_for_operator", "aborted", "deadline", "interrupted"]);
 
-// what the page measured, for bench/console.py: latency from firing (server clock) to the repaint showing it
+// what the page measured, for bench/console.py: latency from firing (server clock) to the end of the
+// paint that shows it, frames received and repaints showing firings
 const stats = { frames: 0, paints: 0, latencies: new Float64Array(1 << 16), n: 0 };
 window.petrobotStats = {
   get frames() { return stats.frames; }, get paints() { return stats.paints; },
@@ -21,8 +22,6 @@ export function initLive(app) {
     offset: 0, ended: false, health: null,
   };
   app.live = live;
-  let queue = [];
-  let scheduled = false;
   let lastPanel = 0;
 
   // the server's node → {connected, heartbeat_rtt_s, in_flight}, as the health table reads it
@@ -53,67 +52,84 @@ export function initLive(app) {
     if (app.mode === "live") paint(true);
   }
 
-  function onFrame(frame) {
-    stats.frames++;
-    queue.push(frame);
-    if (!scheduled) { scheduled = true; requestAnimationFrame(apply); }
+  // Frames are applied as they arrive: tokens are small page elements and the page is drawn at most
+  // once per screen frame, so the marking changes of several frames meet in one repaint, and a frame
+  // that arrives just before a screen frame is drawn in it. The latency is measured after the paint:
+  // a message posted from the frame's requestAnimationFrame callback runs once the page has been
+  // styled, laid out and painted.
+  let oldest = null;       // server time of the oldest firing applied but not yet painted
+  let measuring = false;
+  const afterPaint = new MessageChannel();
+  afterPaint.port1.onmessage = (ev) => {
+    stats.latencies[stats.n % stats.latencies.length] = (performance.timeOrigin + performance.now()) / 1000 - ev.data;
+    stats.n++;
+  };
+  function measureNextPaint() {
+    if (measuring) return;
+    measuring = true;
+    requestAnimationFrame(() => {
+      measuring = false;
+      stats.paints++;
+      const shown = oldest;
+      oldest = null;
+      if (shown !== null) afterPaint.port2.postMessage(shown);
+    });
   }
+  let panelsDue = false;
 
-  // one repaint for every frame that arrived since the last one
-  function apply() {
-    scheduled = false;
-    const frames = queue;
-    queue = [];
-    if (!frames.length) return;
-    const changed = {};
-    const fired = new Set();
-    let oldest = null;
-    for (const f of frames) {
-      live.offset = f.t - Date.now() / 1000;
-      if (f.marking) Object.assign(changed, f.marking);
-      if (f.fired) { for (const t of Object.keys(f.fired)) fired.add(t); if (oldest === null) oldest = f.t_fired[0]; }
-      for (const s of f.started || []) live.running.set(s.i, s);
-      for (const [i, text] of Object.entries(f.feedback || {})) { const r = live.running.get(i); if (r) r.feedback = text; }
-      for (const r of f.ended || []) {
-        live.running.delete(r.i);
-        live.results.push(r);
-        if (r.status === "error") live.errors.push(r);
-      }
-      if (f.latched) live.latched = f.latched;
-      if (f.learner) Object.assign(live.learner, f.learner);
-      for (const o of f.operator || []) live.operator.push(o);
-      if (f.pulses) for (const [e, n] of Object.entries(f.pulses)) live.pulses[e] = (live.pulses[e] || 0) + n;
-      if (f.state) live.state = f.state;
-      if (f.nodes) live.health = toHealth(f.nodes);
-      live.firings = f.firings;
-      live.paused = f.paused;
+  function onFrame(f) {
+    stats.frames++;
+    live.offset = f.t - Date.now() / 1000;
+    if (f.marking) for (const [p, n] of Object.entries(f.marking)) { if (n) live.marking[p] = n; else delete live.marking[p]; }
+    for (const s of f.started || []) live.running.set(s.i, s);
+    for (const [i, text] of Object.entries(f.feedback || {})) { const r = live.running.get(i); if (r) r.feedback = text; }
+    for (const r of f.ended || []) {
+      live.running.delete(r.i);
+      live.results.push(r);
+      if (r.status === "error") live.errors.push(r);
     }
+    if (f.latched) live.latched = f.latched;
+    if (f.learner) Object.assign(live.learner, f.learner);
+    for (const o of f.operator || []) live.operator.push(o);
+    if (f.pulses) for (const [e, n] of Object.entries(f.pulses)) live.pulses[e] = (live.pulses[e] || 0) + n;
+    if (f.state) live.state = f.state;
+    if (f.nodes) live.health = toHealth(f.nodes);
+    live.firings = f.firings;
+    live.paused = f.paused;
     if (live.results.length > 40) live.results.splice(0, live.results.length - 40);
     if (live.errors.length > 20) live.errors.splice(0, live.errors.length - 20);
     if (live.operator.length > 20) live.operator.splice(0, live.operator.length - 20);
-    for (const [p, n] of Object.entries(changed)) { if (n) live.marking[p] = n; else delete live.marking[p]; }
     live.ended = END_STATES.has(live.state.state);
     if (app.mode === "live") {
-      app.graph.setMarking(changed);
-      if (fired.size) app.graph.flash(fired);
-      // badges and panels only when actions started, ended or latched: a run firing thousands of
-      // transitions a second repaints tokens and flashes, not the whole drawing's decorations
-      const detail = frames.some((f) => f.started || f.ended || f.latched || f.feedback);
-      if (detail) paintDetails(true); else header();
-      const fresh = frames.find((f) => f.learner || f.operator || f.state || f.nodes);
-      if (fresh) renderPanelsSoon(true);
-      if (oldest !== null) {
-        // measured after this repaint's work: the drawing below shows these firings
-        const lat = (performance.timeOrigin + performance.now()) / 1000 - oldest;
-        stats.latencies[stats.n % stats.latencies.length] = lat;
-        stats.n++;
+      if (f.marking) app.graph.setMarking(f.marking);
+      if (f.fired) {
+        app.graph.flash(Object.keys(f.fired));
+        if (oldest === null) oldest = f.t_fired[0];
+        measureNextPaint();
       }
-      stats.paints++;
+      // badges only when actions started, ended or latched: a run firing thousands of transitions a
+      // second redraws tokens and flashes, not the whole drawing's decorations
+      if (f.started || f.ended || f.latched || f.feedback) app.graph.setBadges(badges());
+      if (f.started || f.ended || f.learner || f.operator || f.state || f.nodes || f.pulses) panelsDue = true;
+      scheduleText();
     }
-    for (const f of frames) for (const o of f.operator || []) {
+    for (const o of f.operator || []) {
       const what = o.command === "invalid" ? `"${o.text}"` : [o.command, o.place, o.place ? o.count : null].filter((x) => x !== null).join(" ");
       if (!o.ok) app.message(`operator ${what} refused: ${o.reason}`, "bad");
     }
+  }
+
+  // the header and the side panels: DOM text, brought up to date once per screen frame at most
+  let textScheduled = false;
+  function scheduleText() {
+    if (textScheduled) return;
+    textScheduled = true;
+    requestAnimationFrame(() => {
+      textScheduled = false;
+      if (app.mode !== "live") return;
+      header();
+      if (panelsDue) { panelsDue = false; renderPanelsSoon(true); }
+    });
   }
 
   function badges() {
@@ -160,16 +176,30 @@ export function initLive(app) {
   }, 250);
 
   let lastButtons = "";
+  let countShownAt = 0;
+  let countTimer = null;
+  // the page is restyled only where a text really changed
+  function setText(node, text) { if (node.textContent !== text) node.textContent = text; }
   function header() {
     const s = live.state.state || "";
     const state = document.getElementById("run-state");
     const shown = s === "started" || s === "resumed" ? "running" : s;
-    state.textContent = shown || " ";
-    state.className = "run-state " + (END_STATES.has(s) ? (s === "completed" ? "ended" : "error") : shown);
-    document.getElementById("firings").textContent = `${live.firings} firings`;
+    setText(state, shown || " ");
+    const cls = "run-state " + (END_STATES.has(s) ? (s === "completed" ? "ended" : "error") : shown);
+    if (state.className !== cls) state.className = cls;
+    // the firing count changes with every frame: shown ten times a second, and its last value always
+    const now = performance.now();
+    clearTimeout(countTimer);
+    if (now - countShownAt >= 100 || live.paused || live.ended) {
+      countShownAt = now;
+      setText(document.getElementById("firings"), `${live.firings} firings`);
+    } else {
+      countTimer = setTimeout(() => { if (app.mode === "live") header(); }, 100 - (now - countShownAt));
+    }
     const waiting = document.getElementById("waiting");
-    waiting.textContent = live.state.reason ? live.state.reason : "";
-    waiting.title = (live.state.detail || []).join("\n");
+    setText(waiting, live.state.reason ? live.state.reason : "");
+    const detail = (live.state.detail || []).join("\n");
+    if (waiting.title !== detail) waiting.title = detail;
     const control = app.control && !live.ended;
     const key = `${control}|${live.paused}|${live.ended}`;
     if (key === lastButtons) return;

@@ -243,7 +243,10 @@ document.getElementById("export").addEventListener("click", () => {
       const draft = app.currentDraft();
       if (!draft) return;
       const name = draft.net.name || "net";
-      if (fmt === "png") { download(app.graph.png(), `${name}.png`); return; }
+      if (fmt === "png") {
+        try { download(await app.graph.png(), `${name}.png`); } catch (e) { app.message(`export: ${e.message || e}`, "bad"); }
+        return;
+      }
       try {
         const text = await api(`/api/export?format=${fmt}&hidden=${app.graph.showHidden ? 1 : 0}`, token,
                                { method: "POST", body: draft, text: true });
