@@ -7,10 +7,11 @@ of rings (``--rings`` R rings of ``--length`` L plain transitions: no node, no p
 asyncio runtime with a journal, and serves the web console attached to it; this process drives
 Debian's chromium (headless, through Playwright) on the console's page.
 
-* **latency**: the page records, after each repaint, how long ago (server wall clock) the oldest
-  firing it shows was fired (``window.petrobotStats``); p50 and p99 over every repaint of the
-  attached phases. Frames are coalesced server-side (≤ one per 20 ms) and applied at most once per
-  screen frame (``requestAnimationFrame``).
+* **latency**: the page records, once each repaint showing new firings has been painted (a message
+  posted from its ``requestAnimationFrame`` callback runs after the page's style, layout and paint),
+  how long ago (server wall clock) the *oldest* firing it shows was fired (``window.petrobotStats``);
+  p50 and p99 over every such repaint of the attached phases. Frames are coalesced server-side
+  (≤ one per ``--period``, 10 ms), applied as they arrive, and drawn at most once per screen frame.
 * **throughput ratio**: the run alternates phases of ``--phase`` seconds with the console's observer
   removed from the runtime and added back (the page stays connected); the ratio is the firing rate
   of the attached phases over that of the detached ones, in the same run (also the median over
@@ -18,11 +19,16 @@ Debian's chromium (headless, through Playwright) on the console's page.
   because other processes on a shared machine move the rate by more than the console does).
 * **memory**: the page's JavaScript heap after a forced garbage collection, every ``--sample``
   seconds, and the number of DOM nodes, from the start to the end of the run (``--minutes``).
+* **feed cost** (no browser): the same rings in this process with a live feed whose frames go
+  nowhere, attached and detached every ``--phase`` s (``--feed-pairs`` pairs); the process's CPU time
+  per firing in each kind of phase, whose difference is the console's own cost on the run
+  (``feed_cpu_cost``, a fraction), free of what other processes do to the wall-clock rate.
 * **open 1,000 nodes**: ``petrobot console`` serves a net of 500 places and 500 transitions without
   positions; the time from navigation to the page being ready (laid out, drawn, two frames later),
   then to a click on a transition showing it in the inspector.
 
-Usage: python bench/console.py [--minutes M] [--phase S] [--rings R] [--length L] [--json]
+Usage: python bench/console.py [--minutes M] [--phase S] [--rings R] [--length L] [--period S]
+       [--skip-open] [--skip-run] [--feed-pairs N | --feed-only] [--json]
 (needs /usr/bin/chromium or $PETROBOT_CHROMIUM, and the playwright package).
 """
 
@@ -137,6 +143,48 @@ async def serve(args: argparse.Namespace) -> None:
         await asyncio.wait_for(run, TIMEOUT_S)
         await server.close("the bench is over")
     print(json.dumps({"phases": phases}), flush=True)
+
+
+async def feed_cost(args: argparse.Namespace) -> dict[str, Any]:
+    """The console's own cost on the engine, without a browser: the rings run in this process with
+    a live feed whose frames go nowhere, the observer removed and added back every ``--phase``
+    seconds; the process's CPU time per firing of each kind of phase (journal thread included), so
+    that other processes on the machine do not move it."""
+    from coordinator.journal import Journal
+    from coordinator.netfile import load_any
+    from coordinator.operator import Command, OperatorCommand
+    from coordinator.runtime import Runtime
+    from coordinator.web.frames import LiveFeed
+
+    with tempfile.TemporaryDirectory() as tmp:
+        net_path = Path(tmp) / "rings.toml"
+        net_path.write_text(ring_toml(args.rings, args.length), encoding="utf-8")
+        loop = asyncio.get_running_loop()
+        with Journal(Path(tmp) / "bench.sqlite") as journal:
+            runtime = Runtime(load_any(net_path), _NoNodes(), journal)
+            feed = LiveFeed(runtime, period_s=args.period)
+            frames: list[int] = []
+            feed.subscribe(lambda text: frames.append(len(text)))
+            framing = loop.create_task(feed.run())
+            run = loop.create_task(runtime.run())
+            await asyncio.sleep(0.5)
+            cpu_us: dict[bool, list[float]] = {True: [], False: []}
+            for k in range(2 * args.feed_pairs):
+                attached = k % 2 == 1
+                if attached:
+                    runtime.add_observer(feed)
+                else:
+                    runtime.remove_observer(feed)
+                f0, c0 = runtime.engine.fired, time.process_time()
+                await asyncio.sleep(args.phase)
+                cpu_us[attached].append((time.process_time() - c0) / max(1, runtime.engine.fired - f0) * 1e6)
+            runtime.command(OperatorCommand(Command.ABORT))
+            await asyncio.wait_for(run, TIMEOUT_S)
+            framing.cancel()
+    detached, attached_us = statistics.median(cpu_us[False]), statistics.median(cpu_us[True])
+    return {"feed_cpu_us_per_firing_detached": round(detached, 2), "feed_cpu_us_per_firing_attached": round(attached_us, 2),
+            "feed_cpu_cost": round((attached_us - detached) / detached, 4), "feed_frames": len(frames),
+            "feed_frame_bytes_mean": round(statistics.mean(frames)) if frames else None}
 
 
 # ---------------------------------------------------------------------- the browser side
@@ -264,24 +312,35 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rings", type=int, default=4, help="rings of the run's net")
     ap.add_argument("--length", type=int, default=10, help="transitions per ring")
     ap.add_argument("--open-pairs", type=int, default=500, help="places (and transitions) of the net opened")
-    ap.add_argument("--period", type=float, default=0.02, help="shortest time between two live frames, seconds")
+    ap.add_argument("--period", type=float, default=0.01, help="shortest time between two live frames, seconds (the console's default)")
     ap.add_argument("--null", action="store_true",
                     help="never detach the console (the ratio then shows the noise floor of the machine)")
     ap.add_argument("--skip-run", action="store_true", help="only measure opening the large net")
+    ap.add_argument("--skip-open", action="store_true", help="do not measure opening the large net")
+    ap.add_argument("--feed-pairs", type=int, default=8,
+                    help="detached/attached phase pairs of the browser-less feed cost measurement (0: skip it)")
+    ap.add_argument("--feed-only", action="store_true", help="only measure the feed's cost, no browser")
     ap.add_argument("--json", action="store_true", help="print the results as one JSON object")
     ap.add_argument("--serve", metavar="DIR", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.serve:
         asyncio.run(serve(args))
         return 0
-    from playwright.sync_api import sync_playwright
-
     result: dict[str, Any] = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                               "load_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count()}
+    if args.feed_pairs > 0:
+        result.update(asyncio.run(feed_cost(args)))
+    if args.feed_only:
+        result["load_1min_after"] = round(os.getloadavg()[0], 2)
+        print(json.dumps(result, indent=1) if args.json else result)
+        return 0
+    from playwright.sync_api import sync_playwright
+
     with sync_playwright() as p:
         browser = p.chromium.launch(executable_path=chromium(), headless=True, args=CHROMIUM_ARGS)
         try:
-            result.update(measure_open(browser, args.open_pairs))
+            if not args.skip_open:
+                result.update(measure_open(browser, args.open_pairs))
             if not args.skip_run:
                 result.update(measure_run(browser, args))
         finally:
