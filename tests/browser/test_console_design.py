@@ -184,3 +184,33 @@ def test_the_png_export_draws_the_net_with_its_tokens(page: Page, petrobot: Any,
     for dx, dy in ((-7, -7), (7, -7), (-7, 7), (7, 7)):
         assert image[y + 2 * dy, x + 2 * dx].max() < 80, f"no token dot at {(dx, dy)} in the exported PNG"
     assert image[y, x].min() > 150
+
+
+def test_tokens_stay_on_their_place_when_it_is_dragged_and_the_view_zooms(page: Page, petrobot: Any):
+    console = petrobot("console", str(ROOT / "nets" / "catch.toml"), "--listen", "0", "--root", str(ROOT))
+    page.page.goto(console.url())
+    page.wait("document.body.dataset.ready === '1'", what="the catching net to open")
+
+    def token_centre() -> tuple[float, float]:
+        box = page.page.locator(".token-layer .tokens[data-place='runs_remaining']").bounding_box()
+        assert box is not None, "no tokens drawn on runs_remaining"
+        return box["x"] + box["width"] / 2, box["y"] + box["height"] / 2
+
+    def on_place() -> None:
+        (tx, ty), (px, py) = token_centre(), page.node_xy("runs_remaining")
+        assert abs(tx - px) < 1.5 and abs(ty - py) < 1.5, f"tokens at {(tx, ty)}, place at {(px, py)}"
+
+    on_place()
+    x, y = page.node_xy("runs_remaining")
+    page.page.mouse.move(x, y)
+    page.page.mouse.down()
+    page.page.mouse.move(x + 60, y + 40, steps=8)
+    page.page.mouse.up()
+    assert abs(page.node_xy("runs_remaining")[0] - (x + 60)) < 2  # the place moved
+    on_place()
+    # zoom in around a point away from the place (as the mouse wheel does), then pan
+    page.eval("() => { const cy = window.petrobot.graph.cy;"
+              " cy.zoom({ level: cy.zoom() * 1.7, renderedPosition: { x: 300, y: 250 } }); cy.panBy({ x: -40, y: 25 }); }")
+    on_place()
+    page.page.click("#toggle-hidden")  # hide the error branches: their places' tokens go with them
+    assert page.page.locator(".token-layer .tokens[data-place='home_retries_left']").is_hidden()
