@@ -101,7 +101,10 @@ export function initLive(app) {
     if (live.operator.length > 20) live.operator.splice(0, live.operator.length - 20);
     live.ended = END_STATES.has(live.state.state);
     if (app.mode === "live") {
-      if (f.marking) app.graph.setMarking(f.marking);
+      if (f.marking) {
+        app.graph.setMarking(f.marking);
+        if (popPlace !== null && popPlace in f.marking) updatePop();  // the steering popover's count
+      }
       if (f.fired) {
         app.graph.flash(Object.keys(f.fired));
         if (oldest === null) oldest = f.t_fired[0];
@@ -307,6 +310,7 @@ export function initLive(app) {
   });
   app.graph.cy.on("tap", (ev) => { if (ev.target === app.graph.cy) hidePop(); });
   app.graph.cy.on("viewport", hidePop);
+  document.addEventListener("keydown", (ev) => { if (ev.key === "Escape" && !pop.hidden) hidePop(); });
   function hidePop() { pop.hidden = true; popPlace = null; }
   function updatePop() {
     if (!popPlace) return;
