@@ -34,19 +34,18 @@ action learned (from the per-action estimates).
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import math
 import os
 import sys
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from bench.stdio import stdout_to_stderr
 
 from bench.catching import InProcessDrives, rim_position
 from coordinator.learning import Learner, LearningAutomaton
@@ -158,25 +157,11 @@ def frames_needed(action: str) -> int:
     return AVERAGE_K if action == "locate_average" else 1
 
 
-@contextlib.contextmanager
-def _stdout_to_stderr() -> Iterator[None]:
-    """Send file descriptor 1 to stderr meanwhile (pybullet prints to it), keeping ``--json`` clean."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    os.dup2(2, 1)
-    try:
-        yield
-    finally:
-        sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(saved)
-
-
 class _Rig:
     """World, camera, calibration, predictor, robot and drives of one noise level."""
 
     def __init__(self, level: str, seed: int, catch: bool) -> None:
-        with _stdout_to_stderr():
+        with stdout_to_stderr():
             self.world = World()
             self.cw = CatchingWorld(self.world, robot=catch)
         cam = overhead_camera()

@@ -54,18 +54,17 @@ frames without track) and ``ms`` per call.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import math
 import os
 import sys
 import time
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from bench.stdio import stdout_to_stderr
 
 from services.mobile.lines import DETECTORS, make_detector
 from services.mobile.marks import EndMarkDetector
@@ -77,20 +76,6 @@ from sim.mobile.lockstep import TaskSequence
 from sim.mobile.sensors import AnalyticCamera, ImageNoise, robot_camera
 from sim.mobile.world import DEFAULT_DT, MobileWorld
 from sim.world import World
-
-
-@contextlib.contextmanager
-def _stdout_to_stderr() -> Iterator[None]:
-    """Send file descriptor 1 to stderr meanwhile (pybullet prints to it), keeping ``--json`` clean."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    os.dup2(2, 1)
-    try:
-        yield
-    finally:
-        sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(saved)
 
 
 def _summary(results: list[RunResult], build_s: float) -> dict[str, Any]:
@@ -302,7 +287,7 @@ def main(argv: list[str] | None = None) -> int:
         return sequences[-1]
 
     for k, course in enumerate(courses):
-        with _stdout_to_stderr():
+        with stdout_to_stderr():
             r = run_course(
                 course, params=params, mission_factory=None if args.mission == "phase1" else task_sequence, camera=args.camera, noise=CONDITIONS[args.noise],
                 seed=args.seed * 7919 + k, latency=args.latency,
@@ -333,7 +318,7 @@ def main(argv: list[str] | None = None) -> int:
         out["follow_dropouts"] = sum(x.dropouts for x in follows)
         out["follow_cpu_ms_per_frame"] = 1000.0 * sum(x.cpu_s for x in follows) / frames if frames else math.nan
     if args.timing:
-        with _stdout_to_stderr():
+        with stdout_to_stderr():
             out["timing_ms"] = _timing(sorted(DETECTORS))
     if args.json:
         print(json.dumps(out, indent=1))

@@ -41,20 +41,19 @@ courses in the first and last 20, mean Ĵ of a uniform choice against the learne
 from __future__ import annotations
 
 import argparse
-import contextlib
 import dataclasses
 import json
 import math
 import os
 import sys
 import time
-from collections.abc import Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from bench.stdio import stdout_to_stderr
 
 from coordinator.learning import Learner, LearningAutomaton
 from coordinator.netfile import load_net
@@ -225,7 +224,7 @@ def run_condition(condition: str, courses: int, seed: int, *, cost: str = "aprio
         course = random_course(seed * 1_000_003 + k)
         first = auto.choose()
         hook = _Segments(course, k, auto, cost, spec_m, out, first)
-        with _stdout_to_stderr():
+        with stdout_to_stderr():
             res = run_course(course, params=MissionParams(detector=detector_of(first)), noise=noise,
                              seed=seed * 7919 + k, on_tick=hook)
         hook.finish(res.reason)
@@ -234,20 +233,6 @@ def run_condition(condition: str, courses: int, seed: int, *, cost: str = "aprio
     out.wall_s = time.perf_counter() - wall0
     out.cpu_s = time.process_time() - cpu0
     return out
-
-
-@contextlib.contextmanager
-def _stdout_to_stderr() -> Iterator[None]:
-    """Send file descriptor 1 to stderr meanwhile (pybullet prints to it), keeping ``--json`` clean."""
-    sys.stdout.flush()
-    saved = os.dup(1)
-    os.dup2(2, 1)
-    try:
-        yield
-    finally:
-        sys.stdout.flush()
-        os.dup2(saved, 1)
-        os.close(saved)
 
 
 def summarise(res: ConditionResult) -> dict[str, Any]:
