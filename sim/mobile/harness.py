@@ -28,7 +28,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from enum import Enum
 from typing import Any
 
@@ -50,6 +50,7 @@ from services.mobile.steering import (
     SpeedLimits,
     SteeringController,
 )
+from services.mobile.tasks import TaskParams
 
 from ..world import ClockMode, World
 from .course import Course
@@ -68,6 +69,9 @@ class Phase(Enum):
     STOPPING = "stopping"
     DONE = "done"
     FAILED = "failed"
+
+
+_TASKS = TaskParams()
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -98,17 +102,25 @@ class MissionParams:
     detector: str = "ransac"
     control_rate: float = 50.0
     beacon_rate: float = 20.0
-    cruise: float = 0.8
-    approach_speed: float = 0.6
-    look_ahead: float = 0.26
-    gap: float = 0.06
-    min_confidence: float = 0.3
-    max_offset: float = 0.12
-    end_frames: int = 3
-    stop_decel: float = 1.0
-    reacquire_window: float = 0.6
-    max_overshoot: float = 0.6
+    # the nodes' task tuning is the one source of these defaults
+    cruise: float = _TASKS.cruise
+    approach_speed: float = _TASKS.approach_speed
+    look_ahead: float = _TASKS.look_ahead
+    gap: float = _TASKS.gap
+    min_confidence: float = _TASKS.min_confidence
+    max_offset: float = _TASKS.max_offset
+    end_frames: int = _TASKS.end_frames
+    stop_decel: float = _TASKS.stop_decel
+    reacquire_window: float = _TASKS.reacquire_window
+    max_overshoot: float = _TASKS.max_overshoot
     odometry_scale: float = 1.0
+
+    def task_params(self, *, square: float, track_width: float) -> TaskParams:
+        """The nodes' task tuning (:class:`services.mobile.tasks.TaskParams`) with this mission's
+        values for the fields both have, on a floor of ``square`` m squares and a ``track_width`` m
+        track."""
+        shared = {f.name: getattr(self, f.name) for f in fields(TaskParams) if hasattr(self, f.name)}
+        return TaskParams(**{**shared, "square": square, "track_width": track_width})
 
 
 class MobileMission:

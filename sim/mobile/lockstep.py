@@ -33,7 +33,6 @@ from services.mobile.tasks import (
     GotoBeacon,
     ReacquireTrack,
     StopAtT,
-    TaskParams,
 )
 
 from .course import Course
@@ -76,10 +75,7 @@ class TaskSequence:
         geo = DriveGeometry(wheel_radius=robot.wheel_radius, track_width=robot.track_width)
         self.odometry = Odometry(DriveGeometry(wheel_radius=robot.wheel_radius * p.odometry_scale,
                                                track_width=robot.track_width))
-        tp = TaskParams(cruise=p.cruise, approach_speed=p.approach_speed, look_ahead=p.look_ahead, gap=p.gap,
-                        min_confidence=p.min_confidence, max_offset=p.max_offset, end_frames=p.end_frames,
-                        stop_decel=p.stop_decel, reacquire_window=p.reacquire_window,
-                        max_overshoot=p.max_overshoot, square=square, track_width=track_width)
+        tp = p.task_params(square=square, track_width=track_width)
         beacon = BeaconModel(height_above_sensor=beacon_height - robot.sensor_height, sensor_x=robot.sensor_x)
         self.memory = CourseMemory(camera, geo, beacon, tp)
         self.phase = Phase.FOLLOW
