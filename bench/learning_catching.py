@@ -45,13 +45,12 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-from bench.stdio import stdout_to_stderr
-
 from bench.catching import InProcessDrives, rim_position
+from bench.stdio import stdout_to_stderr
 from coordinator.learning import Learner, LearningAutomaton
 from coordinator.netfile import load_net
-from services.robots import motion_control
 from services.actions.vision import VERIFY_FRAMES, track_residual
+from services.robots import motion_control, puma560
 from services.vision import (
     BallTracker,
     Detection,
@@ -63,7 +62,6 @@ from services.vision import (
     locate_bgdiff,
     locate_threshold,
 )
-from services.robots import puma560
 from sim.camera import AnalyticRenderer, calibrate, overhead_camera
 from sim.canbus import SimDrives
 from sim.catching import CatchingWorld, Thrower

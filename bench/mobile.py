@@ -65,7 +65,6 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from bench.stdio import stdout_to_stderr
-
 from services.mobile.lines import DETECTORS, make_detector
 from services.mobile.marks import EndMarkDetector
 from sim.mobile.course import CourseError, random_course

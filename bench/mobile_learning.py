@@ -54,7 +54,6 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from bench.stdio import stdout_to_stderr
-
 from coordinator.learning import Learner, LearningAutomaton
 from coordinator.netfile import load_net
 from services.mobile.lines import make_detector

@@ -1,18 +1,22 @@
-"""Reading an input text file defensively: a size cap, UTF-8 only, no NUL (docs/netfile.md, "Limits").
+"""Reading an input text file defensively: a size cap, UTF-8 only, no NUL (docs/netfile.md, "Limits");
+writing one so that a crash leaves the old file or the new one, never half of it.
 
 Net files (TOML, PNML) and the location file ``services.toml`` are read through here, so that a
 binary file, a UTF-16 file, a NUL byte, a device or a file too large to be a plausible input is
 refused with its line before any parser sees it. The functions raise :class:`TextProblem`, which
 carries no file name: each reader turns it into its own error (``NetFileError``,
-``LocationError``) with the path. Pure except :func:`read_capped`, which reads one file.
+``LocationError``) with the path. Pure except :func:`read_capped`, which reads one file, and
+:func:`write_atomically`, which writes one.
 """
 
 from __future__ import annotations
 
 import os
 import stat
+import tempfile
+from pathlib import Path
 
-__all__ = ["MAX_FILE_BYTES", "TextProblem", "decode_utf8", "read_capped", "screen_text"]
+__all__ = ["MAX_FILE_BYTES", "TextProblem", "decode_utf8", "read_capped", "screen_text", "write_atomically"]
 
 #: Largest input file read, bytes (16 MiB). Net files of a thousand places are tens of kilobytes;
 #: the cap is far above any real file and below what the parsers handle in seconds.
@@ -126,3 +130,20 @@ def screen_text(text: str, limit: int = MAX_FILE_BYTES) -> None:
     except UnicodeEncodeError as exc:
         line, col = _line_col(text, exc.start)
         raise TextProblem(f"not UTF-8 text: lone surrogate at column {col}", line) from None
+
+
+def write_atomically(path: str | os.PathLike[str], text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` through a temporary file in the same directory, renamed over it.
+
+    Raises:
+        OSError: the file cannot be written; ``path`` is then unchanged and no temporary file remains.
+    """
+    target = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise

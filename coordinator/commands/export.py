@@ -11,16 +11,14 @@ write leaves no partial file either.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
 import textwrap
-from pathlib import Path
 from typing import Any
 
 from services.errors import PetrobotError
+from services.textfile import write_atomically
 
-__all__ = ["EXIT_ERROR", "FORMATS", "add_parser", "run", "write_atomically"]
+__all__ = ["EXIT_ERROR", "FORMATS", "add_parser", "run"]
 
 #: Exit status when the net does not load or the output cannot be written.
 EXIT_ERROR = 2
@@ -56,23 +54,6 @@ def add_parser(subparsers: Any) -> None:
     parser.add_argument("--no-check", action="store_true",
                         help="skip the interpreted-net rules (exits of primitive tasks, int: events); "
                              "structural errors are still reported")
-
-
-def write_atomically(path: str | Path, text: str) -> None:
-    """Write ``text`` (UTF-8) to ``path`` through a temporary file in the same directory, renamed over it.
-
-    Raises:
-        OSError: the file cannot be written; ``path`` is then unchanged and no temporary file remains.
-    """
-    target = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, target)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def run(args: argparse.Namespace) -> int:

@@ -69,6 +69,7 @@ from services.textfile import (
     decode_utf8,
     read_capped,
     screen_text,
+    write_atomically,
 )
 from services.tomllines import parse_toml
 
@@ -681,6 +682,6 @@ def save_pnml(net: PetriNet, path: str | Path) -> None:
         NetFileError: if the file cannot be written.
     """
     try:
-        Path(path).write_text(dump_pnml(net), encoding="utf-8")
+        write_atomically(path, dump_pnml(net))
     except OSError as exc:
         raise NetFileError(f"cannot write net file: {exc.strerror or exc}", path=str(path)) from None

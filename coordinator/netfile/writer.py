@@ -17,6 +17,7 @@ from typing import Any
 from coordinator.errors import NetError, NetFileError
 from coordinator.net import PetriNet, PlaceKind, TransitionKind
 from coordinator.netfile.schema import FORMAT_VERSION
+from services.textfile import write_atomically
 
 __all__ = ["dump_net", "format_key", "format_value", "save_net"]
 
@@ -197,6 +198,6 @@ def save_net(net: PetriNet, path: str | Path, layout: Mapping[str, tuple[float, 
     """
     text = dump_net(net, layout)
     try:
-        Path(path).write_text(text, encoding="utf-8")
+        write_atomically(path, text)
     except OSError as exc:
         raise NetFileError(f"cannot write net file: {exc.strerror or exc}", path=str(path)) from None

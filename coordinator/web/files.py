@@ -12,7 +12,6 @@ one); :func:`export_draft` converts a draft to PNML, DOT or canonical TOML.
 from __future__ import annotations
 
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +27,7 @@ from coordinator.web.draft import (
     draft_of_text,
     validate_draft,
 )
+from services.textfile import write_atomically
 
 __all__ = ["FileRefused", "export_draft", "inside", "list_nets", "open_net", "save_draft", "with_layout"]
 
@@ -139,14 +139,7 @@ def save_draft(draft: dict[str, Any], target: Path, location: Any = None) -> dic
         text = dump_pnml(validation.net, draft_layout(draft))
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", dir=target.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as fh:
-                fh.write(text)
-            os.replace(tmp, target)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        write_atomically(target, text)
     except OSError as exc:
         raise FileRefused(f"{target.name}: cannot write: {exc.strerror or exc}") from None
     return {"path": str(target), "validation": validation.to_json()}
