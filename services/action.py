@@ -24,7 +24,7 @@ import asyncio
 import importlib
 import inspect
 from collections.abc import Awaitable, Callable, Mapping
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from services.errors import ActionError
 from services.results import ActionResult
@@ -44,6 +44,8 @@ __all__ = [
     "import_impl",
     "make_action",
 ]
+
+_D = TypeVar("_D", bound="Driver")
 
 
 class MemoryAPI(Protocol):
@@ -153,6 +155,13 @@ class CallContext:
     def drivers(self) -> Mapping[str, Driver]:
         """The node's drivers by name."""
         return self.node.drivers
+
+    def find_driver(self, kind: type[_D]) -> _D | None:
+        """The node's first driver of class ``kind`` (in services.toml order), or ``None``."""
+        for driver in self.node.drivers.values():
+            if isinstance(driver, kind):
+                return driver
+        return None
 
     def publish(self, topic: str, data: Any = None) -> None:
         """Publish external event ``topic`` from this node."""

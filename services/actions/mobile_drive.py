@@ -217,9 +217,9 @@ class DriveDriver(Driver):
 
 
 def _drive(ctx: CallContext) -> DriveDriver:
-    for drv in ctx.drivers.values():
-        if isinstance(drv, DriveDriver):
-            return drv
+    drv = ctx.find_driver(DriveDriver)
+    if drv is not None:
+        return drv
     raise ActionError("this node hosts no wheel drive driver (services.actions.mobile:DriveDriver)")
 
 

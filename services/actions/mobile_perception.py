@@ -240,9 +240,9 @@ class PerceptionDriver(Driver):
 
 
 def _perception(ctx: CallContext) -> PerceptionDriver:
-    for drv in ctx.drivers.values():
-        if isinstance(drv, PerceptionDriver):
-            return drv
+    drv = ctx.find_driver(PerceptionDriver)
+    if drv is not None:
+        return drv
     raise ActionError("this node hosts no mobile camera driver (services.mobile: PerceptionDriver)")
 
 

@@ -397,9 +397,9 @@ class PumaDriver(Driver):
 
 
 def _driver(ctx: CallContext) -> PumaDriver:
-    for drv in ctx.drivers.values():
-        if isinstance(drv, PumaDriver):
-            return drv
+    drv = ctx.find_driver(PumaDriver)
+    if drv is not None:
+        return drv
     raise BusError("no PumaDriver on this node (services.toml [drivers.*])")
 
 
