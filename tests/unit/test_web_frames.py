@@ -43,6 +43,16 @@ tokens = 1
 """
 
 
+def fire(runtime: Runtime, feed: LiveFeed, times: int = 1) -> None:
+    """Fire the next enabled transition ``times`` times and tell the feed, as the runtime does."""
+    engine = runtime.engine
+    for _ in range(times):
+        firing = engine.next_firing()
+        assert firing is not None
+        engine.apply(firing)
+        feed(TransitionFired(runtime.run_id, firing))
+
+
 def frames_of(feed: LiveFeed) -> list[dict[str, Any]]:
     sent: list[dict[str, Any]] = []
     feed.subscribe(lambda text: sent.append(json.loads(text)))
@@ -54,13 +64,8 @@ async def test_the_observer_only_appends_and_a_burst_of_firings_becomes_one_fram
         runtime = Runtime(loads_net(CYCLE), FakeClient(), journal)
         feed = LiveFeed(runtime)
         sent = frames_of(feed)
-        engine = runtime.engine
-        engine.start()
-        for _ in range(1000):
-            firing = engine.next_firing()
-            assert firing is not None
-            engine.apply(firing)
-            feed(TransitionFired(runtime.run_id, firing))
+        runtime.engine.start()
+        fire(runtime, feed, 1000)
         assert sent == []  # nothing is built or sent while the engine fires
         feed.flush()
     assert len(sent) == 1
@@ -83,14 +88,9 @@ async def test_the_observer_keeps_no_firing_event_alive_between_frames(tmp_path:
         runtime = Runtime(loads_net(CYCLE), FakeClient(), journal)
         feed = LiveFeed(runtime)
         sent = frames_of(feed)
-        engine = runtime.engine
-        engine.start()
+        runtime.engine.start()
         before = alive()
-        for _ in range(500):
-            firing = engine.next_firing()
-            assert firing is not None
-            engine.apply(firing)
-            feed(TransitionFired(runtime.run_id, firing))
+        fire(runtime, feed, 500)
         assert alive() == before
         feed.flush()
     assert sent[0]["fired"] == {"there": 250, "back": 250}
@@ -101,23 +101,15 @@ async def test_the_runs_state_travels_in_a_frame_only_when_it_changed(tmp_path: 
         runtime = Runtime(loads_net(CYCLE), FakeClient(), journal)
         feed = LiveFeed(runtime)
         sent = frames_of(feed)
-        engine = runtime.engine
-        engine.start()
-
-        def fire() -> None:
-            firing = engine.next_firing()
-            assert firing is not None
-            engine.apply(firing)
-            feed(TransitionFired(runtime.run_id, firing))
-
+        runtime.engine.start()
         feed(RunStateChanged(runtime.run_id, "started", "", detail=()))
-        fire()
+        fire(runtime, feed)
         feed.flush()
-        fire()
+        fire(runtime, feed)
         feed.flush()
         feed(RunStateChanged(runtime.run_id, "waiting", "waiting for ext:tick", detail=("ext:tick",)))
         feed.flush()
-        fire()  # firing again after a wait: the page is told the run is running
+        fire(runtime, feed)  # firing again after a wait: the page is told the run is running
         feed.flush()
     assert sent[0]["state"]["state"] == "started"
     assert "state" not in sent[1]  # the page redraws its panels only when something there changed
@@ -130,12 +122,8 @@ async def test_a_frame_carries_only_the_places_whose_tokens_changed(tmp_path: Pa
         runtime = Runtime(loads_net(CYCLE), FakeClient(), journal)
         feed = LiveFeed(runtime)
         sent = frames_of(feed)
-        engine = runtime.engine
-        engine.start()
-        firing = engine.next_firing()
-        assert firing is not None
-        engine.apply(firing)
-        feed(TransitionFired(runtime.run_id, firing))
+        runtime.engine.start()
+        fire(runtime, feed)
         feed.flush()
         feed.flush()  # nothing new: no frame
     assert len(sent) == 1
