@@ -5,12 +5,8 @@ message that disturbs nothing."""
 
 from __future__ import annotations
 
-import json
 import secrets
 import sqlite3
-import subprocess
-import sys
-import threading
 from pathlib import Path
 from typing import Any
 
@@ -157,45 +153,22 @@ def test_a_hostile_websocket_message_closes_that_socket_and_the_run_goes_on(page
 
 
 # ---------------------------------------------------------------------- the catching demo
-class Sim:
-    """``petrobot sim catching`` as the demo runs it (analytic camera), ready when it says so."""
-
-    def __init__(self, camera_port: int, can_port: int) -> None:
-        self.proc = subprocess.Popen(
-            [sys.executable, "-m", "coordinator.commands.sim", "catching", "--realtime", "--seed", "3", "--renderer",
-             "analytic", "--throws", "0", "--interval", "0", "--throw-when-home", "1.0", "--first-throw", "4",
-             "--camera-port", str(camera_port), "--can-port", str(can_port)],
-            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-        self.ready = threading.Event()
-        threading.Thread(target=self._read, daemon=True).start()
-
-    def _read(self) -> None:
-        assert self.proc.stdout is not None
-        for line in self.proc.stdout:
-            if line.startswith("{") and json.loads(line).get("event") == "ready":
-                self.ready.set()
-
-    def stop(self) -> None:
-        self.proc.terminate()
-        try:
-            self.proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(timeout=5)
-
-
 @pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_the_catching_demo_live_tokens_move_and_emptying_runs_remaining_ends_the_experiment(
         page: Page, petrobot: Any, tmp_path: Path):
+    from coordinator.commands.simworld import SimWorld
     from tests.integration.conftest import Cluster
     from tests.integration.test_catching import SERVICES
 
     cluster = Cluster(tmp_path)
     cluster.write_services(SERVICES.replace("PREDICT_NODE", "vision"))
-    sim = Sim(cluster.ports["camera"], cluster.ports["can"])
+    # petrobot sim catching as the demo runs it (analytic camera)
+    sim = SimWorld(["--realtime", "--seed", "3", "--renderer", "analytic", "--throws", "0", "--interval", "0",
+                    "--throw-when-home", "1.0", "--first-throw", "4", "--camera-port", str(cluster.ports["camera"]),
+                    "--can-port", str(cluster.ports["can"])])
     try:
-        assert sim.ready.wait(TIMEOUT_S), "the simulator was not ready"
+        sim.wait_ready(TIMEOUT_S)
         cluster.start("vision", "motion")
         journal = tmp_path / "j.sqlite"
         proc = petrobot("run", str(ROOT / "nets" / "catch.toml"), "--services", str(cluster.services_path),
