@@ -1,10 +1,12 @@
 """Following the token flow live in a terminal (paper section 5).
 
-:class:`Console` is a runtime observer. On a terminal it redraws, a few times a second, the
-marking (places with tokens, by kind), the running primitive actions with their node and elapsed
-time, what the run waits for, the last error with its reason, the last firings, and the fate of
-the operator's last command (a refusal stays on screen until the next command); elsewhere (a
-pipe, CI, a log file) it prints one line per firing (the places it took tokens from and gave
+:class:`Console` is a runtime observer. On a terminal it keeps a live view
+(:meth:`Console.screen_lines`, shown by :class:`coordinator.terminal.LiveScreen` above the
+operator's input line): the run's state (``paused`` while paused), the marking (places with
+tokens, by kind), the running primitive actions with their node and elapsed time, what the run
+waits for, the last error with its reason, the last events, and the fate of the operator's last
+command (a refusal stays on screen until the next command); elsewhere (a pipe, CI, a log file) it
+prints one line per firing (the places it took tokens from and gave
 tokens to), action start and result (with the action's reason), what a node said afterwards about
 a call the run had given up on (printed even when quiet if it is not what the net assumed), state
 change and operator command, and counts the pulses of external events that fired nothing instead
@@ -74,7 +76,6 @@ class Console:
         self.runtime: Runtime | None = None
         self._recent: collections.deque[str] = collections.deque(maxlen=8)
         self._t0 = time.monotonic()
-        self._last_draw = 0.0
         self._silent: collections.Counter[str] = collections.Counter()
         self._silent_since = 0.0
         #: the fate of the operator's last command (shown until the next one)
@@ -85,6 +86,10 @@ class Console:
         self.waiting: tuple[str, tuple[str, ...]] | None = None
         #: the run's state as its events tell it (running, paused, waiting, or its end state)
         self.run_state = "running"
+        #: lines shown under the live view's header (e.g. the web console's address)
+        self.banner: list[str] = []
+        #: the live view showing this console (a :class:`coordinator.terminal.LiveScreen`), if any
+        self.screen: Any = None
 
     def attach(self, runtime: Runtime) -> None:
         """Follow ``runtime`` (set it as its observer)."""
@@ -111,9 +116,17 @@ class Console:
         stamped = self._stamp(line)
         self._recent.append(stamped)
         if self.live:
-            if time.monotonic() - self._last_draw > 0.1 or urgent:
-                self.draw()
+            self.draw()
         elif not self.quiet or urgent or error:
+            print(stamped, file=self.stream, flush=True)
+
+    def note(self, text: str) -> None:
+        """Add a line to the recent events (live) or print it (line by line), time-stamped."""
+        stamped = self._stamp(text)
+        self._recent.append(stamped)
+        if self.live:
+            self.draw()
+        else:
             print(stamped, file=self.stream, flush=True)
 
     def _stamp(self, line: str) -> str:
@@ -181,17 +194,31 @@ class Console:
             return f"pulse {event.event}: fired {event.fired}"
         return None
 
+    @property
+    def shown_state(self) -> str:
+        """The state the view shows: ``paused`` while the engine is paused and the run goes on (it
+        may be waiting too: for the operator to resume), else :attr:`run_state`."""
+        runtime = self.runtime
+        if runtime is not None and runtime.engine.paused and self.run_state in ("running", "waiting", "paused"):
+            return "paused"
+        return self.run_state
+
     def draw(self) -> None:
-        """Redraw the live screen (marking, running actions, waiting, last error, recent events,
-        the operator's last command)."""
+        """Have the live view redrawn (it draws :meth:`screen_lines`; nothing without a view)."""
+        if self.screen is not None:
+            self.screen.invalidate()
+
+    def screen_lines(self) -> list[str]:
+        """The live view, one string per line: a header (net, run, state, firings), the banner,
+        the marking, the running primitive actions, what the run waits for, the last error, the
+        pulses that fired nothing and the recent events. The operator's last command is
+        :attr:`operator_note`, shown by the view beside the input line."""
         if self.runtime is None:
-            return
-        self._last_draw = time.monotonic()
+            return [f"petrobot  net {self.net.name}  starting"]
         engine = self.runtime.engine
         marking = engine.marking
-        out = ["\x1b[H\x1b[2J", f"petrobot  net {self.net.name}  run {self.runtime.run_id}  "
-               f"state {self.run_state}  firings {engine.fired}", "", "marking (R resource, T primitive task, "
-               "C control):"]
+        out = [f"petrobot  net {self.net.name}  run {self.runtime.run_id}  state {self.shown_state}  "
+               f"firings {engine.fired}", *self.banner, "", "marking (R resource, T primitive task, C control):"]
         for place in self.net.places:
             n = marking[place.id]
             if n or place.kind is PlaceKind.CONTROL:
@@ -214,12 +241,7 @@ class Console:
             out.append("pulses that fired nothing: " + ", ".join(f"{e} x{n}" for e, n in self._silent.items()))
         out.append("")
         out.extend(self._recent)
-        out.append("")
-        out.append(HELP)
-        if self.operator_note:
-            out.append(f"> {self.operator_note}")
-        self.stream.write("\n".join(out) + "\n")
-        self.stream.flush()
+        return out
 
 
 class CommandSink(Protocol):

@@ -483,7 +483,7 @@ class Runtime:
         if engine.paused and not self._end_requested:
             if engine.firing_possible(ignore_pause=True) or self._events_awaited():
                 if self.operator:
-                    return _Wait("paused: type resume, or step to fire one transition")
+                    return _Wait("paused: resume, or step to fire one transition")
                 return _End("waiting_for_operator", "paused, and no operator can resume the run")
         awaited = self._events_awaited()
         if awaited and not self._end_requested and not engine.paused:
@@ -494,14 +494,14 @@ class Runtime:
         if self._goal and all(marking[p] >= n for p, n in self._goal.items()):
             if options and self.operator and self.linger and not self._end_requested:
                 return _Wait(f"completed: the goal is reached; waiting for the operator: {'; '.join(options)}; "
-                             "or type end (Ctrl-D) to finish", options, home=True)
+                             "or end to finish", options, home=True)
             return _End("completed", "the goal marking is reached" + ("" if rest.at_home else
                         f" ({len(rest.stuck)} place{'' if len(rest.stuck) == 1 else 's'} away from home)"),
                         rest.stuck)
         if rest.at_home:
             if options and self.operator and self.linger and not self._end_requested:
                 return _Wait(f"completed: at the home marking; waiting for the operator: {'; '.join(options)}; "
-                             "or type end (Ctrl-D) to finish", options, home=True)
+                             "or end to finish", options, home=True)
             return _End("completed", "at the home marking")
         if options and not self._end_requested:
             if self.operator:

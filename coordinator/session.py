@@ -18,8 +18,6 @@ branches).
 
 from __future__ import annotations
 
-import asyncio
-
 from coordinator.console import Console, read_operator_commands
 from coordinator.events import Observer
 from coordinator.journal import Journal, JournalReader
@@ -114,18 +112,16 @@ async def execute(net: PetriNet, *, location: Location, key: bytes, journal: Jou
         console.attach(runtime)
         if observer is not None:
             runtime.observer = observer
-        if read_input:
+        screen = None
+        if console.live:  # the terminal's live view, with the input line when the operator types there
+            from coordinator.terminal import LiveScreen
+
+            screen = LiveScreen(console, runtime if read_input else None)
+            screen.start()
+        elif read_input:
             read_operator_commands(runtime)
-        refresher = asyncio.get_running_loop().create_task(_redraw(console)) if console.live else None
         try:
             return await runtime.run(max_seconds=max_seconds)
         finally:
-            if refresher is not None:
-                refresher.cancel()
-
-
-async def _redraw(console: Console, period_s: float = 0.25) -> None:
-    """Redraw the live screen so running actions' elapsed times advance between events."""
-    while True:
-        await asyncio.sleep(period_s)
-        console.draw()
+            if screen is not None:
+                await screen.stop()

@@ -6,6 +6,7 @@ A thin command over :func:`coordinator.session.execute`.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import sys
 from pathlib import Path
@@ -15,7 +16,7 @@ from coordinator.commands import options
 from coordinator.commands.console import add_listen_options
 from services.errors import PetrobotError
 
-__all__ = ["add_parser", "run"]
+__all__ = ["add_parser", "console_address_file", "run"]
 
 DESCRIPTION = """\
 Execute a task net. Every primitive action is called on the node that services.toml places it
@@ -91,8 +92,10 @@ def add_parser(subparsers: Any) -> None:
                         "then ends on --max-seconds or Ctrl-C instead of ending waiting_for_operator")
     p.add_argument("--console", metavar="[HOST:]PORT", default=None,
                    help="also serve the web console attached to this run (petrobot console; port 0 picks a free "
-                        "one): prints its address with the token that gives control; the page is an operator, "
-                        "so the run waits for it as with --wait")
+                        "one): prints its address with the token that gives control, keeps it in the live view's "
+                        "header and writes it to JOURNAL_STEM.console-url beside the journal for scripts "
+                        "(runs/journal.console-url; removed at the end); the page is an operator, so the run "
+                        "waits for it as with --wait")
     add_listen_options(p)
     p.set_defaults(func=run)
 
@@ -144,10 +147,19 @@ async def _execute(args: argparse.Namespace, net: Any, **kwargs: Any) -> Any:
         return await execute(net, **kwargs)
     from coordinator.commands.console import start_console
     from coordinator.web.attach import WebAttachedConsole
+    from services.textfile import write_atomically
 
     server = await start_console(nets=[Path(args.net)], journal=Path(args.journal), services=args.services,
                                  listen=args.console, bind_any=args.bind_any, root=Path.cwd())
+    address = console_address_file(Path(args.journal))
+    try:
+        write_atomically(address, server.url + "\n")  # a fresh file is readable by its owner only
+    except OSError as exc:
+        print(f"petrobot run: cannot write {address}: {exc.strerror or exc}", file=sys.stderr, flush=True)
+    else:
+        print(f"petrobot console: the address is also in {address} (removed when the run ends)", flush=True)
     console = WebAttachedConsole(net, server, Path(args.net), live=kwargs.get("live"), quiet=kwargs.get("quiet", False))
+    console.banner = [f"web console: {server.url}"]
     kwargs["wait"] = True  # the page is an operator
     summary = None
     try:
@@ -156,3 +168,12 @@ async def _execute(args: argparse.Namespace, net: Any, **kwargs: Any) -> Any:
     finally:
         ended = f"the run ended ({summary.end_state})" if summary is not None else "the run stopped"
         await server.close(ended)
+        with contextlib.suppress(OSError):
+            if address.read_text(encoding="utf-8").strip() == server.url:
+                address.unlink()
+
+
+def console_address_file(journal: Path) -> Path:
+    """Where ``run --console`` writes the web console's address (with its token) for scripts: beside
+    the journal, ``JOURNAL_STEM.console-url`` (``runs/journal.sqlite`` → ``runs/journal.console-url``)."""
+    return journal.with_name(journal.stem + ".console-url")

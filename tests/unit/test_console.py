@@ -130,17 +130,30 @@ def test_a_refused_command_stays_on_the_live_screen_until_the_next_command():
     from coordinator.events import OperatorApplied, OperatorRefused, RunStateChanged
 
     net = loads_net(NET)
-    screen = _Screen()
-    console = Console(net, stream=screen)
+    console = Console(net, stream=_Screen())
     console.attach(_Runtime(net))  # type: ignore[arg-type]
     assert console.live
     console(OperatorRefused("r", "fly", "commands: + PLACE [N] | ..."))
     console(TransitionFired("r", Firing(1, "go", {"runs": 1}, {"out": 1})))
     console(RunStateChanged("r", "waiting", "waiting for the operator: + runs 1 would enable go"))
-    console.draw()
-    last = screen.getvalue().split("\x1b[H\x1b[2J")[-1]
-    assert "> refused: fly: commands: + PLACE [N] | ..." in last
-    assert "state waiting" in last and "waiting: waiting for the operator: + runs 1 would enable go" in last
+    view = "\n".join(console.screen_lines())
+    assert console.operator_note == "refused: fly: commands: + PLACE [N] | ..."
+    assert "state waiting" in view and "waiting: waiting for the operator: + runs 1 would enable go" in view
     console(OperatorApplied("r", OperatorCommand(Command.INSERT, "runs", 1)))
-    last = screen.getvalue().split("\x1b[H\x1b[2J")[-1]
-    assert "refused" not in last.split("operator:")[-1] and "> applied: insert runs 1" in last
+    assert console.operator_note == "applied: insert runs 1"
+
+
+def test_the_live_view_says_paused_while_the_engine_is_paused_even_when_the_run_waits():
+    from coordinator.events import RunStateChanged
+
+    net = loads_net(NET)
+    console = Console(net, stream=_Screen())
+    runtime = _Runtime(net)
+    console.attach(runtime)  # type: ignore[arg-type]
+    runtime.engine.pause()
+    console(RunStateChanged("r", "paused", "paused by the operator"))
+    console(RunStateChanged("r", "waiting", "paused: resume, or step to fire one transition"))
+    assert console.shown_state == "paused" and "state paused" in console.screen_lines()[0]
+    runtime.engine.resume()
+    console(RunStateChanged("r", "running", "resumed by the operator"))
+    assert console.shown_state == "running"
