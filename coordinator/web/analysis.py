@@ -1,8 +1,9 @@
 """The analyses of the open net, for the console's side panel: the command line's own reports.
 
 ``petrobot analyze`` (the ordinary-net view: boundedness, liveness, reversibility, invariants),
-``gspn`` (the quantitative view), ``perf`` (J = 1 − R + ρC from the journal) and ``learn`` (the
-learning automata, with their plot) run as child processes of the same Python on a temporary copy
+``gspn`` (the quantitative view: with the console's journal, the mean times and reliabilities measured
+there, as ``petrobot gspn --journal`` takes them), ``perf`` (J = 1 − R + ρC from the journal) and
+``learn`` (the learning automata, with their plot) run as child processes of the same Python on a temporary copy
 of the drawn net, so the page shows exactly what the terminal would, an analysis that takes long or
 much memory never holds up a live run on the console's event loop, and one that goes wrong ends in
 its own process. :func:`run_analysis` returns the report's text, the exit status and the plot.
@@ -22,10 +23,13 @@ from typing import Any
 from coordinator.netfile import dump_net
 from coordinator.web.draft import draft_layout, validate_draft
 
-__all__ = ["ANALYSES", "run_analysis"]
+__all__ = ["ANALYSES", "READS_JOURNAL", "run_analysis"]
 
 #: The analyses, and whether each needs a journal.
 ANALYSES = {"analyze": False, "gspn": False, "perf": True, "learn": True}
+#: The analyses that read the console's journal when it has one (``gspn`` without one takes the net
+#: file's mean times and reliabilities).
+READS_JOURNAL = frozenset({"gspn", "perf", "learn"})
 #: Longest an analysis may run, seconds.
 TIMEOUT_S = 300.0
 #: Most bytes of a report kept.
@@ -39,8 +43,8 @@ async def run_analysis(kind: str, draft: dict[str, Any], *, journal: str | None 
     Args:
         kind: ``analyze``, ``gspn``, ``perf`` or ``learn``.
         draft: the drawn net (it must load).
-        journal: the journal ``perf`` and ``learn`` read.
-        run: restrict ``perf``/``learn`` to one run.
+        journal: the journal ``gspn``, ``perf`` and ``learn`` read (the one the page has open).
+        run: restrict ``gspn``/``perf``/``learn`` to one run.
         cwd: folder the command runs in.
         timeout_s: the command is killed after this many seconds.
 
@@ -61,7 +65,7 @@ async def run_analysis(kind: str, draft: dict[str, Any], *, journal: str | None 
         net_file.write_text(dump_net(validation.net, draft_layout(draft)), encoding="utf-8")
         args = [kind, str(net_file)]
         plot = Path(tmp) / "plot.png"
-        if ANALYSES[kind]:
+        if kind in READS_JOURNAL and journal:
             args += ["--journal", str(journal)]
             if run:
                 args += ["--run", run]

@@ -26,7 +26,7 @@ export function renderProblems(app) {
 export function initAnalysis(app) {
   const panel = document.getElementById("panel-analysis");
   const kinds = [["analyze", "qualitative: boundedness, liveness, reversibility, invariants"],
-                 ["gspn", "quantitative: the GSPN view's measures"],
+                 ["gspn", "quantitative: the GSPN view's measures, with the journal's measured times and reliabilities when the console has one open"],
                  ["perf", "J = 1 \u2212 R + \u03c1C of each action and task, from the journal"],
                  ["learn", "the learning automata, replayed from the journal, with their plot"]];
   const out = el("div");
