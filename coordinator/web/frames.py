@@ -5,14 +5,16 @@ called costs the run a counter increment per firing (no event object is kept unt
 a list append for any other event: nothing is serialised while the engine fires. A coalescing task
 (:meth:`LiveFeed.run`) wakes at most every ``period_s`` (10 ms), takes what piled up, and builds
 one *frame*: the marking's changes (the latest marking wins), the transitions fired since the last
-frame with their counts, the primitive actions started and ended, the learners that changed
-(probabilities, R̂, C, J per action), the run's state when it changed and the operator commands
-applied or refused. One JSON text per frame goes to every page. A run firing thousands of
+frame with their counts, the primitive actions started and ended, the primitive tasks whose
+results changed their record (errors in a row, the last error's whole reason), the learners that
+changed (probabilities, R̂, C, J per action), the run's state when it changed (with the run's
+summary once it has ended) and the operator commands applied or refused. One JSON text per frame goes to every page. A run firing thousands of
 transitions a second thus sends ≤ 100 small frames a second; the page draws at most once per screen
 frame (60 Hz), so the oldest firing a repaint shows is at most one screen frame and one period old
 when the page receives it (bench/console.py measures the rest).
 
-:func:`learner_view` is the learner panel's row data; :func:`result_json` one ended action.
+:func:`learner_view` is the learner panel's row data; :func:`result_json` one ended action;
+:func:`used_nodes` the nodes a net calls or hears from (the page marks the others "not used").
 """
 
 from __future__ import annotations
@@ -40,7 +42,8 @@ from coordinator.events import (
 )
 from coordinator.operator import OperatorCommand
 
-__all__ = ["DEFAULT_PERIOD_S", "FEEDBACK_CHARS", "LiveFeed", "feedback_text", "learner_view", "result_json"]
+__all__ = ["DEFAULT_PERIOD_S", "FEEDBACK_CHARS", "LiveFeed", "feedback_text", "learner_view", "result_json",
+           "used_nodes"]
 
 log = logging.getLogger("petrobot.web")
 
@@ -99,6 +102,25 @@ def result_json(instance: str, task: str, action: str, node: str | None, result:
             "outcome": result.outcome, "reason": result.reason, "wall_s": _round(result.wall_s), "t": t_wall}
 
 
+def used_nodes(net: Any, location: Any) -> set[str] | None:
+    """The nodes a net uses: those services.toml places its primitive actions on, and those that
+    publish its external events; ``None`` when ``location`` cannot say (no ``node_of``)."""
+    if location is None or not callable(getattr(location, "node_of", None)):
+        return None
+    used: set[str] = set()
+    for task in net.tasks.values():
+        for spec in task.actions:
+            with contextlib.suppress(Exception):  # an unplaced action: the preflight said so already
+                used.add(location.node_of(spec.name))
+    publisher = getattr(location, "publisher_of", None)
+    if callable(publisher):
+        for transition in net.transitions:
+            for event in transition.external_events:
+                with contextlib.suppress(Exception):
+                    used.add(publisher(event))
+    return used
+
+
 def _command_json(command: OperatorCommand | str) -> dict[str, Any]:
     if isinstance(command, str):
         return {"command": "invalid", "text": command}
@@ -148,6 +170,11 @@ class LiveFeed:
         self._sent_nodes: dict[str, Any] = {}
         self._sent_state: dict[str, Any] = {}
         self._health_at = 0.0
+        self._used = used_nodes(runtime.net, getattr(runtime.client, "location", None)) \
+            if hasattr(runtime, "net") else None
+        #: per primitive task: errors in a row, errors in all, the last error (whole reason)
+        self._tasks: dict[str, dict[str, Any]] = {}
+        self._summary: dict[str, Any] | None = None
 
     # ------------------------------------------------------------------ the observer
     def __call__(self, event: RunEvent) -> None:
@@ -185,7 +212,9 @@ class LiveFeed:
 
     def nodes(self) -> dict[str, Any]:
         """The nodes' health as the run's client reports it (``ServiceClient.health``): node →
-        ``{"connected", "heartbeat_rtt_s", "in_flight"}``; ``{}`` for a client that cannot say."""
+        ``{"connected", "heartbeat_rtt_s", "in_flight", "used"}``, the nodes this net uses first
+        (``used`` False: services.toml has the node but the net calls nothing there and hears no
+        event from it, so its link is never opened); ``{}`` for a client that cannot say."""
         health = getattr(self.runtime.client, "health", None)
         if not callable(health):
             return {}
@@ -194,7 +223,38 @@ class LiveFeed:
         except Exception:
             log.exception("reading the nodes' health failed")
             return {}
-        return {node: {**h, "heartbeat_rtt_s": _round(h.get("heartbeat_rtt_s"), 4)} for node, h in nodes.items()}
+        used = self._used
+        order = sorted(nodes, key=lambda n: used is not None and n not in used)
+        return {node: {**nodes[node], "heartbeat_rtt_s": _round(nodes[node].get("heartbeat_rtt_s"), 4),
+                       "used": used is None or node in used} for node in order}
+
+    def _task_result(self, task: str, item: dict[str, Any]) -> dict[str, Any]:
+        """Count one result of ``task``: an error adds to its errors in a row, anything else ends them."""
+        record = self._tasks.setdefault(task, {"task": task, "in_a_row": 0, "errors": 0, "results": 0,
+                                               "last_error": None})
+        record["results"] += 1
+        if item["status"] == "error":
+            record["in_a_row"] += 1
+            record["errors"] += 1
+            record["last_error"] = {k: item[k] for k in ("action", "node", "reason", "t", "i")}
+        else:
+            record["in_a_row"] = 0
+        return record
+
+    def summary(self) -> dict[str, Any]:
+        """The run's summary for the page once it has ended: the end state and why, the firings,
+        the final marking, each primitive action's calls and outcomes, and the last errors."""
+        runtime = self.runtime
+        stats = getattr(runtime, "stats", None) or {}
+        errors = list(getattr(runtime, "errors", None) or [])
+        calls = sum(st.calls for st in stats.values())
+        return {**self.state, "run": runtime.run_id, "firings": runtime.engine.fired, "calls": calls,
+                "all_calls_failed": calls > 0 and all(st.error == st.calls for st in stats.values()),
+                "marking": runtime.engine.marking.to_dict(),
+                "actions": [{"task": st.task, "action": st.action, "node": st.node, "calls": st.calls,
+                             "success": st.success, "failure": st.failure, "error": st.error,
+                             "mean_s": _round(st.mean_wall_s, 4)} for st in stats.values()],
+                "errors": errors[-5:], "n_errors": len(errors)}
 
     def snapshot(self) -> dict[str, Any]:
         """The run as it stands, for a page that has just connected."""
@@ -212,8 +272,8 @@ class LiveFeed:
         return {"run": runtime.run_id, "marking": engine.marking.to_dict(), "firings": engine.fired,
                 "paused": engine.paused, "state": self.state, "running": running, "latched": self._latched(),
                 "learner": views, "operator": list(self._operator), "errors": list(self._errors),
-                "results": list(self._results), "nodes": self.nodes(),
-                "server_time": now}
+                "results": list(self._results), "nodes": self.nodes(), "tasks": dict(self._tasks),
+                "summary": self._summary, "server_time": now}
 
     # ------------------------------------------------------------------ frames
     def _latched(self) -> dict[str, list[list[Any]]]:
@@ -250,6 +310,7 @@ class LiveFeed:
         operator: list[dict[str, Any]] = []
         pulses: collections.Counter[str] = collections.Counter()
         learner_tasks: dict[str, Mapping[str, Any]] = {}
+        tasks: dict[str, dict[str, Any]] = {}
         state = None
         for event in events:
             if isinstance(event, ActionStarted):
@@ -268,6 +329,7 @@ class LiveFeed:
                 self._results.append(item)
                 if item["status"] == "error":
                     self._errors.append(item)
+                tasks[event.task] = dict(self._task_result(event.task, item))
             elif isinstance(event, LearnerUpdated):
                 learner_tasks[event.task] = event.state
             elif isinstance(event, (OperatorApplied, OperatorRefused)):
@@ -313,8 +375,12 @@ class LiveFeed:
             frame["pulses"] = dict(pulses)
         if nodes is not None:
             frame["nodes"] = nodes
+        if tasks:
+            frame["tasks"] = tasks
         if self.state != self._sent_state:  # only when it changed: a page redraws its panels then
             frame["state"] = self._sent_state = self.state
+            if self.state["state"] in _END_STATES:
+                frame["summary"] = self._summary = self.summary()
         return frame
 
     def _learner_of(self, task: str, state: Mapping[str, Any]) -> dict[str, Any]:

@@ -77,6 +77,8 @@ MAX_QUEUE = 64
 #: Most messages a page may send in :data:`RATE_WINDOW_S` seconds.
 MAX_MESSAGES = 600
 RATE_WINDOW_S = 10.0
+#: Longest a closing console waits for a page to take what is queued for it (the run's last frame), s.
+BYE_S = 2.0
 
 
 def is_loopback(host: str) -> bool:
@@ -415,11 +417,13 @@ class _Page:
         self._recent: collections.deque[float] = collections.deque()
         self._closing = False
         self._live = False
+        self._drained = asyncio.Event()  # set whenever the sender has sent everything queued
 
     # ------------------------------------------------------------------ outbound
     def send(self, message: dict[str, Any]) -> None:
         """Queue a message (never dropped)."""
         self._replies.append(json.dumps(message, separators=(",", ":"), default=str))
+        self._drained.clear()
         self._ready.set()
 
     def offer_frame(self, text: str) -> None:
@@ -429,6 +433,7 @@ class _Page:
             self._resync = True
         else:
             self._frames.append(text)
+        self._drained.clear()
         self._ready.set()
 
     def subscribe_live(self) -> None:
@@ -458,6 +463,7 @@ class _Page:
                     await ws.send_str(text)
                 except (ConnectionError, RuntimeError):
                     return
+            self._drained.set()
 
     # ------------------------------------------------------------------ inbound
     async def serve(self) -> None:
@@ -494,8 +500,15 @@ class _Page:
             return
         self._closing = True
         if bye and not self.ws.closed:
-            with contextlib.suppress(Exception):
-                await self.ws.send_str(json.dumps({"type": "bye", "reason": reason}))
+            if self._sender is not None and not self._sender.done():
+                # after what is queued (the run's last frame, with its end and summary), not before it
+                self.send({"type": "bye", "reason": reason})
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(BYE_S):
+                        await self._drained.wait()
+            else:
+                with contextlib.suppress(Exception):
+                    await self.ws.send_str(json.dumps({"type": "bye", "reason": reason}))
         with contextlib.suppress(Exception):
             await self.ws.close(code=code, message=reason.encode("utf-8")[:123])
 

@@ -152,6 +152,152 @@ def test_a_hostile_websocket_message_closes_that_socket_and_the_run_goes_on(page
     assert rows(journal, "SELECT end_state FROM run") == [("completed",)]
 
 
+# ---------------------------------------------------------------------- what the page says is true
+FLAKY = """
+[net]
+name = "flaky"
+description = "Three grasps on node alpha, which is down: each ends in error and takes the error branch."
+home = { hand = 1 }
+
+[[place]]
+id = "runs"
+kind = "control"
+tokens = 3
+pos = [200, 40]
+
+[[place]]
+id = "hand"
+kind = "resource"
+tokens = 1
+pos = [380, 40]
+
+[[place]]
+id = "grasping"
+kind = "primitive_task"
+task = "grasp"
+pos = [200, 220]
+
+[[place]]
+id = "held"
+pos = [120, 400]
+
+[[place]]
+id = "failed"
+pos = [300, 400]
+
+[task.grasp]
+actions = ["coin"]
+deadline_s = 30.0
+
+[[transition]]
+id = "start"
+pos = [200, 130]
+inputs = { runs = 1, hand = 1 }
+outputs = { grasping = 1 }
+
+[[transition]]
+id = "grasped"
+pos = [120, 310]
+events = ["int:grasp.ok"]
+inputs = { grasping = 1 }
+outputs = { hand = 1, held = 1 }
+
+[[transition]]
+id = "grasp_failed"
+pos = [300, 310]
+events = ["int:grasp.error"]
+hidden = true
+inputs = { grasping = 1 }
+outputs = { hand = 1, failed = 1 }
+"""
+
+# alpha hosts the grasp; nobody listens on its port. vision and motion are in services.toml, unused
+FLAKY_SERVICES = """
+[nodes.alpha]
+host = "127.0.0.1"
+port = {alpha}
+
+[nodes.vision]
+host = "127.0.0.1"
+port = {vision}
+
+[nodes.motion]
+host = "127.0.0.1"
+port = {motion}
+
+[actions.coin]
+node = "alpha"
+impl = "services.actions.demo:coin"
+
+[actions.echo]
+node = "vision"
+impl = "services.actions.demo:echo"
+"""
+
+
+def test_the_page_shows_failing_tasks_unused_nodes_the_real_state_and_keeps_the_end(page: Page, petrobot: Any,
+                                                                                    tmp_path: Path):
+    from tests.integration.conftest import free_port
+
+    net = tmp_path / "flaky.toml"
+    net.write_text(FLAKY)
+    services = tmp_path / "services.toml"
+    services.write_text(FLAKY_SERVICES.format(alpha=free_port(), vision=free_port(), motion=free_port()))
+    key = tmp_path / "key"
+    key.write_text(secrets.token_hex(32) + "\n")
+    journal = tmp_path / "j.sqlite"
+    proc = petrobot("run", str(net), "--services", str(services), "--key-file", str(key), "--journal", str(journal),
+                    "--console", "0", "--lines", "--degraded", "--max-seconds", "600", cwd=tmp_path)
+    open_live(page, proc.url())
+    page.wait("window.petrobot.live.tasks.grasp && window.petrobot.live.tasks.grasp.in_a_row === 3 && "
+              "window.petrobot.live.state.state === 'waiting'", what="three failed grasps, then the run at rest")
+    page.page.click("#tabs [data-tab=run]")
+
+    # nodes: the one the net uses is down (truly); the others are not used, not "down"
+    health = page.eval("document.getElementById('panel-run').innerText")
+    assert "not used by this net" in health and "vision, motion" in health
+    rows_shown = page.eval("[...document.querySelectorAll('#panel-run table.grid tr')].map(r => r.innerText)")
+    assert any(r.startswith("alpha") and "down" in r for r in rows_shown)
+    assert not any(r.startswith(("vision", "motion")) for r in rows_shown)
+
+    # the failing task is marked on the drawing, with its error branch, and its last reason is there in full
+    failing = page.eval("window.petrobot.graph.cy.$('.failing').not('.badge').map(e => e.id()).sort()")
+    assert failing == ["grasp_failed", "grasping"]
+    (reason,) = rows(journal, "SELECT reason FROM action_result ORDER BY rowid DESC LIMIT 1")[0]
+    x, y = page.node_xy("grasping")
+    page.page.mouse.move(x, y)
+    page.wait("!document.getElementById('task-pop').hidden", what="the task's record on hover")
+    assert page.eval("document.getElementById('task-pop-reason').textContent") == reason
+    assert "3 errors in a row" in page.eval("document.getElementById('task-pop-title').textContent")
+    page.screenshot("live-failing-task")
+
+    # the page's words fit the page, and the badge follows the run: paused, even once it waits
+    page.page.click("#cmd-pause")
+    page.wait("document.getElementById('run-state').textContent === 'paused'", what="the paused badge")
+    page.click_node("runs")
+    page.page.click("#steer-insert")
+    page.wait("window.petrobot.live.marking.runs === 1 && window.petrobot.live.state.state === 'waiting'",
+              what="the token inserted while paused")
+    assert page.eval("document.getElementById('run-state').textContent") == "paused"
+    page.page.keyboard.press("Escape")
+    text = page.eval("document.body.innerText")
+    assert "type resume" not in text and "type end" not in text and "Ctrl-D" not in text
+    assert "paused: resume, or step" in page.eval("document.getElementById('waiting').textContent")
+    page.page.click("#cmd-resume")
+    page.wait("window.petrobot.live.tasks.grasp.in_a_row === 4 && window.petrobot.live.state.state === 'waiting'",
+              what="a fourth failed grasp")
+    page.page.click("#cmd-end")
+    assert proc.wait() == 6, proc.output()  # completed, but every call ended in error
+
+    # the end stays on the page: the state, the final marking, the summary
+    page.wait("document.getElementById('link').textContent === 'run ended'", what="the console to close")
+    assert page.eval("document.getElementById('run-state').textContent") == "completed"
+    assert page.tokens("hand") == 1 and page.tokens("failed") == 4
+    run_panel = page.eval("document.getElementById('panel-run').innerText")
+    assert "completed after" in run_panel and "final marking" in run_panel and "4 errors" in run_panel
+    page.screenshot("live-ended")
+
+
 # ---------------------------------------------------------------------- the catching demo
 @pytest.mark.slow
 @pytest.mark.timeout(300)

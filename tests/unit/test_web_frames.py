@@ -254,7 +254,9 @@ async def test_the_nodes_health_is_in_the_snapshot_and_a_frame_carries_it_when_i
         client = HealthyClient()
         runtime = Runtime(loads_net(CYCLE), client, journal)
         feed = LiveFeed(runtime)
-        assert feed.snapshot()["nodes"] == {"alpha": {"connected": True, "heartbeat_rtt_s": 0.0012, "in_flight": 1}}
+        # the net calls no action: its client's node is there, not used
+        assert feed.snapshot()["nodes"] == {"alpha": {"connected": True, "heartbeat_rtt_s": 0.0012, "in_flight": 1,
+                                                      "used": False}}
         sent = frames_of(feed)
         feed.flush()                      # nothing happened, but the health was never sent
         assert sent[-1]["nodes"]["alpha"]["connected"] is True
@@ -264,7 +266,21 @@ async def test_the_nodes_health_is_in_the_snapshot_and_a_frame_carries_it_when_i
         client.nodes["alpha"] = {"connected": False, "heartbeat_rtt_s": None, "in_flight": 0}
         feed._health_at = 0.0             # as if a second had passed
         feed.flush()
-        assert sent[-1]["nodes"] == {"alpha": {"connected": False, "heartbeat_rtt_s": None, "in_flight": 0}}
+        assert sent[-1]["nodes"] == {"alpha": {"connected": False, "heartbeat_rtt_s": None, "in_flight": 0,
+                                               "used": False}}
+
+
+async def test_the_nodes_the_net_uses_come_first_and_the_others_are_marked_not_used(tmp_path: Path):
+    with Journal(tmp_path / "j.sqlite") as journal:
+        client = HealthyClient()
+        client.results["echo"] = ActionResult.success()
+        client.location.actions.add("echo")  # placed on node "fake"
+        client.nodes["fake"] = {"connected": True, "heartbeat_rtt_s": 0.001, "in_flight": 0}
+        net = loads_net(TASKS.replace("RUNS", "1").replace("ACTION", "echo") + RECOVER)
+        feed = LiveFeed(Runtime(net, client, journal))
+        nodes = feed.snapshot()["nodes"]
+        assert list(nodes) == ["fake", "alpha"]
+        assert nodes["fake"]["used"] is True and nodes["alpha"]["used"] is False
 
 
 async def test_a_client_without_health_gives_an_empty_node_table(tmp_path: Path):
@@ -287,3 +303,25 @@ async def test_the_frame_task_stops_when_cancelled_even_as_an_event_wakes_it(tmp
         done, _ = await asyncio.wait({task}, timeout=TIMEOUT_S)
         assert done, "the frame task swallowed its cancellation and went on"
         assert task.cancelled()
+
+
+async def test_a_task_failing_in_a_row_and_the_runs_summary_reach_the_page(tmp_path: Path):
+    with Journal(tmp_path / "j.sqlite") as journal:
+        net = loads_net(TASKS.replace("RUNS", "3").replace("ACTION", "echo") + RECOVER)
+        runtime = Runtime(net, FakeClient({"echo": ActionResult.error("the gripper reports an overcurrent on "
+                                                                      "joint 2 after 0.4 s (limit 1.2 A)")}),
+                          journal)
+        feed = LiveFeed(runtime)
+        runtime.add_observer(feed)
+        sent = frames_of(feed)
+        summary = await asyncio.wait_for(runtime.run(), TIMEOUT_S)
+        feed.flush()
+    tasks = [f["tasks"]["work"] for f in sent if "tasks" in f]
+    assert tasks[-1]["in_a_row"] == 3 and tasks[-1]["errors"] == tasks[-1]["results"] == 3
+    assert tasks[-1]["last_error"]["reason"] == "the gripper reports an overcurrent on joint 2 after 0.4 s (limit 1.2 A)"
+    (end,) = [f["summary"] for f in sent if "summary" in f]
+    assert end["state"] == summary.end_state == "completed" and end["firings"] == summary.firings
+    assert end["all_calls_failed"] is True and end["n_errors"] == 3
+    assert end["actions"] == [{"task": "work", "action": "echo", "node": "fake", "calls": 3, "success": 0,
+                               "failure": 0, "error": 3, "mean_s": 0.0}]
+    assert feed.snapshot()["summary"] == end and feed.snapshot()["tasks"]["work"]["in_a_row"] == 3

@@ -83,6 +83,11 @@ const STYLE = [
       "text-background-opacity": 0.95, "text-background-padding": 3, "text-border-color": "#f0b35a",
       "text-border-width": 1, "text-border-opacity": 1, "text-wrap": "wrap", "text-max-width": 230, events: "no" } },
   { selector: "node.badge.latched", style: { color: "#0b4f8a", "text-background-color": "#eef6ff", "text-border-color": "#7fb0e0" } },
+  { selector: "node.badge.failing", style: { color: "#a40e26", "text-background-color": "#fff0f0", "text-border-color": "#cf222e" } },
+  { selector: "node.place.failing", style: { "border-color": "#cf222e", "underlay-color": "#cf222e", "underlay-opacity": 0.25,
+                                             "underlay-padding": 8, "underlay-shape": "ellipse" } },
+  { selector: "node.transition.failing", style: { "background-color": "#cf222e", "underlay-color": "#cf222e",
+                                                  "underlay-opacity": 0.22, "underlay-padding": 6 } },
   { selector: ".problem", style: { "underlay-color": "#cf222e", "underlay-opacity": 0.28, "underlay-padding": 6 } },
   { selector: "edge.problem", style: { "line-color": "#cf222e", "target-arrow-color": "#cf222e" } },
   { selector: ":selected", style: { "overlay-color": "#1f6feb", "overlay-opacity": 0.18, "overlay-padding": 6 } },
@@ -104,6 +109,7 @@ export class Graph {
     this.flashTimer = null;
     this.flashing = new Set();
     this.badges = new Map();      // place id -> text
+    this.failing = { places: [], transitions: [] };  // a run's failing primitive tasks: places, error branches
     this.draft = null;
   }
 
@@ -156,6 +162,7 @@ export class Graph {
       }
       this.applyHidden();
       this.bendBackArcs();
+      this.applyFailing();
     });
     const start = marking || Object.fromEntries(draft.places.filter((p) => Number.isInteger(p.tokens) && p.tokens > 0)
       .map((p) => [p.id, p.tokens]));
@@ -244,7 +251,10 @@ export class Graph {
     const cy = this.cy;
     cy.batch(() => {
       cy.nodes(".badge").forEach((b) => { if (!this.badges.has(b.data("place"))) b.remove(); });
-      cy.nodes(".place.busy").forEach((n) => { if (!this.badges.has(n.id()) || this.badges.get(n.id()).latched) n.removeClass("busy"); });
+      cy.nodes(".place.busy").forEach((n) => {
+        const badge = this.badges.get(n.id());
+        if (!badge || badge.latched || badge.failing) n.removeClass("busy");
+      });
       for (const [pid, badge] of this.badges) {
         const place = cy.getElementById(pid);
         if (place.empty()) continue;
@@ -256,10 +266,24 @@ export class Graph {
                                     classes: "badge", selectable: false, grabbable: false, locked: true });
         else { b.data("label", badge.text); b.unlock(); b.position(at); b.lock(); }
         b.toggleClass("latched", !!badge.latched);
-        place.toggleClass("busy", !badge.latched);
+        b.toggleClass("failing", !!badge.failing);
+        place.toggleClass("busy", !badge.latched && !badge.failing);
       }
       this.applyHidden();
     });
+  }
+
+  /** Mark the places of primitive tasks whose last results were errors, and their error branches. */
+  setFailing(places, transitions) {
+    this.failing = { places, transitions };
+    this.cy.batch(() => this.applyFailing());
+  }
+
+  applyFailing() {
+    const cy = this.cy;
+    const want = new Set([...this.failing.places, ...this.failing.transitions]);
+    cy.nodes(".failing").not(".badge").forEach((n) => { if (!want.has(n.id())) n.removeClass("failing"); });
+    for (const id of want) cy.getElementById(id).addClass("failing");
   }
 
   /** Mark elements with problems: set of node ids and arc keys. */

@@ -1,6 +1,9 @@
 // Follow and steer a live run (paper section 5): frames from the server are applied as they arrive and
 // drawn at most once per screen repaint, the latest marking winning; fired transitions flash; running
-// actions and latched events sit beside their places; control places take token insertions and removals.
+// actions and latched events sit beside their places; a primitive task whose last results were errors is
+// marked red with its error branch, its last reason in full on hover or click; control places take token
+// insertions and removals. The badge follows the run (running, paused, waiting, its end state), and once
+// the run has ended the drawing keeps its final marking and the Run panel its summary.
 
 import { el, fmt, seconds } from "./ui.js";
 
@@ -19,7 +22,7 @@ export function initLive(app) {
   const live = {
     runId: null, marking: {}, firings: 0, paused: false, state: { state: "", reason: "", detail: [] },
     running: new Map(), latched: {}, learner: {}, results: [], operator: [], errors: [], pulses: {},
-    offset: 0, ended: false, health: null,
+    offset: 0, ended: false, health: null, tasks: {}, summary: null,
   };
   app.live = live;
   let lastPanel = 0;
@@ -27,7 +30,8 @@ export function initLive(app) {
   // the server's node → {connected, heartbeat_rtt_s, in_flight}, as the health table reads it
   function toHealth(nodes) {
     if (!nodes) return null;
-    const list = Object.entries(nodes).map(([node, h]) => ({ node, connected: h.connected, rtt_s: h.heartbeat_rtt_s, in_flight: h.in_flight }));
+    const list = Object.entries(nodes).map(([node, h]) => ({ node, connected: h.connected, rtt_s: h.heartbeat_rtt_s,
+                                                             in_flight: h.in_flight, used: h.used !== false }));
     return list.length ? { nodes: list } : { note: "this run's client does not report node health" };
   }
 
@@ -47,6 +51,8 @@ export function initLive(app) {
     live.errors = snapshot.errors || [];
     live.results = snapshot.results || [];
     live.health = toHealth(snapshot.nodes);
+    live.tasks = snapshot.tasks || {};
+    live.summary = snapshot.summary || null;
     live.offset = (snapshot.server_time || Date.now() / 1000) - Date.now() / 1000;
     live.ended = END_STATES.has(live.state.state);
     if (app.mode === "live") paint(true);
@@ -93,6 +99,8 @@ export function initLive(app) {
     for (const o of f.operator || []) live.operator.push(o);
     if (f.pulses) for (const [e, n] of Object.entries(f.pulses)) live.pulses[e] = (live.pulses[e] || 0) + n;
     if (f.state) live.state = f.state;
+    if (f.summary) live.summary = f.summary;
+    if (f.tasks) Object.assign(live.tasks, f.tasks);
     if (f.nodes) live.health = toHealth(f.nodes);
     live.firings = f.firings;
     live.paused = f.paused;
@@ -112,8 +120,10 @@ export function initLive(app) {
       }
       // badges only when actions started, ended or latched: a run firing thousands of transitions a
       // second redraws tokens and flashes, not the whole drawing's decorations
+      if (f.tasks) markFailing();
       if (f.started || f.ended || f.latched || f.feedback) app.graph.setBadges(badges());
-      if (f.started || f.ended || f.learner || f.operator || f.state || f.nodes || f.pulses) panelsDue = true;
+      if (f.tasks && taskPlace !== null) showTaskPop(taskPlace);
+      if (f.started || f.ended || f.learner || f.operator || f.state || f.nodes || f.pulses || f.summary) panelsDue = true;
       scheduleText();
     }
     for (const o of f.operator || []) {
@@ -149,10 +159,38 @@ export function initLive(app) {
       const text = items.map(([, action, events]) => `\u2713 ${events.filter((e) => !/\.(ok|success)$/.test(e) || events.length <= 2).join(" ")} (${action})`).join("\n");
       map.set(place, { text, latched: true });
     }
+    for (const [place, rec] of failing().places) {
+      if (map.has(place)) continue;
+      const why = rec.last_error?.reason || "no reason given";
+      map.set(place, { text: `\u2717 ${errorsInARow(rec)}: ${why.length > 60 ? why.slice(0, 59) + "\u2026" : why}`, failing: true });
+    }
     return map;
   }
 
+  // ------------------------------------------------------------------ primitive tasks that keep failing
+  function errorsInARow(rec) { return `${rec.in_a_row} error${rec.in_a_row === 1 ? "" : "s"} in a row`; }
+
+  /** The places and error branches of the primitive tasks whose last results were errors. */
+  function failing() {
+    const draft = app.liveNet?.draft;
+    const places = new Map(), transitions = new Set();
+    if (!draft) return { places, transitions };
+    for (const rec of Object.values(live.tasks)) {
+      if (!rec.in_a_row) continue;
+      for (const p of draft.places) if (p.task === rec.task) places.set(p.id, rec);
+      const error = `int:${rec.task}.error`;
+      for (const t of draft.transitions) if ((t.events || []).includes(error)) transitions.add(t.id);
+    }
+    return { places, transitions };
+  }
+
+  function markFailing() {
+    const f = failing();
+    app.graph.setFailing([...f.places.keys()], [...f.transitions]);
+  }
+
   function paintDetails(force) {
+    markFailing();
     app.graph.setBadges(badges());
     header();
     if (force) renderPanelsSoon(false);
@@ -186,7 +224,8 @@ export function initLive(app) {
   function header() {
     const s = live.state.state || "";
     const state = document.getElementById("run-state");
-    const shown = s === "started" || s === "resumed" ? "running" : s;
+    // the engine's pause holds while the run waits (for the operator to resume): the badge says paused
+    const shown = live.ended ? s : live.paused ? "paused" : s === "started" || s === "resumed" ? "running" : s;
     setText(state, shown || " ");
     const cls = "run-state " + (END_STATES.has(s) ? (s === "completed" ? "ended" : "error") : shown);
     if (state.className !== cls) state.className = cls;
@@ -200,7 +239,7 @@ export function initLive(app) {
       countTimer = setTimeout(() => { if (app.mode === "live") header(); }, 100 - (now - countShownAt));
     }
     const waiting = document.getElementById("waiting");
-    setText(waiting, live.state.reason ? live.state.reason : "");
+    setText(waiting, live.state.reason ? (live.ended ? `the run ended (${s}): ${live.state.reason}` : live.state.reason) : "");
     const detail = (live.state.detail || []).join("\n");
     if (waiting.title !== detail) waiting.title = detail;
     const control = app.control && !live.ended;
@@ -232,8 +271,19 @@ export function initLive(app) {
     panel.replaceChildren();
     const s = live.state;
     panel.append(el("h3", {}, `Run ${live.runId || ""}`));
-    panel.append(el("p", {}, el("b", {}, s.state || "starting"), s.reason ? ` \u2014 ${s.reason}` : ""));
+    const shown = live.ended ? s.state : live.paused ? "paused" : s.state;
+    panel.append(el("p", {}, el("b", {}, shown || "starting"), s.reason ? ` \u2014 ${s.reason}` : ""));
     if ((s.detail || []).length) panel.append(el("ul", { class: "small" }, ...s.detail.map((d) => el("li", {}, d))));
+    if (live.summary) panel.append(summaryView(live.summary));
+    const failingTasks = Object.values(live.tasks).filter((r) => r.in_a_row);
+    if (failingTasks.length) {
+      panel.append(el("h4", {}, "primitive tasks failing"));
+      for (const r of failingTasks) {
+        const e = r.last_error || {};
+        panel.append(el("div", { class: "failing-task" }, el("b", {}, r.task), ` \u2014 ${errorsInARow(r)} (${r.errors} of ${r.results} results); last: `,
+          el("span", { class: "mono" }, `${e.action || "?"} @ ${e.node || "not placed"}`), el("div", { class: "reason" }, e.reason || "no reason given")));
+      }
+    }
     panel.append(el("h4", {}, "running primitive actions"));
     if (!live.running.size) panel.append(el("p", { class: "empty" }, "none"));
     else {
@@ -261,7 +311,7 @@ export function initLive(app) {
         const cls = r.status === "error" ? "node-bad" : r.status === "success" ? "node-ok" : "";
         t.append(el("tr", {}, el("td", { class: "mono" }, `${r.task}/${r.action}`),
           el("td", { class: cls }, r.status + (r.outcome ? ` (${r.outcome})` : "")), el("td", { class: "num" }, seconds(r.wall_s)),
-          el("td", { class: "small" }, r.reason || "")));
+          el("td", { class: "small reason", title: r.reason || "" }, r.reason || "")));
       }
       panel.append(t);
     }
@@ -278,12 +328,38 @@ export function initLive(app) {
     const h = live.health;
     if (!h || !h.nodes) return el("p", { class: "empty" }, h && h.note ? h.note : "no node health yet");
     const t = el("table", { class: "grid" }, el("tr", {}, ...["node", "link", "round trip", "in flight"].map((x) => el("th", {}, x))));
-    for (const n of h.nodes) {
+    const unused = h.nodes.filter((n) => !n.used).map((n) => n.node);
+    for (const n of h.nodes.filter((x) => x.used)) {
       t.append(el("tr", {}, el("td", {}, n.node), el("td", { class: n.connected ? "node-ok" : "node-bad" }, n.connected ? "connected" : "down"),
         el("td", { class: "num" }, n.rtt_s === null || n.rtt_s === undefined ? "-" : `${(n.rtt_s * 1000).toFixed(1)} ms`),
         el("td", { class: "num" }, String(n.in_flight ?? "-"))));
     }
-    return t;
+    if (!unused.length) return t;
+    return el("div", {}, t, el("p", { class: "small unused-nodes" },
+      `not used by this net (none of its actions is placed there, none of its events comes from there): ${unused.join(", ")}`));
+  }
+
+  /** The summary of a run that has ended: how and why, firings, final marking, calls per action, errors. */
+  function summaryView(sum) {
+    const box = el("div", { class: "summary" }, el("h4", {}, "summary"),
+      el("p", {}, `${sum.state} after ${sum.firings} firings`,
+        sum.all_calls_failed ? el("span", { class: "node-bad" }, ` \u2014 every one of the ${sum.calls} primitive-action calls ended in error`) : ""),
+      el("p", { class: "small mono" }, `final marking: ${Object.entries(sum.marking || {}).map(([p, n]) => `${p}: ${n}`).join(", ") || "no tokens"}`));
+    if ((sum.actions || []).length) {
+      const t = el("table", { class: "grid" }, el("tr", {}, ...["task/action", "node", "calls", "ok", "fail", "err", "mean"].map((h) => el("th", {}, h))));
+      for (const a of sum.actions) {
+        t.append(el("tr", {}, el("td", { class: "mono" }, `${a.task}/${a.action}`), el("td", {}, a.node || "-"),
+          el("td", { class: "num" }, String(a.calls)), el("td", { class: "num" }, String(a.success)),
+          el("td", { class: "num" }, String(a.failure)), el("td", { class: "num" + (a.error ? " node-bad" : "") }, String(a.error)),
+          el("td", { class: "num" }, seconds(a.mean_s))));
+      }
+      box.append(t);
+    }
+    if (sum.n_errors) {
+      box.append(el("p", { class: "small" }, `${sum.n_errors} error${sum.n_errors === 1 ? "" : "s"}${sum.n_errors > sum.errors.length ? `, the last ${sum.errors.length}` : ""}:`));
+      box.append(el("ul", { class: "small reason" }, ...sum.errors.map((e) => el("li", {}, e))));
+    }
+    return box;
   }
 
   function renderLearning() {
@@ -299,6 +375,7 @@ export function initLive(app) {
   app.graph.cy.on("tap", "node.place", (ev) => {
     if (app.mode !== "live") return;
     const place = app.currentDraft()?.places.find((p) => p.id === ev.target.id());
+    if (place && place.task && showTaskPop(place.id, true)) { hidePop(); return; }
     if (!place || place.kind !== "control") { hidePop(); return; }
     popPlace = place.id;
     const rp = ev.target.renderedPosition();
@@ -308,9 +385,44 @@ export function initLive(app) {
     updatePop();
     pop.hidden = false;
   });
-  app.graph.cy.on("tap", (ev) => { if (ev.target === app.graph.cy) hidePop(); });
-  app.graph.cy.on("viewport", hidePop);
-  document.addEventListener("keydown", (ev) => { if (ev.key === "Escape" && !pop.hidden) hidePop(); });
+  app.graph.cy.on("tap", (ev) => { if (ev.target === app.graph.cy) { hidePop(); hideTaskPop(true); } });
+  app.graph.cy.on("viewport", () => { hidePop(); hideTaskPop(true); });
+  document.addEventListener("keydown", (ev) => {
+    if (ev.key === "Escape" && !pop.hidden) hidePop();
+    if (ev.key === "Escape") hideTaskPop(true);
+  });
+
+  // a primitive task's record (errors in a row, the last reason in full): on hover, kept by a click
+  const taskPop = document.getElementById("task-pop");
+  let taskPlace = null, taskPinned = false;
+  function showTaskPop(placeId, pin = false) {
+    const place = app.liveNet?.draft?.places.find((p) => p.id === placeId);
+    const rec = place && live.tasks[place.task];
+    if (!rec || !rec.errors) return false;
+    const node = app.graph.cy.getElementById(placeId);
+    if (node.empty()) return false;
+    const rp = node.renderedPosition();
+    taskPop.style.left = `${rp.x + 30}px`;
+    taskPop.style.top = `${Math.max(4, rp.y - 30)}px`;
+    const e = rec.last_error || {};
+    document.getElementById("task-pop-title").textContent = `${rec.task}: ${rec.in_a_row ? errorsInARow(rec) : "last result not an error"}`;
+    document.getElementById("task-pop-count").textContent =
+      `${rec.errors} error${rec.errors === 1 ? "" : "s"} in ${rec.results} result${rec.results === 1 ? "" : "s"}; the last error: ` +
+      `${e.action || "?"} on ${e.node || "no node"} at ${e.t ? new Date(e.t * 1000).toLocaleTimeString() : "?"}`;
+    document.getElementById("task-pop-reason").textContent = e.reason || "no reason given";
+    taskPop.hidden = false;
+    taskPlace = placeId;
+    if (pin) taskPinned = true;
+    return true;
+  }
+  function hideTaskPop(unpin = false) {
+    if (taskPinned && !unpin) return;
+    taskPop.hidden = true;
+    taskPlace = null;
+    taskPinned = false;
+  }
+  app.graph.cy.on("mouseover", "node.place", (ev) => { if (app.mode === "live" && !taskPinned) showTaskPop(ev.target.id()); });
+  app.graph.cy.on("mouseout", "node.place", () => hideTaskPop());
   function hidePop() { pop.hidden = true; popPlace = null; }
   function updatePop() {
     if (!popPlace) return;

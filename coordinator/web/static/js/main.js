@@ -304,8 +304,11 @@ app.link = new Link(token, {
   },
   onClose(reason, final) {
     const l = document.getElementById("link");
-    l.textContent = final ? "closed" : "reconnecting"; l.className = "link down";
-    app.message(reason, final ? "" : "bad");
+    // a run that has ended closes its console: the page keeps the final marking and the summary
+    const ended = final && app.live?.ended;
+    l.textContent = ended ? "run ended" : final ? "closed" : "reconnecting"; l.className = "link down";
+    l.title = ended ? "the run has ended and its console has closed; this page keeps its final state" : "connection to the console server";
+    app.message(ended ? `${reason}: the final marking and the summary (Run panel) stay on this page` : reason, final ? "" : "bad");
     document.body.dataset.closed = reason;
   },
   welcome(msg) {
