@@ -1,18 +1,35 @@
 """Performance function of a robotic task (paper section 3, equation 1); pure, no I/O.
 
-J = 1 − R + ρ·C, where R is the reliability of a primitive action (probability that it meets its
-specifications), C its cost (CPU time, actual execution time or any a-priori unit), and ρ a weight
-such that ρ·C ∈ [0, 1]; the paper's typical choice is ρ = 1 / max_{a ∈ A} C(a) over the primitive
-actions A of a primitive task. The function comes from P. U. Lima and G. N. Saridis, *Design of
+J = 1 − R + ρ·C (eq. 1), where R is the reliability of a primitive action (probability that it
+meets its specifications), C its cost (CPU time, actual execution time or any a-priori unit), and ρ
+a weight such that ρ·C ∈ [0, 1]; the paper's typical choice is ρ = 1 / max_{a ∈ A} C(a) over the
+primitive actions A of a primitive task, which also makes costs of different units comparable
+across primitive tasks. J lies in [0, 2] and **lower is better**: 0 for an action that always meets
+its specifications at no cost. The function comes from P. U. Lima and G. N. Saridis, *Design of
 Intelligent Control Systems Based on Hierarchical Stochastic Automata*, World Scientific, 1996
 (reference [3] of the paper).
+
+**One definition of C and ρ**, used by the learning automata (section 4, :mod:`coordinator.learning`),
+``petrobot learn`` and ``petrobot perf`` alike:
+
+* C of one result (:func:`result_cost`): the cost figure the action reported, else its wall-clock
+  time on the node (s). C(a) of an action: the mean over its results; but when the net file gives
+  every action of the task an a-priori ``cost`` (and its learner does not say ``cost_source =
+  "measured"``), C(a) is that a-priori cost, as the paper computes it.
+* ρ of a primitive task (:func:`task_rho`): the ``rho`` its learner declares; else 1 / max_a C(a) over
+  its actions (the paper's typical ρ); but for a task of a single action, whose 1 / C(a) would make
+  ρC = 1 whatever the action costs (J = 2 − R, blind to cost), ρ = 1 / its ``deadline_s`` when its
+  costs are measured times (ρC: the share of its time budget the action uses; :func:`cost_budget`),
+  else 0 (no deadline, or a-priori costs a deadline does not bound: J = 1 − R, nothing to weigh the
+  cost against).
+
+``perf --cost wall|cpu|cost|apriori`` replaces the first rule by one measure for every action.
 
 Formulas used here, each with its source:
 
 * primitive action (paper section 3): ``R(a) = n_success(a) / n(a)`` over the journal's results
-  (``failure`` and ``error`` both fail the specifications, section 4); ``C(a)`` the a-priori cost of
-  the action in the net file or, when measured, the mean of ``wall_s``, ``cpu_s`` or ``cost`` over its
-  results; ``ρ = 1 / max_a C(a)`` per primitive task unless its learner declares ``rho``; ``J(a) = 1 − R(a) + ρ C(a)``.
+  (``failure`` and ``error`` both fail the specifications, section 4); C(a) and ρ as above;
+  ``J(a) = 1 − R(a) + ρ C(a)``.
 * primitive task: with a probability ``p(a)`` of choosing each action, ``R = Σ p(a) R(a)``,
   ``C = Σ p(a) C(a)`` and ``J = 1 − R + ρ C = Σ p(a) J(a)`` (J is linear in R and C). By default
   ``p`` puts all its mass on the action of least J: the estimator automaton of section 4 converges
@@ -42,21 +59,84 @@ from services.results import Status
 
 __all__ = [
     "COST_MEASURES",
+    "MEASURED_TIMES",
     "ActionPerformance",
     "ActionRecord",
     "TaskPerformance",
     "action_performance",
+    "cost_budget",
     "cost_function",
     "error_sink_places",
     "is_goal",
+    "result_cost",
     "rho_for",
     "task_performance",
+    "task_rho",
     "usage_frequencies",
 ]
 
-#: Cost measures: ``wall`` (``wall_s``), ``cpu`` (``cpu_s``), ``cost`` (the action's reported cost),
-#: ``apriori`` (the net file's ``cost`` of each action).
-COST_MEASURES = ("wall", "cpu", "cost", "apriori")
+#: Cost measures: ``learner`` (C as the learning automata take it: see the module docstring),
+#: ``wall`` (``wall_s``), ``cpu`` (``cpu_s``), ``cost`` (the action's reported cost), ``apriori``
+#: (the net file's ``cost`` of each action).
+COST_MEASURES = ("learner", "wall", "cpu", "cost", "apriori")
+#: The measures that are times in seconds, which a primitive task's deadline bounds.
+MEASURED_TIMES = frozenset({"learner", "wall", "cpu"})
+
+
+def result_cost(cost: float | None, wall_s: float | None) -> float | None:
+    """C of one result of a primitive action (section 3): the cost figure the action reported, else
+    its wall-clock time on the node in seconds; ``None`` when it has neither.
+
+    This is what the learning automata are fed (:meth:`coordinator.learning.Learner.update`) and what
+    ``petrobot learn`` and ``petrobot perf`` read back from the journal.
+    """
+    return cost if cost is not None else wall_s
+
+
+def cost_budget(deadline_s: float | None, actions: int, *, measured_time: bool) -> float | None:
+    """The cost a single-action primitive task weighs its action's cost against: its deadline (s).
+
+    Args:
+        deadline_s: the primitive task's deadline in seconds, or ``None``.
+        actions: how many primitive actions translate the task.
+        measured_time: whether C is a measured time in seconds (not an a-priori or reported figure
+            of another unit, which a deadline does not bound).
+
+    Returns:
+        ``deadline_s`` for a task of one action whose costs are measured times, else ``None``.
+    """
+    return deadline_s if actions == 1 and measured_time else None
+
+
+def task_rho(costs: Iterable[float], *, actions: int, declared: float | None = None,
+             budget: float | None = None) -> float:
+    """ρ of a primitive task in J = 1 − R + ρC (paper section 3, eq. 1; the module docstring).
+
+    Args:
+        costs: the known costs C(a) ≥ 0 of the task's actions (those not known yet left out).
+        actions: how many primitive actions translate the task.
+        declared: the ``rho`` the task's learner declares, or ``None``.
+        budget: :func:`cost_budget` (a single action's deadline, s), or ``None``.
+
+    Returns:
+        ρ in 1/cost-unit: ``declared``; else with one action ``1 / budget`` (0 without a budget);
+        else :func:`rho_for` of ``costs`` (0 when no cost is known yet).
+
+    Raises:
+        ValueError: a negative cost or ρ, or a budget that is not > 0.
+    """
+    if declared is not None:
+        if declared < 0:
+            raise ValueError(f"rho must be >= 0, got {declared}")
+        return float(declared)
+    if actions == 1:
+        if budget is None:
+            return 0.0
+        if not budget > 0:
+            raise ValueError(f"a cost budget must be > 0, got {budget}")
+        return 1.0 / budget
+    known = list(costs)
+    return rho_for(known) if known else 0.0
 
 
 def cost_function(reliability: float, cost: float, rho: float) -> float:
@@ -131,7 +211,9 @@ class ActionRecord:
             object.__setattr__(self, "status", Status(self.status))
 
     def measure(self, which: str) -> float | None:
-        """The cost measure ``which`` (``wall``, ``cpu`` or ``cost``) of this result, or None."""
+        """The cost measure ``which`` (``learner``, ``wall``, ``cpu`` or ``cost``) of this result, or None."""
+        if which == "learner":
+            return result_cost(self.cost, self.wall_s)
         return {"wall": self.wall_s, "cpu": self.cpu_s, "cost": self.cost}.get(which)
 
 
@@ -192,18 +274,20 @@ class TaskPerformance:
 
 
 def action_performance(
-    net: PetriNet, records: Iterable[ActionRecord], *, measure: str = "wall"
+    net: PetriNet, records: Iterable[ActionRecord], *, measure: str = "learner"
 ) -> dict[str, dict[str, ActionPerformance]]:
     """R, C, ρ, J of every primitive action of ``net`` from journal results.
 
     C is the mean of ``measure`` over the action's results when it has some, else the a-priori
-    ``cost`` of the action (always with ``measure="apriori"``). R is the relative frequency of
-    success; without results it falls back on the primitive task's a-priori ``reliability``.
+    ``cost`` of the action (always with ``measure="apriori"``; with ``"learner"`` whenever the task
+    gives every action an a-priori cost and its learner does not say ``cost_source = "measured"``).
+    ρ is :func:`task_rho`. R is the relative frequency of success; without results it falls back
+    on the primitive task's a-priori ``reliability``.
 
     Args:
         net: the task net (its primitive tasks and their actions).
         records: the journal's results; results of unknown tasks or actions are ignored.
-        measure: one of :data:`COST_MEASURES`.
+        measure: one of :data:`COST_MEASURES` (default: as the learners take it).
 
     Returns:
         ``{task: {action: ActionPerformance}}``.
@@ -218,18 +302,24 @@ def action_performance(
         grouped.setdefault((rec.task, rec.action), []).append(rec)
     out: dict[str, dict[str, ActionPerformance]] = {}
     for name, task in net.tasks.items():
+        apriori = measure == "apriori" or (
+            measure == "learner" and all(spec.cost is not None for spec in task.actions)
+            and task.learner.get("cost_source") != "measured")
         rows = []
         for spec in task.actions:
             recs = grouped.get((name, spec.name), [])
             counts = {s: sum(1 for r in recs if r.status == s) for s in ("success", "failure", "error")}
-            values = [v for r in recs if (v := r.measure(measure)) is not None] if measure != "apriori" else []
+            values = [v for r in recs if (v := r.measure(measure)) is not None] if not apriori else []
             cost = _mean(values) if values else spec.cost
             rel = counts["success"] / len(recs) if recs else task.reliability
             source = ("journal" if recs else "apriori") + "/" + ("journal" if values else "apriori")
             rows.append((spec.name, len(recs), counts, rel, cost, source))
         known = [c for *_, c, _ in rows if c is not None]
         declared = task.learner.get("rho")
-        rho = float(declared) if declared is not None else (rho_for(known) if known else 0.0)
+        budget = cost_budget(task.deadline_s, len(task.actions), measured_time=measure in MEASURED_TIMES
+                             and not apriori)
+        rho = task_rho(known, actions=len(task.actions), declared=None if declared is None else float(declared),
+                       budget=budget)
         out[name] = {
             a: ActionPerformance(
                 task=name, action=a, runs=n, successes=c["success"], failures=c["failure"],

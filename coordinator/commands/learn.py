@@ -110,6 +110,7 @@ def read_journal(path: str | Path, run: str | None = None) -> tuple[dict[str, di
             state is not a JSON object of its scheme.
     """
     from coordinator.journal import JournalReader
+    from coordinator.performance import result_cost
 
     with JournalReader.open(path) as journal:
         if run is not None:
@@ -117,7 +118,7 @@ def read_journal(path: str | Path, run: str | None = None) -> tuple[dict[str, di
         states = {task: dict(saved.state) for task, saved in journal.learner_states().items()}
         results: dict[str, list[Trial]] = {}
         for row in journal.results(run):
-            cost = row.cost if row.cost is not None else row.wall_s  # what the runtime feeds the learner
+            cost = result_cost(row.cost, row.wall_s)  # what the runtime feeds the learner
             value = None if cost is None else float(cost)
             if value is not None and (not math.isfinite(value) or value < 0.0):
                 value = None
@@ -131,7 +132,7 @@ def _replay(state: Mapping[str, Any], results: list[Trial]) -> tuple[list[list[f
 
     config = dict(state["config"])
     config["scheme"] = state["scheme"]
-    fresh = make_learner(config, list(state["actions"]), state["costs"], int(state["seed"]))
+    fresh = make_learner(config, list(state["actions"]), state["costs"], int(state["seed"]), state.get("cost_budget"))
     history = [list(fresh.probabilities.values())]
     for action, status, cost in results:
         if action in fresh.actions:
@@ -237,11 +238,30 @@ def report_json(reports: list[TaskReport], threshold: float) -> dict[str, Any]:
     return {"threshold": threshold, "tasks": out}
 
 
+def _rho_source(auto: LearningAutomaton) -> str:
+    """Where an automaton's ρ comes from (:func:`coordinator.performance.task_rho`), in words."""
+    if "rho" in auto.state_dict()["config"]:
+        return "declared"
+    if len(auto.actions) > 1:
+        return "1/max C"
+    if auto.cost_source == "measured" and auto.cost_budget is not None:
+        return f"one action: 1/its deadline {auto.cost_budget:g} s"
+    return "one action without a deadline: cost not weighed"
+
+
+def _cost_source(auto: LearningAutomaton) -> str:
+    """Where an automaton's C comes from, in words."""
+    if auto.cost_source == "apriori":
+        return "the net file's a-priori costs"
+    return "the mean of the cost each result reported, else of its wall time on the node (s)"
+
+
 def report_text(reports: list[TaskReport], threshold: float) -> str:
     """Human-readable report, one block per primitive task."""
     if not reports:
         return "no primitive task has a learner state or a result in this journal\n"
-    lines: list[str] = []
+    lines: list[str] = ["J = 1 - R + rho*C (paper eq. 1), lower is better; p: the probability of choosing the action "
+                        "next (section 4)", ""]
     for rep in reports:
         auto = rep.automaton
         if rep.saved:
@@ -252,7 +272,7 @@ def report_text(reports: list[TaskReport], threshold: float) -> str:
             lines.append(f"{rep.task}: {auto.scheme} ({extra}), {auto.steps} trials, {verdict}")
         else:
             lines.append(f"{rep.task}: no saved learner state; estimates from {len(rep.results)} results")
-        lines.append(f"  rho = {auto.rho:.4g}")
+        lines.append(f"  rho = {auto.rho:.4g} ({_rho_source(auto)}); C: {_cost_source(auto)}")
         lines.append(f"  {'action':20s}{'p':>8s}{'trials':>8s}{'R':>8s}{'C':>10s}{'J':>8s}")
         probs = auto.probabilities
         for name, e in auto.estimates.items():

@@ -21,21 +21,26 @@ def add_parser(subparsers: Any) -> None:
         "perf",
         help="J = 1 - R + rho*C per primitive action, primitive task and task",
         description=(
-            "Compute the performance function of section 3 of the paper, J = 1 - R + rho*C. Per primitive "
-            "action: R = relative frequency of 'success' in the journal (failure and error fail the "
-            "specifications), C = mean measured cost (or the a-priori cost of the net file), rho = 1/max C "
-            "over the actions of the primitive task. Per primitive task: the values of its best action "
-            "(least J, where the learning automaton converges) and of the mix of actions actually used. "
-            "Per task: through the GSPN view, R = probability of ending in a goal marking, C = mean time "
-            "to absorption (s), rho = 1/C_max with every primitive task at its slowest action. Exit status "
-            "0 on success, 2 on an unreadable net or journal, 1 if the analysis fails."),
+            "Compute the performance function of section 3 of the paper, J = 1 - R + rho*C (eq. 1): between "
+            "0 and 2, lower is better. Per primitive action: R = relative frequency of 'success' in the "
+            "journal (failure and error fail the specifications); C and rho as the learning automata take "
+            "them (petrobot learn shows the same numbers): C = the net file's a-priori costs when every action "
+            "of the task has one, else the mean over the results of the cost each action reported, or its "
+            "wall time on the node (s) when it reported none; rho = the task's declared rho, else 1/max C over "
+            "its actions, and for a task of one action 1/its deadline_s (the share of its time budget it used; "
+            "0 without a deadline). Per primitive task: the values of its best action (least J, where the "
+            "learning automaton converges) and of the mix of actions actually used. Per task: through the GSPN "
+            "view, R = probability of ending in a goal marking, C = mean time to absorption (s), rho = 1/C_max "
+            "with every primitive task at its slowest action. Exit status 0 on success, 2 on an unreadable net "
+            "or journal, 1 if the analysis fails."),
     )
     parser.add_argument("net", metavar="NET", help="task net file (.toml, .pnml or .xml)")
     options.add_journal(parser, required=True, help="SQLite journal of real runs (read only)")
     options.add_run(parser)
-    parser.add_argument("--cost", choices=COST_MEASURES, default="wall",
-                        help="cost measure C of an action: wall (actual time, s), cpu (CPU time, s), cost "
-                             "(the cost the action reports) or apriori (the net file); default wall")
+    parser.add_argument("--cost", choices=COST_MEASURES, default="learner",
+                        help="cost measure C of an action: learner (as the learning automata take it, see above; "
+                             "the default), wall (actual time, s), cpu (CPU time, s), cost (the cost the action "
+                             "reports) or apriori (the net file)")
     options.add_ext_rate(parser, help="rate (1/s) of an external event ext:TOPIC in the GSPN view; repeat as "
                                       "needed")
     parser.add_argument("--goal", action="append", metavar="PLACE=N",
@@ -88,13 +93,21 @@ def _row(obj: Any) -> dict[str, Any]:
 def render(rep: dict[str, Any]) -> str:
     """Return the readable text of a :func:`report` dict."""
     scope = f"run {rep['run']}" if rep.get("run") else "journal"
-    lines = [f"net {rep['net']!r}: {rep['results']} {scope} results, cost measure {rep['cost_measure']}", "",
-             f"{'primitive action':32} {'runs':>5} {'R':>7} {'C':>9} {'rho':>8} {'J':>7}  source"]
+    measure = {"learner": "as the learners take it: a-priori costs if the net gives every action one, else "
+                          "each result's reported cost or its wall time on the node (s)",
+               "wall": "wall time on the node (s)", "cpu": "CPU time on the node (s)",
+               "cost": "the cost each action reported", "apriori": "the net file's a-priori costs"}
+    lines = [f"net {rep['net']!r}: {rep['results']} {scope} results",
+             "J = 1 - R + rho*C (paper eq. 1), from 0 to 2: LOWER IS BETTER. R: share of results that met the "
+             "specifications (success);",
+             f"C: cost, {measure.get(rep['cost_measure'], rep['cost_measure'])}; rho: the task's declared rho, "
+             "else 1/max C over its actions (one action: 1/its deadline_s)", "",
+             f"{'primitive action':32} {'runs':>5} {'R':>7} {'C':>9} {'rho':>8} {'J':>7}  source (R/C)"]
     for task, acts in rep["actions"].items():
         for a, p in acts.items():
             lines.append(f"{task + '.' + a:32} {p['runs']:5d} {_fmt(p['reliability']):>7} {_fmt(p['cost']):>9} "
                          f"{_fmt(p['rho']):>8} {_fmt(p['j']):>7}  {p['source']}")
-    lines += ["", f"{'primitive task':20} {'R':>7} {'C':>9} {'J':>7}  basis"]
+    lines += ["", f"{'primitive task':20} {'R':>7} {'C':>9} {'J':>7}  basis (least J: where the learner converges)"]
     for task, entry in rep["primitive_tasks"].items():
         for key in ("best", "used_mix"):
             if key in entry:
@@ -104,7 +117,7 @@ def render(rep: dict[str, Any]) -> str:
     t = rep["task"]
     lines += ["", (f"task {rep['net']!r} (GSPN view): R = {_fmt(t['reliability'])} (probability of a goal "
                    f"marking), C = {_fmt(t['cost'])} s (mean time to absorption), rho = {_fmt(t['rho'])} 1/s, "
-                   f"J = {_fmt(t['j'])}")]
+                   f"J = {_fmt(t['j'])} (lower is better)")]
     for w in t.get("warnings", []):
         lines.append(f"  warning: {w}")
     return "\n".join(lines)

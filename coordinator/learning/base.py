@@ -35,13 +35,14 @@ import numpy as np
 from coordinator.errors import JournalError
 from coordinator.learning.validation import (
     check_actions,
+    check_budget,
     check_cost_source,
     check_rho,
     check_costs,
     check_rate,
     check_warmup,
 )
-from coordinator.performance import cost_function, rho_for
+from coordinator.performance import cost_function, task_rho
 from services.results import Status
 
 __all__ = ["STATE_FORMAT", "ActionEstimate", "LearningAutomaton", "RateAutomaton"]
@@ -84,10 +85,13 @@ class LearningAutomaton(ABC):
             the mean measured cost of each action; ρ = 1 / max over actions of those means).
             Default: ``"apriori"`` when ``costs`` is given, else ``"measured"``.
         rho: ρ ≥ 0 in 1/cost-unit, the weight of cost against reliability; ``None`` (default) for
-            the paper's typical ρ = 1 / max C(a). The paper asks that ρ keep the cost from
+            :func:`coordinator.performance.task_rho`: the paper's typical ρ = 1 / max C(a), or for a
+            single action 1 / ``cost_budget``. The paper asks that ρ keep the cost from
             overwhelming the reliability: a task whose failures cost much more than its actions'
             running costs (a failed segment ends a course) declares a smaller ρ.
         seed: seed of the automaton's own ``numpy`` generator (used when ``choose`` gets none).
+        cost_budget: the deadline (s) of a single-action task whose costs are measured times:
+            ρ = 1 / cost_budget (:func:`coordinator.performance.cost_budget`); ignored otherwise.
 
     Raises:
         LearnerConfigError: on an empty or duplicated action list, bad costs or cost source.
@@ -103,11 +107,13 @@ class LearningAutomaton(ABC):
         cost_source: str | None = None,
         rho: float | None = None,
         seed: int = 0,
+        cost_budget: float | None = None,
     ) -> None:
         self._actions = check_actions(actions)
         self._costs = check_costs(costs, self._actions)
         self._cost_source = check_cost_source(cost_source, self._costs)
         self._rho = None if rho is None else check_rho(rho)
+        self._cost_budget = None if cost_budget is None else check_budget(cost_budget)
         self._seed = int(seed)
         self._rng = np.random.default_rng(self._seed)
         n = len(self._actions)
@@ -142,18 +148,22 @@ class LearningAutomaton(ABC):
 
     @property
     def rho(self) -> float:
-        """ρ of J = 1 − R + ρC (section 3): as configured, else 1 / max C(a) of the a-priori costs
-        or of the measured means.
+        """ρ of J = 1 − R + ρC (section 3), :func:`coordinator.performance.task_rho`: as configured,
+        else 1 / max C(a) of the a-priori costs or of the measured means; for a single action whose
+        costs are measured times, 1 / its cost budget (0 without one).
 
         0.0 while no cost is known or every cost is 0 (and no ρ is configured).
         """
-        if self._rho is not None:
-            return self._rho
         if self._cost_source == "apriori":
             assert self._costs is not None
-            return rho_for(self._costs.values())
+            return task_rho(self._costs.values(), actions=len(self._actions), declared=self._rho)
         means = [s / c for s, c in zip(self._cost_sums, self._cost_counts) if c > 0]
-        return rho_for(means) if means else 0.0
+        return task_rho(means, actions=len(self._actions), declared=self._rho, budget=self._cost_budget)
+
+    @property
+    def cost_budget(self) -> float | None:
+        """The cost budget (s) ρ is 1 / of for a single action with measured costs, or ``None``."""
+        return self._cost_budget
 
     def _cost(self, i: int) -> float | None:
         if self._cost_source == "apriori":
@@ -283,6 +293,7 @@ class LearningAutomaton(ABC):
             "costs": None if self._costs is None else dict(self._costs),
             "config": self._config() if self._rho is None else {**self._config(), "rho": self._rho},
             "seed": self._seed,
+            "cost_budget": self._cost_budget,
             "probabilities": list(self._p),
             "trials": list(self._trials),
             "successes": list(self._successes),
@@ -345,8 +356,9 @@ class RateAutomaton(LearningAutomaton):
         cost_source: str | None = None,
         rho: float | None = None,
         seed: int = 0,
+        cost_budget: float | None = None,
     ) -> None:
-        super().__init__(actions, costs=costs, cost_source=cost_source, rho=rho, seed=seed)
+        super().__init__(actions, costs=costs, cost_source=cost_source, rho=rho, seed=seed, cost_budget=cost_budget)
         self._rate = check_rate(rate)
         self._warmup = check_warmup(warmup)
 

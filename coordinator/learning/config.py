@@ -27,6 +27,7 @@ def make_learner(
     actions: Sequence[str],
     costs: Mapping[str, float] | None = None,
     seed: int = 0,
+    cost_budget: float | None = None,
 ) -> LearningAutomaton:
     """Build the learning automaton of one primitive task from its net-file configuration.
 
@@ -48,6 +49,8 @@ def make_learner(
         actions: the primitive task's primitive actions, in order.
         costs: a-priori costs {action: C ≥ 0} (net file ``costs = {action = value}``), or ``None``.
         seed: seed of the automaton's random generator (see :func:`coordinator.learning.state.task_seed`).
+        cost_budget: a single-action task's deadline (s), ρ = 1 / it when its costs are measured
+            (see :class:`~coordinator.learning.base.LearningAutomaton`), or ``None``.
 
     Returns:
         A fresh automaton with a uniform probability vector (or the fixed choice).
@@ -57,18 +60,20 @@ def make_learner(
             outside (0, 1], a bad warmup, costs that do not match ``actions``, or keys that do not
             apply to the scheme.
     """
-    return automaton_for(learner_spec(config, actions, costs, seed), seed)
+    return automaton_for(learner_spec(config, actions, costs, seed), seed, cost_budget)
 
 
-def automaton_for(spec: LearnerSpec, seed: int = 0) -> LearningAutomaton:
-    """A fresh automaton of a checked configuration, seeded with ``seed``."""
+def automaton_for(spec: LearnerSpec, seed: int = 0, cost_budget: float | None = None) -> LearningAutomaton:
+    """A fresh automaton of a checked configuration, seeded with ``seed`` (``cost_budget``: see
+    :func:`make_learner`)."""
     if spec.scheme == "fixed":
         return FixedChoice(spec.actions, action=spec.action, costs=spec.costs, cost_source=spec.cost_source,
-                           rho=spec.rho, seed=seed)
+                           rho=spec.rho, seed=seed, cost_budget=cost_budget)
     assert spec.rate is not None and spec.warmup is not None
     if spec.scheme == "pursuit":
         assert spec.estimator is not None
         return PursuitAutomaton(spec.actions, rate=spec.rate, warmup=spec.warmup, estimator=spec.estimator,
-                                costs=spec.costs, cost_source=spec.cost_source, rho=spec.rho, seed=seed)
+                                costs=spec.costs, cost_source=spec.cost_source, rho=spec.rho, seed=seed,
+                                cost_budget=cost_budget)
     return LinearRewardInaction(spec.actions, rate=spec.rate, warmup=spec.warmup, costs=spec.costs,
-                                cost_source=spec.cost_source, rho=spec.rho, seed=seed)
+                                cost_source=spec.cost_source, rho=spec.rho, seed=seed, cost_budget=cost_budget)

@@ -40,8 +40,9 @@ class FixedChoice(LearningAutomaton):
         cost_source: str | None = None,
         rho: float | None = None,
         seed: int = 0,
+        cost_budget: float | None = None,
     ) -> None:
-        super().__init__(actions, costs=costs, cost_source=cost_source, rho=rho, seed=seed)
+        super().__init__(actions, costs=costs, cost_source=cost_source, rho=rho, seed=seed, cost_budget=cost_budget)
         self._index = self._actions.index(check_fixed_action(action, self._actions))
         self._p = [0.0] * len(self._actions)
         self._p[self._index] = 1.0

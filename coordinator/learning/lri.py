@@ -58,9 +58,10 @@ class LinearRewardInaction(RateAutomaton):
         cost_source: str | None = None,
         rho: float | None = None,
         seed: int = 0,
+        cost_budget: float | None = None,
     ) -> None:
         super().__init__(actions, rate=rate, warmup=warmup, costs=costs, cost_source=cost_source,
-                         rho=rho, seed=seed)
+                         rho=rho, seed=seed, cost_budget=cost_budget)
 
     def reward(self, i: int, success: bool, cost: float | None) -> float:
         """Reward strength r = 1 − (j − j_lo)/(j_hi − j_lo) ∈ [0, 1] of one result of action ``i``.

@@ -75,9 +75,10 @@ class PursuitAutomaton(RateAutomaton):
         cost_source: str | None = None,
         rho: float | None = None,
         seed: int = 0,
+        cost_budget: float | None = None,
     ) -> None:
         super().__init__(actions, rate=rate, warmup=warmup, costs=costs, cost_source=cost_source,
-                         rho=rho, seed=seed)
+                         rho=rho, seed=seed, cost_budget=cost_budget)
         self._estimator = check_estimator(estimator)
         self._r_tilde: list[float | None] = [None] * len(self._actions)
 

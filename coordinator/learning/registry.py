@@ -17,6 +17,7 @@ from coordinator.learning.config import make_learner
 from coordinator.learning.state import automaton_from_state, task_seed
 from coordinator.learning.validation import LearnerConfigError
 from coordinator.net import PetriNet
+from coordinator.performance import result_cost
 from services.results import ActionResult
 
 __all__ = ["Learner"]
@@ -32,7 +33,7 @@ class Learner:
     def __init__(self, seed: int = 0) -> None:
         self._seed = int(seed)
         self._automata: dict[str, LearningAutomaton] = {}
-        self._configs: dict[str, tuple[dict[str, Any], dict[str, float] | None]] = {}
+        self._configs: dict[str, tuple[dict[str, Any], dict[str, float] | None, float | None]] = {}
 
     @property
     def seed(self) -> int:
@@ -50,17 +51,19 @@ class Learner:
         actions: Sequence[str],
         config: Mapping[str, Any] | None = None,
         costs: Mapping[str, float] | None = None,
+        cost_budget: float | None = None,
     ) -> LearningAutomaton:
-        """Create the automaton of ``task`` with :func:`make_learner` and register it.
+        """Create the automaton of ``task`` with :func:`make_learner` and register it (``cost_budget``:
+        a single-action task's deadline, see :func:`make_learner`).
 
         Raises:
             LearnerConfigError: on a bad configuration, or if the task is already registered.
         """
         if task in self._automata:
             raise LearnerConfigError(f"primitive task {task!r} already has a learner")
-        auto = make_learner(config or {}, actions, costs, task_seed(self._seed, task))
+        auto = make_learner(config or {}, actions, costs, task_seed(self._seed, task), cost_budget)
         self._automata[task] = auto
-        self._configs[task] = (dict(config or {}), None if costs is None else dict(costs))
+        self._configs[task] = (dict(config or {}), None if costs is None else dict(costs), cost_budget)
         return auto
 
     def automaton(self, task: str) -> LearningAutomaton:
@@ -92,8 +95,10 @@ class Learner:
     def from_net(cls, net: PetriNet, seed: int = 0) -> Learner:
         """One automaton per primitive task of a :class:`coordinator.net.PetriNet`.
 
-        Uses each task's ``learner`` table as the configuration (:func:`make_learner`) and the
-        actions' a-priori ``cost`` values as costs (none given: measured costs).
+        Uses each task's ``learner`` table as the configuration (:func:`make_learner`), the
+        actions' a-priori ``cost`` values as costs (none given: measured costs) and, for a task of a
+        single action, its ``deadline_s`` as the cost budget of ρ
+        (:func:`coordinator.performance.task_rho`).
 
         Raises:
             LearnerConfigError: naming the primitive task, on a bad ``learner`` table or on costs
@@ -104,7 +109,8 @@ class Learner:
             names = [spec.name for spec in task.actions]
             given = {spec.name: spec.cost for spec in task.actions if spec.cost is not None}
             try:
-                learner.add_task(name, names, dict(task.learner), given or None)
+                learner.add_task(name, names, dict(task.learner), given or None,
+                                 task.deadline_s if len(names) == 1 else None)
             except LearnerConfigError as exc:
                 raise LearnerConfigError(f"primitive task {name!r}: {exc.problem}") from None
         return learner
@@ -112,15 +118,15 @@ class Learner:
     def update(self, task: str, action: str, result: ActionResult) -> dict[str, Any]:
         """Feed back one result and return the task's new state dict (to persist at once).
 
-        The cost of the run is the action's own cost figure, else its measured duration on the
-        node (``wall_s``).
+        The cost of the run is :func:`coordinator.performance.result_cost`: the action's own cost
+        figure, else its measured duration on the node (``wall_s``).
 
         Raises:
             KeyError: if the task has no automaton.
             ValueError: on an unknown action.
         """
         auto = self._automata[task]
-        auto.update(action, result.status, result.cost if result.cost is not None else result.wall_s)
+        auto.update(action, result.status, result_cost(result.cost, result.wall_s))
         return auto.state_dict()
 
     def state_dict(self) -> dict[str, dict[str, Any]]:
@@ -171,8 +177,8 @@ class Learner:
                         f"does not match the net ({current.scheme}: {', '.join(current.actions)})")
                 skipped.append(task)
                 continue
-            config, costs = self._configs[task]
-            fresh = make_learner(config, current.actions, costs, task_seed(self._seed, task))
+            config, costs, budget = self._configs[task]
+            fresh = make_learner(config, current.actions, costs, task_seed(self._seed, task), budget)
             try:
                 fresh.restore_counts(state)
             except (KeyError, TypeError, ValueError) as exc:

@@ -38,7 +38,8 @@ def automaton_from_state(state: Mapping[str, Any]) -> LearningAutomaton:
             raise JournalError(f"learner state format {state.get('format')!r} is not supported")
         config = dict(state["config"])
         config["scheme"] = state["scheme"]
-        auto = make_learner(config, list(state["actions"]), state["costs"], int(state["seed"]))
+        auto = make_learner(config, list(state["actions"]), state["costs"], int(state["seed"]),
+                            state.get("cost_budget"))
         auto.restore_counts(state)
     except JournalError:
         raise

@@ -26,6 +26,7 @@ __all__ = [
     "LearnerConfigError",
     "LearnerSpec",
     "check_actions",
+    "check_budget",
     "check_cost_source",
     "check_costs",
     "check_estimator",
@@ -137,6 +138,17 @@ def check_rho(rho: Any) -> float:
     if isinstance(rho, bool) or not isinstance(rho, (int, float)) or not math.isfinite(rho) or rho < 0:
         raise LearnerConfigError(f"rho must be a finite number >= 0 (1/cost-unit), got {rho!r}")
     return float(rho)
+
+
+def check_budget(budget: Any) -> float:
+    """A cost budget (a single-action task's deadline, s) as a float > 0.
+
+    Raises:
+        LearnerConfigError: not a finite number > 0.
+    """
+    if isinstance(budget, bool) or not isinstance(budget, (int, float)) or not math.isfinite(budget) or budget <= 0:
+        raise LearnerConfigError(f"a cost budget must be a finite number > 0 (s), got {budget!r}")
+    return float(budget)
 
 
 def check_rate(rate: Any) -> float:

@@ -203,3 +203,140 @@ def test_learn_on_a_journal_of_known_frequencies_counts_named_outcomes_by_their_
     assert main(["perf", net, "--journal", str(journal), "--json", "--ext-rate", "image_sampling_tick=30",
                  "--ext-rate", "ball_caught=2"]) == 0
     assert json.loads(capsys.readouterr().out)["actions"]["catch"]["catch"]["reliability"] == pytest.approx(0.85)
+
+
+AGREE = """
+[net]
+name = "pick_and_place"
+home = { arm = 1 }
+
+[[place]]
+id = "runs"
+kind = "control"
+tokens = 6
+
+[[place]]
+id = "arm"
+kind = "resource"
+tokens = 1
+
+[[place]]
+id = "picking"
+kind = "primitive_task"
+task = "pick"
+
+[[place]]
+id = "placing"
+kind = "primitive_task"
+task = "place"
+
+[task.pick]
+actions = ["pick_fast", "pick_slow"]
+learner = { scheme = "pursuit", warmup = 1 }
+
+[task.place]
+actions = ["place_down"]
+deadline_s = 20.0
+
+[[transition]]
+id = "start"
+inputs = { runs = 1, arm = 1 }
+outputs = { picking = 1 }
+
+[[transition]]
+id = "picked"
+events = ["int:pick.ok"]
+inputs = { picking = 1 }
+outputs = { placing = 1 }
+
+[[transition]]
+id = "pick_failed"
+events = ["int:pick.error"]
+inputs = { picking = 1 }
+outputs = { arm = 1 }
+
+[[transition]]
+id = "placed"
+events = ["int:place.ok"]
+inputs = { placing = 1 }
+outputs = { arm = 1 }
+
+[[transition]]
+id = "place_failed"
+events = ["int:place.error"]
+inputs = { placing = 1 }
+outputs = { arm = 1 }
+"""
+
+
+def _agree_journal(tmp_path: Path) -> tuple[Path, Path]:
+    """A journal of six runs: pick_fast 0.5 s, pick_slow 1.5 s (wall time only), place_down reporting a
+    cost of 0.05 (its CPU time) for 2 s of wall time, failing one time in three."""
+    import asyncio
+
+    from coordinator.runtime import Runtime
+    from coordinator.session import build_learner
+    from coordinator.journal import JournalReader
+    from coordinator.netfile import loads_net
+    from tests.unit.runtime_fakes import FakeClient
+
+    placed = iter(range(100))
+    client = FakeClient({
+        "pick_fast": ActionResult(status=Status.SUCCESS, wall_s=0.5),
+        "pick_slow": ActionResult(status=Status.SUCCESS, wall_s=1.5),
+        "place_down": lambda params: ActionResult(status=Status.FAILURE if next(placed) % 3 == 2 else Status.SUCCESS,
+                                                  wall_s=2.0, cost=0.05)})
+    net = loads_net(AGREE)
+    net_file, journal = tmp_path / "pick_and_place.toml", tmp_path / "j.sqlite"
+    net_file.write_text(AGREE)
+    with Journal(journal) as j:
+        with JournalReader.open(journal) as reader:
+            learner = build_learner(net, 0, reader)
+        summary = asyncio.run(Runtime(net, client, j, learner=learner).run(max_seconds=60))
+    assert summary.calls == 12
+    return net_file, journal
+
+
+def test_perf_and_learn_give_the_same_c_rho_and_j_and_a_single_action_is_weighed_against_its_deadline(
+        tmp_path: Path) -> None:
+    from coordinator.commands import learn as learn_cmd
+
+    net_file, journal = _agree_journal(tmp_path)
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    perf_cmd.add_parser(sub)
+    learn_cmd.add_parser(sub)
+    perf = perf_cmd.report(parser.parse_args(["perf", str(net_file), "--journal", str(journal)]))
+    args = parser.parse_args(["learn", str(net_file), "--journal", str(journal)])
+    from coordinator.learning import Learner
+    from coordinator.netfile import load_any
+
+    states, results = learn_cmd.read_journal(journal)
+    learn = learn_cmd.report_json(learn_cmd.build_reports(states, results, None, Learner.from_net(load_any(net_file))),
+                                  args.threshold)["tasks"]
+    for task, actions in perf["actions"].items():
+        assert perf["actions"][task][next(iter(actions))]["rho"] == pytest.approx(learn[task]["rho"])
+        for action, row in actions.items():
+            mine = learn[task]["actions"][action]
+            assert (row["cost"], row["reliability"], row["j"]) == pytest.approx((mine["cost"], mine["reliability"],
+                                                                                 mine["j"])), (task, action)
+    place = perf["actions"]["place"]["place_down"]
+    # the reported cost (0.05), not the wall time (2 s); rho = 1/deadline: J = 1 - 2/3 + 0.05/20
+    assert place["cost"] == pytest.approx(0.05) and place["rho"] == pytest.approx(1 / 20)
+    assert place["j"] == pytest.approx(1 - 4 / 6 + 0.05 / 20)
+    assert perf["actions"]["pick"]["pick_slow"]["rho"] == pytest.approx(1 / 1.5)
+
+
+def test_perf_and_learn_say_that_lower_j_is_better(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from coordinator.commands import learn as learn_cmd
+
+    net_file, journal = _agree_journal(tmp_path)
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    perf_cmd.add_parser(sub)
+    learn_cmd.add_parser(sub)
+    assert perf_cmd.run(parser.parse_args(["perf", str(net_file), "--journal", str(journal)])) == 0
+    assert "LOWER IS BETTER" in capsys.readouterr().out
+    assert learn_cmd.run(parser.parse_args(["learn", str(net_file), "--journal", str(journal)])) == 0
+    out = capsys.readouterr().out
+    assert "lower is better" in out and "1/its deadline 20 s" in out

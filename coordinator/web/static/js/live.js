@@ -460,7 +460,7 @@ export function renderLearner(panel, learner) {
   const tasks = Object.entries(learner || {});
   panel.append(el("h3", {}, "Learning automata"));
   if (!tasks.length) { panel.append(el("p", { class: "empty" }, "no primitive task has learned yet")); return; }
-  panel.append(el("p", { class: "small" }, "p: probability of choosing the action next; R: successes / trials; C: cost (a-priori or mean measured); J = 1 \u2212 R + \u03c1C, lower is better (paper sections 3 and 4)."));
+  panel.append(el("p", { class: "small" }, "p: probability of choosing the action next; R: successes / trials; C: cost (the net's a-priori cost, else the mean cost the action reported, or its wall time on the node, s); \u03c1: declared, else 1 / max C (one action: 1 / its deadline); J = 1 \u2212 R + \u03c1C, lower is better (paper sections 3 and 4; petrobot perf and learn use the same C and \u03c1)."));
   for (const [task, v] of tasks) {
     panel.append(el("p", { class: "subhead" }, el("b", {}, task), ` \u2014 ${v.scheme || "?"}, ${v.steps ?? 0} results, \u03c1 = ${fmt(v.rho)}`));
     const t = el("table", { class: "grid" }, el("tr", {}, ...["action", "p", "", "n", "R", "C", "J"].map((h) => el("th", {}, h))));
