@@ -19,6 +19,19 @@ robot engineer and a witness:
   transitions, and for each non-live one a marking from which it can never fire again, with its
   firing sequence.
 
+A net may give up on purpose: a **give-up transition** is an error exit (``int:<task>.error``)
+whose every output place is fed by error exits only (e.g. ``home_given_up`` putting the robot out
+of service once the retries of the move home are spent). Markings reached after one are the task's
+*designed stop* (a person must look at the robot); the verdicts name them as such instead of asking
+for a recovery branch there.
+
+**Dead markings, read as the runtime ends a run there** (:func:`dead_ends`): the same rules as
+:mod:`coordinator.engine.rest` — *intended ends* are at home on the places that hold work (control
+places and sinks such as counters aside: a finished experiment, ``runs_remaining`` empty), the run
+ends ``completed``; *waiting for the operator* ones would let a transition fire if the operator
+added tokens to a control place (or took some from one); the others are *real deadlocks* (the run
+ends ``stuck``), each named with the places away from home.
+
 :func:`report` runs the whole analysis and returns the JSON-ready dictionary of ``petrobot analyze``.
 """
 
@@ -41,14 +54,19 @@ from coordinator.analysis.structure import (
     record_only_places,
     without_places,
 )
+from coordinator.engine.rest import home_marking, work_places
 from coordinator.errors import NotEnabledError
 from coordinator.net import PetriNet, PlaceKind, parse_event
+from coordinator.performance import error_sink_places
 
 __all__ = [
+    "LEVEL_MEANINGS",
     "LEVEL_NAMES",
     "Verdict",
     "controllability",
+    "dead_ends",
     "error_transitions",
+    "give_up_transitions",
     "home_condition",
     "record_places",
     "recoverability",
@@ -59,7 +77,15 @@ __all__ = [
 
 #: Names of the liveness levels used in reports.
 LEVEL_NAMES = {0: "L0", 1: "L1", 3: "L3", 4: "L4"}
+#: What each liveness level means, in plain words (on a finite reachability graph L2 = L3).
+LEVEL_MEANINGS = {
+    "L4": "live: can fire again from every reachable marking",
+    "L3": "can fire again and again along some run, but not from every marking",
+    "L1": "can fire at least once, but not for ever: some run leaves it behind",
+    "L0": "dead: can never fire",
+}
 _MAX_WITNESSES = 5
+_MAX_END_EXAMPLES = 3
 
 
 @dataclass(frozen=True)
@@ -88,6 +114,43 @@ def error_transitions(net: PetriNet) -> list[str]:
         if t.hidden or any(parse_event(e)[2] == "error" for e in t.internal_events):
             out.append(t.id)
     return out
+
+
+def give_up_transitions(net: PetriNet) -> list[str]:
+    """Error exits that give the task up: linked to ``int:<task>.error``, and every place they put a
+    token in is fed by error exits only (:func:`coordinator.performance.error_sink_places`), so
+    nothing goes back to the task (no resource, no work place): the robot is put out of service."""
+    sinks = error_sink_places(net)
+    out = []
+    for t in net.transitions:
+        outputs = net.output_places[t.id]
+        if outputs and set(outputs) <= sinks and any(parse_event(e)[2] == "error" for e in t.internal_events):
+            out.append(t.id)
+    return out
+
+
+def _after_give_up(space: StateSpace, original: PetriNet) -> np.ndarray:
+    """(N,) bool: the states reachable from a firing of a give-up transition (the designed stop)."""
+    ids = [space.net.transition_index[t] for t in give_up_transitions(original) if t in space.net.transition_index]
+    if not ids or not space.n_states:
+        return np.zeros(space.n_states, dtype=bool)
+    starts = np.unique(space.dst[np.isin(space.transition, np.array(ids, dtype=np.int64))])
+    n = space.n_states
+    rows = np.concatenate([space.src.astype(np.int32, copy=False), np.full(starts.size, n, dtype=np.int32)])
+    cols = np.concatenate([space.dst.astype(np.int32, copy=False), starts.astype(np.int32)])
+    graph = sp.csr_matrix((np.ones(rows.size, dtype=np.int8), (rows, cols)), shape=(n + 1, n + 1))
+    order = csgraph.breadth_first_order(graph, n, directed=True, return_predecessors=False)
+    mask = np.zeros(n + 1, dtype=bool)
+    mask[order] = True
+    return mask[:n]
+
+
+def _give_up_text(original: PetriNet) -> str:
+    ids = give_up_transitions(original)
+    places = sorted({p for t in ids for p in original.output_places[t]})
+    labels = [original.place(p).label for p in places]
+    what = "; ".join(f"{p} ({label})" if label else p for p, label in zip(places, labels))
+    return f"{_names(ids)} give{'s' if len(ids) == 1 else ''} the task up and mark{'s' if len(ids) == 1 else ''} {what}"
 
 
 def _names(ids: list[str], k: int = 6) -> str:
@@ -265,6 +328,9 @@ def recoverability(a: Analysis, original: PetriNet) -> Verdict:
                              "it stranded.", witness)
     bad_after_error = np.intersect1d(bad, after_error)
     witness["not_recovering_after_error_branches"] = int(bad_after_error.size)
+    stopped = _after_give_up(space, original)
+    designed = bool(stopped[bad].all())
+    witness["designed_stop"] = designed
     after = set(after_error.tolist())
     shown = list(bad_after_error[:_MAX_WITNESSES]) + [i for i in bad[:_MAX_WITNESSES] if i not in after]
     for i in shown[:_MAX_WITNESSES]:
@@ -272,6 +338,14 @@ def recoverability(a: Analysis, original: PetriNet) -> Verdict:
                                     "firing_sequence": space.firing_sequence(int(i)),
                                     "after_error_branch": bool(int(i) in after)})
     first = witness["examples"][0]
+    if designed:
+        recovered = space.n_states - int(bad.size)
+        errs = f", including {np.setdiff1d(after_error, bad).size} reached through an error branch," \
+            if after_error.size else ""
+        return Verdict(False, f"Every error is recovered except the one the net gives up on, by design: "
+                              f"{_give_up_text(original)}; from the {bad.size} markings after that (e.g. after "
+                              f"{_seq(first['firing_sequence'])}) only a person can bring the robot back. The "
+                              f"other {recovered} reachable markings{errs} can all return to {home_name}.", witness)
     return Verdict(False, f"{bad.size} of the {space.n_states} reachable markings can never return to {home_name} "
                           f"(for example after {_seq(first['firing_sequence'])} the task is stuck in "
                           f"{_marking_text(first['marking'])}); add a recovery branch from there.", witness)
@@ -333,11 +407,128 @@ def controllability(a: Analysis, original: PetriNet) -> Verdict:
         parts.append(f"{_names(dead)} can never fire")
     if not_live:
         parts.append(f"{_names(not_live)} can become impossible to fire again")
+    stopped = _after_give_up(space, original)
+    examples = witness["examples"]
+    if not dead and examples and all(stopped[space.index_of(_project(ex["marking"], space))] for ex in examples):
+        witness["designed_stop"] = True
+        return Verdict(False, f"Controllable up to the stop the net makes by design{scope}: every transition can "
+                              f"fire again from every marking except after {_give_up_text(original)}; from there "
+                              f"no step of the task fires again (e.g. after {_seq(examples[0]['firing_sequence'])}, "
+                              f"{examples[0]['transition']} can never fire again) until a person intervenes.",
+                       witness)
     text = "The task is not fully controllable" + scope + ": " + "; ".join(parts)
     if witness["examples"]:
         ex = witness["examples"][0]
         text += f" (e.g. after {_seq(ex['firing_sequence'])}, {ex['transition']} can never fire again)"
     return Verdict(False, text + ".", witness)
+
+
+def _project(marking: dict[str, int], space: StateSpace) -> dict[str, int]:
+    """A full marking on the places of ``space``'s net (a graph explored without record-only places)."""
+    return {p: n for p, n in marking.items() if p in space.net.place_index}
+
+
+def _operator_would_move(states: np.ndarray, net: PetriNet) -> tuple[np.ndarray, list[list[str]]]:
+    """Which markings an operator command on control places would let a transition leave
+    (:meth:`coordinator.engine.Engine.operator_options` on a marking without running actions).
+
+    Args:
+        states: (k, |P|) markings of ``net`` in which nothing is enabled.
+
+    Returns:
+        ((k,) bool, per marking the commands that would do it, e.g. ``"+ reset_request 1 would enable
+        operator_reset"``).
+    """
+    control = {p.id for p in net.places if p.kind is PlaceKind.CONTROL}
+    index = net.place_index
+    k = states.shape[0]
+    moved = np.zeros(k, dtype=bool)
+    options: list[list[str]] = [[] for _ in range(k)]
+    for t in net.transitions:
+        inputs = [(a.source, a.weight) for a in net.arcs if a.target == t.id and not a.inhibitor and not a.reset]
+        inhibitors = [(a.source, a.weight) for a in net.arcs if a.target == t.id and a.inhibitor]
+        if not any(pid in control for pid, _ in inputs + inhibitors):
+            continue
+        ok = np.ones(k, dtype=bool)
+        for pid, w in inputs:
+            if pid not in control:
+                ok &= states[:, index[pid]] >= w
+        for pid, w in inhibitors:
+            if pid not in control:
+                ok &= states[:, index[pid]] < w
+        for i in np.flatnonzero(ok):
+            cmds = [f"+ {pid} {w - int(states[i, index[pid]])}" for pid, w in inputs
+                    if pid in control and states[i, index[pid]] < w]
+            cmds += [f"- {pid} {int(states[i, index[pid]]) - w + 1}" for pid, w in inhibitors
+                     if pid in control and states[i, index[pid]] >= w]
+            if cmds:
+                moved[i] = True
+                options[int(i)].append(f"{', '.join(cmds)} would enable {t.id}")
+    return moved, options
+
+
+def dead_ends(a: Analysis, original: PetriNet) -> dict[str, Any]:
+    """The dead markings of the net as written, read as the runtime would end a run there.
+
+    * ``intended``: at home on the places that hold work (:func:`coordinator.engine.rest.work_places`,
+      compared with :func:`~coordinator.engine.rest.home_marking`): the run ends ``completed``;
+    * ``operator``: away from home, but an operator command on a control place would let a
+      transition fire: the run waits for the operator (or ends ``waiting_for_operator``);
+    * ``stuck``: neither: a real deadlock, the run ends ``stuck``.
+
+    Returns:
+        ``{"decided", "total", "home", "compared_places", "intended", "operator", "stuck",
+        "examples": {kind: [{"marking", "firing_sequence", "away_from_home", "operator",
+        "designed_stop"}]}}``; counts are ``None`` (and only the deadlock examples the analysis kept
+        are read) when the reachability graph is not complete.
+    """
+    work = list(work_places(original))
+    home = {p: int(home_marking(original).get(p, 0)) for p in work}
+    out: dict[str, Any] = {"decided": False, "total": a.n_deadlocks, "home": home, "compared_places": work,
+                           "intended": None, "operator": None, "stuck": None,
+                           "examples": {"intended": [], "operator": [], "stuck": []}}
+    net = a.net
+    space = a.space if a.space is not None and a.space.complete else None
+    if space is not None:
+        dead = space.deadlocks()
+        rows = space.states[dead].astype(np.int64)
+        seqs: list[list[str] | None] = [None] * int(dead.size)
+        stopped = _after_give_up(space, original)[dead]
+    else:
+        rows = np.array([[d.marking.get(p.id, 0) for p in net.places] for d in a.deadlocks],
+                        dtype=np.int64).reshape(len(a.deadlocks), len(net.places))
+        seqs = [d.firing_sequence for d in a.deadlocks]
+        stopped = np.zeros(len(a.deadlocks), dtype=bool)
+    if (rows < 0).any():  # ω markings of a coverability graph: not read
+        return out
+    index = net.place_index
+    cols = np.array([index[p] for p in work], dtype=np.int64)
+    want = np.array([home[p] for p in work], dtype=np.int64)
+    at_home = (rows[:, cols] == want).all(axis=1) if cols.size else np.ones(rows.shape[0], dtype=bool)
+    moved, options = _operator_would_move(rows, net)
+    kinds = np.where(at_home, 0, np.where(moved, 1, 2))
+    names = ("intended", "operator", "stuck")
+    if space is not None:
+        out["decided"] = True
+        out["total"] = int(dead.size)
+        for j, name in enumerate(names):
+            out[name] = int((kinds == j).sum())
+    sinks = [index[s] for s in error_sink_places(original) if s in index]
+    gave_up = rows[:, sinks].sum(axis=1) if sinks else np.zeros(rows.shape[0], dtype=np.int64)
+    for j, name in enumerate(names):
+        chosen = np.flatnonzero(kinds == j)
+        chosen = chosen[np.argsort(gave_up[chosen], kind="stable")]  # the ends with fewest errors first
+        for i in chosen[:_MAX_END_EXAMPLES]:
+            marking = {net.places[c].id: int(v) for c, v in enumerate(rows[i]) if v}
+            seq = seqs[int(i)]
+            if seq is None and space is not None:
+                seq = space.firing_sequence(int(dead[i]))
+            away = [f"{p}: {int(rows[i, index[p]])} (home {home[p]})" for p in work if rows[i, index[p]] != home[p]]
+            out["examples"][name].append({"marking": marking, "firing_sequence": seq or [], "away_from_home": away,
+                                          "operator": options[int(i)], "designed_stop": bool(stopped[i])})
+    if space is not None and out["stuck"]:
+        out["stuck_designed_stop"] = int(stopped[kinds == 2].sum())
+    return out
 
 
 def robotic_reading(a: Analysis, original: PetriNet, env: Analysis | None = None) -> dict[str, Verdict]:
@@ -379,11 +570,12 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
     ``p_invariants_complete``, ``t_invariants_complete``, ``conservative``, ``consistent``,
     ``structural`` (the linear programs: semiflow supports, certificates, state-equation bounds),
     ``sources`` (property → what decided it: the explicit search or the structure), ``undecided``
-    (properties left null), ``structural_conflicts``, ``interpretation_problems``, ``notes`` and
+    (properties left null), ``ends`` (the dead markings read as the runtime ends a run there:
+    :func:`dead_ends`), ``structural_conflicts``, ``interpretation_problems``, ``notes`` and
     ``robotic`` (``stable``, ``error_recoverable``, ``controllable``: each ``{holds, explanation,
     witness}``; error recovery and control judged with the operator as the environment when the net
     has control places), ``environment`` (``modelled``, ``control_places``: place → the most tokens
-    the operator may bring it up to, ``transitions``: the operator's transitions, ``states`` and
+    the operator may bring it up to, ``record_only``: the places left out of its graph, ``transitions``: the operator's transitions, ``states`` and
     ``edges`` of the graph with them, see :mod:`coordinator.analysis.environment`) and ``retries``
     (``retries``: each retry with ``bounded``, ``unbounded``: the retries that can fire for ever).
     ``None`` (JSON null) means "not decided".
@@ -432,6 +624,7 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
         "deadlock": a.deadlock,
         "deadlocks": [{"marking": d.marking, "firing_sequence": d.firing_sequence} for d in a.deadlocks],
         "n_deadlocks": a.n_deadlocks,
+        "ends": dead_ends(a, net),
         "liveness": None if a.liveness is None else {t: LEVEL_NAMES[v] for t, v in a.liveness.items()},
         "dead_transitions": a.dead_transitions,
         "live": a.live,
@@ -455,7 +648,7 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
         "interpretation_problems": [{"element": e, "problem": p} for e, p in net.interpretation_problems()],
         "notes": a.notes,
         "robotic": {k: v.to_dict() for k, v in verdicts.items()},
-        "environment": {"modelled": bool(limits), "control_places": limits,
+        "environment": {"modelled": bool(limits), "control_places": limits, "record_only": records,
                         "transitions": [t.id for t in env_net.transitions[len(net.transitions):]],
                         "states": None if env is None else env.states,
                         "edges": None if env is None else env.edges},

@@ -100,15 +100,76 @@ def _yes(value: Any) -> str:
     return {True: "yes", False: "no", None: "not decided"}.get(value, str(value))
 
 
+def _marking(marking: dict[str, int]) -> str:
+    return "{" + (", ".join(f"{p}:{c}" for p, c in marking.items()) or "no tokens") + "}"
+
+
+def _ends(rep: dict[str, Any]) -> list[str]:
+    """The dead markings read as the runtime ends a run there (robotic.dead_ends)."""
+    ends = rep.get("ends") or {}
+    if not rep["deadlock"] and not ends.get("total"):
+        return ["ends:               none: in every reachable marking some transition can fire"]
+    total = ends.get("total")
+    counted = ends.get("decided")
+    lines = [f"ends: {total if total is not None else 'some'} dead marking{'s' if total != 1 else ''} (nothing can fire), "
+             "read as a run ends there (home compared on the places that hold work: control places and counters "
+             "aside)"]
+    home = ", ".join(f"{p} {n}" for p, n in ends.get("home", {}).items() if n)
+    what = {"intended": f"intended ends (the run completes at home: {home or 'no tokens'})",
+            "operator": "waiting for the operator (a command on a control place would let a transition fire)",
+            "stuck": "real deadlocks (the run ends stuck, away from home)"}
+    for kind in ("intended", "operator", "stuck"):
+        n = ends.get(kind)
+        examples = ends.get("examples", {}).get(kind, [])
+        if counted:
+            extra = ""
+            if kind == "stuck" and n and ends.get("stuck_designed_stop") == n:
+                extra = ", every one after the net's designed stop (a give-up error exit)"
+            lines.append(f"  {what[kind]}: {n}{extra}")
+        elif examples:
+            lines.append(f"  {what[kind]}: among the examples found")
+        for ex in examples:
+            seq = " ".join(ex["firing_sequence"]) or "(initial marking)"
+            lines.append(f"    {_marking(ex['marking'])} after: {seq}")
+            if kind == "stuck" and ex["away_from_home"]:
+                lines.append(f"      away from home: {'; '.join(ex['away_from_home'])}")
+            if kind == "operator":
+                lines.append(f"      {'; '.join(ex['operator'])}")
+    return lines
+
+
+#: What each property means, in plain words (shown in brackets after its value).
+_PLAIN = {
+    "quasi-live": "quasi-live = every transition can fire at least once",
+    "live": "live = every transition can fire again from every reachable marking",
+    "reversible": "reversible = the initial marking can be reached again from every reachable marking",
+    "1-safe": "1-safe = no place ever holds more than one token",
+    "conservative": "conservative = a weighted sum of the tokens of all places never changes: none made, none lost",
+    "consistent": "consistent = some sequence of firings that fires every transition brings the net back to the "
+                  "marking it started from",
+    "home states": "markings reachable again from every reachable marking",
+    "stable places": "places whose count never changes",
+}
+
+
 def render(rep: dict[str, Any]) -> str:
     """Return the readable text of a :func:`~coordinator.analysis.robotic.report` dictionary."""
-    lines = [f"net {rep['net']!r}: {rep['places']} places, {rep['transitions']} transitions (ordinary view)"]
+    from coordinator.analysis.robotic import LEVEL_MEANINGS
+
+    lines = [f"net {rep['net']!r}: {rep['places']} places, {rep['transitions']} transitions (ordinary view: events "
+             "dropped, every enabled transition may fire)"]
     trunc = rep.get("truncated")
     full = ""
     if trunc:
         why = {"max_states": "the state limit", "max_memory": "the memory budget"}.get(trunc["by"], trunc["by"])
         full = f" (partial: stopped by {why})" if not rep["complete"] else f" (complete; later passes skipped: {why})"
-    lines.append(f"reachability graph: {rep['states']:,} markings, {rep['edges']:,} edges{full}")
+    records = [p for p, b in (rep.get("place_bounds") or {}).items()
+               if p in set((rep.get("environment") or {}).get("record_only", []))]
+    env_states = (rep.get("environment") or {}).get("states")
+    kept = (f" (markings that differ only in the counts {', '.join(records)} are told apart; the robotic reading "
+            f"below uses another graph, of {env_states:,} markings: without those counts, with the operator's "
+            "additions)" if records and env_states else "")
+    lines.append(f"reachability graph: {rep['states']:,} markings, {rep['edges']:,} edges of the net as written{full}{kept}")
     if trunc and trunc.get("undecided"):
         lines.append(f"undecided: {', '.join(trunc['undecided'])}")
     lines.append("")
@@ -121,8 +182,11 @@ def render(rep: dict[str, Any]) -> str:
     env = rep.get("environment") or {}
     if env.get("modelled"):
         places = ", ".join(f"{p} (up to {k})" for p, k in env["control_places"].items())
+        dropped = env.get("record_only") or []
+        without = (f"the net without its record-only places ({', '.join(dropped)}: counts no transition reads, "
+                   "which change nothing the task can do next)" if dropped else "the net as written")
         lines.append(f"  environment:       the operator may add tokens to {places} at any time; recovery and "
-                     f"control judged with it ({env['states']:,} markings)")
+                     f"control are judged on {env['states']:,} markings: {without}, with the operator's additions")
     else:
         lines.append("  environment:       no control places: nothing for the operator to add")
     retries = (rep.get("retries") or {}).get("retries", [])
@@ -137,7 +201,8 @@ def render(rep: dict[str, Any]) -> str:
             lines.append(f"  retry {r['transition']} (task {r['task']}): UNBOUNDED: it can fire for ever while nothing "
                          f"else happens{where}; bound it with a counter place")
     lines.append("")
-    lines.append("properties")
+    lines.append("properties (of the net as written, without the operator: a transition that needs an operator's "
+                 "token is dead here)")
     lines.append(f"  bounded:            {_yes(rep['bounded'])}")
     if rep["unbounded_places"]:
         lines.append(f"    unbounded places: {', '.join(rep['unbounded_places'])}")
@@ -149,31 +214,38 @@ def render(rep: dict[str, Any]) -> str:
                      + (f" ... ({len(bounds) - 40} more in --json)" if len(bounds) > 40 else ""))
         if exact != "all":
             lines.append(f"    (upper bounds; exact for {len(exact)} of {len(bounds)} places)")
-    lines.append(f"  1-safe:             {_yes(rep['one_safe'])}")
+    lines.append(f"  1-safe:             {_yes(rep['one_safe'])} [{_PLAIN['1-safe']}]")
     lines.append(f"  max tokens/place:   {rep['max_token_in_place'] if rep['max_token_in_place'] is not None else '-'}")
     lines.append(f"  max tokens/marking: {rep['max_token_per_marking'] if rep['max_token_per_marking'] is not None else '-'}")
-    n_dead = rep["n_deadlocks"]
-    lines.append(f"  deadlock:           {_yes(rep['deadlock'])}" + (f" ({n_dead} dead marking{'s' if n_dead != 1 else ''})" if n_dead else ""))
-    for d in rep["deadlocks"]:
-        marking = ", ".join(f"{p}:{c}" for p, c in d["marking"].items()) or "empty"
-        seq = " ".join(d["firing_sequence"]) or "(initial marking)"
-        lines.append(f"    {{{marking}}} after: {seq}")
-    lines.append(f"  quasi-live:         {_yes(rep['quasi_live'])}")
-    lines.append(f"  live:               {_yes(rep['live'])}")
+    ends = rep.get("ends") or {}
+    if ends.get("decided"):
+        real = ends.get("stuck") or 0
+        lines.append(f"  deadlock:           {_yes(real > 0)} [a real deadlock = a dead marking away from home that no "
+                     f"operator command moves on: {real} of the {ends['total']} dead markings; "
+                     f"{ends.get('intended') or 0} intended end(s), {ends.get('operator') or 0} waiting for the "
+                     "operator; see ends below]")
+    else:
+        n_dead = rep["n_deadlocks"]
+        lines.append(f"  deadlock:           {_yes(rep['deadlock'])} (some reachable marking enables nothing"
+                     + (f": {n_dead} dead markings, intended ends included" if n_dead else "") + "; see ends below)")
+    lines.append(f"  quasi-live:         {_yes(rep['quasi_live'])} [{_PLAIN['quasi-live']}]")
+    lines.append(f"  live:               {_yes(rep['live'])} [{_PLAIN['live']}]")
     if rep["liveness"]:
         by_level: dict[str, list[str]] = {}
         for t, lvl in rep["liveness"].items():
             by_level.setdefault(lvl, []).append(t)
         for lvl in sorted(by_level, reverse=True):
-            lines.append(f"    {lvl}: {', '.join(by_level[lvl])}")
-    lines.append(f"  reversible:         {_yes(rep['reversible'])}")
+            lines.append(f"    {lvl} ({LEVEL_MEANINGS.get(lvl, lvl)}): {', '.join(by_level[lvl])}")
+    lines.append(f"  reversible:         {_yes(rep['reversible'])} [{_PLAIN['reversible']}]")
     if rep["home_states"] is not None:
-        lines.append(f"  home states:        {rep['home_states']}")
+        lines.append(f"  home states:        {rep['home_states']} [{_PLAIN['home states']}]")
     if rep["home_marking_is_home"] is not None:
         lines.append(f"  declared home marking is a home state: {_yes(rep['home_marking_is_home'])}")
     stable = rep["stable_places"]
-    lines.append(f"  stable places:      {', '.join(stable) if stable else ('none' if stable is not None else '-')}")
-    lines.append(f"  conservative:       {_yes(rep['conservative'])}   consistent: {_yes(rep['consistent'])}")
+    lines.append(f"  stable places:      {', '.join(stable) if stable else ('none' if stable is not None else '-')} "
+                 f"[{_PLAIN['stable places']}]")
+    lines.append(f"  conservative:       {_yes(rep['conservative'])} [{_PLAIN['conservative']}]")
+    lines.append(f"  consistent:         {_yes(rep['consistent'])} [{_PLAIN['consistent']}]")
     for key, title in (("p_invariants", "P-invariants"), ("t_invariants", "T-invariants")):
         inv = rep[key]
         lines.append(f"  {title}: {len(inv)}" + ("" if rep[f"{key}_complete"] else " (size guard hit)"))
@@ -191,6 +263,8 @@ def render(rep: dict[str, Any]) -> str:
     for c in conflicts[:10]:
         eff = {True: "effective", False: "never effective", None: "?"}[c["effective"]]
         lines.append(f"    {c['place']}: {', '.join(c['transitions'])} ({eff})")
+    lines.append("")
+    lines.extend(_ends(rep))
     for problem in rep["interpretation_problems"]:
         lines.append(f"  note: {problem['problem']}")
     for note in rep["notes"]:

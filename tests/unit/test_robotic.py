@@ -343,3 +343,46 @@ def test_the_catch_net_of_fig_1_is_stable_and_recovers_from_every_error_but_a_ro
     for d in doc["deadlocks"]:
         m = d["marking"]
         assert (m.get("robot_ready") == 1 and m.get("camera_free") == 1) or m.get("robot_out_of_service") == 1
+
+
+def _paper_net(name: str) -> dict:
+    from pathlib import Path
+
+    from coordinator.netfile import load_any
+
+    return report(load_any(Path(__file__).resolve().parents[2] / "nets" / name, interpreted=False))
+
+
+def test_the_catch_nets_dead_markings_are_its_intended_ends_and_its_designed_stop_not_unexplained_deadlocks():
+    doc = _paper_net("catch.toml")
+    ends = doc["ends"]
+    assert ends["decided"] and ends["total"] == doc["n_deadlocks"] == 49
+    # the experiment over (runs_remaining empty), robot and camera home: the run ends completed
+    assert (ends["intended"], ends["operator"], ends["stuck"]) == (15, 0, 34)
+    assert {"robot_ready": 1, "camera_free": 1, "missed": 4, "home_retries_left": 3} in [
+        e["marking"] for e in ends["examples"]["intended"]]
+    # every real deadlock comes after home_given_up: the robot out of service, as the net says
+    assert ends["stuck_designed_stop"] == 34
+    assert all("home_given_up" in e["firing_sequence"] and e["designed_stop"] for e in ends["examples"]["stuck"])
+    recoverable = doc["robotic"]["error_recoverable"]["explanation"]
+    controllable = doc["robotic"]["controllable"]["explanation"]
+    assert "by design" in recoverable and "add a recovery branch" not in recoverable
+    assert "by design" in controllable and "only a person" in recoverable and "a person" in controllable
+    text = analyze.render(doc)
+    assert "deadlock:           yes [a real deadlock = " in text and "34 of the 49 dead markings; 15 intended" in text
+    assert "intended ends (the run completes at home" in text
+    # the two marking counts say what each counts
+    assert "998 markings" in text and "another graph, of 194 markings: without those counts" in text
+    # L-levels and properties in plain words
+    for words in ("L1 (can fire at least once, but not for ever", "L3 (can fire again and again along some run",
+                  "consistent = some sequence of firings that fires every transition brings the net back"):
+        assert words in text
+
+
+def test_the_mobile_nets_out_of_service_ends_wait_for_the_operators_reset_and_none_is_a_real_deadlock():
+    doc = _paper_net("mobile.toml")
+    ends = doc["ends"]
+    assert (ends["intended"], ends["operator"], ends["stuck"]) == (2, 3, 0)
+    assert all(e["operator"] == ["+ reset_request 1 would enable operator_reset"] for e in ends["examples"]["operator"])
+    assert doc["robotic"]["error_recoverable"]["holds"] is True and doc["robotic"]["controllable"]["holds"] is True
+    assert "deadlock:           no [" in analyze.render(doc)
