@@ -7,7 +7,8 @@ primitive action's result, in journal order.
 The net file gives the primitive tasks and their configured learners, so tasks that have not run
 yet are listed too (uniform probabilities, no trials). For each primitive task it reports the
 probability of each primitive action, R̂, C and Ĵ (eq. 1), and whether one action has reached the
-convergence threshold. ``--plot`` draws the probability of each action over the trials. The
+convergence threshold. ``--plot [FILE.png]`` draws the probability of each action over the trials
+(without a file name: beside the journal, ``JOURNAL_STEM.learning.png``, and says where). The
 history is not stored: it is rebuilt by replaying the task's results, in journal order, through a
 fresh automaton of the saved configuration and seed; the cost of a result is its ``cost``, or
 ``wall_s`` when the action reported none, as the runtime feeds the learner. The learning updates
@@ -37,7 +38,8 @@ from services.results import Status
 if TYPE_CHECKING:
     from coordinator.learning import Learner, LearningAutomaton
 
-__all__ = ["TaskReport", "add_parser", "build_reports", "plot", "read_journal", "report_json", "report_text", "run"]
+__all__ = ["TaskReport", "add_parser", "build_reports", "default_plot_path", "learned_so_far", "plot", "read_journal",
+           "report_json", "report_text", "run"]
 
 _EPS = 1e-12
 
@@ -84,13 +86,51 @@ def add_parser(subparsers: Any) -> None:
     options.add_journal(parser, required=True, help="SQLite journal of the runs (read only)")
     options.add_run(parser)
     options.add_json(parser, help="print a JSON document instead of text")
-    parser.add_argument("--plot", metavar="FILE.png",
+    parser.add_argument("--plot", metavar="FILE.png", nargs="?", const="",
                         help="draw the probability of each action over the trials, one panel per task "
-                             "(rebuilt by replaying the journal's results; PNG written with matplotlib)")
+                             "(rebuilt by replaying the journal's results; PNG written with matplotlib); without "
+                             "FILE.png, beside the journal: JOURNAL_STEM.learning.png (runs/catching.learning.png)")
     parser.add_argument("--threshold", type=float, default=0.95,
                         help="probability at which a task counts as converged (default 0.95)")
     parser.add_argument("--task", action="append", metavar="NAME",
                         help="report only this primitive task (repeatable)")
+
+
+def default_plot_path(journal: str | Path) -> Path:
+    """Where ``--plot`` without a file name writes: beside the journal, ``JOURNAL_STEM.learning.png``."""
+    path = Path(journal)
+    return path.with_name(path.stem + ".learning.png")
+
+
+def learned_so_far(journal: str | Path, net: str | Path) -> list[str]:
+    """What the learners of ``net`` have learned in ``journal``, one line per primitive task that
+    chooses among alternatives (section 4): its probabilities, most likely first, its results, the
+    action of least Ĵ so far and whether it converged or still warms up. For a demo's report.
+
+    Raises:
+        JournalError, NetError: an unreadable journal or net.
+    """
+    from coordinator.learning import Learner
+    from coordinator.netfile import load_any
+
+    states, results = read_journal(journal)
+    lines = []
+    for rep in build_reports(states, results, None, Learner.from_net(load_any(net))):
+        auto = rep.automaton
+        if len(auto.actions) < 2 or not rep.saved:
+            continue
+        probs = sorted(auto.probabilities.items(), key=lambda kv: -kv[1])
+        js = {a: e.j for a, e in auto.estimates.items() if e.j is not None}
+        best = min(js, key=lambda a: js[a]) if js else None
+        warmup = getattr(auto, "warmup", 0) or 0
+        done = auto.converged()
+        state = (f"converged to {done}" if done else
+                 f"warming up (each action is tried {warmup} time{'s' * (warmup != 1)} first)"
+                 if any(e.trials < warmup for e in auto.estimates.values()) else "learning")
+        lines.append(f"learner {rep.task} ({auto.scheme}, {auto.steps} result{'s' * (auto.steps != 1)}, {state}): "
+                     f"p = {', '.join(f'{a} {p:.2f}' for a, p in probs)}"
+                     + (f"; least J so far: {best} (J = {js[best]:.3f}, lower is better)" if best else ""))
+    return lines
 
 
 def read_journal(path: str | Path, run: str | None = None) -> tuple[dict[str, dict[str, Any]], dict[str, list[Trial]]]:
@@ -288,13 +328,14 @@ def report_text(reports: list[TaskReport], threshold: float) -> str:
 
 
 def plot(reports: list[TaskReport], path: str, threshold: float) -> int:
-    """Draw p(action) over trials for every task with a saved state and results; return the panels drawn."""
+    """Draw p(action) over trials for every task with alternatives, a saved state and results; return the
+    panels drawn."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    drawn = [r for r in reports if len(r.history) > 1]
+    drawn = [r for r in reports if len(r.history) > 1 and len(r.automaton.actions) > 1]  # a fixed choice: p = 1
     if not drawn:
         return 0
     fig, axes = plt.subplots(len(drawn), 1, figsize=(7.0, 2.6 * len(drawn)), squeeze=False)
@@ -332,12 +373,17 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(report_json(reports, args.threshold), indent=2))
     else:
         sys.stdout.write(report_text(reports, args.threshold))
-    if args.plot:
+    if args.plot is not None:
+        target = args.plot or str(default_plot_path(args.journal))
         try:
-            n = plot(reports, args.plot, args.threshold)
+            n = plot(reports, target, args.threshold)
         except OSError as exc:
-            print(f"petrobot learn: cannot write {args.plot}: {exc}", file=sys.stderr)
+            print(f"petrobot learn: cannot write {target}: {exc}", file=sys.stderr)
             return 2
-        if not args.json:
-            print(f"plot: {n} task(s) drawn to {args.plot}")
+        out = sys.stderr if args.json else sys.stdout
+        if n:
+            print(f"plot: {n} task(s) drawn to {target}", file=out)
+        else:
+            print(f"plot: nothing drawn (no primitive task has both a saved learner and results); {target} "
+                  "not written", file=out)
     return 0
