@@ -611,3 +611,32 @@ def test_learn_command_replays_one_run_from_a_fresh_learner_with_run(tmp_path: P
     assert grasp["note"] == f"a fresh learner over the 20 results of run {runs[1]}"
     assert learn_cmd.run(_args(str(net_path), "--journal", db, "--run", "nope")) == 2
     assert "no run 'nope'" in capsys.readouterr().err
+
+
+def test_the_catch_nets_locate_learner_moves_within_the_four_runs_of_the_demo():
+    """After the default 4-run demo the learner shows what it learned (section 4), not p = 1/3."""
+    from coordinator.learning import Learner
+    from coordinator.netfile import load_net
+
+    auto = Learner.from_net(load_net(Path(__file__).resolve().parents[2] / "nets" / "catch.toml"), seed=0) \
+        .automaton("locate")
+    for _ in range(4):
+        auto.update(auto.choose(), Status.SUCCESS, 1.0)
+    assert max(auto.probabilities.values()) > 0.4
+    assert max(auto.probabilities, key=auto.probabilities.get) == "locate_bgdiff"  # least J: the cheapest
+
+
+def test_learn_plot_without_a_file_writes_beside_the_journal_and_a_demo_line_says_what_was_learned(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]):
+    from tests.unit.test_performance import _agree_journal
+
+    net_file, journal = _agree_journal(tmp_path)
+    parser = argparse.ArgumentParser()
+    learn_cmd.add_parser(parser.add_subparsers())
+    assert learn_cmd.run(parser.parse_args(["learn", str(net_file), "--journal", str(journal), "--plot"])) == 0
+    target = tmp_path / "j.learning.png"
+    assert target.stat().st_size > 0
+    assert f"plot: 1 task(s) drawn to {target}" in capsys.readouterr().out  # pick; place has one action
+    (line,) = learn_cmd.learned_so_far(journal, net_file)
+    assert line.startswith("learner pick (pursuit, 6 results, ") and "p = pick_fast 0." in line
+    assert "least J so far: pick_fast" in line
