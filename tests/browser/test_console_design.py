@@ -143,6 +143,11 @@ def test_the_replay_of_a_finished_run_scrubs_back_and_forth_and_jumps_to_errors(
     page.page.locator("#panel-timeline .runs-list li", has_text=run_id).click()
     page.wait("window.petrobot.replay.data && window.petrobot.mode === 'replay'", what="the replay")
     total = page.eval("window.petrobot.replay.records.length")
+    # a replay opens where the run started, and says so
+    assert page.tokens("runs_remaining") == 3 and page.tokens("robot") == 1 and page.tokens("done") == 0
+    assert page.eval("document.getElementById('rp-pos').textContent").startswith(f"0 / {total} records")
+    assert "shown at its start" in page.eval("document.getElementById('message').textContent")
+    page.page.click("#rp-end")
     assert page.tokens("done") == 3 and page.tokens("runs_remaining") == 0  # the end of the run
     page.page.click("#rp-start")
     assert page.tokens("runs_remaining") == 3 and page.tokens("robot") == 1 and page.tokens("done") == 0
@@ -159,6 +164,34 @@ def test_the_replay_of_a_finished_run_scrubs_back_and_forth_and_jumps_to_errors(
     page.screenshot("replay-error")
     page.page.click("#rp-end")
     assert page.tokens("done") == 3
+
+
+def test_the_readme_console_example_opens_the_demos_journal_and_replay_says_to_pick_a_run(page: Page, petrobot: Any,
+                                                                                          tmp_path: Path):
+    import re
+
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    (command,) = re.findall(r"`(petrobot console nets/\S+ --journal \S+)`", readme)
+    journal = command.split("--journal ")[1].split()[0]
+    demo_help = subprocess.run([sys.executable, "-m", "coordinator.cli", "demo", "--help"], capture_output=True,
+                               text=True, cwd=ROOT, timeout=120).stdout
+    assert journal == "runs/catching.sqlite" and journal in demo_help  # the journal the demo writes
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "nets").mkdir()
+    (tmp_path / "nets" / "catch.toml").write_text((ROOT / "nets" / "catch.toml").read_text())
+    run_id = finished_journal(tmp_path / journal)
+    console = petrobot(*command.split()[1:], "--listen", "0", cwd=tmp_path)  # as the README says, on a free port
+    page.page.goto(console.url())
+    page.wait("document.body.dataset.ready === '1'", what="the page")
+    assert page.eval("document.getElementById('run-state').textContent") == "design"
+    page.page.click("#modes [data-mode=replay]")
+    assert page.eval("document.getElementById('run-state').textContent") == "replay"  # no design badge left
+    assert "pick a run in the Runs panel" in page.eval("document.getElementById('hint').textContent")
+    page.page.locator("#panel-timeline .runs-list li", has_text=run_id).click()
+    page.wait("window.petrobot.replay.data && window.petrobot.replay.k === 0", what="the replay at its start")
+    assert page.eval("document.getElementById('hint').textContent") == ""
+    assert page.eval("document.getElementById('run-state').textContent") == "replay"
+    page.screenshot("replay-start")
 
 
 def test_the_png_export_draws_the_net_with_its_tokens(page: Page, petrobot: Any, tmp_path: Path):

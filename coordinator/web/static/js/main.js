@@ -62,8 +62,16 @@ app.setMode = (mode) => {
   editor.renderInspector();
   editor.renderTasks();
   analysis.render();
-  if (mode === "design") { document.getElementById("run-state").textContent = "design"; document.getElementById("run-state").className = "run-state"; document.getElementById("firings").textContent = ""; }
+  const badge = document.getElementById("run-state");
+  if (mode === "design") { badge.textContent = "design"; badge.className = "run-state"; document.getElementById("firings").textContent = ""; }
+  // a replay before a run is picked: say what to do, and no badge left over from another mode
+  const picking = mode === "replay" && !app.replay.data;
+  if (picking) {
+    badge.textContent = "replay"; badge.className = "run-state"; document.getElementById("firings").textContent = "";
+    app.hint(REPLAY_HINT);
+  } else if (document.getElementById("hint").textContent === REPLAY_HINT) app.hint("");
 };
+const REPLAY_HINT = "pick a run in the Runs panel on the right to replay it";
 
 app.selectTab = (name) => {
   document.querySelectorAll("#tabs .tab").forEach((b) => b.classList.toggle("active", b.dataset.tab === name));

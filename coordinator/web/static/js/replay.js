@@ -71,8 +71,10 @@ export function initReplay(app) {
     slider.max = String(rp.records.length);
     app.replayDraft = data.draft;
     app.setMode("replay");
-    seek(rp.records.length);
-    app.message(`run ${runId}: ${rp.records.length} records, ${rp.errors.length} errors; drag the slider or use the arrows`);
+    app.graph.fit();  // the run's net, whole (the view may have been fitted to an empty one)
+    seek(0);  // a replay starts where the run started
+    app.message(`run ${runId}: ${rp.records.length} records, ${rp.errors.length} errors; shown at its start: ` +
+                "\u25B6 plays it, the slider and the arrow keys step through it, \u25B6| goes to its end");
     for (const n of data.notes || []) app.message(n);
     if (rp.runs.length) renderRuns({ journal: rp.journal, runs: rp.runs, live: rp.live });
   }
