@@ -9,8 +9,10 @@ command (a refusal stays on screen until the next command); elsewhere (a pipe, C
 prints one line per firing (the places it took tokens from and gave
 tokens to), action start and result (with the action's reason), what a node said afterwards about
 a call the run had given up on (printed even when quiet if it is not what the net assumed), state
-change and operator command, and counts the pulses of external events that fired nothing instead
-of printing each.
+change and operator command; the pulses of external events are not printed one by one: one that
+fired something is named on its firing line (``fire #7 start_run on ext:image_sampling_tick``), and
+those that fired nothing are counted and summed up in one line at most every
+:data:`PULSE_REPORT_S` seconds, and at the end of the run.
 :func:`read_operator_commands` turns lines typed on standard input into operator commands
 (insert/remove tokens in control places, pause, step, resume, abort, end; end of input is end).
 """
@@ -22,7 +24,7 @@ import collections
 import sys
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, Protocol, TextIO
 
 from coordinator.events import (
@@ -46,8 +48,8 @@ __all__ = ["HELP", "CommandSink", "Console", "read_operator_commands"]
 
 HELP = f"operator: {USAGE}   (then Enter; Ctrl-D = end)"
 
-#: Seconds after which pulses that fired nothing are reported even if nothing else happened.
-PULSE_REPORT_S = 5.0
+#: Shortest time between two summaries of the pulses that fired nothing (line by line), seconds.
+PULSE_REPORT_S = 10.0
 
 _KIND_MARK = {PlaceKind.RESOURCE: "R", PlaceKind.PRIMITIVE_TASK: "T", PlaceKind.CONTROL: "C", PlaceKind.PLAIN: " "}
 
@@ -65,17 +67,19 @@ class Console:
         live: redraw a screen (``True``), print line by line (``False``), or decide from
             ``stream.isatty()`` (``None``).
         quiet: print nothing but errors, state changes, operator commands and the end.
+        clock: monotonic seconds (the pulse summaries' period).
     """
 
     def __init__(self, net: PetriNet, *, stream: TextIO | None = None, live: bool | None = None,
-                 quiet: bool = False) -> None:
+                 quiet: bool = False, clock: Callable[[], float] = time.monotonic) -> None:
         self.net = net
+        self._clock = clock
         self.stream = stream or sys.stderr
         self.live = self.stream.isatty() if live is None else live
         self.quiet = quiet
         self.runtime: Runtime | None = None
         self._recent: collections.deque[str] = collections.deque(maxlen=8)
-        self._t0 = time.monotonic()
+        self._t0 = clock()
         self._silent: collections.Counter[str] = collections.Counter()
         self._silent_since = 0.0
         #: the fate of the operator's last command (shown until the next one)
@@ -98,12 +102,11 @@ class Console:
 
     def __call__(self, event: RunEvent) -> None:
         self._track(event)
-        if isinstance(event, PulseDelivered) and not event.fired:
-            if not self._silent:
-                self._silent_since = time.monotonic()
-            self._silent[event.event] += 1
-            if not self.live and not self.quiet and time.monotonic() - self._silent_since >= PULSE_REPORT_S:
-                self._flush_pulses()
+        if isinstance(event, PulseDelivered):
+            if not event.fired:  # a pulse that fired something is on its firing's line
+                if not self._silent:
+                    self._silent_since = self._clock()
+                self._silent[event.event] += 1
             return
         line = self._describe(event)
         if line is None:
@@ -111,7 +114,10 @@ class Console:
         urgent = isinstance(event, (RunStateChanged, OperatorApplied, OperatorRefused)) or (
             isinstance(event, CallReconciled) and event.differs)
         error = isinstance(event, ActionEnded) and event.result.status is Status.ERROR
-        if not self.live and (not self.quiet or urgent or error):
+        ended = isinstance(event, RunStateChanged) and event.state not in ("started", "resumed", "paused", "running",
+                                                                           "waiting")
+        due = self._silent and self._clock() - self._silent_since >= PULSE_REPORT_S
+        if not self.live and (ended or (due and (not self.quiet or urgent or error))):
             self._flush_pulses()
         stamped = self._stamp(line)
         self._recent.append(stamped)
@@ -130,16 +136,17 @@ class Console:
             print(stamped, file=self.stream, flush=True)
 
     def _stamp(self, line: str) -> str:
-        return f"{time.monotonic() - self._t0:8.3f}s  {line}"
+        return f"{self._clock() - self._t0:8.3f}s  {line}"
 
     def _flush_pulses(self) -> None:
+        """One line summing up the pulses that fired nothing since the last summary."""
         if not self._silent:
             return
-        for event, n in self._silent.items():
-            text = self._stamp(f"pulse {event} x{n}: fired nothing")
-            self._recent.append(text)
-            if not self.live:
-                print(text, file=self.stream, flush=True)
+        counts = ", ".join(f"{event} x{n}" for event, n in self._silent.items())
+        text = self._stamp(f"pulses that fired nothing in the last {self._clock() - self._silent_since:.1f} s: {counts}")
+        self._recent.append(text)
+        if not self.live:
+            print(text, file=self.stream, flush=True)
         self._silent.clear()
 
     def _track(self, event: RunEvent) -> None:
@@ -190,8 +197,6 @@ class Console:
             why = f": {event.reason}" if event.reason else ""
             more = "".join(f"\n            - {d}" for d in event.detail if d not in event.reason)
             return f"run {event.run} {event.state}{why}{more}"
-        if isinstance(event, PulseDelivered):
-            return f"pulse {event.event}: fired {event.fired}"
         return None
 
     @property

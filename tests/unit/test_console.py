@@ -74,20 +74,31 @@ def test_the_line_view_prints_one_line_per_event_and_errors_even_when_quiet():
     assert len(quiet_out.getvalue().splitlines()) == 1
 
 
-def test_pulses_that_fire_nothing_are_counted_not_printed_one_by_one():
+def test_pulses_are_summed_up_at_most_every_ten_seconds_not_printed_one_by_one():
     from coordinator.events import PulseDelivered, RunStateChanged
 
+    now = [0.0]
     out = io.StringIO()
-    console = Console(loads_net(NET), stream=out, live=False)
-    for _ in range(250):
-        console(PulseDelivered("r", "ext:image_sampling_tick", 0))
-    console(PulseDelivered("r", "ext:image_sampling_tick", 1))
+    console = Console(loads_net(NET), stream=out, live=False, clock=lambda: now[0])
+    for second in range(25):  # a camera ticking at 10 Hz for 25 s; a run started on one tick every 5 s
+        for tick in range(10):
+            now[0] = second + tick / 10
+            fired = int(second % 5 == 0 and tick == 0)
+            console(PulseDelivered("r", "ext:image_sampling_tick", fired))
+            if fired:
+                console(TransitionFired("r", Firing(second + 1, "go", {"runs": 1}, {"out": 1},
+                                                    pulse="ext:image_sampling_tick")))
     console(RunStateChanged("r", "completed", "at the home marking"))
     lines = out.getvalue().splitlines()
-    assert len(lines) == 3
-    assert lines[0].endswith("pulse ext:image_sampling_tick x250: fired nothing")
-    assert lines[1].endswith("pulse ext:image_sampling_tick: fired 1")
-    assert lines[2].endswith("run r completed: at the home marking")
+    summaries = [line for line in lines if "pulses that fired nothing" in line]
+    assert not any("fired 1" in line for line in lines)  # the firing line names its pulse
+    assert sum("on ext:image_sampling_tick" in line for line in lines) == 5
+    assert len(summaries) == 2 and len(lines) == 8
+    # the first line printed 10 s or more after the counting began (the firing at 15 s) brings the first
+    # summary; the end of the run brings the rest: 245 pulses that fired nothing in all
+    assert summaries[0].endswith("pulses that fired nothing in the last 14.9 s: ext:image_sampling_tick x147")
+    assert summaries[1].endswith("in the last 9.8 s: ext:image_sampling_tick x98")
+    assert lines[-1].endswith("run r completed: at the home marking")
 
 
 def test_the_line_view_gives_reasons_waiting_and_the_places_a_firing_moved():
