@@ -36,7 +36,8 @@ matches interruptions to the blank squares in order and counts every sample as f
 come from the journal and are the demo's job.
 
 :func:`score` returns the numbers (JSON-ready), :func:`render_report` the text,
-:func:`write_top_view` a PNG of the floor, track, beacons, path and stop (matplotlib, Agg).
+:func:`write_top_view` a PNG of the floor, track, beacons, path and stop (matplotlib, Agg), drawn by
+:func:`top_view`.
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ import numpy as np
 
 from .course import Course, Tile
 
-__all__ = ["OFF_TRACK", "RECOVERY_OFFSET", "STOP_TOLERANCE", "render_report", "score", "write_top_view"]
+__all__ = ["OFF_TRACK", "RECOVERY_OFFSET", "STOP_TOLERANCE", "render_report", "score", "top_view", "write_top_view"]
 
 #: A stop counts as on the T mark within this distance of its centre, m.
 STOP_TOLERANCE = 0.3
@@ -386,14 +387,18 @@ def _centre_line(course: Course, tile: Tile, n: int = 40) -> np.ndarray:
     return np.array([course.pose_at(float(s))[:2] for s in ss])
 
 
-def write_top_view(course: Course, path: Any, png_path: str) -> None:
-    """Write a top view of the run as a PNG: the chessboard, the painted track (the hidden path of
-    each interruption dotted), the T bar, the beacons (resume points), the robot's path and where
-    it started and stopped.
+def top_view(course: Course, path: Any) -> Any:
+    """The top view of a run as a matplotlib figure (Agg): the chessboard, every square of the course
+    numbered as the report names it (``6 (B)``: its place in the course and, for an interruption, its
+    code), the painted track, the interruptions (hatched squares, the hidden path dotted), the T mark,
+    the beacons (resume points), the robot's path, where it started and, hollow so that the T stays
+    visible under it, where it stopped.
+
+    Returns:
+        The figure; close it (``matplotlib.pyplot.close``) when done.
 
     Raises:
         ValueError: as :func:`score` for a bad path.
-        OSError: if the file cannot be written.
     """
     import matplotlib
 
@@ -412,33 +417,58 @@ def write_top_view(course: Course, path: Any, png_path: str) -> None:
                                        zorder=0))
         for tile in course.tiles:
             pts = _centre_line(course, tile)
+            i, j = tile.square
+            ink = "white" if course.is_black(i, j) else "black"
             if tile.blank:
+                ax.add_patch(Rectangle((i * sq, j * sq), sq, sq, fill=False, hatch="//", edgecolor="tab:orange",
+                                       lw=1.5, zorder=0.5))
                 ax.plot(pts[:, 0], pts[:, 1], ":", color="tab:orange", lw=1.0, zorder=1)
             else:
-                colour = "white" if course.is_black(*tile.square) else "black"
-                ax.plot(pts[:, 0], pts[:, 1], "-", color=colour, lw=2.0, zorder=1)
+                ax.plot(pts[:, 0], pts[:, 1], "-", color=ink, lw=2.0, zorder=1)
+            label = f"{tile.index + 1} ({tile.code})" if tile.blank else str(tile.index + 1)
+            ax.text(i * sq + 0.06 * sq, j * sq + 0.94 * sq, label, color="tab:orange" if tile.blank else ink,
+                    fontsize=7, fontweight="bold" if tile.blank else "normal", ha="left", va="top", zorder=3)
         ex, ey = course.end_point()
         end = course.tiles[-1]
         hx, hy = math.cos(end.heading * math.pi / 2.0), math.sin(end.heading * math.pi / 2.0)
         half_bar = course.end_bar_length / 2.0
         colour = "white" if course.is_black(*end.square) else "black"
         ax.plot([ex - hy * half_bar, ex + hy * half_bar], [ey + hx * half_bar, ey - hx * half_bar], "-",
-                color=colour, lw=3.0, zorder=1)
+                color=colour, lw=3.0, zorder=5, label="T mark")
         for _, bx, by, _ in course.resume_points():
             ax.plot(bx, by, "o", color="tab:orange", ms=7, zorder=3)
         if arr.shape[0]:
             ax.plot(arr[:, 1], arr[:, 2], "-", color="tab:red", lw=1.0, zorder=2, label="robot (axle midpoint)")
             ax.plot(arr[0, 1], arr[0, 2], "^", color="tab:green", ms=8, zorder=4, label="start")
-            ax.plot(arr[-1, 1], arr[-1, 2], "s", color="tab:blue", ms=7, zorder=4, label="stop")
+            ax.plot(arr[-1, 1], arr[-1, 2], "s", mfc="none", mec="tab:blue", mew=1.5, ms=9, zorder=4, label="stop")
         ax.plot([], [], "o", color="tab:orange", label="beacon (resume point)")
+        ax.add_patch(Rectangle((0, 0), 0, 0, fill=False, hatch="//", edgecolor="tab:orange",
+                               label="interruption (no track painted)"))
         ax.set_aspect("equal")
         ax.set_xlim(i0 * sq, (i1 + 1) * sq)
         ax.set_ylim(j0 * sq, (j1 + 1) * sq)
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
-        ax.set_title(f"{course.name}: top view")
+        ax.set_title(f"{course.name}: top view (squares numbered as in the report)")
         ax.legend(loc="upper left", fontsize=7, framealpha=0.8)
         fig.tight_layout()
+    except BaseException:
+        plt.close(fig)
+        raise
+    return fig
+
+
+def write_top_view(course: Course, path: Any, png_path: str) -> None:
+    """Write :func:`top_view` as a PNG.
+
+    Raises:
+        ValueError: as :func:`score` for a bad path.
+        OSError: if the file cannot be written.
+    """
+    from matplotlib import pyplot as plt
+
+    fig = top_view(course, path)
+    try:
         fig.savefig(png_path, dpi=100)
     finally:
         plt.close(fig)

@@ -184,3 +184,32 @@ def test_a_list_of_tuples_is_a_path_and_an_unknown_event_object_is_refused(cours
     assert score(course, path, [], None)["time_s"] > 0
     with pytest.raises(ValueError, match="neither a dict"):
         score(course, path, [object()], None)
+
+
+def test_the_top_view_numbers_the_squares_as_the_report_shows_the_gaps_and_keeps_the_t_visible(course: Course):
+    from matplotlib import pyplot as plt
+
+    from sim.mobile.report import top_view
+
+    path = _path(course)
+    fig = top_view(course, path)
+    try:
+        ax = fig.axes[0]
+        labels = {text.get_text() for text in ax.texts}
+        # the report's names: "interruption on square 4 (B)"; the other squares by their number
+        report = render_report(course, path, _events(course, path), tuple(path[-1, 1:]))
+        assert "interruption on square 4 (B)" in report
+        assert labels == {"1", "2", "3", "4 (B)", "5", "6", "7", "8"}
+        hatched = [p for p in ax.patches if p.get_hatch() == "//" and p.get_width() > 0]
+        assert [(p.get_x(), p.get_y()) for p in hatched] == [
+            (i * course.square, j * course.square) for i, j in (t.square for t in course.tiles if t.blank)]
+        # the robot stops on the T: the stop marker is hollow and the bar is drawn over it
+        fig.canvas.draw()
+        image = np.asarray(fig.canvas.buffer_rgba())[:, :, :3].astype(int)
+        ex, ey = course.end_point()
+        x, y = ax.transData.transform((ex, ey))
+        row, col = image.shape[0] - int(round(y)), int(round(x))
+        bar = np.array([255, 255, 255] if course.is_black(*course.tiles[-1].square) else [0, 0, 0])
+        assert np.abs(image[row - 1:row + 2, col - 1:col + 2] - bar).sum(axis=2).min() < 60, "the T is hidden"
+    finally:
+        plt.close(fig)
