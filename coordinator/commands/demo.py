@@ -163,7 +163,11 @@ def _learned(journal: Path, net: Path) -> None:
     """What the learners have learned so far (section 4), and how to go on learning."""
     from coordinator.commands.learn import learned_so_far
 
-    for line in learned_so_far(journal, net):
+    try:
+        lines = learned_so_far(journal, net)
+    except PetrobotError as exc:  # the run is over and reported: its exit code stays the run's
+        lines = [f"learner: not read ({exc})"]
+    for line in lines:
         print(line)
     print(f"learning: petrobot learn {net.relative_to(ROOT) if net.is_relative_to(ROOT) else net} --journal "
           f"{journal} --plot; go on learning from here: petrobot demo --journal {journal}")
