@@ -155,22 +155,10 @@ async def _catching(args: argparse.Namespace) -> int:
               f"waits for the camera client {st['camera_misses']}/{st['camera_waits']} and for the CAN master "
               f"{st['master_misses']}/{st['master_waits']} ran out; {st['drive_faults']} drive fault(s)")
     print(f"journal: {journal_path}; logs: {logs}/")
-    _learned(journal_path, net_path)
+    from coordinator.commands.learn import print_learned
+
+    print_learned(journal_path, net_path)
     return summary.exit_code
-
-
-def _learned(journal: Path, net: Path) -> None:
-    """What the learners have learned so far (section 4), and how to go on learning."""
-    from coordinator.commands.learn import learned_so_far
-
-    try:
-        lines = learned_so_far(journal, net)
-    except PetrobotError as exc:  # the run is over and reported: its exit code stays the run's
-        lines = [f"learner: not read ({exc})"]
-    for line in lines:
-        print(line)
-    print(f"learning: petrobot learn {net.relative_to(ROOT) if net.is_relative_to(ROOT) else net} --journal "
-          f"{journal} --plot; go on learning from here: petrobot demo --journal {journal}")
 
 
 async def _foundation(args: argparse.Namespace) -> int:

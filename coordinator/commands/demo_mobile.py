@@ -197,7 +197,7 @@ async def run_mobile(args: argparse.Namespace) -> int:
               f"{st['drive_faults']} drive fault(s)")
     print(f"journal: {journal_path}; logs: {logs}/; ground truth: {truth}"
           + (f"; top view: {png}" if png.exists() else ""))
-    from coordinator.commands.demo import _learned
+    from coordinator.commands.learn import print_learned
 
-    _learned(journal_path, net_path)
+    print_learned(journal_path, net_path)
     return summary.exit_code

@@ -38,8 +38,8 @@ from services.results import Status
 if TYPE_CHECKING:
     from coordinator.learning import Learner, LearningAutomaton
 
-__all__ = ["TaskReport", "add_parser", "build_reports", "default_plot_path", "learned_so_far", "plot", "read_journal",
-           "report_json", "report_text", "run"]
+__all__ = ["TaskReport", "add_parser", "build_reports", "default_plot_path", "learned_so_far", "plot", "print_learned",
+           "read_journal", "report_json", "report_text", "run"]
 
 _EPS = 1e-12
 
@@ -131,6 +131,21 @@ def learned_so_far(journal: str | Path, net: str | Path) -> list[str]:
                      f"p = {', '.join(f'{a} {p:.2f}' for a, p in probs)}"
                      + (f"; least J so far: {best} (J = {js[best]:.3f}, lower is better)" if best else ""))
     return lines
+
+
+def print_learned(journal: Path, net: Path) -> None:
+    """Print what a demo's learners have learned so far (:func:`learned_so_far`) and how to go on
+    learning; a journal or net that cannot be read gets one line saying so (the demo's exit code
+    stays its run's)."""
+    try:
+        lines = learned_so_far(journal, net)
+    except PetrobotError as exc:
+        lines = [f"learner: not read ({exc})"]
+    for line in lines:
+        print(line)
+    shown = net.relative_to(Path.cwd()) if net.is_absolute() and net.is_relative_to(Path.cwd()) else net
+    print(f"learning: petrobot learn {shown} --journal {journal} --plot; go on learning from here: "
+          f"petrobot demo --journal {journal}")
 
 
 def read_journal(path: str | Path, run: str | None = None) -> tuple[dict[str, dict[str, Any]], dict[str, list[Trial]]]:
