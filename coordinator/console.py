@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import re
 import sys
 import threading
 import time
@@ -44,9 +45,14 @@ from coordinator.reconcile import describe as describe_reconciliation
 from coordinator.runtime import Runtime
 from services.results import Status
 
-__all__ = ["HELP", "CommandSink", "Console", "read_operator_commands"]
+__all__ = ["ESCAPES", "HELP", "CommandSink", "Console", "read_operator_commands"]
 
 HELP = f"operator: {USAGE}   (then Enter; Ctrl-D = end)"
+
+#: A terminal's escape sequence (cursor and editing keys: CSI ``ESC [ ... final``, SS3 ``ESC O x``,
+#: or ESC and one character), as a terminal in line mode puts it into the line when such a key is
+#: pressed.
+ESCAPES = re.compile(r"\x1b(?:\[[0-9;?]*[ -/]*[@-~]|O.|.)?")
 
 #: Shortest time between two summaries of the pulses that fired nothing (line by line), seconds.
 PULSE_REPORT_S = 10.0
@@ -264,7 +270,9 @@ def read_operator_commands(runtime: CommandSink, stream: TextIO | None = None, *
     """Read operator commands, one per line, from ``stream`` (standard input) until end of input.
 
     Reading happens in a daemon thread (a blocked read must not keep the program alive at the
-    end of the run); each command is handed to the runtime's event loop. A line that is no command
+    end of the run); each command is handed to the runtime's event loop. The escape sequences of
+    cursor and editing keys (arrows, Home, End...) that a terminal in line mode leaves in a line are
+    taken out first (:data:`ESCAPES`): a line of nothing else is ignored. A line that is no command
     goes to ``runtime.refuse_input`` (journaled as refused; the console shows why until the next
     command) and to ``on_error(text, reason)`` if given, in the reader thread; the run goes on.
     End of input (Ctrl-D) is the ``end`` command when ``end_on_eof``.
@@ -283,7 +291,8 @@ def read_operator_commands(runtime: CommandSink, stream: TextIO | None = None, *
         return True
 
     def reader() -> None:
-        for line in src:
+        for raw in src:
+            line = ESCAPES.sub("", raw)
             if not line.strip():
                 continue
             try:

@@ -168,3 +168,32 @@ def test_the_live_view_says_paused_while_the_engine_is_paused_even_when_the_run_
     runtime.engine.resume()
     console(RunStateChanged("r", "running", "resumed by the operator"))
     assert console.shown_state == "running"
+
+
+def test_cursor_keys_typed_in_line_mode_are_taken_out_of_the_line_never_refused_as_a_command():
+    import asyncio
+    import threading
+
+    from coordinator.console import read_operator_commands
+
+    class Sink:
+        def __init__(self) -> None:
+            self.got: list = []
+
+        def command(self, cmd: OperatorCommand) -> None:
+            self.got.append(cmd)
+
+        def refuse_input(self, text: str, reason: str) -> None:
+            self.got.append(("refused", text))
+
+    typed = "\x1b[4~\n+ runs\x1b[D\x1b[C 2\n\x1b[A\x1b[B\x1bOH\n\x1b[1;5Cpause\n"  # End; arrows; Home; Ctrl-Right
+
+    async def main() -> list:
+        sink = Sink()
+        thread: threading.Thread = read_operator_commands(sink, io.StringIO(typed))  # type: ignore[arg-type]
+        await asyncio.to_thread(thread.join, 30)
+        await asyncio.sleep(0)
+        return sink.got
+
+    assert asyncio.run(main()) == [OperatorCommand(Command.INSERT, "runs", 2), OperatorCommand(Command.PAUSE),
+                                   OperatorCommand(Command.END)]
