@@ -444,9 +444,18 @@ def _operator_would_move(states: np.ndarray, net: PetriNet) -> tuple[np.ndarray,
     k = states.shape[0]
     moved = np.zeros(k, dtype=bool)
     options: list[list[str]] = [[] for _ in range(k)]
+    if not control:
+        return moved, options
+    inputs_of: dict[str, list[tuple[str, int]]] = {}
+    inhibitors_of: dict[str, list[tuple[str, int]]] = {}
+    for a in net.arcs:  # one pass over the arcs: O(|A|), not O(|T|·|A|)
+        if a.inhibitor:
+            inhibitors_of.setdefault(a.target, []).append((a.source, a.weight))
+        elif not a.reset:
+            inputs_of.setdefault(a.target, []).append((a.source, a.weight))
     for t in net.transitions:
-        inputs = [(a.source, a.weight) for a in net.arcs if a.target == t.id and not a.inhibitor and not a.reset]
-        inhibitors = [(a.source, a.weight) for a in net.arcs if a.target == t.id and a.inhibitor]
+        inputs = inputs_of.get(t.id, [])
+        inhibitors = inhibitors_of.get(t.id, [])
         if not any(pid in control for pid, _ in inputs + inhibitors):
             continue
         ok = np.ones(k, dtype=bool)
