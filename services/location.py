@@ -535,7 +535,9 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         if name in drivers:
             raise fail(f"[drivers.{name}]: the name {name} is reserved for the ROS 2 session of node {node}",
                        "drivers", name)
-        drivers[name] = DriverSpec(name=name, node=node, impl=DRIVER_IMPL)
+        connect = nodes[node].ros2.connect
+        drivers[name] = DriverSpec(name=name, node=node, impl=DRIVER_IMPL,
+                                   params=MappingProxyType({"router": connect[0]} if connect else {}))
 
     return Location(
         path=path,

@@ -21,6 +21,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from services.action import Driver, NodeContext
+from services.devices.endpoint import DeviceEndpoint
 from services.ros2.condition import EdgeDetector
 from services.ros2.config import ActionKind, Ros2ActionSpec, Ros2EventSpec, check_action_types, check_event_types
 from services.ros2.endpoints import ActionClient, Publication, ServiceClient, Subscription
@@ -63,6 +64,15 @@ class UntilWatch:
 
 class Ros2Driver(Driver):
     """The node's ROS 2 session and endpoints (see the module docstring)."""
+
+    @classmethod
+    def device(cls, params: dict[str, Any]) -> DeviceEndpoint:
+        """The Zenoh router the node connects to first (``params["router"]``, from services.toml's
+        ``connect``), which ``petrobot up`` checks before starting the node."""
+        address = str(params.get("router", "")).split("/", 1)[-1].split("#", 1)[0]
+        host, _, port = address.rpartition(":")
+        return DeviceEndpoint("Zenoh router", host.strip("[]") or "127.0.0.1", int(port) if port.isdigit() else 0,
+                              "petrobot sim zenoh (or rmw_zenohd on the ROS 2 machine)")
 
     def __init__(self, name: str, params: Mapping[str, Any]) -> None:
         super().__init__(name, params)
