@@ -21,7 +21,7 @@ generated code of ``example_interfaces`` carries on a Jazzy machine (:data:`JAZZ
 SDK computes the others itself.
 
 Everything the robot sees and does is printed as JSON lines (``ready``, ``service``, ``goal``,
-``cancel``, ``result``, ``crossfire``) so that a test can compare it with petrobot's journal.
+``executing``, ``cancel``, ``result``, ``crossfire``) so that a test can compare it with petrobot's journal.
 """
 
 from __future__ import annotations
@@ -207,6 +207,7 @@ class Ros2Robot:
     def _execute(self, goal: _Goal) -> None:
         goal.status = EXECUTING
         self._publish_status()
+        self.emit("executing", goal_id=goal.goal_id.hex())
         sequence = [0, 1]
         feedback_type = self._types["example_interfaces/msg/Fibonacci_Feedback"]
         for i in range(1, goal.order):
