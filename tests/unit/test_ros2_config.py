@@ -3,6 +3,8 @@ events, their errors with file and line, and their check against the interface t
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from services.errors import LocationError
@@ -181,3 +183,21 @@ def test_specs_are_checked_against_the_types(store):
     fields = parse_event_spec({"topic": "/c", "type": "std_msgs/msg/Bool", "fields": ["value"]}, "[e]")
     with pytest.raises(Ros2ConfigError, match="fields reads 'value'"):
         check_event_types(fields, store, "[e]")
+
+
+def test_petrobot_check_names_a_bad_goal_field_of_the_net_and_a_bad_condition_of_services_toml(tmp_path, capsys):
+    from coordinator.cli import main
+
+    root = Path(__file__).resolve().parents[2]
+    net = tmp_path / "ros2.toml"
+    net.write_text((root / "nets" / "ros2.toml").read_text().replace("order = 10", 'order = "ten"'))
+    assert main(["check", str(net), "--services", str(root / "services.toml")]) == 2
+    said = "".join(capsys.readouterr())
+    assert "task 'count': the parameters of ROS 2 action 'fibonacci' do not fit " \
+           "example_interfaces/action/Fibonacci_Goal: goal field 'goal.order': expected an integer (int32)" in said
+    services = tmp_path / "services.toml"
+    services.write_text((root / "services.toml").read_text().replace("len(sequence) > 1", "len(sequense) > 1"))
+    assert main(["check", "--services-only", "--services", str(services)]) == 2
+    said = "".join(capsys.readouterr())
+    assert f"{services}:" in said and "[actions.fibonacci]: ros2: success reads 'sequense'" in said
+    assert main(["check", str(root / "nets" / "ros2.toml"), "--services", str(root / "services.toml")]) == 0
