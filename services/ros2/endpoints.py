@@ -22,6 +22,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import threading
 import time
 from collections.abc import Awaitable, Callable, Mapping
 from typing import Any, TypeVar
@@ -170,34 +171,61 @@ class ServiceClient:
                     errors.append(f"reply without a valid attachment ({exc})")
                     return
                 if echoed.sequence_number != seq or echoed.gid != self.gid:
-                    return  # a reply to someone else's request
+                    errors.append(f"only a reply for another request (sequence number {echoed.sequence_number}, "
+                                  f"ours {seq})")
+                    return
             done.set_result(ok or b"")
 
         def finished() -> None:
             if not done.done():
-                if errors:
-                    why = "; ".join(errors)
-                elif loop.time() - started >= limit * 0.99:
+                if loop.time() - started >= limit * 0.99:
                     why = f"no answer within {limit:g} s"
+                elif errors:
+                    why = "; ".join(errors)
                 elif server is not None and server.present:
                     why = "the server went away before answering (its process ended or its Zenoh session was lost)"
                 else:
                     why = "no service server answered (none in the ROS 2 graph, or its type hash differs)"
                 done.set_exception(CallFailed(f"{self.name}: {why}"))
 
+        # Replies and the end of the query come from Zenoh's threads, not necessarily the same one:
+        # they are queued under a lock and handed to the loop in one drain, so that the end of the
+        # query is never seen before a reply that came first.
+        arrived: list[tuple[bytes | None, bytes | None, str | None]] = []
+        ended = [False]
+        lock = threading.Lock()
+
+        def drain() -> None:
+            with lock:
+                batch = arrived[:]
+                arrived.clear()
+                over = ended[0]
+            for item in batch:
+                deliver(*item)
+            if over:
+                finished()
+
         def on_reply(reply: Any) -> None:  # Zenoh thread
             ok = reply.ok
             if ok is not None:
                 att = ok.attachment
-                session.soon(deliver, ok.payload.to_bytes(), att.to_bytes() if att is not None else None, None)
+                item = (ok.payload.to_bytes(), att.to_bytes() if att is not None else None, None)
             else:
-                session.soon(deliver, None, None, f"error reply: {_text(reply.err.payload.to_bytes())}")
+                item = (None, None, f"error reply: {_text(reply.err.payload.to_bytes())}")
+            with lock:
+                arrived.append(item)
+            session.soon(drain)
+
+        def on_end() -> None:  # Zenoh thread, after the last reply's callback returned
+            with lock:
+                ended[0] = True
+            session.soon(drain)
 
         cancel = zenoh.CancellationToken()
         server = _ServerWatch(session, self.name, action=action) if watch else None
         try:
             session.zenoh.get(
-                self.key, zenoh.handlers.Callback(on_reply, lambda: session.soon(finished), indirect=False),
+                self.key, zenoh.handlers.Callback(on_reply, on_end, indirect=False),
                 payload=payload, attachment=attachment, target=zenoh.QueryTarget.ALL_COMPLETE,
                 consolidation=zenoh.ConsolidationMode.NONE, timeout=limit,
                 cancellation_token=cancel,
