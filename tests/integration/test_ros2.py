@@ -272,8 +272,11 @@ def test_feedback_reaches_the_caller_and_the_ros_graph_shows_petrobots_node(worl
     probe = textwrap.dedent(f"""
         from zenoh_ros2_sdk import get_topic_info
         from zenoh_ros2_sdk.session import ZenohSession
-        info = get_topic_info("/crossfire", router_port={world.cluster.ports['zenoh']}, timeout=2.0, verbose=True)
-        print(sorted((e.node_name, e.node_namespace) for e in info.subscribers))
+        for attempt in range(40):  # the probe's own session may take a moment to reach the router
+            info = get_topic_info("/crossfire", router_port={world.cluster.ports['zenoh']}, timeout=1.0, verbose=True)
+            if info is not None and any(e.node_name == "petrobot_robot" for e in info.subscribers):
+                break
+        print(sorted((e.node_name, e.node_namespace) for e in info.subscribers) if info else None)
         ZenohSession.get_instance().session.close()
     """)
     done = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, timeout=TIMEOUT_S)
