@@ -148,6 +148,10 @@ class Ros2Session:
             node = Entity(domain_id=self.settings.domain_id, session_id=self.zid, node_id=0, entity_id=0,
                           kind=EntityKind.NODE, namespace=self.settings.namespace, node_name=self.node_name)
             self._node_token = self._z.liveliness().declare_token(node.token)
+        if self.settings.connect and not list(self._z.info.routers_zid()):
+            log.warning("ROS 2 session of %s: no Zenoh router answers at %s yet (down, refusing our TLS "
+                        "certificate or password, or unreachable); Zenoh keeps trying, and calls find no server "
+                        "meanwhile", self.node_name, ", ".join(self.settings.connect))
         log.info("ROS 2 session %s open (%s, %s mode, domain %d, connect %s): node %s%s", self.zid,
                  self.dialect.value, self.settings.mode, self.settings.domain_id, ", ".join(self.settings.connect),
                  qualify(self.node_name, self.settings.namespace), "" if self.settings.user is None

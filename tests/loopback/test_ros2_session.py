@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import shutil
 import socket
 from collections.abc import AsyncIterator, Callable
 from typing import Any
@@ -15,7 +16,7 @@ import zenoh
 
 from services.ros2.config import SessionSettings
 from services.ros2.endpoints import CallFailed, ServiceClient, Subscription
-from services.ros2.errors import Ros2FieldError
+from services.ros2.errors import Ros2ConfigError, Ros2Error, Ros2FieldError
 from services.ros2.graph import Attachment, Dialect, Entity, EntityKind
 from services.ros2.qos import encode_qos, Qos
 from services.ros2.session import Ros2Session
@@ -248,3 +249,91 @@ async def test_topic_messages_reach_a_subscription_and_garbage_is_skipped(peer: 
     assert got == [{"data": True}]
     publisher.undeclare()
     await session.close()
+
+
+# --------------------------------------------------------------------------- TLS and user/password
+
+
+@pytest.fixture(scope="module")
+def certs(tmp_path_factory: pytest.TempPathFactory) -> Any:
+    from test_node_tls import make_ca, make_host
+
+    if shutil.which("openssl") is None:
+        pytest.skip("the openssl command makes the test certificates and is not installed")
+    where = tmp_path_factory.mktemp("zenoh-certs")
+    make_ca(where, "ca")
+    make_host(where, "ca", "host")
+    make_ca(where, "rogue_ca")
+    make_host(where, "rogue_ca", "rogue")
+    return where
+
+
+class SecurePeer(Peer):
+    """A router on a TLS endpoint (mutual TLS) and, optionally, a user/password dictionary."""
+
+    def __init__(self, certs: Any, dictionary: Any = None) -> None:
+        self.endpoint = f"tls/127.0.0.1:{_free_port()}"
+        tls = {"transport/link/tls/root_ca_certificate": str(certs / "ca.pem"),
+               "transport/link/tls/listen_certificate": str(certs / "host.pem"),
+               "transport/link/tls/listen_private_key": str(certs / "host.key"),
+               "transport/link/tls/connect_certificate": str(certs / "host.pem"),
+               "transport/link/tls/connect_private_key": str(certs / "host.key"),
+               "transport/link/tls/enable_mtls": True}
+        auth = {"transport/auth/usrpwd/dictionary_file": str(dictionary),
+                "transport/auth/usrpwd/user": "robot", "transport/auth/usrpwd/password": "robot-secret"} \
+            if dictionary else {}
+        self.router = zenoh.open(_config("router", **{"listen/endpoints": [self.endpoint], **tls, **auth}))
+        self.session = zenoh.open(_config("client", **{"connect/endpoints": [self.endpoint], **tls, **auth}))
+        self.undeclare = []
+
+
+async def test_a_session_over_mutual_tls_calls_the_service(certs: Any):
+    peer = SecurePeer(certs)
+    try:
+        session = await _session(peer, tls_root_ca=str(certs / "ca.pem"), tls_cert=str(certs / "host.pem"),
+                                 tls_key=str(certs / "host.key"))
+        client = ServiceClient(session, "/add_two_ints", ADD)
+        peer.serve(client.key, _adder())
+        await _routed(session, client.key)
+        assert await client.call({"a": 20, "b": 22}, timeout_s=10) == {"sum": 42}
+        await session.close()
+    finally:
+        peer.close()
+
+
+async def test_a_certificate_from_another_ca_cannot_even_open_the_session(certs: Any):
+    peer = SecurePeer(certs)
+    try:
+        session = Ros2Session(SessionSettings(connect=(peer.endpoint,), mode="client",
+                                              tls_root_ca=str(certs / "ca.pem"), tls_cert=str(certs / "rogue.pem"),
+                                              tls_key=str(certs / "rogue.key")), "tester", STORE)
+        with pytest.raises(Ros2Error, match="cannot open the Zenoh session"):
+            await session.open()
+    finally:
+        peer.close()
+
+
+async def test_user_and_password_from_the_password_file_are_checked_by_the_router(certs: Any, tmp_path: Any):
+    dictionary = tmp_path / "users.txt"
+    dictionary.write_text("robot:robot-secret\npetrobot:lab-secret\n")
+    peer = SecurePeer(certs, dictionary)
+    tls = {"tls_root_ca": str(certs / "ca.pem"), "tls_cert": str(certs / "host.pem"), "tls_key": str(certs / "host.key")}
+    try:
+        (tmp_path / "good").write_text("lab-secret\n")
+        (tmp_path / "bad").write_text("guess\n")
+        session = await _session(peer, user="petrobot", password_file=str(tmp_path / "good"), **tls)
+        client = ServiceClient(session, "/add_two_ints", ADD)
+        peer.serve(client.key, _adder())
+        await _routed(session, client.key)
+        assert await client.call({"a": 1, "b": 2}, timeout_s=10) == {"sum": 3}
+        await session.close()
+        wrong = Ros2Session(SessionSettings(connect=(peer.endpoint,), mode="client", user="petrobot",
+                                            password_file=str(tmp_path / "bad"), **tls), "tester", STORE)
+        with pytest.raises(Ros2Error, match="cannot open the Zenoh session"):
+            await wrong.open()
+        missing = Ros2Session(SessionSettings(connect=(peer.endpoint,), mode="client", user="petrobot",
+                                              password_file=str(tmp_path / "absent"), **tls), "tester", STORE)
+        with pytest.raises(Ros2ConfigError, match="cannot read the Zenoh password file"):
+            await missing.open()
+    finally:
+        peer.close()
