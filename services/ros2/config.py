@@ -25,16 +25,27 @@ file's loader adds the file and line) and builds the Zenoh configuration of a se
 An action's ``ros2`` table: exactly one of ``action``, ``service`` and ``publish`` (or only
 ``until``), with ``type``::
 
-    ros2 = { action = "/fibonacci", type = "example_interfaces/action/Fibonacci",
-             success = "len(sequence) > 0",  # a condition on the result (default: SUCCEEDED is success)
-             aborted = "failure",            # what ABORTED is: failure (default) or error
-             rejected = "failure",           # what a rejected goal is: failure (default) or error
-             fill = false,                   # true: missing goal fields take their defaults
-             cancel_wait_s = 1.0,            # after cancel_goal, how long to wait for the result
-             qos = { depth = 10 } }
-    ros2 = { service = "/add_two_ints", type = "example_interfaces/srv/AddTwoInts", success = "sum > 0" }
-    ros2 = { publish = "/cmd_vel", type = "geometry_msgs/msg/Twist", rate_hz = 10.0, duration_s = 2.0,
-             until = { topic = "/arrived", type = "std_msgs/msg/Bool", when = "data" } }
+    [actions.fibonacci.ros2]
+    action = "/fibonacci"
+    type = "example_interfaces/action/Fibonacci"
+    success = "len(sequence) > 0"   # a condition on the result (default: SUCCEEDED is success)
+    aborted = "failure"             # what ABORTED is: failure (default) or error
+    rejected = "failure"            # what a rejected goal is: failure (default) or error
+    fill = false                    # true: missing goal fields take their defaults
+    cancel_wait_s = 1.0             # after cancel_goal, how long to wait for the result
+    qos = { depth = 10 }
+
+    [actions.add.ros2]
+    service = "/add_two_ints"
+    type = "example_interfaces/srv/AddTwoInts"
+    success = "sum > 0"
+
+    [actions.drive.ros2]
+    publish = "/cmd_vel"
+    type = "geometry_msgs/msg/Twist"
+    rate_hz = 10.0                  # else published once
+    duration_s = 2.0                # or until the condition below, the deadline or a cancel
+    until = { topic = "/arrived", type = "std_msgs/msg/Bool", when = "data" }
 
 An event's ``ros2`` table::
 

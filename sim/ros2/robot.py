@@ -13,7 +13,10 @@ reach is exercised against someone else's reading of the rmw_zenoh wire:
   publishing each partial sequence as feedback, and ends SUCCEEDED, or CANCELED at the next step
   after a cancel request;
 * the topic ``/crossfire`` (``std_msgs/msg/Bool``), published at ``rate_hz``: false, and true while a
-  ball is in the crossfire (every ``period_s`` for ``pulse_s``, or on command).
+  ball is in the crossfire (every ``period_s`` for ``pulse_s``, or on command);
+* a base that drives on ``/cmd_vel`` (``geometry_msgs/msg/Twist``): each command moves it forward by
+  ``linear.x`` times the time since the previous one (at most 0.2 s), and ``/docked``
+  (``std_msgs/msg/Bool``, published with ``/crossfire``) says whether it has travelled ``dock_m``.
 
 The SDK is given the definitions petrobot ships (``services/ros2/definitions``) and is never allowed
 to fetch any from git (:func:`forbid_fetching`). The action's type hashes are the ones the
@@ -21,7 +24,7 @@ generated code of ``example_interfaces`` carries on a Jazzy machine (:data:`JAZZ
 SDK computes the others itself.
 
 Everything the robot sees and does is printed as JSON lines (``ready``, ``service``, ``goal``,
-``executing``, ``cancel``, ``result``, ``crossfire``) so that a test can compare it with petrobot's journal.
+``executing``, ``cancel``, ``result``, ``crossfire``, ``cmd_vel`` (every 10th), ``docked``) so that a test can compare it with petrobot's journal.
 """
 
 from __future__ import annotations
@@ -94,12 +97,14 @@ class Ros2Robot:
         period_s: a ball crosses every ``period_s`` seconds (0: only on command).
         pulse_s: how long the crossfire sees it, seconds.
         node_name: the ROS 2 node name of the robot.
+        dock_m: the distance the base drives before it is docked, metres.
     """
 
     def __init__(self, router: tuple[str, int], out: TextIO, *, step_s: float = 0.1, rate_hz: float = 20.0,
-                 period_s: float = 0.0, pulse_s: float = 0.3, node_name: str = "stand_in_robot") -> None:
+                 period_s: float = 0.0, pulse_s: float = 0.3, node_name: str = "stand_in_robot",
+                 dock_m: float = 1.0) -> None:
         forbid_fetching()
-        from zenoh_ros2_sdk import ROS2Publisher, ROS2ServiceServer
+        from zenoh_ros2_sdk import ROS2Publisher, ROS2ServiceServer, ROS2Subscriber
         from zenoh_ros2_sdk.qos import QosDurability, QosProfile
         from zenoh_ros2_sdk.session import ZenohSession
 
@@ -113,6 +118,10 @@ class Ros2Robot:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._crossfire_forced: bool | None = None
+        self.dock_m = dock_m
+        self.travelled = 0.0
+        self.commands = 0
+        self._last_command: float | None = None
         host, port = router
         self.sdk = ZenohSession.get_instance(host, port)
         self._types = self._register()
@@ -148,6 +157,8 @@ class Ros2Robot:
             type_hash=JAZZY_HASHES["action_msgs/msg/GoalStatusArray"],
             qos=QosProfile(durability=QosDurability.TRANSIENT_LOCAL, history_depth=1), **common)
         self._crossfire = ROS2Publisher("/crossfire", "std_msgs/msg/Bool", msg_definition="bool data", **common)
+        self._docked = ROS2Publisher("/docked", "std_msgs/msg/Bool", msg_definition="bool data", **common)
+        self._cmd_vel = ROS2Subscriber("/cmd_vel", "geometry_msgs/msg/Twist", self._drive, **common)
         self._threads = [threading.Thread(target=self._serve_results, name="get_result", daemon=True),
                          threading.Thread(target=self._publish_crossfire, name="crossfire", daemon=True)]
         for thread in self._threads:
@@ -276,6 +287,22 @@ class Ros2Robot:
                                    status=g.status) for g in self.goals.values()]
         self._status.publish(status_list=entries)
 
+    # ---- the base
+
+    def _drive(self, twist: Any) -> None:
+        now = time.monotonic()
+        dt = 0.0 if self._last_command is None else min(0.2, now - self._last_command)
+        self._last_command = now
+        with self._lock:
+            before = self.travelled
+            self.travelled += float(twist.linear.x) * dt
+            self.commands += 1
+            count, travelled = self.commands, self.travelled
+        if count % 10 == 1:
+            self.emit("cmd_vel", count=count, linear_x=float(twist.linear.x), travelled=round(travelled, 4))
+        if before < self.dock_m <= travelled:
+            self.emit("docked", commands=count, travelled=round(travelled, 4))
+
     # ---- crossfire
 
     def force_crossfire(self, value: bool | None) -> None:
@@ -294,6 +321,7 @@ class Ros2Robot:
             else:
                 value = False
             self._crossfire.publish(data=value)
+            self._docked.publish(data=self.travelled >= self.dock_m)
             if value != last:
                 self.emit("crossfire", data=value)
                 last = value
@@ -303,14 +331,15 @@ class Ros2Robot:
     def ready(self, **data: Any) -> None:
         """Say that every interface is served."""
         self.emit("ready", node=self._servers[0].node_name, services=["/add_two_ints"], actions=["/fibonacci"],
-                  topics=["/crossfire"], **data)
+                  topics=["/crossfire", "/docked"], subscriptions=["/cmd_vel"], **data)
 
     def close(self) -> None:
         """Stop the threads, withdraw every interface, close the session."""
         self._stop.set()
         for thread in self._threads:
             thread.join(timeout=2.0)
-        for endpoint in [*self._servers, self._results, self._feedback, self._status, self._crossfire]:
+        for endpoint in [*self._servers, self._results, self._feedback, self._status, self._crossfire, self._docked,
+                         self._cmd_vel]:
             endpoint.close()
         self.sdk.session.close()
 

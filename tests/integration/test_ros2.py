@@ -47,6 +47,12 @@ node = "robot"
 deadline_s = 60.0
 ros2 = {{ action = "/fibonacci", type = "example_interfaces/action/Fibonacci", success = "len(sequence) > 1" }}
 
+[actions.drive_to_dock]
+node = "robot"
+deadline_s = 30.0
+params = {{ linear = {{ x = 2.0 }} }}
+ros2 = {{ publish = "/cmd_vel", type = "geometry_msgs/msg/Twist", rate_hz = 20.0, fill = true, until = {{ topic = "/docked", type = "std_msgs/msg/Bool", when = "data" }} }}
+
 [events.crossfire]
 node = "robot"
 ros2 = {{ topic = "/crossfire", type = "std_msgs/msg/Bool", when = "data", fields = ["data"] }}
@@ -336,3 +342,18 @@ def test_the_robot_killed_mid_goal_takes_the_error_branch_at_once(world: Ros2Wor
     assert "went away" in fib.reason or "left the ROS 2 graph" in fib.reason, fib.reason
     assert fib.value["goal_id"] == goal["goal_id"]
     record_property("error_after_kill_s", round(fib.t_wall - killed, 3))  # measured, not asserted
+
+
+def test_a_publication_at_a_rate_ends_when_a_condition_on_another_topic_holds(world: Ros2World):
+    import asyncio
+
+    async def call() -> Any:
+        async with world.cluster.client() as client:
+            return await client.call("drive_to_dock", {})
+
+    result = asyncio.run(call())
+    assert result.status == Status.SUCCESS, result
+    docked = world.robot.wait_for("docked", lambda e: e["event"] == "docked")
+    assert result.value["until"] == {"data": True}
+    # the robot drove 1 m at 2 m/s on commands every 0.05 s: it saw about ten, the last ones after it docked
+    assert docked["commands"] >= 2 and result.value["published"] >= docked["commands"]
