@@ -357,3 +357,23 @@ def test_a_publication_at_a_rate_ends_when_a_condition_on_another_topic_holds(wo
     assert result.value["until"] == {"data": True}
     # the robot drove 1 m at 2 m/s on commands every 0.05 s: it saw about ten, the last ones after it docked
     assert docked["commands"] >= 2 and result.value["published"] >= docked["commands"]
+
+
+def test_a_rejected_goal_is_a_failure_and_a_deadline_cancels_the_goal_on_the_robot(world: Ros2World):
+    import asyncio
+
+    async def calls() -> tuple[Any, Any]:
+        async with world.cluster.client() as client:
+            rejected = await client.call("fibonacci", {"order": 99})
+            late = await client.call("fibonacci", {"order": 40}, deadline_s=0.5)
+            return rejected, late
+
+    rejected, late = asyncio.run(calls())
+    assert (rejected.status, rejected.outcome) == (Status.FAILURE, "rejected")
+    assert rejected.reason == "the action server rejected the goal"
+    goals = world.robot.seen("goal")
+    assert [(g["order"], g["accepted"]) for g in goals] == [(99, False), (40, True)]
+    assert (late.status, late.outcome, late.reason) == (Status.ERROR, "canceled", "deadline")
+    cancel = world.robot.wait_for("cancel request", lambda e: e["event"] == "cancel")
+    ended = world.robot.wait_for("the goal's end", lambda e: e["event"] == "result")
+    assert cancel["goal_id"] == goals[1]["goal_id"] == late.value["goal_id"] and ended["status"] == "CANCELED"
