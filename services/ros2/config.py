@@ -77,6 +77,7 @@ __all__ = [
     "ACTION_IMPL",
     "DRIVER_IMPL",
     "DRIVER_NAME",
+    "MAX_MESSAGE_BYTES",
     "PASSWORD_ENV",
     "ActionKind",
     "Ros2ActionSpec",
@@ -100,6 +101,9 @@ DRIVER_NAME = "ros2"
 """The name of that driver (reserved in ``[drivers]``)."""
 PASSWORD_ENV = "PETROBOT_ZENOH_PASSWORD"
 """Environment variable holding the Zenoh password when ``password_file`` is not set."""
+
+MAX_MESSAGE_BYTES = 64 * 1024 * 1024
+"""The largest message a node's Zenoh session takes in, bytes."""
 
 _PLAINTEXT = frozenset({"tcp", "udp", "ws"})
 _SECURE = frozenset({"tls", "quic"})
@@ -366,7 +370,7 @@ def endpoint_problems(settings: SessionSettings) -> list[str]:
 def zenoh_config(settings: SessionSettings, password: str | None = None) -> dict[str, Any]:
     """The Zenoh configuration of a session, as ``{"path/of/key": JSON value}`` (for
     ``zenoh.Config.insert_json5``), following rmw_zenoh's session defaults: multicast scouting off,
-    gossip on, timestamps on.
+    gossip on, timestamps on; and messages of at most :data:`MAX_MESSAGE_BYTES` taken in.
 
     Args:
         settings: the node's settings.
@@ -382,6 +386,9 @@ def zenoh_config(settings: SessionSettings, password: str | None = None) -> dict
         "connect/timeout_ms": {"router": -1, "peer": -1, "client": 0},
         "connect/exit_on_failure": {"router": False, "peer": False, "client": True},
         "queries_default_timeout": 600000,
+        # a hostile peer cannot make this node receive one message larger than this (Zenoh's default is
+        # 1 GiB); a camera image of a few MB passes
+        "transport/link/rx/max_message_size": MAX_MESSAGE_BYTES,
     }
     if settings.tls_root_ca:
         config["transport/link/tls/root_ca_certificate"] = settings.tls_root_ca
