@@ -6,7 +6,9 @@ call's) as the goal, request or message, checks them against the type before any
 (a missing or mistyped field is an ``error`` naming it), and maps what the ROS 2 side does onto the
 call's lifecycle:
 
-* **action** — the goal is sent under a fresh UUID; each feedback message of that goal is sent to
+* **action** — the goal is sent under a UUID made from the call id (:func:`goal_uuid`: a call
+  re-issued after the node restarted finds its goal on the server rather than starting another);
+  each feedback message of that goal is sent to
   the caller as the call's feedback; the result and the goal status give the call's status
   (:mod:`services.ros2.outcome`). A cancel (petrobot ``abort``), the deadline or the caller's loss
   sends ``cancel_goal`` and waits up to ``cancel_wait_s`` for the server's final result, which the
@@ -37,9 +39,20 @@ from services.ros2.endpoints import REJECTED, ActionClient, CallFailed, Publicat
 from services.ros2.errors import Ros2FieldError
 from services.ros2.outcome import GoalStatus, action_result, rejected_result, service_result
 
-__all__ = ["Ros2Primitive"]
+__all__ = ["GOAL_NAMESPACE", "Ros2Primitive", "goal_uuid"]
 
 log = logging.getLogger("petrobot.ros2")
+
+
+GOAL_NAMESPACE = uuid.UUID("6c1b3f64-77a5-5d7e-9a61-1d0f5e2c9b40")
+"""The namespace of the goal ids petrobot makes (RFC 4122 name-based, SHA-1)."""
+
+
+def goal_uuid(node: str, action: str, call_id: str) -> bytes:
+    """The goal id of call ``call_id`` of ``action`` on ``node``: the same call always sends the same
+    goal id, so that a call re-issued after the node restarted (``petrobot run --resume``) meets the
+    goal it sent before instead of starting a second one."""
+    return uuid.uuid5(GOAL_NAMESPACE, f"{node}/{action}/{call_id}").bytes
 
 
 def _cancel_reason(exc: asyncio.CancelledError, ctx: CallContext) -> str:
@@ -88,13 +101,16 @@ class Ros2Primitive(PrimitiveAction):
     async def _goal(self, client: ActionClient, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         spec = self.spec
         assert spec is not None
-        goal_id = uuid.uuid4().bytes
+        goal_id = goal_uuid(ctx.node.name, self.name, ctx.call_id)
         hex_id = goal_id.hex()
         seen: list[int] = []
         try:
             client.check_goal(params, fill=spec.fill)
         except Ros2FieldError as exc:
             return ActionResult.error(f"goal {exc} (type {client.types.goal}); nothing was sent")
+        driver = self.driver
+        assert driver is not None
+        driver.goal_started(goal_id, client)
         try:
             status, result = await client.run(
                 goal_id, params, fill=spec.fill, on_feedback=ctx.feedback, on_status=seen.append,
@@ -104,6 +120,8 @@ class Ros2Primitive(PrimitiveAction):
             return ActionResult.error(str(exc), value={"status": last, "goal_id": hex_id, "result": None})
         except asyncio.CancelledError as exc:
             return await self._cancelled(client, goal_id, _cancel_reason(exc, ctx))
+        finally:
+            driver.goal_ended(goal_id)
         if status == REJECTED:
             return rejected_result(hex_id, spec.rejected)
         return action_result(status, result, goal_id=hex_id, success=spec.success, aborted=spec.aborted)

@@ -383,7 +383,9 @@ def zenoh_config(settings: SessionSettings, password: str | None = None) -> dict
         "scouting/multicast/enabled": False,
         "scouting/gossip/enabled": True,
         "timestamping/enabled": {"router": True, "peer": True, "client": True},
-        "connect/timeout_ms": {"router": -1, "peer": -1, "client": 0},
+        # a client needs its router at start: it tries for 5 s (a TLS handshake on a loaded machine takes
+        # a while), then the node does not start; a peer opens at once and keeps trying in the background
+        "connect/timeout_ms": {"router": -1, "peer": -1, "client": 5000},
         "connect/exit_on_failure": {"router": False, "peer": False, "client": True},
         "queries_default_timeout": 600000,
         # a hostile peer cannot make this node receive one message larger than this (Zenoh's default is

@@ -43,6 +43,8 @@ LONG_WAIT_S = 7 * 24 * 3600.0
 """The Zenoh timeout of a query with no deadline (a week: a goal may take long)."""
 REJECTED = -1
 """The status :meth:`ActionClient.run` returns for a goal the server refused."""
+MAX_STATUS_GOALS = 10_000
+"""Goals of one status message kept (a server lists its recent goals; a hostile one cannot flood)."""
 
 
 class CallFailed(Ros2Error):
@@ -387,6 +389,8 @@ class ActionClient:
         self.get_result = ServiceClient(session, self.names.get_result, self.types.get_result)
         self._feedback_to: dict[bytes, Callable[[dict[str, Any]], None]] = {}
         self._status_to: dict[bytes, Callable[[int], None]] = {}
+        self.known: dict[bytes, int] = {}
+        """The goals the server's status topic lists, with their status (its latest message)."""
         self.feedback = Subscription(session, self.names.feedback, self.types.feedback_message, self._on_feedback,
                                      feedback_qos)
         self.status = Subscription(session, self.names.status, self.types.status, self._on_status, STATUS_QOS)
@@ -397,10 +401,14 @@ class ActionClient:
             route(fields["feedback"])
 
     def _on_status(self, fields: dict[str, Any]) -> None:
-        for entry in fields["status_list"]:
-            route = self._status_to.get(bytes(entry["goal_info"]["goal_id"]["uuid"]))
+        known = {}
+        for entry in fields["status_list"][:MAX_STATUS_GOALS]:
+            goal_id = bytes(entry["goal_info"]["goal_id"]["uuid"])
+            known[goal_id] = int(entry["status"])
+            route = self._status_to.get(goal_id)
             if route is not None:
                 route(int(entry["status"]))
+        self.known = known
 
     def check_goal(self, goal: Mapping[str, Any], *, fill: bool = False) -> None:
         """Check ``goal`` against the goal type.
@@ -426,7 +434,8 @@ class ActionClient:
 
         Returns:
             ``(status, result fields)``; status :data:`REJECTED` (-1) with no result when the server
-            refused the goal.
+            refused the goal. A goal the server refuses because it already has it (its status topic
+            lists ``goal_id``: the same call sent before this node restarted) is waited for instead.
 
         Raises:
             Ros2FieldError: ``goal`` does not fit the goal type (nothing was sent).
@@ -440,7 +449,11 @@ class ActionClient:
         try:
             reply = self.send_goal.decode(await self.send_goal.call_raw(request, action=True))
             if not reply["accepted"]:
-                return REJECTED, {}
+                if goal_id not in self.known:
+                    return REJECTED, {}
+                # the server already has this goal: sent under the same id before this node restarted
+                log.info("goal %s of %s was sent before (the server lists it): waiting for its result", goal_id.hex(),
+                         self.name)
             if on_accepted is not None:
                 on_accepted()
             result = await self.get_result.call({"goal_id": {"uuid": goal_id}}, action=True)

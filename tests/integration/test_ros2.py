@@ -377,3 +377,29 @@ def test_a_rejected_goal_is_a_failure_and_a_deadline_cancels_the_goal_on_the_rob
     cancel = world.robot.wait_for("cancel request", lambda e: e["event"] == "cancel")
     ended = world.robot.wait_for("the goal's end", lambda e: e["event"] == "result")
     assert cancel["goal_id"] == goals[1]["goal_id"] == late.value["goal_id"] and ended["status"] == "CANCELED"
+
+
+def test_a_goal_left_running_by_a_node_that_died_is_cancelled_when_the_node_restarts(world: Ros2World):
+    import asyncio
+
+    async def call() -> Any:
+        async with world.cluster.client() as client:
+            return await client.call("fibonacci", {"order": 40}, call_id="run-1-count")
+
+    async def start_then_crash() -> None:
+        task = asyncio.create_task(call())
+        await asyncio.to_thread(world.robot.wait_for, "the goal running", lambda e: e["event"] == "executing")
+        world.cluster.kill("robot")  # the petrobot node dies mid-goal (SIGKILL)
+        task.cancel()
+
+    asyncio.run(start_then_crash())
+    (goal,) = world.robot.seen("goal")
+    assert world.robot.seen("cancel") == []
+    world.cluster.start("robot", timeout=60.0)
+    cancel = world.robot.wait_for("the goal cancelled", lambda e: e["event"] == "cancel")
+    ended = world.robot.wait_for("the goal's end", lambda e: e["event"] == "result")
+    assert cancel["goal_id"] == goal["goal_id"] == ended["goal_id"] and ended["status"] == "CANCELED"
+    # the node answers the call as it ended for the journal: it died with the node
+    again = asyncio.run(call())
+    assert (again.status, again.reason) == (Status.ERROR, "node_restarted")
+    assert len(world.robot.seen("goal")) == 1

@@ -201,3 +201,18 @@ def test_petrobot_check_names_a_bad_goal_field_of_the_net_and_a_bad_condition_of
     said = "".join(capsys.readouterr())
     assert f"{services}:" in said and "[actions.fibonacci]: ros2: success reads 'sequense'" in said
     assert main(["check", str(root / "nets" / "ros2.toml"), "--services", str(root / "services.toml")]) == 0
+
+
+def test_the_goal_ledger_survives_the_process_and_a_damaged_one_is_ignored(tmp_path):
+    from services.ros2.driver import GoalLedger
+
+    ledger = GoalLedger(tmp_path / "state" / "ros2-goals.json")
+    ledger.add("ab" * 16, "/fibonacci")
+    ledger.add("cd" * 16, "/navigate")
+    ledger.remove("cd" * 16)
+    assert GoalLedger(ledger.path).left_over() == {"ab" * 16: "/fibonacci"}
+    ledger.clear()
+    assert GoalLedger(ledger.path).left_over() == {}
+    ledger.path.write_text("{not json")
+    assert GoalLedger(ledger.path).left_over() == {}
+    assert GoalLedger(tmp_path / "absent.json").left_over() == {}
