@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import shutil
 import socket
 from collections.abc import AsyncIterator, Callable
 from typing import Any
@@ -254,18 +253,8 @@ async def test_topic_messages_reach_a_subscription_and_garbage_is_skipped(peer: 
 # --------------------------------------------------------------------------- TLS and user/password
 
 
-@pytest.fixture(scope="module")
-def certs(tmp_path_factory: pytest.TempPathFactory) -> Any:
-    from test_node_tls import make_ca, make_host
-
-    if shutil.which("openssl") is None:
-        pytest.skip("the openssl command makes the test certificates and is not installed")
-    where = tmp_path_factory.mktemp("zenoh-certs")
-    make_ca(where, "ca")
-    make_host(where, "ca", "host")
-    make_ca(where, "rogue_ca")
-    make_host(where, "rogue_ca", "rogue")
-    return where
+# the node's TLS tests make the certificates (a CA, a host, a rogue CA and its host): the same here
+from test_node_tls import certs  # noqa: E402,F401
 
 
 class SecurePeer(Peer):
