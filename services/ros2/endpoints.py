@@ -184,6 +184,8 @@ class ServiceClient:
                     why = f"no answer within {limit:g} s"
                 elif errors:
                     why = "; ".join(errors)
+                elif not session.connected():
+                    why = "the Zenoh session reaches no router or peer (the router is down or the network cut)"
                 elif server is not None and server.present:
                     why = "the server went away before answering (its process ended or its Zenoh session was lost)"
                 else:

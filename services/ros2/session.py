@@ -175,6 +175,16 @@ class Ros2Session:
         except Exception as exc:  # noqa: BLE001 - closing must not fail the node's stop
             log.warning("closing the Zenoh session failed: %s", exc)
 
+    def connected(self) -> bool:
+        """Whether the session reaches at least one Zenoh router or peer now."""
+        if self._z is None or self._closed:
+            return False
+        try:
+            info = self._z.info
+            return bool(list(info.routers_zid()) or list(info.peers_zid()))
+        except Exception:  # noqa: BLE001 - a session being torn down
+            return False
+
     # ---- back into the event loop
 
     def soon(self, fn: Callable[..., Any], *args: Any) -> None:

@@ -68,7 +68,8 @@ class Peer:
             except Exception:  # noqa: BLE001
                 pass
         self.session.close()
-        self.router.close()
+        if not self.router.is_closed():
+            self.router.close()
 
 
 @pytest.fixture
@@ -190,6 +191,22 @@ async def test_a_server_whose_token_leaves_the_graph_ends_the_call_it_never_answ
     await asyncio.wait_for(asked.wait(), 10)
     token.undeclare()
     with pytest.raises(CallFailed, match="left the ROS 2 graph"):
+        await call
+    await session.close()
+
+
+async def test_losing_the_router_ends_a_pending_call_at_once_and_says_why(peer: Peer):
+    session = await _session(peer)
+    client = ServiceClient(session, "/add_two_ints", ADD)
+    held: list[Any] = []
+    asked = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    peer.serve(client.key, lambda q: (held.append(q), loop.call_soon_threadsafe(asked.set)))
+    await _routed(session, client.key)
+    call = asyncio.create_task(client.call({"a": 1, "b": 1}))
+    await asyncio.wait_for(asked.wait(), 10)
+    peer.router.close()  # the session's only router goes away
+    with pytest.raises(CallFailed, match="reaches no router or peer"):
         await call
     await session.close()
 
