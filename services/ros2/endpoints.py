@@ -43,6 +43,8 @@ LONG_WAIT_S = 7 * 24 * 3600.0
 """The Zenoh timeout of a query with no deadline (a week: a goal may take long)."""
 REJECTED = -1
 """The status :meth:`ActionClient.run` returns for a goal the server refused."""
+LINK_SETTLE_S = 0.3
+"""After a query ended with no reply, how long to look for the session losing its link, seconds."""
 MAX_STATUS_GOALS = 10_000
 """Goals of one status message kept (a server lists its recent goals; a hostile one cannot flood)."""
 
@@ -159,6 +161,7 @@ class ServiceClient:
         errors: list[str] = []
         limit = timeout_s or LONG_WAIT_S
         started = loop.time()
+        explaining: list[asyncio.Task[None]] = []
 
         def deliver(ok: bytes | None, att: bytes | None, err: str | None) -> None:
             if done.done():
@@ -179,17 +182,28 @@ class ServiceClient:
             done.set_result(ok or b"")
 
         def finished() -> None:
+            if done.done():
+                return
+            if loop.time() - started >= limit * 0.99:
+                done.set_exception(CallFailed(f"{self.name}: no answer within {limit:g} s"))
+            elif errors:
+                done.set_exception(CallFailed(f"{self.name}: {'; '.join(errors)}"))
+            else:
+                explaining.append(loop.create_task(explain()))
+
+        async def explain() -> None:
+            """The query ended with no reply: say why. A lost router ends the query a moment before
+            the session notices it has lost its link: look for that a short while first."""
+            end = loop.time() + LINK_SETTLE_S
+            while session.connected() and loop.time() < end:
+                await asyncio.sleep(0.02)
+            if not session.connected():
+                why = "the Zenoh session reaches no router or peer (the router is down or the network cut)"
+            elif server is not None and server.present:
+                why = "the server went away before answering (its process ended or its Zenoh session was lost)"
+            else:
+                why = "no service server answered (none in the ROS 2 graph, or its type hash differs)"
             if not done.done():
-                if loop.time() - started >= limit * 0.99:
-                    why = f"no answer within {limit:g} s"
-                elif errors:
-                    why = "; ".join(errors)
-                elif not session.connected():
-                    why = "the Zenoh session reaches no router or peer (the router is down or the network cut)"
-                elif server is not None and server.present:
-                    why = "the server went away before answering (its process ended or its Zenoh session was lost)"
-                else:
-                    why = "no service server answered (none in the ROS 2 graph, or its type hash differs)"
                 done.set_exception(CallFailed(f"{self.name}: {why}"))
 
         # Replies and the end of the query come from Zenoh's threads, not necessarily the same one:
@@ -242,6 +256,8 @@ class ServiceClient:
                 server.close()
             if not done.done():
                 cancel.cancel()
+            for task in explaining:
+                task.cancel()
 
     async def call(self, request: Mapping[str, Any], *, timeout_s: float | None = None, fill: bool = False,
                    action: bool = False) -> dict[str, Any]:

@@ -52,7 +52,13 @@ class Peer:
         self.undeclare: list[Any] = []
 
     def serve(self, key: str, answer: Callable[[Any], None]) -> Any:
-        queryable = self.session.declare_queryable(key, answer, complete=True)
+        def answer_or_probe(query: Any) -> None:
+            if query.payload is not None and query.payload.to_bytes() == PROBE:
+                query.reply_err(PROBE)  # _routed's question: the route to this queryable works
+            else:
+                answer(query)
+
+        queryable = self.session.declare_queryable(key, answer_or_probe, complete=True)
         self.undeclare.append(queryable)
         return queryable
 
@@ -81,14 +87,18 @@ async def peer() -> AsyncIterator[Peer]:
         p.close()
 
 
+PROBE = b"probe"
+
+
 async def _routed(session: Ros2Session, key: str) -> None:
-    """Wait until the queryables on ``key`` are known to ``session`` (declarations travel)."""
-    querier = session.zenoh.declare_querier(key, target=zenoh.QueryTarget.ALL_COMPLETE)
-    try:
-        while not querier.matching_status:
-            await asyncio.sleep(0.01)
-    finally:
-        querier.undeclare()
+    """Wait until a query from ``session`` on ``key`` reaches the peer's queryable (declarations and
+    routes travel): ask with a probe the peer answers at once, until it does."""
+    while True:
+        replies = await asyncio.to_thread(
+            lambda: list(session.zenoh.get(key, payload=PROBE, target=zenoh.QueryTarget.ALL_COMPLETE, timeout=2)))
+        if any(r.err is not None and r.err.payload.to_bytes() == PROBE for r in replies):
+            return
+        await asyncio.sleep(0.01)
 
 
 async def _tokens(peer: Peer, count: int) -> list[str]:
