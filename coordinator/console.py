@@ -30,6 +30,7 @@ from typing import Any, Protocol, TextIO
 
 from coordinator.events import (
     ActionEnded,
+    ActionFeedback,
     ActionStarted,
     CallReconciled,
     OperatorApplied,
@@ -43,6 +44,7 @@ from coordinator.net import PetriNet, PlaceKind
 from coordinator.operator import USAGE, Command, OperatorCommand, parse_operator_command
 from coordinator.reconcile import describe as describe_reconciliation
 from coordinator.runtime import Runtime
+from coordinator.web.frames import feedback_text
 from services.results import Status
 
 __all__ = ["ESCAPES", "HELP", "CommandSink", "Console", "read_operator_commands"]
@@ -100,6 +102,8 @@ class Console:
         self.banner: list[str] = []
         #: the live view showing this console (a :class:`coordinator.terminal.LiveScreen`), if any
         self.screen: Any = None
+        #: the latest feedback of each running primitive action (by instance), as short text
+        self.feedback: dict[str, str] = {}
 
     def attach(self, runtime: Runtime) -> None:
         """Follow ``runtime`` (set it as its observer)."""
@@ -156,6 +160,10 @@ class Console:
         self._silent.clear()
 
     def _track(self, event: RunEvent) -> None:
+        if isinstance(event, ActionFeedback):
+            self.feedback[event.instance] = feedback_text(event.data)
+        elif isinstance(event, ActionEnded):
+            self.feedback.pop(event.instance, None)
         if isinstance(event, OperatorRefused):
             self.operator_note = f"refused: {event.command}: {event.reason}"
         elif isinstance(event, OperatorApplied):
@@ -221,7 +229,7 @@ class Console:
 
     def screen_lines(self) -> list[str]:
         """The live view, one string per line: a header (net, run, state, firings), the banner,
-        the marking, the running primitive actions, what the run waits for, the last error, the
+        the marking, the running primitive actions (with their latest feedback), what the run waits for, the last error, the
         pulses that fired nothing and the recent events. The operator's last command is
         :attr:`operator_note`, shown by the view beside the input line."""
         if self.runtime is None:
@@ -239,7 +247,9 @@ class Console:
         running = self.runtime.running()
         for r in running:
             s = r.start
-            out.append(f"  {s.task:<14} {s.action:<22} on {r.node or '?':<10} {r.elapsed_s:7.2f} s")
+            shown = self.feedback.get(s.instance)
+            out.append(f"  {s.task:<14} {s.action:<22} on {r.node or '?':<10} {r.elapsed_s:7.2f} s"
+                       + (f"  {shown}" if shown else ""))
         if not running:
             out.append("  (none)")
         if self.waiting is not None:

@@ -43,8 +43,18 @@ Format (every section optional except ``[nodes.*]``)::
     [memory]                      # which node hosts the global memory service
     node = "alpha"
 
+    [ros2]                        # optional: how nodes reach ROS 2 over Zenoh (docs/ros2.md)
+    [actions.fibonacci]           # a primitive action that is a ROS 2 action (no impl needed)
+    node = "alpha"
+    ros2 = { action = "/fibonacci", type = "example_interfaces/action/Fibonacci" }
+    [events.crossfire]            # an external event from a ROS 2 topic
+    node = "alpha"
+    ros2 = { topic = "/crossfire", type = "std_msgs/msg/Bool", when = "data" }
+
 The global memory actions ``memory.get``, ``memory.set`` and ``memory.keys`` are placed on the
-``[memory]`` node implicitly.
+``[memory]`` node implicitly; so is the driver ``ros2.NODE`` (the node's Zenoh session,
+:mod:`services.ros2.driver`) on every node hosting a ROS 2 action or event. The ``ros2`` tables are
+parsed by :mod:`services.ros2.config`.
 """
 
 from __future__ import annotations
@@ -59,6 +69,17 @@ from types import MappingProxyType
 from typing import Any
 
 from services.errors import LocationError
+from services.ros2.config import (
+    ACTION_IMPL,
+    DRIVER_IMPL,
+    DRIVER_NAME,
+    Ros2ActionSpec,
+    Ros2EventSpec,
+    SessionSettings,
+    parse_action_spec,
+    parse_event_spec,
+    parse_session,
+)
 from services.textfile import TextProblem, decode_utf8, read_capped
 from services.tomllines import parse_toml
 
@@ -127,6 +148,7 @@ class NodeSpec:
         state_dir: directory where the node keeps call results across restarts, or ``None`` for
             the default (``$XDG_STATE_HOME/petrobot/NAME``, i.e. ``~/.local/state/petrobot/NAME``).
         tls: TLS settings of the connections to and from this node.
+        ros2: how this node reaches ROS 2 (``[ros2]`` overridden by ``[nodes.NAME.ros2]``).
     """
 
     name: str
@@ -135,6 +157,7 @@ class NodeSpec:
     max_in_flight: int = _DEFAULT_MAX_IN_FLIGHT
     state_dir: str | None = None
     tls: TlsSettings = field(default_factory=TlsSettings)
+    ros2: SessionSettings = field(default_factory=SessionSettings)
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -153,6 +176,7 @@ class ActionPlacement:
         params: default parameters, merged under each call's params.
         unattended: the call may finish when its caller is gone; otherwise the node cancels a
             call nobody waits for (docs/protocol.md §5, "Orphaned calls").
+        ros2: the ROS 2 action, service or topic this action is (its ``ros2`` table), or ``None``.
     """
 
     name: str
@@ -162,6 +186,7 @@ class ActionPlacement:
     deadline_s: float | None = None
     params: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     unattended: bool = False
+    ros2: Ros2ActionSpec | None = None
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
@@ -192,6 +217,7 @@ class Location:
         drivers: driver specs by name.
         events: publishing node by event topic.
         memory_node: node hosting the global memory, or ``None``.
+        ros2_events: the events that come from ROS 2 topics, by event topic.
     """
 
     path: str
@@ -200,6 +226,7 @@ class Location:
     drivers: Mapping[str, DriverSpec]
     events: Mapping[str, str]
     memory_node: str | None = None
+    ros2_events: Mapping[str, Ros2EventSpec] = field(default_factory=lambda: MappingProxyType({}))
 
     def node_of(self, action: str) -> str:
         """Name of the node hosting ``action``.
@@ -365,11 +392,20 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         except LocationError as exc:
             raise fail(str(exc), *key) from None
 
-    extra = sorted(set(doc) - {"nodes", "actions", "drivers", "events", "memory", "tls"})
+    extra = sorted(set(doc) - {"nodes", "actions", "drivers", "events", "memory", "tls", "ros2"})
     if extra:
         raise fail(f"unknown key(s) {', '.join(extra)}", extra[0])
     directory = os.path.dirname(path) if path != "<string>" else ""
     tls = tls_of(doc["tls"], "[tls]", TlsSettings(), "tls") if "tls" in doc else TlsSettings()
+
+    def ros2_of(parse: Any, value: Any, where: str, *key: str, **kwargs: Any) -> Any:
+        try:
+            return parse(value, where=where, **kwargs)
+        except LocationError as exc:
+            raise fail(str(exc), *key) from None
+
+    ros2 = (ros2_of(parse_session, doc["ros2"], "[ros2]", "ros2", directory=directory) if "ros2" in doc
+            else SessionSettings())
 
     nodes: dict[str, NodeSpec] = {}
     seen_addr: dict[tuple[str, int], str] = {}
@@ -377,7 +413,7 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         where = f"[nodes.{name}]"
         if not isinstance(entry, dict):
             raise fail(f"{where} must be a table", "nodes", name)
-        check_keys(entry, {"host", "port", "max_in_flight", "state_dir", "tls"}, where, "nodes", name)
+        check_keys(entry, {"host", "port", "max_in_flight", "state_dir", "tls", "ros2"}, where, "nodes", name)
         check_name(name, _NAME_RE, where, "nodes", name)
         host = entry.get("host")
         port = entry.get("port")
@@ -399,8 +435,10 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         if state_dir is not None and (not isinstance(state_dir, str) or not state_dir):
             raise fail(f"{where}: state_dir must be a non-empty string", "nodes", name, "state_dir")
         node_tls = tls_of(entry["tls"], f"{where}.tls", tls, "nodes", name, "tls") if "tls" in entry else tls
+        node_ros2 = (ros2_of(parse_session, entry["ros2"], f"{where}.ros2", "nodes", name, "ros2", base=ros2,
+                             directory=directory) if "ros2" in entry else ros2)
         nodes[name] = NodeSpec(
-            name=name, host=host, port=port, max_in_flight=cap, tls=node_tls,
+            name=name, host=host, port=port, max_in_flight=cap, tls=node_tls, ros2=node_ros2,
             state_dir=os.path.join(directory, os.path.expanduser(state_dir)) if state_dir else None,
         )
     if not nodes:
@@ -437,7 +475,7 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         where = f"[actions.{name}]"
         if not isinstance(entry, dict):
             raise fail(f"{where} must be a table", "actions", name)
-        check_keys(entry, {"node", "impl", "local_only", "deadline_s", "params", "unattended"}, where,
+        check_keys(entry, {"node", "impl", "local_only", "deadline_s", "params", "unattended", "ros2"}, where,
                    "actions", name)
         if name in MEMORY_ACTIONS:
             raise fail(f"{where}: {name} is reserved for the global memory service", "actions", name)
@@ -452,10 +490,13 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         if deadline is not None and (isinstance(deadline, bool) or not isinstance(deadline, (int, float))
                                      or not 0 < deadline < math.inf):
             raise fail(f"{where}: deadline_s must be a positive finite number", "actions", name, "deadline_s")
+        spec = ros2_of(parse_action_spec, entry["ros2"], f"{where}: ros2", "actions", name, "ros2") \
+            if "ros2" in entry else None
         actions[name] = ActionPlacement(
             name=name,
             node=node_ref(entry, where, "actions", name),
-            impl=impl_ref(entry, where, "actions", name),
+            impl=impl_ref(entry, where, "actions", name) if spec is None or "impl" in entry else ACTION_IMPL,
+            ros2=spec,
             local_only=local_only,
             deadline_s=float(deadline) if deadline is not None else None,
             params=params_of(entry, where, "actions", name),
@@ -478,13 +519,25 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         )
 
     events: dict[str, str] = {}
+    ros2_events: dict[str, Ros2EventSpec] = {}
     for topic, entry in table("events").items():
         where = f"[events.{topic}]"
         if not isinstance(entry, dict):
             raise fail(f"{where} must be a table", "events", topic)
-        check_keys(entry, {"node"}, where, "events", topic)
+        check_keys(entry, {"node", "ros2"}, where, "events", topic)
         check_name(topic, _TOPIC_RE, where, "events", topic)
         events[topic] = node_ref(entry, where, "events", topic)
+        if "ros2" in entry:
+            ros2_events[topic] = ros2_of(parse_event_spec, entry["ros2"], f"{where}: ros2", "events", topic, "ros2")
+
+    for node in sorted({a.node for a in actions.values() if a.ros2} | {events[t] for t in ros2_events}):
+        name = f"{DRIVER_NAME}.{node}"
+        if name in drivers:
+            raise fail(f"[drivers.{name}]: the name {name} is reserved for the ROS 2 session of node {node}",
+                       "drivers", name)
+        connect = nodes[node].ros2.connect
+        drivers[name] = DriverSpec(name=name, node=node, impl=DRIVER_IMPL,
+                                   params=MappingProxyType({"router": connect[0]} if connect else {}))
 
     return Location(
         path=path,
@@ -493,4 +546,5 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         drivers=MappingProxyType(drivers),
         events=MappingProxyType(events),
         memory_node=memory_node,
+        ros2_events=MappingProxyType(ros2_events),
     )

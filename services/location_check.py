@@ -3,7 +3,8 @@
 :func:`services.location.parse_location` checks what the text of ``services.toml`` can tell (types,
 names, known nodes, the syntax of hosts and ``impl`` strings). A node would still fail at start on
 an ``impl`` whose module does not import or names neither a primitive action nor an async function,
-on a driver that is no :class:`~services.action.Driver`, or on a host name that does not resolve.
+on a driver that is no :class:`~services.action.Driver`, on a host name that does not resolve, or on
+a ROS 2 action or event whose type or fields are unknown (:mod:`services.ros2.preflight`).
 :func:`check_location_file` finds those ahead of time, for ``petrobot check`` (paper §5: the location
 file says where each primitive action runs).
 
@@ -130,6 +131,11 @@ def check_location(location: Location, lines: TomlLines,
     for name, driver in location.drivers.items():
         if actions is None or driver.node in nodes:
             report(driver_impl_problem(driver.impl), f"[drivers.{name}]", "drivers", name, "impl")
+    if any(a.ros2 is not None for a in location.actions.values()) or location.ros2_events:
+        from services.ros2.preflight import location_problems
+
+        for key, problem in location_problems(location, None if actions is None else wanted):
+            report(problem, f"[{key[0]}.{key[1]}]", *key)
     return [LocationError(message) for _, message in sorted(found, key=lambda item: item[0])]
 
 

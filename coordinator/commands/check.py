@@ -109,6 +109,16 @@ def run(args: argparse.Namespace) -> int:
             for element, problem in check_net(net, location):
                 line = line_of(element)
                 problems.append(f"{path}:{line}: {problem}" if line else f"{path}: {problem}")
+            if any(location.actions[a].ros2 is not None for a in needed or () if a in location.actions):
+                from services.ros2.preflight import params_problem
+
+                for task in net.tasks.values():
+                    for action in task.actions:
+                        problem = params_problem(location, action.name, action.params)
+                        if problem is not None:
+                            line = line_of(task.name)
+                            problems.append(f"{path}:{line}: task {task.name!r}: {problem}" if line
+                                            else f"{path}: task {task.name!r}: {problem}")
             placed = f"; placement checked against {services}"
     ok = f"OK {path}: {summary(net)}{placed}" if net is not None else ""
     return _finish(problems, path if services is None else f"{path} and {services}", ok)

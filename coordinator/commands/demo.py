@@ -52,6 +52,11 @@ everything.
                which drives the wheels over the CAN bus and stops them if the set points stop.
                Prints a report (completion, time, speed, cross-track error, interruptions, stop
                error, per-task statistics) and writes a top view of the driven path.
+  ros2         nets/ros2.toml: primitive actions that are ROS 2 interfaces, reached over Zenoh
+               (docs/ros2.md). Starts a Zenoh router and a stand-in ROS 2 robot (zenoh-ros2-sdk)
+               serving the tutorials' AddTwoInts service and Fibonacci action and a /crossfire
+               Bool topic; node rosbot plans with the service, counts with the action (feedback
+               shown) and waits for a ball in the crossfire (an external event from the topic).
   foundation   nets/demo.toml: sense on node alpha, compute on alpha or beta, three runs.
 
 Every firing, action start and result goes to the journal. Without --journal each demo starts a
@@ -65,7 +70,7 @@ def add_parser(subparsers: Any) -> None:
     """Register ``demo`` on the ``petrobot`` sub-command parser."""
     p = subparsers.add_parser("demo", help="run a demonstration on localhost (sim + nodes + coordinator)",
                               description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("which", nargs="?", default="catching", choices=["catching", "mobile", "foundation"],
+    p.add_argument("which", nargs="?", default="catching", choices=["catching", "mobile", "ros2", "foundation"],
                    help="which demonstration (default: %(default)s)")
     p.add_argument("--runs", type=int, default=None,
                    help="tokens in runs_remaining at the start (default: the net's own, 4 for catching)")
@@ -77,7 +82,7 @@ def add_parser(subparsers: Any) -> None:
                    help="camera back end: pybullet's TinyRenderer (default) or the fast analytic one")
     p.add_argument("--course", default=None,
                    help="mobile: course file (default nets/courses/fig2.toml)")
-    p.add_argument("--net", default=None, help="mobile: task net (default nets/mobile.toml)")
+    p.add_argument("--net", default=None, help="mobile, ros2: task net (default nets/mobile.toml, nets/ros2.toml)")
     p.add_argument("--noise", choices=["default", "noisy", "scuffed", "harsh", "clean"], default="default",
                    help="mobile: image condition of the downward camera (default: default)")
     p.add_argument("--truth-every", type=float, default=0.1, metavar="S",
@@ -199,8 +204,9 @@ def run(args: argparse.Namespace) -> int:
     import signal
 
     from coordinator.commands.demo_mobile import run_mobile
+    from coordinator.commands.demo_ros2 import run_ros2
 
-    demo = {"catching": _catching, "mobile": run_mobile}.get(args.which, _foundation)
+    demo = {"catching": _catching, "mobile": run_mobile, "ros2": run_ros2}.get(args.which, _foundation)
     signal.signal(signal.SIGTERM, _terminate)
     try:
         return asyncio.run(demo(args))

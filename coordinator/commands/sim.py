@@ -1,7 +1,8 @@
 """``petrobot sim catching`` / ``petrobot sim mobile``: a testbed's physical world as a process (paper §6).
 
-``petrobot sim mobile`` is the mobile robot's course (:mod:`sim.mobile.process`); the rest of this
-docstring describes the catching world.
+``petrobot sim mobile`` is the mobile robot's course (:mod:`sim.mobile.process`); ``petrobot sim
+zenoh`` and ``petrobot sim ros2`` are the Zenoh router and the stand-in ROS 2 robot of the ROS 2
+demo (:mod:`sim.ros2.process`); the rest of this docstring describes the catching world.
 
 Runs the pybullet world at 1 kHz with the table, the thrower, the ball, the PUMA 560 with its cup and
 crossfire sensor, and serves the hardware-like back ends on 127.0.0.1 (``--host`` to serve another
@@ -124,6 +125,19 @@ def add_parser(subparsers: Any) -> None:
         ),
     )
     from sim.mobile.process import add_arguments as add_mobile_arguments
+    from sim.ros2.process import add_robot_arguments, add_router_arguments
+
+    add_router_arguments(worlds.add_parser(
+        "zenoh", help="a Zenoh router on the loopback (the middle of the ROS 2 demo's graph)",
+        description="A Zenoh router (eclipse-zenoh in router mode, multicast scouting off), as rmw_zenohd is on a "
+                    "ROS 2 machine. Prints a JSON ready line; stop it with Ctrl-C or SIGTERM."))
+    add_robot_arguments(worlds.add_parser(
+        "ros2", help="a stand-in ROS 2 robot (zenoh-ros2-sdk): AddTwoInts, Fibonacci action, /crossfire",
+        description="A stand-in ROS 2 robot built on zenoh-ros2-sdk, speaking rmw_zenoh through the router: the "
+                    "service /add_two_ints (example_interfaces/srv/AddTwoInts), the action /fibonacci "
+                    "(example_interfaces/action/Fibonacci: feedback per term, cancellable) and the topic "
+                    "/crossfire (std_msgs/msg/Bool). Prints one JSON line per event (ready, service, goal, cancel, "
+                    "result, crossfire); stop it with Ctrl-C or SIGTERM."))
 
     add_mobile_arguments(m)
 
@@ -139,6 +153,10 @@ def run(args: argparse.Namespace) -> int:
         from sim.mobile.process import run as run_mobile
 
         return run_mobile(args)
+    if args.world in ("zenoh", "ros2"):
+        from sim.ros2.process import run_robot, run_router
+
+        return run_router(args) if args.world == "zenoh" else run_robot(args)
     if args.world != "catching":
         print(f"unknown world {args.world!r}", file=sys.stderr)
         return 2

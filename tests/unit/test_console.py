@@ -197,3 +197,24 @@ def test_cursor_keys_typed_in_line_mode_are_taken_out_of_the_line_never_refused_
 
     assert asyncio.run(main()) == [OperatorCommand(Command.INSERT, "runs", 2), OperatorCommand(Command.PAUSE),
                                    OperatorCommand(Command.END)]
+
+
+def test_the_live_view_shows_each_running_actions_latest_feedback_until_it_ends():
+    from types import SimpleNamespace
+
+    from coordinator.events import ActionFeedback
+
+    net = loads_net(NET)
+    console = Console(net, stream=_Screen())
+    runtime = _Runtime(net)
+    call = SimpleNamespace(start=SimpleNamespace(instance="r-1", task="count", action="fibonacci"), node="rosbot",
+                           elapsed_s=0.4)
+    runtime.running = lambda: [call]  # type: ignore[method-assign]
+    console.attach(runtime)  # type: ignore[arg-type]
+    console(ActionFeedback("r", "r-1", "count", "fibonacci", {"sequence": [0, 1, 1]}))
+    console(ActionFeedback("r", "r-1", "count", "fibonacci", {"sequence": [0, 1, 1, 2]}))
+    (row,) = [line for line in console.screen_lines() if line.startswith("  count ")]
+    assert row.endswith('{"sequence": [0, 1, 1, 2]}')
+    console(ActionEnded("r", "r-1", "count", "fibonacci", "rosbot", ActionResult.success()))
+    (row,) = [line for line in console.screen_lines() if line.startswith("  count ")]
+    assert "sequence" not in row

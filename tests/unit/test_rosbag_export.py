@@ -1,0 +1,95 @@
+"""`petrobot export RUN --to mcap`: a run of the catching demo's journal (tests/data/catching_demo.sqlite,
+two runs of `petrobot demo catching --runs 2 --seed 3`) as a rosbag2 MCAP bag, read back with
+Foxglove's mcap + mcap-ros2-support and with rosbags' reader, message counts equal to the journal's."""
+
+from __future__ import annotations
+
+import math
+import shutil
+from collections import Counter
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from coordinator.cli import main
+from coordinator.journal import JournalReader
+from coordinator.rosbag import TOPICS, export_run
+
+DATA = Path(__file__).resolve().parents[1] / "data" / "catching_demo.sqlite"
+
+
+@pytest.fixture
+def journal(tmp_path: Path) -> Path:
+    copy = tmp_path / "catching.sqlite"
+    shutil.copyfile(DATA, copy)
+    return copy
+
+
+def _journal_counts(journal: Path, run: str) -> Counter[str]:
+    with JournalReader.open(journal) as reader:
+        firings = len(reader.firings(run))
+        return Counter({"/petrobot/run": 1, "/petrobot/firing": firings, "/petrobot/marking": firings + 1,
+                        "/petrobot/action_start": len(reader.starts(run)),
+                        "/petrobot/action_result": len(reader.results(run)),
+                        "/petrobot/operator": len(reader.operator_commands(run)),
+                        "/petrobot/reconciliation": len(reader.reconciliations(run))})
+
+
+def test_a_catching_run_reads_back_with_foxglove_and_rosbags_readers_with_the_journals_counts(journal, tmp_path):
+    with JournalReader.open(journal) as reader:
+        run = reader.runs()[-1].id
+        first = reader.firings(run)[0]
+    written = export_run(journal, run, tmp_path / "run.bag")
+    expected = _journal_counts(journal, run)
+    assert expected["/petrobot/firing"] > 10 and expected["/petrobot/action_result"] > 3
+    with open(written.mcap, "rb") as fh:
+        decoded = make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages()
+        foxglove = Counter(channel.topic for _, channel, _, _ in decoded)
+    assert foxglove == +expected
+    with open(written.mcap, "rb") as fh:
+        schemas = {s.name: s for s in make_reader(fh).get_summary().schemas.values()}
+    assert set(schemas) == set(TOPICS.values()) and {s.encoding for s in schemas.values()} == {"ros2msg"}
+    # rosbags, with nothing but the definitions the bag itself carries
+    store = get_typestore(Stores.EMPTY)
+    seen: Counter[str] = Counter()
+    with Reader(written.directory) as bag:
+        for connection in bag.connections:
+            store.register(get_types_from_msg(connection.msgdef.data, connection.msgtype))
+        markings = []
+        for connection, stamp, raw in bag.messages():
+            message = store.deserialize_cdr(raw, connection.msgtype)
+            seen[connection.topic] += 1
+            if connection.topic == "/petrobot/firing" and seen[connection.topic] == 1:
+                assert (message.transition, message.seq) == (first.transition, first.seq)
+                assert stamp == round(first.t_wall * 1e9)
+            if connection.topic == "/petrobot/marking":
+                markings.append({p.place: p.tokens for p in message.places})
+            if connection.topic == "/petrobot/action_result":
+                assert message.status in ("success", "failure", "error")
+                assert math.isnan(message.cost) or message.cost >= 0
+    assert seen == +expected
+    assert markings[0]["runs_remaining"] >= 1 and all(all(n > 0 for n in m.values()) for m in markings)
+
+
+def test_the_command_writes_the_last_run_beside_the_journal_and_never_replaces_a_bag(journal, capsys):
+    assert main(["export", "last", "--to", "mcap", "--journal", str(journal)]) == 0
+    said = capsys.readouterr().err
+    with JournalReader.open(journal) as reader:
+        run = reader.runs()[-1].id
+    bag = journal.parent / f"{run}.bag"
+    assert f"run {run}: {bag}" in said and "read back with mcap-ros2-support" in said
+    before = sorted(p.name for p in bag.iterdir())
+    assert main(["export", "last", "--to", "mcap", "--journal", str(journal)]) == 2
+    assert "exists" in capsys.readouterr().err
+    assert sorted(p.name for p in bag.iterdir()) == before
+    assert [p.name for p in journal.parent.iterdir() if p.name.startswith(".")] == []  # no scratch left
+
+
+def test_an_unknown_run_is_refused_and_nothing_is_written(journal, tmp_path, capsys):
+    assert main(["export", "nosuchrun", "--to", "mcap", "--journal", str(journal), "-o", str(tmp_path / "x.bag")]) == 2
+    assert "no run 'nosuchrun'" in capsys.readouterr().err
+    assert not (tmp_path / "x.bag").exists()
