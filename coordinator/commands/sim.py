@@ -7,7 +7,7 @@ Runs the pybullet world at 1 kHz with the table, the thrower, the ball, the PUMA
 crossfire sensor, and serves the hardware-like back ends on 127.0.0.1 (``--host`` to serve another
 address, e.g. in a network namespace of its own):
 
-* the overhead camera: :class:`sim.camera.FrameServer` (grab-latest frames; its info map carries
+* the overhead camera: :class:`sim.frameserver.FrameServer` (grab-latest frames; its info map carries
   the calibration, made at start-up by imaging the ball at known table points);
 * the CAN bus with the six joint drives and the crossfire I/O module: a socketcand-protocol
   gateway (:class:`sim.canbus.CanGateway`) for python-can's ``socketcand`` interface.
@@ -148,14 +148,13 @@ def run(args: argparse.Namespace) -> int:
     from services.vision import calibration_points
     from sim.camera import (
         AnalyticRenderer,
-        Frame,
-        FrameServer,
         TinyRenderer,
         calibrate,
         camera_info,
         overhead_camera,
     )
     from sim.canbus import CanGateway, SimDrives
+    from sim.frameserver import Frame, FrameServer
     from sim.catching import CatchingWorld, Thrower
     from sim.world import ClockMode, World
 

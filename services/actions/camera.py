@@ -4,7 +4,7 @@
 "services.actions.camera:CameraDriver"``, params ``host``, ``port``, ``tick_every``,
 ``connect_timeout_s``) is the frame-grabber card. A thread (:class:`CameraLink`) grabs every frame
 from the camera server (:mod:`services.devices.framegrabber`; the simulated one is
-``sim.camera.FrameServer``), keeps the last few and a background image (per-pixel median of frames
+``sim.frameserver.FrameServer``), keeps the last few and a background image (per-pixel median of frames
 at least 0.3 s apart), and the driver publishes the external event ``image_sampling_tick``
 (``{"seq", "t"}``) for every ``tick_every``-th frame. After a lost camera the next action call
 reconnects (:meth:`CameraDriver.reconnect_if_lost`), so a restarted camera server is picked up.

@@ -3,7 +3,7 @@
 Builds the course's floor, beacons and robot (:class:`sim.mobile.world.MobileWorld`, 250 Hz
 physics) and serves the robot's hardware on ``--host`` (127.0.0.1):
 
-* **camera and beacon sensor** — :class:`sim.camera.FrameServer` (``--camera-port``, 7220): the
+* **camera and beacon sensor** — :class:`sim.frameserver.FrameServer` (``--camera-port``, 7220): the
   downward camera's grey frames at ``--fps`` (50/s; TinyRenderer or the analytic floor-map warp),
   each header carrying the latest beacon scan (``meta = {"beacon": {"seq", "t", "obs": [[azimuth,
   elevation], ...]}}``, 20 scans/s): one transport, the project's framing, grab-latest. The info
@@ -80,8 +80,8 @@ def _emit(out: TextIO, event: str, **data: Any) -> None:
 
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Run the mobile world until stopped (or ``--duration``); returns the exit code."""
-    from sim.camera import Frame, FrameServer
     from sim.canbus import CanGateway
+    from sim.frameserver import Frame, FrameServer
     from sim.world import ClockMode, World
 
     from .candrives import SimWheelCan

@@ -11,12 +11,12 @@ from services.vision import calibration_points, locate_threshold
 from services.devices.framegrabber import Frame, FrameClient
 from sim.camera import (
     AnalyticRenderer,
-    FrameServer,
     TinyRenderer,
     calibrate,
     overhead_camera,
 )
 from sim.catching import CatchingWorld
+from sim.frameserver import FrameServer
 from sim.world import World
 
 
