@@ -34,7 +34,7 @@ Format (every section optional except ``[nodes.*]``)::
 
     [drivers.camera]              # optional background components started with the node
     node = "alpha"
-    impl = "services.actions.camera:CameraDriver"
+    impl = "services.catching.camera:CameraDriver"
     params = {}
 
     [events.image_sampling_tick]  # which node publishes each external event topic

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from typing import Any, Self
 
 from services.devices import cia402 as cf
-from services.robots import puma560
+from services.catching.robot import puma560
 from sim import socketcand
 
 __all__ = [

@@ -88,14 +88,14 @@ def add_parser(subparsers: Any) -> None:
     p.set_defaults(func=run)
 
 
-from coordinator.commands.simworld import SimWorld, journal_for
+from coordinator.commands.demo_start import SimWorld, journal_for
 
 
 # --------------------------------------------------------------------------------------- demos
 async def _catching(args: argparse.Namespace) -> int:
     import asyncio
 
-    from coordinator.catching_report import CatchReport
+    from coordinator.commands.demo_catching import CatchReport
     from coordinator.console import Console
     from coordinator.journal import Journal
     from coordinator.netfile import load_net

@@ -113,7 +113,7 @@ async def run_mobile(args: argparse.Namespace) -> int:
     """The mobile demo (see the module docstring); returns the run's exit code."""
     import asyncio
 
-    from coordinator.commands.simworld import SimWorld, journal_for
+    from coordinator.commands.demo_start import SimWorld, journal_for
     from coordinator.console import Console
     from coordinator.journal import Journal
     from coordinator.netfile import load_net

@@ -144,9 +144,9 @@ def run(args: argparse.Namespace) -> int:
         return 2
     import numpy as np
 
-    from services.robots import motion_control
-    from services.vision import calibration_points
-    from sim.camera import (
+    from services.catching.robot import motion_control
+    from services.catching.vision import calibration_points
+    from sim.catching.camera import (
         AnalyticRenderer,
         TinyRenderer,
         calibrate,
@@ -155,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
     )
     from sim.canbus import CanGateway, SimDrives
     from sim.frameserver import Frame, FrameServer
-    from sim.catching import CatchingWorld, Thrower
+    from sim.catching.world import CatchingWorld, Thrower
     from sim.world import ClockMode, World
 
     out = sys.stdout

@@ -157,7 +157,7 @@ def test_a_hostile_websocket_message_closes_that_socket_and_the_run_goes_on(page
 @pytest.mark.timeout(300)
 def test_the_catching_demo_live_tokens_move_and_emptying_runs_remaining_ends_the_experiment(
         page: Page, petrobot: Any, tmp_path: Path):
-    from coordinator.commands.simworld import SimWorld
+    from coordinator.commands.demo_start import SimWorld
     from tests.integration.conftest import Cluster
     from tests.integration.test_catching import SERVICES
 

@@ -9,8 +9,8 @@ from collections.abc import Callable
 import pybullet
 from pybullet_utils import bullet_client
 
-from services.robots import puma560 as K
-from sim import puma560 as P
+from services.catching.robot import puma560 as K
+from sim.catching import puma560 as P
 from sim.canbus import SimDrives
 
 

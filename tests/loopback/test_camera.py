@@ -7,15 +7,15 @@ import threading
 import numpy as np
 import pytest
 
-from services.vision import calibration_points, locate_threshold
+from services.catching.vision import calibration_points, locate_threshold
 from services.devices.framegrabber import Frame, FrameClient
-from sim.camera import (
+from sim.catching.camera import (
     AnalyticRenderer,
     TinyRenderer,
     calibrate,
     overhead_camera,
 )
-from sim.catching import CatchingWorld
+from sim.catching.world import CatchingWorld
 from sim.frameserver import FrameServer
 from sim.world import World
 

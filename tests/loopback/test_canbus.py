@@ -13,7 +13,7 @@ from puma_rig import SimRig
 
 from services.devices import cia402 as cf
 from services.devices.drives import BusError, PumaDrives
-from services.robots import puma560 as P
+from services.catching.robot import puma560 as P
 from sim import socketcand
 from sim.canbus import CanGateway
 

@@ -1,5 +1,5 @@
 """Set points: validation and the latest-wins holder without sockets, then published as events of
-a node on 127.0.0.1 and received through an authenticated node link (services/stream.py)."""
+a node on 127.0.0.1 and received through an authenticated node link (services/catching/setpoints.py)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from services.client import NodeLink
 from services.errors import AuthenticationError
 from services.location import parse_location
 from services.node.server import Node
-from services.stream import (
+from services.catching.setpoints import (
     MAX_SEQ,
     LatestSetPoint,
     MalformedSetPoint,

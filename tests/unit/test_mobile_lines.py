@@ -122,6 +122,8 @@ def test_detectors_refuse_images_of_the_wrong_kind():
 def test_the_mobile_services_import_only_numpy_opencv_and_the_standard_library():
     allowed = {"numpy", "cv2", "__future__"}
     for path in sorted((ROOT / "services" / "mobile").glob("*.py")):
+        if path.name.endswith("_node.py"):
+            continue  # the nodes' shells around these algorithms (drivers, actions)
         tree = ast.parse(path.read_text(encoding="utf-8"))
         for node in ast.walk(tree):
             if isinstance(node, ast.Import):

@@ -71,7 +71,7 @@ class MalformedSetPoint(RemoteProtocolError):
 class SetPoint:
     """A predicted catching point, as the vision side sends it to the motion side.
 
-    Coordinates are in the table frame of :mod:`sim.catching` (x towards the robot, catch line at
+    Coordinates are in the table frame of :mod:`sim.catching.world` (x towards the robot, catch line at
     x = 0); times ``t_frame`` and ``t`` are on the camera's clock (simulated time in the sim),
     ``t_capture`` and ``t_sent`` on the host's wall clock (:func:`time.time`, for latency).
 

@@ -5,16 +5,16 @@ services.toml (example)::
 
     [drivers.puma]
     node = "motion"
-    impl = "services.actions.motion:PumaDriver"
+    impl = "services.catching.motion_node:PumaDriver"
     params = { can_host = "127.0.0.1", can_port = 7211 }
 
     [actions.move_home]
     node = "motion"
-    impl = "services.actions.motion:MoveHome"
+    impl = "services.catching.motion_node:MoveHome"
 
     [actions.catch]
     node = "motion"
-    impl = "services.actions.motion:Catch"
+    impl = "services.catching.motion_node:Catch"
 
     [events.ball_caught]
     node = "motion"
@@ -25,18 +25,18 @@ services.toml (example)::
   gateway;
 * ``setpoints_from`` (default: the node services.toml places the action ``predict`` on) and
   ``setpoint_topic`` ("setpoints"): where the set points come from, as events of that node
-  (:mod:`services.stream`); ``setpoint_max_age_s`` (0.2): a set point older than this (wall
+  (:mod:`services.catching.setpoints`); ``setpoint_max_age_s`` (0.2): a set point older than this (wall
   clock) means a lost stream;
 * ``robot_base`` ([0.75, 0.0, 0.46, pi]): x, y, z (m), yaw (rad) of the robot base frame in the
   table frame of the set points;
 * ``edge_x``, ``table_z``, ``rim_drop``, ``tilt_deg``, ``y_min``, ``y_max``: override
-  :class:`services.robots.motion_control.CatchGeometry` (base frame);
+  :class:`services.catching.robot.motion_control.CatchGeometry` (base frame);
 * ``switch_interval_s`` (0.001): the node process's thread switch interval (see :meth:`PumaDriver.setup`);
 * ``heartbeat_timeout_s`` (0.5, bus time: a CAN node silent that long is lost), ``bus_silence_s``
   (2.0, wall time: nothing at all on the bus that long and it is lost), ``connect_timeout_s`` (5.0).
 
 The driver owns a control thread that runs once per CAN SYNC (2 ms of simulated time): one
-:meth:`services.robots.motion_control.CatchServo.step` per cycle elapsed on the bus (at most
+:meth:`services.catching.robot.motion_control.CatchServo.step` per cycle elapsed on the bus (at most
 :data:`services.devices.cia402.TARGET_TIMEOUT_CYCLES`, the cycles a drive extrapolates a missing
 target, so that a late thread's next target continues where the drives' extrapolation went) and
 one set of RPDO targets. The crossfire sensor's rising edge publishes the external event
@@ -51,7 +51,7 @@ restarts where the arm is; a lost bus is reconnected. ``move_home`` reports a re
 Watchdog (node side): when set points stop coming during ``catch`` (none for
 ``setpoint_max_age_s``, on the wall clock and on the bus clock the frames are stamped with, before
 the ball is due at the line: the vision node died, the link is cut, the publisher stopped), the servo brakes every joint to rest at its acceleration limit (a
-controlled stop, :meth:`services.robots.motion_control.CatchServo.stop`) and ``catch`` returns
+controlled stop, :meth:`services.catching.robot.motion_control.CatchServo.stop`) and ``catch`` returns
 ``error`` with outcome ``stream_lost``, the reason, and the stop in its value (``watchdog``). The
 drives have their own watchdog for a silent master (:mod:`sim.canbus`).
 
@@ -85,9 +85,9 @@ from services.devices.drives import BusError, PumaDrives
 from services.devices.endpoint import DeviceEndpoint
 from services.errors import ActionError, LocationError
 from services.results import ActionResult, Status
-from services.robots import motion_control as mc
-from services.robots.puma560 import UnreachableError
-from services.stream import (
+from services.catching.robot import motion_control as mc
+from services.catching.robot.puma560 import UnreachableError
+from services.catching.setpoints import (
     SETPOINT_TOPIC,
     SetPoint,
     SetPointSubscription,

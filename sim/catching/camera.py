@@ -27,7 +27,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from services.vision import Homography, Roi, fit_homography, locate_threshold
+from services.catching.vision import Homography, Roi, fit_homography, locate_threshold
 
 __all__ = [
     "AnalyticRenderer",
@@ -307,7 +307,7 @@ def calibrate(
     Args:
         render_at: function placing the ball's centre at table point (x, y) (on the table) and
             returning the frame, (H, W, 3) uint8 BGR.
-        points: (N, 2) known table points, m (e.g. :func:`services.vision.calibration_points`).
+        points: (N, 2) known table points, m (e.g. :func:`services.catching.vision.calibration_points`).
         frames_per_point: frames taken at each point; their detections are averaged (reduces the
             effect of pixel noise on the calibration).
         roi: search only this region of the frames (e.g. :meth:`CameraModel.table_roi`).
@@ -317,7 +317,7 @@ def calibrate(
 
     Raises:
         RuntimeError: if the ball is not found at some calibration point.
-        ValueError: from :func:`services.vision.fit_homography` on degenerate points.
+        ValueError: from :func:`services.catching.vision.fit_homography` on degenerate points.
     """
     pixels = []
     for x, y in np.asarray(points, dtype=float):

@@ -220,7 +220,7 @@ def _drive(ctx: CallContext) -> DriveDriver:
     drv = ctx.find_driver(DriveDriver)
     if drv is not None:
         return drv
-    raise ActionError("this node hosts no wheel drive driver (services.actions.mobile:DriveDriver)")
+    raise ActionError("this node hosts no wheel drive driver (services.mobile.drive_node:DriveDriver)")
 
 
 class StopRobot(PrimitiveAction):
