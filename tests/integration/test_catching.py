@@ -54,7 +54,7 @@ node = "vision"
 
 [drivers.puma]
 node = "motion"
-impl = "services.catching.motion_node:PumaDriver"
+impl = "services.catching.arm:PumaDriver"
 params = {{ can_port = {port[can]} }}
 
 [actions.move_home]

@@ -80,7 +80,7 @@ node = "vision"
 
 [drivers.puma]
 node = "motion"
-impl = "services.catching.motion_node:PumaDriver"
+impl = "services.catching.arm:PumaDriver"
 params = {{ can_host = "{SUBNET}.10", can_port = 7211 }}
 
 [actions.move_home]

@@ -17,7 +17,8 @@ import pytest
 from puma_rig import SimRig
 
 from services.action import CallContext, NodeContext
-from services.catching.motion_node import Catch, MoveHome, PumaDriver, table_to_base
+from services.catching.arm import PumaDriver, table_to_base
+from services.catching.motion_node import Catch, MoveHome
 from services.client import NodeLink
 from services.devices import cia402 as cf
 from services.location import parse_location
