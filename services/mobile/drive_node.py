@@ -1,5 +1,5 @@
 """The mobile robot's drive node: the wheel drives on the CAN bus, odometry, the steering set points
-with the watchdog, and ``stop_robot`` (paper section 6; overview in :mod:`services.actions.mobile`)."""
+with the watchdog, and ``stop_robot`` (paper section 6; overview in :mod:`services.mobile`)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from services.results import ActionResult
 
 __all__ = ["DEFAULT_CAN_PORT", "DriveDriver", "StopRobot"]
 
-log = logging.getLogger("services.actions.mobile")
+log = logging.getLogger(__name__)
 
 DEFAULT_CAN_PORT = 7221
 

@@ -1,6 +1,6 @@
 """The mobile robot's perception node: the camera/beacon/odometry driver and the course's primitive
 actions, streaming steering set points (paper section 6, Fig. 3; overview and outcomes in
-:mod:`services.actions.mobile`)."""
+:mod:`services.mobile`)."""
 
 from __future__ import annotations
 

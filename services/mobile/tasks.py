@@ -3,7 +3,7 @@
 Each primitive action of the course is a controller stepped once per camera frame with the frame's
 time, the odometry pose at that time and the image (and, for the beacon tasks, the beacon scans):
 it returns a :class:`Step` — the steering set point to stream to the drives and, when the task
-has ended, its outcome. The perception node's actions (:mod:`services.actions.mobile`) run them
+has ended, its outcome. The perception node's actions (:mod:`services.mobile.perception_node`) run them
 on frames from the camera server and odometry from the drive node; ``bench/mobile.py`` runs the
 same controllers in process in lock-step. What one task leaves for the next (the last track
 estimate, where the track ended, the beacon sightings of the last second, the T bar's position,
