@@ -618,24 +618,37 @@ class CanGateway:
         assert self._server is not None
         while not self._stop.is_set():
             try:
-                conn, _ = self._server.accept()
+                conn, addr = self._server.accept()
             except TimeoutError:
                 continue
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            conn.settimeout(None)
+            except OSError as exc:
+                if self._stop.is_set() or self._server.fileno() < 0:
+                    return  # closed by stop()
+                log.warning("CAN gateway: accept failed: %s", exc)  # out of descriptors...: try again
+                self._stop.wait(0.1)
+                continue
+            try:
+                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                conn.settimeout(None)
+            except OSError:  # the peer is already gone
+                conn.close()
+                continue
             with self._lock:
                 self._conns.append(conn)
-            _Connection(self, conn).start()
+            _Connection(self, conn, f"{addr[0]}:{addr[1]}").start()
 
 
 class _Connection:
-    """One client of the gateway: a reader and a writer thread around the sans-IO protocol."""
+    """One client of the gateway: a reader and a writer thread around the sans-IO protocol.
 
-    def __init__(self, gateway: CanGateway, sock: socket.socket) -> None:
+    A peer may leave at any moment (a port probe connects and closes at once): every send and
+    receive error ends this connection only, never the gateway.
+    """
+
+    def __init__(self, gateway: CanGateway, sock: socket.socket, peer: str) -> None:
         self.gw = gateway
         self.sock = sock
+        self.peer = peer
         self.proto = socketcand.SocketcandServerProtocol(gateway.channels)
         self.port = gateway.bus.connect()
         self.lock = threading.Lock()
@@ -644,17 +657,25 @@ class _Connection:
         self.done = threading.Event()
 
     def start(self) -> None:
+        if not self._flush():  # the greeting, before any thread may close the socket
+            return
         for target, name in ((self._reader, "reader"), (self._writer, "writer")):
             th = threading.Thread(target=target, name=f"can-gateway-{name}", daemon=True)
             th.start()
             self.gw._threads.append(th)
-        self._flush()
 
-    def _flush(self) -> None:
-        with self.lock:
-            out = self.proto.data_to_send()
-            if out:
-                self.sock.sendall(out)
+    def _flush(self) -> bool:
+        """Send what the protocol has queued; False (and the connection closed) if the peer is gone."""
+        try:
+            with self.lock:
+                out = self.proto.data_to_send()
+                if out:
+                    self.sock.sendall(out)
+            return True
+        except OSError as exc:
+            log.debug("CAN gateway: %s left: %s", self.peer, exc)
+            self._close()
+            return False
 
     def _reader(self) -> None:
         try:
@@ -666,9 +687,8 @@ class _Connection:
                     frames = self.proto.receive_data(data, time.monotonic())
                     if self.proto.mode is socketcand.ServerMode.RAW and self.raw_since is None:
                         self.raw_since = time.monotonic()
-                    out = self.proto.data_to_send()
-                    if out:
-                        self.sock.sendall(out)
+                if not self._flush():
+                    return
                 if frames:
                     self.forwarding = self.raw_since is not None
                 for f in frames:
@@ -681,31 +701,26 @@ class _Connection:
             self._close()
 
     def _writer(self) -> None:
-        try:
-            while not self.done.is_set():
-                first = self.port.recv(timeout=0.1)
-                if first is None:
+        while not self.done.is_set():
+            first = self.port.recv(timeout=0.1)
+            if first is None:
+                continue
+            frames = [first] + self.port.recv_all()
+            if not self.forwarding:
+                if self.raw_since is None or time.monotonic() - self.raw_since < _RAW_SETTLE_S:
                     continue
-                frames = [first] + self.port.recv_all()
-                if not self.forwarding:
-                    if self.raw_since is None or time.monotonic() - self.raw_since < _RAW_SETTLE_S:
-                        continue
-                    self.forwarding = True
-                with self.lock:
-                    for f in frames:
-                        self.proto.frame_out(f)
-                    out = self.proto.data_to_send()
-                    if out:
-                        self.sock.sendall(out)
-        except OSError:
-            pass
-        finally:
-            self._close()
+                self.forwarding = True
+            with self.lock:
+                for f in frames:
+                    self.proto.frame_out(f)
+            if not self._flush():
+                return
 
     def _close(self) -> None:
-        if self.done.is_set():
-            return
-        self.done.set()
+        with self.lock:
+            if self.done.is_set():
+                return
+            self.done.set()
         self.port.close()
         try:
             self.sock.close()
