@@ -10,7 +10,7 @@ pybullet world rolls the ball; the analytic camera renders it at ``--fps`` twice
 with 0.5 px position noise plus grey-level noise; each image goes through the locator, the
 calibrated pixel → table map and the rolling-ball predictor (services.catching.vision); the noisy
 pipeline's set points (in the robot base frame) drive services.catching.robot.motion_control's servo, whose joint
-targets go as CiA 402 RPDOs over the simulated CAN bus to the simulated drives (sim.canbus), stepped
+targets go as CiA 402 RPDOs over the simulated CAN bus to the simulated drives (sim.catching.drives), stepped
 in-process every 1 ms.
 
 Measured per throw: the lateral prediction error at the catch line of the last prediction made at
@@ -69,7 +69,7 @@ from sim.catching.camera import (
     calibrate,
     overhead_camera,
 )
-from sim.canbus import SimDrives
+from sim.catching.drives import SimDrives
 from sim.catching.world import CatchingWorld, Thrower
 from sim.world import World
 

@@ -63,7 +63,7 @@ from services.catching.vision import (
     locate_threshold,
 )
 from sim.catching.camera import AnalyticRenderer, calibrate, overhead_camera
-from sim.canbus import SimDrives
+from sim.catching.drives import SimDrives
 from sim.catching.world import CatchingWorld, Thrower
 from sim.world import World
 

@@ -24,7 +24,7 @@ Watchdog (node side): when set points stop coming during ``catch`` (none for
 the ball is due at the line: the vision node died, the link is cut, the publisher stopped), the servo brakes every joint to rest at its acceleration limit (a
 controlled stop, :meth:`services.catching.robot.motion_control.CatchServo.stop`) and ``catch`` returns
 ``error`` with outcome ``stream_lost``, the reason, and the stop in its value (``watchdog``). The
-drives have their own watchdog for a silent master (:mod:`sim.canbus`).
+drives have their own watchdog for a silent master (:mod:`sim.drives`).
 
 Outcomes of ``catch``: success when the crossfire sensor fires; failure when the ball is missed
 (the bus clock passed the predicted rim time by ``miss_grace_s`` without a catch), including a

@@ -1,7 +1,7 @@
 """CAN frames of the robot drives (CiA 301/402 style): identifiers, payloads, the drive state machine.
 
 Pure (no sockets, no clocks): the motion node's CAN master (:mod:`services.devices.drives`) encodes and
-decodes these frames on a real or simulated bus; the simulated drives (:mod:`sim.canbus`) use the
+decodes these frames on a real or simulated bus; the simulated drives (:mod:`sim.drives`) use the
 same codec and state machine, so the two can never disagree. Tested without I/O.
 
 Bus layout (11-bit identifiers, CANopen pre-defined connection set):

@@ -1,7 +1,7 @@
 """Motion-node side of the PUMA's CAN bus: the six CiA 402 drives and the crossfire module.
 
 Talks to the bus through python-can's ``socketcand`` interface (the sim's gateway in
-:mod:`sim.canbus`, or any socketcand server); on real hardware the same frames would go through
+:class:`sim.socketcand.CanGateway`, or any socketcand server); on real hardware the same frames would go through
 ``interface="socketcan"``. Frame layout and units: :mod:`services.devices.cia402`.
 
 A receive thread keeps the latest actual positions and statuswords (TPDO1), heartbeat times,

@@ -7,7 +7,7 @@ address, e.g. in a network namespace of its own):
 * the overhead camera: :class:`sim.frameserver.FrameServer` (grab-latest frames; its info map carries
   the calibration, made at start-up by imaging the ball at known table points);
 * the CAN bus with the six joint drives and the crossfire I/O module: a socketcand-protocol
-  gateway (:class:`sim.canbus.CanGateway`) for python-can's ``socketcand`` interface.
+  gateway (:class:`sim.socketcand.CanGateway`) for python-can's ``socketcand`` interface.
 
 Clock modes: ``--realtime`` (default) paces simulated time to the wall clock, but waits after each
 camera frame, up to ``--camera-wait-ms`` of wall time, until a connected camera client has taken it
@@ -18,7 +18,7 @@ The pixel noise restarts from (``--seed``, throw number) at each throw.
 
 The CAN bus is paced to the motion node's CAN master: at each SYNC the sim waits up to
 ``--master-wait-ms`` of wall time for the targets of a master that answered the previous SYNC
-(:class:`sim.canbus.SimDrives`), so that the sim's own bursts of stepping after rendering a camera
+(:class:`sim.catching.drives.SimDrives`), so that the sim's own bursts of stepping after rendering a camera
 frame are not charged to the master; a silent master is not waited for (the drives' watchdogs act).
 
 The thrower rolls a ball every ``--interval`` seconds of simulated time. Stdout gets one JSON line
@@ -112,8 +112,9 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         camera_info,
         overhead_camera,
     )
-    from sim.canbus import CanGateway, SimDrives
+    from sim.catching.drives import SimDrives
     from sim.frameserver import Frame, FrameServer
+    from sim.socketcand import CanGateway
     from sim.catching.world import CatchingWorld, Thrower
     from sim.world import ClockMode, World
 

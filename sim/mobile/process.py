@@ -11,7 +11,7 @@ physics) and serves the robot's hardware on ``--host`` (127.0.0.1):
   the robot's dimensions (``robot``), ``beacon_height``, ``square``, ``track_width`` and ``course``;
 * **wheel drives** — two CiA 402 drives in profile velocity mode on the simulated CAN bus
   (:class:`sim.mobile.candrives.SimWheelCan`), served by the socketcand gateway
-  (:class:`sim.canbus.CanGateway`, ``--can-port``, 7221).
+  (:class:`sim.socketcand.CanGateway`, ``--can-port``, 7221).
 
 Stdout gets one JSON line per event: ``ready`` (ports, course), ``pose`` (ground truth every
 ``--pose-every`` s: t, the wall clock it was taken at, x, y, heading, speed over the last period,
@@ -80,8 +80,8 @@ def _emit(out: TextIO, event: str, **data: Any) -> None:
 
 def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
     """Run the mobile world until stopped (or ``--duration``); returns the exit code."""
-    from sim.canbus import CanGateway
     from sim.frameserver import Frame, FrameServer
+    from sim.socketcand import CanGateway
     from sim.world import ClockMode, World
 
     from .candrives import SimWheelCan

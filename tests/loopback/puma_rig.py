@@ -11,7 +11,7 @@ from pybullet_utils import bullet_client
 
 from services.catching.robot import puma560 as K
 from sim.catching import puma560 as P
-from sim.canbus import SimDrives
+from sim.catching.drives import SimDrives
 
 
 class SimRig:

@@ -16,7 +16,7 @@ from services.devices import cia402 as cf
 from services.devices.drives import BusError, PumaDrives
 from services.catching.robot import puma560 as P
 from sim import socketcand
-from sim.canbus import CanGateway
+from sim.socketcand import CanGateway
 
 # --- pure encoding -------------------------------------------------------------------------------
 

@@ -26,7 +26,7 @@ from services.node.server import Node
 from services.catching.robot import motion_control as mc
 from services.catching.robot import puma560 as P
 from services.catching.setpoints import SetPoint
-from sim.canbus import CanGateway
+from sim.socketcand import CanGateway
 
 ROBOT_BASE = (0.75, 0.0, 0.46, math.pi)
 KEY = bytes(range(32))
