@@ -52,17 +52,22 @@ def add_parser(subparsers: Any) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the world ``args.world`` until stopped (or ``--duration``); returns the exit code."""
+    """Run the world ``args.world`` until stopped (or ``--duration``); returns the exit code (2 when
+    it cannot start, with the reason on stderr: e.g. a port already in use)."""
+    from sim.process import ServeError
+
     if args.world == "mobile":
-        from sim.mobile.process import run as run_mobile
-
-        return run_mobile(args)
-    if args.world == "catching":
-        from sim.catching.process import run as run_catching
-
-        return run_catching(args)
-    print(f"unknown world {args.world!r}", file=sys.stderr)
-    return 2
+        from sim.mobile.process import run as run_world
+    elif args.world == "catching":
+        from sim.catching.process import run as run_world
+    else:
+        print(f"unknown world {args.world!r}", file=sys.stderr)
+        return 2
+    try:
+        return run_world(args)
+    except ServeError as exc:
+        print(f"petrobot sim {args.world}: {exc}", file=sys.stderr)
+        return 2
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -32,10 +32,7 @@ master waits that ran out).
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import signal
-import sys
 import time
 from typing import Any, TextIO
 
@@ -93,11 +90,6 @@ def add_arguments(c: argparse.ArgumentParser) -> None:
 
 
 
-def _emit(out: TextIO, event: str, **data: Any) -> None:
-    out.write(json.dumps({"event": event, **data}) + "\n")
-    out.flush()
-
-
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
     """Run the catching world until stopped (or ``--duration``); its event lines go to ``out``
     (default: stdout). Returns the exit code."""
@@ -112,23 +104,15 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         camera_info,
         overhead_camera,
     )
+    from services.devices.framegrabber import Frame
     from sim.catching.drives import SimDrives
-    from sim.frameserver import Frame, FrameServer
-    from sim.socketcand import CanGateway
     from sim.catching.world import CatchingWorld, Thrower
+    from sim.process import WorldProcess
     from sim.world import ClockMode, World
 
-    out = out if out is not None else sys.stdout
-    stop = {"flag": False}
-
-    def on_signal(signum: int, frame: Any) -> None:
-        stop["flag"] = True
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     world = World(mode=ClockMode.REALTIME if args.mode == "realtime" else ClockMode.LOCKSTEP)
-    server: FrameServer | None = None
-    gateway: CanGateway | None = None
-    try:
+    with WorldProcess(world, out, camera_wait_s=args.camera_wait_ms / 1000.0,
+                      lockstep=args.mode == "lockstep") as proc:
         cw = CatchingWorld(world, robot=True)
         geo = motion_control.CatchGeometry()
         q_home = motion_control.home_pose(geo)
@@ -169,13 +153,12 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         info = camera_info(cam, hom, robot_base=cw.robot_base,
                            rolling_model=cw.ball.rolling_decel_params(), fps=args.fps,
                            table_size=(cw.table.length, cw.table.width))
-        server = FrameServer(host=args.host, port=args.camera_port, info=info)
-        camera_port = server.start()
-        gateway = CanGateway(drives.bus, host=args.host, port=args.can_port)
-        can_port = gateway.start()
-        _emit(out, "ready", mode=args.mode, host=args.host, camera_port=camera_port, can_port=can_port,
-              calibration_rms_m=hom.rms_m, renderer=args.renderer, width=args.width,
-              height=args.height, fps=args.fps)
+        camera_port, can_port = proc.serve(args.host, args.camera_port, info, drives.bus, args.can_port)
+        server = proc.server
+        assert server is not None
+        proc.emit("ready", mode=args.mode, host=args.host, camera_port=camera_port, can_port=can_port,
+                  calibration_rms_m=hom.rms_m, renderer=args.renderer, width=args.width,
+                  height=args.height, fps=args.fps)
         tf = cw.table_to_base()
         thrower = Thrower(args.seed)
         period = 1.0 / args.fps
@@ -184,25 +167,12 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         next_throw = math.inf if args.after_camera_client else args.first_throw
         active: dict[str, Any] | None = None
         home_since: float | None = 0.0
-        reported = 0  # drives.faults already emitted (a fault is emitted once its joint is at rest)
-        camera_waits = camera_misses = 0
-        t_wall0 = time.monotonic()
-        world.resync()
-        while not stop["flag"] and (args.duration <= 0 or world.t < args.duration):
+        proc.begin()
+        while not proc.stopping and (args.duration <= 0 or world.t < args.duration):
             world.advance(period)
-            while reported < len(drives.faults) and not math.isnan(drives.faults[reported].t_stopped):
-                f = drives.faults[reported]
-                _emit(out, "drive_fault", t=f.t, node=f.node, code=f"{int(f.code):#06x}", reason=f.reason,
-                      speed=f.speed, stop_s=f.t_stopped - f.t)
-                reported += 1
+            proc.report_faults(drives)
             t_wall = time.time()
-            server.publish(Frame(seq, world.t, render(), t_wall))
-            if server.client_count:
-                if args.mode == "lockstep":
-                    server.wait_sent(seq, timeout=1.0)
-                elif args.camera_wait_ms > 0:
-                    camera_waits += 1
-                    camera_misses += not server.wait_sent(seq, timeout=args.camera_wait_ms / 1000.0)
+            proc.publish(Frame(seq, world.t, render(), t_wall))
             seq += 1
             if math.isinf(next_throw) and thrown == 0 and server.client_count:
                 next_throw = world.t + args.first_throw
@@ -221,8 +191,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
                 thrown += 1
                 renderer.reseed([args.seed, thrown])
                 active = {"n": thrown, "crossed": False}
-                _emit(out, "throw", n=thrown, t=world.t, speed=spec.speed, heading=spec.heading,
-                      x0=spec.x0, y0=spec.y0)
+                proc.emit("throw", n=thrown, t=world.t, speed=spec.speed, heading=spec.heading,
+                          x0=spec.x0, y0=spec.y0)
                 next_throw = world.t + args.interval
             if active is not None:
                 cr = cw.crossing
@@ -231,26 +201,14 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
                     active["t_cross"] = cr.t
                     xb, yb, _ = tf.point(0.0, cr.y)
                     vxb, vyb = tf.vector(cr.vx, cr.vy)
-                    _emit(out, "crossing", n=active["n"], t=cr.t, y=cr.y, x_base=xb, y_base=yb,
-                          vx_base=vxb, vy_base=vyb)
+                    proc.emit("crossing", n=active["n"], t=cr.t, y=cr.y, x_base=xb, y_base=yb,
+                              vx_base=vxb, vy_base=vyb)
                 done_after = active.get("t_cross", math.inf) + 1.0
                 stalled = cr is None and world.t - (cw.t_launch or 0.0) > 8.0
                 if world.t >= done_after or stalled:
-                    _emit(out, "result", n=active["n"], t=world.t, caught=bool(cw.crossfire()),
-                          crossed=cr is not None)
+                    proc.emit("result", n=active["n"], t=world.t, caught=bool(cw.crossfire()),
+                              crossed=cr is not None)
                     cw.park()
                     active = None
-        _emit(out, "stopped", t=world.t, wall_s=time.monotonic() - t_wall0, frames=seq, throws=thrown,
-              max_lag_s=world.lag, slipped_s=world.slipped, camera_waits=camera_waits,
-              camera_misses=camera_misses, master_waits=drives.master_waits,
-              master_misses=drives.master_misses, drive_faults=len(drives.faults))
+        proc.stopped(drives, throws=thrown)
         return 0
-    finally:
-        if gateway is not None:
-            gateway.stop()
-        if server is not None:
-            server.close()
-        world.close()
-        for s, h in old.items():
-            signal.signal(s, h)
-

@@ -28,9 +28,7 @@ it.
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import signal
 import sys
 import time
 from dataclasses import asdict
@@ -73,15 +71,11 @@ def add_arguments(c: argparse.ArgumentParser) -> None:
                         "machine sees every frame instead of the world running away from it")
 
 
-def _emit(out: TextIO, event: str, **data: Any) -> None:
-    out.write(json.dumps({"event": event, **data}) + "\n")
-    out.flush()
-
-
-def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
-    """Run the mobile world until stopped (or ``--duration``); returns the exit code."""
-    from sim.frameserver import Frame, FrameServer
-    from sim.socketcand import CanGateway
+def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """Run the mobile world until stopped (or ``--duration``); its event lines go to ``out``
+    (default: stdout). Returns the exit code."""
+    from services.devices.framegrabber import Frame
+    from sim.process import WorldProcess
     from sim.world import ClockMode, World
 
     from .candrives import SimWheelCan
@@ -100,19 +94,12 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         "noisy": ImageNoise(sigma=25.0, blur_px=1.0, gain_sigma=0.15), "scuffed": ImageNoise(spots=3.0),
         "harsh": ImageNoise(sigma=25.0, blur_px=1.0, gain_sigma=0.15, spots=3.0),
     }[args.noise]
-    stop = {"flag": False}
-
-    def on_signal(signum: int, frame: Any) -> None:
-        stop["flag"] = True
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     world = World(dt=DEFAULT_DT, mode=ClockMode.REALTIME if args.mode == "realtime" else ClockMode.LOCKSTEP,
                   solver_iterations=10)
-    server: FrameServer | None = None
-    gateway: CanGateway | None = None
-    mw: MobileWorld | None = None
-    try:
+    with WorldProcess(world, out, camera_wait_s=args.camera_wait_ms / 1000.0, lockstep=args.mode == "lockstep",
+                      skip_frozen_client=True) as proc:
         mw = MobileWorld(world, course, textured=args.renderer == "tiny")
+        proc.on_close(mw.close)
         spec = mw.robot.spec
         cam_model = mw.camera_model()
         cam = (mw.tiny_camera if args.renderer == "tiny" else mw.analytic_camera)(cam_model, noise=noise, seed=args.seed)
@@ -126,15 +113,12 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             "beacon_height": course.beacon.height, "square": course.square, "track_width": course.track_width,
             "course": course.name, "fps": args.fps,
         }
-        server = FrameServer(host=args.host, port=args.camera_port, info=info)
-        camera_port = server.start()
-        gateway = CanGateway(can.bus, host=args.host, port=args.can_port)
-        can_port = gateway.start()
+        camera_port, can_port = proc.serve(args.host, args.camera_port, info, can.bus, args.can_port)
         world.step(25)  # let the robot settle on its wheels
         ex, ey = course.end_point()
-        _emit(out, "ready", mode=args.mode, host=args.host, camera_port=camera_port, can_port=can_port,
-              course=course.name, length=course.length, renderer=args.renderer, noise=args.noise,
-              end_point=[ex, ey], start=list(course.start_pose()))
+        proc.emit("ready", mode=args.mode, host=args.host, camera_port=camera_port, can_port=can_port,
+                  course=course.name, length=course.length, renderer=args.renderer, noise=args.noise,
+                  end_point=[ex, ey], start=list(course.start_pose()))
         period = 1.0 / args.fps
         scan_every = 1.0 / 20.0
         next_scan = world.t
@@ -142,14 +126,10 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         scan_seq = 0
         scan: dict[str, Any] | None = None
         seq = 0
-        reported = 0
         last_xy: tuple[float, float] | None = None
         last_t = world.t
-        camera_waits = camera_misses = 0
-        camera_in_step = True
-        t_wall0 = time.monotonic()
-        world.resync()
-        while not stop["flag"] and (args.duration <= 0 or world.t < args.duration):
+        proc.begin()
+        while not proc.stopping and (args.duration <= 0 or world.t < args.duration):
             world.advance(period)
             t = world.t
             pose = mw.pose()
@@ -159,41 +139,16 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 scan = {"seq": scan_seq, "t": t, "obs": [[o.azimuth, o.elevation] for o in obs]}
                 scan_seq += 1
             frame = cam.grab(pose, t)
-            server.publish(Frame(seq, t, frame.image, time.time(), {"beacon": scan} if scan else None))
-            if server.client_count:
-                if args.mode == "lockstep":
-                    server.wait_sent(seq, timeout=1.0)
-                elif args.camera_wait_ms > 0 and (camera_in_step or server.wait_sent(seq - 1, timeout=0.0)):
-                    # wait only for a client that took the previous frame: a frozen one costs one wait
-                    camera_waits += 1
-                    camera_in_step = server.wait_sent(seq, timeout=args.camera_wait_ms / 1000.0)
-                    camera_misses += not camera_in_step
+            proc.publish(Frame(seq, t, frame.image, time.time(), {"beacon": scan} if scan else None))
             seq += 1
             if t >= next_pose - 1e-9:
                 next_pose += args.pose_every
                 here = mw.where(pose[0], pose[1])
                 speed = 0.0 if last_xy is None else math.hypot(pose[0] - last_xy[0], pose[1] - last_xy[1]) / (t - last_t)
                 last_xy, last_t = (pose[0], pose[1]), t
-                _emit(out, "pose", t=round(t, 4), wall=time.time(), x=pose[0], y=pose[1], heading=pose[2], v=speed,
-                      tile=None if here is None else here[0].index, blank=None if here is None else here[0].blank,
-                      s=None if here is None else here[1], offset=None if here is None else here[2])
-            while reported < len(can.faults) and not math.isnan(can.faults[reported].t_stopped):
-                f = can.faults[reported]
-                _emit(out, "drive_fault", t=f.t, node=f.node, code=f"{int(f.code):#06x}", reason=f.reason,
-                      speed=f.speed, stop_s=f.t_stopped - f.t)
-                reported += 1
-        _emit(out, "stopped", t=world.t, wall_s=time.monotonic() - t_wall0, frames=seq,
-              max_lag_s=world.lag, slipped_s=world.slipped, drive_faults=len(can.faults),
-              camera_waits=camera_waits, camera_misses=camera_misses, master_waits=can.master_waits,
-              master_misses=can.master_misses)
+                proc.emit("pose", t=round(t, 4), wall=time.time(), x=pose[0], y=pose[1], heading=pose[2], v=speed,
+                          tile=None if here is None else here[0].index, blank=None if here is None else here[0].blank,
+                          s=None if here is None else here[1], offset=None if here is None else here[2])
+            proc.report_faults(can)
+        proc.stopped(can)
         return 0
-    finally:
-        if gateway is not None:
-            gateway.stop()
-        if server is not None:
-            server.close()
-        if mw is not None:
-            mw.close()
-        world.close()
-        for s, h in old.items():
-            signal.signal(s, h)
