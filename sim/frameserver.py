@@ -29,6 +29,10 @@ class FrameServer:
         port: TCP port, 0 for any free one (see :attr:`port` after :meth:`start`).
         info: a msgpack-able map served on request ``{"op": "info"}`` (the camera's data sheet and
             calibration: image size, homography, robot base pose...).
+
+    A connection counts as a camera client (:attr:`client_count`, what the world waits for) from
+    its first grab on: one that only asks for the info map (a probe, a node reading the
+    calibration) changes nothing in the world.
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 0, info: dict[str, Any] | None = None) -> None:
@@ -41,7 +45,8 @@ class FrameServer:
         self._closed = False
         self._sock: socket.socket | None = None
         self._threads: list[threading.Thread] = []
-        self._clients: list[socket.socket] = []
+        self._clients: list[socket.socket] = []  # every connection
+        self._grabbing: set[socket.socket] = set()  # those that asked for a frame
         self._last_sent = -1
 
     def start(self) -> int:
@@ -63,8 +68,8 @@ class FrameServer:
 
     @property
     def client_count(self) -> int:
-        """Number of connected clients."""
-        return len(self._clients)
+        """Number of connected clients that take frames."""
+        return len(self._grabbing)
 
     def wait_sent(self, seq: int, timeout: float) -> bool:
         """Wait until frame ``seq`` (or a later one) has been sent to some client (lock-step pacing).
@@ -119,6 +124,7 @@ class FrameServer:
                 if req.get("op") != "grab":
                     conn.sendall(pack_map({"error": f"unknown op {req.get('op')!r}"}, MAX_HEADER))
                     continue
+                self._grabbing.add(conn)
                 after = int(req.get("after", -1))
                 timeout = min(float(req.get("timeout", 1.0)), 10.0)
                 with self._cond:
@@ -142,5 +148,6 @@ class FrameServer:
             pass
         finally:
             conn.close()
+            self._grabbing.discard(conn)
             if conn in self._clients:
                 self._clients.remove(conn)

@@ -134,7 +134,7 @@ class PumaDriver(Driver):
         """The CAN gateway this driver connects to (params ``can_host``, ``can_port``)."""
         return DeviceEndpoint("CAN gateway", str(params.get("can_host", "127.0.0.1")),
                               int(params.get("can_port", 7211)),
-                              "petrobot sim catching")
+                              "petrobot sim catching", "socketcand")
 
     # --- lifecycle -------------------------------------------------------------------------------
 

@@ -236,7 +236,7 @@ class CameraDriver(Driver):
         """The camera server this driver connects to (params ``host``, ``port``)."""
         return DeviceEndpoint("camera server", str(params.get("host", "127.0.0.1")),
                               int(params.get("port", DEFAULT_CAMERA_PORT)),
-                              "petrobot sim catching")
+                              "petrobot sim catching", "frames")
 
     async def setup(self, node: NodeContext) -> None:
         self.link = CameraLink(

@@ -70,7 +70,7 @@ class DriveDriver(Driver):
     def device(cls, params: dict[str, Any]) -> DeviceEndpoint:
         """The CAN gateway this driver connects to."""
         return DeviceEndpoint("mobile CAN gateway", str(params.get("can_host", "127.0.0.1")),
-                              int(params.get("can_port", DEFAULT_CAN_PORT)), "petrobot sim mobile")
+                              int(params.get("can_port", DEFAULT_CAN_PORT)), "petrobot sim mobile", "socketcand")
 
     async def setup(self, node: NodeContext) -> None:
         """Subscribe to the steering set points; connect to the drives in the background."""

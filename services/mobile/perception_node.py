@@ -93,7 +93,7 @@ class PerceptionDriver(Driver):
     def device(cls, params: dict[str, Any]) -> DeviceEndpoint:
         """The frame server this driver connects to."""
         return DeviceEndpoint("mobile camera server", str(params.get("host", "127.0.0.1")),
-                              int(params.get("port", DEFAULT_CAMERA_PORT)), "petrobot sim mobile")
+                              int(params.get("port", DEFAULT_CAMERA_PORT)), "petrobot sim mobile", "frames")
 
     async def setup(self, node: NodeContext) -> None:
         """Start the grabbing thread and subscribe to the drive node's odometry."""
