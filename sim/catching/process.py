@@ -75,10 +75,12 @@ def add_arguments(c: argparse.ArgumentParser) -> None:
     c.add_argument("--fps", type=float, default=25.0, help="camera frame rate, 1/s (default 25)")
     c.add_argument("--noise", type=float, default=2.0,
                    help="grey-level pixel noise sigma (default 2)")
-    c.add_argument("--camera-port", type=int, default=DEFAULT_CAMERA_PORT,
-                   help=f"TCP port of the camera frame server (default {DEFAULT_CAMERA_PORT}; 0: any)")
-    c.add_argument("--can-port", type=int, default=DEFAULT_CAN_PORT,
-                   help=f"TCP port of the socketcand CAN gateway (default {DEFAULT_CAN_PORT}; 0: any)")
+    c.add_argument("--camera-port", type=int, default=None,
+                   help=f"TCP port of the camera frame server (default: the camera driver's in services.toml, "
+                        f"else {DEFAULT_CAMERA_PORT}; 0: any)")
+    c.add_argument("--can-port", type=int, default=None,
+                   help=f"TCP port of the socketcand CAN gateway (default: the PUMA driver's in services.toml, "
+                        f"else {DEFAULT_CAN_PORT}; 0: any)")
     c.add_argument("--host", default="127.0.0.1",
                    help="address the camera server and the CAN gateway listen on (default 127.0.0.1)")
     c.add_argument("--camera-wait-ms", type=float, default=100.0, metavar="MS",
@@ -88,6 +90,10 @@ def add_arguments(c: argparse.ArgumentParser) -> None:
                    help="wall time waited at each SYNC for the targets of a CAN master that answered "
                         "the previous one (default 100; 0: never wait)")
 
+
+
+def _port(given: int | None, default: int) -> int:
+    return default if given is None else given
 
 
 def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
@@ -153,7 +159,8 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         info = camera_info(cam, hom, robot_base=cw.robot_base,
                            rolling_model=cw.ball.rolling_decel_params(), fps=args.fps,
                            table_size=(cw.table.length, cw.table.width))
-        camera_port, can_port = proc.serve(args.host, args.camera_port, info, drives.bus, args.can_port)
+        camera_port, can_port = proc.serve(args.host, _port(args.camera_port, DEFAULT_CAMERA_PORT), info,
+                                           drives.bus, _port(args.can_port, DEFAULT_CAN_PORT))
         server = proc.server
         assert server is not None
         proc.emit("ready", mode=args.mode, host=args.host, camera_port=camera_port, can_port=can_port,

@@ -59,8 +59,12 @@ def add_arguments(c: argparse.ArgumentParser) -> None:
     c.add_argument("--fps", type=float, default=50.0, help="camera frame rate, 1/s (default 50)")
     c.add_argument("--duration", type=float, default=0.0, help="stop after this many simulated seconds (0: never)")
     c.add_argument("--pose-every", type=float, default=0.1, help="ground-truth pose line period, s of sim time")
-    c.add_argument("--camera-port", type=int, default=DEFAULT_CAMERA_PORT, help="frame server port (0: any)")
-    c.add_argument("--can-port", type=int, default=DEFAULT_CAN_PORT, help="CAN gateway port (0: any)")
+    c.add_argument("--camera-port", type=int, default=None,
+                   help=f"frame server port (default: the perception driver's in services.toml, else "
+                        f"{DEFAULT_CAMERA_PORT}; 0: any)")
+    c.add_argument("--can-port", type=int, default=None,
+                   help=f"CAN gateway port (default: the wheel drives' driver's in services.toml, else "
+                        f"{DEFAULT_CAN_PORT}; 0: any)")
     c.add_argument("--host", default="127.0.0.1", help="address the servers listen on (default 127.0.0.1)")
     c.add_argument("--master-wait-ms", type=float, default=100.0, metavar="MS",
                    help="wall time waited at each SYNC for the targets of a CAN master that answered "
@@ -113,7 +117,9 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
             "beacon_height": course.beacon.height, "square": course.square, "track_width": course.track_width,
             "course": course.name, "fps": args.fps,
         }
-        camera_port, can_port = proc.serve(args.host, args.camera_port, info, can.bus, args.can_port)
+        camera_port, can_port = proc.serve(
+            args.host, DEFAULT_CAMERA_PORT if args.camera_port is None else args.camera_port, info, can.bus,
+            DEFAULT_CAN_PORT if args.can_port is None else args.can_port)
         world.step(25)  # let the robot settle on its wheels
         ex, ey = course.end_point()
         proc.emit("ready", mode=args.mode, host=args.host, camera_port=camera_port, can_port=can_port,
