@@ -42,17 +42,12 @@ MODULES = _modules()
 
 
 def _imports(name: str, path: Path) -> set[str]:
-    """Project modules imported by one module, anywhere in it (functions included), except under
-    ``if TYPE_CHECKING:`` (annotations only: no import at run time)."""
+    """Project modules imported by one module, anywhere in it (functions included, and imports for
+    annotations only, under ``if TYPE_CHECKING:``: a circle of types is a circle of design)."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
     is_pkg = path.name == "__init__.py"
-    typing_only = {id(n) for block in ast.walk(tree) if isinstance(block, ast.If)
-                   and ast.unparse(block.test) in ("TYPE_CHECKING", "typing.TYPE_CHECKING")
-                   for stmt in block.body for n in ast.walk(stmt)}
     out: set[str] = set()
     for node in ast.walk(tree):
-        if id(node) in typing_only:
-            continue
         if isinstance(node, ast.Import):
             targets = [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
