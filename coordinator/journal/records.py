@@ -16,7 +16,7 @@ from coordinator.engine import Instance
 from coordinator.net import Marking
 from coordinator.performance import ActionRecord
 from coordinator.reconcile import differs
-from services.results import Status
+from services.results import ActionResult, Status
 
 __all__ = ["FiringRow", "LearnerState", "OperatorRow", "ReconciliationRow", "Recovered", "ResultRow", "RunRow", "RunStats",
            "StartRow"]
@@ -90,26 +90,76 @@ class RunStats:
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ResultRow(ActionRecord):
-    """One primitive-action result: an :class:`~coordinator.performance.ActionRecord` and where it
-    came from.
+class ResultRow:
+    """One primitive-action result: the :class:`~services.results.ActionResult` the coordinator
+    received, and where it came from.
+
+    The result is the one record of how the call ended, as the node sent it and the engine took it
+    (validated once, when the journal's row was read back); ``status``, ``outcome``, ``cost``,
+    ``wall_s``, ``cpu_s``, ``reason`` and ``value`` read it. :attr:`record` is the same result as
+    the performance functions take it.
 
     Attributes:
         run: run id.
         instance: instance id (the call id).
+        task, action: the primitive task and the primitive action that ran.
         node: the node that ran the action, or ``None``.
+        result: how the call ended (its ``value`` decoded from JSON, ``None`` when JSON could not
+            hold it).
         t_wall: when the coordinator received the result.
-        reason: why an error happened, or ``None``.
-        value: the returned value, decoded from JSON (``None`` when JSON could not hold it).
+        entry: order among every record of the journal.
     """
 
     run: str
     instance: str
-    node: str | None = None
+    task: str
+    action: str
+    node: str | None
+    result: ActionResult
     t_wall: float = 0.0
-    reason: str | None = None
-    value: Any = None
     entry: int = 0
+
+    @property
+    def status(self) -> Status:
+        """How the call ended."""
+        return self.result.status
+
+    @property
+    def outcome(self) -> str | None:
+        """Its named outcome, or ``None``."""
+        return self.result.outcome
+
+    @property
+    def cost(self) -> float | None:
+        """The action's own cost figure, or ``None``."""
+        return self.result.cost
+
+    @property
+    def wall_s(self) -> float:
+        """Wall-clock duration on the node, s."""
+        return self.result.wall_s
+
+    @property
+    def cpu_s(self) -> float:
+        """CPU time on the node, s."""
+        return self.result.cpu_s
+
+    @property
+    def reason(self) -> str | None:
+        """Why an error happened, or ``None``."""
+        return self.result.reason
+
+    @property
+    def value(self) -> Any:
+        """The returned value."""
+        return self.result.value
+
+    @property
+    def record(self) -> ActionRecord:
+        """The result as the performance functions take it (:mod:`coordinator.performance`)."""
+        r = self.result
+        return ActionRecord(task=self.task, action=self.action, status=r.status, outcome=r.outcome, cost=r.cost,
+                            wall_s=r.wall_s, cpu_s=r.cpu_s)
 
 
 @dataclass(frozen=True, slots=True)
@@ -172,9 +222,9 @@ class ReconciliationRow:
         run, instance, task, action, node: the call (``instance`` is the call id).
         assumed: the status the net went on with (the journaled result's), or ``None`` when no
             result was journaled (the run ended, on abort or deadline, before one came).
-        status: the node's final status, or ``None`` when the node does not know the call (it
-            never ran, or its result is no longer kept).
-        outcome, reason, cost, wall_s, cpu_s, value: the node's result (``None`` when unknown).
+        truth: the node's final result, or ``None`` when the node does not know the call (it
+            never ran, or its result is no longer kept); ``status``, ``outcome``, ``reason``,
+            ``cost``, ``wall_s``, ``cpu_s`` and ``value`` read it (``None`` when unknown).
         t_wall: when the node's answer was journaled.
         entry: order among every record of the journal.
     """
@@ -185,20 +235,43 @@ class ReconciliationRow:
     action: str
     node: str | None
     assumed: Status | None
-    status: Status | None
-    outcome: str | None
-    reason: str | None
-    cost: float | None
-    wall_s: float | None
-    cpu_s: float | None
-    value: Any
+    truth: ActionResult | None
     t_wall: float
     entry: int = 0
 
     @property
+    def status(self) -> Status | None:
+        """The node's final status, or ``None`` when it does not know the call."""
+        return None if self.truth is None else self.truth.status
+
+    @property
+    def outcome(self) -> str | None:
+        return None if self.truth is None else self.truth.outcome
+
+    @property
+    def reason(self) -> str | None:
+        return None if self.truth is None else self.truth.reason
+
+    @property
+    def cost(self) -> float | None:
+        return None if self.truth is None else self.truth.cost
+
+    @property
+    def wall_s(self) -> float | None:
+        return None if self.truth is None else self.truth.wall_s
+
+    @property
+    def cpu_s(self) -> float | None:
+        return None if self.truth is None else self.truth.cpu_s
+
+    @property
+    def value(self) -> Any:
+        return None if self.truth is None else self.truth.value
+
+    @property
     def known(self) -> bool:
         """True when the node knew the call (it ran, or started and died with the node)."""
-        return self.status is not None
+        return self.truth is not None
 
     @property
     def differs(self) -> bool:
