@@ -45,7 +45,7 @@ from services.action import CallContext, PrimitiveAction
 from services.catching.arm import PumaDriver, table_to_base
 from services.catching.robot import motion_control as mc
 from services.catching.robot.puma560 import UnreachableError
-from services.catching.setpoints import SetPoint, SetPointSubscription, StreamLostError
+from services.catching.setpoints import CatchSetPoint, SetPointSubscription, StreamLostError
 from services.devices.drives import BusError
 from services.results import ActionResult, Status
 
@@ -160,7 +160,7 @@ when it started, bus time).
             drv.arm_catch()
             t_bus0 = drv.bus_time()
             sp = await self._first_set_point(sub, drv, min(first_wait, timeout))
-            used: SetPoint | None = None
+            used: CatchSetPoint | None = None
             t_rim: float | None = None
             wall_deadline = t0 + _WALL_BACKSTOP * timeout
             while True:
@@ -216,7 +216,7 @@ when it started, bus time).
                     f"{exc}; watchdog stopped the arm in {t_rest - t_trigger:.3f} s (bus time)")
 
     @staticmethod
-    async def _first_set_point(sub: SetPointSubscription, drv: PumaDriver, timeout: float) -> SetPoint:
+    async def _first_set_point(sub: SetPointSubscription, drv: PumaDriver, timeout: float) -> CatchSetPoint:
         """The first set point received after :meth:`SetPointSubscription.restart`.
 
         Raises:
@@ -235,7 +235,7 @@ when it started, bus time).
         raise StreamLostError(f"no set point within {timeout} s{where}")
 
     @staticmethod
-    def _aim(drv: PumaDriver, sp: SetPoint, info: dict[str, Any]) -> float | None:
+    def _aim(drv: PumaDriver, sp: CatchSetPoint, info: dict[str, Any]) -> float | None:
         xb, yb, vxb, vyb = table_to_base(sp.x, sp.y, sp.vx, sp.vy, drv.robot_base)  # type: ignore[arg-type]
         try:
             with drv.lock:

@@ -14,7 +14,7 @@ driver had its own module).
   (see *Location within specification* below); without it any detection on the table is a success.
 * :class:`Predict` (primitive task *predict*): tracks the ball frame by frame, predicts where and
   when it crosses the catch line, and publishes each prediction as a set point (table frame, as
-  :class:`services.catching.setpoints.SetPoint` specifies; the motion node turns it into its base frame) on
+  :class:`services.catching.setpoints.CatchSetPoint` specifies; the motion node turns it into its base frame) on
   the node's event topic ``setpoints`` (param ``topic``), to which the motion node subscribes
   through its authenticated node link (:mod:`services.catching.setpoints`). ``success`` once the ball has
   crossed, with the last prediction; ``failure`` when the ball stops or vanishes before the line;
@@ -59,7 +59,7 @@ from services.catching.camera import (
 from services.devices.framegrabber import Frame
 from services.errors import ActionError
 from services.results import ActionResult, Status
-from services.catching.setpoints import SETPOINT_TOPIC, SetPoint
+from services.catching.setpoints import SETPOINT_TOPIC, CatchSetPoint
 from services.catching.vision import (
     BallTracker,
     Detection,
@@ -282,7 +282,7 @@ class Predict(PrimitiveAction):
                 pred = tracker.observe(det, frame.t)
                 cpu += time.thread_time() - c0
                 if pred is not None:
-                    sp = SetPoint(seq=sent, t_frame=frame.t, t_capture=frame.t_wall, t_sent=time.time(),
+                    sp = CatchSetPoint(seq=sent, t_frame=frame.t, t_capture=frame.t_wall, t_sent=time.time(),
                                   x=pred.x, y=pred.y, t=pred.t, vx=pred.vx, vy=pred.vy,
                                   sigma_y=pred.sigma_y, sigma_t=pred.sigma_t)
                     ctx.publish(topic, sp.to_dict())

@@ -66,6 +66,8 @@ import math
 import struct
 from dataclasses import dataclass, field
 
+from services.errors import PetrobotError
+
 __all__ = [
     "CONSUMER_HEARTBEAT_S",
     "CROSSFIRE_ID",
@@ -139,7 +141,7 @@ object 0x1016: 3.5 periods of the master's 100 ms heartbeat)."""
 _INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
 
 
-class FrameError(ValueError):
+class FrameError(PetrobotError, ValueError):
     """A CAN payload or socketcand message is malformed or out of range."""
 
 

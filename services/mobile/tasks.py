@@ -39,7 +39,7 @@ from .camera import GroundCamera
 from .lines import LineEstimate, make_detector
 from .marks import EndMarkDetector, GapMonitor
 from .odometry import DriveGeometry, Pose2D
-from .steering import PurePursuit, SetPoint, SpeedLimits, SteeringController
+from .steering import PurePursuit, SteeringSetPoint, SpeedLimits, SteeringController
 
 __all__ = [
     "DETECTORS",
@@ -113,7 +113,7 @@ class Step:
         note: why it ended, in words.
     """
 
-    setpoint: SetPoint
+    setpoint: SteeringSetPoint
     outcome: str | None = None
     success: bool = True
     note: str = ""
@@ -189,7 +189,7 @@ class CourseMemory:
             return None
         return line
 
-    def stop(self, t: float) -> SetPoint:
+    def stop(self, t: float) -> SteeringSetPoint:
         """A zero-speed set point at ``t``."""
         return self.steering.stop(t)
 

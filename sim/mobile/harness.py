@@ -46,7 +46,7 @@ from services.mobile.marks import EndMarkDetector, GapMonitor
 from services.mobile.odometry import DriveGeometry, Odometry, Pose2D
 from services.mobile.steering import (
     PurePursuit,
-    SetPoint,
+    SteeringSetPoint,
     SpeedLimits,
     SteeringController,
 )
@@ -190,7 +190,7 @@ class MobileMission:
     def tick(
         self, t: float, image: np.ndarray, encoders: tuple[float, float],
         beacons: list[BeaconObservation] | None = None,
-    ) -> SetPoint:
+    ) -> SteeringSetPoint:
         """One control step.
 
         Args:
@@ -222,7 +222,7 @@ class MobileMission:
         return self._stopping(t, pose, image, line if seen else None)
 
     # --- phases -----------------------------------------------------------------------------
-    def _follow(self, t: float, pose: Pose2D, image: np.ndarray, line: LineEstimate | None) -> SetPoint:
+    def _follow(self, t: float, pose: Pose2D, image: np.ndarray, line: LineEstimate | None) -> SteeringSetPoint:
         p = self.params
         mark = self.end_detector.detect(image)
         self._end_hits = self._end_hits + 1 if mark is not None else 0
@@ -242,7 +242,7 @@ class MobileMission:
             return self._interruption(t, pose)
         return self.steering.command(t, p.cruise, self._curvature)
 
-    def _interruption(self, t: float, pose: Pose2D) -> SetPoint:
+    def _interruption(self, t: float, pose: Pose2D) -> SteeringSetPoint:
         self.interruptions += 1
         if self._last_line is None:
             return self._fail(t, "no track seen before the interruption")
@@ -257,7 +257,7 @@ class MobileMission:
 
     def _approach(
         self, t: float, pose: Pose2D, beacons: list[BeaconObservation] | None, line: LineEstimate | None
-    ) -> SetPoint:
+    ) -> SteeringSetPoint:
         p = self.params
         if beacons:
             self.approach.observe(pose, beacons)
@@ -277,7 +277,7 @@ class MobileMission:
         self._curvature = self.approach.curvature(pose)
         return self.steering.command(t, p.approach_speed, self._curvature)
 
-    def _stopping(self, t: float, pose: Pose2D, image: np.ndarray, line: LineEstimate | None) -> SetPoint:
+    def _stopping(self, t: float, pose: Pose2D, image: np.ndarray, line: LineEstimate | None) -> SteeringSetPoint:
         p = self.params
         mark = self.end_detector.detect(image)
         if mark is not None:
@@ -294,7 +294,7 @@ class MobileMission:
             return self.steering.stop(t)
         return self.steering.command(t, v, self._curvature)
 
-    def _fail(self, t: float, reason: str) -> SetPoint:
+    def _fail(self, t: float, reason: str) -> SteeringSetPoint:
         self.reason = reason
         self._enter(Phase.FAILED, t, reason)
         return self.steering.stop(t)
@@ -426,7 +426,7 @@ class _CourseRun:
         self.world = World(dt=dt, mode=ClockMode.REALTIME if realtime else ClockMode.LOCKSTEP, solver_iterations=10)
         self.result = RunResult(course.name, length=course.length, interruptions=sum(t.blank for t in course.tiles))
         self.mw: MobileWorld | None = None
-        self.queue: deque[tuple[float, SetPoint]] = deque()
+        self.queue: deque[tuple[float, SteeringSetPoint]] = deque()
         self.pending: set[int] = set()
         self.tick_no = 0
 

@@ -25,7 +25,7 @@ from services.location import parse_location
 from services.node.server import Node
 from services.catching.robot import motion_control as mc
 from services.catching.robot import puma560 as P
-from services.catching.setpoints import SetPoint
+from services.catching.setpoints import CatchSetPoint
 from sim.socketcand import CanGateway
 
 ROBOT_BASE = (0.75, 0.0, 0.46, math.pi)
@@ -117,7 +117,7 @@ class Bench:
             t0 = time.monotonic()
             seq = 0
             while stop_after_s is None or time.monotonic() - t0 <= stop_after_s:
-                sp = SetPoint(seq=seq, t_frame=self.rig.t, t_capture=time.time(), t_sent=time.time(),
+                sp = CatchSetPoint(seq=seq, t_frame=self.rig.t, t_capture=time.time(), t_sent=time.time(),
                               x=0.0, y=y, t=t_cross, vx=vx, vy=0.0).to_dict()
                 if bad is not None and seq % 3 == 2:
                     sp.update(bad)

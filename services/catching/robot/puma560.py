@@ -28,6 +28,8 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from services.errors import PetrobotError
+
 __all__ = [
     "CUP_DEPTH",
     "CUP_INNER_RADIUS",
@@ -90,7 +92,7 @@ CUP_MASS = 0.08  # kg
 CUP_RESTITUTION = 0.05
 
 
-class UnreachableError(ValueError):
+class UnreachableError(PetrobotError, ValueError):
     """No inverse-kinematics solution exists within the joint limits for the requested pose."""
 
 
