@@ -89,8 +89,42 @@ class RunStats:
         return (self.run.ended_wall or self.last_wall) - self.run.started_wall
 
 
+class _ResultField:
+    """One field of the :class:`~services.results.ActionResult` a row holds, read through the row
+    (``row.status`` is ``row.result.status``; ``None`` when the row holds no result)."""
+
+    name = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, row: Any, owner: type | None = None) -> Any:
+        if row is None:
+            return self
+        result = row.action_result()
+        return None if result is None else getattr(result, self.name)
+
+
+class _HoldsResult:
+    """A row that holds an action's result: its fields read through the row."""
+
+    __slots__ = ()
+
+    status = _ResultField()
+    outcome = _ResultField()
+    cost = _ResultField()
+    wall_s = _ResultField()
+    cpu_s = _ResultField()
+    reason = _ResultField()
+    value = _ResultField()
+
+    def action_result(self) -> ActionResult | None:
+        """The result the row holds, or ``None``."""
+        raise NotImplementedError
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ResultRow:
+class ResultRow(_HoldsResult):
     """One primitive-action result: the :class:`~services.results.ActionResult` the coordinator
     received, and where it came from.
 
@@ -119,40 +153,9 @@ class ResultRow:
     t_wall: float = 0.0
     entry: int = 0
 
-    @property
-    def status(self) -> Status:
-        """How the call ended."""
-        return self.result.status
-
-    @property
-    def outcome(self) -> str | None:
-        """Its named outcome, or ``None``."""
-        return self.result.outcome
-
-    @property
-    def cost(self) -> float | None:
-        """The action's own cost figure, or ``None``."""
-        return self.result.cost
-
-    @property
-    def wall_s(self) -> float:
-        """Wall-clock duration on the node, s."""
-        return self.result.wall_s
-
-    @property
-    def cpu_s(self) -> float:
-        """CPU time on the node, s."""
-        return self.result.cpu_s
-
-    @property
-    def reason(self) -> str | None:
-        """Why an error happened, or ``None``."""
-        return self.result.reason
-
-    @property
-    def value(self) -> Any:
-        """The returned value."""
-        return self.result.value
+    def action_result(self) -> ActionResult:
+        """The result the row holds."""
+        return self.result
 
     @property
     def record(self) -> ActionRecord:
@@ -210,7 +213,7 @@ class OperatorRow:
 
 
 @dataclass(frozen=True, slots=True)
-class ReconciliationRow:
+class ReconciliationRow(_HoldsResult):
     """What a node said, when asked afterwards, about a call the coordinator had given up on.
 
     The coordinator gives up on a call when node trouble (a lost connection, missed heartbeats, an
@@ -239,34 +242,9 @@ class ReconciliationRow:
     t_wall: float
     entry: int = 0
 
-    @property
-    def status(self) -> Status | None:
-        """The node's final status, or ``None`` when it does not know the call."""
-        return None if self.truth is None else self.truth.status
-
-    @property
-    def outcome(self) -> str | None:
-        return None if self.truth is None else self.truth.outcome
-
-    @property
-    def reason(self) -> str | None:
-        return None if self.truth is None else self.truth.reason
-
-    @property
-    def cost(self) -> float | None:
-        return None if self.truth is None else self.truth.cost
-
-    @property
-    def wall_s(self) -> float | None:
-        return None if self.truth is None else self.truth.wall_s
-
-    @property
-    def cpu_s(self) -> float | None:
-        return None if self.truth is None else self.truth.cpu_s
-
-    @property
-    def value(self) -> Any:
-        return None if self.truth is None else self.truth.value
+    def action_result(self) -> ActionResult | None:
+        """The node's final result, or ``None``."""
+        return self.truth
 
     @property
     def known(self) -> bool:
