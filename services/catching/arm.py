@@ -32,7 +32,7 @@ one set of RPDO targets. The crossfire sensor's rising edge publishes the extern
 
 Faults: before every action the driver makes sure the drives are usable, the way a CiA 402 master
 does: a drive in FAULT (following error, RPDO timeout, lost master heartbeat; the drive's EMCY says
-which) is reset and enabled again (:meth:`services.devices.drives.PumaDrives.enable`) and the servo
+which) is reset and enabled again (:meth:`services.devices.drives.CanDrives.enable`) and the servo
 restarts where the arm is; a lost bus is reconnected. ``move_home`` reports a recovery in its value
 (``recovered``).
 """
@@ -53,7 +53,8 @@ from services.action import Driver, NodeContext
 from services.catching.robot import motion_control as mc
 from services.catching.setpoints import SETPOINT_TOPIC, SetPointSubscription
 from services.devices import cia402 as cf
-from services.devices.drives import BusError, PumaDrives
+from services.catching.drives import PumaDrives
+from services.devices.drives import BusError
 from services.devices.endpoint import DeviceEndpoint
 from services.errors import ActionError, LocationError
 

@@ -62,7 +62,7 @@ drive node reports that its **watchdog** stopped the wheels during the action (s
 reaching it) or a drive fault, or on ``timeout_s`` (60 s of camera time).
 
 **Drive node** — driver :class:`~services.mobile.drive_node.DriveDriver` (the wheel drives on the CAN bus, CiA 402 profile
-velocity mode, :class:`services.devices.drives.WheelCanDrives`): a control thread runs once per
+velocity mode, :class:`services.devices.drives.VelocityCanDrives`): a control thread runs once per
 SYNC, integrates the wheel encoders into odometry (:class:`services.mobile.odometry.Odometry`),
 commands the latest valid steering set point's wheel speeds (:class:`~services.mobile.setpoints.SteeringInput`: validation,
 latest wins, the **watchdog**: none for ``stale_s`` = 0.25 s → zero speed, a controlled stop on the

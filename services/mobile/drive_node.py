@@ -11,7 +11,8 @@ import time
 from typing import Any
 
 from services.action import CallContext, Driver, NodeContext, PrimitiveAction
-from services.devices.drives import BusError, WheelCanDrives
+from services.devices import cia402 as cf
+from services.devices.drives import BusError, VelocityCanDrives
 from services.devices.endpoint import DeviceEndpoint
 from services.errors import ActionError, LocationError
 from services.mobile.odometry import DriveGeometry, Odometry, Pose2D
@@ -54,7 +55,7 @@ class DriveDriver(Driver):
         ``latency_every`` (param, 500) set points."""
         self.latency_every = int(p.get("latency_every", 500))
         self.odometry = Odometry(self.geometry)
-        self.drives: WheelCanDrives | None = None
+        self.drives: VelocityCanDrives | None = None
         self.fault: str | None = None
         self.lock = threading.Lock()
         self.pose = Pose2D()
@@ -112,8 +113,9 @@ class DriveDriver(Driver):
             await asyncio.sleep(0.5)
 
     def _start(self) -> None:
-        drives = WheelCanDrives(self.can_host, self.can_port, self.channel,
-                                heartbeat_timeout=self.heartbeat_timeout, silence_timeout=self.bus_silence)
+        drives = VelocityCanDrives(self.can_host, self.can_port, self.channel,
+                                   heartbeat_timeout=self.heartbeat_timeout, silence_timeout=self.bus_silence,
+                                   nodes=cf.WHEEL_IDS)
         drives.open(timeout=self.connect_timeout)
         try:
             drives.start(timeout=self.connect_timeout)

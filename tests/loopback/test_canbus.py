@@ -13,7 +13,8 @@ from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_me
 from puma_rig import SimRig
 
 from services.devices import cia402 as cf
-from services.devices.drives import BusError, PumaDrives
+from services.catching.drives import PumaDrives
+from services.devices.drives import BusError
 from services.catching.robot import puma560 as P
 from sim import socketcand
 from sim.socketcand import CanGateway
