@@ -8,9 +8,9 @@ Usage::
 Phase 1 (one process, lock-step simulated time, 1 kHz): for every throw of a seeded thrower the
 pybullet world rolls the ball; the analytic camera renders it at ``--fps`` twice, without noise and
 with 0.5 px position noise plus grey-level noise; each image goes through the locator, the
-calibrated pixel → table map and the rolling-ball predictor (services.vision); the noisy
-pipeline's set points (in the robot base frame) drive services.robots.motion_control's servo, whose joint
-targets go as CiA 402 RPDOs over the simulated CAN bus to the simulated drives (sim.canbus), stepped
+calibrated pixel → table map and the rolling-ball predictor (services.catching.vision); the noisy
+pipeline's set points (in the robot base frame) drive services.catching.robot.motion_control's servo, whose joint
+targets go as CiA 402 RPDOs over the simulated CAN bus to the simulated drives (sim.catching.drives), stepped
 in-process every 1 ms.
 
 Measured per throw: the lateral prediction error at the catch line of the last prediction made at
@@ -30,7 +30,7 @@ mis-calibrated model; the simulated ball keeps the true one).
 Phase 2 (real time, three processes on 127.0.0.1): the sim (``coordinator.commands.sim catching``,
 world paced to the wall clock, analytic camera at the demo's 320×240 and 25 frames/s by default), a
 vision node (``services.node``: camera driver and ``predict``, which publishes each set point as an
-event of the node) and this process as the motion side (a :class:`services.stream.SetPointSubscription`
+event of the node) and this process as the motion side (a :class:`services.catching.setpoints.SetPointSubscription`
 on an authenticated node link, as the motion node has; it calls ``predict`` once per throw).
 Latency = receive time of a set point minus the capture time of its frame (same host clock), split
 into capture → sent (frame transfer and image processing) and sent → received (the node protocol).
@@ -55,8 +55,8 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from services.devices import cia402 as cf
-from services.robots import motion_control, puma560
-from services.vision import (
+from services.catching.robot import motion_control, puma560
+from services.catching.vision import (
     BallTracker,
     RollingModel,
     RollingPredictor,
@@ -64,13 +64,13 @@ from services.vision import (
     locate_bgdiff,
     locate_threshold,
 )
-from sim.camera import (
+from sim.catching.camera import (
     AnalyticRenderer,
     calibrate,
     overhead_camera,
 )
-from sim.canbus import SimDrives
-from sim.catching import CatchingWorld, Thrower
+from sim.catching.drives import SimDrives
+from sim.catching.world import CatchingWorld, Thrower
 from sim.world import World
 
 LEAD_TOLERANCE_M = 0.005
@@ -299,12 +299,12 @@ port = {node_port}
 
 [drivers.camera]
 node = "vision"
-impl = "services.actions.camera:CameraDriver"
+impl = "services.catching.camera:CameraDriver"
 params = {{ port = {camera_port} }}
 
 [actions.predict]
 node = "vision"
-impl = "services.actions.vision:Predict"
+impl = "services.catching.vision_node:Predict"
 """
 
 
@@ -319,7 +319,7 @@ def _free_port() -> int:
 async def _subscribe_and_predict(port: int, key: bytes, seconds: float, on_sp: Any) -> None:
     """Subscribe to the vision node's set points and call ``predict`` for ``seconds`` (wall)."""
     from services.client import NodeLink
-    from services.stream import SetPointSubscription
+    from services.catching.setpoints import SetPointSubscription
 
     link = NodeLink("vision", ("127.0.0.1", port), key, name="node:motion", connect_timeout_s=30.0)
     try:

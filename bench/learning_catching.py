@@ -13,7 +13,7 @@ frame; each instance draws one of the three primitive actions (``locate_threshol
 ``locate_average``) from a pursuit automaton configured as ``nets/catch.toml``'s locate task
 (:meth:`coordinator.learning.Learner.from_net`), runs the same pure locator function the vision
 action runs on the rendered frames, and judges the location as the vision action does with
-``spec_m`` (:func:`services.actions.vision.track_residual` over the next ``VERIFY_FRAMES`` frames;
+``spec_m`` (:func:`services.catching.vision_node.track_residual` over the next ``VERIFY_FRAMES`` frames;
 the node has no ground truth). The status (``success`` within specification, else ``failure``) and
 the locator's measured CPU time go to the automaton. A failed instance is followed by a new one on
 the next frame, as the net's *no ball seen* transition restarts the run. After a success, prediction
@@ -49,9 +49,9 @@ from bench.catching import InProcessDrives, rim_position
 from bench.stdio import stdout_to_stderr
 from coordinator.learning import Learner, LearningAutomaton
 from coordinator.netfile import load_net
-from services.actions.vision import VERIFY_FRAMES, track_residual
-from services.robots import motion_control, puma560
-from services.vision import (
+from services.catching.vision_node import VERIFY_FRAMES, track_residual
+from services.catching.robot import motion_control, puma560
+from services.catching.vision import (
     BallTracker,
     Detection,
     Homography,
@@ -62,9 +62,9 @@ from services.vision import (
     locate_bgdiff,
     locate_threshold,
 )
-from sim.camera import AnalyticRenderer, calibrate, overhead_camera
-from sim.canbus import SimDrives
-from sim.catching import CatchingWorld, Thrower
+from sim.catching.camera import AnalyticRenderer, calibrate, overhead_camera
+from sim.catching.drives import SimDrives
+from sim.catching.world import CatchingWorld, Thrower
 from sim.world import World
 
 TASK = "locate"

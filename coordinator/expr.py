@@ -41,6 +41,8 @@ from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from services.errors import PetrobotError
+
 __all__ = [
     "MAX_DEPTH",
     "MAX_LENGTH",
@@ -65,7 +67,7 @@ Scalar = int | float | bool
 """The value of an expression on one marking."""
 
 
-class ExprError(ValueError):
+class ExprError(PetrobotError, ValueError):
     """A syntax, type or name error in a marking expression.
 
     Attributes:

@@ -33,7 +33,7 @@ from __future__ import annotations
 import enum
 import numbers
 import re
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import ItemsView, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
 from types import MappingProxyType
@@ -402,8 +402,22 @@ class Marking(Mapping[str, int]):
         self._items: dict[str, int] = dict(sorted(data.items()))
         self._hash: int | None = None
 
+    @classmethod
+    def from_counts(cls, counts: Mapping[str, int]) -> Marking:
+        """The marking of ``counts`` that whoever counted them keeps non-negative integers (an
+        engine's place counts): zeros dropped, no other check, for a reader that asks many times a
+        second (the web console's frames)."""
+        m = cls.__new__(cls)
+        m._items = dict(sorted((p, n) for p, n in counts.items() if n))
+        m._hash = None
+        return m
+
     def __getitem__(self, place: str) -> int:
         return self._items.get(place, 0)
+
+    def items(self) -> ItemsView[str, int]:
+        """(place, tokens) of the non-empty places, in place order."""
+        return self._items.items()
 
     def __contains__(self, place: object) -> bool:
         return place in self._items
@@ -831,6 +845,14 @@ class PetriNet:
                                            f"{Marking(where).to_dict()}, where it is enabled; it must be "
                                            f"finite and {need}"))
         return out
+
+    def summary(self) -> str:
+        """One line describing the net: its name, places, transitions, arcs, primitive tasks (and
+        their actions) and initial tokens (what ``petrobot check`` and the web console say of it)."""
+        actions = sum(len(t.actions) for t in self.tasks.values())
+        return (f"net {self.name!r}: {len(self.places)} places, {len(self.transitions)} transitions, "
+                f"{len(self.arcs)} arcs, {len(self.tasks)} primitive tasks ({actions} actions), "
+                f"{self.initial_marking.total} initial tokens")
 
     # ------------------------------------------------------------------ derived nets
     def with_initial_marking(self, marking: Mapping[str, int]) -> PetriNet:

@@ -194,8 +194,13 @@ class NodeGroup:
         if proc.returncode is not None:
             await asyncio.sleep(2 * _POLL_S)  # let the follower read the last lines
             last = "; ".join(line for line in self.tail(name) if line) or "no output"
-            raise PetrobotError(f"node {name} exited with status {proc.returncode} before listening: {last}")
-        raise PetrobotError(f"node {name} not listening after {timeout_s:g} s")
+            raise PetrobotError(f"node {name} exited with status {proc.returncode} before listening: {last}"
+                                + self._log_said(name))
+        raise PetrobotError(f"node {name} not listening after {timeout_s:g} s" + self._log_said(name))
+
+    def _log_said(self, name: str) -> str:
+        path = self.log_path(name)
+        return f" (log {path})" if path is not None else ""
 
     def running(self) -> list[str]:
         """The nodes whose process has not exited."""

@@ -45,8 +45,8 @@ Formulas used here, each with its source:
   imports this module, never the other way).
 
 Records: :class:`ActionRecord` is one result of a primitive action, what these formulas need; the
-journal's :class:`coordinator.journal.ResultRow` is one (it adds where the result came from), so
-the journal's rows are passed here as they are read. This module opens no file.
+journal gives each of its results as one (:attr:`coordinator.journal.ResultRow.record`,
+:func:`coordinator.journal.read_results`). This module opens no file.
 """
 
 from __future__ import annotations

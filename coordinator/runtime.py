@@ -231,7 +231,7 @@ class Runtime:
         if recovered is not None:  # a resumed run counts the results before its interruption too
             for row in journal.results(self.run_id):
                 self.stats.setdefault((row.task, row.action), ActionStats(row.task, row.action, row.node or "?")).record(
-                    ActionResult(status=row.status, wall_s=row.wall_s or 0.0))
+                    row.result)
         self.errors: list[str] = []
         self._reconciler = Reconciler(client, self._reconciled)
         self._reconcile_s = reconcile_s
@@ -359,8 +359,7 @@ class Runtime:
         for row in self.journal.results(self.run_id):
             if row.instance in done or row.node is None or row.status is not Status.ERROR:
                 continue
-            seen = ActionResult(status=Status.ERROR, reason=row.reason, wall_s=row.wall_s or 0.0, cpu_s=row.cpu_s or 0.0)
-            if given_up(seen):
+            if given_up(row.result):
                 self._reconciler.add(GivenUp(row.instance, row.task, row.action, row.node, row.status,
                                              row.reason or ""))
 

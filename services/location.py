@@ -34,7 +34,7 @@ Format (every section optional except ``[nodes.*]``)::
 
     [drivers.camera]              # optional background components started with the node
     node = "alpha"
-    impl = "services.actions.camera:CameraDriver"
+    impl = "services.catching.camera:CameraDriver"
     params = {}
 
     [events.image_sampling_tick]  # which node publishes each external event topic
@@ -63,7 +63,7 @@ import ipaddress
 import math
 import os
 import re
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
@@ -84,7 +84,12 @@ from services.textfile import TextProblem, decode_utf8, read_capped
 from services.tomllines import parse_toml
 
 __all__ = [
+    "ACTION_KEYS",
+    "DRIVER_KEYS",
+    "EVENT_KEYS",
     "MEMORY_ACTIONS",
+    "NODE_KEYS",
+    "TOP_KEYS",
     "ActionPlacement",
     "DriverSpec",
     "Location",
@@ -366,185 +371,238 @@ def parse_location(text: str, *, path: str = "<string>") -> Location:
         doc, lines = parse_toml(text)
     except TextProblem as exc:
         raise _error(path, exc.line, exc.problem.replace("TOML syntax error", "not valid TOML", 1)) from None
+    return _LocationLoader(doc, lines, path).load()
 
-    def fail(problem: str, *key: str) -> LocationError:
-        return _error(path, lines.line(*key), problem)
 
-    def table(key: str) -> Mapping[str, Any]:
-        value = doc.get(key, {})
-        if not isinstance(value, dict):
-            raise fail(f"[{key}] must be a table", key)
-        return value
+TOP_KEYS = frozenset({"nodes", "actions", "drivers", "events", "memory", "tls", "ros2"})
+"""The tables a location file may have."""
+NODE_KEYS = frozenset({"host", "port", "max_in_flight", "state_dir", "tls", "ros2"})
+"""The keys of a ``[nodes.NAME]`` table."""
+ACTION_KEYS = frozenset({"node", "impl", "local_only", "deadline_s", "params", "unattended", "ros2"})
+"""The keys of an ``[actions.NAME]`` table."""
+DRIVER_KEYS = frozenset({"node", "impl", "params"})
+"""The keys of a ``[drivers.NAME]`` table."""
+EVENT_KEYS = frozenset({"node", "ros2"})
+"""The keys of an ``[events.TOPIC]`` table."""
 
-    def check_keys(entry: Mapping[str, Any], allowed: set[str], where: str, *key: str) -> None:
-        extra = sorted(set(entry) - allowed)
+
+class _LocationLoader:
+    """Turns a parsed location file into a :class:`Location`, one kind of table after the other
+    (the ``[tls]`` and ``[ros2]`` defaults, then nodes: every other table names one). The first
+    problem stops it, as a :class:`~services.errors.LocationError` at the line of its key
+    (``FILE:LINE: problem``).
+
+    A new key of a table goes in its ``*_KEYS`` set and in the method that reads one entry of that
+    kind (:meth:`node`, :meth:`action`, :meth:`driver`, :meth:`event`); the ``ros2`` tables are read
+    by :mod:`services.ros2.config` through :meth:`ros2_of`.
+    """
+
+    def __init__(self, doc: dict[str, Any], lines: Any, path: str) -> None:
+        self.doc = doc
+        self.lines = lines
+        self.path = path
+        self.directory = os.path.dirname(path) if path != "<string>" else ""
+        self.tls = TlsSettings()
+        self.ros2 = SessionSettings()
+        self.nodes: dict[str, NodeSpec] = {}
+        self.ros2_events: dict[str, Ros2EventSpec] = {}
+        self._addresses: dict[tuple[str, int], str] = {}
+
+    def load(self) -> Location:
+        extra = sorted(set(self.doc) - TOP_KEYS)
         if extra:
-            raise fail(f"{where}: unknown key(s) {', '.join(extra)}", *key, extra[0])
+            raise self.fail(f"unknown key(s) {', '.join(extra)}", extra[0])
+        if "tls" in self.doc:
+            self.tls = self.tls_of(self.doc["tls"], "[tls]", TlsSettings(), "tls")
+        if "ros2" in self.doc:
+            self.ros2 = self.ros2_of(parse_session, self.doc["ros2"], "[ros2]", "ros2", directory=self.directory)
+        for name, entry in self.table("nodes").items():
+            self.nodes[name] = self.node(name, entry)
+        if not self.nodes:
+            raise _error(self.path, 1, "no [nodes.*] table: a location file names at least one node")
+        memory_node = self.memory()
+        actions = {name: self.action(name, entry) for name, entry in self.table("actions").items()}
+        if memory_node is not None:
+            for name in MEMORY_ACTIONS:
+                actions[name] = ActionPlacement(name=name, node=memory_node, impl=MEMORY_IMPL)
+        drivers = {name: self.driver(name, entry) for name, entry in self.table("drivers").items()}
+        events = {topic: self.event(topic, entry) for topic, entry in self.table("events").items()}
+        self.ros2_drivers(actions, events, drivers)
+        return Location(
+            path=self.path,
+            nodes=MappingProxyType(self.nodes),
+            actions=MappingProxyType(actions),
+            drivers=MappingProxyType(drivers),
+            events=MappingProxyType(events),
+            memory_node=memory_node,
+            ros2_events=MappingProxyType(self.ros2_events),
+        )
 
-    def check_name(name: str, pattern: re.Pattern[str], where: str, *key: str) -> None:
-        if len(name) > _MAX_NAME or not pattern.fullmatch(name):
-            raise fail(f"{where}: bad name (use letters, digits, '_'{_NAME_CHARS[pattern]}, starting with a "
-                       f"letter or '_'; at most {_MAX_NAME} characters)", *key)
-
-    def tls_of(entry: Any, where: str, base: TlsSettings, *key: str) -> TlsSettings:
-        try:
-            return parse_tls(entry, where, base, directory)
-        except LocationError as exc:
-            raise fail(str(exc), *key) from None
-
-    extra = sorted(set(doc) - {"nodes", "actions", "drivers", "events", "memory", "tls", "ros2"})
-    if extra:
-        raise fail(f"unknown key(s) {', '.join(extra)}", extra[0])
-    directory = os.path.dirname(path) if path != "<string>" else ""
-    tls = tls_of(doc["tls"], "[tls]", TlsSettings(), "tls") if "tls" in doc else TlsSettings()
-
-    def ros2_of(parse: Any, value: Any, where: str, *key: str, **kwargs: Any) -> Any:
-        try:
-            return parse(value, where=where, **kwargs)
-        except LocationError as exc:
-            raise fail(str(exc), *key) from None
-
-    ros2 = (ros2_of(parse_session, doc["ros2"], "[ros2]", "ros2", directory=directory) if "ros2" in doc
-            else SessionSettings())
-
-    nodes: dict[str, NodeSpec] = {}
-    seen_addr: dict[tuple[str, int], str] = {}
-    for name, entry in table("nodes").items():
+    # ---------------------------------------------------------------- one entry of each kind
+    def node(self, name: str, entry: Any) -> NodeSpec:
+        """A ``[nodes.NAME]`` table (its address must not be another node's)."""
         where = f"[nodes.{name}]"
-        if not isinstance(entry, dict):
-            raise fail(f"{where} must be a table", "nodes", name)
-        check_keys(entry, {"host", "port", "max_in_flight", "state_dir", "tls", "ros2"}, where, "nodes", name)
-        check_name(name, _NAME_RE, where, "nodes", name)
+        self.entry_table(entry, where, NODE_KEYS, "nodes", name)
+        self.check_name(name, _NAME_RE, where, "nodes", name)
         host = entry.get("host")
         port = entry.get("port")
         cap = entry.get("max_in_flight", _DEFAULT_MAX_IN_FLIGHT)
         if not isinstance(host, str) or not host:
-            raise fail(f"{where}: host must be a non-empty string", "nodes", name, "host")
+            raise self.fail(f"{where}: host must be a non-empty string", "nodes", name, "host")
         problem = _host_problem(host)
         if problem is not None:
-            raise fail(f"{where}: {problem}", "nodes", name, "host")
+            raise self.fail(f"{where}: {problem}", "nodes", name, "host")
         if type(port) is not int or not 0 < port < 65536:
-            raise fail(f"{where}: port must be an integer in 1..65535", "nodes", name, "port")
+            raise self.fail(f"{where}: port must be an integer in 1..65535", "nodes", name, "port")
         if type(cap) is not int or cap < 1:
-            raise fail(f"{where}: max_in_flight must be a positive integer", "nodes", name, "max_in_flight")
-        if (host, port) in seen_addr:
-            raise fail(f"{where}: duplicate address {host}:{port} (also node {seen_addr[host, port]!r})",
-                       "nodes", name, "port")
-        seen_addr[host, port] = name
+            raise self.fail(f"{where}: max_in_flight must be a positive integer", "nodes", name, "max_in_flight")
+        if (host, port) in self._addresses:
+            raise self.fail(f"{where}: duplicate address {host}:{port} (also node {self._addresses[host, port]!r})",
+                            "nodes", name, "port")
+        self._addresses[host, port] = name
         state_dir = entry.get("state_dir")
         if state_dir is not None and (not isinstance(state_dir, str) or not state_dir):
-            raise fail(f"{where}: state_dir must be a non-empty string", "nodes", name, "state_dir")
-        node_tls = tls_of(entry["tls"], f"{where}.tls", tls, "nodes", name, "tls") if "tls" in entry else tls
-        node_ros2 = (ros2_of(parse_session, entry["ros2"], f"{where}.ros2", "nodes", name, "ros2", base=ros2,
-                             directory=directory) if "ros2" in entry else ros2)
-        nodes[name] = NodeSpec(
-            name=name, host=host, port=port, max_in_flight=cap, tls=node_tls, ros2=node_ros2,
-            state_dir=os.path.join(directory, os.path.expanduser(state_dir)) if state_dir else None,
+            raise self.fail(f"{where}: state_dir must be a non-empty string", "nodes", name, "state_dir")
+        tls = self.tls_of(entry["tls"], f"{where}.tls", self.tls, "nodes", name, "tls") if "tls" in entry else self.tls
+        ros2 = (self.ros2_of(parse_session, entry["ros2"], f"{where}.ros2", "nodes", name, "ros2", base=self.ros2,
+                             directory=self.directory) if "ros2" in entry else self.ros2)
+        return NodeSpec(
+            name=name, host=host, port=port, max_in_flight=cap, tls=tls, ros2=ros2,
+            state_dir=os.path.join(self.directory, os.path.expanduser(state_dir)) if state_dir else None,
         )
-    if not nodes:
-        raise _error(path, 1, "no [nodes.*] table: a location file names at least one node")
 
-    def node_ref(entry: Mapping[str, Any], where: str, *key: str) -> str:
-        node = entry.get("node")
-        if not isinstance(node, str):
-            raise fail(f"{where}: node must be a string", *key, "node")
-        if node not in nodes:
-            raise fail(f"{where}: unknown node {node!r} (known: {', '.join(sorted(nodes))})", *key, "node")
-        return node
+    def memory(self) -> str | None:
+        """The ``[memory]`` table: the node hosting the global memory, or ``None``."""
+        mem = self.table("memory")
+        if not mem:
+            return None
+        self.check_keys(mem, {"node"}, "[memory]", "memory")
+        return self.node_ref(mem, "[memory]", "memory")
 
-    def impl_ref(entry: Mapping[str, Any], where: str, *key: str) -> str:
-        impl = entry.get("impl")
-        if not isinstance(impl, str) or not _IMPL_RE.fullmatch(impl):
-            raise fail(f"{where}: impl must be an importable \"module:attr\" string, got {impl!r}", *key, "impl")
-        return impl
-
-    def params_of(entry: Mapping[str, Any], where: str, *key: str) -> Mapping[str, Any]:
-        params = entry.get("params", {})
-        if not isinstance(params, dict):
-            raise fail(f"{where}: params must be a table", *key, "params")
-        return MappingProxyType(dict(params))
-
-    memory_node: str | None = None
-    mem = table("memory")
-    if mem:
-        check_keys(mem, {"node"}, "[memory]", "memory")
-        memory_node = node_ref(mem, "[memory]", "memory")
-
-    actions: dict[str, ActionPlacement] = {}
-    for name, entry in table("actions").items():
+    def action(self, name: str, entry: Any) -> ActionPlacement:
+        """An ``[actions.NAME]`` table (a ROS 2 action, service or topic by its ``ros2`` table, with
+        no ``impl`` needed)."""
         where = f"[actions.{name}]"
-        if not isinstance(entry, dict):
-            raise fail(f"{where} must be a table", "actions", name)
-        check_keys(entry, {"node", "impl", "local_only", "deadline_s", "params", "unattended", "ros2"}, where,
-                   "actions", name)
+        self.entry_table(entry, where, ACTION_KEYS, "actions", name)
         if name in MEMORY_ACTIONS:
-            raise fail(f"{where}: {name} is reserved for the global memory service", "actions", name)
-        check_name(name, _ACTION_RE, where, "actions", name)
-        local_only = entry.get("local_only", False)
-        if not isinstance(local_only, bool):
-            raise fail(f"{where}: local_only must be true or false", "actions", name, "local_only")
-        unattended = entry.get("unattended", False)
-        if not isinstance(unattended, bool):
-            raise fail(f"{where}: unattended must be true or false", "actions", name, "unattended")
+            raise self.fail(f"{where}: {name} is reserved for the global memory service", "actions", name)
+        self.check_name(name, _ACTION_RE, where, "actions", name)
+        local_only = self.flag(entry, "local_only", where, "actions", name)
+        unattended = self.flag(entry, "unattended", where, "actions", name)
         deadline = entry.get("deadline_s")
         if deadline is not None and (isinstance(deadline, bool) or not isinstance(deadline, (int, float))
                                      or not 0 < deadline < math.inf):
-            raise fail(f"{where}: deadline_s must be a positive finite number", "actions", name, "deadline_s")
-        spec = ros2_of(parse_action_spec, entry["ros2"], f"{where}: ros2", "actions", name, "ros2") \
-            if "ros2" in entry else None
-        actions[name] = ActionPlacement(
+            raise self.fail(f"{where}: deadline_s must be a positive finite number", "actions", name, "deadline_s")
+        spec = (self.ros2_of(parse_action_spec, entry["ros2"], f"{where}: ros2", "actions", name, "ros2")
+                if "ros2" in entry else None)
+        return ActionPlacement(
             name=name,
-            node=node_ref(entry, where, "actions", name),
-            impl=impl_ref(entry, where, "actions", name) if spec is None or "impl" in entry else ACTION_IMPL,
+            node=self.node_ref(entry, where, "actions", name),
+            impl=self.impl_ref(entry, where, "actions", name) if spec is None or "impl" in entry else ACTION_IMPL,
             ros2=spec,
             local_only=local_only,
             deadline_s=float(deadline) if deadline is not None else None,
-            params=params_of(entry, where, "actions", name),
+            params=self.params_of(entry, where, "actions", name),
             unattended=unattended,
         )
-    if memory_node is not None:
-        for name in MEMORY_ACTIONS:
-            actions[name] = ActionPlacement(name=name, node=memory_node, impl=MEMORY_IMPL)
 
-    drivers: dict[str, DriverSpec] = {}
-    for name, entry in table("drivers").items():
+    def driver(self, name: str, entry: Any) -> DriverSpec:
+        """A ``[drivers.NAME]`` table."""
         where = f"[drivers.{name}]"
-        if not isinstance(entry, dict):
-            raise fail(f"{where} must be a table", "drivers", name)
-        check_keys(entry, {"node", "impl", "params"}, where, "drivers", name)
-        check_name(name, _ACTION_RE, where, "drivers", name)
-        drivers[name] = DriverSpec(
-            name=name, node=node_ref(entry, where, "drivers", name), impl=impl_ref(entry, where, "drivers", name),
-            params=params_of(entry, where, "drivers", name),
+        self.entry_table(entry, where, DRIVER_KEYS, "drivers", name)
+        self.check_name(name, _ACTION_RE, where, "drivers", name)
+        return DriverSpec(
+            name=name, node=self.node_ref(entry, where, "drivers", name),
+            impl=self.impl_ref(entry, where, "drivers", name), params=self.params_of(entry, where, "drivers", name),
         )
 
-    events: dict[str, str] = {}
-    ros2_events: dict[str, Ros2EventSpec] = {}
-    for topic, entry in table("events").items():
+    def event(self, topic: str, entry: Any) -> str:
+        """An ``[events.TOPIC]`` table: the node that publishes the topic (the ROS 2 topic it comes
+        from, by its ``ros2`` table, goes to :attr:`ros2_events`)."""
         where = f"[events.{topic}]"
-        if not isinstance(entry, dict):
-            raise fail(f"{where} must be a table", "events", topic)
-        check_keys(entry, {"node", "ros2"}, where, "events", topic)
-        check_name(topic, _TOPIC_RE, where, "events", topic)
-        events[topic] = node_ref(entry, where, "events", topic)
+        self.entry_table(entry, where, EVENT_KEYS, "events", topic)
+        self.check_name(topic, _TOPIC_RE, where, "events", topic)
+        node = self.node_ref(entry, where, "events", topic)
         if "ros2" in entry:
-            ros2_events[topic] = ros2_of(parse_event_spec, entry["ros2"], f"{where}: ros2", "events", topic, "ros2")
+            self.ros2_events[topic] = self.ros2_of(parse_event_spec, entry["ros2"], f"{where}: ros2", "events", topic,
+                                                   "ros2")
+        return node
 
-    for node in sorted({a.node for a in actions.values() if a.ros2} | {events[t] for t in ros2_events}):
-        name = f"{DRIVER_NAME}.{node}"
-        if name in drivers:
-            raise fail(f"[drivers.{name}]: the name {name} is reserved for the ROS 2 session of node {node}",
-                       "drivers", name)
-        connect = nodes[node].ros2.connect
-        drivers[name] = DriverSpec(name=name, node=node, impl=DRIVER_IMPL,
-                                   params=MappingProxyType({"router": connect[0]} if connect else {}))
+    def ros2_drivers(self, actions: Mapping[str, ActionPlacement], events: Mapping[str, str],
+                     drivers: dict[str, DriverSpec]) -> None:
+        """Add the implicit driver ``ros2.NODE`` (the node's Zenoh session) of every node hosting a
+        ROS 2 action or event to ``drivers``; a driver of the file may not take its name."""
+        for node in sorted({a.node for a in actions.values() if a.ros2} | {events[t] for t in self.ros2_events}):
+            name = f"{DRIVER_NAME}.{node}"
+            if name in drivers:
+                raise self.fail(f"[drivers.{name}]: the name {name} is reserved for the ROS 2 session of node {node}",
+                                "drivers", name)
+            connect = self.nodes[node].ros2.connect
+            drivers[name] = DriverSpec(name=name, node=node, impl=DRIVER_IMPL,
+                                       params=MappingProxyType({"router": connect[0]} if connect else {}))
 
-    return Location(
-        path=path,
-        nodes=MappingProxyType(nodes),
-        actions=MappingProxyType(actions),
-        drivers=MappingProxyType(drivers),
-        events=MappingProxyType(events),
-        memory_node=memory_node,
-        ros2_events=MappingProxyType(ros2_events),
-    )
+    # ---------------------------------------------------------------- values
+    def node_ref(self, entry: Mapping[str, Any], where: str, *key: str) -> str:
+        node = entry.get("node")
+        if not isinstance(node, str):
+            raise self.fail(f"{where}: node must be a string", *key, "node")
+        if node not in self.nodes:
+            raise self.fail(f"{where}: unknown node {node!r} (known: {', '.join(sorted(self.nodes))})", *key, "node")
+        return node
+
+    def impl_ref(self, entry: Mapping[str, Any], where: str, *key: str) -> str:
+        impl = entry.get("impl")
+        if not isinstance(impl, str) or not _IMPL_RE.fullmatch(impl):
+            raise self.fail(f"{where}: impl must be an importable \"module:attr\" string, got {impl!r}", *key, "impl")
+        return impl
+
+    def params_of(self, entry: Mapping[str, Any], where: str, *key: str) -> Mapping[str, Any]:
+        params = entry.get("params", {})
+        if not isinstance(params, dict):
+            raise self.fail(f"{where}: params must be a table", *key, "params")
+        return MappingProxyType(dict(params))
+
+    def flag(self, entry: Mapping[str, Any], name: str, where: str, *key: str) -> bool:
+        value = entry.get(name, False)
+        if not isinstance(value, bool):
+            raise self.fail(f"{where}: {name} must be true or false", *key, name)
+        return value
+
+    def tls_of(self, entry: Any, where: str, base: TlsSettings, *key: str) -> TlsSettings:
+        try:
+            return parse_tls(entry, where, base, self.directory)
+        except LocationError as exc:
+            raise self.fail(str(exc), *key) from None
+
+    def ros2_of(self, parse: Any, value: Any, where: str, *key: str, **kwargs: Any) -> Any:
+        """``parse(value, where=where, **kwargs)`` (a parser of :mod:`services.ros2.config`), its
+        problem reported at the line of ``key``."""
+        try:
+            return parse(value, where=where, **kwargs)
+        except LocationError as exc:
+            raise self.fail(str(exc), *key) from None
+
+    # ---------------------------------------------------------------- structure and reporting
+    def fail(self, problem: str, *key: str) -> LocationError:
+        return _error(self.path, self.lines.line(*key), problem)
+
+    def table(self, key: str) -> Mapping[str, Any]:
+        value = self.doc.get(key, {})
+        if not isinstance(value, dict):
+            raise self.fail(f"[{key}] must be a table", key)
+        return value
+
+    def entry_table(self, entry: Any, where: str, allowed: frozenset[str], *key: str) -> None:
+        if not isinstance(entry, dict):
+            raise self.fail(f"{where} must be a table", *key)
+        self.check_keys(entry, allowed, where, *key)
+
+    def check_keys(self, entry: Mapping[str, Any], allowed: Collection[str], where: str, *key: str) -> None:
+        extra = sorted(set(entry) - set(allowed))
+        if extra:
+            raise self.fail(f"{where}: unknown key(s) {', '.join(extra)}", *key, extra[0])
+
+    def check_name(self, name: str, pattern: re.Pattern[str], where: str, *key: str) -> None:
+        if len(name) > _MAX_NAME or not pattern.fullmatch(name):
+            raise self.fail(f"{where}: bad name (use letters, digits, '_'{_NAME_CHARS[pattern]}, starting with a "
+                            f"letter or '_'; at most {_MAX_NAME} characters)", *key)

@@ -16,6 +16,8 @@ import stat
 import tempfile
 from pathlib import Path
 
+from services.errors import PetrobotError
+
 __all__ = ["MAX_FILE_BYTES", "TextProblem", "decode_utf8", "read_capped", "screen_text", "write_atomically"]
 
 #: Largest input file read, bytes (16 MiB). Net files of a thousand places are tens of kilobytes;
@@ -31,7 +33,7 @@ _BOMS = (
 _UTF8_BOM = b"\xef\xbb\xbf"
 
 
-class TextProblem(Exception):
+class TextProblem(PetrobotError):
     """An input text is unusable.
 
     Attributes:

@@ -1,8 +1,15 @@
-"""The socketcand ASCII protocol, server side: the simulated CAN-Ethernet gateway (sans-IO).
+"""The simulated CAN-Ethernet gateway: the socketcand ASCII protocol, server side.
 
 A real lab puts a CAN-Ethernet gateway (or the socketcand daemon) between the bus and the motion
-node; the motion node's master talks to it with python-can's ``socketcand`` client. The simulated
-bus (:mod:`sim.canbus`) serves the same protocol, so the node cannot tell the two apart.
+node; the motion node's master talks to it with python-can's ``socketcand`` client
+(``can.Bus(interface="socketcand", host=..., port=..., channel="can0")``). The simulated bus
+(:mod:`sim.canbus`) is served with the same protocol, so the node cannot tell the two apart. Both
+worlds serve their bus with it.
+
+Two layers: :class:`SocketcandServerProtocol`, the sans-IO core of one connection (bytes in,
+frames and bytes out), and :class:`CanGateway`, the TCP server around it: one accept thread and,
+per connection, a reader and a writer thread. A peer may connect and leave at any moment (a port
+probe, a scanner, a killed client): that ends its connection only.
 
 socketcand ASCII (linux-can/socketcand doc/protocol.md): server greets ``< hi >``; ``< open can0 >``
 and ``< rawmode >`` are answered ``< ok >``; in raw mode the server sends
@@ -14,11 +21,22 @@ an empty frame has an empty data field.
 from __future__ import annotations
 
 import enum
+import logging
+import socket
+import threading
+import time
 from collections.abc import Sequence
+from typing import Self
 
 from services.devices.cia402 import CanFrame, FrameError
+from sim.canbus import SimBus
 
-__all__ = ["ServerMode", "SocketcandServerProtocol", "format_frame", "format_send", "parse_message"]
+__all__ = ["CanGateway", "ServerMode", "SocketcandServerProtocol", "format_frame", "format_send",
+           "parse_message"]
+
+log = logging.getLogger(__name__)
+
+_RAW_SETTLE_S = 0.2  # gateway: forward bus frames this long after "< ok >" to rawmode at the latest
 
 
 def format_frame(frame: CanFrame) -> bytes:
@@ -166,3 +184,186 @@ class SocketcandServerProtocol:
         out = bytes(self._out)
         self._out.clear()
         return out
+
+
+class CanGateway:
+    """socketcand-protocol TCP server bridging a :class:`SimBus` to other processes.
+
+    Implements the subset python-can's ``socketcand`` client uses (``open``, ``rawmode``,
+    ``send``, plus ``echo``). Bus frames are forwarded once the connection is in raw mode and the
+    client has sent its first frame, or :data:`_RAW_SETTLE_S` after raw mode at the latest
+    (python-can reads the ``< ok >`` of ``rawmode`` with a single ``recv`` and compares it exactly,
+    so nothing may follow it in the same segment).
+
+    Args:
+        bus: the simulated bus.
+        host: listen address (loopback only by default).
+        port: TCP port, 0 for any free port.
+        channels: bus names served.
+    """
+
+    def __init__(
+        self, bus: SimBus, host: str = "127.0.0.1", port: int = 0, channels: Sequence[str] = ("can0",)
+    ) -> None:
+        self.bus = bus
+        self.host = host
+        self.port = port
+        self.channels = tuple(channels)
+        self._server: socket.socket | None = None
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._conns: list[socket.socket] = []
+        self._lock = threading.Lock()
+
+    def start(self) -> int:
+        """Start listening; returns the TCP port."""
+        srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        srv.bind((self.host, self.port))
+        srv.listen(8)
+        srv.settimeout(0.1)
+        self._server = srv
+        self.port = srv.getsockname()[1]
+        th = threading.Thread(target=self._accept_loop, name="can-gateway-accept", daemon=True)
+        th.start()
+        self._threads.append(th)
+        return self.port
+
+    def stop(self) -> None:
+        """Close the server and every connection; join the threads (bounded)."""
+        self._stop.set()
+        with self._lock:
+            conns = list(self._conns)
+        for c in conns:
+            try:
+                c.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            c.close()
+        if self._server is not None:
+            self._server.close()
+        for th in self._threads:
+            th.join(timeout=2.0)
+
+    def __enter__(self) -> Self:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    def _accept_loop(self) -> None:
+        assert self._server is not None
+        while not self._stop.is_set():
+            try:
+                conn, addr = self._server.accept()
+            except TimeoutError:
+                continue
+            except OSError as exc:
+                if self._stop.is_set() or self._server.fileno() < 0:
+                    return  # closed by stop()
+                log.warning("CAN gateway: accept failed: %s", exc)  # out of descriptors...: try again
+                self._stop.wait(0.1)
+                continue
+            try:
+                conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                conn.settimeout(None)
+            except OSError:  # the peer is already gone
+                conn.close()
+                continue
+            with self._lock:
+                self._conns.append(conn)
+            _Connection(self, conn, f"{addr[0]}:{addr[1]}").start()
+
+
+class _Connection:
+    """One client of the gateway: a reader and a writer thread around the sans-IO protocol.
+
+    A peer may leave at any moment (a port probe connects and closes at once): every send and
+    receive error ends this connection only, never the gateway.
+    """
+
+    def __init__(self, gateway: CanGateway, sock: socket.socket, peer: str) -> None:
+        self.gw = gateway
+        self.sock = sock
+        self.peer = peer
+        self.proto = SocketcandServerProtocol(gateway.channels)
+        self.port = gateway.bus.connect()
+        self.lock = threading.Lock()
+        self.raw_since: float | None = None
+        self.forwarding = False
+        self.done = threading.Event()
+
+    def start(self) -> None:
+        if not self._flush():  # the greeting, before any thread may close the socket
+            return
+        for target, name in ((self._reader, "reader"), (self._writer, "writer")):
+            th = threading.Thread(target=target, name=f"can-gateway-{name}", daemon=True)
+            th.start()
+            self.gw._threads.append(th)
+
+    def _flush(self) -> bool:
+        """Send what the protocol has queued; False (and the connection closed) if the peer is gone."""
+        try:
+            with self.lock:
+                out = self.proto.data_to_send()
+                if out:
+                    self.sock.sendall(out)
+            return True
+        except OSError as exc:
+            log.debug("CAN gateway: %s left: %s", self.peer, exc)
+            self._close()
+            return False
+
+    def _reader(self) -> None:
+        try:
+            while not self.done.is_set():
+                data = self.sock.recv(4096)
+                if not data:
+                    break
+                with self.lock:
+                    frames = self.proto.receive_data(data, time.monotonic())
+                    if self.proto.mode is ServerMode.RAW and self.raw_since is None:
+                        self.raw_since = time.monotonic()
+                if not self._flush():
+                    return
+                if frames:
+                    self.forwarding = self.raw_since is not None
+                for f in frames:
+                    self.port.send(f)
+                if self.proto.mode is ServerMode.CLOSED:
+                    break
+        except OSError:
+            pass
+        finally:
+            self._close()
+
+    def _writer(self) -> None:
+        while not self.done.is_set():
+            first = self.port.recv(timeout=0.1)
+            if first is None:
+                continue
+            frames = [first] + self.port.recv_all()
+            if not self.forwarding:
+                if self.raw_since is None or time.monotonic() - self.raw_since < _RAW_SETTLE_S:
+                    continue
+                self.forwarding = True
+            with self.lock:
+                for f in frames:
+                    self.proto.frame_out(f)
+            if not self._flush():
+                return
+
+    def _close(self) -> None:
+        with self.lock:
+            if self.done.is_set():
+                return
+            self.done.set()
+        self.port.close()
+        try:
+            self.sock.close()
+        except OSError:
+            pass
+        with self.gw._lock:
+            if self.sock in self.gw._conns:
+                self.gw._conns.remove(self.sock)

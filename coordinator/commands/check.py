@@ -21,7 +21,7 @@ if TYPE_CHECKING:
     from coordinator.net import PetriNet
     from services.location import Location
 
-__all__ = ["EXIT_PROBLEMS", "add_parser", "run", "summary"]
+__all__ = ["EXIT_PROBLEMS", "add_parser", "run"]
 
 #: Exit status when a problem is found (usage errors exit 2 too, as with argparse).
 EXIT_PROBLEMS = 2
@@ -51,14 +51,6 @@ def add_parser(subparsers: Any) -> None:
                              f"./{DEFAULT_SERVICES} if it exists; not checked without one)")
     parser.add_argument("--services-only", action="store_true",
                         help=f"check the location file alone (--services, default ./{DEFAULT_SERVICES})")
-
-
-def summary(net: PetriNet) -> str:
-    """One line describing a net: places, transitions, arcs, tasks, actions, tokens."""
-    actions = sum(len(t.actions) for t in net.tasks.values())
-    return (f"net {net.name!r}: {len(net.places)} places, {len(net.transitions)} transitions, "
-            f"{len(net.arcs)} arcs, {len(net.tasks)} primitive tasks ({actions} actions), "
-            f"{net.initial_marking.total} initial tokens")
 
 
 def _location_summary(location: Location) -> str:
@@ -120,7 +112,7 @@ def run(args: argparse.Namespace) -> int:
                             problems.append(f"{path}:{line}: task {task.name!r}: {problem}" if line
                                             else f"{path}: task {task.name!r}: {problem}")
             placed = f"; placement checked against {services}"
-    ok = f"OK {path}: {summary(net)}{placed}" if net is not None else ""
+    ok = f"OK {path}: {net.summary()}{placed}" if net is not None else ""
     return _finish(problems, path if services is None else f"{path} and {services}", ok)
 
 

@@ -4,27 +4,27 @@ Starts on this machine what a ROS 2 lab would have: a Zenoh router (``petrobot s
 rmw_zenohd) and a stand-in ROS 2 robot speaking rmw_zenoh (``petrobot sim ros2``, built on
 zenoh-ros2-sdk: the AddTwoInts service, the Fibonacci action, the /crossfire topic); then the node
 that services.toml gives these actions (``rosbot``), and runs ``nets/ros2.toml`` with the token
-flow visible: each run plans with /add_two_ints, counts with /fibonacci (its feedback counted) and
-waits for a ball in the crossfire (the external event ``crossfire``, the rising edge of /crossfire).
-It prints one line per run and what the robot saw; the robot's and the router's logs go to
-``runs/logs/ros2.log`` and ``zenoh.log``. docs/ros2.md says how the same net reaches a real ROS 2
-machine.
+flow visible (:func:`coordinator.commands.demo_start.run_demo`, as every demo): each run plans with
+/add_two_ints, counts with /fibonacci (its feedback counted) and waits for a ball in the crossfire
+(the external event ``crossfire``, the rising edge of /crossfire). The router listens where
+services.toml has the node connect, which must be this machine's loopback. It prints one line per run (:class:`Ros2Report`) and
+what the robot saw; the robot's and the router's logs go to ``runs/logs/ros2.log`` and
+``zenoh.log``. docs/ros2.md says how the same net reaches a real ROS 2 machine.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from coordinator.commands.demo_start import ROOT, DemoWorld, nodes_of, run_demo, say
 from coordinator.events import ActionEnded, ActionFeedback, Observer, RunEvent, TransitionFired
+from coordinator.net import PetriNet
 from services.errors import PetrobotError
 
 __all__ = ["Ros2Report", "run_ros2"]
-
-ROOT = Path(__file__).resolve().parents[2]
 
 
 @dataclass
@@ -85,66 +85,42 @@ class Ros2Report:
         return "\n".join(lines)
 
 
+def _local_router(services: str, net: PetriNet) -> str:
+    """The one Zenoh router on this machine the net's ROS 2 nodes connect to (the demo serves it).
+
+    Raises:
+        PetrobotError: they connect to none, to several, or to one off this machine's loopback.
+    """
+    from services.location import load_location
+
+    location = load_location(services)
+    nodes = nodes_of(net, location)
+    routers = sorted({c for n in nodes for c in location.nodes[n].ros2.connect})
+    if len(routers) != 1 or not routers[0].startswith("tcp/127.0.0.1:"):
+        raise PetrobotError(f"the ROS 2 demo serves one Zenoh router on this machine; the nodes {', '.join(nodes)} "
+                            f"connect to {', '.join(routers) or 'none'} (expected one tcp/127.0.0.1:PORT)")
+    return routers[0]
+
+
 async def run_ros2(args: argparse.Namespace) -> int:
     """The ROS 2 demo (see the module docstring); returns the run's exit code."""
-    import asyncio
-
-    from coordinator.commands.simworld import SimWorld, journal_for
-    from coordinator.console import Console
-    from coordinator.journal import Journal
     from coordinator.netfile import load_net
-    from coordinator.nodegroup import NodeGroup
-    from coordinator.session import execute
-    from services.keys import load_key
-    from services.location import load_location
 
     net_path = Path(args.net) if args.net else ROOT / "nets" / "ros2.toml"
     net = load_net(net_path)
     if args.runs is not None:
         net = net.with_initial_marking({**net.initial_marking, "runs_remaining": args.runs})
-    location = load_location(args.services)
-    key = load_key(args.key_file)
-    nodes = sorted({location.node_of(a.name) for t in net.tasks.values() for a in t.actions}
-                   | {location.publisher_of(e[4:]) for t in net.transitions for e in t.external_events})
-    routers = sorted({c for n in nodes for c in location.nodes[n].ros2.connect})
-    if len(routers) != 1 or not routers[0].startswith("tcp/127.0.0.1:"):
-        raise PetrobotError(f"the ROS 2 demo serves one Zenoh router on this machine; the nodes {', '.join(nodes)} "
-                            f"connect to {', '.join(routers) or 'none'} (expected one tcp/127.0.0.1:PORT)")
-    router = routers[0]
-    journal_path = journal_for(args.journal, "runs/ros2.sqlite")
-    logs = journal_path.parent / "logs"
-    logs.mkdir(parents=True, exist_ok=True)
-
-    def say(text: str) -> None:
-        print(f"demo: {text}", file=sys.stderr, flush=True)
-
-    say(f"journal {journal_path}; logs in {logs}/ (zenoh.log, ros2.log, {', '.join(f'{n}.log' for n in nodes)})")
-    say(f"starting a Zenoh router on {router} and the stand-in ROS 2 robot (zenoh-ros2-sdk)")
-    zenoh = SimWorld(["--listen", router], log=logs / "zenoh.log", world="zenoh")
-    robot: SimWorld | None = None
-    try:
-        await asyncio.to_thread(zenoh.wait_ready, 30.0)
-        robot = SimWorld(["--router", router, "--crossfire-period", "1.5", "--crossfire-pulse", "0.3"],
-                         log=logs / "ros2.log", world="ros2")
-        await asyncio.to_thread(robot.wait_ready, 60.0)
-        say(f"starting nodes {', '.join(nodes)}")
-        async with NodeGroup(args.services, nodes, key_file=args.key_file, log_level="INFO", log_dir=logs):
-            console = Console(net, live=args.live)
-            report = Ros2Report(console)
-            with Journal(journal_path) as journal:
-                say(f"running {net_path.relative_to(ROOT) if net_path.is_relative_to(ROOT) else net_path}: "
-                    f"{net.initial_marking.get('runs_remaining', 0)} runs")
-                summary = await execute(net, location=location, key=key, journal=journal, seed=args.seed,
-                                        net_text=net_path.read_text(encoding="utf-8"), observer=report,
-                                        read_input=sys.stdin.isatty(), max_seconds=args.max_seconds,
-                                        console=console)
-    finally:
-        if robot is not None:
-            robot.stop()
-        zenoh.stop()
-    print(summary.format())
+    router = _local_router(args.services, net)
+    say(f"a Zenoh router on {router} and the stand-in ROS 2 robot (zenoh-ros2-sdk) play the ROS 2 side")
+    done = await run_demo(
+        args, net, net_path, journal="runs/ros2.sqlite", report=Ros2Report,
+        worlds=[DemoWorld("zenoh", log="zenoh.log"),
+                DemoWorld("ros2", ["--crossfire-period", "1.5", "--crossfire-pulse", "0.3"], log="ros2.log")])
+    report = done.report
+    assert report is not None
+    print(done.summary.format())
     print(report.format())
-    seen = robot.events if robot is not None else []
+    seen = done.worlds.get("ros2", [])
     goals = [e for e in seen if e.get("event") == "goal"]
     results = [e for e in seen if e.get("event") == "result"]
     calls = [e for e in seen if e.get("event") == "service"]
@@ -152,5 +128,5 @@ async def run_ros2(args: argparse.Namespace) -> int:
     print(f"the robot saw {len(calls)} service call(s), {len(goals)} goal(s) "
           f"({sum(1 for g in goals if g.get('accepted'))} accepted), ended {len(results)} "
           f"({', '.join(sorted({r['status'] for r in results})) or 'none'}), and {len(balls)} ball(s) in its crossfire")
-    print(f"journal: {journal_path}; logs: {logs}/")
-    return summary.exit_code
+    print(f"journal: {done.journal}; logs: {done.logs}/")
+    return done.summary.exit_code

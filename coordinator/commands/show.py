@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import enum
 import json
 import sys
 import time
@@ -68,7 +69,6 @@ def describe(record: Record, t0: float) -> str:
         StartRow,
     )
     from coordinator.reconcile import describe as describe_reconciliation
-    from services.results import ActionResult
 
     stamp = f"{record.t_wall - t0:9.3f}s  "
     if isinstance(record, FiringRow):
@@ -85,11 +85,9 @@ def describe(record: Record, t0: float) -> str:
         return (f"{stamp}result   {record.task}/{record.action} on {record.node or '?'}: "
                 f"{record.status.value}{extra}{wall}{why} [{record.instance}]")
     if isinstance(record, ReconciliationRow):
-        node_said = None if record.status is None else ActionResult(
-            status=record.status, outcome=record.outcome, reason=record.reason, wall_s=record.wall_s or 0.0)
         mark = "DIFFERS  " if record.differs else ""
         return (f"{stamp}reconcile {mark}{record.task}/{record.action}: "
-                f"{describe_reconciliation(record.node, record.action, record.assumed, node_said)} [{record.instance}]")
+                f"{describe_reconciliation(record.node, record.action, record.assumed, record.truth)} [{record.instance}]")
     if isinstance(record, OperatorRow):
         what = record.command + (f" {record.place} {record.count}" if record.place is not None else "")
         if record.accepted:
@@ -123,16 +121,28 @@ def report(args: argparse.Namespace) -> dict[str, Any]:
     }
 
 
+_RESULT_FIELDS = ("status", "outcome", "cost", "wall_s", "cpu_s", "reason", "value")
+"""The fields of an action's result, flat in a record's JSON (``null`` when a node did not know the call)."""
+
+
 def _fields(record: Any) -> dict[str, Any]:
     out = {}
     for name in record.__slots__:
-        value = getattr(record, name)
-        out[name] = value.value if hasattr(value, "value") and not isinstance(value, (int, float, str)) else value
-        if isinstance(out[name], tuple):
-            out[name] = list(out[name])
-        elif hasattr(out[name], "items"):
-            out[name] = dict(out[name])
+        if name in ("result", "truth"):  # the ActionResult a result or a reconciliation holds
+            out.update((f, _plain(getattr(record, f))) for f in _RESULT_FIELDS)
+        else:
+            out[name] = _plain(getattr(record, name))
     return out
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, enum.Enum):
+        return value.value
+    if isinstance(value, tuple):
+        return list(value)
+    if hasattr(value, "items"):
+        return dict(value)
+    return value
 
 
 def render(rep: dict[str, Any]) -> str:

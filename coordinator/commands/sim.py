@@ -1,61 +1,44 @@
-"""``petrobot sim catching`` / ``petrobot sim mobile``: a testbed's physical world as a process (paper §6).
+"""``petrobot sim catching|mobile|zenoh|ros2``: a testbed's physical world as a process (paper §6).
 
-``petrobot sim mobile`` is the mobile robot's course (:mod:`sim.mobile.process`); ``petrobot sim
-zenoh`` and ``petrobot sim ros2`` are the Zenoh router and the stand-in ROS 2 robot of the ROS 2
-demo (:mod:`sim.ros2.process`); the rest of this docstring describes the catching world.
+The worlds live in :mod:`sim` (:mod:`sim.catching.process`, :mod:`sim.mobile.process`, and the ROS 2
+demo's Zenoh router and stand-in ROS 2 robot in :mod:`sim.ros2.process`); this command parses their
+options and runs the one asked for. ``python -m coordinator.commands.sim WORLD [options]`` does the
+same without the ``petrobot`` front end (the demos start their worlds so).
 
-Runs the pybullet world at 1 kHz with the table, the thrower, the ball, the PUMA 560 with its cup and
-crossfire sensor, and serves the hardware-like back ends on 127.0.0.1 (``--host`` to serve another
-address, e.g. in a network namespace of its own):
-
-* the overhead camera: :class:`sim.camera.FrameServer` (grab-latest frames; its info map carries
-  the calibration, made at start-up by imaging the ball at known table points);
-* the CAN bus with the six joint drives and the crossfire I/O module: a socketcand-protocol
-  gateway (:class:`sim.canbus.CanGateway`) for python-can's ``socketcand`` interface.
-
-Clock modes: ``--realtime`` (default) paces simulated time to the wall clock, but waits after each
-camera frame, up to ``--camera-wait-ms`` of wall time, until a connected camera client has taken it
-(so that a vision node on a loaded machine sees every frame and a throw looks the same each time);
-``--lockstep`` runs without wall-clock pacing and waits, after each camera frame, until a connected
-camera client has taken it (so a slow vision node slows the world down instead of missing frames).
-The pixel noise restarts from (``--seed``, throw number) at each throw.
-
-The CAN bus is paced to the motion node's CAN master: at each SYNC the sim waits up to
-``--master-wait-ms`` of wall time for the targets of a master that answered the previous SYNC
-(:class:`sim.canbus.SimDrives`), so that the sim's own bursts of stepping after rendering a camera
-frame are not charged to the master; a silent master is not waited for (the drives' watchdogs act).
-
-The thrower rolls a ball every ``--interval`` seconds of simulated time. Stdout gets one JSON line
-per event: ``ready`` (ports), ``throw``, ``crossing`` (ground truth of the catch-line crossing, table
-and robot base frames), ``result`` (``caught``: the ball ended in the cup), ``drive_fault`` (a
-drive's fault: bus time, node, EMCY code, reason, the joint's speed, and ``stop_s``, how long its
-quick stop took, once at rest) and ``stopped`` (frames, throws, the worst real-time lag, the
-master waits that ran out).
+Ports: services.toml is the one source of truth. Unless ``--camera-port`` or ``--can-port`` say
+otherwise, the world serves its camera and its CAN bus on the ports services.toml gives the drivers
+that use them (each driver says which server it needs, and that this world serves it:
+:func:`services.devices.probe.device_endpoints`); without such a driver, or without the file, on
+the world's defaults. Likewise, unless ``--listen`` (``zenoh``) or ``--router`` (``ros2``) say
+otherwise, the router is on 127.0.0.1 at the port of the Zenoh router the file's ROS 2 nodes
+connect to (their ``ros2.NODE`` drivers name it).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import math
-import signal
+import os
 import sys
-import time
-from typing import Any, TextIO
+from collections.abc import Callable
+from typing import Any
 
-__all__ = ["add_parser", "main", "run"]
+from coordinator.commands import options
+from services.errors import PetrobotError
 
-DEFAULT_CAMERA_PORT = 7210
-DEFAULT_CAN_PORT = 7211
-#: a joint within this of its home angle counts as home for --throw-when-home, rad
-HOME_TOLERANCE_RAD = 0.02
+__all__ = ["add_parser", "device_ports", "main", "run"]
 
 
 def add_parser(subparsers: Any) -> None:
-    """Register ``sim`` (with its ``catching`` world) on the ``petrobot`` sub-command parser."""
+    """Register ``sim`` (with its ``catching``, ``mobile``, ``zenoh`` and ``ros2`` worlds) on the
+    ``petrobot`` sub-command parser."""
+    from sim.catching.process import add_arguments as add_catching_arguments
+    from sim.mobile.process import add_arguments as add_mobile_arguments
+    from sim.ros2.process import add_robot_arguments, add_router_arguments
+
     parser = subparsers.add_parser(
         "sim",
-        help="run a simulated world (the catching or the mobile testbed) as a process",
+        help="run a simulated world (the catching or the mobile testbed, the ROS 2 demo's router or robot) as a "
+             "process",
         description="Run a simulated physical world with hardware-like back ends on 127.0.0.1.",
     )
     worlds = parser.add_subparsers(dest="world", required=True, metavar="WORLD")
@@ -70,49 +53,8 @@ def add_parser(subparsers: Any) -> None:
             "event (ready, throw, crossing, result) on stdout. Stop it with Ctrl-C or SIGTERM."
         ),
     )
-    mode = c.add_mutually_exclusive_group()
-    mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
-                      help="pace simulated time to the wall clock (default; for the demo)")
-    mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",
-                      help="no wall-clock pacing: after each camera frame, wait until a connected "
-                           "camera client has taken it")
-    c.set_defaults(mode="realtime")
-    c.add_argument("--seed", type=int, default=1, help="seed of the thrower and of the pixel noise")
-    c.add_argument("--throws", type=int, default=0,
-                   help="number of balls to throw, then keep running idle (0: throw forever)")
-    c.add_argument("--interval", type=float, default=6.0,
-                   help="simulated seconds between throws (default 6)")
-    c.add_argument("--throw-when-home", type=float, default=0.0, metavar="S",
-                   help="throw only once the PUMA has rested at its home pose for S simulated seconds, "
-                        "as a person waits for the robot to be ready (default 0: do not wait)")
-    c.add_argument("--first-throw", type=float, default=3.0,
-                   help="simulated time of the first throw, s (default 3)")
-    c.add_argument("--after-camera-client", action="store_true",
-                   help="count --first-throw from the moment the first camera client connects "
-                        "(so that the first ball is not thrown before anyone looks)")
-    c.add_argument("--duration", type=float, default=0.0,
-                   help="stop after this many simulated seconds (0: run until stopped)")
-    c.add_argument("--renderer", choices=("tiny", "analytic"), default="tiny",
-                   help="camera back end: pybullet TinyRenderer (default) or the fast analytic one")
-    c.add_argument("--width", type=int, default=320, help="image width, pixels (default 320)")
-    c.add_argument("--height", type=int, default=240, help="image height, pixels (default 240)")
-    c.add_argument("--fps", type=float, default=25.0, help="camera frame rate, 1/s (default 25)")
-    c.add_argument("--noise", type=float, default=2.0,
-                   help="grey-level pixel noise sigma (default 2)")
-    c.add_argument("--camera-port", type=int, default=DEFAULT_CAMERA_PORT,
-                   help=f"TCP port of the camera frame server (default {DEFAULT_CAMERA_PORT}; 0: any)")
-    c.add_argument("--can-port", type=int, default=DEFAULT_CAN_PORT,
-                   help=f"TCP port of the socketcand CAN gateway (default {DEFAULT_CAN_PORT}; 0: any)")
-    c.add_argument("--host", default="127.0.0.1",
-                   help="address the camera server and the CAN gateway listen on (default 127.0.0.1)")
-    c.add_argument("--camera-wait-ms", type=float, default=100.0, metavar="MS",
-                   help="--realtime: wall time waited after each frame for a connected camera client "
-                        "to take it (default 100; 0: never wait)")
-    c.add_argument("--master-wait-ms", type=float, default=100.0, metavar="MS",
-                   help="wall time waited at each SYNC for the targets of a CAN master that answered "
-                        "the previous one (default 100; 0: never wait)")
-
-
+    add_catching_arguments(c)
+    _add_services(c)
     m = worlds.add_parser(
         "mobile",
         help="the mobile robot's course: downward camera + beacon sensor server, CAN gateway (velocity mode)",
@@ -124,198 +66,102 @@ def add_parser(subparsers: Any) -> None:
             "per event (ready, pose: ground truth, drive_fault, stopped) on stdout."
         ),
     )
-    from sim.mobile.process import add_arguments as add_mobile_arguments
-    from sim.ros2.process import add_robot_arguments, add_router_arguments
-
-    add_router_arguments(worlds.add_parser(
+    add_mobile_arguments(m)
+    _add_services(m)
+    z = worlds.add_parser(
         "zenoh", help="a Zenoh router on the loopback (the middle of the ROS 2 demo's graph)",
         description="A Zenoh router (eclipse-zenoh in router mode, multicast scouting off), as rmw_zenohd is on a "
-                    "ROS 2 machine. Prints a JSON ready line; stop it with Ctrl-C or SIGTERM."))
-    add_robot_arguments(worlds.add_parser(
+                    "ROS 2 machine. Prints a JSON ready line; stop it with Ctrl-C or SIGTERM.")
+    add_router_arguments(z)
+    _add_services(z, "the Zenoh router's port")
+    r = worlds.add_parser(
         "ros2", help="a stand-in ROS 2 robot (zenoh-ros2-sdk): AddTwoInts, Fibonacci action, /crossfire",
         description="A stand-in ROS 2 robot built on zenoh-ros2-sdk, speaking rmw_zenoh through the router: the "
                     "service /add_two_ints (example_interfaces/srv/AddTwoInts), the action /fibonacci "
                     "(example_interfaces/action/Fibonacci: feedback per term, cancellable) and the topic "
                     "/crossfire (std_msgs/msg/Bool). Prints one JSON line per event (ready, service, goal, cancel, "
-                    "result, crossfire); stop it with Ctrl-C or SIGTERM."))
+                    "result, crossfire); stop it with Ctrl-C or SIGTERM.")
+    add_robot_arguments(r)
+    _add_services(r, "the Zenoh router's port")
 
-    add_mobile_arguments(m)
+
+def _add_services(parser: argparse.ArgumentParser, what: str = "the camera and CAN ports") -> None:
+    options.add_services(parser, help=f"location file whose drivers give {what} (default: %(default)s, when it "
+                                      "exists)")
 
 
-def _emit(out: TextIO, event: str, **data: Any) -> None:
-    out.write(json.dumps({"event": event, **data}) + "\n")
-    out.flush()
+def device_ports(services: str | os.PathLike[str], world: str) -> dict[str, int]:
+    """The ports services.toml gives the device servers world ``world`` serves: ``{"frames": camera
+    port, "socketcand": CAN port}`` (a key is missing when no driver needs that server).
+
+    Raises:
+        LocationError: the file is bad.
+        PetrobotError: two drivers want the same server of this world on different ports.
+    """
+    from services.devices.probe import device_endpoints
+    from services.location import load_location
+
+    found: dict[str, dict[int, str]] = {}
+    for spec, end in device_endpoints(load_location(services)):
+        if end.served_by.split(" (", 1)[0] == f"petrobot sim {world}":
+            found.setdefault(end.protocol, {})[end.port] = spec.name
+    for protocol, ports in found.items():
+        if len(ports) > 1:
+            which = ", ".join(f"{port} (driver {name})" for port, name in sorted(ports.items()))
+            raise PetrobotError(f"{services}: the drivers want the {world} world's {protocol} server on "
+                                f"different ports: {which}")
+    return {protocol: next(iter(ports)) for protocol, ports in found.items()}
+
+
+# what each world takes from services.toml: the world whose servers its drivers name, {option: protocol}
+_FROM_SERVICES: dict[str, tuple[str, dict[str, str]]] = {
+    "catching": ("catching", {"camera_port": "frames", "can_port": "socketcand"}),
+    "mobile": ("mobile", {"camera_port": "frames", "can_port": "socketcand"}),
+    "zenoh": ("zenoh", {"listen": "zenoh"}),
+    "ros2": ("zenoh", {"router": "zenoh"}),  # the robot connects to the router petrobot sim zenoh serves
+}
+
+
+def _ports_from_services(args: argparse.Namespace) -> None:
+    """Fill in the ports the command line left open from services.toml (module docstring)."""
+    served_by, wanted = _FROM_SERVICES[args.world]
+    open_options = [option for option in wanted if getattr(args, option) is None]
+    services = getattr(args, "services", None)
+    if not open_options or services is None or not (os.path.exists(services)
+                                                    or services != options.DEFAULT_SERVICES):
+        return
+    ports = device_ports(services, served_by)
+    for option in open_options:
+        port = ports.get(wanted[option])
+        if port is not None:
+            setattr(args, option, port if wanted[option] != "zenoh" else f"tcp/127.0.0.1:{port}")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run the world until stopped (or ``--duration``); returns the exit code."""
+    """Run the world ``args.world`` until stopped (or ``--duration``); returns the exit code (2 when
+    it cannot start, with the reason on stderr: e.g. a port already in use)."""
+    run_world: Callable[[argparse.Namespace], int]
     if args.world == "mobile":
-        from sim.mobile.process import run as run_mobile
-
-        return run_mobile(args)
-    if args.world in ("zenoh", "ros2"):
-        from sim.ros2.process import run_robot, run_router
-
-        return run_router(args) if args.world == "zenoh" else run_robot(args)
-    if args.world != "catching":
+        from sim.mobile.process import run as run_world
+    elif args.world == "catching":
+        from sim.catching.process import run as run_world
+    elif args.world == "zenoh":
+        from sim.ros2.process import run_router as run_world
+    elif args.world == "ros2":
+        from sim.ros2.process import run_robot as run_world
+    else:
         print(f"unknown world {args.world!r}", file=sys.stderr)
         return 2
-    import numpy as np
-
-    from services.robots import motion_control
-    from services.vision import calibration_points
-    from sim.camera import (
-        AnalyticRenderer,
-        Frame,
-        FrameServer,
-        TinyRenderer,
-        calibrate,
-        camera_info,
-        overhead_camera,
-    )
-    from sim.canbus import CanGateway, SimDrives
-    from sim.catching import CatchingWorld, Thrower
-    from sim.world import ClockMode, World
-
-    out = sys.stdout
-    stop = {"flag": False}
-
-    def on_signal(signum: int, frame: Any) -> None:
-        stop["flag"] = True
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-    world = World(mode=ClockMode.REALTIME if args.mode == "realtime" else ClockMode.LOCKSTEP)
-    server: FrameServer | None = None
-    gateway: CanGateway | None = None
     try:
-        cw = CatchingWorld(world, robot=True)
-        geo = motion_control.CatchGeometry()
-        q_home = motion_control.home_pose(geo)
-        cw.set_joint_positions(q_home)
-        drives = SimDrives(master_wait_s=args.master_wait_ms / 1000.0)
-        assert cw.robot_id is not None
-        drives.attach(world.client, cw.robot_id, cw.joint_indices, crossfire=cw.crossfire)
-        world.add_step_hook(drives.step)
-        cam = overhead_camera(cw.table.length, cw.table.height, width=args.width, height=args.height)
-        render: Any
-        renderer: TinyRenderer | AnalyticRenderer
-        if args.renderer == "tiny":
-            tiny = TinyRenderer(cam, world.client, intensity_sigma=args.noise, seed=args.seed)
-            renderer = tiny
-
-            def render() -> np.ndarray:
-                return tiny.render()
-
-            def render_at(x: float, y: float) -> np.ndarray:
-                cw.pb.resetBasePositionAndOrientation(cw.ball_id, [x, y, cw.ball_plane_z], [0, 0, 0, 1])
-                return tiny.render()
-        else:
-            ana = AnalyticRenderer(cam, table_length=cw.table.length, table_width=cw.table.width,
-                                   table_height=cw.table.height, ball_radius=cw.ball.radius,
-                                   intensity_sigma=args.noise, seed=args.seed)
-            renderer = ana
-
-            def render() -> np.ndarray:
-                pos, _ = cw.ball_state()
-                return ana.render(pos if cw.ball_on_table() else None)
-
-            def render_at(x: float, y: float) -> np.ndarray:
-                return ana.render((x, y, cw.ball_plane_z))
-
-        roi = cam.table_roi(cw.table.length, cw.table.width, cw.ball_plane_z)
-        hom = calibrate(render_at, calibration_points(cw.table.length, cw.table.width), 4, roi=roi)
-        cw.park()
-        info = camera_info(cam, hom, robot_base=cw.robot_base,
-                           rolling_model=cw.ball.rolling_decel_params(), fps=args.fps,
-                           table_size=(cw.table.length, cw.table.width))
-        server = FrameServer(host=args.host, port=args.camera_port, info=info)
-        camera_port = server.start()
-        gateway = CanGateway(drives.bus, host=args.host, port=args.can_port)
-        can_port = gateway.start()
-        _emit(out, "ready", mode=args.mode, host=args.host, camera_port=camera_port, can_port=can_port,
-              calibration_rms_m=hom.rms_m, renderer=args.renderer, width=args.width,
-              height=args.height, fps=args.fps)
-        tf = cw.table_to_base()
-        thrower = Thrower(args.seed)
-        period = 1.0 / args.fps
-        seq = 0
-        thrown = 0
-        next_throw = math.inf if args.after_camera_client else args.first_throw
-        active: dict[str, Any] | None = None
-        home_since: float | None = 0.0
-        reported = 0  # drives.faults already emitted (a fault is emitted once its joint is at rest)
-        camera_waits = camera_misses = 0
-        t_wall0 = time.monotonic()
-        world.resync()
-        while not stop["flag"] and (args.duration <= 0 or world.t < args.duration):
-            world.advance(period)
-            while reported < len(drives.faults) and not math.isnan(drives.faults[reported].t_stopped):
-                f = drives.faults[reported]
-                _emit(out, "drive_fault", t=f.t, node=f.node, code=f"{int(f.code):#06x}", reason=f.reason,
-                      speed=f.speed, stop_s=f.t_stopped - f.t)
-                reported += 1
-            t_wall = time.time()
-            server.publish(Frame(seq, world.t, render(), t_wall))
-            if server.client_count:
-                if args.mode == "lockstep":
-                    server.wait_sent(seq, timeout=1.0)
-                elif args.camera_wait_ms > 0:
-                    camera_waits += 1
-                    camera_misses += not server.wait_sent(seq, timeout=args.camera_wait_ms / 1000.0)
-            seq += 1
-            if math.isinf(next_throw) and thrown == 0 and server.client_count:
-                next_throw = world.t + args.first_throw
-            if args.throw_when_home > 0:
-                at_home = bool(np.max(np.abs(cw.joint_positions() - q_home)) < HOME_TOLERANCE_RAD)
-                if not at_home:
-                    home_since = None
-                elif home_since is None:
-                    home_since = world.t
-            robot_ready = args.throw_when_home <= 0 or (
-                home_since is not None and world.t - home_since >= args.throw_when_home)
-            if (active is None and robot_ready and world.t >= next_throw
-                    and (args.throws <= 0 or thrown < args.throws)):
-                spec = thrower.next()
-                cw.launch(spec)
-                thrown += 1
-                renderer.reseed([args.seed, thrown])
-                active = {"n": thrown, "crossed": False}
-                _emit(out, "throw", n=thrown, t=world.t, speed=spec.speed, heading=spec.heading,
-                      x0=spec.x0, y0=spec.y0)
-                next_throw = world.t + args.interval
-            if active is not None:
-                cr = cw.crossing
-                if cr is not None and not active["crossed"]:
-                    active["crossed"] = True
-                    active["t_cross"] = cr.t
-                    xb, yb, _ = tf.point(0.0, cr.y)
-                    vxb, vyb = tf.vector(cr.vx, cr.vy)
-                    _emit(out, "crossing", n=active["n"], t=cr.t, y=cr.y, x_base=xb, y_base=yb,
-                          vx_base=vxb, vy_base=vyb)
-                done_after = active.get("t_cross", math.inf) + 1.0
-                stalled = cr is None and world.t - (cw.t_launch or 0.0) > 8.0
-                if world.t >= done_after or stalled:
-                    _emit(out, "result", n=active["n"], t=world.t, caught=bool(cw.crossfire()),
-                          crossed=cr is not None)
-                    cw.park()
-                    active = None
-        _emit(out, "stopped", t=world.t, wall_s=time.monotonic() - t_wall0, frames=seq, throws=thrown,
-              max_lag_s=world.lag, slipped_s=world.slipped, camera_waits=camera_waits,
-              camera_misses=camera_misses, master_waits=drives.master_waits,
-              master_misses=drives.master_misses, drive_faults=len(drives.faults))
-        return 0
-    finally:
-        if gateway is not None:
-            gateway.stop()
-        if server is not None:
-            server.close()
-        world.close()
-        for s, h in old.items():
-            signal.signal(s, h)
+        _ports_from_services(args)
+        return run_world(args)
+    except PetrobotError as exc:  # ServeError among them: a port in use...
+        print(f"petrobot sim {args.world}: {exc}", file=sys.stderr)
+        return 2
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Standalone entry point: ``python -m coordinator.commands.sim catching [options]``."""
+    """Standalone entry point: ``python -m coordinator.commands.sim catching|mobile|zenoh|ros2 [options]``."""
     parser = argparse.ArgumentParser(prog="python -m coordinator.commands.sim")
     sub = parser.add_subparsers(dest="command")
     add_parser(sub)

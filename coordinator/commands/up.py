@@ -65,29 +65,15 @@ def missing_devices(location: Any, node: str, timeout_s: float = 0.5) -> list[tu
     """The device servers node ``node``'s drivers need that do not answer: (server, served by).
 
     A driver class with a ``device(params)`` class method (a
-    :class:`services.devices.endpoint.DeviceEndpoint`) names its server; a TCP connect to it is
-    tried (``timeout_s`` each).
+    :class:`services.devices.endpoint.DeviceEndpoint`) names its server; each is asked whether it
+    is there the way its protocol allows, without taking a frame or opening the bus
+    (:func:`services.devices.probe.probe`, ``timeout_s`` each): the probe changes nothing in the
+    world it probes.
     """
-    import socket
+    from services.devices.probe import device_endpoints, probe
 
-    from services.action import import_impl
-
-    out = []
-    for spec in location.drivers_on(node):
-        try:
-            cls = import_impl(spec.impl)
-        except PetrobotError:
-            continue  # the node itself will say what is wrong with its impl
-        device = getattr(cls, "device", None)
-        if device is None:
-            continue
-        end = device(dict(spec.params))
-        try:
-            with socket.create_connection((end.host, end.port), timeout=timeout_s):
-                pass
-        except OSError:
-            out.append((end.describe(), end.served_by))
-    return out
+    return [(end.describe(), end.served_by) for _, end in device_endpoints(location, [node])
+            if probe(end, timeout_s) is not None]
 
 
 async def _up(args: argparse.Namespace) -> int:

@@ -30,7 +30,9 @@ from coordinator.journal.records import (
 )
 from coordinator.journal.schema import check_schema
 from coordinator.net import Marking, PetriNet
-from services.results import Status, latched_events
+from coordinator.performance import ActionRecord
+from services.errors import ActionError
+from services.results import ActionResult, Status, latched_events
 
 __all__ = ["JournalReader", "Record", "read_results"]
 
@@ -183,9 +185,22 @@ class JournalReader:
         where, args = _where_run(run)
         rows = self._query("SELECT run, instance, task, action, node, status, outcome, cost, wall_s, cpu_s, "
                            f"t_wall, reason, value, entry FROM action_result{where} ORDER BY entry", args)
-        return [ResultRow(run=r, instance=i, task=t, action=a, node=n, status=Status(s), outcome=o, cost=c,
-                          wall_s=w, cpu_s=cpu, t_wall=float(tw), reason=why, value=_loads(v), entry=int(e))
+        return [ResultRow(run=r, instance=i, task=t, action=a, node=n, t_wall=float(tw), entry=int(e),
+                          result=self._result(e, s, o, c, w, cpu, why, v))
                 for r, i, t, a, n, s, o, c, w, cpu, tw, why, v, e in rows if s in _STATUSES]
+
+    def _result(self, entry: int, status: str, outcome: str | None, cost: float | None, wall_s: float | None,
+                cpu_s: float | None, reason: str | None, value: str | None) -> ActionResult:
+        """The one place a journaled result becomes an :class:`ActionResult` again (validated).
+
+        Raises:
+            JournalError: the row is not a result the journal could have written.
+        """
+        try:
+            return ActionResult(status=Status(status), outcome=outcome, cost=cost, wall_s=wall_s or 0.0,
+                                cpu_s=cpu_s or 0.0, reason=reason, value=_loads(value))
+        except ActionError as exc:
+            raise JournalError(f"{self.path}: record {entry} is not a valid result: {exc}") from None
 
     def starts(self, run: str | None = None) -> list[StartRow]:
         """Primitive actions sent to their nodes, in journal order."""
@@ -225,8 +240,8 @@ class JournalReader:
         rows = self._query("SELECT run, instance, task, action, node, assumed, status, outcome, reason, cost, wall_s, "
                            f"cpu_s, value, t_wall, entry FROM reconciliation{where} ORDER BY entry", args)
         return [ReconciliationRow(r, i, t, a, n, Status(was) if was in _STATUSES else None,
-                                  Status(st) if st in _STATUSES else None, o, why, c, w, cpu, _loads(v), float(tw),
-                                  int(e))
+                                  self._result(e, st, o, c, w, cpu, why, v) if st in _STATUSES else None,
+                                  float(tw), int(e))
                 for r, i, t, a, n, was, st, o, why, c, w, cpu, v, tw, e in rows]
 
     def final_words(self, run: str | None = None) -> dict[str, ResultRow | ReconciliationRow]:
@@ -298,8 +313,9 @@ class JournalReader:
         return _replay(self.path, net, run, int(head[0][0] or 0), records)
 
 
-def read_results(path: str | Path, run: str | None = None) -> list[ResultRow]:
-    """Open a journal read-only and return its results, of run ``run`` or of every run.
+def read_results(path: str | Path, run: str | None = None) -> list[ActionRecord]:
+    """Open a journal read-only and return its results as the performance functions take them
+    (:attr:`ResultRow.record`), of run ``run`` or of every run.
 
     Raises:
         JournalError: naming the file, if it is missing or not a journal, or has no run ``run``.
@@ -307,7 +323,7 @@ def read_results(path: str | Path, run: str | None = None) -> list[ResultRow]:
     with JournalReader.open(path) as journal:
         if run is not None:
             journal.run(run)  # an unknown run is an error, not an empty report
-        return journal.results(run)
+        return [row.record for row in journal.results(run)]
 
 
 def _replay(path: str, net: PetriNet, run: str, seed: int, records: Iterable[tuple[Any, ...]]) -> Recovered:

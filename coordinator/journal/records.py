@@ -16,7 +16,7 @@ from coordinator.engine import Instance
 from coordinator.net import Marking
 from coordinator.performance import ActionRecord
 from coordinator.reconcile import differs
-from services.results import Status
+from services.results import ActionResult, Status
 
 __all__ = ["FiringRow", "LearnerState", "OperatorRow", "ReconciliationRow", "Recovered", "ResultRow", "RunRow", "RunStats",
            "StartRow"]
@@ -89,27 +89,80 @@ class RunStats:
         return (self.run.ended_wall or self.last_wall) - self.run.started_wall
 
 
+class _ResultField:
+    """One field of the :class:`~services.results.ActionResult` a row holds, read through the row
+    (``row.status`` is ``row.result.status``; ``None`` when the row holds no result)."""
+
+    name = ""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, row: Any, owner: type | None = None) -> Any:
+        if row is None:
+            return self
+        result = row.action_result()
+        return None if result is None else getattr(result, self.name)
+
+
+class _HoldsResult:
+    """A row that holds an action's result: its fields read through the row."""
+
+    __slots__ = ()
+
+    status = _ResultField()
+    outcome = _ResultField()
+    cost = _ResultField()
+    wall_s = _ResultField()
+    cpu_s = _ResultField()
+    reason = _ResultField()
+    value = _ResultField()
+
+    def action_result(self) -> ActionResult | None:
+        """The result the row holds, or ``None``."""
+        raise NotImplementedError
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
-class ResultRow(ActionRecord):
-    """One primitive-action result: an :class:`~coordinator.performance.ActionRecord` and where it
-    came from.
+class ResultRow(_HoldsResult):
+    """One primitive-action result: the :class:`~services.results.ActionResult` the coordinator
+    received, and where it came from.
+
+    The result is the one record of how the call ended, as the node sent it and the engine took it
+    (validated once, when the journal's row was read back); ``status``, ``outcome``, ``cost``,
+    ``wall_s``, ``cpu_s``, ``reason`` and ``value`` read it. :attr:`record` is the same result as
+    the performance functions take it.
 
     Attributes:
         run: run id.
         instance: instance id (the call id).
+        task, action: the primitive task and the primitive action that ran.
         node: the node that ran the action, or ``None``.
+        result: how the call ended (its ``value`` decoded from JSON, ``None`` when JSON could not
+            hold it).
         t_wall: when the coordinator received the result.
-        reason: why an error happened, or ``None``.
-        value: the returned value, decoded from JSON (``None`` when JSON could not hold it).
+        entry: order among every record of the journal.
     """
 
     run: str
     instance: str
-    node: str | None = None
+    task: str
+    action: str
+    node: str | None
+    result: ActionResult
     t_wall: float = 0.0
-    reason: str | None = None
-    value: Any = None
     entry: int = 0
+
+    def action_result(self) -> ActionResult:
+        """The result the row holds."""
+        return self.result
+
+    @property
+    def record(self) -> ActionRecord:
+        """The result as the performance functions take it (:mod:`coordinator.performance`)."""
+        r = self.result
+        return ActionRecord(task=self.task, action=self.action, status=r.status, outcome=r.outcome, cost=r.cost,
+                            wall_s=r.wall_s, cpu_s=r.cpu_s)
 
 
 @dataclass(frozen=True, slots=True)
@@ -160,7 +213,7 @@ class OperatorRow:
 
 
 @dataclass(frozen=True, slots=True)
-class ReconciliationRow:
+class ReconciliationRow(_HoldsResult):
     """What a node said, when asked afterwards, about a call the coordinator had given up on.
 
     The coordinator gives up on a call when node trouble (a lost connection, missed heartbeats, an
@@ -172,9 +225,9 @@ class ReconciliationRow:
         run, instance, task, action, node: the call (``instance`` is the call id).
         assumed: the status the net went on with (the journaled result's), or ``None`` when no
             result was journaled (the run ended, on abort or deadline, before one came).
-        status: the node's final status, or ``None`` when the node does not know the call (it
-            never ran, or its result is no longer kept).
-        outcome, reason, cost, wall_s, cpu_s, value: the node's result (``None`` when unknown).
+        truth: the node's final result, or ``None`` when the node does not know the call (it
+            never ran, or its result is no longer kept); ``status``, ``outcome``, ``reason``,
+            ``cost``, ``wall_s``, ``cpu_s`` and ``value`` read it (``None`` when unknown).
         t_wall: when the node's answer was journaled.
         entry: order among every record of the journal.
     """
@@ -185,20 +238,18 @@ class ReconciliationRow:
     action: str
     node: str | None
     assumed: Status | None
-    status: Status | None
-    outcome: str | None
-    reason: str | None
-    cost: float | None
-    wall_s: float | None
-    cpu_s: float | None
-    value: Any
+    truth: ActionResult | None
     t_wall: float
     entry: int = 0
+
+    def action_result(self) -> ActionResult | None:
+        """The node's final result, or ``None``."""
+        return self.truth
 
     @property
     def known(self) -> bool:
         """True when the node knew the call (it ran, or started and died with the node)."""
-        return self.status is not None
+        return self.truth is not None
 
     @property
     def differs(self) -> bool:

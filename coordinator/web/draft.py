@@ -91,13 +91,7 @@ class Validation:
     def to_json(self) -> dict[str, Any]:
         return {"ok": not self.problems, "problems": [p.to_json() for p in self.problems],
                 "placement": self.placement,
-                "summary": _summary(self.net) if self.net is not None else ""}
-
-
-def _summary(net: PetriNet) -> str:
-    from coordinator.commands.check import summary
-
-    return summary(net)
+                "summary": self.net.summary() if self.net is not None else ""}
 
 
 # ------------------------------------------------------------------------------------------ writing

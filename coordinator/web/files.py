@@ -27,6 +27,7 @@ from coordinator.web.draft import (
     draft_of_text,
     validate_draft,
 )
+from services.errors import PetrobotError
 from services.textfile import write_atomically
 
 __all__ = ["FileRefused", "export_draft", "inside", "list_nets", "open_net", "save_draft", "with_layout"]
@@ -35,7 +36,7 @@ __all__ = ["FileRefused", "export_draft", "inside", "list_nets", "open_net", "sa
 MAX_LISTED = 500
 
 
-class FileRefused(Exception):
+class FileRefused(PetrobotError):
     """A path the console will not read or write (outside its folder, wrong suffix, unreadable)."""
 
 

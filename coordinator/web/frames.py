@@ -291,7 +291,7 @@ class LiveFeed:
         self._fired, self._t_first, self._t_last, self._fired_latched = {}, None, None, False
         self._pending = False
         engine = self.runtime.engine
-        marking = engine.counts()
+        marking = engine.marking
         changed = {p: n for p, n in marking.items() if self._sent_marking.get(p) != n}
         changed.update({p: 0 for p in self._sent_marking if p not in marking})
         nodes = None

@@ -19,6 +19,7 @@ from typing import Any
 
 from coordinator.netfile.limits import MAX_COUNT, MAX_NAME
 from coordinator.operator import Command
+from services.errors import PetrobotError
 
 __all__ = [
     "CLIENT_TYPES",
@@ -51,7 +52,7 @@ _DRAFT_KEYS = frozenset({"net", "places", "transitions", "arcs", "tasks"})
 _ANALYSES = frozenset({"analyze", "gspn", "perf", "learn"})
 
 
-class ProtocolViolation(Exception):
+class ProtocolViolation(PetrobotError):
     """An inbound message breaks the protocol; the socket is closed with ``reason``.
 
     Attributes:

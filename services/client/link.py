@@ -13,6 +13,10 @@ it ends within about 1 s. The next call reconnects, retrying with exponential ba
 A call given up on that way may still be running on the node: the node cancels it (reason
 ``"caller_gone"``) once nobody has asked for it during its heartbeat window, unless its action is
 unattended. :meth:`NodeLink.query` asks the node what became of it, without running anything.
+
+Each TCP connection of a link (its wire) hands what it receives to the link through
+:class:`WireHost`, given at construction: a call accepted, ended (with its result, or rejected),
+its feedback, an event, a pong, the welcome, the connection lost. :class:`NodeLink` is that host.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ import os
 import ssl
 import uuid
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 from services.errors import AuthenticationError, ProtocolError, RemoteProtocolError
 from services.location import TlsSettings
@@ -38,7 +42,6 @@ from services.protocol import (
     Connection,
     Event,
     Feedback,
-    Hello,
     Message,
     Ping,
     Pong,
@@ -55,7 +58,7 @@ from services.protocol import (
 from services.results import ActionResult
 from services.wire import FramedConnection, client_context
 
-__all__ = ["UNKNOWN_CALL", "EventCallback", "FeedbackCallback", "NodeLink", "describe"]
+__all__ = ["UNKNOWN_CALL", "EventCallback", "FeedbackCallback", "NodeLink", "WireHost", "describe"]
 
 log = logging.getLogger("petrobot.client")
 
@@ -79,13 +82,51 @@ class _Pending:
         self.accepted = False
 
 
-class _Wire(FramedConnection):
-    """One TCP connection of a NodeLink."""
+class WireHost(Protocol):
+    """What one connection of a link needs of the link (every method is called on the loop).
 
-    def __init__(self, link: NodeLink) -> None:
-        super().__init__(Connection(Role.CLIENT, link._key, name=link.name, max_frame=link.max_frame),
-                         asyncio.get_running_loop(), tls_binding=link.tls.mode == "psk")
-        self.link = link
+    Attributes:
+        node: the node's name (for log lines).
+    """
+
+    node: str
+
+    def call_accepted(self, call_id: str) -> None:
+        """The node accepted call ``call_id``."""
+
+    def call_ended(self, call_id: str, result: ActionResult) -> None:
+        """Call ``call_id`` ended with ``result`` (a rejection is an error result with its reason)."""
+
+    def call_feedback(self, call_id: str, data: Any) -> None:
+        """Feedback ``data`` of running call ``call_id``."""
+
+    def event_received(self, event: Event) -> None:
+        """An event of a subscribed topic."""
+
+    def pong_received(self, seq: int, now: float) -> None:
+        """The answer to ping ``seq``, at loop time ``now``."""
+
+    def welcomed(self, welcome: Welcome) -> None:
+        """The handshake succeeded: what the node offers."""
+
+    def wire_lost(self, wire: _Wire, exc: Exception) -> None:
+        """Connection ``wire`` is gone (``exc`` says why): its calls fail."""
+
+
+class _Wire(FramedConnection):
+    """One TCP connection of a NodeLink.
+
+    Args:
+        host: the link.
+        conn: the sans-IO client connection.
+        loop: the running loop.
+        tls_binding: the connection runs over TLS in ``psk`` mode.
+    """
+
+    def __init__(self, host: WireHost, conn: Connection, loop: asyncio.AbstractEventLoop, *,
+                 tls_binding: bool = False) -> None:
+        super().__init__(conn, loop, tls_binding=tls_binding)
+        self.host = host
         self.opened: asyncio.Future[None] = self.loop.create_future()
         self.closed = False
 
@@ -100,7 +141,7 @@ class _Wire(FramedConnection):
                 self._handle(msg)
         except ProtocolError as exc:
             reason = "auth_failed" if isinstance(exc, AuthenticationError) else f"protocol_error: {shown(str(exc), 200)}"
-            log.warning("node %s: %s", self.link.node, shown(str(exc), 200))
+            log.warning("node %s: %s", self.host.node, shown(str(exc), 200))
             self.abort(exc, reason)
             return
         self._flush()
@@ -111,58 +152,32 @@ class _Wire(FramedConnection):
     # ---- input
 
     def _handle(self, msg: Message) -> None:
-        kind = type(msg)
-        link = self.link
-        if kind is Result:
-            assert isinstance(msg, Result)
-            p = link._pending.pop(msg.id, None)
-            if p is not None and not p.future.done():
-                p.future.set_result(msg.result)
-        elif kind is Accepted:
-            p = link._pending.get(msg.id)  # type: ignore[attr-defined]
-            if p is not None:
-                p.accepted = True
-        elif kind is Feedback:
-            assert isinstance(msg, Feedback)
-            p = link._pending.get(msg.id)
-            if p is not None and p.on_feedback is not None:
-                try:
-                    p.on_feedback(msg.data)
-                except Exception:
-                    log.exception("feedback callback of call %s failed", shown(msg.id))
-        elif kind is Rejected:
-            assert isinstance(msg, Rejected)
-            p = link._pending.pop(msg.id, None)
-            if p is not None and not p.future.done():
-                p.future.set_result(ActionResult.error(msg.reason))
-        elif kind is Event:
-            assert isinstance(msg, Event)
-            for cb in list(link._topics.get(msg.topic, ())):
-                try:
-                    cb(msg)
-                except Exception:
-                    log.exception("event callback for %s failed", shown(msg.topic))
-        elif kind is Ping:
-            self.send(Pong(seq=msg.seq))  # type: ignore[attr-defined]
-        elif kind is Pong:
-            sent = link._ping_sent
-            if sent is not None and sent[0] == msg.seq:  # type: ignore[attr-defined]
-                link._rtt_s = self.loop.time() - sent[1]
-                link._ping_sent = None
-        elif kind is Hello:
-            pass  # the connection answered with auth by itself
-        elif kind is Welcome:
-            assert isinstance(msg, Welcome)
-            link._welcomed(msg)
+        host = self.host
+        if isinstance(msg, Result):
+            host.call_ended(msg.id, msg.result)
+        elif isinstance(msg, Accepted):
+            host.call_accepted(msg.id)
+        elif isinstance(msg, Feedback):
+            host.call_feedback(msg.id, msg.data)
+        elif isinstance(msg, Rejected):
+            host.call_ended(msg.id, ActionResult.error(msg.reason))
+        elif isinstance(msg, Event):
+            host.event_received(msg)
+        elif isinstance(msg, Ping):
+            self.send(Pong(seq=msg.seq))
+        elif isinstance(msg, Pong):
+            host.pong_received(msg.seq, self.loop.time())
+        elif isinstance(msg, Welcome):
+            host.welcomed(msg)
             if not self.opened.done():
                 self.opened.set_result(None)
-        elif kind is Bye:
-            assert isinstance(msg, Bye)
+        elif isinstance(msg, Bye):
             if msg.reason.startswith("auth_failed") and not self.opened.done():
-                exc: Exception = AuthenticationError(f"node {link.node} refused our key (auth_failed)")
+                exc: Exception = AuthenticationError(f"node {host.node} refused our key (auth_failed)")
             else:
                 exc = ConnectionError(f"node said bye: {shown(msg.reason, 200)}")
             self.abort(exc, None)
+        # Hello: the connection answered with auth by itself
 
     # ---- teardown
 
@@ -185,11 +200,12 @@ class _Wire(FramedConnection):
         if not self.opened.done():
             self.opened.set_exception(exc)
             self.opened.exception()  # mark retrieved
-        self.link._lost(self, exc)
+        self.host.wire_lost(self, exc)
 
 
-class NodeLink:
-    """An authenticated, self-healing connection to one node.
+class NodeLink(WireHost):
+    """An authenticated, self-healing connection to one node; the host of its wires
+    (:class:`WireHost`).
 
     Used by :class:`ServiceClient` (one per node) and by nodes that reach other nodes (global
     memory, set-point streaming).
@@ -445,10 +461,58 @@ class NodeLink:
         except (TimeoutError, OSError, ProtocolError) as exc:
             raise _Unreachable(ActionResult.error(f"node {self.node} unreachable: {describe(exc)}")) from None
 
-    def _welcomed(self, msg: Welcome) -> None:
-        self.offered_actions = tuple(msg.actions) if msg.actions is not None else None
-        self.location_digest = msg.location
-        self.location_changed = msg.location_changed
+    # ---- what its wires hand over (WireHost)
+
+    def call_accepted(self, call_id: str) -> None:
+        """The node accepted call ``call_id``."""
+        p = self._pending.get(call_id)
+        if p is not None:
+            p.accepted = True
+
+    def call_ended(self, call_id: str, result: ActionResult) -> None:
+        """Call ``call_id`` ended: its waiter gets ``result``."""
+        p = self._pending.pop(call_id, None)
+        if p is not None and not p.future.done():
+            p.future.set_result(result)
+
+    def call_feedback(self, call_id: str, data: Any) -> None:
+        """Pass feedback ``data`` to the callback of call ``call_id`` (its failure is logged)."""
+        p = self._pending.get(call_id)
+        if p is not None and p.on_feedback is not None:
+            try:
+                p.on_feedback(data)
+            except Exception:
+                log.exception("feedback callback of call %s failed", shown(call_id))
+
+    def event_received(self, event: Event) -> None:
+        """Pass ``event`` to the callbacks of its topic (a failing one is logged)."""
+        for cb in list(self._topics.get(event.topic, ())):
+            try:
+                cb(event)
+            except Exception:
+                log.exception("event callback for %s failed", shown(event.topic))
+
+    def pong_received(self, seq: int, now: float) -> None:
+        """The answer to the last ping gives the round trip (:meth:`health`)."""
+        sent = self._ping_sent
+        if sent is not None and sent[0] == seq:
+            self._rtt_s = now - sent[1]
+            self._ping_sent = None
+
+    def welcomed(self, welcome: Welcome) -> None:
+        """Keep what the node says it offers."""
+        self.offered_actions = tuple(welcome.actions) if welcome.actions is not None else None
+        self.location_digest = welcome.location
+        self.location_changed = welcome.location_changed
+
+    def wire_lost(self, wire: _Wire, exc: Exception) -> None:
+        """Connection ``wire`` is gone: the calls waiting on it end in error with the reason."""
+        if wire is not self._wire:
+            return
+        self._wire = None
+        if not self._closed:
+            log.warning("lost node %s: %s", self.node, exc)
+        self._fail_all(str(exc) or exc.__class__.__name__)
 
     def _send_cancel(self, cid: str) -> bool:
         w = self._wire
@@ -490,7 +554,7 @@ class NodeLink:
         host, port = self.address
         tls_name = (self.tls.server_name or host) if self.tls.mode == "certificate" else None
         async with asyncio.timeout(timeout):
-            _, wire = await loop.create_connection(lambda: _Wire(self), host, port, local_addr=self.local_addr,
+            _, wire = await loop.create_connection(self._new_wire, host, port, local_addr=self.local_addr,
                                                    ssl=self._ssl, server_hostname=tls_name)
             try:
                 await wire.opened
@@ -505,6 +569,10 @@ class NodeLink:
         if self._heartbeat is None or self._heartbeat.done():
             self._heartbeat = loop.create_task(self._heartbeat_loop())
         return wire
+
+    def _new_wire(self) -> _Wire:
+        conn = Connection(Role.CLIENT, self._key, name=self.name, max_frame=self.max_frame)
+        return _Wire(self, conn, asyncio.get_running_loop(), tls_binding=self.tls.mode == "psk")
 
     async def _heartbeat_loop(self) -> None:
         loop = asyncio.get_running_loop()
@@ -547,14 +615,6 @@ class NodeLink:
             except (TimeoutError, OSError, ProtocolError):
                 await asyncio.sleep(delay)
                 delay = min(delay * 2, 2.0)
-
-    def _lost(self, wire: _Wire, exc: Exception) -> None:
-        if wire is not self._wire:
-            return
-        self._wire = None
-        if not self._closed:
-            log.warning("lost node %s: %s", self.node, exc)
-        self._fail_all(str(exc) or exc.__class__.__name__)
 
     def _fail_all(self, reason: str) -> None:
         pending, self._pending = self._pending, {}

@@ -1,7 +1,7 @@
 """CAN frames of the robot drives (CiA 301/402 style): identifiers, payloads, the drive state machine.
 
 Pure (no sockets, no clocks): the motion node's CAN master (:mod:`services.devices.drives`) encodes and
-decodes these frames on a real or simulated bus; the simulated drives (:mod:`sim.canbus`) use the
+decodes these frames on a real or simulated bus; the simulated drives (:mod:`sim.drives`) use the
 same codec and state machine, so the two can never disagree. Tested without I/O.
 
 Bus layout (11-bit identifiers, CANopen pre-defined connection set):
@@ -65,6 +65,8 @@ import enum
 import math
 import struct
 from dataclasses import dataclass, field
+
+from services.errors import PetrobotError
 
 __all__ = [
     "CONSUMER_HEARTBEAT_S",
@@ -139,7 +141,7 @@ object 0x1016: 3.5 periods of the master's 100 ms heartbeat)."""
 _INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
 
 
-class FrameError(ValueError):
+class FrameError(PetrobotError, ValueError):
     """A CAN payload or socketcand message is malformed or out of range."""
 
 

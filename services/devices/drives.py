@@ -1,21 +1,28 @@
-"""Motion-node side of the PUMA's CAN bus: the six CiA 402 drives and the crossfire module.
+"""The master of CiA 402 drives on a CAN bus, as a node's driver sees them (position or velocity mode).
+
+The framework's generic device link to drives: a testbed's driver says which node ids its drives
+and I/O modules have (the PUMA's six joint drives and its crossfire module:
+:class:`services.catching.drives.PumaDrives`; the mobile robot's two wheel drives in profile
+velocity mode: :class:`VelocityCanDrives` with the wheels' ids), and the master does the rest. A
+real bus or another CAN stack replaces this module, not the testbeds' drivers.
 
 Talks to the bus through python-can's ``socketcand`` interface (the sim's gateway in
-:mod:`sim.canbus`, or any socketcand server); on real hardware the same frames would go through
+:class:`sim.socketcand.CanGateway`, or any socketcand server); on real hardware the same frames would go through
 ``interface="socketcan"``. Frame layout and units: :mod:`services.devices.cia402`.
 
 A receive thread keeps the latest actual positions and statuswords (TPDO1), heartbeat times,
-the drives' emergency messages (EMCY), the crossfire state and the latest SYNC;
-:meth:`PumaDrives.wait_sync` lets a control loop run once per 2 ms bus cycle. Supervision, on
+the drives' emergency messages (EMCY), the I/O modules' reports (handed to :meth:`CanDrives.on_io`
+callbacks) and the latest SYNC; :meth:`CanDrives.wait_sync` lets a control loop run once per bus
+cycle. Supervision, on
 two clocks: a node whose latest heartbeat is older than ``heartbeat_timeout`` seconds of *bus* time
 (the time the SYNCs carry: a node gone silent on a live bus), a bus on which nothing at all arrived
 for ``silence_timeout`` seconds of *wall* time (the bus, or the simulation behind it, stopped), or a
-closed connection, makes :meth:`PumaDrives.check` raise :class:`BusError`; so does a drive in
+closed connection, makes :meth:`CanDrives.check` raise :class:`BusError`; so does a drive in
 FAULT, naming the cause its EMCY gave. (A simulation slowed down by a loaded machine delivers its
 heartbeats further apart in wall time without anything being lost; judged on the wall clock alone,
 0.5 s, that stall failed catches of the demo.) The master produces its own heartbeat (node
 :data:`services.devices.cia402.MASTER_ID`, every 100 ms of bus time while it sends targets), which
-the drives consume. :meth:`PumaDrives.enable` is also the CiA 402 fault recovery: it waits out a
+the drives consume. :meth:`CanDrives.enable` is also the CiA 402 fault recovery: it waits out a
 running fault reaction, resets the fault (controlword 0x00, then the rising edge 0x80) and walks
 every drive to OPERATION_ENABLED again.
 """
@@ -35,7 +42,7 @@ from numpy.typing import NDArray
 from services.devices import cia402 as cf
 from services.errors import ActionError
 
-__all__ = ["BusError", "PumaDrives", "WheelCanDrives"]
+__all__ = ["BusError", "CanDrives", "IoCallback", "VelocityCanDrives"]
 
 # python-can's socketcand client logs every TCP read that splits a frame message as a warning;
 # that is ordinary stream fragmentation, not a fault.
@@ -46,15 +53,16 @@ class BusError(ActionError):
     """The CAN bus or a drive is unusable: connection lost, heartbeat missing, drive fault."""
 
 
-CrossfireCallback = Callable[[bool, float], None]
+IoCallback = Callable[[bytes, float], None]
+"""Called from the receive thread with an I/O module's TPDO1 data and its bus time, s."""
 
 
-class PumaDrives:
-    """The PUMA joint drives as seen from the motion node.
+class CanDrives:
+    """CiA 402 drives in cyclic synchronous position mode as seen from a node (the master).
 
-    Lifecycle: ``PumaDrives(host, port)`` only configures; :meth:`open` connects (or use it as a
-    context manager); :meth:`enable` brings every drive to OPERATION_ENABLED; :meth:`send_targets`
-    once per cycle; :meth:`close` disables and disconnects.
+    Lifecycle: ``CanDrives(host, port, nodes=...)`` only configures; :meth:`open` connects (or use it
+    as a context manager); :meth:`enable` brings every drive to OPERATION_ENABLED;
+    :meth:`send_targets` once per cycle; :meth:`close` disables and disconnects.
 
     Args:
         host, port: the socketcand server (the sim's CAN gateway).
@@ -62,11 +70,10 @@ class PumaDrives:
         heartbeat_timeout: seconds of bus time without a heartbeat after which a node counts as lost.
         silence_timeout: seconds of wall time without any frame after which the bus counts as lost.
         clock: monotonic clock for supervision (seconds).
+        nodes: node ids of the drives, 1..n in order.
+        io_nodes: node ids of the other modules on the bus (I/O), whose heartbeats are supervised
+            too and whose TPDO1 reports go to :meth:`on_io` callbacks.
     """
-
-    NODES: tuple[int, ...] = cf.DRIVE_IDS
-    OTHER_NODES: tuple[int, ...] = (cf.CROSSFIRE_ID,)
-    """CAN nodes besides the drives whose heartbeats are supervised."""
 
     def __init__(
         self,
@@ -76,7 +83,12 @@ class PumaDrives:
         heartbeat_timeout: float = 0.5,
         silence_timeout: float = 2.0,
         clock: Callable[[], float] = time.monotonic,
+        *,
+        nodes: tuple[int, ...],
+        io_nodes: tuple[int, ...] = (),
     ) -> None:
+        self.nodes = tuple(nodes)
+        self.io_nodes = tuple(io_nodes)
         self.host = host
         self.port = port
         self.channel = channel
@@ -88,7 +100,7 @@ class PumaDrives:
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._cond = threading.Condition()
-        n = len(self.NODES)
+        n = len(self.nodes)
         self._positions = np.full(n, np.nan)
         self._velocities = np.full(n, np.nan)
         self._statuswords = [0] * n
@@ -97,8 +109,7 @@ class PumaDrives:
         self._sync_count = 0
         self._sync_returned = 0
         self._sync_t = float("nan")
-        self._crossfire: bool | None = None
-        self._crossfire_callbacks: list[CrossfireCallback] = []
+        self._io: dict[int, list[IoCallback]] = {node: [] for node in self.io_nodes}
         self._emcy: dict[int, tuple[int, float]] = {}
         self._expect_enabled = False
         self._heartbeat_sent_t = -float("inf")
@@ -131,7 +142,7 @@ class PumaDrives:
         self._expect_enabled = False
         try:
             if self._dead is None:
-                for node in self.NODES:
+                for node in self.nodes:
                     self._send(self._hold_rpdo(node, cf.Controlword.DISABLE_VOLTAGE))
         except BusError:
             pass
@@ -150,28 +161,29 @@ class PumaDrives:
     # --- state -----------------------------------------------------------------------------------
 
     def positions(self) -> NDArray[np.float64]:
-        """Latest actual joint positions, shape (6,), rad (NaN until a drive reported)."""
+        """Latest actual positions of the drives, shape (n,), rad (NaN until a drive reported)."""
         with self._cond:
             return self._positions.copy()
 
     def states(self) -> list[cf.DriveState | None]:
-        """Latest CiA 402 state of drives 1..6 (``None`` until reported or not understood)."""
+        """Latest CiA 402 state of drives 1..n (``None`` until reported or not understood)."""
         with self._cond:
             return self._states_locked()
-
-    @property
-    def crossfire(self) -> bool | None:
-        """Latest crossfire state (True = beam interrupted), ``None`` before the first report."""
-        return self._crossfire
 
     @property
     def sim_time(self) -> float:
         """Bus time (s) stamped on the latest SYNC."""
         return self._sync_t
 
-    def on_crossfire(self, callback: CrossfireCallback) -> None:
-        """Call ``callback(blocked, t)`` from the receive thread on every crossfire report."""
-        self._crossfire_callbacks.append(callback)
+    def on_io(self, node: int, callback: IoCallback) -> None:
+        """Call ``callback(data, t)`` from the receive thread on every TPDO1 of I/O module ``node``.
+
+        Raises:
+            ValueError: ``node`` is not one of the ``io_nodes``.
+        """
+        if node not in self._io:
+            raise ValueError(f"CAN node {node} is not an I/O module of this bus ({self.io_nodes})")
+        self._io[node].append(callback)
 
     def lost(self) -> str | None:
         """Why the bus counts as lost (closed, marked lost, a node's heartbeat missing), or ``None``."""
@@ -184,7 +196,7 @@ class PumaDrives:
             silent = now - self._last_rx
         if silent > self.silence_timeout:
             return f"nothing on the CAN bus for {silent:.2f} s (no SYNC, no heartbeats): bus lost"
-        for node in (*self.NODES, *self.OTHER_NODES):
+        for node in (*self.nodes, *self.io_nodes):
             seen = beats.get(node)
             if seen is None:
                 if now - self._opened_at > self.silence_timeout:
@@ -202,7 +214,7 @@ class PumaDrives:
             raise BusError(lost)
         with self._cond:
             states = self._states_locked()
-        for node, state in zip(self.NODES, states):
+        for node, state in zip(self.nodes, states):
             if state in (cf.DriveState.FAULT, cf.DriveState.FAULT_REACTION_ACTIVE):
                 raise BusError(f"drive {node} is in FAULT ({self.fault_cause(node)})")
             if self._expect_enabled and state is not cf.DriveState.OPERATION_ENABLED:
@@ -223,7 +235,7 @@ class PumaDrives:
     def faults(self) -> dict[int, str]:
         """Drives in FAULT or FAULT REACTION ACTIVE by node id, each with its EMCY cause in words."""
         with self._cond:
-            return {n: self._cause_locked(n) for n, s in zip(self.NODES, self._states_locked())
+            return {n: self._cause_locked(n) for n, s in zip(self.nodes, self._states_locked())
                     if s in (cf.DriveState.FAULT, cf.DriveState.FAULT_REACTION_ACTIVE)}
 
     def all_enabled(self) -> bool:
@@ -275,7 +287,7 @@ class PumaDrives:
             (cf.Controlword.ENABLE_OPERATION, (on,)),
         )
         for cw, states in steps:
-            for node in self.NODES:
+            for node in self.nodes:
                 self._send(self._hold_rpdo(node, cw))
             if states:
                 self._wait(
@@ -291,18 +303,19 @@ class PumaDrives:
     def disable(self) -> None:
         """Disable voltage on every drive (they hold position, brakes on)."""
         self._expect_enabled = False
-        for node in self.NODES:
+        for node in self.nodes:
             self._send(self._hold_rpdo(node, cf.Controlword.DISABLE_VOLTAGE))
 
     def send_targets(self, q: Sequence[float] | NDArray[np.float64]) -> None:
-        """Send one RPDO1 per drive: enable-operation controlword and target, rad, shape (6,).
+        """Send one RPDO1 per drive: enable-operation controlword and target, rad, shape (n,).
 
         Raises:
             BusError: the connection is lost.
+            ValueError: not one target per drive.
         """
-        if len(q) != 6:
-            raise ValueError(f"expected 6 joint targets, got {len(q)}")
-        for node, target in zip(self.NODES, q):
+        if len(q) != len(self.nodes):
+            raise ValueError(f"expected {len(self.nodes)} joint targets, got {len(q)}")
+        for node, target in zip(self.nodes, q):
             self._send(cf.encode_rpdo1(node, cf.Controlword.ENABLE_OPERATION, float(target)))
         if self._sync_t - self._heartbeat_sent_t >= cf.HEARTBEAT_PERIOD_S - 1e-9:
             self._send_heartbeat()
@@ -377,7 +390,7 @@ class PumaDrives:
                         what += ": " + ", ".join(
                             f"drive {n} {s.value if s else 'silent'}"
                             + (f" ({self._cause_locked(n)})" if s is cf.DriveState.FAULT else "")
-                            for n, s in zip(self.NODES, self._states_locked()))
+                            for n, s in zip(self.nodes, self._states_locked()))
                     raise BusError(what)
                 self._cond.wait(min(left, 0.05))
 
@@ -419,23 +432,22 @@ class PumaDrives:
 
     def _handle(self, frame: cf.CanFrame) -> None:
         cid = frame.can_id
-        callbacks: list[CrossfireCallback] = []
+        callbacks: list[IoCallback] = []
         self._last_rx = self._clock()
         with self._cond:
             if cid == cf.SYNC_ID:
                 self._sync_count += 1
                 self._sync_t = frame.t
-            elif cf.TPDO1_BASE + 1 <= cid <= cf.TPDO1_BASE + len(self.NODES):
+            elif cf.TPDO1_BASE + 1 <= cid <= cf.TPDO1_BASE + len(self.nodes):
                 i = cid - cf.TPDO1_BASE - 1
                 sw, q = cf.decode_tpdo1(frame.data)
                 self._statuswords[i] = sw
                 self._positions[i] = q
                 self._tpdo_seen[i] = True
-            elif cf.TPDO2_BASE + 1 <= cid <= cf.TPDO2_BASE + len(self.NODES):
+            elif cf.TPDO2_BASE + 1 <= cid <= cf.TPDO2_BASE + len(self.nodes):
                 self._velocities[cid - cf.TPDO2_BASE - 1] = cf.decode_tpdo2(frame.data)[0]
-            elif cid == cf.TPDO1_BASE + cf.CROSSFIRE_ID:
-                self._crossfire = cf.decode_crossfire(frame.data)
-                callbacks = list(self._crossfire_callbacks)
+            elif cid - cf.TPDO1_BASE in self._io:
+                callbacks = list(self._io[cid - cf.TPDO1_BASE])
             elif cf.EMCY_BASE + 1 <= cid <= cf.EMCY_BASE + 0x7F:
                 code, _register = cf.decode_emcy(frame.data)
                 self._emcy[cid - cf.EMCY_BASE] = (code, frame.t)
@@ -445,7 +457,7 @@ class PumaDrives:
                 return
             self._cond.notify_all()
         for cb in callbacks:
-            cb(bool(self._crossfire), frame.t)
+            cb(frame.data, frame.t)
 
 
 def _connect(host: str, port: int, channel: str, timeout: float) -> can.BusABC:
@@ -469,36 +481,32 @@ def _connect(host: str, port: int, channel: str, timeout: float) -> can.BusABC:
     return can.Bus(interface="socketcand", host=host, port=port, channel=channel, tcp_tune=True)
 
 
-class WheelCanDrives(PumaDrives):
-    """The mobile robot's two wheel drives (node 1 left, node 2 right) in CiA 402 profile velocity
-    mode, as seen from the drive node: the same master (connection, supervision, NMT start, fault
-    recovery by :meth:`enable`, the master's heartbeat, :meth:`wait_sync`) with velocity RPDOs.
+class VelocityCanDrives(CanDrives):
+    """CiA 402 drives in profile velocity mode (the mobile robot's wheels, node 1 left, node 2
+    right): the same master (connection, supervision, NMT start, fault recovery by :meth:`enable`,
+    the master's heartbeat, :meth:`wait_sync`) with velocity RPDOs.
 
     Frames: :mod:`services.devices.cia402` (RPDO1 = controlword + target velocity 0x60FF; TPDO1 =
-    statusword + position actual 0x6064; TPDO2 = velocity actual 0x606C). The bus has no other
-    supervised node (no crossfire module).
+    statusword + position actual 0x6064; TPDO2 = velocity actual 0x606C).
     """
-
-    NODES = cf.WHEEL_IDS
-    OTHER_NODES = ()
 
     def _hold_rpdo(self, node: int, cw: int) -> cf.CanFrame:
         return cf.encode_velocity_rpdo1(node, cw, 0.0)
 
-    def send_velocities(self, left: float, right: float) -> None:
-        """One RPDO1 per wheel drive: enable-operation controlword and target velocity, rad/s
-        (also the master's heartbeat every 100 ms of bus time).
+    def send_velocities(self, *velocities: float) -> None:
+        """One RPDO1 per drive, in node order: enable-operation controlword and target velocity,
+        rad/s (also the master's heartbeat every 100 ms of bus time).
 
         Raises:
             BusError: the connection is lost.
             FrameError: a velocity is not finite.
         """
-        self._send(cf.encode_velocity_rpdo1(self.NODES[0], cf.Controlword.ENABLE_OPERATION, float(left)))
-        self._send(cf.encode_velocity_rpdo1(self.NODES[1], cf.Controlword.ENABLE_OPERATION, float(right)))
+        for node, velocity in zip(self.nodes, velocities, strict=True):
+            self._send(cf.encode_velocity_rpdo1(node, cf.Controlword.ENABLE_OPERATION, float(velocity)))
         if self._sync_t - self._heartbeat_sent_t >= cf.HEARTBEAT_PERIOD_S - 1e-9:
             self._send_heartbeat()
 
     def velocities(self) -> NDArray[np.float64]:
-        """Latest velocity actual values (TPDO2) of the (left, right) wheels, rad/s (NaN before)."""
+        """Latest velocity actual values (TPDO2) of the drives, in node order, rad/s (NaN before)."""
         with self._cond:
             return self._velocities.copy()

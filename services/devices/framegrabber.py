@@ -2,7 +2,7 @@
 
 "A CCD camera above the table feeds the image-processing PC through a frame-grabber card." Here the
 camera is a TCP frame server with grab-latest semantics (the simulated one is
-:class:`sim.camera.FrameServer`; a GigE camera behind a small bridge serves the same protocol), and
+:class:`sim.frameserver.FrameServer`; a GigE camera behind a small bridge serves the same protocol), and
 :class:`FrameClient` is the grabber. Blocking sockets: the vision node runs it in a thread.
 
 Wire format: every message is one frame of :mod:`services.protocol.framing` (4-byte big-endian

@@ -31,8 +31,10 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from services.errors import MalformedSetPoint
+
 from .odometry import Pose2D
-from .steering import SetPoint
+from .steering import SteeringSetPoint
 
 __all__ = [
     "MAX_CURVATURE",
@@ -61,11 +63,7 @@ MAX_SEQ = 2**63 - 1
 MAX_KEYS = 32
 
 
-class MalformedSetPoint(ValueError):
-    """A set point (or odometry message) that fails validation; the message names the field."""
-
-
-def setpoint_to_dict(sp: SetPoint, t_sent: float, t_capture: float | None = None) -> dict[str, Any]:
+def setpoint_to_dict(sp: SteeringSetPoint, t_sent: float, t_capture: float | None = None) -> dict[str, Any]:
     """The event data of set point ``sp`` (``t_sent``: the sender's wall clock, s; ``t_capture``: the
     wall clock at which its frame was captured, s, when known: for latency only)."""
     out = {"seq": sp.seq, "t": sp.t, "v": sp.v, "curvature": sp.curvature, "left": sp.left,
@@ -97,7 +95,7 @@ def _check_map(d: object) -> dict[Any, Any]:
     return d
 
 
-def parse_setpoint(data: object) -> SetPoint:
+def parse_setpoint(data: object) -> SteeringSetPoint:
     """Validate one set point's event data field by field (unknown keys ignored).
 
     Raises:
@@ -107,7 +105,7 @@ def parse_setpoint(data: object) -> SetPoint:
     seq = d.get("seq")
     if isinstance(seq, bool) or not isinstance(seq, int) or not 0 <= seq <= MAX_SEQ:
         raise MalformedSetPoint(f"field 'seq' is not an integer in 0..2^63-1: {seq!r}")
-    return SetPoint(
+    return SteeringSetPoint(
         seq=seq,
         t=_number(d, "t", MAX_TIME, non_negative=True),
         v=_number(d, "v", MAX_SPEED),
@@ -164,7 +162,7 @@ class SteeringInput:
         if not stale_s > 0:
             raise ValueError(f"stale_s must be positive, got {stale_s}")
         self.stale_s = float(stale_s)
-        self.latest: SetPoint | None = None
+        self.latest: SteeringSetPoint | None = None
         self.accepted = self.malformed = self.stale = self.out_of_order = 0
         self.watchdog_stops = 0
         self.stopped = False
@@ -172,7 +170,7 @@ class SteeringInput:
         self._wall = -math.inf
         self._bus = -math.inf
 
-    def offer(self, data: object, wall: float, bus: float) -> SetPoint | None:
+    def offer(self, data: object, wall: float, bus: float) -> SteeringSetPoint | None:
         """Take one event's data received at wall time ``wall`` and bus time ``bus`` (NaN if the bus
         clock is not known yet); returns the set point if accepted."""
         try:
@@ -217,4 +215,4 @@ class SteeringInput:
     def hold(self) -> None:
         """Forget the latest set point's wheel speeds (an explicit stop): zero until a newer one."""
         if self.latest is not None:
-            self.latest = SetPoint(self.latest.seq, self.latest.t, 0.0, 0.0, 0.0, 0.0)
+            self.latest = SteeringSetPoint(self.latest.seq, self.latest.t, 0.0, 0.0, 0.0, 0.0)

@@ -1,6 +1,6 @@
 """Steering and speed: set points for the wheel drives.
 
-The drive node takes a stream of :class:`SetPoint` s — a forward speed and a path curvature, turned
+The drive node takes a stream of :class:`SteeringSetPoint` s — a forward speed and a path curvature, turned
 into a velocity set point per wheel (rad/s) with the drive's geometry — each numbered and stamped
 so that the receiver can drop stale or out-of-order ones.
 
@@ -30,12 +30,13 @@ from dataclasses import dataclass
 from .lines import LineEstimate
 from .odometry import DriveGeometry
 
-__all__ = ["PurePursuit", "SetPoint", "SpeedLimits", "SteeringController", "pursuit_curvature"]
+__all__ = ["PurePursuit", "SpeedLimits", "SteeringController", "SteeringSetPoint", "pursuit_curvature"]
 
 
 @dataclass(frozen=True, slots=True)
-class SetPoint:
-    """A drive set point.
+class SteeringSetPoint:
+    """A steering set point for the drive node (the catching testbed's is
+    :class:`services.catching.setpoints.CatchSetPoint`).
 
     Attributes:
         seq: sequence number, from 0, increasing by one per set point of a stream.
@@ -137,7 +138,7 @@ class SteeringController:
         self.v = 0.0
         self._t: float | None = None
 
-    def command(self, t: float, v_wish: float, curvature: float) -> SetPoint:
+    def command(self, t: float, v_wish: float, curvature: float) -> SteeringSetPoint:
         """The set point for time ``t`` (s): speed toward ``v_wish`` within the acceleration bounds
         and the curve bound, along ``curvature`` (1/m).
 
@@ -156,14 +157,14 @@ class SteeringController:
             # braking is never limited below a requested stop (the stop profile already is)
             self.v = target
         left, right = self.geometry.wheel_speeds(self.v, curvature)
-        sp = SetPoint(self.seq, t, self.v, curvature, left, right)
+        sp = SteeringSetPoint(self.seq, t, self.v, curvature, left, right)
         self.seq += 1
         return sp
 
-    def stop(self, t: float) -> SetPoint:
+    def stop(self, t: float) -> SteeringSetPoint:
         """A zero-speed set point at time ``t``."""
         self.v = 0.0
         self._t = t if self._t is None else max(self._t, t)
-        sp = SetPoint(self.seq, t, 0.0, 0.0, 0.0, 0.0)
+        sp = SteeringSetPoint(self.seq, t, 0.0, 0.0, 0.0, 0.0)
         self.seq += 1
         return sp

@@ -3,7 +3,7 @@
 Each primitive action of the course is a controller stepped once per camera frame with the frame's
 time, the odometry pose at that time and the image (and, for the beacon tasks, the beacon scans):
 it returns a :class:`Step` — the steering set point to stream to the drives and, when the task
-has ended, its outcome. The perception node's actions (:mod:`services.actions.mobile`) run them
+has ended, its outcome. The perception node's actions (:mod:`services.mobile.perception_node`) run them
 on frames from the camera server and odometry from the drive node; ``bench/mobile.py`` runs the
 same controllers in process in lock-step. What one task leaves for the next (the last track
 estimate, where the track ended, the beacon sightings of the last second, the T bar's position,
@@ -39,7 +39,7 @@ from .camera import GroundCamera
 from .lines import LineEstimate, make_detector
 from .marks import EndMarkDetector, GapMonitor
 from .odometry import DriveGeometry, Pose2D
-from .steering import PurePursuit, SetPoint, SpeedLimits, SteeringController
+from .steering import PurePursuit, SteeringSetPoint, SpeedLimits, SteeringController
 
 __all__ = [
     "DETECTORS",
@@ -113,7 +113,7 @@ class Step:
         note: why it ended, in words.
     """
 
-    setpoint: SetPoint
+    setpoint: SteeringSetPoint
     outcome: str | None = None
     success: bool = True
     note: str = ""
@@ -189,7 +189,7 @@ class CourseMemory:
             return None
         return line
 
-    def stop(self, t: float) -> SetPoint:
+    def stop(self, t: float) -> SteeringSetPoint:
         """A zero-speed set point at ``t``."""
         return self.steering.stop(t)
 

@@ -159,8 +159,7 @@ class Listener:
         if exc is not None:  # the TLS handshake failed or the peer went away first
             self._limited.log(logging.INFO, ("tls", peer.peer_host), "connection from %s failed: %s",
                               peer.peer_host, exc)
-            peer.closed = True
-            peer.node._gone(peer)
+            peer.connect_failed()
 
     def _refuse(self, sock: socket.socket, bye: bytes) -> None:
         if self._ssl is None:

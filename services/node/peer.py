@@ -11,26 +11,33 @@ Back-pressure: a peer that does not read what it is sent cannot make the node ho
 reading from the peer (messages already received wait too) until the backlog has drained; events
 for it go to the fan-out's bounded backlog and feedback for it is dropped (counted), while results
 are always sent.
+
+A peer reaches its node only through :class:`PeerHost`, given at construction: the sans-IO
+connection turns bytes into messages, the peer hands each message to its host (a call to admit, a
+query to answer, a cancel, a subscription), reports authentication and departure, and asks the host
+how much output it may hold. The node (:class:`services.node.server.Node`) is that host; this
+module never imports it, as websockets' asyncio shell never imports what drives it.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 from services.errors import AuthenticationError, ProtocolError
+from services.node.logs import LogLimiter
 from services.protocol import (
     Auth,
     Bye,
     Call,
     Cancel,
     Connection,
+    Event,
     Message,
     Ping,
     Pong,
     Query,
-    Role,
     State,
     Subscribe,
     Unsubscribe,
@@ -38,10 +45,7 @@ from services.protocol import (
 )
 from services.wire import FramedConnection
 
-if TYPE_CHECKING:
-    from services.node.server import Node
-
-__all__ = ["Peer"]
+__all__ = ["Peer", "PeerHost"]
 
 log = logging.getLogger("petrobot.node")
 
@@ -49,13 +53,64 @@ _WRITE_HIGH_WATER = 256 * 1024
 _ABORT_AFTER_S = 1.0  # a closed connection whose output the peer does not read is cut after this
 
 
+class PeerHost(Protocol):
+    """What a connection needs of the node that accepted it; every method is called on the loop.
+
+    Attributes:
+        max_output: bytes that may wait to go out to one peer before the node stops reading from it.
+    """
+
+    max_output: int
+
+    def peer_connected(self, peer: Peer) -> None:
+        """The transport is up: the peer is one of the node's connections."""
+
+    def peer_authenticated(self, peer: Peer) -> None:
+        """The handshake succeeded (the host may still refuse the peer, over its caps)."""
+
+    def login_failed(self, peer: Peer, exc: Exception) -> None:
+        """The handshake failed with ``exc`` (the peer is closed next)."""
+
+    def peer_gone(self, peer: Peer) -> None:
+        """The connection closed or failed: forget the peer (may be called more than once)."""
+
+    def admit_call(self, peer: Peer, call: Call) -> None:
+        """Admit, join, answer or reject ``call``, and say so to the peer."""
+
+    def answer_query(self, peer: Peer, query: Query) -> None:
+        """Answer ``query`` (what became of a call), never running anything."""
+
+    def cancel_call(self, call_id: str) -> None:
+        """Cancel call ``call_id`` if it runs."""
+
+    def subscribe(self, peer: Peer, topic: str) -> None:
+        """Send the peer the events of ``topic`` (a refusal is the host's to log)."""
+
+    def unsubscribe(self, peer: Peer, topic: str) -> None:
+        """Stop sending the peer the events of ``topic``."""
+
+    def writing_paused(self, peer: Peer) -> None:
+        """The peer's transport buffer is full: hold its events back."""
+
+    def writing_resumed(self, peer: Peer) -> list[Event]:
+        """The buffer drained: the events held back for the peer, to send now."""
+        ...
+
+    def read_done(self) -> None:
+        """One read from a peer has been handled (the calls it started are committed before they run)."""
+
+
 class Peer(FramedConnection):
     """One accepted connection (see the module docstring).
 
     Args:
-        node: the node.
-        host: the peer's IP address.
+        host: the node, as the connection sees it.
+        conn: the sans-IO server connection (its key, name, frame cap and offer are the node's).
+        loop: the running loop.
+        peer_host: the peer's IP address.
         accepted_at: loop time of the accept, seconds.
+        limited: the node's rate-limited log, for lines a peer can provoke at will.
+        tls_binding: the connection runs over TLS in ``psk`` mode.
 
     Attributes:
         local: whether the peer is on this host (decided at authentication).
@@ -66,12 +121,12 @@ class Peer(FramedConnection):
         connecting: the task setting up the transport (TLS handshake), until it is done.
     """
 
-    def __init__(self, node: Node, host: str, accepted_at: float) -> None:
-        conn = Connection(Role.SERVER, node._key, name=node.name, max_frame=node.max_frame,
-                          previous_keys=node._previous_keys, offer=node._offer)
-        super().__init__(conn, node._loop, tls_binding=node.tls_binding)
-        self.node = node
-        self.peer_host = host
+    def __init__(self, host: PeerHost, conn: Connection, loop: asyncio.AbstractEventLoop, peer_host: str,
+                 accepted_at: float, limited: LogLimiter, *, tls_binding: bool = False) -> None:
+        super().__init__(conn, loop, tls_binding=tls_binding)
+        self.host = host
+        self.limited = limited
+        self.peer_host = peer_host
         self.accepted_at = accepted_at
         self.local = False
         self.authenticated = False
@@ -99,7 +154,7 @@ class Peer(FramedConnection):
         if self.closed:  # evicted while its TLS handshake ran
             transport.abort()
             return
-        self.node._peers.add(self)
+        self.host.peer_connected(self)
         log.debug("connection from %s", self.peer_host)
         self._flush()  # hello
 
@@ -115,23 +170,28 @@ class Peer(FramedConnection):
             self.closed = True
             if self.authenticated:
                 log.info("connection from %r closed%s", self, f": {shown(str(exc))}" if exc else "")
-        self.node._gone(self)
+        self.host.peer_gone(self)
 
     def pause_writing(self) -> None:
         self._writing_paused = True
-        self.node._fanout.pause(self)
+        self.host.writing_paused(self)
 
     def resume_writing(self) -> None:
         self._writing_paused = False
-        for ev in self.node._fanout.resume(self):
+        for ev in self.host.writing_resumed(self):
             self.send(ev)
         self._unblock()
+
+    def connect_failed(self) -> None:
+        """The transport never came up (TLS handshake failed, or the peer left first)."""
+        self.closed = True
+        self.host.peer_gone(self)
 
     # ---- input
 
     def _process(self) -> None:
         conn = self.conn
-        limit = self.node.max_output
+        limit = self.host.max_output
         try:
             while not self.closed:
                 if self.authenticated and self.output_backlog > limit:
@@ -143,16 +203,15 @@ class Peer(FramedConnection):
                 self._handle(msg)
         except ProtocolError as exc:
             if isinstance(exc, AuthenticationError):
-                self.node._login_failed(self, exc)
+                self.host.login_failed(self, exc)
                 self.close("auth_failed")
             else:
-                self.node._limited.log(logging.WARNING, ("bad frame", self.peer_host),
-                                       "bad frame from %r: %s", self, shown(str(exc), 200))
+                self.limited.log(logging.WARNING, ("bad frame", self.peer_host),
+                                 "bad frame from %r: %s", self, shown(str(exc), 200))
                 self.close(f"protocol_error: {shown(str(exc), 200)}")
             return
         finally:
-            if self.node._durable:
-                self.node.commit()  # the calls started by this read are on disk before they run
+            self.host.read_done()  # the calls started by this read are on disk before they run
         self._schedule_flush()
 
     def _block(self) -> None:
@@ -163,7 +222,7 @@ class Peer(FramedConnection):
 
     def _unblock(self) -> None:
         if self._reading_blocked and not self._writing_paused and not self.closed \
-                and self.output_backlog <= self.node.max_output and self.transport is not None:
+                and self.output_backlog <= self.host.max_output and self.transport is not None:
             self._reading_blocked = False
             self.transport.resume_reading()
             self.loop.call_soon(self._process)  # messages received before we stopped
@@ -178,34 +237,29 @@ class Peer(FramedConnection):
         return not self._writing_paused and not self._reading_blocked
 
     def _handle(self, msg: Message) -> None:
-        node = self.node
-        kind = type(msg)
-        if kind is Call:
-            node._on_call(self, msg)  # type: ignore[arg-type]
-        elif kind is Ping:
-            self.send(Pong(seq=msg.seq))  # type: ignore[attr-defined]
-        elif kind is Query:
-            node._on_query(self, msg)  # type: ignore[arg-type]
-        elif kind is Cancel:
-            node._on_cancel(msg.id)  # type: ignore[attr-defined]
-        elif kind is Subscribe:
-            topic = msg.topic  # type: ignore[attr-defined]
-            refusal = node._fanout.subscribe(self, topic)
-            if refusal is not None:
-                node._limited.log(logging.WARNING, ("subscription refused", self.peer_host),
-                                  "subscription of %r to %s refused: %s", self, shown(topic, 64), refusal.value)
-        elif kind is Unsubscribe:
-            node._fanout.unsubscribe(self, msg.topic)  # type: ignore[attr-defined]
-        elif kind is Bye:
-            reason = shown(msg.reason, 120)  # type: ignore[attr-defined]
+        host = self.host
+        if isinstance(msg, Call):
+            host.admit_call(self, msg)
+        elif isinstance(msg, Ping):
+            self.send(Pong(seq=msg.seq))
+        elif isinstance(msg, Query):
+            host.answer_query(self, msg)
+        elif isinstance(msg, Cancel):
+            host.cancel_call(msg.id)
+        elif isinstance(msg, Subscribe):
+            host.subscribe(self, msg.topic)
+        elif isinstance(msg, Unsubscribe):
+            host.unsubscribe(self, msg.topic)
+        elif isinstance(msg, Bye):
+            reason = shown(msg.reason, 120)
             if self.authenticated:
                 log.info("%r said bye: %s", self, reason)
             else:
-                node._limited.log(logging.INFO, ("bye before login", self.peer_host),
-                                  "unauthenticated %s said bye: %s", self.peer_host, reason)
+                self.limited.log(logging.INFO, ("bye before login", self.peer_host),
+                                 "unauthenticated %s said bye: %s", self.peer_host, reason)
             self._close_transport()
-        elif kind is Auth:
-            node._authenticated(self)
+        elif isinstance(msg, Auth):
+            host.peer_authenticated(self)
 
     # ---- output and closing
 
@@ -238,7 +292,7 @@ class Peer(FramedConnection):
             self.closed = True
             if self.connecting is not None:
                 self.connecting.cancel()
-            self.node._gone(self)
+            self.host.peer_gone(self)
             return
         self.close(reason)
 
@@ -252,4 +306,4 @@ class Peer(FramedConnection):
                 t.close()  # let the results and the bye go out, but not forever
                 if t.get_write_buffer_size():
                     self.loop.call_later(_ABORT_AFTER_S, t.abort)
-        self.node._gone(self)
+        self.host.peer_gone(self)

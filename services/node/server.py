@@ -11,7 +11,8 @@ module does the I/O only; the decisions are made by the sans-IO cores beside it:
 * :class:`services.node.guard.ConnectionGuard` and :class:`~services.node.guard.AuthThrottle`
   decide which connections may stay (caps, handshake deadline, failed logins);
 * :class:`services.protocol.Connection` parses and encodes the frames of each connection
-  (:class:`services.node.peer.Peer` is one connection; :class:`services.node.listener.Listener`
+  (:class:`services.node.peer.Peer` is one connection, which reaches the node only through the
+  :class:`services.node.peer.PeerHost` methods the node implements; :class:`services.node.listener.Listener`
   accepts them).
 
 What the shell adds:
@@ -95,17 +96,20 @@ from services.node.guard import (
 from services.node.listener import Listener
 from services.node.locality import Locality
 from services.node.logs import LogLimiter
-from services.node.peer import Peer
+from services.node.peer import Peer, PeerHost
 from services.node.watch import LocationWatch, digest_of
 from services.protocol import (
     DEFAULT_MAX_FRAME,
     Accepted,
     Call,
+    Connection,
+    Event,
     Feedback,
     Offer,
     Query,
     Rejected,
     Result,
+    Role,
     encode_frame,
     shown,
 )
@@ -122,8 +126,9 @@ DEFAULT_MAX_OUTPUT = 1024 * 1024
 """Bytes that may wait to go out to one peer before the node stops reading from it."""
 
 
-class Node:
-    """A node process's server (see the module docstring).
+class Node(PeerHost):
+    """A node process's server (see the module docstring); the host of its connections
+    (:class:`~services.node.peer.PeerHost`).
 
     Args:
         name: node name in services.toml.
@@ -271,7 +276,7 @@ class Node:
         soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
         self._guard.caps = budget_caps(self._guard.caps, soft, _open_fds())
         self._listener = Listener(
-            self._loop, self.host, self.port, lambda host, now: Peer(self, host, now), self._guard,
+            self._loop, self.host, self.port, self._new_peer, self._guard,
             self._throttle, self._limited, server_context(self.spec.tls),
         )
         self.port = self._listener.port
@@ -350,13 +355,23 @@ class Node:
             self._links[node] = link
         return link
 
-    # ---- connections
+    # ---- connections (the PeerHost interface)
+
+    def _new_peer(self, host: str, accepted_at: float) -> Peer:
+        conn = Connection(Role.SERVER, self._key, name=self.name, max_frame=self.max_frame,
+                          previous_keys=self._previous_keys, offer=self._offer)
+        return Peer(self, conn, self._loop, host, accepted_at, self._limited, tls_binding=self.tls_binding)
 
     def _offer(self) -> Offer:
         return Offer(actions=self._calls.actions, location=self.watch.digest,
                      location_changed=self.watch.changed())
 
-    def _authenticated(self, peer: Peer) -> None:
+    def peer_connected(self, peer: Peer) -> None:
+        """A connection's transport is up (:class:`~services.node.peer.PeerHost`)."""
+        self._peers.add(peer)
+
+    def peer_authenticated(self, peer: Peer) -> None:
+        """A connection's handshake succeeded: keep it, unless over the caps."""
         if not self._guard.authenticate(peer):
             self._limited.log(logging.WARNING, ("open cap", peer.peer_host),
                               "refused %r: too many connections (%d open)", peer, self._guard.open)
@@ -372,11 +387,12 @@ class Node:
                               "finish the key rotation", peer)
         log.info("connection from %r authenticated", peer)
 
-    def _login_failed(self, peer: Peer, exc: Exception) -> None:
+    def login_failed(self, peer: Peer, exc: Exception) -> None:
+        """A connection's handshake failed: count it against its address."""
         self._throttle.failed(peer.peer_host, self._loop.time())
         self._limited.log(logging.WARNING, ("auth", peer.peer_host), "refused %s: %s", peer.peer_host, exc)
 
-    def _gone(self, peer: Peer) -> None:
+    def peer_gone(self, peer: Peer) -> None:
         """``peer`` closed or went away: forget it (once), and orphan the calls it alone waited for."""
         if peer.forgotten:
             return
@@ -391,9 +407,34 @@ class Node:
                      "it may finish unattended" if rec.unattended
                      else f"cancelled in {self.peer_timeout_s:g} s unless it is asked for again")
 
+    def subscribe(self, peer: Peer, topic: str) -> None:
+        """Send ``peer`` the events of ``topic``, unless over its subscription caps (logged)."""
+        refusal = self._fanout.subscribe(peer, topic)
+        if refusal is not None:
+            self._limited.log(logging.WARNING, ("subscription refused", peer.peer_host),
+                              "subscription of %r to %s refused: %s", peer, shown(topic, 64), refusal.value)
+
+    def unsubscribe(self, peer: Peer, topic: str) -> None:
+        """Stop sending ``peer`` the events of ``topic``."""
+        self._fanout.unsubscribe(peer, topic)
+
+    def writing_paused(self, peer: Peer) -> None:
+        """Hold ``peer``'s events back (in the fan-out's bounded backlog)."""
+        self._fanout.pause(peer)
+
+    def writing_resumed(self, peer: Peer) -> list[Event]:
+        """The events held back for ``peer``."""
+        return self._fanout.resume(peer)
+
+    def read_done(self) -> None:
+        """A read from a peer is handled: with a durable store, commit the calls it started."""
+        if self._durable:
+            self.commit()
+
     # ---- calls
 
-    def _on_call(self, peer: Peer, call: Call) -> None:
+    def admit_call(self, peer: Peer, call: Call) -> None:
+        """Admit, join, answer or reject ``call`` from ``peer`` (:class:`~services.node.calls.CallTable`)."""
         cid = call.id
         verdict = self._calls.admit(call, peer, local=peer.local, now=time.time())
         if type(verdict) is Start:
@@ -417,7 +458,8 @@ class Node:
             log.info("call %s (%s) from %r: repeated while running, joined", shown(cid, 64),
                      shown(call.action, 64), peer)
 
-    def _on_query(self, peer: Peer, query: Query) -> None:
+    def answer_query(self, peer: Peer, query: Query) -> None:
+        """Answer ``query`` from ``peer``: the call's result, a join, or a rejection."""
         cid = query.id
         verdict = self._calls.query(cid, peer)
         if type(verdict) is Answer:
@@ -433,7 +475,8 @@ class Node:
             self._limited.log(logging.INFO, ("query", peer.peer_host), "query %s from %r: %s", shown(cid, 64),
                               peer, verdict.reason.value)
 
-    def _on_cancel(self, cid: str, reason: str = "cancelled") -> None:
+    def cancel_call(self, cid: str, reason: str = "cancelled") -> None:
+        """Cancel call ``cid`` with ``reason`` if it runs."""
         task = self._tasks.get(cid)
         if task is not None and not task.done() and self._calls.cancel(cid, reason) is not None:
             task.cancel(reason)

@@ -2,7 +2,7 @@
 
 A frame is a 4-byte big-endian unsigned length followed by that many bytes of body; in petrobot
 the body is one msgpack map. The node protocol (:mod:`services.protocol.connection`), the
-set-point stream (:mod:`services.stream`) and the frame grabber's link to its camera
+set-point stream (:mod:`services.catching.setpoints`) and the frame grabber's link to its camera
 (:mod:`services.devices.framegrabber`) all use this module.
 
 :class:`FrameReader` checks the announced length against its cap as soon as the 4 header bytes

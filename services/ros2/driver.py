@@ -130,7 +130,7 @@ class Ros2Driver(Driver):
         address = str(params.get("router", "")).split("/", 1)[-1].split("#", 1)[0]
         host, _, port = address.rpartition(":")
         return DeviceEndpoint("Zenoh router", host.strip("[]") or "127.0.0.1", int(port) if port.isdigit() else 0,
-                              "petrobot sim zenoh (or rmw_zenohd on the ROS 2 machine)")
+                              "petrobot sim zenoh (or rmw_zenohd on the ROS 2 machine)", "zenoh")
 
     def __init__(self, name: str, params: Mapping[str, Any]) -> None:
         super().__init__(name, params)

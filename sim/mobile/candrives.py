@@ -3,9 +3,10 @@ velocity mode in front of :class:`sim.mobile.robot.WheelDrives`.
 
 Frame layout and units: :mod:`services.devices.cia402` (velocity mode: RPDO1 = controlword + target
 velocity 0x60FF, TPDO1 = statusword + position actual 0x6064, TPDO2 = velocity actual 0x606C +
-torque actual 0x6077). The bus itself, its in-process ports and the socketcand gateway are
-:mod:`sim.canbus`'s (:class:`sim.canbus.SimBus`, :class:`sim.canbus.CanGateway`); the power state
-machine is :class:`services.devices.cia402.Cia402StateMachine`, shared with the PUMA's drives.
+torque actual 0x6077). The bus itself and its in-process ports are :mod:`sim.canbus`'s, the
+socketcand gateway :class:`sim.socketcand.CanGateway`; boot-up, NMT, SYNC, heartbeats, the
+watchdogs and the waits for the master are those of every simulated drive
+(:class:`sim.drives.SimCanDrives`, shared with the PUMA's drives).
 
 Drive model: the target velocity of the latest RPDO is handed to ``WheelDrives.set_velocity`` (which
 ramps the demand at the drive's acceleration ramp and applies the torque limit); a drive that is
@@ -24,18 +25,14 @@ starved for a moment by a loaded machine then slows the world instead of faultin
 
 from __future__ import annotations
 
-import logging
-import math
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Protocol
 
 from services.devices import cia402 as cf
-from sim.canbus import FaultRecord, SimBus
+from sim.canbus import SimBus
+from sim.drives import SimCanDrives, SimDrive
 
 __all__ = ["CYCLE_S", "REST_SPEED", "TARGET_TIMEOUT_CYCLES", "SimWheelCan", "WheelActuator"]
-
-log = logging.getLogger(__name__)
 
 CYCLE_S = 0.008
 """SYNC period of the mobile robot's bus, s (125 Hz: two physics steps of 4 ms)."""
@@ -54,25 +51,24 @@ class WheelActuator(Protocol):
     def torques(self) -> tuple[float, float]: ...
 
 
-@dataclass
-class _Wheel:
-    node: int
-    sm: cf.Cia402StateMachine = field(default_factory=cf.Cia402StateMachine)
-    nmt: cf.NmtState = cf.NmtState.PRE_OPERATIONAL
+@dataclass(kw_only=True)
+class _Wheel(SimDrive):
     target: float = 0.0
-    missed: int = 0
     got_target: bool = False
 
 
-class SimWheelCan:
+class SimWheelCan(SimCanDrives[_Wheel]):
     """Two velocity-mode CiA 402 drives (node 1 left, node 2 right) on a :class:`SimBus`.
 
     Args:
         wheels: the wheel actuator (``MobileWorld.robot.drives``).
-        bus: the bus (a new one if ``None``); serve it with :class:`sim.canbus.CanGateway`.
+        bus: the bus (a new one if ``None``); serve it with :class:`sim.socketcand.CanGateway`.
         cycle_s: SYNC period, s of simulated time.
         target_timeout_cycles: missing RPDOs in a row before an RPDO-timeout fault.
         consumer_heartbeat_s: heartbeat consumer time for the master, s of bus time.
+        master_wait_s: wall time waited at a SYNC for the targets of a master that answered the
+            previous one (0: never wait); a master that missed a wait is not waited for again until
+            it answers (its drives' RPDO timeout then runs on real time).
 
     Attributes:
         faults: every fault (bus time, node, code, reason, speed, when the wheel was at rest).
@@ -81,163 +77,50 @@ class SimWheelCan:
     def __init__(self, wheels: WheelActuator, bus: SimBus | None = None, *, cycle_s: float = CYCLE_S,
                  target_timeout_cycles: int = TARGET_TIMEOUT_CYCLES,
                  consumer_heartbeat_s: float = cf.CONSUMER_HEARTBEAT_S, master_wait_s: float = 0.0) -> None:
+        super().__init__(bus, cycle_s=cycle_s, target_timeout_cycles=target_timeout_cycles,
+                         consumer_heartbeat_s=consumer_heartbeat_s, master_wait_s=master_wait_s,
+                         kind="wheel drive")
         self.wheels = wheels
-        self.bus = bus if bus is not None else SimBus()
-        self.cycle_s = float(cycle_s)
-        self.target_timeout_cycles = int(target_timeout_cycles)
-        self.consumer_heartbeat_s = float(consumer_heartbeat_s)
-        self.master_wait_s = float(master_wait_s)
-        self.faults: list[FaultRecord] = []
-        self.master_waits = 0
-        """SYNCs at which the world waited for the master's targets."""
-        self.master_misses = 0
-        """Waits that ran out."""
-        self._master_in_step = False
-        self._drives = [_Wheel(node) for node in cf.WHEEL_IDS]
-        self._booted = False
-        self._next_sync = 0.0
-        self._next_heartbeat = 0.0
-        self._master_heartbeat: float | None = None
+        self._drives = [_Wheel(node=node) for node in cf.WHEEL_IDS]
 
-    def states(self) -> list[cf.DriveState]:
-        """CiA 402 state of the left and right drive."""
-        return [d.sm.state for d in self._drives]
+    def decode_target(self, data: bytes) -> tuple[int, float]:
+        return cf.decode_velocity_rpdo1(data)
 
-    def step(self, t: float) -> None:
-        """Advance the drives to simulated time ``t`` (s): received frames, SYNC and PDOs,
-        heartbeats, watchdogs, fault reactions; then hand the wheel targets to the actuator."""
-        if not self._booted:
-            self._booted = True
-            for d in self._drives:
-                self.bus.transmit(cf.encode_heartbeat(d.node, cf.NmtState.BOOT_UP, t))
-            self._next_sync = t
-            self._next_heartbeat = t + cf.HEARTBEAT_PERIOD_S
-        for frame in self.bus.take_inbound():
-            self._receive(frame, t)
-        if t >= self._next_sync - 1e-9:
-            self._next_sync += self.cycle_s
-            if t > self._next_sync:
-                self._next_sync = t + self.cycle_s
-            if self.master_wait_s > 0:
-                self._await_master(t)
-            self._sync(t)
-        if t >= self._next_heartbeat - 1e-9:
-            self._next_heartbeat = t + cf.HEARTBEAT_PERIOD_S
-            for d in self._drives:
-                self.bus.transmit(cf.encode_heartbeat(d.node, d.nmt, t))
-        if self._master_heartbeat is not None and t - self._master_heartbeat > self.consumer_heartbeat_s:
-            silent = t - self._master_heartbeat
-            self._master_heartbeat = None
-            for d in self._drives:
-                if self._enabled(d):
-                    self._fault(d, t, cf.EmcyCode.HEARTBEAT_LOST, f"no heartbeat from the master for {silent:.3f} s")
-        speeds = self.wheels.velocities()
-        targets = []
-        for d, v in zip(self._drives, speeds):
-            if d.sm.state is cf.DriveState.FAULT_REACTION_ACTIVE and abs(v) < REST_SPEED:
-                d.sm.reaction_done()
-                for k in range(len(self.faults) - 1, -1, -1):
-                    f = self.faults[k]
-                    if f.node == d.node and math.isnan(f.t_stopped):
-                        self.faults[k] = FaultRecord(f.t, f.node, f.code, f.reason, f.speed, t)
-                        break
-            targets.append(d.target if d.sm.state is cf.DriveState.OPERATION_ENABLED else 0.0)
-        self.wheels.set_velocity(targets[0], targets[1])
-
-    def _await_master(self, t: float) -> None:
-        """At a SYNC, wait (wall clock, at most ``master_wait_s``) for the targets of a master that
-        answered the previous SYNC, so that the world's bursts of stepping are not charged to a
-        master in another process; a master that missed a wait is not waited for again until it
-        answers (its drives' RPDO timeout then runs on real time)."""
-        waiting = [d for d in self._drives if self._enabled(d) and not d.got_target]
-        if not waiting or not self._master_in_step:
-            return
-        self.master_waits += 1
-        deadline = time.monotonic() + self.master_wait_s
-        while any(self._enabled(d) and not d.got_target for d in waiting):
-            left = deadline - time.monotonic()
-            if left <= 0:
-                self._master_in_step = False
-                self.master_misses += 1
-                return
-            frame = self.bus.wait_inbound(left)
-            if frame is not None:
-                self._receive(frame, t)
-
-    @staticmethod
-    def _enabled(d: _Wheel) -> bool:
-        return d.nmt is cf.NmtState.OPERATIONAL and d.sm.state is cf.DriveState.OPERATION_ENABLED
-
-    def _receive(self, frame: cf.CanFrame, t: float) -> None:
-        if frame.can_id == cf.NMT_ID and len(frame.data) == 2:
-            try:
-                cmd = cf.NmtCommand(frame.data[0])
-            except ValueError:
-                return
-            new = {
-                cf.NmtCommand.START: cf.NmtState.OPERATIONAL,
-                cf.NmtCommand.STOP: cf.NmtState.STOPPED,
-                cf.NmtCommand.PRE_OPERATIONAL: cf.NmtState.PRE_OPERATIONAL,
-                cf.NmtCommand.RESET_NODE: cf.NmtState.PRE_OPERATIONAL,
-            }[cmd]
-            for d in self._drives:
-                if frame.data[1] in (0, d.node):
-                    d.nmt = new
-                    if new is not cf.NmtState.OPERATIONAL and not d.sm.faulted:
-                        d.sm.on_controlword(cf.Controlword.DISABLE_VOLTAGE)
-            return
-        if frame.can_id == cf.HEARTBEAT_BASE + cf.MASTER_ID:
-            self._master_heartbeat = t
-            return
-        node = frame.can_id - cf.RPDO1_BASE
-        if not 1 <= node <= len(self._drives):
-            return
-        d = self._drives[node - 1]
-        if d.nmt is not cf.NmtState.OPERATIONAL:
-            return
-        try:
-            cw, velocity = cf.decode_velocity_rpdo1(frame.data)
-        except cf.FrameError:
-            log.warning("wheel drive %d: bad RPDO1 %s", node, frame.data.hex())
-            return
-        before = d.sm.state
-        after = d.sm.on_controlword(cw)
-        if before is cf.DriveState.FAULT and after is not before:
-            self.bus.transmit(cf.encode_emcy(d.node, cf.EmcyCode.NO_ERROR, 0, t))
+    def take_target(self, d: _Wheel, before: cf.DriveState, after: cf.DriveState, target: float, t: float) -> None:
         if after is cf.DriveState.OPERATION_ENABLED:
-            d.target = velocity if before is cf.DriveState.OPERATION_ENABLED else 0.0
+            d.target = target if before is cf.DriveState.OPERATION_ENABLED else 0.0
             d.got_target = True
-            self._master_in_step = True
+            self.master_answered()
         else:
             d.target = 0.0
 
-    def _sync(self, t: float) -> None:
-        self.bus.transmit(cf.CanFrame(cf.SYNC_ID, b"", t))
+    def has_target(self, d: _Wheel) -> bool:
+        return d.got_target
+
+    def on_sync(self, t: float) -> None:
         positions = self.wheels.encoders()
         speeds = self.wheels.velocities()
         torques = self.wheels.torques()
         for d, q, v, tau in zip(self._drives, positions, speeds, torques):
             if d.sm.state is cf.DriveState.OPERATION_ENABLED:
-                if d.got_target:
-                    d.got_target = False
-                    d.missed = 0
-                else:
-                    d.missed += 1
-                    if d.missed > self.target_timeout_cycles:
-                        self._fault(d, t, cf.EmcyCode.RPDO_TIMEOUT,
-                                    f"no target from the master for {d.missed} cycles "
-                                    f"({d.missed * self.cycle_s * 1000:.0f} ms)")
+                got, d.got_target = d.got_target, False
+                self.count_target(d, got, t)
             if d.nmt is cf.NmtState.OPERATIONAL:
                 self.bus.transmit(cf.encode_tpdo1(d.node, d.sm.statusword, q, t))
                 self.bus.transmit(cf.encode_tpdo2(d.node, v, tau, t))
 
-    def _fault(self, d: _Wheel, t: float, code: cf.EmcyCode, reason: str) -> None:
-        if d.sm.faulted:
-            return
-        speed = abs(self.wheels.velocities()[d.node - 1])
-        text = f"{code.text}: {reason} at t={t:.3f} s"
-        d.sm.start_fault_reaction(text, code)
+    def start_fault_reaction(self, d: _Wheel, t: float) -> float:
+        """Quick stop: target 0 on the drive's ramp."""
         d.target = 0.0
-        self.faults.append(FaultRecord(t, d.node, code, text, speed))
-        log.warning("wheel drive %d: %s", d.node, text)
-        self.bus.transmit(cf.encode_emcy(d.node, code, 0x01, t))
+        return abs(self.wheels.velocities()[d.node - 1])
+
+    def tick(self, t: float) -> None:
+        """Hand the wheel targets to the actuator (0 unless operation enabled); a faulted wheel at
+        rest ends its fault reaction."""
+        speeds = self.wheels.velocities()
+        targets = []
+        for d, v in zip(self._drives, speeds):
+            if d.sm.state is cf.DriveState.FAULT_REACTION_ACTIVE and abs(v) < REST_SPEED:
+                self.at_rest(d, t)
+            targets.append(d.target if d.sm.state is cf.DriveState.OPERATION_ENABLED else 0.0)
+        self.wheels.set_velocity(targets[0], targets[1])

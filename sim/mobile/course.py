@@ -46,6 +46,8 @@ from typing import Any
 
 import numpy as np
 
+from services.errors import PetrobotError
+
 __all__ = [
     "HEADINGS",
     "TILE_CODES",
@@ -71,7 +73,7 @@ TILE_CODES = {
 """Tile code → (shape, blank). Shapes: S straight, L/R quarter arc, E end."""
 
 
-class CourseError(ValueError):
+class CourseError(PetrobotError, ValueError):
     """A course is invalid or its file cannot be read; str() is ``FILE:LINE: problem``.
 
     Attributes:

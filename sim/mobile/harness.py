@@ -46,7 +46,7 @@ from services.mobile.marks import EndMarkDetector, GapMonitor
 from services.mobile.odometry import DriveGeometry, Odometry, Pose2D
 from services.mobile.steering import (
     PurePursuit,
-    SetPoint,
+    SteeringSetPoint,
     SpeedLimits,
     SteeringController,
 )
@@ -190,7 +190,7 @@ class MobileMission:
     def tick(
         self, t: float, image: np.ndarray, encoders: tuple[float, float],
         beacons: list[BeaconObservation] | None = None,
-    ) -> SetPoint:
+    ) -> SteeringSetPoint:
         """One control step.
 
         Args:
@@ -222,7 +222,7 @@ class MobileMission:
         return self._stopping(t, pose, image, line if seen else None)
 
     # --- phases -----------------------------------------------------------------------------
-    def _follow(self, t: float, pose: Pose2D, image: np.ndarray, line: LineEstimate | None) -> SetPoint:
+    def _follow(self, t: float, pose: Pose2D, image: np.ndarray, line: LineEstimate | None) -> SteeringSetPoint:
         p = self.params
         mark = self.end_detector.detect(image)
         self._end_hits = self._end_hits + 1 if mark is not None else 0
@@ -242,7 +242,7 @@ class MobileMission:
             return self._interruption(t, pose)
         return self.steering.command(t, p.cruise, self._curvature)
 
-    def _interruption(self, t: float, pose: Pose2D) -> SetPoint:
+    def _interruption(self, t: float, pose: Pose2D) -> SteeringSetPoint:
         self.interruptions += 1
         if self._last_line is None:
             return self._fail(t, "no track seen before the interruption")
@@ -257,7 +257,7 @@ class MobileMission:
 
     def _approach(
         self, t: float, pose: Pose2D, beacons: list[BeaconObservation] | None, line: LineEstimate | None
-    ) -> SetPoint:
+    ) -> SteeringSetPoint:
         p = self.params
         if beacons:
             self.approach.observe(pose, beacons)
@@ -277,7 +277,7 @@ class MobileMission:
         self._curvature = self.approach.curvature(pose)
         return self.steering.command(t, p.approach_speed, self._curvature)
 
-    def _stopping(self, t: float, pose: Pose2D, image: np.ndarray, line: LineEstimate | None) -> SetPoint:
+    def _stopping(self, t: float, pose: Pose2D, image: np.ndarray, line: LineEstimate | None) -> SteeringSetPoint:
         p = self.params
         mark = self.end_detector.detect(image)
         if mark is not None:
@@ -294,7 +294,7 @@ class MobileMission:
             return self.steering.stop(t)
         return self.steering.command(t, v, self._curvature)
 
-    def _fail(self, t: float, reason: str) -> SetPoint:
+    def _fail(self, t: float, reason: str) -> SteeringSetPoint:
         self.reason = reason
         self._enter(Phase.FAILED, t, reason)
         return self.steering.stop(t)
@@ -398,90 +398,136 @@ def run_course(
     Raises:
         ValueError: on an unknown camera kind.
     """
-    p = params or MissionParams()
-    spec = robot or RobotSpec()
     if camera not in ("analytic", "tiny"):
         raise ValueError(f"unknown camera {camera!r} (analytic or tiny)")
-    world = World(dt=dt, mode=ClockMode.REALTIME if realtime else ClockMode.LOCKSTEP, solver_iterations=10)
-    result = RunResult(course.name, length=course.length, interruptions=sum(t.blank for t in course.tiles))
-    mw: MobileWorld | None = None
+    run = _CourseRun(course, params or MissionParams(), robot or RobotSpec(), dt=dt, realtime=realtime,
+                     latency=latency)
     try:
-        mw = MobileWorld(world, course, robot=spec, textured=camera == "tiny")
+        run.start(camera, camera_model, noise, seed, mission_factory or MobileMission)
+        limit = max_time if max_time is not None else course.length / 0.25 + 10.0
+        while run.tick(limit, off_track, on_tick):
+            pass
+        run.finish(stop_tolerance)
+        return run.result
+    finally:
+        run.close()
+
+
+class _CourseRun:
+    """The phases of one :func:`run_course`: build the world and the mission, tick the closed loop
+    (scoring each tick against ground truth), score the stop; always close the world."""
+
+    def __init__(self, course: Course, params: MissionParams, spec: RobotSpec, *, dt: float, realtime: bool,
+                 latency: float) -> None:
+        self.course = course
+        self.params = params
+        self.spec = spec
+        self.latency = latency
+        self.world = World(dt=dt, mode=ClockMode.REALTIME if realtime else ClockMode.LOCKSTEP, solver_iterations=10)
+        self.result = RunResult(course.name, length=course.length, interruptions=sum(t.blank for t in course.tiles))
+        self.mw: MobileWorld | None = None
+        self.queue: deque[tuple[float, SteeringSetPoint]] = deque()
+        self.pending: set[int] = set()
+        self.tick_no = 0
+
+    def start(self, camera: str, camera_model: GroundCamera | None, noise: ImageNoise | None, seed: int,
+              mission_factory: Any) -> None:
+        """Build the world, the sensors and the mission; let the robot settle; start the mission."""
+        course, world = self.course, self.world
+        self.mw = mw = MobileWorld(world, course, robot=self.spec, textured=camera == "tiny")
         cam_model = camera_model or mw.camera_model()
-        cam = (mw.analytic_camera if camera == "analytic" else mw.tiny_camera)(cam_model, noise=noise, seed=seed)
-        sensor = mw.beacon_sensor(seed=seed + 1)
-        mission = (mission_factory or MobileMission)(
-            cam_model, spec, beacon_height=course.beacon.height, square=course.square,
-            track_width=course.track_width, params=p,
+        self.cam = (mw.analytic_camera if camera == "analytic" else mw.tiny_camera)(cam_model, noise=noise, seed=seed)
+        self.sensor = mw.beacon_sensor(seed=seed + 1)
+        self.mission = mission_factory(
+            cam_model, self.spec, beacon_height=course.beacon.height, square=course.square,
+            track_width=course.track_width, params=self.params,
         )
         x0, y0, th0 = course.start_pose()
         world.step(25)  # let the robot settle on its wheels
-        mission.start(Pose2D(x0, y0, th0, 0.0, world.t), mw.encoders(), world.t)
-        period = 1.0 / p.control_rate
-        scan_every = max(1, round(p.control_rate / p.beacon_rate))
-        limit = max_time if max_time is not None else course.length / 0.25 + 10.0
-        pending = {b.tile for b in mw.beacons}
-        queue: deque[tuple[float, SetPoint]] = deque()
+        self.mission.start(Pose2D(x0, y0, th0, 0.0, world.t), mw.encoders(), world.t)
+        self.period = 1.0 / self.params.control_rate
+        self.scan_every = max(1, round(self.params.control_rate / self.params.beacon_rate))
+        self.pending = {b.tile for b in mw.beacons}
+        world.add_step_hook(self._deliver)
+        self.t_start = world.t
+        self.wall0 = time.perf_counter()
+        self.cpu0 = time.process_time()
 
-        def deliver(t_step: float) -> None:
-            while queue and queue[0][0] <= t_step + 1e-9:
-                sp_due = queue.popleft()[1]
-                mw.set_wheel_velocities(sp_due.left, sp_due.right)
+    def _deliver(self, t_step: float) -> None:
+        """Apply the set points whose latency has passed (a step hook of the world)."""
+        assert self.mw is not None
+        while self.queue and self.queue[0][0] <= t_step + 1e-9:
+            sp_due = self.queue.popleft()[1]
+            self.mw.set_wheel_velocities(sp_due.left, sp_due.right)
 
-        world.add_step_hook(deliver)
-        t_start = world.t
-        wall0 = time.perf_counter()
-        cpu0 = time.process_time()
-        tick = 0
-        while True:
-            t = world.t
-            pose = mw.pose()
-            frame = cam.render(pose)
-            obs = sensor.observe(pose, t) if tick % scan_every == 0 else None
-            sp = mission.tick(t, frame, mw.encoders(), obs)
-            queue.append((t + latency, sp))
-            if on_tick is not None:
-                on_tick(t, mission, mw, sp)
-            here = mw.where(pose[0], pose[1])
-            if here is not None:
-                tile, _, off = here
-                if not tile.blank and mission.phase in (Phase.FOLLOW, Phase.STOPPING):
-                    result.cross_track.append(abs(off))
-                    if abs(off) > off_track:
-                        result.reason = f"left the track on tile {tile.index + 1} ({abs(off):.2f} m off)"
-                        break
-                if tile.index - 1 in pending and course.project(tile, pose[0], pose[1])[0] >= 0.5:
-                    pending.discard(tile.index - 1)
-                    if abs(off) < 0.1:
-                        result.recovered += 1
-            if mission.phase is Phase.DONE:
-                break
-            if mission.phase is Phase.FAILED:
-                result.reason = mission.reason
-                break
-            if t - t_start > limit:
-                result.reason = f"time limit {limit:.0f} s"
-                break
-            world.advance(period)
-            tick += 1
-        result.wall = time.perf_counter() - wall0
-        result.cpu = time.process_time() - cpu0
-        result.t_sim = world.t - t_start
-        result.log = mission.log
+    def tick(self, limit: float, off_track: float, on_tick: Any) -> bool:
+        """One control tick: sense, step the mission, score; False once the run is over."""
+        mw, mission, world, result = self.mw, self.mission, self.world, self.result
+        assert mw is not None
+        t = world.t
+        pose = mw.pose()
+        frame = self.cam.render(pose)
+        obs = self.sensor.observe(pose, t) if self.tick_no % self.scan_every == 0 else None
+        sp = mission.tick(t, frame, mw.encoders(), obs)
+        self.queue.append((t + self.latency, sp))
+        if on_tick is not None:
+            on_tick(t, mission, mw, sp)
+        if not self._score(pose, off_track):
+            return False
         if mission.phase is Phase.DONE:
-            world.advance(0.3)  # let it come to rest
-            x, y, _ = mw.pose()
-            ex, ey = course.end_point()
-            result.stop_error = math.hypot(x - ex, y - ey)
-            if result.stop_error > stop_tolerance:
-                result.reason = f"stopped {result.stop_error:.2f} m from the T mark"
-            elif result.recovered < result.interruptions:
-                result.reason = f"recovered {result.recovered} of {result.interruptions} interruptions"
-            else:
-                result.completed = True
-                result.mean_speed = course.length / result.t_sim
-        return result
-    finally:
-        if mw is not None:
-            mw.close()
-        world.close()
+            return False
+        if mission.phase is Phase.FAILED:
+            result.reason = mission.reason
+            return False
+        if t - self.t_start > limit:
+            result.reason = f"time limit {limit:.0f} s"
+            return False
+        world.advance(self.period)
+        self.tick_no += 1
+        return True
+
+    def _score(self, pose: tuple[float, float, float], off_track: float) -> bool:
+        """Score one tick against ground truth: the cross-track offset while following, the
+        interruptions recovered; False when the robot left the track."""
+        assert self.mw is not None
+        here = self.mw.where(pose[0], pose[1])
+        if here is None:
+            return True
+        tile, _, off = here
+        if not tile.blank and self.mission.phase in (Phase.FOLLOW, Phase.STOPPING):
+            self.result.cross_track.append(abs(off))
+            if abs(off) > off_track:
+                self.result.reason = f"left the track on tile {tile.index + 1} ({abs(off):.2f} m off)"
+                return False
+        if tile.index - 1 in self.pending and self.course.project(tile, pose[0], pose[1])[0] >= 0.5:
+            self.pending.discard(tile.index - 1)
+            if abs(off) < 0.1:
+                self.result.recovered += 1
+        return True
+
+    def finish(self, stop_tolerance: float) -> None:
+        """Time the run and, when the mission is done, score where the robot stopped."""
+        result, world, mission = self.result, self.world, self.mission
+        assert self.mw is not None
+        result.wall = time.perf_counter() - self.wall0
+        result.cpu = time.process_time() - self.cpu0
+        result.t_sim = world.t - self.t_start
+        result.log = mission.log
+        if mission.phase is not Phase.DONE:
+            return
+        world.advance(0.3)  # let it come to rest
+        x, y, _ = self.mw.pose()
+        ex, ey = self.course.end_point()
+        result.stop_error = math.hypot(x - ex, y - ey)
+        if result.stop_error > stop_tolerance:
+            result.reason = f"stopped {result.stop_error:.2f} m from the T mark"
+        elif result.recovered < result.interruptions:
+            result.reason = f"recovered {result.recovered} of {result.interruptions} interruptions"
+        else:
+            result.completed = True
+            result.mean_speed = self.course.length / result.t_sim
+
+    def close(self) -> None:
+        if self.mw is not None:
+            self.mw.close()
+        self.world.close()

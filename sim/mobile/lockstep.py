@@ -25,7 +25,7 @@ import numpy as np
 from services.mobile.beacon import BeaconModel, BeaconObservation
 from services.mobile.camera import GroundCamera
 from services.mobile.odometry import DriveGeometry, Odometry, Pose2D
-from services.mobile.steering import SetPoint
+from services.mobile.steering import SteeringSetPoint
 from services.mobile.tasks import (
     CourseMemory,
     FindBeacon,
@@ -110,7 +110,7 @@ class TaskSequence:
         self.records.append(TaskRecord(task, action, t))
 
     def tick(self, t: float, image: np.ndarray, encoders: tuple[float, float],
-             beacons: list[BeaconObservation] | None = None) -> SetPoint:
+             beacons: list[BeaconObservation] | None = None) -> SteeringSetPoint:
         """One control step (one camera frame): the running task's set point."""
         pose = self.odometry.update(*encoders, t)
         m = self.memory

@@ -3,7 +3,7 @@
 Builds the course's floor, beacons and robot (:class:`sim.mobile.world.MobileWorld`, 250 Hz
 physics) and serves the robot's hardware on ``--host`` (127.0.0.1):
 
-* **camera and beacon sensor** — :class:`sim.camera.FrameServer` (``--camera-port``, 7220): the
+* **camera and beacon sensor** — :class:`sim.frameserver.FrameServer` (``--camera-port``, 7220): the
   downward camera's grey frames at ``--fps`` (50/s; TinyRenderer or the analytic floor-map warp),
   each header carrying the latest beacon scan (``meta = {"beacon": {"seq", "t", "obs": [[azimuth,
   elevation], ...]}}``, 20 scans/s): one transport, the project's framing, grab-latest. The info
@@ -11,7 +11,7 @@ physics) and serves the robot's hardware on ``--host`` (127.0.0.1):
   the robot's dimensions (``robot``), ``beacon_height``, ``square``, ``track_width`` and ``course``;
 * **wheel drives** — two CiA 402 drives in profile velocity mode on the simulated CAN bus
   (:class:`sim.mobile.candrives.SimWheelCan`), served by the socketcand gateway
-  (:class:`sim.canbus.CanGateway`, ``--can-port``, 7221).
+  (:class:`sim.socketcand.CanGateway`, ``--can-port``, 7221).
 
 Stdout gets one JSON line per event: ``ready`` (ports, course), ``pose`` (ground truth every
 ``--pose-every`` s: t, the wall clock it was taken at, x, y, heading, speed over the last period,
@@ -28,9 +28,7 @@ it.
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import signal
 import sys
 import time
 from dataclasses import asdict
@@ -61,8 +59,12 @@ def add_arguments(c: argparse.ArgumentParser) -> None:
     c.add_argument("--fps", type=float, default=50.0, help="camera frame rate, 1/s (default 50)")
     c.add_argument("--duration", type=float, default=0.0, help="stop after this many simulated seconds (0: never)")
     c.add_argument("--pose-every", type=float, default=0.1, help="ground-truth pose line period, s of sim time")
-    c.add_argument("--camera-port", type=int, default=DEFAULT_CAMERA_PORT, help="frame server port (0: any)")
-    c.add_argument("--can-port", type=int, default=DEFAULT_CAN_PORT, help="CAN gateway port (0: any)")
+    c.add_argument("--camera-port", type=int, default=None,
+                   help=f"frame server port (default: the perception driver's in services.toml, else "
+                        f"{DEFAULT_CAMERA_PORT}; 0: any)")
+    c.add_argument("--can-port", type=int, default=None,
+                   help=f"CAN gateway port (default: the wheel drives' driver's in services.toml, else "
+                        f"{DEFAULT_CAN_PORT}; 0: any)")
     c.add_argument("--host", default="127.0.0.1", help="address the servers listen on (default 127.0.0.1)")
     c.add_argument("--master-wait-ms", type=float, default=100.0, metavar="MS",
                    help="wall time waited at each SYNC for the targets of a CAN master that answered "
@@ -73,15 +75,11 @@ def add_arguments(c: argparse.ArgumentParser) -> None:
                         "machine sees every frame instead of the world running away from it")
 
 
-def _emit(out: TextIO, event: str, **data: Any) -> None:
-    out.write(json.dumps({"event": event, **data}) + "\n")
-    out.flush()
-
-
-def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
-    """Run the mobile world until stopped (or ``--duration``); returns the exit code."""
-    from sim.camera import Frame, FrameServer
-    from sim.canbus import CanGateway
+def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
+    """Run the mobile world until stopped (or ``--duration``); its event lines go to ``out``
+    (default: stdout). Returns the exit code."""
+    from services.devices.framegrabber import Frame
+    from sim.process import WorldProcess
     from sim.world import ClockMode, World
 
     from .candrives import SimWheelCan
@@ -100,19 +98,12 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         "noisy": ImageNoise(sigma=25.0, blur_px=1.0, gain_sigma=0.15), "scuffed": ImageNoise(spots=3.0),
         "harsh": ImageNoise(sigma=25.0, blur_px=1.0, gain_sigma=0.15, spots=3.0),
     }[args.noise]
-    stop = {"flag": False}
-
-    def on_signal(signum: int, frame: Any) -> None:
-        stop["flag"] = True
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
     world = World(dt=DEFAULT_DT, mode=ClockMode.REALTIME if args.mode == "realtime" else ClockMode.LOCKSTEP,
                   solver_iterations=10)
-    server: FrameServer | None = None
-    gateway: CanGateway | None = None
-    mw: MobileWorld | None = None
-    try:
+    with WorldProcess(world, out, camera_wait_s=args.camera_wait_ms / 1000.0, lockstep=args.mode == "lockstep",
+                      skip_frozen_client=True) as proc:
         mw = MobileWorld(world, course, textured=args.renderer == "tiny")
+        proc.on_close(mw.close)
         spec = mw.robot.spec
         cam_model = mw.camera_model()
         cam = (mw.tiny_camera if args.renderer == "tiny" else mw.analytic_camera)(cam_model, noise=noise, seed=args.seed)
@@ -126,15 +117,14 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
             "beacon_height": course.beacon.height, "square": course.square, "track_width": course.track_width,
             "course": course.name, "fps": args.fps,
         }
-        server = FrameServer(host=args.host, port=args.camera_port, info=info)
-        camera_port = server.start()
-        gateway = CanGateway(can.bus, host=args.host, port=args.can_port)
-        can_port = gateway.start()
+        camera_port, can_port = proc.serve(
+            args.host, DEFAULT_CAMERA_PORT if args.camera_port is None else args.camera_port, info, can.bus,
+            DEFAULT_CAN_PORT if args.can_port is None else args.can_port)
         world.step(25)  # let the robot settle on its wheels
         ex, ey = course.end_point()
-        _emit(out, "ready", mode=args.mode, host=args.host, camera_port=camera_port, can_port=can_port,
-              course=course.name, length=course.length, renderer=args.renderer, noise=args.noise,
-              end_point=[ex, ey], start=list(course.start_pose()))
+        proc.emit("ready", mode=args.mode, host=args.host, camera_port=camera_port, can_port=can_port,
+                  course=course.name, length=course.length, renderer=args.renderer, noise=args.noise,
+                  end_point=[ex, ey], start=list(course.start_pose()))
         period = 1.0 / args.fps
         scan_every = 1.0 / 20.0
         next_scan = world.t
@@ -142,14 +132,10 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
         scan_seq = 0
         scan: dict[str, Any] | None = None
         seq = 0
-        reported = 0
         last_xy: tuple[float, float] | None = None
         last_t = world.t
-        camera_waits = camera_misses = 0
-        camera_in_step = True
-        t_wall0 = time.monotonic()
-        world.resync()
-        while not stop["flag"] and (args.duration <= 0 or world.t < args.duration):
+        proc.begin()
+        while not proc.stopping and (args.duration <= 0 or world.t < args.duration):
             world.advance(period)
             t = world.t
             pose = mw.pose()
@@ -159,41 +145,16 @@ def run(args: argparse.Namespace, out: TextIO = sys.stdout) -> int:
                 scan = {"seq": scan_seq, "t": t, "obs": [[o.azimuth, o.elevation] for o in obs]}
                 scan_seq += 1
             frame = cam.grab(pose, t)
-            server.publish(Frame(seq, t, frame.image, time.time(), {"beacon": scan} if scan else None))
-            if server.client_count:
-                if args.mode == "lockstep":
-                    server.wait_sent(seq, timeout=1.0)
-                elif args.camera_wait_ms > 0 and (camera_in_step or server.wait_sent(seq - 1, timeout=0.0)):
-                    # wait only for a client that took the previous frame: a frozen one costs one wait
-                    camera_waits += 1
-                    camera_in_step = server.wait_sent(seq, timeout=args.camera_wait_ms / 1000.0)
-                    camera_misses += not camera_in_step
+            proc.publish(Frame(seq, t, frame.image, time.time(), {"beacon": scan} if scan else None))
             seq += 1
             if t >= next_pose - 1e-9:
                 next_pose += args.pose_every
                 here = mw.where(pose[0], pose[1])
                 speed = 0.0 if last_xy is None else math.hypot(pose[0] - last_xy[0], pose[1] - last_xy[1]) / (t - last_t)
                 last_xy, last_t = (pose[0], pose[1]), t
-                _emit(out, "pose", t=round(t, 4), wall=time.time(), x=pose[0], y=pose[1], heading=pose[2], v=speed,
-                      tile=None if here is None else here[0].index, blank=None if here is None else here[0].blank,
-                      s=None if here is None else here[1], offset=None if here is None else here[2])
-            while reported < len(can.faults) and not math.isnan(can.faults[reported].t_stopped):
-                f = can.faults[reported]
-                _emit(out, "drive_fault", t=f.t, node=f.node, code=f"{int(f.code):#06x}", reason=f.reason,
-                      speed=f.speed, stop_s=f.t_stopped - f.t)
-                reported += 1
-        _emit(out, "stopped", t=world.t, wall_s=time.monotonic() - t_wall0, frames=seq,
-              max_lag_s=world.lag, slipped_s=world.slipped, drive_faults=len(can.faults),
-              camera_waits=camera_waits, camera_misses=camera_misses, master_waits=can.master_waits,
-              master_misses=can.master_misses)
+                proc.emit("pose", t=round(t, 4), wall=time.time(), x=pose[0], y=pose[1], heading=pose[2], v=speed,
+                          tile=None if here is None else here[0].index, blank=None if here is None else here[0].blank,
+                          s=None if here is None else here[1], offset=None if here is None else here[2])
+            proc.report_faults(can)
+        proc.stopped(can)
         return 0
-    finally:
-        if gateway is not None:
-            gateway.stop()
-        if server is not None:
-            server.close()
-        if mw is not None:
-            mw.close()
-        world.close()
-        for s, h in old.items():
-            signal.signal(s, h)

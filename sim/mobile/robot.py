@@ -19,7 +19,7 @@ CiA 402 drive in velocity mode does; the demand follows the set point within the
 acceleration ramp and is clamped to the motor's speed limit, and pybullet's velocity motor applies
 it with the motor's torque limit. A step hook (:meth:`WheelDrives.step`, registered with
 :meth:`sim.world.World.add_step_hook`) applies the demand before every physics step, so that a CAN
-layer can later sit in front of :meth:`WheelDrives.set_velocity` as :mod:`sim.canbus` does for the
+layer can later sit in front of :meth:`WheelDrives.set_velocity` as :mod:`sim.catching.drives` does for the
 PUMA's position-mode drives. Encoders report the wheel angles quantised to their counts.
 """
 

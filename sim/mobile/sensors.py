@@ -4,7 +4,7 @@ Paper section 6 ("Mobile Robot Task"): the robot follows the track by vision and
 track resumes by "following a cylindrical retroreflector".
 
 Cameras — one model (:class:`services.mobile.camera.GroundCamera`), two renderers delivering the
-same timestamped :class:`sim.camera.Frame` with an (H, W) uint8 grey image:
+same timestamped :class:`services.devices.framegrabber.Frame` with an (H, W) uint8 grey image:
 
 * :class:`AnalyticCamera` — warps the :class:`sim.mobile.floor.FloorMap` with the camera's
   pixel → floor affine map composed with the robot's pose (one ``cv2.warpAffine``, bilinear), then
@@ -29,10 +29,10 @@ from typing import Any
 import cv2
 import numpy as np
 
+from services.devices.framegrabber import Frame
 from services.mobile.beacon import BeaconObservation
 from services.mobile.camera import GroundCamera
 
-from ..camera import Frame
 from .floor import FloorMap
 from .robot import RobotSpec
 

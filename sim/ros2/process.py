@@ -10,35 +10,43 @@ line: ``crossfire true``, ``crossfire false``, ``crossfire auto`` (back to the p
 ``quit``.
 
 Both print one JSON line per event on stdout (``ready`` first) and stop on SIGTERM, Ctrl-C or
-``quit``.
+``quit`` (:func:`sim.process.stop_on_signals`, as the testbeds' worlds do). Unless ``--listen`` or
+``--router`` say otherwise, the router is the one services.toml's ROS 2 nodes connect to, on
+127.0.0.1 (``petrobot sim`` takes its port from the file), else :data:`DEFAULT_ROUTER`. A router
+that cannot listen, or a ``--router`` that is no ``tcp/HOST:PORT``, ends the process with status 2
+and one line saying why.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import signal
 import sys
 import threading
 import time
 from typing import Any
 
-__all__ = ["add_robot_arguments", "add_router_arguments", "run_robot", "run_router"]
+from services.errors import PetrobotError
+from sim.process import ServeError, stop_on_signals
+
+__all__ = ["DEFAULT_ROUTER", "add_robot_arguments", "add_router_arguments", "run_robot", "run_router"]
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7457"
 
 
 def add_router_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``petrobot sim zenoh``."""
-    parser.add_argument("--listen", default=DEFAULT_ROUTER, metavar="ENDPOINT",
-                        help=f"Zenoh endpoint to listen on (default {DEFAULT_ROUTER}; rmw_zenoh's own router "
-                             "listens on tcp/[::]:7447)")
+    parser.add_argument("--listen", default=None, metavar="ENDPOINT",
+                        help=f"Zenoh endpoint to listen on (default: tcp/127.0.0.1 on the port of the router the "
+                             f"ROS 2 nodes of services.toml connect to, else {DEFAULT_ROUTER}; rmw_zenoh's own "
+                             "router listens on tcp/[::]:7447)")
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser) -> None:
     """The options of ``petrobot sim ros2``."""
-    parser.add_argument("--router", default=DEFAULT_ROUTER, metavar="ENDPOINT",
-                        help=f"the Zenoh router to connect to, tcp/HOST:PORT (default {DEFAULT_ROUTER})")
+    parser.add_argument("--router", default=None, metavar="ENDPOINT",
+                        help=f"the Zenoh router to connect to, tcp/HOST:PORT (default: tcp/127.0.0.1 on the port of "
+                             f"the router the ROS 2 nodes of services.toml connect to, else {DEFAULT_ROUTER})")
     parser.add_argument("--step-s", type=float, default=0.1,
                         help="seconds per Fibonacci term (the tutorial's server takes 1; default 0.1)")
     parser.add_argument("--crossfire-hz", type=float, default=20.0, help="/crossfire messages per second (default 20)")
@@ -55,33 +63,30 @@ def _emit(event: str, **data: Any) -> None:
     print(json.dumps({"event": event, "t": round(time.time(), 6), **data}), flush=True)
 
 
-def _stop_on_signals(stop: threading.Event) -> None:
-    def on_signal(signum: int, frame: Any) -> None:
-        stop.set()
-
-    signal.signal(signal.SIGTERM, on_signal)
-    signal.signal(signal.SIGINT, on_signal)
-
-
 def run_router(args: argparse.Namespace) -> int:
-    """Run the router until stopped; exit status 0, or 2 if it cannot listen."""
+    """Run the router until stopped; exit status 0.
+
+    Raises:
+        ServeError: it cannot listen on ``--listen``.
+    """
     import zenoh
 
+    listen = args.listen or DEFAULT_ROUTER
     config = zenoh.Config()
-    for key, value in (("mode", "router"), ("listen/endpoints", [args.listen]), ("scouting/multicast/enabled", False),
+    for key, value in (("mode", "router"), ("listen/endpoints", [listen]), ("scouting/multicast/enabled", False),
                        ("scouting/gossip/enabled", True)):
         config.insert_json5(key, json.dumps(value))
     try:
         session = zenoh.open(config)
     except zenoh.ZError as exc:
-        print(f"petrobot sim zenoh: cannot listen on {args.listen}: {exc}", file=sys.stderr)
-        return 2
+        raise ServeError(f"cannot listen on {listen}: {exc}") from None
     stop = threading.Event()
-    _stop_on_signals(stop)
-    _emit("ready", listen=args.listen, zid=str(session.info.zid()))
+    restore = stop_on_signals(stop.set)
+    _emit("ready", listen=listen, zid=str(session.info.zid()))
     while not stop.wait(0.2):
         pass
     session.close()
+    restore()
     _emit("stopped")
     return 0
 
@@ -90,18 +95,23 @@ def _endpoint(text: str) -> tuple[str, int]:
     proto, _, address = text.partition("/")
     host, _, port = address.rpartition(":")
     if proto != "tcp" or not host or not port.isdigit():
-        raise SystemExit(f"petrobot sim ros2: --router must be tcp/HOST:PORT, got {text!r}")
+        raise PetrobotError(f"--router must be tcp/HOST:PORT, got {text!r}")
     return host.strip("[]"), int(port)
 
 
 def run_robot(args: argparse.Namespace) -> int:
-    """Run the stand-in robot until stopped (stdin commands: see the module docstring)."""
+    """Run the stand-in robot until stopped (stdin commands: see the module docstring); exit status 0.
+
+    Raises:
+        PetrobotError: ``--router`` is no ``tcp/HOST:PORT``.
+    """
     from sim.ros2.robot import Ros2Robot
 
-    robot = Ros2Robot(_endpoint(args.router), sys.stdout, step_s=args.step_s, rate_hz=args.crossfire_hz,
+    router = args.router or DEFAULT_ROUTER
+    robot = Ros2Robot(_endpoint(router), sys.stdout, step_s=args.step_s, rate_hz=args.crossfire_hz,
                       period_s=args.crossfire_period, pulse_s=args.crossfire_pulse, node_name=args.node_name)
     stop = threading.Event()
-    _stop_on_signals(stop)
+    restore = stop_on_signals(stop.set)
 
     def commands() -> None:
         for line in sys.stdin:
@@ -121,9 +131,10 @@ def run_robot(args: argparse.Namespace) -> int:
 
     if args.commands:
         threading.Thread(target=commands, name="commands", daemon=True).start()
-    robot.ready(router=args.router)
+    robot.ready(router=router)
     while not stop.wait(0.2):
         pass
     robot.close()
+    restore()
     robot.emit("stopped")
     return 0

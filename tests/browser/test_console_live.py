@@ -303,7 +303,7 @@ def test_the_page_shows_failing_tasks_unused_nodes_the_real_state_and_keeps_the_
 @pytest.mark.timeout(300)
 def test_the_catching_demo_live_tokens_move_and_emptying_runs_remaining_ends_the_experiment(
         page: Page, petrobot: Any, tmp_path: Path):
-    from coordinator.commands.simworld import SimWorld
+    from coordinator.commands.demo_start import SimWorld
     from tests.integration.conftest import Cluster
     from tests.integration.test_catching import SERVICES
 

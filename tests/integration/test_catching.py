@@ -29,24 +29,24 @@ port = {port[motion]}
 
 [drivers.camera]
 node = "vision"
-impl = "services.actions.vision:CameraDriver"
+impl = "services.catching.vision_node:CameraDriver"
 params = {{ port = {port[camera]} }}
 
 [actions.locate_threshold]
 node = "vision"
-impl = "services.actions.vision:LocateThreshold"
+impl = "services.catching.vision_node:LocateThreshold"
 
 [actions.locate_bgdiff]
 node = "vision"
-impl = "services.actions.vision:LocateBgdiff"
+impl = "services.catching.vision_node:LocateBgdiff"
 
 [actions.locate_average]
 node = "vision"
-impl = "services.actions.vision:LocateAverage"
+impl = "services.catching.vision_node:LocateAverage"
 
 [actions.predict]
 node = "PREDICT_NODE"
-impl = "services.actions.vision:Predict"
+impl = "services.catching.vision_node:Predict"
 params = {{ camera_port = {port[camera]} }}
 
 [events.image_sampling_tick]
@@ -54,16 +54,16 @@ node = "vision"
 
 [drivers.puma]
 node = "motion"
-impl = "services.actions.motion:PumaDriver"
+impl = "services.catching.arm:PumaDriver"
 params = {{ can_port = {port[can]} }}
 
 [actions.move_home]
 node = "motion"
-impl = "services.actions.motion:MoveHome"
+impl = "services.catching.motion_node:MoveHome"
 
 [actions.catch]
 node = "motion"
-impl = "services.actions.motion:Catch"
+impl = "services.catching.motion_node:Catch"
 deadline_s = 20.0
 
 [events.ball_caught]

@@ -38,45 +38,45 @@ port = {port[drive]}
 
 [drivers.mobile_camera]
 node = "perception"
-impl = "services.actions.mobile:PerceptionDriver"
+impl = "services.mobile.perception_node:PerceptionDriver"
 params = {{ port = {port[camera]} }}
 
 [actions.follow_centroid]
 node = "perception"
-impl = "services.actions.mobile:FollowCentroid"
+impl = "services.mobile.perception_node:FollowCentroid"
 
 [actions.follow_ransac]
 node = "perception"
-impl = "services.actions.mobile:FollowRansac"
+impl = "services.mobile.perception_node:FollowRansac"
 
 [actions.follow_scanline]
 node = "perception"
-impl = "services.actions.mobile:FollowScanline"
+impl = "services.mobile.perception_node:FollowScanline"
 
 [actions.find_beacon]
 node = "perception"
-impl = "services.actions.mobile:FindBeaconAction"
+impl = "services.mobile.perception_node:FindBeaconAction"
 
 [actions.goto_beacon]
 node = "perception"
-impl = "services.actions.mobile:GotoBeaconAction"
+impl = "services.mobile.perception_node:GotoBeaconAction"
 
 [actions.reacquire_track]
 node = "perception"
-impl = "services.actions.mobile:ReacquireTrackAction"
+impl = "services.mobile.perception_node:ReacquireTrackAction"
 
 [actions.stop_at_t]
 node = "perception"
-impl = "services.actions.mobile:StopAtTAction"
+impl = "services.mobile.perception_node:StopAtTAction"
 
 [drivers.wheels]
 node = "drive"
-impl = "services.actions.mobile:DriveDriver"
+impl = "services.mobile.drive_node:DriveDriver"
 params = {{ can_port = {port[can]} }}
 
 [actions.stop_robot]
 node = "drive"
-impl = "services.actions.mobile:StopRobot"
+impl = "services.mobile.drive_node:StopRobot"
 """
 
 WATCHDOG_STALE_S = 0.25

@@ -55,24 +55,24 @@ port = 7104
 
 [drivers.camera]
 node = "vision"
-impl = "services.actions.camera:CameraDriver"
+impl = "services.catching.camera:CameraDriver"
 params = {{ host = "{SUBNET}.10", port = 7210 }}
 
 [actions.locate_threshold]
 node = "vision"
-impl = "services.actions.vision:LocateThreshold"
+impl = "services.catching.vision_node:LocateThreshold"
 
 [actions.locate_bgdiff]
 node = "vision"
-impl = "services.actions.vision:LocateBgdiff"
+impl = "services.catching.vision_node:LocateBgdiff"
 
 [actions.locate_average]
 node = "vision"
-impl = "services.actions.vision:LocateAverage"
+impl = "services.catching.vision_node:LocateAverage"
 
 [actions.predict]
 node = "vision"
-impl = "services.actions.vision:Predict"
+impl = "services.catching.vision_node:Predict"
 params = {{ camera_host = "{SUBNET}.10", camera_port = 7210 }}
 
 [events.image_sampling_tick]
@@ -80,16 +80,16 @@ node = "vision"
 
 [drivers.puma]
 node = "motion"
-impl = "services.actions.motion:PumaDriver"
+impl = "services.catching.arm:PumaDriver"
 params = {{ can_host = "{SUBNET}.10", can_port = 7211 }}
 
 [actions.move_home]
 node = "motion"
-impl = "services.actions.motion:MoveHome"
+impl = "services.catching.motion_node:MoveHome"
 
 [actions.catch]
 node = "motion"
-impl = "services.actions.motion:Catch"
+impl = "services.catching.motion_node:Catch"
 deadline_s = 20.0
 
 [events.ball_caught]

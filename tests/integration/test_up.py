@@ -50,12 +50,12 @@ impl = "services.actions.demo:ComputePrimes"
 
 [drivers.camera]
 node = "vision"
-impl = "services.actions.camera:CameraDriver"
+impl = "services.catching.camera:CameraDriver"
 params = {{ port = {port[camera]}, connect_timeout_s = 1.0 }}
 
 [actions.locate_threshold]
 node = "vision"
-impl = "services.actions.vision:LocateThreshold"
+impl = "services.catching.vision_node:LocateThreshold"
 """
 
 

@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 from conftest import ROOT, Cluster
 
-from services.stream import SETPOINT_TOPIC, LatestSetPoint
+from services.catching.setpoints import SETPOINT_TOPIC, LatestSetPoint
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow]
 
@@ -26,24 +26,24 @@ port = {port[vision]}
 
 [drivers.camera]
 node = "vision"
-impl = "services.actions.camera:CameraDriver"
+impl = "services.catching.camera:CameraDriver"
 params = {{ port = {port[camera]} }}
 
 [actions.locate_threshold]
 node = "vision"
-impl = "services.actions.vision:LocateThreshold"
+impl = "services.catching.vision_node:LocateThreshold"
 
 [actions.locate_bgdiff]
 node = "vision"
-impl = "services.actions.vision:LocateBgdiff"
+impl = "services.catching.vision_node:LocateBgdiff"
 
 [actions.locate_average]
 node = "vision"
-impl = "services.actions.vision:LocateAverage"
+impl = "services.catching.vision_node:LocateAverage"
 
 [actions.predict]
 node = "vision"
-impl = "services.actions.vision:Predict"
+impl = "services.catching.vision_node:Predict"
 
 [events.image_sampling_tick]
 node = "vision"
@@ -165,14 +165,14 @@ async def test_predict_moved_to_a_node_without_the_camera_driver_still_publishes
     moved = VISION_SERVICES.replace(
         '''[actions.predict]
 node = "vision"
-impl = "services.actions.vision:Predict"''',
+impl = "services.catching.vision_node:Predict"''',
         '''[nodes.motion]
 host = "127.0.0.1"
 port = {port[motion]}
 
 [actions.predict]
 node = "motion"
-impl = "services.actions.vision:Predict"
+impl = "services.catching.vision_node:Predict"
 params = {{ camera_port = {port[camera]} }}''',
     )
     assert moved != VISION_SERVICES

@@ -9,9 +9,9 @@ from collections.abc import Callable
 import pybullet
 from pybullet_utils import bullet_client
 
-from services.robots import puma560 as K
-from sim import puma560 as P
-from sim.canbus import SimDrives
+from services.catching.robot import puma560 as K
+from sim.catching import puma560 as P
+from sim.catching.drives import SimDrives
 
 
 class SimRig:

@@ -7,16 +7,18 @@ import threading
 import numpy as np
 import pytest
 
-from services.vision import calibration_points, locate_threshold
+from services.catching.vision import calibration_points, locate_threshold
+from services.devices.endpoint import DeviceEndpoint
 from services.devices.framegrabber import Frame, FrameClient
-from sim.camera import (
+from services.devices.probe import probe
+from sim.catching.camera import (
     AnalyticRenderer,
-    FrameServer,
     TinyRenderer,
     calibrate,
     overhead_camera,
 )
-from sim.catching import CatchingWorld
+from sim.catching.world import CatchingWorld
+from sim.frameserver import FrameServer
 from sim.world import World
 
 
@@ -66,6 +68,24 @@ def test_frame_server_hands_out_the_latest_frame_and_waits_for_a_newer_one():
         f2 = client.grab(after=1, timeout=30.0)  # returns as soon as frame 2 is published
         assert f2 is not None and f2.seq == 2
         timer.join()
+    finally:
+        client.close()
+        server.close()
+
+
+def test_a_probe_is_answered_and_is_no_camera_client_the_world_waits_for():
+    server = FrameServer(info={"fps": 25.0})
+    port = server.start()
+    client = FrameClient("127.0.0.1", port)
+    try:
+        assert probe(DeviceEndpoint("camera server", "127.0.0.1", port, "petrobot sim catching", "frames")) is None
+        assert client.info() == {"fps": 25.0}
+        assert server.client_count == 0  # connected and asked its info: no frame taken yet
+        server.publish(Frame(0, 0.0, np.zeros((2, 2, 3), dtype=np.uint8)))
+        assert client.grab(after=-1, timeout=1.0) is not None
+        assert server.client_count == 1
+        closed = DeviceEndpoint("camera server", "127.0.0.1", 1, "petrobot sim catching", "frames")
+        assert probe(closed) is not None
     finally:
         client.close()
         server.close()

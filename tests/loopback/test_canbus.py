@@ -3,6 +3,7 @@ drives, the loopback gateway with python-can's socketcand client, and the motion
 
 from __future__ import annotations
 
+import socket
 import time
 
 import can
@@ -12,10 +13,11 @@ from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_me
 from puma_rig import SimRig
 
 from services.devices import cia402 as cf
-from services.devices.drives import BusError, PumaDrives
-from services.robots import puma560 as P
+from services.catching.drives import PumaDrives
+from services.devices.drives import BusError
+from services.catching.robot import puma560 as P
 from sim import socketcand
-from sim.canbus import CanGateway
+from sim.socketcand import CanGateway
 
 # --- pure encoding -------------------------------------------------------------------------------
 
@@ -442,6 +444,31 @@ def test_python_can_socketcand_client_sees_sync_and_commands_the_drives(served):
         assert seen_tpdo
     finally:
         bus.shutdown()
+
+
+def _sees_sync(port: int) -> bool:
+    bus = can.Bus(interface="socketcand", host="127.0.0.1", port=port, channel="can0")
+    try:
+        deadline = time.monotonic() + 3
+        while time.monotonic() < deadline:
+            msg = bus.recv(timeout=0.1)
+            if msg is not None and msg.arbitration_id == cf.SYNC_ID:
+                return True
+        return False
+    finally:
+        bus.shutdown()
+
+
+@pytest.mark.timeout(30)
+def test_the_gateway_survives_peers_that_connect_and_leave_at_once(served):
+    _rig, _, port = served
+    for n in range(30):  # a port probe, a scanner, a client killed at once: each closes without a word
+        with socket.create_connection(("127.0.0.1", port), timeout=2) as sock:
+            if n % 3 == 1:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00")
+            elif n % 3 == 2:
+                sock.sendall(b"< open can0 >< rawmode >< send 1")
+    assert _sees_sync(port), "the gateway stopped serving after peers that left at once"
 
 
 @pytest.mark.timeout(60)

@@ -1,6 +1,6 @@
-"""Motion node actions (services/actions/motion.py) against the simulated PUMA over the CAN gateway,
+"""Motion node actions (services/catching/motion_node.py) against the simulated PUMA over the CAN gateway,
 with set points published by a real vision node on 127.0.0.1 and received through the motion
-node's authenticated link (services/stream.py). The ball is not simulated here: the crossfire
+node's authenticated link (services/catching/setpoints.py). The ball is not simulated here: the crossfire
 sensor reports a catch when the cup's rim sits where the set point said the ball would fall."""
 
 from __future__ import annotations
@@ -17,15 +17,16 @@ import pytest
 from puma_rig import SimRig
 
 from services.action import CallContext, NodeContext
-from services.actions.motion import Catch, MoveHome, PumaDriver, table_to_base
+from services.catching.arm import PumaDriver, table_to_base
+from services.catching.motion_node import Catch, MoveHome
 from services.client import NodeLink
 from services.devices import cia402 as cf
 from services.location import parse_location
 from services.node.server import Node
-from services.robots import motion_control as mc
-from services.robots import puma560 as P
-from services.stream import SetPoint
-from sim.canbus import CanGateway
+from services.catching.robot import motion_control as mc
+from services.catching.robot import puma560 as P
+from services.catching.setpoints import CatchSetPoint
+from sim.socketcand import CanGateway
 
 ROBOT_BASE = (0.75, 0.0, 0.46, math.pi)
 KEY = bytes(range(32))
@@ -116,7 +117,7 @@ class Bench:
             t0 = time.monotonic()
             seq = 0
             while stop_after_s is None or time.monotonic() - t0 <= stop_after_s:
-                sp = SetPoint(seq=seq, t_frame=self.rig.t, t_capture=time.time(), t_sent=time.time(),
+                sp = CatchSetPoint(seq=seq, t_frame=self.rig.t, t_capture=time.time(), t_sent=time.time(),
                               x=0.0, y=y, t=t_cross, vx=vx, vy=0.0).to_dict()
                 if bad is not None and seq % 3 == 2:
                     sp.update(bad)

@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import socket
+
+import pytest
 
 from coordinator.commands import sim
 
@@ -42,3 +45,66 @@ def test_sim_help_explains_every_option(capsys):
     for option in ("--realtime", "--lockstep", "--seed", "--throws", "--interval", "--renderer",
                    "--camera-port", "--can-port", "--fps", "--duration"):
         assert option in text
+
+
+SERVICES = {
+    "catching": """
+[nodes.vision]
+host = "127.0.0.1"
+port = 7103
+
+[nodes.motion]
+host = "127.0.0.1"
+port = 7104
+
+[drivers.camera]
+node = "vision"
+impl = "services.catching.camera:CameraDriver"
+params = {{ port = {camera} }}
+
+[drivers.puma]
+node = "motion"
+impl = "services.catching.arm:PumaDriver"
+params = {{ can_port = {can} }}
+""",
+    "mobile": """
+[nodes.perception]
+host = "127.0.0.1"
+port = 7105
+
+[nodes.drive]
+host = "127.0.0.1"
+port = 7106
+
+[drivers.mobile_camera]
+node = "perception"
+impl = "services.mobile.perception_node:PerceptionDriver"
+params = {{ port = {camera} }}
+
+[drivers.wheels]
+node = "drive"
+impl = "services.mobile.drive_node:DriveDriver"
+params = {{ can_port = {can} }}
+""",
+}
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@pytest.mark.parametrize("world", ["catching", "mobile"])
+def test_sim_serves_its_devices_on_the_ports_services_toml_gives_their_drivers(world, tmp_path, capsys):
+    camera, can = _free_port(), _free_port()
+    services = tmp_path / "services.toml"
+    services.write_text(SERVICES[world].format(camera=camera, can=can))
+    parser = argparse.ArgumentParser()
+    sim.add_parser(parser.add_subparsers(dest="command"))
+    args = parser.parse_args(["sim", world, "--services", str(services), "--lockstep", "--renderer", "analytic",
+                              "--duration", "0.1"])
+    assert sim.run(args) == 0
+    ready = json.loads(capsys.readouterr().out.splitlines()[0])
+    assert ready["event"] == "ready" and (ready["camera_port"], ready["can_port"]) == (camera, can)
+

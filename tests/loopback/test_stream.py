@@ -1,5 +1,5 @@
 """Set points: validation and the latest-wins holder without sockets, then published as events of
-a node on 127.0.0.1 and received through an authenticated node link (services/stream.py)."""
+a node on 127.0.0.1 and received through an authenticated node link (services/catching/setpoints.py)."""
 
 from __future__ import annotations
 
@@ -14,11 +14,11 @@ from services.client import NodeLink
 from services.errors import AuthenticationError
 from services.location import parse_location
 from services.node.server import Node
-from services.stream import (
+from services.catching.setpoints import (
     MAX_SEQ,
     LatestSetPoint,
     MalformedSetPoint,
-    SetPoint,
+    CatchSetPoint,
     SetPointSubscription,
     StreamLostError,
 )
@@ -26,8 +26,8 @@ from services.stream import (
 KEY = bytes(range(32))
 
 
-def _sp(seq: int, y: float = 0.1, t_frame: float = 0.5) -> SetPoint:
-    return SetPoint(seq=seq, t_frame=t_frame, t_capture=10.0, t_sent=10.001, x=0.75, y=y, t=1.2,
+def _sp(seq: int, y: float = 0.1, t_frame: float = 0.5) -> CatchSetPoint:
+    return CatchSetPoint(seq=seq, t_frame=t_frame, t_capture=10.0, t_sent=10.001, x=0.75, y=y, t=1.2,
                     vx=-0.9, vy=0.05, sigma_y=0.001, sigma_t=0.002)
 
 
@@ -35,9 +35,9 @@ def _sp(seq: int, y: float = 0.1, t_frame: float = 0.5) -> SetPoint:
 
 
 def test_a_set_point_survives_its_dict_form():
-    assert SetPoint.from_dict(_sp(7).to_dict()) == _sp(7)
+    assert CatchSetPoint.from_dict(_sp(7).to_dict()) == _sp(7)
     bare = {k: v for k, v in _sp(3).to_dict().items() if not k.startswith("sigma")}
-    assert SetPoint.from_dict(bare).sigma_y == 0.0
+    assert CatchSetPoint.from_dict(bare).sigma_y == 0.0
 
 
 @pytest.mark.parametrize(("field", "value", "says"), [
@@ -57,19 +57,19 @@ def test_a_set_point_with_a_bad_field_is_refused_naming_it(field, value, says):
     data = _sp(1).to_dict()
     data[field] = value
     with pytest.raises(MalformedSetPoint, match=says):
-        SetPoint.from_dict(data)
+        CatchSetPoint.from_dict(data)
 
 
 def test_a_set_point_that_is_not_a_map_of_few_fields_is_refused():
     with pytest.raises(MalformedSetPoint, match="map"):
-        SetPoint.from_dict([1, 2, 3])
+        CatchSetPoint.from_dict([1, 2, 3])
     huge = {**_sp(1).to_dict(), **{f"k{i}": 0 for i in range(40)}}
     with pytest.raises(MalformedSetPoint, match="at most"):
-        SetPoint.from_dict(huge)
+        CatchSetPoint.from_dict(huge)
     missing = _sp(1).to_dict()
     del missing["t"]
     with pytest.raises(MalformedSetPoint, match="without 't'"):
-        SetPoint.from_dict(missing)
+        CatchSetPoint.from_dict(missing)
 
 
 def test_a_malformed_set_point_is_dropped_and_counted_and_the_latest_stays():

@@ -1,5 +1,5 @@
-"""The shape of the code: layers that point one way, no import circle, public modules that say
-what they export (docs/architecture.md)."""
+"""The shape of the code: layers that point one way, one home per testbed, no import circle, public
+modules that say what they export (docs/architecture.md)."""
 
 from __future__ import annotations
 
@@ -15,16 +15,29 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 PACKAGES = ("coordinator", "services", "sim")
-#: which top-level package may import which (besides itself); the command line (coordinator.commands)
-#: is the top of every layer and may also start a simulated world (``petrobot sim``)
-ALLOWED = {"coordinator": {"services"}, "coordinator.commands": {"services", "sim"}, "services": set(),
-           "sim": {"services"}}
+#: which top-level package may import which (besides itself)
+ALLOWED = {"coordinator": {"services"}, "services": set(), "sim": {"services"}}
+#: the testbeds: each has its node side in services/NAME/ and its world in sim/NAME/
+TESTBEDS = ("catching", "mobile")
+
+
+def _door(module: str) -> bool:
+    """The demo and sim commands: the only coordinator modules that reach ``sim`` and the testbeds
+    (``petrobot sim``, ``petrobot demo``)."""
+    return module == "coordinator.commands.sim" or module.startswith("coordinator.commands.demo")
 
 
 def _allowed(module: str) -> set[str]:
-    if module.startswith("coordinator.commands."):
-        return ALLOWED["coordinator.commands"]
+    if _door(module):
+        return {"services", "sim"}
     return ALLOWED[module.split(".")[0]]
+
+
+def _testbed(module: str) -> str | None:
+    """The testbed a module belongs to (``services.catching.vision`` → ``catching``), or ``None``
+    for the framework."""
+    parts = module.split(".")
+    return parts[1] if parts[0] in ("services", "sim") and len(parts) > 1 and parts[1] in TESTBEDS else None
 
 
 def _modules() -> dict[str, Path]:
@@ -42,17 +55,12 @@ MODULES = _modules()
 
 
 def _imports(name: str, path: Path) -> set[str]:
-    """Project modules imported by one module, anywhere in it (functions included), except under
-    ``if TYPE_CHECKING:`` (annotations only: no import at run time)."""
+    """Project modules imported by one module, anywhere in it (functions included, and imports for
+    annotations only, under ``if TYPE_CHECKING:``: a circle of types is a circle of design)."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
     is_pkg = path.name == "__init__.py"
-    typing_only = {id(n) for block in ast.walk(tree) if isinstance(block, ast.If)
-                   and ast.unparse(block.test) in ("TYPE_CHECKING", "typing.TYPE_CHECKING")
-                   for stmt in block.body for n in ast.walk(stmt)}
     out: set[str] = set()
     for node in ast.walk(tree):
-        if id(node) in typing_only:
-            continue
         if isinstance(node, ast.Import):
             targets = [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -80,6 +88,23 @@ def test_layers_point_one_way_services_import_neither_coordinator_nor_sim():
     upward = [(a, b) for a, targets in GRAPH.items() for b in targets
               if b.split(".")[0] != a.split(".")[0] and b.split(".")[0] not in _allowed(a)]
     assert upward == [], f"imports against the layers: {upward}"
+
+
+def test_every_testbed_has_its_node_side_and_its_world_in_a_package_of_its_own():
+    for testbed in TESTBEDS:
+        assert f"services.{testbed}" in MODULES and f"sim.{testbed}" in MODULES, testbed
+
+
+def test_testbed_packages_import_the_framework_and_never_each_other():
+    crossing = [(a, b) for a, targets in GRAPH.items() for b in targets
+                if _testbed(a) is not None and _testbed(b) not in (None, _testbed(a))]
+    assert crossing == [], f"a testbed imports another: {crossing}"
+
+
+def test_the_framework_imports_no_testbed_and_only_the_demo_and_sim_commands_reach_them():
+    into = [(a, b) for a, targets in GRAPH.items() for b in targets
+            if _testbed(a) is None and not _door(a) and _testbed(b) is not None]
+    assert into == [], f"the framework imports a testbed: {into}"
 
 
 def _strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from services.vision import (
+from services.catching.vision import (
     BallTracker,
     Homography,
     PlanarTransform,
@@ -20,7 +20,7 @@ from services.vision import (
     locate_threshold,
     table_roi,
 )
-from sim.camera import AnalyticRenderer, calibrate, overhead_camera
+from sim.catching.camera import AnalyticRenderer, calibrate, overhead_camera
 
 Z_BALL = 0.78  # centre plane of a 40 mm ball on the 0.76 m table
 

@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from services.robots import motion_control
-from services.vision import RollingModel
-from sim.catching import BallSpec, CatchingWorld, TableSpec, Thrower, ThrowSpec
+from services.catching.robot import motion_control
+from services.catching.vision import RollingModel
+from sim.catching.world import BallSpec, CatchingWorld, TableSpec, Thrower, ThrowSpec
 from sim.world import ClockMode, World
 
 

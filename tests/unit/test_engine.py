@@ -235,14 +235,14 @@ def test_next_firing_decides_without_changing_the_marking():
     assert [f.transition for f in journal] == ["arm"]
 
 
-def test_counts_is_the_marking_as_a_plain_dict_and_a_copy():
+def test_the_marking_is_a_snapshot_of_the_non_empty_places():
     engine = Engine(tick_net())
     for _ in range(3):
-        counts = engine.counts()
-        assert counts == engine.marking.to_dict() and all(n > 0 for n in counts.values())
-        counts.clear()  # the reader's own copy: the engine's marking is untouched
-        assert engine.counts() == engine.marking.to_dict()
+        marking = engine.marking
+        before = marking.to_dict()
+        assert all(n > 0 for n in before.values()) and dict(marking.items()) == before
         engine.advance()
+        assert marking.to_dict() == before  # a snapshot: firing does not change it
 
 
 def test_a_stale_firing_is_refused():

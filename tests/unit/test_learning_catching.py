@@ -10,7 +10,7 @@ from types import ModuleType
 
 import pytest
 
-from services.actions.vision import track_residual
+from services.catching.vision_node import track_residual
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 

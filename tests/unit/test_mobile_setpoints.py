@@ -13,16 +13,16 @@ from services.mobile.setpoints import (
     parse_setpoint,
     setpoint_to_dict,
 )
-from services.mobile.steering import SetPoint
+from services.mobile.steering import SteeringSetPoint
 
 
 def sp(seq: int, t: float = 1.0, left: float = 10.0, right: float = 12.0) -> dict[str, object]:
-    return setpoint_to_dict(SetPoint(seq, t, 0.5, 0.4, left, right), 100.0)
+    return setpoint_to_dict(SteeringSetPoint(seq, t, 0.5, 0.4, left, right), 100.0)
 
 
 def test_a_valid_set_point_round_trips_through_its_event_data():
     got = parse_setpoint(sp(7, 2.5))
-    assert got == SetPoint(7, 2.5, 0.5, 0.4, 10.0, 12.0)
+    assert got == SteeringSetPoint(7, 2.5, 0.5, 0.4, 10.0, 12.0)
 
 
 @pytest.mark.parametrize("field, bad", [

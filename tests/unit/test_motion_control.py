@@ -1,4 +1,4 @@
-"""Catching motion control (services/robots/motion_control.py), checked with forward kinematics."""
+"""Catching motion control (services/catching/robot/motion_control.py), checked with forward kinematics."""
 
 from __future__ import annotations
 
@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from services.robots import motion_control as M
-from services.robots import puma560 as P
+from services.catching.robot import motion_control as M
+from services.catching.robot import puma560 as P
 
 GEOM = M.CatchGeometry()
 

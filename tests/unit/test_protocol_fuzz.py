@@ -156,7 +156,7 @@ setpoint_maps = st.one_of(
 @FUZZ
 @given(maps=st.lists(setpoint_maps, min_size=1, max_size=6))
 def test_any_received_set_point_map_is_taken_with_finite_fields_or_counted_as_malformed(maps: list[Any]) -> None:
-    from services.stream import LatestSetPoint
+    from services.catching.setpoints import LatestSetPoint
 
     latest = LatestSetPoint(max_age=0.2)
     for i, data in enumerate(maps):

@@ -1,4 +1,4 @@
-"""PUMA 560 kinematics, inertias and URDF (sim/puma560.py)."""
+"""PUMA 560 kinematics, inertias and URDF (sim/catching/puma560.py)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pybullet
 import pytest
 from pybullet_utils import bullet_client
 
-from services.robots import puma560 as K
-from sim import puma560 as P
+from services.catching.robot import puma560 as K
+from sim.catching import puma560 as P
 
 
 def _random_q(rng: np.random.Generator, n: int) -> np.ndarray:

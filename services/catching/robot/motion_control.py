@@ -3,7 +3,7 @@
 Pure: no I/O, no clocks (times are passed in). Used by the motion node (over the CAN drives, one
 step per 2 ms SYNC cycle) and by the in-process catching bench.
 
-Geometry (all in the robot base frame = DH frame 0 of :mod:`services.robots.puma560`, metres):
+Geometry (all in the robot base frame = DH frame 0 of :mod:`services.catching.robot.puma560`, metres):
 
 * The table lies along +x; its near edge (the *catch line*) is the line ``x = edge_x`` at surface
   height ``table_z``. Balls roll toward -x and leave the table there.
@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from services.robots import puma560
+from services.catching.robot import puma560
 
 __all__ = [
     "CYCLE_S",
@@ -140,7 +140,7 @@ def catch_target(
         The target (rim position, time the ball reaches it, joint goal).
 
     Raises:
-        services.robots.puma560.UnreachableError: the cup pose is out of reach within the joint limits.
+        services.catching.robot.puma560.UnreachableError: the cup pose is out of reach within the joint limits.
     """
     z0 = geometry.table_z + geometry.ball_radius
     z_rim = geometry.table_z - geometry.rim_drop
@@ -155,7 +155,7 @@ def home_pose(geometry: CatchGeometry = CatchGeometry()) -> Array:
     """Joint angles of the home pose: the cup at the middle of the catch line, shape (6,), rad.
 
     Raises:
-        services.robots.puma560.UnreachableError: the geometry puts the middle of the catch line out of reach.
+        services.catching.robot.puma560.UnreachableError: the geometry puts the middle of the catch line out of reach.
     """
     y_mid = 0.5 * (geometry.y_min + geometry.y_max)
     return catch_target(geometry.edge_x, y_mid, 0.0, -0.8, 0.0, puma560.Q_HOME, geometry).q
@@ -263,7 +263,7 @@ class CatchServo:
         """Aim the cup at a predicted catch-line crossing (see :func:`catch_target`).
 
         Raises:
-            services.robots.puma560.UnreachableError: the catch pose is out of reach; the goal is unchanged.
+            services.catching.robot.puma560.UnreachableError: the catch pose is out of reach; the goal is unchanged.
         """
         target = catch_target(x, y, t_arrival, vx, vy, self.goal, self.geometry)
         self.target = target

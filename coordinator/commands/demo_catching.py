@@ -1,22 +1,31 @@
-"""The catching experiment's report: one line per run of ``nets/catch.toml`` (paper section 6).
+"""``petrobot demo catching``: the paper's Fig. 1 on one machine, and its report (paper section 6).
+
+:func:`run_catching` starts the simulated world (``petrobot sim catching``: table, thrower, ball,
+PUMA 560 with its cup, overhead camera, CAN bus), the vision and motion nodes placed by
+services.toml, and runs ``nets/catch.toml`` with the token flow visible
+(:func:`coordinator.commands.demo_start.run_demo`); then prints, per run, the outcome, the
+prediction error at the catch line (against the simulator's ground truth), the time of each
+primitive task and the reason of every error.
 
 :class:`CatchReport` observes a run of the catching net (:mod:`coordinator.events`): it groups the
 events into runs of the experiment (each starts with the transition ``start_run``), keeps the
 outcome, the locate action the learner chose, the final prediction of the catch point, the time
 of each primitive task and the reason of every error (and of a miss), and pairs each prediction
-with the simulator's ground truth. ``petrobot demo`` prints it. Pure: it only reads events.
+with the simulator's ground truth. Pure: it only reads events.
 """
 
 from __future__ import annotations
 
+import argparse
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
+from coordinator.commands.demo_start import ROOT, DemoWorld, run_demo, world_lines
 from coordinator.events import ActionEnded, Observer, RunEvent, TransitionFired
 from services.results import ActionResult, Status
 
-__all__ = ["CatchReport", "RunRecord"]
+__all__ = ["CatchReport", "RunRecord", "run_catching"]
 
 
 @dataclass
@@ -128,3 +137,31 @@ class CatchReport:
     def outcomes(self) -> list[tuple[str, str]]:
         """(outcome, locate action) of each run: what two runs with the same seed should share."""
         return [(r.outcome, r.locate_action) for r in self.runs]
+
+
+async def run_catching(args: argparse.Namespace) -> int:
+    """The catching demo (see the module docstring); returns the run's exit code."""
+    from coordinator.netfile import load_net
+
+    net_path = ROOT / "nets" / "catch.toml"
+    net = load_net(net_path)
+    if args.runs is not None:
+        net = net.with_initial_marking({**net.initial_marking, "runs_remaining": args.runs})
+    done = await run_demo(
+        args, net, net_path, journal="runs/catching.sqlite", report=CatchReport,
+        worlds=[DemoWorld("catching", ["--realtime", "--seed", str(args.seed), "--renderer", args.renderer,
+                                       "--throws", "0", "--interval", "0", "--throw-when-home", "1.0",
+                                       "--first-throw", "4", "--after-camera-client"])])
+    report = done.report
+    assert report is not None
+    report.match_truth([e for e in done.world if e.get("event") == "crossing"])
+    print(done.summary.format())
+    print(report.format())
+    for line in world_lines(done.world):
+        print(line)
+    print(f"journal: {done.journal}; logs: {done.logs}/")
+    from coordinator.commands.learn import print_learned
+
+    print_learned(done.journal, net_path)
+    return done.summary.exit_code
+

@@ -7,10 +7,10 @@ key), framed, size-capped and validated: the vision node publishes each set poin
 topic :data:`SETPOINT_TOPIC` (``ctx.publish``), and the motion node subscribes to that topic on the
 node that publishes it through the node's own authenticated link (``ctx.node.link(node)``). A
 process without the key cannot connect, let alone steer the arm; a connection that opens and closes
-cannot end a catch; a set point whose fields are not what :meth:`SetPoint.from_dict` expects is
+cannot end a catch; a set point whose fields are not what :meth:`CatchSetPoint.from_dict` expects is
 dropped and counted, never used.
 
-Layers, sans-IO style: :class:`SetPoint` (validation), :class:`LatestSetPoint` (latest wins,
+Layers, sans-IO style: :class:`CatchSetPoint` (validation), :class:`LatestSetPoint` (latest wins,
 staleness judged with a time passed in, malformed set points counted); :class:`SetPointSubscription`
 is the thin shell that feeds a holder from a node link's events.
 """
@@ -23,7 +23,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import asdict, dataclass, fields
 from typing import TYPE_CHECKING, Any
 
-from services.errors import ActionError, RemoteProtocolError
+from services.errors import ActionError, MalformedSetPoint
 
 if TYPE_CHECKING:
     from services.client import NodeLink
@@ -32,9 +32,9 @@ if TYPE_CHECKING:
 __all__ = [
     "MAX_SEQ",
     "SETPOINT_TOPIC",
+    "CatchSetPoint",
     "LatestSetPoint",
     "MalformedSetPoint",
-    "SetPoint",
     "SetPointSubscription",
     "StreamLostError",
     "received_map",
@@ -63,15 +63,12 @@ class StreamLostError(ActionError):
     """No fresh set point: the stream never started, went stale, or the link to its node is down."""
 
 
-class MalformedSetPoint(RemoteProtocolError):
-    """A received set point is not a map of the expected, finite, bounded fields."""
-
-
 @dataclass(frozen=True, slots=True, kw_only=True)
-class SetPoint:
-    """A predicted catching point, as the vision side sends it to the motion side.
+class CatchSetPoint:
+    """A predicted catching point, as the vision side sends it to the motion side (the mobile
+    robot's set points are :class:`services.mobile.steering.SteeringSetPoint`).
 
-    Coordinates are in the table frame of :mod:`sim.catching` (x towards the robot, catch line at
+    Coordinates are in the table frame of :mod:`sim.catching.world` (x towards the robot, catch line at
     x = 0); times ``t_frame`` and ``t`` are on the camera's clock (simulated time in the sim),
     ``t_capture`` and ``t_sent`` on the host's wall clock (:func:`time.time`, for latency).
 
@@ -104,7 +101,7 @@ class SetPoint:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: object) -> SetPoint:
+    def from_dict(cls, d: object) -> CatchSetPoint:
         """Build from a received map, checking every field.
 
         ``seq`` must be an ``int`` (not a bool) in ``0 .. 2**63 - 1``; every other field a finite
@@ -196,13 +193,13 @@ class LatestSetPoint:
         received_at: receive time of :attr:`latest`, s.
         received: set points offered (well-formed or not).
         dropped: well-formed set points not newer than the latest (by ``seq``).
-        malformed: set points refused by :meth:`SetPoint.from_dict`.
+        malformed: set points refused by :meth:`CatchSetPoint.from_dict`.
         last_malformed: why the latest malformed one was refused.
     """
 
     def __init__(self, max_age: float = 0.2) -> None:
         self.max_age = max_age
-        self.latest: SetPoint | None = None
+        self.latest: CatchSetPoint | None = None
         self.received_at: float | None = None
         self.received = 0
         self.dropped = 0
@@ -210,7 +207,7 @@ class LatestSetPoint:
         self.last_malformed: str | None = None
         self.closed_reason: str | None = None
 
-    def offer(self, sp: SetPoint, now: float) -> bool:
+    def offer(self, sp: CatchSetPoint, now: float) -> bool:
         """Offer a received set point at time ``now`` (s); True if it became the latest.
 
         A set point whose seq is not newer than the latest one's is dropped (counted in
@@ -224,14 +221,14 @@ class LatestSetPoint:
         self.received_at = now
         return True
 
-    def offer_data(self, data: object, now: float) -> SetPoint | None:
+    def offer_data(self, data: object, now: float) -> CatchSetPoint | None:
         """Offer a received map; returns the set point if it became the latest, else ``None``.
 
         A malformed map is counted (:attr:`malformed`, :attr:`last_malformed`) and dropped; it never
         raises and never changes the latest set point.
         """
         try:
-            sp = SetPoint.from_dict(data)
+            sp = CatchSetPoint.from_dict(data)
         except MalformedSetPoint as exc:
             self.received += 1
             self.malformed += 1
@@ -248,7 +245,7 @@ class LatestSetPoint:
         """Seconds since the latest set point was received (infinite before the first)."""
         return math.inf if self.received_at is None else now - self.received_at
 
-    def get(self, now: float, camera_now: float | None = None) -> SetPoint:
+    def get(self, now: float, camera_now: float | None = None) -> CatchSetPoint:
         """The latest set point, if fresh at time ``now`` (s, same clock as :meth:`offer`).
 
         Args:
@@ -298,7 +295,7 @@ class SetPointSubscription:
         *,
         max_age: float = 0.2,
         clock: Callable[[], float] = time.time,
-        on_set_point: Callable[[SetPoint, float], None] | None = None,
+        on_set_point: Callable[[CatchSetPoint, float], None] | None = None,
     ) -> None:
         self.link = link
         self.topic = topic
@@ -325,7 +322,7 @@ class SetPointSubscription:
         self.state = LatestSetPoint(self.state.max_age)
         return self.state
 
-    def latest(self, camera_now: float | None = None) -> SetPoint:
+    def latest(self, camera_now: float | None = None) -> CatchSetPoint:
         """The latest fresh set point (``camera_now``: see :meth:`LatestSetPoint.get`).
 
         Raises:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from services.vision.locate import Roi
+from services.catching.vision.locate import Roi
 
 __all__ = ["Homography", "PlanarTransform", "calibration_points", "fit_homography", "table_roi"]
 

@@ -1,17 +1,17 @@
 """The vision node's camera: the frame-grabber driver and its link to the camera server (paper §6).
 
 :class:`CameraDriver` (services.toml ``[drivers.camera]``, ``impl =
-"services.actions.camera:CameraDriver"``, params ``host``, ``port``, ``tick_every``,
+"services.catching.camera:CameraDriver"``, params ``host``, ``port``, ``tick_every``,
 ``connect_timeout_s``) is the frame-grabber card. A thread (:class:`CameraLink`) grabs every frame
 from the camera server (:mod:`services.devices.framegrabber`; the simulated one is
-``sim.camera.FrameServer``), keeps the last few and a background image (per-pixel median of frames
+``sim.frameserver.FrameServer``), keeps the last few and a background image (per-pixel median of frames
 at least 0.3 s apart), and the driver publishes the external event ``image_sampling_tick``
 (``{"seq", "t"}``) for every ``tick_every``-th frame. After a lost camera the next action call
 reconnects (:meth:`CameraDriver.reconnect_if_lost`), so a restarted camera server is picked up.
 
 The camera server's info map carries the calibration (:class:`VisionConfig`): the homography, the
 table's size, the robot base pose and the rolling model. The actions that use the camera live in
-:mod:`services.actions.vision`.
+:mod:`services.catching.vision_node`.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ from services.action import CallContext, Driver, NodeContext
 from services.devices.endpoint import DeviceEndpoint
 from services.devices.framegrabber import Frame, FrameClient
 from services.errors import ActionError
-from services.vision import Homography, PlanarTransform, Roi, RollingModel, table_roi
+from services.catching.vision import Homography, PlanarTransform, Roi, RollingModel, table_roi
 
 __all__ = [
     "DEFAULT_CAMERA_PORT",
@@ -72,7 +72,7 @@ class VisionConfig:
 
     @classmethod
     def from_info(cls, info: dict[str, Any]) -> VisionConfig:
-        """Parse the camera server's ``info`` (``sim.camera.camera_info`` in the simulation)'s map.
+        """Parse the camera server's ``info`` (``sim.catching.camera.camera_info`` in the simulation)'s map.
 
         Raises:
             ActionError: if fields are missing or malformed.
@@ -236,7 +236,7 @@ class CameraDriver(Driver):
         """The camera server this driver connects to (params ``host``, ``port``)."""
         return DeviceEndpoint("camera server", str(params.get("host", "127.0.0.1")),
                               int(params.get("port", DEFAULT_CAMERA_PORT)),
-                              "petrobot sim catching")
+                              "petrobot sim catching", "frames")
 
     async def setup(self, node: NodeContext) -> None:
         self.link = CameraLink(

@@ -5,9 +5,9 @@ Pure: no I/O, no clocks (frame times are passed in).
 
 from __future__ import annotations
 
-from services.vision.calibration import Homography
-from services.vision.locate import Detection, Roi
-from services.vision.rolling import Prediction, RollingPredictor
+from services.catching.vision.calibration import Homography
+from services.catching.vision.locate import Detection, Roi
+from services.catching.vision.rolling import Prediction, RollingPredictor
 
 __all__ = ["BallTracker"]
 
@@ -24,7 +24,7 @@ class BallTracker:
         predictor: the rolling-ball predictor (owned by the tracker from now on).
         gap: s without a detection that ends a throw.
         jump: m of backward motion that starts a new throw.
-        roi: region of the image to search (see :func:`services.vision.calibration.table_roi`), for
+        roi: region of the image to search (see :func:`services.catching.vision.calibration.table_roi`), for
             the locate functions.
     """
 

@@ -13,17 +13,13 @@ Both add pixel noise: Gaussian grey-level noise (``intensity_sigma``, drawn from
 so that a frame costs no random-number generation) and, for the analytic renderer, a Gaussian jitter
 of the drawn ball's position (``position_sigma_px``), the "0.5 px noise" of the benchmarks.
 
-:class:`FrameServer` serves frames over TCP on 127.0.0.1 like a GigE camera with grab-latest
-semantics; the vision node's frame grabber (:class:`services.devices.framegrabber.FrameClient`)
-reads them. The wire format is documented there.
+The frames are served by :class:`sim.frameserver.FrameServer`; :func:`camera_info` is the info map
+the vision node reads from it (data sheet and calibration).
 """
 
 from __future__ import annotations
 
-import functools
 import math
-import socket
-import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -31,16 +27,12 @@ from typing import Any
 import cv2
 import numpy as np
 
-from services.devices.framegrabber import MAX_HEADER, Frame
-from services.errors import ProtocolError
-from services.protocol.framing import pack_map, recv_frame, unpack_map
-from services.vision import Homography, Roi, fit_homography, locate_threshold
+from services.catching.vision import Homography, Roi, fit_homography, locate_threshold
 
 __all__ = [
     "AnalyticRenderer",
     "CameraModel",
-    "FrameServer",
-    "TinyRenderer",
+        "TinyRenderer",
     "calibrate",
     "camera_info",
     "overhead_camera",
@@ -315,7 +307,7 @@ def calibrate(
     Args:
         render_at: function placing the ball's centre at table point (x, y) (on the table) and
             returning the frame, (H, W, 3) uint8 BGR.
-        points: (N, 2) known table points, m (e.g. :func:`services.vision.calibration_points`).
+        points: (N, 2) known table points, m (e.g. :func:`services.catching.vision.calibration_points`).
         frames_per_point: frames taken at each point; their detections are averaged (reduces the
             effect of pixel noise on the calibration).
         roi: search only this region of the frames (e.g. :meth:`CameraModel.table_roi`).
@@ -325,7 +317,7 @@ def calibrate(
 
     Raises:
         RuntimeError: if the ball is not found at some calibration point.
-        ValueError: from :func:`services.vision.fit_homography` on degenerate points.
+        ValueError: from :func:`services.catching.vision.fit_homography` on degenerate points.
     """
     pixels = []
     for x, y in np.asarray(points, dtype=float):
@@ -339,134 +331,6 @@ def calibrate(
             (float(np.mean([d.u for d in dets if d])), float(np.mean([d.v for d in dets if d])))
         )
     return fit_homography(np.asarray(pixels), np.asarray(points, dtype=float))
-
-
-# --------------------------------------------------------------------------------------------------
-# Frame server (sim process) and client (vision node's camera driver)
-# --------------------------------------------------------------------------------------------------
-class FrameServer:
-    """Serves the latest camera frame over TCP (grab-latest), one thread per client.
-
-    Args:
-        host: address to listen on (127.0.0.1).
-        port: TCP port, 0 for any free one (see :attr:`port` after :meth:`start`).
-        info: a msgpack-able map served on request ``{"op": "info"}`` (the camera's data sheet and
-            calibration: image size, homography, robot base pose...).
-    """
-
-    def __init__(self, host: str = "127.0.0.1", port: int = 0, info: dict[str, Any] | None = None) -> None:
-        self.host = host
-        self.info = dict(info or {})
-        self._requested_port = port
-        self.port = 0
-        self._cond = threading.Condition()
-        self._latest: Frame | None = None
-        self._closed = False
-        self._sock: socket.socket | None = None
-        self._threads: list[threading.Thread] = []
-        self._clients: list[socket.socket] = []
-        self._last_sent = -1
-
-    def start(self) -> int:
-        """Listen and serve in background threads; returns the port."""
-        s = socket.create_server((self.host, self._requested_port))
-        s.settimeout(0.2)
-        self._sock = s
-        self.port = s.getsockname()[1]
-        th = threading.Thread(target=self._accept_loop, name="frame-server", daemon=True)
-        th.start()
-        self._threads.append(th)
-        return self.port
-
-    def publish(self, frame: Frame) -> None:
-        """Make ``frame`` the latest; wakes clients waiting for a newer frame."""
-        with self._cond:
-            self._latest = frame
-            self._cond.notify_all()
-
-    @property
-    def client_count(self) -> int:
-        """Number of connected clients."""
-        return len(self._clients)
-
-    def wait_sent(self, seq: int, timeout: float) -> bool:
-        """Wait until frame ``seq`` (or a later one) has been sent to some client (lock-step pacing).
-
-        Returns:
-            True if it was sent within ``timeout`` s.
-        """
-        with self._cond:
-            return self._cond.wait_for(lambda: self._closed or self._last_sent >= seq, timeout)
-
-    def close(self) -> None:
-        """Stop serving and close every connection."""
-        with self._cond:
-            self._closed = True
-            self._cond.notify_all()
-        for c in list(self._clients):
-            try:
-                c.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-            c.close()
-        if self._sock is not None:
-            self._sock.close()
-        for th in self._threads:
-            th.join(timeout=2.0)
-
-    def _accept_loop(self) -> None:
-        assert self._sock is not None
-        while not self._closed:
-            try:
-                conn, _ = self._sock.accept()
-            except TimeoutError:
-                continue
-            except OSError:
-                return
-            conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._clients.append(conn)
-            th = threading.Thread(target=self._serve, args=(conn,), daemon=True)
-            th.start()
-            self._threads.append(th)
-
-    def _newer(self, after: int) -> bool:
-        return self._closed or (self._latest is not None and self._latest.seq > after)
-
-    def _serve(self, conn: socket.socket) -> None:
-        try:
-            while not self._closed:
-                req = unpack_map(recv_frame(conn, MAX_HEADER))
-                if req.get("op") == "info":
-                    conn.sendall(pack_map({"info": self.info}, MAX_HEADER))
-                    continue
-                if req.get("op") != "grab":
-                    conn.sendall(pack_map({"error": f"unknown op {req.get('op')!r}"}, MAX_HEADER))
-                    continue
-                after = int(req.get("after", -1))
-                timeout = min(float(req.get("timeout", 1.0)), 10.0)
-                with self._cond:
-                    self._cond.wait_for(functools.partial(self._newer, after), timeout=timeout)
-                    frame = self._latest
-                if frame is None or frame.seq <= after:
-                    conn.sendall(pack_map({"error": "timeout"}, MAX_HEADER))
-                    continue
-                img = np.ascontiguousarray(frame.image)
-                h, w = img.shape[:2]
-                ch = img.shape[2] if img.ndim == 3 else 1
-                header: dict[str, Any] = {"seq": frame.seq, "t": frame.t, "t_wall": frame.t_wall, "width": w, "height": h,
-                          "channels": ch, "nbytes": img.nbytes}
-                if frame.meta:
-                    header["meta"] = frame.meta
-                conn.sendall(pack_map(header, MAX_HEADER) + img.tobytes())
-                with self._cond:
-                    self._last_sent = max(self._last_sent, frame.seq)
-                    self._cond.notify_all()
-        except (ConnectionError, OSError, ValueError, ProtocolError):
-            pass
-        finally:
-            conn.close()
-            if conn in self._clients:
-                self._clients.remove(conn)
 
 
 def camera_info(

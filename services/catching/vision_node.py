@@ -1,7 +1,7 @@
 """Actions of the vision node of the catching testbed: locate the ball, predict the catch (paper §6).
 
-The actions read frames from the node's camera driver, :class:`services.actions.camera.CameraDriver`
-(``services.actions.vision:CameraDriver`` still names it, for services files written before the
+The actions read frames from the node's camera driver, :class:`services.catching.camera.CameraDriver`
+(``services.catching.vision_node:CameraDriver`` still names it, for services files written before the
 driver had its own module).
 
 * Three alternative primitive actions of the *locate ball* primitive task, with different cost and
@@ -14,9 +14,9 @@ driver had its own module).
   (see *Location within specification* below); without it any detection on the table is a success.
 * :class:`Predict` (primitive task *predict*): tracks the ball frame by frame, predicts where and
   when it crosses the catch line, and publishes each prediction as a set point (table frame, as
-  :class:`services.stream.SetPoint` specifies; the motion node turns it into its base frame) on
+  :class:`services.catching.setpoints.CatchSetPoint` specifies; the motion node turns it into its base frame) on
   the node's event topic ``setpoints`` (param ``topic``), to which the motion node subscribes
-  through its authenticated node link (:mod:`services.stream`). ``success`` once the ball has
+  through its authenticated node link (:mod:`services.catching.setpoints`). ``success`` once the ball has
   crossed, with the last prediction; ``failure`` when the ball stops or vanishes before the line;
   ``error`` when the camera is lost. If the node hosts no camera driver (the action was moved to
   another node in services.toml), it opens its own connection to the camera server (params
@@ -35,7 +35,7 @@ expects) and ``{"reason": "out_of_spec" | "track_lost", "residual_m"}`` in the v
 locator, it is not the locator).
 
 The calibration (homography, robot base pose, rolling model) comes from the camera server's info
-map (:class:`services.actions.camera.VisionConfig`).
+map (:class:`services.catching.camera.VisionConfig`).
 """
 
 from __future__ import annotations
@@ -48,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from services.action import CallContext, PrimitiveAction
-from services.actions.camera import (
+from services.catching.camera import (
     DEFAULT_CAMERA_PORT,
     CameraDriver,
     CameraLink,
@@ -59,8 +59,8 @@ from services.actions.camera import (
 from services.devices.framegrabber import Frame
 from services.errors import ActionError
 from services.results import ActionResult, Status
-from services.stream import SETPOINT_TOPIC, SetPoint
-from services.vision import (
+from services.catching.setpoints import SETPOINT_TOPIC, CatchSetPoint
+from services.catching.vision import (
     BallTracker,
     Detection,
     RollingPredictor,
@@ -94,7 +94,7 @@ def track_residual(location: tuple[float, float, float],
 
     The track's x(t) and y(t) are each fitted by a least-squares straight line and evaluated at the
     location's time (linear regression; over a few tenths of a second a rolling ball's path is a
-    constant-velocity line to well under a millimetre, see :mod:`sim.catching`). Pure.
+    constant-velocity line to well under a millimetre, see :mod:`sim.catching.world`). Pure.
 
     Args:
         location: (t, x, y) of the located ball: s, and table-frame m.
@@ -282,7 +282,7 @@ class Predict(PrimitiveAction):
                 pred = tracker.observe(det, frame.t)
                 cpu += time.thread_time() - c0
                 if pred is not None:
-                    sp = SetPoint(seq=sent, t_frame=frame.t, t_capture=frame.t_wall, t_sent=time.time(),
+                    sp = CatchSetPoint(seq=sent, t_frame=frame.t, t_capture=frame.t_wall, t_sent=time.time(),
                                   x=pred.x, y=pred.y, t=pred.t, vx=pred.vx, vy=pred.vy,
                                   sigma_y=pred.sigma_y, sigma_t=pred.sigma_t)
                     ctx.publish(topic, sp.to_dict())

@@ -1,7 +1,7 @@
 """PUMA 560 kinematics from its standard Denavit–Hartenberg table: the robot's data sheet in code.
 
 Pure (numpy only): the motion node plans with it on the real robot or in simulation; the
-simulated world (:mod:`sim.puma560`) writes its URDF from the same table.
+simulated world (:mod:`sim.catching.puma560`) writes its URDF from the same table.
 
 Conventions (SI units: metres, radians):
 
@@ -27,6 +27,8 @@ from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
+
+from services.errors import PetrobotError
 
 __all__ = [
     "CUP_DEPTH",
@@ -77,7 +79,7 @@ QDD_MAX: Array = np.array([10.0, 10.0, 12.0, 20.0, 20.0, 20.0])
 TAU_MAX: Array = np.array([150.0, 250.0, 120.0, 30.0, 30.0, 30.0])
 
 # Home pose: the cup rim centre at (0.66, 0, 0.25) m in the base frame, cup axis tilted 45 degrees
-# from vertical toward +x (services.robots.motion_control's default catching pose, mid catch line).
+# from vertical toward +x (services.catching.robot.motion_control's default catching pose, mid catch line).
 Q_HOME: Array = np.array([0.2553, 1.1078, -3.1181, 0.1895, 1.2469, -0.2434])
 
 # --- Cup (the tool) ---------------------------------------------------------------------------------
@@ -90,7 +92,7 @@ CUP_MASS = 0.08  # kg
 CUP_RESTITUTION = 0.05
 
 
-class UnreachableError(ValueError):
+class UnreachableError(PetrobotError, ValueError):
     """No inverse-kinematics solution exists within the joint limits for the requested pose."""
 
 

@@ -1,6 +1,6 @@
 """The mobile robot's perception node: the camera/beacon/odometry driver and the course's primitive
 actions, streaming steering set points (paper section 6, Fig. 3; overview and outcomes in
-:mod:`services.actions.mobile`)."""
+:mod:`services.mobile`)."""
 
 from __future__ import annotations
 
@@ -93,7 +93,7 @@ class PerceptionDriver(Driver):
     def device(cls, params: dict[str, Any]) -> DeviceEndpoint:
         """The frame server this driver connects to."""
         return DeviceEndpoint("mobile camera server", str(params.get("host", "127.0.0.1")),
-                              int(params.get("port", DEFAULT_CAMERA_PORT)), "petrobot sim mobile")
+                              int(params.get("port", DEFAULT_CAMERA_PORT)), "petrobot sim mobile", "frames")
 
     async def setup(self, node: NodeContext) -> None:
         """Start the grabbing thread and subscribe to the drive node's odometry."""

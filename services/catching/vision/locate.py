@@ -92,7 +92,7 @@ def locate_threshold(
         frame: (H, W, 3) uint8 BGR image.
         t: timestamp of the frame, s.
         params: thresholds.
-        roi: search only this region (e.g. :func:`services.vision.calibration.table_roi`, which
+        roi: search only this region (e.g. :func:`services.catching.vision.calibration.table_roi`, which
             keeps the robot's orange cup beyond the table edge out of the search).
 
     Returns:

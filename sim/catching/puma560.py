@@ -1,7 +1,7 @@
 """The simulated PUMA 560: URDF written from the DH table, dynamics, cup and crossfire sensor.
 
 Kinematics, limits and the cup's geometry are the robot's data sheet and live in
-:mod:`services.robots.puma560` (the motion node uses them on a real robot too); this module adds
+:mod:`services.catching.robot.puma560` (the motion node uses them on a real robot too); this module adds
 what only the simulation needs. Everything here is pure (numpy only) except :func:`write_urdf`
 and :func:`load`.
 
@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from services.robots.puma560 import (
+from services.catching.robot.puma560 import (
     CUP_DEPTH,
     CUP_INNER_RADIUS,
     CUP_MASS,

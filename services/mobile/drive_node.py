@@ -1,5 +1,5 @@
 """The mobile robot's drive node: the wheel drives on the CAN bus, odometry, the steering set points
-with the watchdog, and ``stop_robot`` (paper section 6; overview in :mod:`services.actions.mobile`)."""
+with the watchdog, and ``stop_robot`` (paper section 6; overview in :mod:`services.mobile`)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ import time
 from typing import Any
 
 from services.action import CallContext, Driver, NodeContext, PrimitiveAction
-from services.devices.drives import BusError, WheelCanDrives
+from services.devices import cia402 as cf
+from services.devices.drives import BusError, VelocityCanDrives
 from services.devices.endpoint import DeviceEndpoint
 from services.errors import ActionError, LocationError
 from services.mobile.odometry import DriveGeometry, Odometry, Pose2D
@@ -20,7 +21,7 @@ from services.results import ActionResult
 
 __all__ = ["DEFAULT_CAN_PORT", "DriveDriver", "StopRobot"]
 
-log = logging.getLogger("services.actions.mobile")
+log = logging.getLogger(__name__)
 
 DEFAULT_CAN_PORT = 7221
 
@@ -54,7 +55,7 @@ class DriveDriver(Driver):
         ``latency_every`` (param, 500) set points."""
         self.latency_every = int(p.get("latency_every", 500))
         self.odometry = Odometry(self.geometry)
-        self.drives: WheelCanDrives | None = None
+        self.drives: VelocityCanDrives | None = None
         self.fault: str | None = None
         self.lock = threading.Lock()
         self.pose = Pose2D()
@@ -70,7 +71,7 @@ class DriveDriver(Driver):
     def device(cls, params: dict[str, Any]) -> DeviceEndpoint:
         """The CAN gateway this driver connects to."""
         return DeviceEndpoint("mobile CAN gateway", str(params.get("can_host", "127.0.0.1")),
-                              int(params.get("can_port", DEFAULT_CAN_PORT)), "petrobot sim mobile")
+                              int(params.get("can_port", DEFAULT_CAN_PORT)), "petrobot sim mobile", "socketcand")
 
     async def setup(self, node: NodeContext) -> None:
         """Subscribe to the steering set points; connect to the drives in the background."""
@@ -112,8 +113,9 @@ class DriveDriver(Driver):
             await asyncio.sleep(0.5)
 
     def _start(self) -> None:
-        drives = WheelCanDrives(self.can_host, self.can_port, self.channel,
-                                heartbeat_timeout=self.heartbeat_timeout, silence_timeout=self.bus_silence)
+        drives = VelocityCanDrives(self.can_host, self.can_port, self.channel,
+                                   heartbeat_timeout=self.heartbeat_timeout, silence_timeout=self.bus_silence,
+                                   nodes=cf.WHEEL_IDS)
         drives.open(timeout=self.connect_timeout)
         try:
             drives.start(timeout=self.connect_timeout)
@@ -220,7 +222,7 @@ def _drive(ctx: CallContext) -> DriveDriver:
     drv = ctx.find_driver(DriveDriver)
     if drv is not None:
         return drv
-    raise ActionError("this node hosts no wheel drive driver (services.actions.mobile:DriveDriver)")
+    raise ActionError("this node hosts no wheel drive driver (services.mobile.drive_node:DriveDriver)")
 
 
 class StopRobot(PrimitiveAction):

@@ -19,7 +19,7 @@ slipping then decelerates at
 
     dv/dt = -(3/5) (g μ_r / r + k v²),   k = ½ ρ C_d π r² / m,
 
-the model :mod:`services.vision.rolling` predicts with (tests check pybullet against it).
+the model :mod:`services.catching.vision.rolling` predicts with (tests check pybullet against it).
 """
 
 from __future__ import annotations
@@ -33,9 +33,9 @@ from typing import Any
 
 import numpy as np
 
-from services.vision import PlanarTransform
+from services.catching.vision import PlanarTransform
 
-from .world import World
+from sim.world import World
 
 __all__ = [
     "AIR_DENSITY",
@@ -214,11 +214,11 @@ class CatchingWorld:
         table: table geometry.
         ball: ball properties.
         drag: apply air drag (turn off only to test rolling friction alone).
-        robot: load the PUMA 560 from :func:`sim.puma560.write_urdf` (needs that module).
+        robot: load the PUMA 560 from :func:`sim.catching.puma560.write_urdf` (needs that module).
         robot_base: (x, y, z, yaw) of the robot base frame (DH frame 0, on the shoulder) in the table
             frame (m, rad). The default faces the robot towards the table, its catch line 0.75 m in
             front of the shoulder and the table top 0.30 m above it, as
-            :class:`services.robots.motion_control.CatchGeometry` assumes.
+            :class:`services.catching.robot.motion_control.CatchGeometry` assumes.
         record_history: keep (t, x, y, z) of the ball at every step of a throw.
 
     Attributes:
