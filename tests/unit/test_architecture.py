@@ -19,6 +19,10 @@ PACKAGES = ("coordinator", "services", "sim")
 ALLOWED = {"coordinator": {"services"}, "services": set(), "sim": {"services"}}
 #: the testbeds: each has its node side in services/NAME/ and its world in sim/NAME/
 TESTBEDS = ("catching", "mobile")
+#: the worlds ``petrobot sim`` runs, each from its package's process module: the testbeds' and the
+#: ROS 2 demo's (sim/ros2/: a Zenoh router and a stand-in robot). ROS 2 is no testbed: services/ros2/
+#: is the framework's reach to any ROS 2 robot, which a node of any testbed may use.
+WORLDS = (*TESTBEDS, "ros2")
 
 
 def _door(module: str) -> bool:
@@ -105,6 +109,21 @@ def test_the_framework_imports_no_testbed_and_only_the_demo_and_sim_commands_rea
     into = [(a, b) for a, targets in GRAPH.items() for b in targets
             if _testbed(a) is None and not _door(a) and _testbed(b) is not None]
     assert into == [], f"the framework imports a testbed: {into}"
+
+
+def _world(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[1] if parts[0] == "sim" and len(parts) > 1 and parts[1] in WORLDS else None
+
+
+def test_worlds_import_no_other_world_and_petrobot_sim_only_dispatches_to_their_processes():
+    crossing = [(a, b) for a, targets in GRAPH.items() for b in targets
+                if _world(a) is not None and _world(b) not in (None, _world(a))]
+    assert crossing == [], f"a world imports another: {crossing}"
+    assert all(f"sim.{world}.process" in MODULES for world in WORLDS)
+    reached = sorted(b for b in GRAPH["coordinator.commands.sim"] if b.startswith("sim"))
+    assert reached == sorted(f"sim.{world}.process" for world in WORLDS), \
+        "petrobot sim parses and dispatches; each world runs from its own sim.NAME.process"
 
 
 def _strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
