@@ -353,3 +353,16 @@ async def test_user_and_password_from_the_password_file_are_checked_by_the_route
             await missing.open()
     finally:
         peer.close()
+
+
+async def test_petrobot_up_finds_a_running_zenoh_router_by_connecting_only_and_a_stopped_one_missing(peer: Peer):
+    from services.devices.probe import probe
+    from services.ros2.driver import Ros2Driver
+
+    router = Ros2Driver.device({"router": peer.endpoint})
+    assert router.protocol == "zenoh"
+    assert probe(router) is None  # connected and left: asked for camera info, a router is "not a camera server"
+    session = await _session(peer)  # the probe left the router serving
+    await session.close()
+    peer.close()
+    assert probe(router) == "Connection refused"

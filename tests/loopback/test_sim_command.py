@@ -1,10 +1,14 @@
-"""`petrobot sim catching` in lock-step mode, run in-process for a few simulated seconds."""
+"""`petrobot sim catching` in lock-step mode, run in-process for a few simulated seconds; where each world
+serves its devices (and `petrobot sim zenoh` its router) when services.toml says."""
 
 from __future__ import annotations
 
 import argparse
 import json
 import socket
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -108,3 +112,31 @@ def test_sim_serves_its_devices_on_the_ports_services_toml_gives_their_drivers(w
     ready = json.loads(capsys.readouterr().out.splitlines()[0])
     assert ready["event"] == "ready" and (ready["camera_port"], ready["can_port"]) == (camera, can)
 
+
+
+def test_sim_zenoh_listens_where_services_toml_has_its_ros2_nodes_connect(tmp_path):
+    port = _free_port()
+    services = tmp_path / "services.toml"
+    services.write_text(f"""
+[nodes.rosbot]
+host = "127.0.0.1"
+port = 7107
+
+[nodes.rosbot.ros2]
+connect = ["tcp/127.0.0.1:{port}"]
+
+[events.crossfire]
+node = "rosbot"
+ros2 = {{ topic = "/crossfire", type = "std_msgs/msg/Bool", when = "data" }}
+""")
+    proc = subprocess.Popen([sys.executable, "-m", "coordinator.commands.sim", "zenoh", "--services", str(services)],
+                            cwd=Path(__file__).resolve().parents[2], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        ready = json.loads(proc.stdout.readline())
+        assert ready["event"] == "ready" and ready["listen"] == f"tcp/127.0.0.1:{port}"
+        with socket.create_connection(("127.0.0.1", port), timeout=5):
+            pass
+    finally:
+        proc.terminate()
+        assert proc.wait(timeout=30) == 0
