@@ -87,5 +87,5 @@ async def run_mobile(args: argparse.Namespace) -> int:
           + (f"; top view: {png}" if png.exists() else ""))
     from coordinator.commands.learn import print_learned
 
-    print_learned(done.journal, net_path)
+    print_learned(done.journal, net_path, "mobile")
     return done.summary.exit_code

@@ -133,10 +133,11 @@ def learned_so_far(journal: str | Path, net: str | Path) -> list[str]:
     return lines
 
 
-def print_learned(journal: Path, net: Path) -> None:
+def print_learned(journal: Path, net: Path, demo: str = "") -> None:
     """Print what a demo's learners have learned so far (:func:`learned_so_far`) and how to go on
-    learning; a journal or net that cannot be read gets one line saying so (the demo's exit code
-    stays its run's)."""
+    learning (``petrobot demo DEMO --journal JOURNAL``; ``demo`` empty for the default, catching); a
+    journal or net that cannot be read gets one line saying so (the demo's exit code stays its
+    run's)."""
     try:
         lines = learned_so_far(journal, net)
     except PetrobotError as exc:
@@ -145,7 +146,7 @@ def print_learned(journal: Path, net: Path) -> None:
         print(line)
     shown = net.relative_to(Path.cwd()) if net.is_absolute() and net.is_relative_to(Path.cwd()) else net
     print(f"learning: petrobot learn {shown} --journal {journal} --plot; go on learning from here: "
-          f"petrobot demo --journal {journal}")
+          f"petrobot demo {demo + ' ' if demo else ''}--journal {journal}")
 
 
 def read_journal(path: str | Path, run: str | None = None) -> tuple[dict[str, dict[str, Any]], dict[str, list[Trial]]]:

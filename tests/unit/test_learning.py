@@ -640,3 +640,14 @@ def test_learn_plot_without_a_file_writes_beside_the_journal_and_a_demo_line_say
     (line,) = learn_cmd.learned_so_far(journal, net_file)
     assert line.startswith("learner pick (pursuit, 6 results, ") and "p = pick_fast 0." in line
     assert "least J so far: pick_fast" in line
+
+
+def test_the_mobile_demos_learner_line_says_to_go_on_learning_with_the_mobile_demo(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]):
+    from tests.unit.test_performance import _agree_journal
+
+    net_file, journal = _agree_journal(tmp_path)
+    learn_cmd.print_learned(journal, net_file, "mobile")
+    assert capsys.readouterr().out.rstrip().endswith(f"go on learning from here: petrobot demo mobile --journal {journal}")
+    learn_cmd.print_learned(journal, net_file)
+    assert capsys.readouterr().out.rstrip().endswith(f"go on learning from here: petrobot demo --journal {journal}")
