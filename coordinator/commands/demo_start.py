@@ -281,8 +281,7 @@ async def run_demo(args: argparse.Namespace, net: PetriNet, net_path: Path, *, j
                 say(f"running {_shown(net_path)}: {net.name}"
                     + (f", {net.initial_marking['runs_remaining']} runs" if "runs_remaining" in net.initial_marking else ""))
                 summary = await execute(net, location=location, key=key, journal=jnl, seed=args.seed,
-                                        net_text=net_path.read_text(encoding="utf-8"),
-                                        observer=observer,
+                                        net_text=net_path.read_text(encoding="utf-8"), observer=observer,
                                         read_input=sys.stdin.isatty(), max_seconds=args.max_seconds,
                                         console=console)
                 if settle_s > 0:
