@@ -53,6 +53,8 @@ __all__ = [
     "Arc",
     "ActionSpec",
     "PrimitiveTask",
+    "OperatorRights",
+    "FORCE_STATUSES",
     "Marking",
     "PetriNet",
     "parse_event",
@@ -328,6 +330,70 @@ class ActionSpec:
             raise NetError(f"action {self.name!r} has a negative cost {self.cost}")
 
 
+#: The statuses an operator may force on a running primitive action (``[operator] force``).
+FORCE_STATUSES = ("success", "failure", "error")
+
+
+def _forced_problem(task: str, outcome: str) -> str | None:
+    """Why ``outcome`` cannot be written in ``[operator] force`` for ``task``, or ``None``."""
+    status, _, named = outcome.partition(".")
+    if status not in FORCE_STATUSES or (named and not _NAME_RE.match(named)) or (_ and not named):
+        return (f"operator may force {outcome!r} on task {task!r}: write a status (success, failure, error) or "
+                "a status and a named outcome, e.g. 'failure.no_ball'")
+    return None
+
+
+@dataclass(frozen=True, slots=True, kw_only=True)
+class OperatorRights:
+    """What an operator may force from a console (paper section 5; the ``[operator]`` table of a net
+    file, docs/netfile.md): raise external events and force the outcome of running primitive actions,
+    for training and recovery drills (the idea of FlexBE's autonomy levels). Everything forced is
+    journaled as the operator's and never counts as a measured result (``perf``, the learners).
+
+    Attributes:
+        inject: the ``ext:<topic>`` events an operator may raise.
+        force: primitive task → the outcomes an operator may force on its running action: a status
+            (``success``, ``failure``, ``error``) or a status and a named outcome
+            (``failure.no_ball``: status failure, ``int:<task>.no_ball`` raised).
+    """
+
+    inject: tuple[str, ...] = ()
+    force: Mapping[str, tuple[str, ...]] = field(default_factory=dict, hash=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "inject", tuple(self.inject))
+        object.__setattr__(self, "force", MappingProxyType({k: tuple(v) for k, v in self.force.items()}))
+        for event in self.inject:
+            m = EVENT_RE.match(event) if isinstance(event, str) else None
+            if m is None or m.group("topic") is None:
+                raise NetError(f"operator may inject {event!r}: only external events (ext:<topic>) can be raised")
+        for task, outcomes in self.force.items():
+            for outcome in outcomes:
+                problem = _forced_problem(task, outcome) if isinstance(outcome, str) else \
+                    f"operator may force {outcome!r} on task {task!r}: an outcome is a string"
+                if problem is not None:
+                    raise NetError(problem)
+
+    def __bool__(self) -> bool:
+        return bool(self.inject or self.force)
+
+    def may_inject(self, event: str) -> bool:
+        """Whether the operator may raise ``event`` (``ext:<topic>``)."""
+        return event in self.inject
+
+    def may_force(self, task: str, outcome: str) -> bool:
+        """Whether the operator may force ``outcome`` (``status`` or ``status.named``) on ``task``."""
+        return outcome in self.force.get(task, ())
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, OperatorRights):
+            return NotImplemented
+        return self.inject == other.inject and dict(self.force) == dict(other.force)
+
+    def __hash__(self) -> int:
+        return hash((self.inject, tuple(sorted(self.force))))
+
+
 @dataclass(frozen=True, slots=True, kw_only=True)
 class PrimitiveTask:
     """A primitive task and its alternative primitive actions (sections 2 and 4).
@@ -483,6 +549,7 @@ class PetriNet:
         tasks: primitive tasks by name.
         description: free text.
         home_marking: a declared home marking for reversibility analysis, or ``None`` (M0 is used).
+        operator: what an operator may force from a console (events raised, outcomes forced).
     """
 
     name: str
@@ -493,6 +560,7 @@ class PetriNet:
     tasks: Mapping[str, PrimitiveTask] = field(default_factory=dict, hash=False)
     description: str = ""
     home_marking: Marking | None = None
+    operator: OperatorRights = field(default_factory=OperatorRights, hash=False)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "places", tuple(self.places))
@@ -569,6 +637,23 @@ class PetriNet:
         for name, task in self.tasks.items():
             if name != task.name:
                 raise NetError(f"task registered as {name!r} is named {task.name!r}")
+        problem = self.operator_problem()
+        if problem is not None:
+            raise NetError(problem)
+
+    def operator_problem(self) -> str | None:
+        """What is wrong with :attr:`operator` in this net, or ``None``: an event to inject that no
+        transition links, a task to force that the net does not have."""
+        linked = {e for t in self.transitions for e in t.external_events}
+        for event in self.operator.inject:
+            if event not in linked:
+                known = ", ".join(sorted(linked)) or "none"
+                return f"operator may inject {event!r}, which no transition links (external events: {known})"
+        for task in self.operator.force:
+            if task not in self.tasks:
+                known = ", ".join(self.tasks) or "none"
+                return f"operator may force an outcome of task {task!r}, which the net does not have (tasks: {known})"
+        return None
 
     def interpretation_problems(self) -> list[tuple[str, str]]:
         """Check the interpreted-net rules of section 2.
@@ -860,7 +945,7 @@ class PetriNet:
         return PetriNet(
             name=self.name, places=self.places, transitions=self.transitions, arcs=self.arcs,
             initial_marking=Marking(marking), tasks=self.tasks, description=self.description,
-            home_marking=self.home_marking,
+            home_marking=self.home_marking, operator=self.operator,
         )
 
     def __hash__(self) -> int:
@@ -874,4 +959,5 @@ class PetriNet:
             and self.transitions == other.transitions and set(self.arcs) == set(other.arcs)
             and self.initial_marking == other.initial_marking and dict(self.tasks) == dict(other.tasks)
             and self.description == other.description and self.home_marking == other.home_marking
+            and self.operator == other.operator
         )

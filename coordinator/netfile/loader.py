@@ -33,6 +33,7 @@ from coordinator.net import (
     ActionSpec,
     Arc,
     Marking,
+    OperatorRights,
     PetriNet,
     Place,
     PlaceKind,
@@ -58,6 +59,7 @@ from coordinator.netfile.schema import (
     ARC_KEYS,
     FORMAT_VERSION,
     NET_KEYS,
+    OPERATOR_KEYS,
     PLACE_KEYS,
     TASK_KEYS,
     TOP_KEYS,
@@ -217,7 +219,8 @@ class _Loader:
                 hint = f"; did you mean {close[0]!r}?" if close else f" (known: {', '.join(TOP_KEYS)})"
                 line = self.smap.elements.get((key, None))
                 self.report(f"unknown section {_brief(key)}{hint}", line or self._find_header(key))
-        for key, kind in (("net", dict), ("task", dict), ("place", list), ("transition", list), ("arc", list)):
+        for key, kind in (("net", dict), ("task", dict), ("place", list), ("transition", list), ("arc", list),
+                          ("operator", dict)):
             if key in doc and not isinstance(doc[key], kind):
                 form = f"[{key}]" if kind is dict else f"[[{key}]]"
                 self.report(f"{key} must be written as {form} table(s)", self._find_header(key))
@@ -244,12 +247,13 @@ class _Loader:
                 if pid not in places and pid not in self.declared["place"]:
                     self.report(f"home marking of [net] puts tokens in unknown place {pid!r}",
                                 self.smap.key("net", None, "home"))
+        operator = self.load_operator(tasks, transitions)
         if self.problems:
             return None
         try:
             net = PetriNet(name=name, places=tuple(places.values()), transitions=tuple(transitions.values()),
                            arcs=tuple(arcs), initial_marking=marking, tasks=tasks, description=description,
-                           home_marking=home)
+                           home_marking=home, operator=operator)
         except NetError as exc:
             self.report(exc.problem, None)
             return None
@@ -292,6 +296,56 @@ class _Loader:
                                 f"{_brief(count)}", line)
             self.check(count_problem(count, f"{what}: token count of {_brief(place)}", 0), line)
         return Marking(table)
+
+    # ---------------------------------------------------------------- what an operator may force
+    def load_operator(self, tasks: Mapping[str, PrimitiveTask], transitions: Mapping[str, Transition]
+                      ) -> OperatorRights:
+        """``[operator]``: the external events an operator may raise and the outcomes they may force."""
+        table = self.doc.get("operator", {})
+        self.check_keys(table, OPERATOR_KEYS, "[operator]", "operator", None)
+        inject: list[str] = []
+        force: dict[str, tuple[str, ...]] = {}
+        linked = {e for t in transitions.values() for e in t.external_events}
+        try:
+            events = self.get(table, "inject", "array", "[operator]", "operator", None, [])
+            line = self.smap.key("operator", None, "inject")
+            for event in events:
+                if not isinstance(event, str) or not event.startswith("ext:") or event_problem(event) is not None:
+                    self.report(f"inject of [operator] names {_brief(event)}: only external events (ext:<topic>) "
+                                "can be raised by the operator", line)
+                elif event not in linked:
+                    known = ", ".join(sorted(linked)) or "none"
+                    self.report(f"inject of [operator] names {event!r}, which no transition links (external "
+                                f"events: {known})", line)
+                else:
+                    inject.append(event)
+        except _Skip:
+            pass
+        try:
+            outcomes = self.get(table, "force", "table", "[operator]", "operator", None, {})
+            line = self.smap.key("operator", None, "force")
+            for task, listed in outcomes.items():
+                if task not in tasks:
+                    if task not in self.doc.get("task", {}):
+                        known = ", ".join(sorted(tasks)) or "none defined"
+                        self.report(f"force of [operator] names unknown task {task!r} (tasks: {known})", line)
+                    continue
+                if not isinstance(listed, list) or not listed:
+                    self.report(f"force of [operator]: the outcomes of task {task!r} must be a non-empty array, "
+                                f"e.g. [\"success\", \"failure\", \"error\"]", line)
+                    continue
+                good = []
+                for outcome in listed:
+                    try:
+                        OperatorRights(force={task: (outcome,)})
+                    except NetError as exc:
+                        self.report(f"force of [operator]: {exc.problem}", line)
+                        continue
+                    good.append(outcome)
+                force[task] = tuple(dict.fromkeys(good))
+        except _Skip:
+            pass
+        return OperatorRights(inject=tuple(dict.fromkeys(inject)), force=force)
 
     # ---------------------------------------------------------------- tasks
     def load_tasks(self) -> dict[str, PrimitiveTask]:

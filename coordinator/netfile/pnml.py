@@ -43,6 +43,7 @@ from coordinator.net import (
     ActionSpec,
     Arc,
     Marking,
+    OperatorRights,
     PetriNet,
     Place,
     PlaceKind,
@@ -303,9 +304,21 @@ class _Reader:
                         raise self.error(f"home marking puts tokens in unknown place {_brief(place)}", tok)
                     counts[place] = self.integer(tok.get("count"), "home token count", tok, 0)
                 home = self.guarded(home_elem, lambda: Marking(counts))
+        operator = OperatorRights()
+        rights = tool.find("operator") if tool is not None else None
+        if rights is not None:
+            inject = [self.text(e.get("name", ""), "an event the operator may inject", e, MAX_NAME)
+                      for e in rights.iter("inject")]
+            force: dict[str, list[str]] = {}
+            for f in rights.iter("force"):
+                force.setdefault(self.text(f.get("task", ""), "a task whose outcome the operator may force", f,
+                                           MAX_NAME), []).append(
+                    self.text(f.get("outcome", ""), "an outcome the operator may force", f, MAX_NAME))
+            operator = self.guarded(rights, lambda: OperatorRights(inject=tuple(inject), force=force))
         result = self.guarded(net, lambda: PetriNet(
             name=name, places=tuple(place_objs), transitions=tuple(trans_objs), arcs=tuple(arc_objs),
             initial_marking=Marking(marking), tasks=tasks, description=description, home_marking=home,
+            operator=operator,
         ))
         for tid, _, problem in result.expression_problems():
             raise self.error(problem, self.elements.get(tid))
@@ -623,6 +636,12 @@ def dump_pnml(net: PetriNet, layout: Mapping[str, tuple[float, float]] | None = 
                 net_tool.append(f"            <learner>{escape(format_value(dict(task.learner)))}</learner>")
             net_tool.append("          </task>")
         net_tool.append("        </tasks>")
+    if net.operator:
+        net_tool.append("        <operator>")
+        net_tool += [f"          <inject{_attrs({'name': e})}/>" for e in net.operator.inject]
+        net_tool += [f"          <force{_attrs({'task': task, 'outcome': o})}/>"
+                     for task, outcomes in net.operator.force.items() for o in outcomes]
+        net_tool.append("        </operator>")
     if net_tool:
         out.append(f'    <toolspecific tool="{TOOL}" version="{TOOL_VERSION}">')
         out += [line[2:] for line in net_tool]

@@ -11,6 +11,7 @@ __all__ = [
     "ARC_KEYS",
     "FORMAT_VERSION",
     "NET_KEYS",
+    "OPERATOR_KEYS",
     "PLACE_KEYS",
     "TASK_KEYS",
     "TOP_KEYS",
@@ -21,9 +22,11 @@ __all__ = [
 FORMAT_VERSION = 1
 
 #: Top-level sections.
-TOP_KEYS = ("net", "place", "task", "transition", "arc")
+TOP_KEYS = ("net", "place", "task", "transition", "arc", "operator")
 #: Keys of ``[net]``.
 NET_KEYS = ("name", "description", "format", "home")
+#: Keys of ``[operator]``: what an operator may force from a console.
+OPERATOR_KEYS = ("inject", "force")
 #: Keys of a ``[[place]]``.
 PLACE_KEYS = ("id", "kind", "tokens", "label", "capacity", "task", "pos")
 #: Keys of a ``[task.<name>]``.

@@ -27,7 +27,7 @@ _SIMPLE_STRING = re.compile(r'[ \t]*"([^"\\]*)"[ \t\r]*(?:#.*)?')
 class SourceMap:
     """Lines of the elements and keys of a net file, found by scanning its text.
 
-    Elements are ``("net", None)``, ``("place", i)``, ``("transition", i)``, ``("arc", i)`` (0-based
+    Elements are ``("net", None)``, ``("operator", None)``, ``("place", i)``, ``("transition", i)``, ``("arc", i)`` (0-based
     index among the tables of that array) and ``("task", name)``. Lines are 1-based.
     """
 
@@ -66,7 +66,7 @@ class SourceMap:
                 self.elements.setdefault((section, None), number)
                 return
             ident, rest = path[1], path[2:]
-        elif section == "net":
+        elif section in ("net", "operator"):
             ident, rest = None, path[1:]
         else:
             self.elements.setdefault((section, None), number)

@@ -104,7 +104,8 @@ def _pos(layout: Mapping[str, tuple[float, float]] | None, ident: str) -> list[s
 def dump_net(net: PetriNet, layout: Mapping[str, tuple[float, float]] | None = None) -> str:
     """Write a net as canonical TOML (docs/netfile.md, "Canonical form").
 
-    Sections in the order ``[net]``, ``[[place]]`` (net order), ``[task.*]`` (definition order),
+    Sections in the order ``[net]``, ``[operator]`` (when the net declares what an operator may
+    force), ``[[place]]`` (net order), ``[task.*]`` (definition order),
     ``[[transition]]`` (net order) with their arcs as ``inputs``/``outputs``/``inhibitors`` tables
     (keys in place order), then one ``[[arc]]`` table per reset arc (transition order, then place
     order); keys equal to their default are left out; a rate or weight expression is written as a
@@ -122,6 +123,12 @@ def dump_net(net: PetriNet, layout: Mapping[str, tuple[float, float]] | None = N
     out.append(f"format = {FORMAT_VERSION}")
     if net.home_marking is not None:
         out.append(f"home = {_inline(net.home_marking.items())}")
+    if net.operator:
+        out += ["", "[operator]"]
+        if net.operator.inject:
+            out.append(f"inject = {format_value(list(net.operator.inject))}")
+        if net.operator.force:
+            out.append(f"force = {_inline((task, list(outcomes)) for task, outcomes in net.operator.force.items())}")
     for place in net.places:
         out += ["", "[[place]]", f"id = {format_value(place.id)}"]
         if place.kind is not PlaceKind.PLAIN:

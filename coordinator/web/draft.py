@@ -7,7 +7,8 @@ transitions::
      "places": [{"id": "p", "kind": "control", "tokens": 4, "pos": [x, y]}, ...],   # [[place]]
      "tasks": {"locate": {"actions": [...], "deadline_s": 12.0}},                   # [task.*]
      "transitions": [{"id": "t", "events": ["ext:tick"], "pos": [x, y]}, ...],      # [[transition]]
-     "arcs": [{"from": "p", "to": "t", "weight": 1, "inhibitor": false}, ...]}
+     "arcs": [{"from": "p", "to": "t", "weight": 1, "inhibitor": false}, ...],
+     "operator": {"inject": ["ext:tick"], "force": {"locate": ["error"]}}}            # [operator], optional
 
 :func:`draft_to_toml` writes a draft as the text of a net file (arcs between a place and a
 transition go into the transition's ``inputs``/``outputs``/``inhibitors``; any other arc is an
@@ -136,6 +137,9 @@ def draft_to_toml(draft: Mapping[str, Any]) -> tuple[str, list[Element | None]]:
     net = dict(draft.get("net") or {})
     net.setdefault("format", 1)
     w.add(_table_lines(net, _FIRST_KEYS["net"]), ("net", ""))
+    operator = draft.get("operator")
+    if isinstance(operator, Mapping) and operator:
+        w.add(["", "[operator]"] + _table_lines(operator, ("inject", "force")), ("net", ""))
     places = [p for p in draft.get("places") or [] if isinstance(p, Mapping)]
     transitions = [t for t in draft.get("transitions") or [] if isinstance(t, Mapping)]
     place_ids = {p.get("id") for p in places if isinstance(p.get("id"), str)}
@@ -197,8 +201,9 @@ def draft_of_text(text: str) -> dict[str, Any]:
     tasks = doc.get("task", {})
     transitions = doc.get("transition", [])
     loose = doc.get("arc", [])
+    operator = doc.get("operator", {})
     if not (isinstance(net, dict) and isinstance(places, list) and isinstance(tasks, dict)
-            and isinstance(transitions, list) and isinstance(loose, list)):
+            and isinstance(transitions, list) and isinstance(loose, list) and isinstance(operator, dict)):
         raise NetError("the file's sections are not the tables of a net file (docs/netfile.md)")
     draft_transitions, arcs = [], []
     for t in transitions:
@@ -218,9 +223,12 @@ def draft_of_text(text: str) -> dict[str, Any]:
         draft_transitions.append({k: v for k, v in t.items() if k not in _ARC_SECTIONS})
     arcs += [dict(a) for a in loose if isinstance(a, dict)]
     net = {k: v for k, v in net.items() if k != "format"}
-    return {"net": net, "places": [dict(p) for p in places if isinstance(p, dict)],
-            "tasks": {str(k): dict(v) for k, v in tasks.items() if isinstance(v, dict)},
-            "transitions": draft_transitions, "arcs": arcs}
+    draft = {"net": net, "places": [dict(p) for p in places if isinstance(p, dict)],
+             "tasks": {str(k): dict(v) for k, v in tasks.items() if isinstance(v, dict)},
+             "transitions": draft_transitions, "arcs": arcs}
+    if operator:
+        draft["operator"] = dict(operator)
+    return draft
 
 
 def draft_of_net(net: PetriNet, layout: Layout | None = None) -> dict[str, Any]:

@@ -48,7 +48,7 @@ MAX_STRING = 65_536
 CLOSE_POLICY = 1008
 CLOSE_TOO_BIG = 1009
 
-_DRAFT_KEYS = frozenset({"net", "places", "transitions", "arcs", "tasks"})
+_DRAFT_KEYS = frozenset({"net", "places", "transitions", "arcs", "tasks", "operator"})
 _ANALYSES = frozenset({"analyze", "gspn", "perf", "learn"})
 
 
@@ -141,7 +141,7 @@ def _draft(value: Any) -> dict[str, Any]:
             raise ProtocolViolation(f"draft.{key} must be an array of at most {MAX_ELEMENTS} objects")
         if not all(isinstance(item, dict) for item in items):
             raise ProtocolViolation(f"draft.{key} must hold objects only")
-    for key in ("net", "tasks"):
+    for key in ("net", "tasks", "operator"):
         table = value.get(key, {})
         if not isinstance(table, dict) or len(table) > MAX_ELEMENTS:
             raise ProtocolViolation(f"draft.{key} must be an object")
