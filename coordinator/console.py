@@ -32,6 +32,7 @@ from coordinator.events import (
     ActionEnded,
     ActionFeedback,
     ActionStarted,
+    BreakpointHit,
     CallReconciled,
     OperatorApplied,
     OperatorRefused,
@@ -112,7 +113,7 @@ class Console:
 
     def __call__(self, event: RunEvent) -> None:
         self._track(event)
-        if isinstance(event, PulseDelivered):
+        if isinstance(event, PulseDelivered) and not event.operator:
             if not event.fired:  # a pulse that fired something is on its firing's line
                 if not self._silent:
                     self._silent_since = self._clock()
@@ -198,8 +199,14 @@ class Console:
             r = event.result
             extra = f" ({r.outcome})" if r.outcome else ""
             why = f": {r.reason}" if r.reason else ""
+            if event.forced:
+                return f"done  {event.task}/{event.action}: {r.status.value}{extra} FORCED ({r.reason})"
             return (f"done  {event.task}/{event.action} on {event.node or '?'}: {r.status.value}{extra}"
                     f" in {r.wall_s:.3f} s{why}")
+        if isinstance(event, PulseDelivered):
+            return f"operator raised {event.event}: {event.fired} transition{'' if event.fired == 1 else 's'} fired"
+        if isinstance(event, BreakpointHit):
+            return f"breakpoint {event.breakpoint}: {event.why}; paused (resume, or step)"
         if isinstance(event, CallReconciled):
             text = describe_reconciliation(event.node, event.action, event.assumed, event.result, event.lost)
             return f"reconciled {event.task}: {text} [{event.instance}]"

@@ -13,6 +13,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from coordinator.breakpoints import Breakpoint
 from coordinator.engine import Firing
 from coordinator.operator import OperatorCommand
 from coordinator.reconcile import differs
@@ -22,6 +23,7 @@ __all__ = [
     "ActionEnded",
     "ActionFeedback",
     "ActionStarted",
+    "BreakpointHit",
     "CallReconciled",
     "LearnerUpdated",
     "Observer",
@@ -79,6 +81,7 @@ class ActionStarted:
         place: its primitive-task place.
         action: the primitive action chosen (by the learner, section 4).
         node: the node services.toml places it on, or ``None`` if it is not placed.
+        params: the parameters the action was called with (the task's, then the action's own).
     """
 
     run: str
@@ -88,11 +91,13 @@ class ActionStarted:
     action: str
     node: str | None
     t_wall: float = field(default_factory=_now)
+    params: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, slots=True)
 class ActionEnded:
-    """A primitive action returned (already journaled, not yet latched in the engine)."""
+    """A primitive action returned (already journaled, not yet latched in the engine); ``forced``: the
+    operator forced this outcome (the net's ``[operator]`` table), it is no measured result."""
 
     run: str
     instance: str
@@ -101,6 +106,7 @@ class ActionEnded:
     node: str | None
     result: ActionResult
     t_wall: float = field(default_factory=_now)
+    forced: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,11 +159,28 @@ class CallReconciled:
 
 @dataclass(frozen=True, slots=True)
 class PulseDelivered:
-    """An external event arrived as a pulse; ``fired`` transitions fired on it."""
+    """An external event arrived as a pulse; ``fired`` transitions fired on it; ``operator``: the
+    operator raised it (``inject``), not its publisher."""
 
     run: str
     event: str
     fired: int
+    t_wall: float = field(default_factory=_now)
+    operator: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class BreakpointHit:
+    """A breakpoint paused the run (journaled as a ``pause`` with the breakpoint as its detail).
+
+    Attributes:
+        breakpoint: the breakpoint (:mod:`coordinator.breakpoints`).
+        why: what made it true, in words (``"ball_caught fired"``).
+    """
+
+    run: str
+    breakpoint: Breakpoint
+    why: str
     t_wall: float = field(default_factory=_now)
 
 
@@ -201,7 +224,7 @@ class LearnerUpdated:
 
 
 RunEvent = (RunStateChanged | TransitionFired | ActionStarted | ActionFeedback | ActionEnded | CallReconciled
-            | PulseDelivered | OperatorApplied | OperatorRefused | LearnerUpdated)
+            | PulseDelivered | OperatorApplied | OperatorRefused | LearnerUpdated | BreakpointHit)
 """Any event of a run."""
 
 Observer = Callable[[RunEvent], None]

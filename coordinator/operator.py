@@ -2,20 +2,27 @@
 
 The operator changes a run's path and timing by inserting or removing tokens in *control* places
 (e.g. emptying ``runs_remaining`` ends an experiment after the current run), and can pause it,
-step it one firing at a time, resume it or abort it, and end a run that waits for them. Commands
-come from the terminal (a typed line, :func:`parse_operator_command`) or a program driving the
-runtime; the runtime journals each command and applies it through the engine, or journals its
-refusal with the reason.
+step it one firing at a time, resume it or abort it, and end a run that waits for them. They may
+set and clear breakpoints (:mod:`coordinator.breakpoints`), and, where the net's ``[operator]``
+table allows it, raise an external event (``inject``) or force the outcome of a running primitive
+action (``force``) for drills. Commands come from the terminal (a typed line,
+:func:`parse_operator_command`), the web console or a program driving the runtime; the runtime
+journals each command and applies it through the engine, or journals its refusal with the reason.
 """
 
 from __future__ import annotations
 
 import enum
+import shlex
 from dataclasses import dataclass
+from typing import Any
+
+from coordinator.breakpoints import Breakpoint, parse_breakpoint
 
 __all__ = ["Command", "OperatorCommand", "parse_operator_command", "USAGE"]
 
-USAGE = "+ PLACE [N] | - PLACE [N] | pause | step | resume | abort | end"
+USAGE = ("+ PLACE [N] | - PLACE [N] | pause | step | resume | abort | end | break BREAKPOINT | clear BREAKPOINT"
+         " | inject ext:TOPIC | force INSTANCE OUTCOME [REASON]")
 """One-line summary of the typed command syntax."""
 
 
@@ -37,6 +44,15 @@ class Command(enum.StrEnum):
     END = "end"
     """Stop waiting: end the run as soon as nothing fires and no primitive action runs, instead of
     waiting for the operator or an external event (Ctrl-D on the terminal does the same)."""
+    BREAK = "break"
+    """Set a breakpoint (:mod:`coordinator.breakpoints`)."""
+    CLEAR = "clear"
+    """Clear a breakpoint."""
+    INJECT = "inject"
+    """Raise an external event the net's ``[operator]`` table lets the operator raise."""
+    FORCE = "force"
+    """End a running primitive action with an outcome the net's ``[operator]`` table lets the
+    operator force (a drill; never counted as a measured result)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,16 +63,45 @@ class OperatorCommand:
         command: what to do.
         place: the control place of ``insert``/``remove``, else ``None``.
         count: number of tokens for ``insert``/``remove`` (≥ 1).
+        breakpoint: the breakpoint of ``break``/``clear``, else ``None``.
+        event: the ``ext:<topic>`` event of ``inject``, else ``None``.
+        instance: the running instance (call id) of ``force``, else ``None``.
+        outcome: what ``force`` ends it with: ``success``, ``failure``, ``error`` or
+            ``status.named`` (``failure.no_ball``), else ``None``.
+        reason: the operator's reason given with ``force`` (journaled with the result).
     """
 
     command: Command
     place: str | None = None
     count: int = 1
+    breakpoint: Breakpoint | None = None
+    event: str | None = None
+    instance: str | None = None
+    outcome: str | None = None
+    reason: str = ""
 
     def __str__(self) -> str:
-        if self.place is None:
-            return self.command.value
-        return f"{self.command.value} {self.place} {self.count}"
+        if self.place is not None:
+            return f"{self.command.value} {self.place} {self.count}"
+        if self.breakpoint is not None:
+            return f"{self.command.value} {self.breakpoint}"
+        if self.event is not None:
+            return f"{self.command.value} {self.event}"
+        if self.instance is not None:
+            reason = f" {shlex.quote(self.reason)}" if self.reason else ""
+            return f"{self.command.value} {self.instance} {self.outcome}{reason}"
+        return self.command.value
+
+    def detail(self) -> dict[str, Any] | None:
+        """What the journal keeps of this command besides its name, place and count (the
+        ``detail`` column: docs/journal.md), or ``None``."""
+        if self.breakpoint is not None:
+            return {"breakpoint": self.breakpoint.to_json()}
+        if self.event is not None:
+            return {"event": self.event}
+        if self.instance is not None:
+            return {"instance": self.instance, "outcome": self.outcome, "reason": self.reason}
+        return None
 
 
 _ALIASES = {"+": Command.INSERT, "-": Command.REMOVE, "p": Command.PAUSE, "s": Command.STEP,
@@ -66,7 +111,8 @@ _ALIASES = {"+": Command.INSERT, "-": Command.REMOVE, "p": Command.PAUSE, "s": C
 def parse_operator_command(text: str) -> OperatorCommand:
     """Parse a typed command: ``+ PLACE [N]``, ``- PLACE [N]``, ``insert PLACE [N]``,
     ``remove PLACE [N]``, ``pause`` (``p``), ``step`` (``s``), ``resume`` (``r``), ``abort`` (``q``),
-    ``end``.
+    ``end``, ``break BREAKPOINT``, ``clear BREAKPOINT`` (``enabled T``, ``fires T``, ``count P N``,
+    ``error TASK``), ``inject ext:TOPIC``, ``force INSTANCE OUTCOME [REASON]``.
 
     Raises:
         ValueError: with a usage hint, on anything else.
@@ -80,6 +126,20 @@ def parse_operator_command(text: str) -> OperatorCommand:
             head = Command(words[0])
         except ValueError:
             raise ValueError(f"commands: {USAGE}") from None
+    if head in (Command.BREAK, Command.CLEAR):
+        return OperatorCommand(head, breakpoint=parse_breakpoint(" ".join(words[1:])))
+    if head is Command.INJECT:
+        if len(words) != 2 or not words[1].startswith("ext:"):
+            raise ValueError("usage: inject ext:TOPIC")
+        return OperatorCommand(head, event=words[1])
+    if head is Command.FORCE:
+        try:
+            parts = shlex.split(text)
+        except ValueError as exc:
+            raise ValueError(f"force: {exc}") from None
+        if len(parts) < 3:
+            raise ValueError("usage: force INSTANCE success|failure|error[.OUTCOME] [REASON]")
+        return OperatorCommand(head, instance=parts[1], outcome=parts[2], reason=" ".join(parts[3:]))
     if head in (Command.INSERT, Command.REMOVE):
         if len(words) not in (2, 3):
             raise ValueError(f"usage: {head.value} PLACE [COUNT]")

@@ -21,6 +21,14 @@ with its node (:mod:`coordinator.reconcile`): as soon as the node can be reached
 of the run, and when the run is resumed, the node is asked for the call's final result, which is
 journaled (a ``reconciliation`` record) and reported (:class:`~coordinator.events.CallReconciled`).
 
+Breakpoints (:mod:`coordinator.breakpoints`) are operator commands like the others: the runtime
+looks at them after every firing, token change and result, and a breakpoint that becomes true
+pauses the run (journaled as a ``pause`` with the breakpoint). Where the net's ``[operator]``
+table allows it, an operator may raise an external event (``inject``: delivered as a pulse exactly
+like its publisher's) or force the outcome of a running primitive action (``force``: the call is
+cancelled on its node and the instance ends with the forced outcome, journaled ``forced``, never
+fed to the learner or counted in the run's statistics).
+
 The runtime owns no policy: which action translates a primitive task comes from the learner
 (section 4) passed in, or the first action of the task.
 """
@@ -36,6 +44,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from coordinator.breakpoints import BreakpointWatch, Hit
 from coordinator.engine import (
     CancelAction,
     Effect,
@@ -49,6 +58,7 @@ from coordinator.events import (
     ActionEnded,
     ActionFeedback,
     ActionStarted,
+    BreakpointHit,
     CallReconciled,
     LearnerUpdated,
     Observer,
@@ -60,7 +70,7 @@ from coordinator.events import (
     TransitionFired,
 )
 from coordinator.journal import Journal, Recovered
-from coordinator.net import PetriNet
+from coordinator.net import FORCE_STATUSES, PetriNet
 from coordinator.operator import Command, OperatorCommand
 from coordinator.reconcile import GivenUp, Reconciler, describe, given_up, never_sent
 from coordinator.runsummary import END_STATES, EXIT_CODES, ActionStats, RunSummary
@@ -116,6 +126,7 @@ class _Completed:
 @dataclass(frozen=True, slots=True)
 class _Pulse:
     topic: str
+    operator: bool = False  # raised by the operator (inject), not by its publisher
 
 
 @dataclass(frozen=True, slots=True)
@@ -233,6 +244,8 @@ class Runtime:
                 self.stats.setdefault((row.task, row.action), ActionStats(row.task, row.action, row.node or "?")).record(
                     row.result)
         self.errors: list[str] = []
+        #: the operator's breakpoints (:mod:`coordinator.breakpoints`)
+        self.breakpoints = BreakpointWatch(net)
         self._reconciler = Reconciler(client, self._reconciled)
         self._reconcile_s = reconcile_s
         self._reissued: set[str] = set()
@@ -414,7 +427,7 @@ class Runtime:
                 if isinstance(item, _Completed):
                     self._on_result(item.instance, item.result)
                 else:
-                    await self._pulse(item.topic)
+                    await self._pulse(item.topic, item.operator)
                 continue
             if await self._fire():
                 continue
@@ -445,18 +458,29 @@ class Runtime:
             self.journal.firing(self.run_id, firing)
             self._handle(engine.apply(firing))
             self._last_wait = None
+            if self.breakpoints:
+                self._break(self.breakpoints.after_firing(firing.transition, engine))
             n += 1
             if n % self._per_tick == 0:
                 await asyncio.sleep(0)  # let results, pulses and typed commands in
 
-    async def _pulse(self, topic: str) -> None:
+    async def _pulse(self, topic: str, operator: bool = False) -> None:
         before = self.engine.fired
         self.engine.begin_pulse(topic)
         try:
             await self._fire(pulse=True)
         finally:
             self.engine.end_pulse()
-        self._emit(PulseDelivered(self.run_id, f"ext:{topic}", self.engine.fired - before))
+        self._emit(PulseDelivered(self.run_id, f"ext:{topic}", self.engine.fired - before, operator=operator))
+
+    def _break(self, hit: Hit | None) -> None:
+        """Pause the run at a breakpoint that has just become true (journaled as the operator's pause)."""
+        if hit is None or self.engine.paused or self._ending is not None:
+            return
+        self.journal.operator(self.run_id, "pause", detail={"breakpoint": hit.breakpoint.to_json(), "why": hit.why})
+        self.engine.pause()
+        self._emit(BreakpointHit(self.run_id, hit.breakpoint, hit.why))
+        self._emit(RunStateChanged(self.run_id, "paused", f"breakpoint {hit.breakpoint}: {hit.why}"))
 
     async def _wait_input(self, until: float | None) -> None:
         if self._inbox or self._commands:
@@ -555,6 +579,21 @@ class Runtime:
                 engine.insert_tokens(place, cmd.count)
             else:
                 engine.remove_tokens(place, cmd.count)
+        elif command in (Command.BREAK, Command.CLEAR):
+            if cmd.breakpoint is None:
+                raise EngineError(f"{command.value} needs a breakpoint")
+            try:
+                if command is Command.BREAK:
+                    self.breakpoints.add(cmd.breakpoint, engine)
+                else:
+                    self.breakpoints.remove(cmd.breakpoint)
+            except ValueError as exc:
+                raise EngineError(str(exc)) from None
+            self.journal.operator(run, command.value, detail=cmd.detail())
+        elif command is Command.INJECT:
+            self._inject(cmd)
+        elif command is Command.FORCE:
+            self._force(cmd)
         elif command is Command.PAUSE:
             if engine.paused:
                 raise EngineError("the run is already paused")
@@ -571,7 +610,14 @@ class Runtime:
             if not engine.firing_possible(ignore_pause=True):
                 raise EngineError("no transition can fire now")
             self.journal.operator(run, "step")
-            engine.step(self._journal_firing, self._handle)
+            stepped: list[str] = []
+
+            def journal_firing(firing: Firing) -> None:
+                stepped.append(firing.transition)
+                self._journal_firing(firing)
+            engine.step(journal_firing, self._handle)
+            if self.breakpoints and stepped:
+                self._break(self.breakpoints.after_firing(stepped[0], engine))
         elif command is Command.ABORT:
             self.journal.operator(run, "abort")
             self._begin_ending("aborted", "aborted by the operator")
@@ -582,6 +628,47 @@ class Runtime:
             raise EngineError(f"unknown operator command {command!r}")
         self._last_wait = None
         self._emit(OperatorApplied(run, cmd))
+        if command in (Command.INSERT, Command.REMOVE) and self.breakpoints:
+            self._break(self.breakpoints.after_change(engine))
+
+    def _inject(self, cmd: OperatorCommand) -> None:
+        """Raise an external event for the operator: journaled, then delivered as a pulse."""
+        event = cmd.event or ""
+        if not self.net.operator.may_inject(event):
+            allowed = ", ".join(self.net.operator.inject) or "none"
+            raise EngineError(f"net {self.net.name!r} does not let the operator raise {event!r} (its [operator] "
+                              f"inject allows: {allowed})")
+        self.journal.operator(self.run_id, "inject", detail=cmd.detail())
+        self._inbox.append(_Pulse(event[4:], operator=True))
+        self._wake.set()
+
+    def _force(self, cmd: OperatorCommand) -> None:
+        """End a running primitive action with the outcome the operator forces (a drill)."""
+        flight = self._inflight.get(cmd.instance or "")
+        if flight is None:
+            raise EngineError(f"no primitive action is running as instance {cmd.instance!r}")
+        task, outcome = flight.start.task, cmd.outcome or ""
+        if not self.net.operator.may_force(task, outcome):
+            allowed = ", ".join(self.net.operator.force.get(task, ())) or "nothing"
+            raise EngineError(f"net {self.net.name!r} does not let the operator force {outcome!r} on task {task!r} "
+                              f"(its [operator] force allows: {allowed})")
+        status, _, named = outcome.partition(".")
+        assert status in FORCE_STATUSES  # OperatorRights checked it
+        reason = "forced by the operator" + (f": {cmd.reason}" if cmd.reason else "")
+        result = ActionResult(status=Status(status), outcome=named or None, reason=reason)
+        self.journal.operator(self.run_id, "force", detail=cmd.detail())
+        del self._inflight[flight.start.instance]
+        # ask the node to stop the real action, then stop waiting for its result (which would come
+        # back as "cancelled" and must not end the instance a second time)
+        asyncio.get_running_loop().create_task(self._cancel(flight.start.instance))
+        if flight.call is not None:
+            flight.call.cancel()
+        start, node = flight.start, flight.node
+        self.journal.action_result(self.run_id, start.instance, start.task, start.action, node, result, forced=True)
+        self._emit(ActionEnded(self.run_id, start.instance, start.task, start.action, node, result, forced=True))
+        self.engine.complete(start.instance, result)
+        if self.breakpoints:
+            self._break(self.breakpoints.after_result(start.task, status, self.engine))
 
     # ------------------------------------------------------------------ actions and events
     def _subscribe(self) -> None:
@@ -629,7 +716,8 @@ class Runtime:
         self._inflight[start.instance] = flight
         if not journal:
             self._reissued.add(start.instance)  # an earlier coordinator may have sent it
-        self._emit(ActionStarted(self.run_id, start.instance, start.task, start.place, start.action, node))
+        self._emit(ActionStarted(self.run_id, start.instance, start.task, start.place, start.action, node,
+                                 params=start.params))
         flight.call = asyncio.get_running_loop().create_task(self._call(start))
 
     async def _call(self, start: StartAction) -> None:
@@ -679,6 +767,9 @@ class Runtime:
             self.engine.complete(instance, result)
         except EngineError as exc:
             self.errors.append(str(exc))
+            return
+        if self.breakpoints:
+            self._break(self.breakpoints.after_result(start.task, result.status.value, self.engine))
 
     def _emit(self, event: RunEvent) -> None:
         if self.observer is not None:

@@ -97,7 +97,8 @@ class LiveScreen:
 
         console = self.console
         controls = [p.id for p in console.net.places if p.kind is PlaceKind.CONTROL]
-        words = ["+", "-", "pause", "step", "resume", "abort", "end", *controls]
+        words = ["+", "-", "pause", "step", "resume", "abort", "end", "break", "clear", "enabled", "fires", "count",
+                 "error", "inject", "force", *console.net.operator.inject, *controls]
         buffer = Buffer(multiline=False, history=InMemoryHistory(), accept_handler=self._accept,
                         completer=WordCompleter(words, sentence=False), complete_while_typing=False)
         reading = self.sink is not None

@@ -173,7 +173,7 @@ def read_journal(path: str | Path, run: str | None = None) -> tuple[dict[str, di
             journal.run(run)
         states = {task: dict(saved.state) for task, saved in journal.learner_states().items()}
         results: dict[str, list[Trial]] = {}
-        for row in journal.results(run):
+        for row in journal.results(run, forced=False):  # the operator's forced outcomes taught nothing
             cost = result_cost(row.cost, row.wall_s)  # what the runtime feeds the learner
             value = None if cost is None else float(cost)
             if value is not None and (not math.isfinite(value) or value < 0.0):

@@ -65,7 +65,8 @@ def report(args: argparse.Namespace) -> dict[str, Any]:
     )
 
     net = load_any(args.net, interpreted=False)
-    records = read_results(args.journal, args.run)
+    records = read_results(args.journal, args.run)  # an outcome the operator forced measures nothing
+    every = read_results(args.journal, args.run, forced=True)
     per_action = action_performance(net, records, measure=args.cost)
     usage = usage_frequencies(records)
     tasks: dict[str, Any] = {}
@@ -80,6 +81,7 @@ def report(args: argparse.Namespace) -> dict[str, Any]:
                                           goal=parse_pairs(args.goal, "--goal", int) or None)
     return {
         "net": net.name, "run": args.run, "cost_measure": args.cost, "results": len(records),
+        "forced_left_out": len(every) - len(records),
         "actions": {t: {a: _row(p) for a, p in acts.items()} for t, acts in per_action.items()},
         "primitive_tasks": tasks,
         "task": _row(task) | {k: v for k, v in details.items()},
@@ -103,6 +105,10 @@ def render(rep: dict[str, Any]) -> str:
              f"C: cost, {measure.get(rep['cost_measure'], rep['cost_measure'])}; rho: the task's declared rho, "
              "else 1/max C over its actions (one action: 1/its deadline_s)", "",
              f"{'primitive action':32} {'runs':>5} {'R':>7} {'C':>9} {'rho':>8} {'J':>7}  source (R/C)"]
+    if rep.get("forced_left_out"):
+        n = rep["forced_left_out"]
+        lines.insert(1, f"{n} outcome{'' if n == 1 else 's'} forced by the operator (drills) left out: "
+                        "they measure nothing")
     for task, acts in rep["actions"].items():
         for a, p in acts.items():
             lines.append(f"{task + '.' + a:32} {p['runs']:5d} {_fmt(p['reliability']):>7} {_fmt(p['cost']):>9} "

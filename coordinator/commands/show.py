@@ -17,7 +17,7 @@ from coordinator.commands import options
 if TYPE_CHECKING:
     from coordinator.journal import JournalReader, Record, RunRow
 
-__all__ = ["add_parser", "describe", "find_run", "render", "report", "run"]
+__all__ = ["add_parser", "describe", "find_run", "operator_detail", "render", "report", "run"]
 
 
 def add_parser(subparsers: Any) -> None:
@@ -82,7 +82,8 @@ def describe(record: Record, t0: float) -> str:
         extra = f" ({record.outcome})" if record.outcome else ""
         wall = f" in {record.wall_s:.3f} s" if record.wall_s is not None else ""
         why = f": {record.reason}" if record.reason else ""
-        return (f"{stamp}result   {record.task}/{record.action} on {record.node or '?'}: "
+        head = "FORCED   " if record.forced else "result   "  # by the operator: no measured result
+        return (f"{stamp}{head}{record.task}/{record.action} on {record.node or '?'}: "
                 f"{record.status.value}{extra}{wall}{why} [{record.instance}]")
     if isinstance(record, ReconciliationRow):
         mark = "DIFFERS  " if record.differs else ""
@@ -90,10 +91,28 @@ def describe(record: Record, t0: float) -> str:
                 f"{describe_reconciliation(record.node, record.action, record.assumed, record.truth)} [{record.instance}]")
     if isinstance(record, OperatorRow):
         what = record.command + (f" {record.place} {record.count}" if record.place is not None else "")
+        what += operator_detail(record.command, record.detail)
         if record.accepted:
             return f"{stamp}operator {what}"
         return f"{stamp}operator {what} REFUSED: {record.reason or ''}"
     raise TypeError(type(record).__name__)
+
+
+def operator_detail(command: str, detail: Any) -> str:
+    """What an operator command carried besides a place and a count, in words (``" ext:tick"``,
+    ``" at breakpoint fires ball_caught: ball_caught fired"``), or ``""``."""
+    if not isinstance(detail, dict):
+        return ""
+    bp = detail.get("breakpoint")
+    if isinstance(bp, dict):
+        text = f"{bp.get('kind')} {bp.get('target')}" + (f" {bp.get('count')}" if bp.get("kind") == "count" else "")
+        return f" at breakpoint {text}: {detail.get('why', '')}" if command == "pause" else f" {text}"
+    if "event" in detail:
+        return f" {detail['event']}"
+    if "instance" in detail:
+        why = f" ({detail['reason']})" if detail.get("reason") else ""
+        return f" {detail.get('outcome')} on {detail['instance']}{why}"
+    return ""
 
 
 def report(args: argparse.Namespace) -> dict[str, Any]:

@@ -273,6 +273,18 @@ class Engine:
                 return False
         return True
 
+    def ready(self, transition: str) -> bool:
+        """Whether ``transition`` is ready to fire: enabled by the marking, its input tokens available
+        (not busy with running primitive actions) and its internal events latched; its external
+        event, if any, is not required (a breakpoint's "enabled", :mod:`coordinator.breakpoints`).
+
+        Raises:
+            EngineError: the net has no such transition.
+        """
+        if transition not in self._inputs:
+            raise EngineError(f"no transition {transition!r} in this net")
+        return self._can_fire(transition)
+
     def _refresh(self) -> bool:
         """Bring the fireable set up to date; return True if it is not empty."""
         if self._dirty:

@@ -68,6 +68,14 @@ class JournalReader:
             raise JournalError(f"{path}: cannot read the journal: {exc}") from exc
         # a version-1 journal (read-only) has no accepted/reason: every command it holds was applied
         self._operator_cols = ("accepted, reason" if {"accepted", "reason"} <= have else "1, NULL")
+        # a journal before version 4 (read-only) has no detail and no forced: no command carried one,
+        # every result was measured
+        self._detail_col = "detail" if "detail" in have else "NULL"
+        try:
+            results = {row[1] for row in db.execute("PRAGMA table_info(action_result)")}
+        except sqlite3.DatabaseError as exc:
+            raise JournalError(f"{path}: cannot read the journal: {exc}") from exc
+        self._forced_col = "forced" if "forced" in results else "0"
         try:  # a journal of version 1 or 2 (read-only) has no reconciliation table
             self._reconciliation = bool(db.execute("PRAGMA table_info(reconciliation)").fetchall())
         except sqlite3.DatabaseError as exc:
@@ -173,21 +181,25 @@ class JournalReader:
         return out
 
     # ------------------------------------------------------------------ records of runs
-    def results(self, run: str | None = None) -> list[ResultRow]:
+    def results(self, run: str | None = None, *, forced: bool = True) -> list[ResultRow]:
         """Primitive-action results in journal order, of one run or of all runs.
 
         Rows whose status is not success, failure or error (no petrobot journal writes one) are
-        left out.
+        left out; so are the outcomes the operator forced when ``forced`` is False (what measures
+        an action's reliability and cost: ``perf``, ``learn``).
 
         Raises:
             JournalError: the database cannot be read.
         """
         where, args = _where_run(run)
+        if not forced:
+            where += f"{' AND' if where else ' WHERE'} {self._forced_col} = 0"
         rows = self._query("SELECT run, instance, task, action, node, status, outcome, cost, wall_s, cpu_s, "
-                           f"t_wall, reason, value, entry FROM action_result{where} ORDER BY entry", args)
+                           f"t_wall, reason, value, entry, {self._forced_col} FROM action_result{where} ORDER BY entry",
+                           args)
         return [ResultRow(run=r, instance=i, task=t, action=a, node=n, t_wall=float(tw), entry=int(e),
-                          result=self._result(e, s, o, c, w, cpu, why, v))
-                for r, i, t, a, n, s, o, c, w, cpu, tw, why, v, e in rows if s in _STATUSES]
+                          result=self._result(e, s, o, c, w, cpu, why, v), forced=bool(f))
+                for r, i, t, a, n, s, o, c, w, cpu, tw, why, v, e, f in rows if s in _STATUSES]
 
     def _result(self, entry: int, status: str, outcome: str | None, cost: float | None, wall_s: float | None,
                 cpu_s: float | None, reason: str | None, value: str | None) -> ActionResult:
@@ -222,10 +234,10 @@ class JournalReader:
     def operator_commands(self, run: str | None = None) -> list[OperatorRow]:
         """Operator commands (section 5) in journal order, refused ones included (``accepted`` False)."""
         where, args = _where_run(run)
-        rows = self._query(f"SELECT run, command, place, count, t_wall, {self._operator_cols}, entry "
-                           f"FROM operator{where} ORDER BY entry", args)
-        return [OperatorRow(r, str(c), p, n, float(tw), bool(ok), why, int(e))
-                for r, c, p, n, tw, ok, why, e in rows]
+        rows = self._query(f"SELECT run, command, place, count, t_wall, {self._operator_cols}, entry, "
+                           f"{self._detail_col} FROM operator{where} ORDER BY entry", args)
+        return [OperatorRow(r, str(c), p, n, float(tw), bool(ok), why, int(e), _loads(d))
+                for r, c, p, n, tw, ok, why, e, d in rows]
 
     def reconciliations(self, run: str | None = None) -> list[ReconciliationRow]:
         """What nodes said afterwards about the calls the coordinator gave up on, in journal order
@@ -313,9 +325,10 @@ class JournalReader:
         return _replay(self.path, net, run, int(head[0][0] or 0), records)
 
 
-def read_results(path: str | Path, run: str | None = None) -> list[ActionRecord]:
+def read_results(path: str | Path, run: str | None = None, *, forced: bool = False) -> list[ActionRecord]:
     """Open a journal read-only and return its results as the performance functions take them
-    (:attr:`ResultRow.record`), of run ``run`` or of every run.
+    (:attr:`ResultRow.record`), of run ``run`` or of every run: the measured ones only, unless
+    ``forced`` asks for the outcomes the operator forced too.
 
     Raises:
         JournalError: naming the file, if it is missing or not a journal, or has no run ``run``.
@@ -323,7 +336,7 @@ def read_results(path: str | Path, run: str | None = None) -> list[ActionRecord]
     with JournalReader.open(path) as journal:
         if run is not None:
             journal.run(run)  # an unknown run is an error, not an empty report
-        return [row.record for row in journal.results(run)]
+        return [row.record for row in journal.results(run, forced=forced)]
 
 
 def _replay(path: str, net: PetriNet, run: str, seed: int, records: Iterable[tuple[Any, ...]]) -> Recovered:

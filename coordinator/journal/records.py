@@ -142,6 +142,7 @@ class ResultRow(_HoldsResult):
             hold it).
         t_wall: when the coordinator received the result.
         entry: order among every record of the journal.
+        forced: the operator forced this outcome (a drill): not a measured result.
     """
 
     run: str
@@ -152,6 +153,7 @@ class ResultRow(_HoldsResult):
     result: ActionResult
     t_wall: float = 0.0
     entry: int = 0
+    forced: bool = False
 
     def action_result(self) -> ActionResult:
         """The result the row holds."""
@@ -199,8 +201,12 @@ class FiringRow:
 @dataclass(frozen=True, slots=True)
 class OperatorRow:
     """An operator command (section 5): ``insert``/``remove`` (with place and count), ``pause``,
-    ``step``, ``resume``, ``abort`` or ``end``; ``accepted`` is False for a refused command (a
-    line that is no command is journaled as ``invalid``), with the refusal in ``reason``."""
+    ``step``, ``resume``, ``abort``, ``end``, ``break``/``clear`` (a breakpoint), ``inject`` (an
+    external event) or ``force`` (an outcome); ``accepted`` is False for a refused command (a line
+    that is no command is journaled as ``invalid``), with the refusal in ``reason``. ``detail``
+    holds what the command carries besides a place and a count: ``{"breakpoint": {...}}``,
+    ``{"event": "ext:..."}``, ``{"instance", "outcome", "reason"}``; a ``pause`` with a
+    ``breakpoint`` detail is the pause a breakpoint made."""
 
     run: str
     command: str
@@ -210,6 +216,7 @@ class OperatorRow:
     accepted: bool = True
     reason: str | None = None
     entry: int = 0
+    detail: Any = None
 
 
 @dataclass(frozen=True, slots=True)

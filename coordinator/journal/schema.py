@@ -7,15 +7,16 @@ in which they were written, so a run can be replayed in order)::
     firing(entry, run, seq, transition, consumed, produced, instances, pulse, t_wall)
     action_start(entry, run, instance, task, place, action, node, params, t_wall)
     action_result(entry, run, instance, task, action, node, status, outcome, cost, wall_s, cpu_s,
-                  t_wall, reason, value)
-    operator(entry, run, command, place, count, t_wall, accepted, reason)
+                  t_wall, reason, value, forced)
+    operator(entry, run, command, place, count, t_wall, accepted, reason, detail)
     reconciliation(entry, run, instance, task, action, node, assumed, status, outcome, reason, cost,
                    wall_s, cpu_s, value, t_wall)
     learner_state(task, scheme, state, updated_wall)
 
 JSON columns: ``consumed``/``produced`` (place → tokens), ``instances`` (list of ids), ``params``
 and ``value`` (JSON of the call's parameters and returned value, when JSON can hold them),
-``state`` (the learner's state dict, :mod:`coordinator.learning.state`). Times: ``t_wall``,
+``state`` (the learner's state dict, :mod:`coordinator.learning.state`), ``operator.detail`` (what a
+command carries besides a place and a count: a breakpoint, an injected event, a forced outcome). Times: ``t_wall``,
 ``started_wall``, ``ended_wall`` and ``updated_wall`` are Unix times in seconds; ``wall_s`` and
 ``cpu_s`` are durations in seconds measured on the node. ``learner_state`` holds the latest state
 of each primitive task's automaton, across runs. ``operator.accepted`` is 1 for a command that was
@@ -23,12 +24,15 @@ applied, 0 for one that was refused, with the refusal in ``reason``. A ``reconci
 what a node said, when asked afterwards, about a call the coordinator had given up on (node trouble):
 ``assumed`` is the status the net went on with (NULL if no result was journaled), ``status`` the
 node's final status (NULL if the node does not know the call: it never ran, or its result expired).
+``action_result.forced`` is 1 for an outcome the operator forced (a drill, ``[operator]`` of the net):
+never a measured result.
 
 Schema versions (``PRAGMA user_version``): 1 (no version set) had one ``entry`` sequence per table
-and no ``accepted``/``reason``; 2 added them; 3 (:data:`SCHEMA_VERSION`) added ``reconciliation``.
-:func:`migrate` brings an older journal to version 3 when it is opened for writing (a version-1
-journal's entries renumbered in the order of their times); a read-only reader reads every version
-(a journal without ``reconciliation`` has no reconciliations). The user-facing description:
+and no ``accepted``/``reason``; 2 added them; 3 added ``reconciliation``; 4 (:data:`SCHEMA_VERSION`)
+added ``operator.detail`` and ``action_result.forced``. :func:`migrate` brings an older journal to
+version 4 when it is opened for writing (a version-1 journal's entries renumbered in the order of
+their times); a read-only reader reads every version (a journal without ``reconciliation`` has no
+reconciliations, one without ``forced`` no forced outcome, one without ``detail`` no details). The user-facing description:
 ``docs/journal.md``.
 
 Only :mod:`coordinator.journal` reads and writes these tables; every other module goes through
@@ -41,10 +45,10 @@ import sqlite3
 
 from coordinator.errors import JournalError
 
-__all__ = ["ADDED_IN_3", "COLUMNS", "DDL", "RECORD_TABLES", "SCHEMA_VERSION", "check_schema", "migrate",
+__all__ = ["ADDED_IN_3", "ADDED_IN_4", "COLUMNS", "DDL", "RECORD_TABLES", "SCHEMA_VERSION", "check_schema", "migrate",
            "schema_version"]
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 """The version this code writes (``PRAGMA user_version``)."""
 
 DDL = """
@@ -64,11 +68,11 @@ CREATE TABLE IF NOT EXISTS action_start (
 CREATE TABLE IF NOT EXISTS action_result (
     entry INTEGER PRIMARY KEY, run TEXT NOT NULL, instance TEXT NOT NULL, task TEXT NOT NULL,
     action TEXT NOT NULL, node TEXT, status TEXT NOT NULL, outcome TEXT, cost REAL, wall_s REAL,
-    cpu_s REAL, t_wall REAL NOT NULL, reason TEXT, value TEXT
+    cpu_s REAL, t_wall REAL NOT NULL, reason TEXT, value TEXT, forced INTEGER NOT NULL DEFAULT 0
 );
 CREATE TABLE IF NOT EXISTS operator (
     entry INTEGER PRIMARY KEY, run TEXT NOT NULL, command TEXT NOT NULL, place TEXT, count INTEGER,
-    t_wall REAL NOT NULL, accepted INTEGER NOT NULL DEFAULT 1, reason TEXT
+    t_wall REAL NOT NULL, accepted INTEGER NOT NULL DEFAULT 1, reason TEXT, detail TEXT
 );
 CREATE TABLE IF NOT EXISTS reconciliation (
     entry INTEGER PRIMARY KEY, run TEXT NOT NULL, instance TEXT NOT NULL, task TEXT NOT NULL,
@@ -92,8 +96,8 @@ COLUMNS: dict[str, tuple[str, ...]] = {
     "firing": ("entry", "run", "seq", "transition", "consumed", "produced", "instances", "pulse", "t_wall"),
     "action_start": ("entry", "run", "instance", "task", "place", "action", "node", "params", "t_wall"),
     "action_result": ("entry", "run", "instance", "task", "action", "node", "status", "outcome", "cost",
-                      "wall_s", "cpu_s", "t_wall", "reason", "value"),
-    "operator": ("entry", "run", "command", "place", "count", "t_wall", "accepted", "reason"),
+                      "wall_s", "cpu_s", "t_wall", "reason", "value", "forced"),
+    "operator": ("entry", "run", "command", "place", "count", "t_wall", "accepted", "reason", "detail"),
     "reconciliation": ("entry", "run", "instance", "task", "action", "node", "assumed", "status", "outcome",
                        "reason", "cost", "wall_s", "cpu_s", "value", "t_wall"),
     "learner_state": ("task", "scheme", "state", "updated_wall"),
@@ -105,6 +109,9 @@ ADDED_IN_2: dict[str, tuple[str, ...]] = {"operator": ("accepted", "reason")}
 
 ADDED_IN_3 = ("reconciliation",)
 """Tables a journal of version 1 or 2 lacks (a reader of such a journal finds no rows in them)."""
+
+ADDED_IN_4: dict[str, tuple[str, ...]] = {"operator": ("detail",), "action_result": ("forced",)}
+"""Columns a journal of version 1 to 3 lacks (a reader supplies NULL and 0)."""
 
 RECORD_TABLES = ("firing", "action_start", "action_result", "operator", "reconciliation")
 """The tables whose rows share the ``entry`` sequence."""
@@ -122,7 +129,8 @@ def migrate(db: sqlite3.Connection, path: str) -> int:
     journaled) and ``operator.reason``, and renumbers ``entry`` in one sequence over the record
     tables, ordered by ``t_wall`` (then firing, start, result, operator, then the old entry), which
     is the order the records were written in. Version 2 → 3: adds the (empty) ``reconciliation``
-    table. A fresh journal only gets its version set.
+    table. Version 3 → 4: adds ``operator.detail`` (NULL) and ``action_result.forced`` (0: every
+    older result was measured). A fresh journal only gets its version set.
 
     Returns:
         The version the journal had.
@@ -148,6 +156,11 @@ def migrate(db: sqlite3.Connection, path: str) -> int:
                     db.execute("ALTER TABLE operator ADD COLUMN reason TEXT")
             for statement in _RECONCILIATION_DDL:  # version 3 (also made by DDL: idempotent)
                 db.execute(statement)
+            for table, columns in ADDED_IN_4.items():  # version 4
+                have = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
+                for column in columns:
+                    if column not in have:
+                        db.execute(f"ALTER TABLE {table} ADD COLUMN {_ADDED_DDL[column]}")
             if version < 2:
                 _renumber(db)
             db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
@@ -159,6 +172,8 @@ def migrate(db: sqlite3.Connection, path: str) -> int:
     except sqlite3.DatabaseError as exc:
         raise JournalError(f"{path}: cannot migrate the journal: {exc}") from exc
 
+
+_ADDED_DDL = {"detail": "detail TEXT", "forced": "forced INTEGER NOT NULL DEFAULT 0"}
 
 _RECONCILIATION_DDL = tuple(
     part.strip() for part in DDL.split(";")
@@ -197,7 +212,8 @@ def check_schema(db: sqlite3.Connection, path: str) -> None:
                 continue
             if not have:
                 raise JournalError(f"{path}: not a petrobot journal (no table {table!r})")
-            missing = [c for c in columns if c not in have and c not in ADDED_IN_2.get(table, ())]
+            missing = [c for c in columns if c not in have and c not in ADDED_IN_2.get(table, ())
+                       and c not in ADDED_IN_4.get(table, ())]
             if missing:
                 raise JournalError(f"{path}: not a petrobot journal (table {table!r} lacks "
                                    f"{', '.join(missing)})")

@@ -163,13 +163,14 @@ class Journal(JournalReader):
         )
 
     def action_result(self, run: str, instance: str, task: str, action: str, node: str | None,
-                      result: ActionResult) -> None:
-        """Record the result of a primitive action, before the engine latches it."""
+                      result: ActionResult, *, forced: bool = False) -> None:
+        """Record the result of a primitive action, before the engine latches it; ``forced``: an
+        outcome the operator forced (a drill), never a measured result."""
         self._record(
             "action_result", "run, instance, task, action, node, status, outcome, cost, wall_s, cpu_s, t_wall, "
-            "reason, value",
+            "reason, value, forced",
             (run, instance, task, action, node, result.status.value, result.outcome, result.cost, result.wall_s,
-             result.cpu_s, time.time(), result.reason, _json(result.value)),
+             result.cpu_s, time.time(), result.reason, _json(result.value), int(forced)),
         )
 
     def reconciliation(self, run: str, instance: str, task: str, action: str, node: str | None,
@@ -189,11 +190,14 @@ class Journal(JournalReader):
         )
 
     def operator(self, run: str, command: str, place: str | None = None, count: int | None = None, *,
-                 accepted: bool = True, reason: str | None = None) -> None:
-        """Record an operator command (insert, remove, pause, step, resume, abort, end): before it
-        is applied, or with ``accepted=False`` and the ``reason`` when it is refused."""
-        self._record("operator", "run, command, place, count, t_wall, accepted, reason",
-                     (run, command, place, count, time.time(), int(accepted), reason))
+                 accepted: bool = True, reason: str | None = None, detail: Mapping[str, Any] | None = None) -> None:
+        """Record an operator command (insert, remove, pause, step, resume, abort, end, break, clear,
+        inject, force): before it is applied, or with ``accepted=False`` and the ``reason`` when it is
+        refused; ``detail`` is what it carries besides a place and a count (a breakpoint, an event, a
+        forced outcome; a pause a breakpoint made has the breakpoint)."""
+        self._record("operator", "run, command, place, count, t_wall, accepted, reason, detail",
+                     (run, command, place, count, time.time(), int(accepted), reason,
+                      None if detail is None else _json(dict(detail))))
 
     def save_learner(self, task: str, scheme: str, state: Mapping[str, Any]) -> None:
         """Store the learner state of a primitive task (replaces the previous one)."""

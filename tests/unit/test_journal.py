@@ -340,7 +340,7 @@ def test_a_journal_of_version_2_is_read_without_reconciliations_and_migrated_whe
         journal.reconciliation("r2", "r2-1", "w", "a", "alpha", Status.ERROR, ActionResult.success(7))
         assert [r.entry for r in journal.timeline("r2")] == [1, 2, 3, 4, 5, 6]
     with sqlite3.connect(path) as db:
-        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 3
+        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 4
 
 
 def test_a_reconciliation_is_the_journals_last_word_on_a_call_and_says_whether_it_differs(tmp_path: Path):
