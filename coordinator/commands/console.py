@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from coordinator.commands import options
 from services.errors import PetrobotError
 
 __all__ = ["add_listen_options", "add_parser", "parse_listen", "run", "start_console"]
@@ -26,12 +27,18 @@ Serve the operator console, a web page (open the printed address in a browser): 
 with the mouse (places, transitions, arcs, primitive tasks and their actions, events), checked as
 you draw with the rules of `petrobot check` (and against services.toml: which node hosts each
 action); save it as a TOML net file with the drawing's positions; open TOML and PNML; export PNML,
-DOT and PNG; replay the runs of a journal; run analyze, gspn, perf and learn on the drawn net.
-Nets and journals are read, and nets saved, under the current folder (--root) only.
+DOT and PNG; replay the runs of a journal; run analyze, gspn, perf and learn on the drawn net and
+see their results on it. Nets and journals are read, and nets saved, under the current folder
+(--root) only.
 
-The printed address carries a secret token: the page opened with it may save files and steer runs;
-without it the page is read-only. To follow and steer a live run, use `petrobot run NET --console
-[HOST:]PORT`."""
+Runs: the page starts a net file on the nodes of services.toml, or resumes an interrupted run,
+with the same preflight as `petrobot run` (every primitive action placed and offered by a reachable
+node), and follows several runs at once; they are written to --journal (default
+ROOT/runs/journal.sqlite) and interrupted, resumable, when the console stops. To serve the page
+attached to a run started on the command line, use `petrobot run NET --console [HOST:]PORT`.
+
+The printed address carries a secret token: the page opened with it may save files, start and
+steer runs; without it the page is read-only."""
 
 
 def parse_listen(text: str) -> tuple[str, int]:
@@ -76,6 +83,7 @@ def add_parser(subparsers: Any) -> None:
                    help="address to listen on (default: %(default)s; port 0 picks a free port)")
     p.add_argument("--root", metavar="DIR", default=".",
                    help="folder the page may open and save net files in (default: the current folder)")
+    options.add_key_file(p)
     add_listen_options(p)
     p.set_defaults(func=run)
 
@@ -91,7 +99,7 @@ def _location(path: str | None) -> Any:
 
 
 async def start_console(*, nets: list[Path], journal: Path | None, services: str | None, listen: str,
-                        bind_any: bool, root: Path) -> Any:
+                        bind_any: bool, root: Path, key_file: str | None = None) -> Any:
     """Start a :class:`~coordinator.web.server.ConsoleServer` and print its address.
 
     Raises:
@@ -105,7 +113,7 @@ async def start_console(*, nets: list[Path], journal: Path | None, services: str
         raise PetrobotError(f"{host} is not a loopback address: the console would be reachable from the network; "
                             "add --bind-any to listen there anyway")
     config = ConsoleConfig(root=root, nets=nets, journal=journal, location=_location(services), host=host,
-                           port=port, bind_any=bind_any)
+                           port=port, bind_any=bind_any, key_file=key_file)
     server = ConsoleServer(config)
     try:
         url = await server.start()
@@ -135,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
 
     async def serve() -> None:
         server = await start_console(nets=nets, journal=journal, services=args.services, listen=args.listen,
-                                     bind_any=args.bind_any, root=root)
+                                     bind_any=args.bind_any, root=root, key_file=args.key_file)
         print("  open it in a browser; Ctrl-C stops the console", flush=True)
         try:
             await asyncio.Event().wait()

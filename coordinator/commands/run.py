@@ -150,7 +150,7 @@ async def _execute(args: argparse.Namespace, net: Any, **kwargs: Any) -> Any:
     from services.textfile import write_atomically
 
     server = await start_console(nets=[Path(args.net)], journal=Path(args.journal), services=args.services,
-                                 listen=args.console, bind_any=args.bind_any, root=Path.cwd())
+                                 listen=args.console, bind_any=args.bind_any, root=Path.cwd(), key_file=args.key_file)
     address = console_address_file(Path(args.journal))
     try:
         write_atomically(address, server.url + "\n")  # a fresh file is readable by its owner only

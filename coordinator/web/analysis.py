@@ -6,7 +6,9 @@ there, as ``petrobot gspn --journal`` takes them), ``perf`` (J = 1 − R + ρC f
 ``learn`` (the learning automata, with their plot) run as child processes of the same Python on a temporary copy
 of the drawn net, so the page shows exactly what the terminal would, an analysis that takes long or
 much memory never holds up a live run on the console's event loop, and one that goes wrong ends in
-its own process. :func:`run_analysis` returns the report's text, the exit status and the plot.
+its own process. :func:`run_analysis` returns the report's text, the exit status and the plot; with
+``as_json`` the command's own ``--json`` document too (``data``), from which the page draws the
+analyses on the net (the same JSON the command line gives: the page reads it, never reshapes it).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import contextlib
+import json
 import os
 import sys
 import tempfile
@@ -34,10 +37,12 @@ READS_JOURNAL = frozenset({"gspn", "perf", "learn"})
 TIMEOUT_S = 300.0
 #: Most bytes of a report kept.
 MAX_OUTPUT = 1 << 20
+#: Largest ``--json`` document read back, bytes (a state space's examples stay far below).
+MAX_JSON = 32 << 20
 
 
 async def run_analysis(kind: str, draft: dict[str, Any], *, journal: str | None = None, run: str | None = None,
-                       cwd: Path | None = None, timeout_s: float = TIMEOUT_S) -> dict[str, Any]:
+                       cwd: Path | None = None, timeout_s: float = TIMEOUT_S, as_json: bool = False) -> dict[str, Any]:
     """Run ``petrobot KIND`` on a draft and return its report.
 
     Args:
@@ -47,18 +52,21 @@ async def run_analysis(kind: str, draft: dict[str, Any], *, journal: str | None 
         run: restrict ``gspn``/``perf``/``learn`` to one run.
         cwd: folder the command runs in.
         timeout_s: the command is killed after this many seconds.
+        as_json: run the command with ``--json`` and parse its document into ``data``.
 
     Returns:
-        ``{"kind", "command", "exit", "stdout", "stderr", "plot"}``: ``plot`` is a PNG as base64
-        (``learn``), else ``None``; ``exit`` is ``None`` when the command was killed.
+        ``{"kind", "command", "exit", "stdout", "stderr", "plot", "data"}``: ``plot`` is a PNG as
+        base64 (``learn``), else ``None``; ``exit`` is ``None`` when the command was killed;
+        ``data`` is the ``--json`` document (``None`` without ``as_json`` or when the command
+        printed none).
     """
     validation = validate_draft(draft, "drawing.toml")
     if validation.net is None:
-        return {"kind": kind, "command": f"petrobot {kind}", "exit": 2, "stdout": "", "plot": None,
+        return {"kind": kind, "command": f"petrobot {kind}", "exit": 2, "stdout": "", "plot": None, "data": None,
                 "stderr": "the drawing has problems; fix them first:\n" + "\n".join(
                     p["text"] for p in validation.to_json()["problems"])}
     if ANALYSES.get(kind) and not journal:
-        return {"kind": kind, "command": f"petrobot {kind}", "exit": 2, "stdout": "", "plot": None,
+        return {"kind": kind, "command": f"petrobot {kind}", "exit": 2, "stdout": "", "plot": None, "data": None,
                 "stderr": f"petrobot {kind} reads a journal: start the console with --journal FILE"}
     with tempfile.TemporaryDirectory(prefix="petrobot-console-") as tmp:
         net_file = Path(tmp) / f"{validation.net.name or 'net'}.toml"
@@ -71,6 +79,8 @@ async def run_analysis(kind: str, draft: dict[str, Any], *, journal: str | None 
                 args += ["--run", run]
         if kind == "learn":
             args += ["--plot", str(plot)]
+        if as_json:
+            args.append("--json")
         shown = "petrobot " + " ".join(a if a != str(net_file) else net_file.name for a in args)
         env = dict(os.environ, PYTHONUNBUFFERED="1")
         root = str(Path(__file__).resolve().parents[2])
@@ -91,5 +101,10 @@ async def run_analysis(kind: str, draft: dict[str, Any], *, journal: str | None 
                 proc.kill()
             raise
         image = base64.b64encode(plot.read_bytes()).decode("ascii") if plot.exists() else None
-    return {"kind": kind, "command": shown, "exit": code, "plot": image,
-            "stdout": out[:MAX_OUTPUT].decode("utf-8", "replace"), "stderr": err[:MAX_OUTPUT].decode("utf-8", "replace")}
+    data = None
+    if as_json and out and len(out) <= MAX_JSON:
+        with contextlib.suppress(ValueError):
+            data = json.loads(out)
+    return {"kind": kind, "command": shown, "exit": code, "plot": image, "data": data,
+            "stdout": "" if data is not None else out[:MAX_OUTPUT].decode("utf-8", "replace"),
+            "stderr": err[:MAX_OUTPUT].decode("utf-8", "replace")}

@@ -13,8 +13,22 @@ transitions a second thus sends ≤ 100 small frames a second; the page draws at
 frame (60 Hz), so the oldest firing a repaint shows is at most one screen frame and one period old
 when the page receives it (bench/console.py measures the rest).
 
+Frames are sized to what the pages can paint: a page that says when it has painted a frame
+(:meth:`LiveFeed.painted`, the ``painted`` message) is *pacing*, and the next frame waits until
+every pacing page has painted the previous one (at most :data:`PACE_MAX_S`), piling up what
+happens meanwhile into that one frame. A page on a loaded machine, which paints less often, thus
+gets fewer, larger frames instead of a backlog, and costs the run less CPU.
+
 :func:`learner_view` is the learner panel's row data; :func:`result_json` one ended action;
 :func:`used_nodes` the nodes a net calls or hears from (the page marks the others "not used").
+
+The *blackboard* of a primitive-task place (:meth:`LiveFeed.blackboard`, asked for by the page when
+the operator opens a place, as Groot2's blackboard view): its running actions with their
+parameters and their latest feedback in full, and the results latched on its tokens with their
+returned values (payloads), status, outcome, reason and whether the operator forced them; and the
+external events delivered lately with the time and whether the operator raised them. The feed
+keeps these as the events pass (bounded: :data:`BLACKBOARD_BYTES` per value, the latest
+:data:`KEPT_RESULTS` results), never by asking the engine or the journal.
 """
 
 from __future__ import annotations
@@ -32,6 +46,7 @@ from coordinator.events import (
     ActionEnded,
     ActionFeedback,
     ActionStarted,
+    BreakpointHit,
     LearnerUpdated,
     OperatorApplied,
     OperatorRefused,
@@ -42,8 +57,8 @@ from coordinator.events import (
 )
 from coordinator.operator import OperatorCommand
 
-__all__ = ["DEFAULT_PERIOD_S", "FEEDBACK_CHARS", "LiveFeed", "feedback_text", "learner_view", "result_json",
-           "used_nodes"]
+__all__ = ["BLACKBOARD_BYTES", "DEFAULT_PERIOD_S", "FEEDBACK_CHARS", "LiveFeed", "feedback_text", "json_value",
+           "learner_view", "result_json", "used_nodes"]
 
 log = logging.getLogger("petrobot.web")
 
@@ -53,10 +68,31 @@ log = logging.getLogger("petrobot.web")
 DEFAULT_PERIOD_S = 0.01
 #: Shortest time between two looks at the nodes' health, seconds.
 HEALTH_PERIOD_S = 1.0
+#: Longest the next frame waits for a page to say it has painted the previous one, seconds (a page
+#: that paints slower than this gets its frames anyway, as a page that never says).
+PACE_MAX_S = 0.25
 #: Most action starts/ends, operator notes or pulses one frame lists (a burst beyond is counted).
 MAX_LISTED = 200
 #: Feedback shown per running action: its JSON text, cut to this many characters.
 FEEDBACK_CHARS = 160
+#: Largest value (parameters, feedback, a result's payload) a blackboard shows, bytes of JSON.
+BLACKBOARD_BYTES = 64 * 1024
+#: Results kept for the blackboard (those latched on tokens are looked up among them).
+KEPT_RESULTS = 512
+#: External events remembered for the blackboard, per topic the latest.
+KEPT_TOPICS = 64
+
+
+def json_value(data: Any, limit: int = BLACKBOARD_BYTES) -> Any:
+    """``data`` as JSON-ready values for the page, or its JSON text cut to ``limit`` bytes (with a
+    note) when it is larger; anything JSON cannot hold is shown by its ``repr``."""
+    try:
+        text = json.dumps(data, default=repr, separators=(",", ":"))
+    except (TypeError, ValueError):
+        text = json.dumps(repr(data))
+    if len(text) <= limit:
+        return json.loads(text)
+    return {"cut": f"{len(text)} bytes of JSON; the first {limit} shown", "text": text[:limit]}
 
 
 def feedback_text(data: Any) -> str:
@@ -95,11 +131,12 @@ def learner_view(automaton: Any) -> dict[str, Any]:
     return {"scheme": automaton.scheme, "steps": automaton.steps, "rho": _round(automaton.rho), "actions": rows}
 
 
-def result_json(instance: str, task: str, action: str, node: str | None, result: Any, t_wall: float
-                ) -> dict[str, Any]:
-    """One ended primitive action, as frames and replays list it."""
+def result_json(instance: str, task: str, action: str, node: str | None, result: Any, t_wall: float,
+                forced: bool = False) -> dict[str, Any]:
+    """One ended primitive action, as frames and replays list it (``forced``: by the operator)."""
     return {"i": instance, "task": task, "action": action, "node": node, "status": result.status.value,
-            "outcome": result.outcome, "reason": result.reason, "wall_s": _round(result.wall_s), "t": t_wall}
+            "outcome": result.outcome, "reason": result.reason, "wall_s": _round(result.wall_s), "t": t_wall,
+            **({"forced": True} if forced else {})}
 
 
 def used_nodes(net: Any, location: Any) -> set[str] | None:
@@ -125,7 +162,8 @@ def _command_json(command: OperatorCommand | str) -> dict[str, Any]:
     if isinstance(command, str):
         return {"command": "invalid", "text": command}
     return {"command": command.command.value, "place": command.place,
-            "count": command.count if command.place is not None else None}
+            "count": command.count if command.place is not None else None, "text": str(command),
+            **(command.detail() or {})}
 
 
 class LiveFeed:
@@ -156,6 +194,9 @@ class LiveFeed:
         self._pending = False
         self._wake = asyncio.Event()
         self._sinks: list[Callable[[str], None]] = []
+        self._awaiting: dict[Callable[[str], None], int] = {}  # pacing sink -> seq of the frame it has not painted
+        self._pacing: set[Callable[[str], None]] = set()
+        self._painted = asyncio.Event()
         self._sent_marking: dict[str, int] = runtime.engine.marking.to_dict()
         self._seq = 0
         self._replies: dict[int, tuple[OperatorCommand, Callable[[bool, str], None]]] = {}
@@ -175,6 +216,13 @@ class LiveFeed:
         #: per primitive task: errors in a row, errors in all, the last error (whole reason)
         self._tasks: dict[str, dict[str, Any]] = {}
         self._summary: dict[str, Any] | None = None
+        # the blackboard: parameters and latest feedback of running actions, the latest results
+        # (their payloads), the external events delivered lately
+        self._params: dict[str, Any] = {}
+        self._feedback: dict[str, tuple[Any, int, float]] = {}  # instance -> (data, feedback count, time)
+        self._ended_results: collections.OrderedDict[str, dict[str, Any]] = collections.OrderedDict()
+        self._topics: collections.OrderedDict[str, dict[str, Any]] = collections.OrderedDict()
+        self._hits: collections.deque[dict[str, Any]] = collections.deque(maxlen=20)
 
     # ------------------------------------------------------------------ the observer
     def __call__(self, event: RunEvent) -> None:
@@ -191,6 +239,9 @@ class LiveFeed:
                 self._fired_latched = True
         else:
             self._events.append(event)
+            if type(event) is ActionFeedback:  # the blackboard keeps the latest feedback in full
+                seen = self._feedback.get(event.instance)
+                self._feedback[event.instance] = (event.data, 1 + (seen[1] if seen else 0), event.t_wall)
         if not self._pending:
             self._pending = True
             self._wake.set()
@@ -204,6 +255,20 @@ class LiveFeed:
         """Stop sending frames to ``sink``."""
         with contextlib.suppress(ValueError):
             self._sinks.remove(sink)
+        self._pacing.discard(sink)
+        self._awaiting.pop(sink, None)
+        self._painted.set()
+
+    def painted(self, sink: Callable[[str], None], seq: int) -> None:
+        """The page behind ``sink`` has painted frame ``seq``: it paces the frames from now on (the
+        next frame waits for it, module doc)."""
+        if sink not in self._sinks:
+            return
+        self._pacing.add(sink)
+        if self._awaiting.get(sink, -1) <= seq:
+            self._awaiting.pop(sink, None)
+            if not self._awaiting:
+                self._painted.set()
 
     def expect_reply(self, command: OperatorCommand, reply: Callable[[bool, str], None]) -> None:
         """Call ``reply(accepted, reason)`` when the runtime applies or refuses ``command`` (the
@@ -273,7 +338,47 @@ class LiveFeed:
                 "paused": engine.paused, "state": self.state, "running": running, "latched": self._latched(),
                 "learner": views, "operator": list(self._operator), "errors": list(self._errors),
                 "results": list(self._results), "nodes": self.nodes(), "tasks": dict(self._tasks),
-                "summary": self._summary, "server_time": now}
+                "summary": self._summary, "server_time": now, "breakpoints": self.breakpoints(),
+                "hits": list(self._hits)}
+
+    def breakpoints(self) -> list[dict[str, Any]]:
+        """The run's breakpoints (:mod:`coordinator.breakpoints`) as the page draws them."""
+        watch = getattr(self.runtime, "breakpoints", None)
+        return [bp.to_json() for bp in getattr(watch, "breakpoints", ())]
+
+    def blackboard(self, place: str) -> dict[str, Any]:
+        """What the actions of primitive-task place ``place`` are doing, for the operator (module doc).
+
+        Returns:
+            ``{"place", "task", "running": [{"i", "action", "node", "t", "params", "feedback",
+            "feedback_count", "feedback_t"}], "latched": [{"i", "action", "events", "status",
+            "outcome", "reason", "value", "forced", "t"}], "events": [{"event", "t", "fired",
+            "operator"}]}``; values as :func:`json_value` gives them.
+        """
+        runtime = self.runtime
+        task = None
+        with contextlib.suppress(Exception):
+            task = runtime.net.place(place).task
+        now = self.clock()
+        running = []
+        for flight in runtime.running():
+            start = flight.start
+            if start.place != place:
+                continue
+            data, count, t = self._feedback.get(start.instance, (None, 0, None))
+            running.append({"i": start.instance, "action": start.action, "node": flight.node,
+                            "t": now - flight.elapsed_s, "params": json_value(self._params.get(start.instance,
+                                                                                               start.params)),
+                            "feedback": json_value(data), "feedback_count": count, "feedback_t": t})
+        latched = []
+        for inst in runtime.engine.ended_instances():
+            if inst.place != place:
+                continue
+            kept = self._ended_results.get(inst.id, {})
+            latched.append({"i": inst.id, "action": inst.action,
+                            "events": sorted(f"int:{inst.task}.{o}" for o in inst.outcomes), **kept})
+        return {"place": place, "task": task, "running": running, "latched": latched,
+                "events": list(reversed(self._topics.values()))}
 
     # ------------------------------------------------------------------ frames
     def _latched(self) -> dict[str, list[list[Any]]]:
@@ -311,9 +416,13 @@ class LiveFeed:
         pulses: collections.Counter[str] = collections.Counter()
         learner_tasks: dict[str, Mapping[str, Any]] = {}
         tasks: dict[str, dict[str, Any]] = {}
+        injected: list[dict[str, Any]] = []
+        hits: list[dict[str, Any]] = []
+        breakpoints_changed = False
         state = None
         for event in events:
             if isinstance(event, ActionStarted):
+                self._params[event.instance] = event.params
                 if len(started) < MAX_LISTED:
                     started.append({"i": event.instance, "task": event.task, "place": event.place,
                                     "action": event.action, "node": event.node, "t": event.t_wall})
@@ -322,8 +431,16 @@ class LiveFeed:
                     feedback[event.instance] = feedback_text(event.data)  # the latest per action wins
             elif isinstance(event, ActionEnded):
                 feedback.pop(event.instance, None)
+                self._params.pop(event.instance, None)
+                self._feedback.pop(event.instance, None)
                 latched = True
-                item = result_json(event.instance, event.task, event.action, event.node, event.result, event.t_wall)
+                item = result_json(event.instance, event.task, event.action, event.node, event.result, event.t_wall,
+                                   event.forced)
+                self._ended_results[event.instance] = {
+                    "status": item["status"], "outcome": item["outcome"], "reason": item["reason"],
+                    "value": json_value(event.result.value), "forced": event.forced, "t": event.t_wall}
+                while len(self._ended_results) > KEPT_RESULTS:
+                    self._ended_results.popitem(last=False)
                 if len(ended) < MAX_LISTED:
                     ended.append(item)
                 self._results.append(item)
@@ -336,6 +453,8 @@ class LiveFeed:
                 ok = isinstance(event, OperatorApplied)
                 reason = "" if ok else event.reason  # type: ignore[union-attr]
                 note = {**_command_json(event.command), "ok": ok, "reason": reason, "t": event.t_wall}
+                if ok and note["command"] in ("break", "clear"):
+                    breakpoints_changed = True
                 self._operator.append(note)
                 if len(operator) < MAX_LISTED:
                     operator.append(note)
@@ -347,6 +466,18 @@ class LiveFeed:
                 state = {"state": event.state, "reason": event.reason, "detail": list(event.detail)}
             elif isinstance(event, PulseDelivered):
                 pulses[event.event] += 1
+                self._topics.pop(event.event, None)
+                self._topics[event.event] = {"event": event.event, "t": event.t_wall, "fired": event.fired,
+                                             "operator": event.operator}
+                while len(self._topics) > KEPT_TOPICS:
+                    self._topics.popitem(last=False)
+                if event.operator:
+                    injected.append({"event": event.event, "fired": event.fired, "t": event.t_wall})
+            elif isinstance(event, BreakpointHit):
+                hit = {**event.breakpoint.to_json(), "text": str(event.breakpoint), "why": event.why,
+                       "t": event.t_wall}
+                self._hits.append(hit)
+                hits.append(hit)
         if state is not None:
             self.state = state
         elif fired and self.state["state"] == "waiting":
@@ -373,6 +504,12 @@ class LiveFeed:
             frame["operator"] = operator
         if pulses:
             frame["pulses"] = dict(pulses)
+        if injected:
+            frame["injected"] = injected
+        if hits:
+            frame["hits"] = hits
+        if breakpoints_changed:
+            frame["breakpoints"] = self.breakpoints()
         if nodes is not None:
             frame["nodes"] = nodes
         if tasks:
@@ -407,6 +544,8 @@ class LiveFeed:
         self._last_frame = time.monotonic()
         text = json.dumps(frame, separators=(",", ":"), default=str)
         for sink in list(self._sinks):
+            if sink in self._pacing:
+                self._awaiting[sink] = frame["seq"]
             try:
                 sink(text)
             except Exception:  # a page that fails is dropped by its own handler; never the run
@@ -427,6 +566,12 @@ class LiveFeed:
             wait = self._last_frame + self.period_s - time.monotonic()
             if wait > 0:
                 await asyncio.sleep(wait)
+            if self._awaiting:  # a pacing page has not painted the last frame yet: let it
+                self._painted.clear()
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(max(0.0, self._last_frame + PACE_MAX_S - time.monotonic())):
+                        await self._painted.wait()
+                self._awaiting.clear()
             try:
                 self.flush()
             except Exception:

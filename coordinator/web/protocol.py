@@ -1,7 +1,10 @@
 """The web console's WebSocket protocol, version 1: every message the page may send, checked here.
 
 Messages are JSON objects in text frames (docs/console.md, "Protocol"). The page sends ``hello``
-first, then any of ``command``, ``validate``, ``save``, ``analyze`` and ``ping``; the server
+first, then any of ``command``, ``validate``, ``save``, ``analyze``, ``ping``, ``watch`` (follow
+another live run), ``blackboard`` (what a place's actions are doing), ``start`` and ``resume`` (a
+run of a net file, on the nodes of services.toml) and ``painted`` (the page has drawn a frame: the
+server sends the next one only then, so frames are sized to what the page can paint); the server
 answers each message that has an ``id`` with a message carrying the same ``id``. Everything the
 server receives goes through :func:`parse_client_message`, the one place an inbound message is
 checked: size, JSON syntax, nesting, the message type, its keys and the type and range of each
@@ -17,6 +20,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from coordinator.breakpoints import BreakKind, Breakpoint
 from coordinator.netfile.limits import MAX_COUNT, MAX_NAME
 from coordinator.operator import Command
 from services.errors import PetrobotError
@@ -28,6 +32,7 @@ __all__ = [
     "MAX_DEPTH",
     "MAX_ELEMENTS",
     "MAX_MESSAGE_BYTES",
+    "MAX_REASON",
     "PROTOCOL_VERSION",
     "ClientMessage",
     "ProtocolViolation",
@@ -50,6 +55,10 @@ CLOSE_TOO_BIG = 1009
 
 _DRAFT_KEYS = frozenset({"net", "places", "transitions", "arcs", "tasks", "operator"})
 _ANALYSES = frozenset({"analyze", "gspn", "perf", "learn"})
+#: Longest reason an operator may give with a forced outcome, characters.
+MAX_REASON = 512
+#: Longest run of a live run started from the page, seconds (a day).
+MAX_RUN_SECONDS = 86_400.0
 
 
 class ProtocolViolation(PetrobotError):
@@ -74,10 +83,13 @@ class ClientMessage:
     """One checked message from the page.
 
     Attributes:
-        type: ``hello``, ``command``, ``validate``, ``save``, ``analyze`` or ``ping``.
-        id: the request id the answer carries (``None`` for ``hello``).
-        fields: the message's other keys, checked (``token``; ``command``, ``place``, ``count``;
-            ``draft``; ``path``; ``kind``, ``journal``, ``run``).
+        type: ``hello``, ``command``, ``validate``, ``save``, ``analyze``, ``ping``, ``watch``,
+            ``blackboard``, ``start``, ``resume`` or ``painted``.
+        id: the request id the answer carries (``None`` for ``hello`` and ``painted``).
+        fields: the message's other keys, checked (``token``; ``command``, ``place``, ``count``,
+            ``breakpoint`` (a :class:`~coordinator.breakpoints.Breakpoint`), ``event``, ``instance``,
+            ``outcome``, ``reason``, ``run``; ``draft``; ``path``; ``kind``, ``run``, ``format``; ``net``,
+            ``marking``, ``seed``, ``max_seconds``, ``degraded``; ``place``; ``seq``).
     """
 
     type: str
@@ -187,24 +199,41 @@ def parse_client_message(data: str | bytes) -> ClientMessage:
                                     f"{PROTOCOL_VERSION}); reload the page")
         token = msg.get("token")
         return ClientMessage("hello", None, {"token": None if token is None else _str(token, "token", 256)})
+    if kind == "painted":
+        _keys(msg, {"type", "seq"}, {"type", "seq"})
+        return ClientMessage("painted", None, {"seq": _int(msg["seq"], "painted.seq", 0, 2**53)})
     if kind not in CLIENT_TYPES:
         raise ProtocolViolation(f"unknown message type {kind[:40]!r}")
     ident = _int(msg.get("id"), f"{kind}.id", 0, 2**53)
     fields: dict[str, Any] = {}
     if kind == "command":
-        _keys(msg, {"type", "id", "command", "place", "count"}, {"type", "id", "command"})
-        try:
-            command = Command(_str(msg["command"], "command.command", 16))
-        except ValueError:
-            raise ProtocolViolation(f"unknown operator command {str(msg['command'])[:16]!r}") from None
-        fields["command"] = command
-        if command in (Command.INSERT, Command.REMOVE):
-            if "place" not in msg:
-                raise ProtocolViolation(f"command {command.value} needs a place")
-            fields["place"] = _str(msg["place"], "command.place", MAX_NAME)
-            fields["count"] = _int(msg.get("count", 1), "command.count", 1, MAX_COUNT)
-        elif "place" in msg or "count" in msg:
-            raise ProtocolViolation(f"command {command.value} takes no place or count")
+        fields.update(_command(msg))
+    elif kind == "watch":
+        _keys(msg, {"type", "id", "run"}, {"type", "id", "run"})
+        fields["run"] = _str(msg["run"], "watch.run", 64)
+    elif kind == "blackboard":
+        _keys(msg, {"type", "id", "place", "run"}, {"type", "id", "place"})
+        fields["place"] = _str(msg["place"], "blackboard.place", MAX_NAME)
+        fields["run"] = None if msg.get("run") is None else _str(msg["run"], "blackboard.run", 64)
+    elif kind in ("start", "resume"):
+        allowed = {"type", "id", "net", "degraded"} | ({"marking", "seed", "max_seconds"} if kind == "start" else set())
+        _keys(msg, allowed, {"type", "id", "net"})
+        fields["net"] = _str(msg["net"], f"{kind}.net", 1024)
+        fields["degraded"] = msg.get("degraded", False)
+        if not isinstance(fields["degraded"], bool):
+            raise ProtocolViolation(f"{kind}.degraded must be true or false")
+        if kind == "start":
+            marking = msg.get("marking", {})
+            if not isinstance(marking, dict) or len(marking) > MAX_ELEMENTS:
+                raise ProtocolViolation("start.marking must be an object place -> tokens")
+            fields["marking"] = {_str(p, "start.marking place", MAX_NAME): _int(n, "start.marking tokens", 0, MAX_COUNT)
+                                 for p, n in marking.items()}
+            fields["seed"] = _int(msg.get("seed", 0), "start.seed", 0, 2**31 - 1)
+            limit = msg.get("max_seconds")
+            if limit is not None and (not isinstance(limit, (int, float)) or isinstance(limit, bool)
+                                      or not 0 < limit <= MAX_RUN_SECONDS):
+                raise ProtocolViolation(f"start.max_seconds must be a number in (0, {MAX_RUN_SECONDS:g}] or null")
+            fields["max_seconds"] = None if limit is None else float(limit)
     elif kind == "validate":
         _keys(msg, {"type", "id", "draft"}, {"type", "id", "draft"})
         fields["draft"] = _draft(msg["draft"])
@@ -213,13 +242,16 @@ def parse_client_message(data: str | bytes) -> ClientMessage:
         fields["draft"] = _draft(msg["draft"])
         fields["path"] = _str(msg["path"], "save.path", 1024)
     elif kind == "analyze":
-        _keys(msg, {"type", "id", "draft", "kind", "run"}, {"type", "id", "draft", "kind"})
+        _keys(msg, {"type", "id", "draft", "kind", "run", "format"}, {"type", "id", "draft", "kind"})
         fields["draft"] = _draft(msg["draft"])
         which = _str(msg["kind"], "analyze.kind", 16)
         if which not in _ANALYSES:
             raise ProtocolViolation(f"analyze.kind must be one of {', '.join(sorted(_ANALYSES))}")
         fields["kind"] = which
         fields["run"] = None if msg.get("run") is None else _str(msg["run"], "analyze.run", 64)
+        fields["format"] = _str(msg.get("format", "text"), "analyze.format", 8)
+        if fields["format"] not in ("text", "json"):
+            raise ProtocolViolation("analyze.format must be text or json")
     elif kind == "ping":
         _keys(msg, {"type", "id", "t"}, {"type", "id"})
         t = msg.get("t", 0.0)
@@ -229,5 +261,53 @@ def parse_client_message(data: str | bytes) -> ClientMessage:
     return ClientMessage(kind, ident, fields)
 
 
-#: Message types the page may send after ``hello``.
-CLIENT_TYPES = frozenset({"command", "validate", "save", "analyze", "ping"})
+def _command(msg: dict[str, Any]) -> dict[str, Any]:
+    """The keys of a ``command`` message, checked for its command."""
+    _keys(msg, {"type", "id", "command", "place", "count", "breakpoint", "event", "instance", "outcome", "reason",
+                "run"}, {"type", "id", "command"})
+    try:
+        command = Command(_str(msg["command"], "command.command", 16))
+    except ValueError:
+        raise ProtocolViolation(f"unknown operator command {str(msg['command'])[:16]!r}") from None
+    fields: dict[str, Any] = {"command": command,
+                              "run": None if msg.get("run") is None else _str(msg["run"], "command.run", 64)}
+    wanted = {Command.INSERT: {"place", "count"}, Command.REMOVE: {"place", "count"},
+              Command.BREAK: {"breakpoint"}, Command.CLEAR: {"breakpoint"}, Command.INJECT: {"event"},
+              Command.FORCE: {"instance", "outcome", "reason"}}.get(command, set())
+    extra = {"place", "count", "breakpoint", "event", "instance", "outcome", "reason"} - wanted
+    if extra & set(msg):
+        raise ProtocolViolation(f"command {command.value} takes no {min(extra & set(msg))}")
+    if command in (Command.INSERT, Command.REMOVE):
+        if "place" not in msg:
+            raise ProtocolViolation(f"command {command.value} needs a place")
+        fields["place"] = _str(msg["place"], "command.place", MAX_NAME)
+        fields["count"] = _int(msg.get("count", 1), "command.count", 1, MAX_COUNT)
+    elif command in (Command.BREAK, Command.CLEAR):
+        bp = msg.get("breakpoint")
+        if not isinstance(bp, dict) or not set(bp) <= {"kind", "target", "count"}:
+            raise ProtocolViolation(f"command {command.value} needs a breakpoint {{kind, target, count}}")
+        try:
+            bkind = BreakKind(_str(bp.get("kind"), "breakpoint.kind", 16))
+        except ValueError:
+            raise ProtocolViolation("breakpoint.kind must be enabled, fires, count or error") from None
+        count = None
+        if bkind is BreakKind.COUNT:
+            count = _int(bp.get("count"), "breakpoint.count", 0, MAX_COUNT)
+        elif bp.get("count") is not None:
+            raise ProtocolViolation(f"a {bkind.value} breakpoint takes no count")
+        fields["breakpoint"] = Breakpoint(bkind, _str(bp.get("target"), "breakpoint.target", MAX_NAME), count)
+    elif command is Command.INJECT:
+        event = _str(msg.get("event"), "command.event", MAX_NAME + 4)
+        if not event.startswith("ext:"):
+            raise ProtocolViolation("command inject needs an external event ext:TOPIC")
+        fields["event"] = event
+    elif command is Command.FORCE:
+        fields["instance"] = _str(msg.get("instance"), "command.instance", MAX_NAME)
+        fields["outcome"] = _str(msg.get("outcome"), "command.outcome", 2 * MAX_NAME + 1)
+        fields["reason"] = _str(msg.get("reason", ""), "command.reason", MAX_REASON)
+    return fields
+
+
+#: Message types the page may send after ``hello`` (``painted`` carries no id).
+CLIENT_TYPES = frozenset({"command", "validate", "save", "analyze", "ping", "watch", "blackboard", "start",
+                          "resume"})

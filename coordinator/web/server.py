@@ -2,8 +2,10 @@
 
 :class:`ConsoleServer` serves the page (HTML, CSS, its scripts and the vendored libraries, all from
 the package: nothing comes from another site), a small JSON API (open a net file, list the runs of
-the journal, a run's timeline, export a drawing) and one WebSocket per page (:mod:`.protocol`):
-live frames of an attached run (:class:`~coordinator.web.frames.LiveFeed`), operator commands,
+the journal, a run's timeline, export a drawing, the documentation the page links its numbers to)
+and one WebSocket per page (:mod:`.protocol`): live frames of the run the page watches
+(:class:`~coordinator.web.frames.LiveFeed`; the console follows any number of runs,
+:mod:`.runs`), operator commands, a place's blackboard, runs started and resumed from the page,
 validation, saving and analyses.
 
 Security (docs/console.md, "Security"):
@@ -52,6 +54,7 @@ from coordinator.web.files import (
     save_draft,
 )
 from coordinator.web.frames import DEFAULT_PERIOD_S, LiveFeed
+from coordinator.web.runs import LiveRun, RunRefused, RunStarter, StartRequest
 from coordinator.web.protocol import (
     CLOSE_POLICY,
     MAX_MESSAGE_BYTES,
@@ -76,9 +79,15 @@ CSP = ("default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' 
 MAX_QUEUE = 64
 #: Most messages a page may send in :data:`RATE_WINDOW_S` seconds.
 MAX_MESSAGES = 600
+#: Most ``painted`` messages (one per frame painted) a page may send in :data:`RATE_WINDOW_S` seconds.
+MAX_PAINTED = 3000
 RATE_WINDOW_S = 10.0
 #: Longest a closing console waits for a page to take what is queued for it (the run's last frame), s.
 BYE_S = 2.0
+#: How often the pages' list of live runs is brought up to date, seconds.
+RUNS_PERIOD_S = 1.0
+#: Live runs kept in the list once ended (the oldest ended ones are dropped beyond).
+KEPT_ENDED = 8
 
 
 def is_loopback(host: str) -> bool:
@@ -104,6 +113,10 @@ class ConsoleConfig:
         bind_any: allow a host that is not a loopback address.
         token: the secret that gives control; a fresh random one when ``None``.
         period_s: shortest time between two live frames, seconds.
+        key_file: the shared key runs started from the page connect to the nodes with (``None``:
+            the default key, as ``petrobot run``).
+        run_journal: the journal runs started from the page write to when ``journal`` is not
+            given (``ROOT/runs/journal.sqlite``).
     """
 
     root: Path = field(default_factory=Path.cwd)
@@ -115,6 +128,8 @@ class ConsoleConfig:
     bind_any: bool = False
     token: str | None = None
     period_s: float = DEFAULT_PERIOD_S
+    key_file: str | None = None
+    run_journal: Path | None = None
 
 
 class ConsoleServer:
@@ -132,11 +147,13 @@ class ConsoleServer:
         self.token = config.token or secrets.token_urlsafe(24)
         self.root = config.root.resolve()
         self.pages: set[_Page] = set()
-        self.feed: LiveFeed | None = None
-        self.runtime: Any = None
-        self.live_net: dict[str, Any] | None = None
-        self._feed_task: asyncio.Task[None] | None = None
+        #: the runs this console follows, by run id, oldest first (:mod:`.runs`)
+        self.runs: dict[str, LiveRun] = {}
         self._runner: web.AppRunner | None = None
+        self._runs_task: asyncio.Task[None] | None = None
+        self._runs_sent: list[dict[str, Any]] = []
+        self.starter = RunStarter(journal=self.run_journal(), location=config.location, key_file=config.key_file,
+                                  attach=lambda runtime, path, task: self._follow(runtime, path, task))
         self.port = 0
         self._preloaded = {self._shown(p): p for p in config.nets}
         self.app = self._make_app()
@@ -168,31 +185,65 @@ class ConsoleServer:
         await site.start()
         addresses = self._runner.addresses  # the bound socket tells the port chosen for port 0
         self.port = int(addresses[0][1]) if addresses else self.config.port
+        self._runs_task = asyncio.get_running_loop().create_task(self._tell_runs(), name="console-runs")
         return self.url
 
     async def close(self, reason: str = "the console is closing") -> None:
-        """Say goodbye to every page, close their sockets and stop listening."""
-        if self.feed is not None:
+        """Say goodbye to every page, close their sockets and stop listening; the runs started from
+        the page are interrupted (resumable)."""
+        for live in self.runs.values():
             with contextlib.suppress(Exception):
-                self.feed.flush()
+                live.feed.flush()
         for page in list(self.pages):
             await page.close(WSCloseCode.GOING_AWAY, reason, bye=True)
-        if self._feed_task is not None:
-            self._feed_task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await self._feed_task
-        if self.runtime is not None and self.feed is not None:
-            self.runtime.remove_observer(self.feed)
+        await self.starter.stop()
+        for task in (self._runs_task, *(live.feed_task for live in self.runs.values())):
+            if task is not None:
+                task.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await task
+        for live in self.runs.values():
+            live.runtime.remove_observer(live.feed)
         if self._runner is not None:
             await self._runner.cleanup()
 
+    # ------------------------------------------------------------------ the runs it follows
+    def run_journal(self) -> Path:
+        """The journal runs started from the page write to."""
+        if self.config.journal is not None:
+            return self.config.journal
+        return self.config.run_journal or self.root / "runs" / "journal.sqlite"
+
+    @property
+    def live(self) -> LiveRun | None:
+        """The run a page watches unless it chose another: the newest one still going, else the newest."""
+        going = [live for live in self.runs.values() if not live.feed.ended]
+        return (going or list(self.runs.values()) or [None])[-1]
+
+    @property
+    def feed(self) -> LiveFeed | None:
+        """The frames of :attr:`live` (``None`` without a run)."""
+        return self.live.feed if self.live is not None else None
+
+    @property
+    def runtime(self) -> Any:
+        """The runtime of :attr:`live` (``None`` without a run)."""
+        return self.live.runtime if self.live is not None else None
+
+    @property
+    def live_net(self) -> dict[str, Any] | None:
+        """The drawing of :attr:`live`'s net."""
+        return self.live.net if self.live is not None else None
+
     def attach_run(self, runtime: Any, net_path: Path | None = None) -> LiveFeed:
         """Follow a run (a :class:`coordinator.runtime.Runtime`, before or after it starts): its events
-        go to the pages as frames, and pages with the token steer it."""
-        self.runtime = runtime
-        self.feed = LiveFeed(runtime, period_s=self.config.period_s)
-        runtime.add_observer(self.feed)
-        self._feed_task = asyncio.get_running_loop().create_task(self.feed.run(), name="console-frames")
+        go to the pages watching it as frames, and pages with the token steer it."""
+        return self._follow(runtime, net_path, None).feed
+
+    def _follow(self, runtime: Any, net_path: Path | None, task: asyncio.Task[Any] | None) -> LiveRun:
+        feed = LiveFeed(runtime, period_s=self.config.period_s)
+        runtime.add_observer(feed)
+        feed_task = asyncio.get_running_loop().create_task(feed.run(), name=f"console-frames-{runtime.run_id}")
         net = None
         if net_path is not None:
             with contextlib.suppress(FileRefused):
@@ -205,11 +256,35 @@ class ConsoleServer:
             net = {"path": runtime.net.name, "name": runtime.net.name, "draft": draft,
                    "validation": validate_draft(draft, runtime.net.name, self.config.location).to_json(),
                    "laid_out": True}
-        self.live_net = net
+        live = LiveRun(runtime, feed, net, feed_task, task=task)
+        self.runs[live.run_id] = live
+        ended = [rid for rid, other in self.runs.items() if other.feed.ended]
+        for rid in ended[:max(0, len(ended) - KEPT_ENDED)]:
+            self.runs.pop(rid).feed_task.cancel()
         for page in list(self.pages):
-            page.subscribe_live()
-            page.send({"type": "run", "live": self.feed.snapshot(), "net": net})
-        return self.feed
+            if page.watching is None or page.watching not in self.runs or self.runs[page.watching].feed.ended:
+                page.watch(live)
+        self._send_runs()
+        return live
+
+    def runs_json(self) -> list[dict[str, Any]]:
+        """The live runs for the pages' list, oldest first."""
+        return [live.summary() for live in self.runs.values()]
+
+    def _send_runs(self) -> None:
+        runs = self.runs_json()
+        if runs != self._runs_sent:
+            self._runs_sent = runs
+            for page in list(self.pages):
+                if page.greeted:
+                    page.send({"type": "runs", "runs": runs})
+
+    async def _tell_runs(self) -> None:
+        """Keep the pages' list of live runs up to date (their state and firings, once a second)."""
+        while True:
+            await asyncio.sleep(RUNS_PERIOD_S)
+            with contextlib.suppress(Exception):
+                self._send_runs()
 
     # ------------------------------------------------------------------ the app
     def _make_app(self) -> web.Application:
@@ -221,6 +296,7 @@ class ConsoleServer:
         app.router.add_get("/api/runs", self._api_runs)
         app.router.add_get("/api/replay", self._api_replay)
         app.router.add_post("/api/export", self._api_export)
+        app.router.add_get("/docs/{name}", self._docs)
         app.router.add_static("/static/", STATIC, follow_symlinks=False, show_index=False)
         return app
 
@@ -298,7 +374,19 @@ class ConsoleServer:
             return self.config.journal
         journal = getattr(self.runtime, "journal", None)
         path = getattr(journal, "path", None)
-        return Path(path) if path and path != ":memory:" else None
+        if path and path != ":memory:":
+            return Path(path)
+        started = self.run_journal()
+        return started if started.is_file() else None
+
+    async def _docs(self, request: web.Request) -> web.StreamResponse:
+        from coordinator.web.docs import DocMissing, render_doc
+
+        try:
+            html = await asyncio.to_thread(render_doc, request.match_info["name"])
+        except DocMissing as exc:
+            return web.Response(status=404, text=str(exc))
+        return web.Response(text=html, content_type="text/html", charset="utf-8")
 
     async def _api_runs(self, request: web.Request) -> web.StreamResponse:
         from coordinator.journal import JournalReader
@@ -316,7 +404,8 @@ class ConsoleServer:
         except JournalError as exc:
             return self._error(400, str(exc))
         live = getattr(self.runtime, "run_id", None)
-        return web.json_response({"journal": self._shown(path), "runs": runs, "live": live})
+        return web.json_response({"journal": self._shown(path), "runs": runs, "live": live,
+                                  "following": list(self.runs)})
 
     async def _api_replay(self, request: web.Request) -> web.StreamResponse:
         from coordinator.journal import JournalReader
@@ -326,7 +415,9 @@ class ConsoleServer:
         run = request.query.get("run", "")
         if path is None:
             return self._error(404, "no journal: start the console with --journal FILE")
-        fallback = self.live_net["draft"] if self.live_net else None
+        run_id = request.query.get("run", "")
+        following = self.runs.get(run_id)
+        fallback = following.net["draft"] if following is not None else self.live_net["draft"] if self.live_net else None
 
         def read() -> dict[str, Any]:
             with JournalReader.open(path) as reader:
@@ -353,9 +444,10 @@ class ConsoleServer:
         if data["draft"] is not None:
             from coordinator.web.files import with_layout
 
-            if self.live_net is not None and data["draft"].get("net", {}).get("name") == \
-                    self.live_net["draft"].get("net", {}).get("name"):
-                data["draft"] = self.live_net["draft"]
+            shown = following.net if following is not None else self.live_net
+            if shown is not None and data["draft"].get("net", {}).get("name") == \
+                    shown["draft"].get("net", {}).get("name"):
+                data["draft"] = shown["draft"]
             else:
                 data["draft"] = await asyncio.to_thread(with_layout, data["draft"])
         return web.json_response(data)
@@ -392,12 +484,15 @@ class ConsoleServer:
         return ws
 
     # ------------------------------------------------------------------ what a page learns first
-    def welcome(self, control: bool) -> dict[str, Any]:
+    def welcome(self, control: bool, live: LiveRun | None) -> dict[str, Any]:
+        from coordinator.web.docs import DEFINITIONS
+
         return {"type": "welcome", "v": PROTOCOL_VERSION, "control": control, "server_time": time.time(),
                 "nets": list(self._preloaded), "journal": self._shown(self._journal()) if self._journal() else None,
                 "services": self.config.location is not None,
-                "live": self.feed.snapshot() if self.feed is not None else None,
-                "net": self.live_net if self.feed is not None else None}
+                "live": live.feed.snapshot() if live is not None else None,
+                "net": live.net if live is not None else None, "runs": self.runs_json(),
+                "definitions": DEFINITIONS}
 
 
 class _Page:
@@ -416,7 +511,11 @@ class _Page:
         self._tasks: set[asyncio.Task[Any]] = set()
         self._recent: collections.deque[float] = collections.deque()
         self._closing = False
-        self._live = False
+        #: the run whose frames this page gets (a run id of ``server.runs``), or ``None``
+        self.watching: str | None = None
+        self._analysis: asyncio.Future[Any] | None = None
+        self._feed: LiveFeed | None = None
+        self._painted: collections.deque[float] = collections.deque()
         self._drained = asyncio.Event()  # set whenever the sender has sent everything queued
 
     # ------------------------------------------------------------------ outbound
@@ -436,10 +535,21 @@ class _Page:
         self._drained.clear()
         self._ready.set()
 
-    def subscribe_live(self) -> None:
-        if not self._live and self.server.feed is not None:
-            self._live = True
-            self.server.feed.subscribe(self.offer_frame)
+    def watch(self, live: LiveRun | None, *, announce: bool = True) -> None:
+        """Get the frames of ``live`` from now on (instead of another run's); with ``announce``, send
+        the page its snapshot and net first (a ``run`` message)."""
+        if self._feed is not None:
+            self._feed.unsubscribe(self.offer_frame)
+            self._feed = None
+        self._frames.clear()
+        self._resync = False
+        self.watching = live.run_id if live is not None else None
+        if live is None:
+            return
+        if announce:
+            self.send({"type": "run", "live": live.feed.snapshot(), "net": live.net})
+        self._feed = live.feed
+        live.feed.subscribe(self.offer_frame)
 
     async def _send_loop(self) -> None:
         ws = self.ws
@@ -449,10 +559,10 @@ class _Page:
             while (self._replies or self._frames or self._resync) and not ws.closed:
                 if self._replies:
                     text = self._replies.popleft()
-                elif self._resync and self.server.feed is not None:
+                elif self._resync and self._feed is not None:
                     self._resync = False
                     self._frames.clear()
-                    text = json.dumps({"type": "snapshot", **self.server.feed.snapshot()}, separators=(",", ":"),
+                    text = json.dumps({"type": "snapshot", **self._feed.snapshot()}, separators=(",", ":"),
                                       default=str)
                 elif self._frames:
                     text = self._frames.popleft()
@@ -475,8 +585,12 @@ class _Page:
                     await self.close(1009, f"message larger than {MAX_MESSAGE_BYTES} bytes")
                     break
                 try:
-                    self._count()
-                    await self.handle(parse_client_message(data))
+                    msg = parse_client_message(data)
+                    if msg.type == "painted":
+                        self._count_painted()
+                    else:
+                        self._count()
+                    await self.handle(msg)
                 except ProtocolViolation as exc:
                     log.info("closing a console WebSocket: %s", exc.reason)
                     await self.close(exc.code, exc.reason)
@@ -494,6 +608,15 @@ class _Page:
             self._recent.popleft()
         if len(self._recent) > MAX_MESSAGES:
             raise ProtocolViolation(f"more than {MAX_MESSAGES} messages in {RATE_WINDOW_S:g} s")
+
+    def _count_painted(self) -> None:
+        """``painted`` messages have their own bound: one per frame the page was sent, at most."""
+        now = time.monotonic()
+        self._painted.append(now)
+        while self._painted and self._painted[0] < now - RATE_WINDOW_S:
+            self._painted.popleft()
+        if len(self._painted) > MAX_PAINTED:
+            raise ProtocolViolation(f"more than {MAX_PAINTED} painted messages in {RATE_WINDOW_S:g} s")
 
     async def close(self, code: int, reason: str, *, bye: bool = False) -> None:
         if self._closing:
@@ -513,16 +636,17 @@ class _Page:
             await self.ws.close(code=code, message=reason.encode("utf-8")[:123])
 
     def stop(self) -> None:
-        if self.server.feed is not None:
-            self.server.feed.unsubscribe(self.offer_frame)
+        if self._feed is not None:
+            self._feed.unsubscribe(self.offer_frame)
         for task in (self._sender, *self._tasks):
             if task is not None:
                 task.cancel()
 
-    def _spawn(self, coro: Awaitable[Any]) -> None:
+    def _spawn(self, coro: Awaitable[Any]) -> asyncio.Future[Any]:
         task = asyncio.ensure_future(coro)
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
+        return task
 
     def reply(self, msg: ClientMessage, **fields: Any) -> None:
         self.send({"type": "reply", "id": msg.id, "to": msg.type, **fields})
@@ -534,12 +658,34 @@ class _Page:
                 raise ProtocolViolation("hello twice")
             self.greeted = True
             self.control = server.has_token(msg.fields["token"])
-            self.send(server.welcome(self.control))
-            self.subscribe_live()
+            live = server.live
+            self.send(server.welcome(self.control, live))
+            self.watch(live, announce=False)
             return
         if not self.greeted:
             raise ProtocolViolation("the first message must be hello")
-        if msg.type == "ping":
+        if msg.type == "painted":
+            if self._feed is not None:
+                self._feed.painted(self.offer_frame, msg.fields["seq"])
+        elif msg.type == "watch":
+            live = server.runs.get(msg.fields["run"])
+            if live is None:
+                self.reply(msg, ok=False, reason=f"the console follows no run {msg.fields['run']!r}")
+            else:
+                self.watch(live)
+                self.reply(msg, ok=True, run=live.run_id)
+        elif msg.type == "blackboard":
+            live = server.runs.get(msg.fields["run"] or self.watching or "")
+            if live is None:
+                self.reply(msg, ok=False, reason="no run is followed here")
+            else:
+                self.reply(msg, ok=True, blackboard=live.feed.blackboard(msg.fields["place"]))
+        elif msg.type in ("start", "resume"):
+            if not self.control:
+                self.reply(msg, ok=False, reason=_READ_ONLY)
+            else:
+                self._spawn(self._start(msg))
+        elif msg.type == "ping":
             self.reply(msg, ok=True, t=msg.fields["t"], server_time=time.time())
         elif msg.type == "command":
             self._command(msg)
@@ -551,28 +697,52 @@ class _Page:
         elif msg.type == "analyze":
             if not self.control:
                 self.reply(msg, ok=False, reason=_READ_ONLY)
-            elif any(not t.done() for t in self._tasks):
+            elif self._analysis is not None and not self._analysis.done():
                 self.reply(msg, ok=False, reason="an analysis is already running")
             else:
-                self._spawn(self._analyze(msg))
+                self._analysis = self._spawn(self._analyze(msg))
 
     def _command(self, msg: ClientMessage) -> None:
         server = self.server
         if not self.control:
             self.reply(msg, ok=False, reason=_READ_ONLY)
             return
-        if server.runtime is None or server.feed is None:
-            self.reply(msg, ok=False, reason="no run is attached to this console (petrobot run NET --console PORT)")
-            return
-        if server.feed.ended:
-            self.reply(msg, ok=False, reason=f"the run has ended ({server.feed.state['state']})")
-            return
         f = msg.fields
-        command = OperatorCommand(f["command"], f.get("place"), f.get("count", 1)) \
-            if f["command"] in (Command.INSERT, Command.REMOVE) else OperatorCommand(f["command"])
-        server.feed.expect_reply(command, lambda ok, reason: self.reply(msg, ok=ok, reason=reason,
-                                                                       command=str(command)))
-        server.runtime.command(command)
+        live = server.runs.get(f.get("run") or self.watching or "")
+        if live is None:
+            self.reply(msg, ok=False, reason="no run is followed by this console (petrobot run NET --console PORT, "
+                                             "or start one from the page)")
+            return
+        if live.feed.ended:
+            self.reply(msg, ok=False, reason=f"the run has ended ({live.feed.state['state']})")
+            return
+        if f["command"] in (Command.INSERT, Command.REMOVE):
+            command = OperatorCommand(f["command"], f.get("place"), f.get("count", 1))
+        else:
+            command = OperatorCommand(f["command"], breakpoint=f.get("breakpoint"), event=f.get("event"),
+                                      instance=f.get("instance"), outcome=f.get("outcome"), reason=f.get("reason", ""))
+        live.feed.expect_reply(command, lambda ok, reason: self.reply(msg, ok=ok, reason=reason,
+                                                                     command=str(command)))
+        live.runtime.command(command)
+
+    async def _start(self, msg: ClientMessage) -> None:
+        """Start or resume a run of a net file under the root, as ``petrobot run`` would (:mod:`.runs`)."""
+        server = self.server
+        f = msg.fields
+        try:
+            path = inside(server.root, f["net"])
+        except FileRefused as exc:
+            self.reply(msg, ok=False, reason=str(exc))
+            return
+        request = StartRequest(path, marking=f.get("marking", {}), seed=f.get("seed", 0),
+                               max_seconds=f.get("max_seconds"), degraded=f["degraded"], resume=msg.type == "resume")
+        try:
+            live = await server.starter.start(request)
+        except RunRefused as exc:
+            self.reply(msg, ok=False, reason=str(exc))
+            return
+        self.watch(live)
+        self.reply(msg, ok=True, run=live.run_id)
 
     async def _save(self, msg: ClientMessage) -> None:
         server = self.server
@@ -593,7 +763,8 @@ class _Page:
         journal = server._journal()
         try:
             report = await run_analysis(msg.fields["kind"], msg.fields["draft"], journal=str(journal) if journal else None,
-                                        run=msg.fields.get("run"), cwd=server.root)
+                                        run=msg.fields.get("run"), cwd=server.root,
+                                        as_json=msg.fields.get("format") == "json")
         except Exception as exc:  # an analysis that cannot start is reported, never raised into the loop
             self.reply(msg, ok=False, reason=f"{type(exc).__name__}: {exc}")
             return
