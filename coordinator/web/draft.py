@@ -38,8 +38,8 @@ from services.errors import LocationError
 from services.textfile import TextProblem
 from services.tomllines import parse_toml
 
-__all__ = ["Element", "Problem", "Validation", "draft_layout", "draft_of_net", "draft_of_text",
-           "draft_to_toml", "placement_of", "validate_draft"]
+__all__ = ["UNSAVED", "Element", "Problem", "Validation", "draft_layout", "draft_of_net", "draft_of_text",
+           "draft_to_toml", "placement_of", "validate_draft", "validate_text"]
 
 Element = tuple[str, str]
 """What a problem is about: ``("place", id)``, ``("transition", id)``, ``("task", name)``,
@@ -279,29 +279,85 @@ def placement_of(net: PetriNet | None, draft: Mapping[str, Any], location: Any) 
     return out
 
 
-def validate_draft(draft: Mapping[str, Any], name: str = "draft.toml", location: Placement | None = None
-                   ) -> Validation:
+#: What the problems of a drawing that is not saved as it stands are said to be in.
+UNSAVED = "unsaved drawing"
+
+
+def validate_draft(draft: Mapping[str, Any], name: str = UNSAVED, location: Placement | None = None, *,
+                   lines: bool | None = None) -> Validation:
     """Check a draft as ``petrobot check`` checks a net file (and its placement, given a location).
 
     Args:
         draft: the draft (shape checked by :func:`coordinator.web.protocol.parse_client_message`).
-        name: the file name the messages carry.
+        name: what the messages say the problems are in: a file, or :data:`UNSAVED`.
         location: a :class:`services.location.Location` (``node_of``/``publisher_of``), or ``None``.
+        lines: give each message the line of :attr:`Validation.text` (the file Save would write);
+            by default only when ``name`` names a file (an unsaved drawing has no lines: its
+            problems point to their elements).
 
     Returns:
-        The :class:`Validation`; its problems name the lines of :attr:`Validation.text`.
+        The :class:`Validation`.
     """
     text, owner = draft_to_toml(draft)
     net, errors = lint_net(text, name)
+    with_lines = name != UNSAVED if lines is None else lines
     problems = []
     for err in errors:
         element = owner[err.line - 1] if err.line is not None and 0 < err.line <= len(owner) else None
-        problems.append(Problem(str(err), err.problem, element))
+        problems.append(Problem(str(err) if with_lines else f"{name}: {err.problem}", err.problem, element))
     if net is not None and location is not None:
         smap = SourceMap.scan(text)
-        for ident, problem in check_net(net, location):
-            line = smap.of_id(ident)
-            kind = "task" if ident in net.tasks else "transition"
-            problems.append(Problem(f"{name}:{line}: {problem}" if line else f"{name}: {problem}", problem,
-                                    (kind, ident)))
+        problems += _placement_problems(net, location, smap, name, with_lines)
     return Validation(net, problems, placement_of(net, draft, location), text)
+
+
+def _placement_problems(net: PetriNet, location: Placement, smap: SourceMap, name: str, with_lines: bool
+                        ) -> list[Problem]:
+    out = []
+    for ident, problem in check_net(net, location):
+        line = smap.of_id(ident) if with_lines else None
+        kind = "task" if ident in net.tasks else "transition"
+        out.append(Problem(f"{name}:{line}: {problem}" if line else f"{name}: {problem}", problem, (kind, ident)))
+    return out
+
+
+def validate_text(text: str, name: str, draft: Mapping[str, Any], location: Placement | None = None) -> Validation:
+    """Check the text of a net file as it is on disk: the problems name ``name`` and the lines of
+    ``text`` itself (what ``petrobot check FILE`` says), each tied to the element at its line.
+
+    Args:
+        text: the file's text.
+        name: the file as the page shows it (``nets/catch.toml``).
+        draft: the draft of ``text`` (:func:`draft_of_text`), for the placement table.
+        location: as :func:`validate_draft`.
+    """
+    net, errors = lint_net(text, name)
+    smap = SourceMap.scan(text)
+    starts = sorted(((line, _element_of(section, ident, smap, text)) for (section, ident), line in smap.elements.items()),
+                    key=lambda item: item[0])
+    problems = []
+    for err in errors:
+        element = None
+        if err.line is not None:
+            for line, owner in starts:
+                if line > err.line:
+                    break
+                element = owner
+        problems.append(Problem(str(err), err.problem, element))
+    if net is not None and location is not None:
+        problems += _placement_problems(net, location, smap, name, True)
+    return Validation(net, problems, placement_of(net, draft, location), text)
+
+
+def _element_of(section: str, ident: Any, smap: SourceMap, text: str) -> Element | None:
+    """The element a table of the file is (its id read back from the map), for :func:`validate_text`."""
+    if section in ("place", "transition") and isinstance(ident, int):
+        for (kind, name), line in smap.ids.items():
+            if kind == section and line == smap.keys.get((section, ident, "id")):
+                return (section, name)
+        return None
+    if section == "task" and isinstance(ident, str):
+        return ("task", ident)
+    if section in ("net", "operator"):
+        return ("net", "")
+    return None

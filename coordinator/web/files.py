@@ -12,6 +12,7 @@ one); :func:`export_draft` converts a draft to PNML, DOT or canonical TOML.
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 from typing import Any
 
@@ -26,11 +27,12 @@ from coordinator.web.draft import (
     draft_of_net,
     draft_of_text,
     validate_draft,
+    validate_text,
 )
 from services.errors import PetrobotError
 from services.textfile import write_atomically
 
-__all__ = ["FileRefused", "export_draft", "inside", "list_nets", "open_net", "save_draft", "with_layout"]
+__all__ = ["FileRefused", "export_draft", "inside", "is_net_file", "list_nets", "open_net", "save_draft", "with_layout"]
 
 #: Most net files :func:`list_nets` lists.
 MAX_LISTED = 500
@@ -57,15 +59,36 @@ def inside(root: Path, path: str, *, suffixes: tuple[str, ...] = SUFFIXES) -> Pa
     return candidate
 
 
+#: A TOML file is listed as a net when its first bytes hold a ``[net]`` table or a ``[[place]]``.
+_TOML_NET = re.compile(rb"^[ \t]*(\[net\]|\[\[place\]\])", re.MULTILINE)
+#: How much of a file :func:`is_net_file` reads, bytes.
+SNIFF_BYTES = 64 * 1024
+
+
+def is_net_file(path: Path) -> bool:
+    """Whether ``path`` looks like a net file (a TOML net, or PNML): what Open lists, not
+    ``services.toml`` or ``pyproject.toml``."""
+    try:
+        with path.open("rb") as f:
+            head = f.read(SNIFF_BYTES)
+    except OSError:
+        return False
+    if path.suffix.lower() == ".toml":
+        return _TOML_NET.search(head) is not None
+    return b"<pnml" in head[:8192]
+
+
 def list_nets(root: Path) -> list[str]:
-    """Net files under ``root`` (relative paths, sorted; hidden folders and ``.venv`` skipped)."""
+    """Net files under ``root`` (relative paths, sorted; hidden folders and ``.venv`` skipped; files
+    that are not nets — ``services.toml``, ``pyproject.toml``, other XML — left out)."""
     base = root.resolve()
     found: list[str] = []
     for folder, dirs, files in os.walk(base):
         dirs[:] = sorted(d for d in dirs if not d.startswith(".") and d not in ("node_modules", "__pycache__"))
         for name in sorted(files):
-            if Path(name).suffix.lower() in SUFFIXES and not name.startswith("."):
-                found.append(str((Path(folder) / name).relative_to(base)))
+            path = Path(folder) / name
+            if path.suffix.lower() in SUFFIXES and not name.startswith(".") and is_net_file(path):
+                found.append(str(path.relative_to(base)))
                 if len(found) >= MAX_LISTED:
                     return found
     return found
@@ -101,9 +124,11 @@ def open_net(path: Path, location: Any = None, *, shown_as: str | None = None) -
         FileRefused: the file cannot be read, or is not a net file that opens.
     """
     name = shown_as or path.name
+    text = None
     try:
         if path.suffix.lower() == ".toml":
-            draft = draft_of_text(read_text(path))
+            text = read_text(path)
+            draft = draft_of_text(text)
         else:
             from coordinator.netfile.pnml import load_pnml
 
@@ -113,25 +138,31 @@ def open_net(path: Path, location: Any = None, *, shown_as: str | None = None) -
             from None
     had = bool(draft_layout(draft))
     draft = with_layout(draft)
-    validation = validate_draft(draft, name, location)
+    # the file's own problems at the file's own lines (what petrobot check FILE says)
+    validation = validate_text(text, name, draft, location) if text is not None else \
+        validate_draft(draft, name, location, lines=False)
     return {"path": shown_as or str(path), "name": name, "draft": draft, "validation": validation.to_json(),
             "laid_out": not had}
 
 
-def save_draft(draft: dict[str, Any], target: Path, location: Any = None) -> dict[str, Any]:
+def save_draft(draft: dict[str, Any], target: Path, location: Any = None, *, shown_as: str | None = None
+               ) -> dict[str, Any]:
     """Write a draft to ``target`` in one step; a valid net is written in the canonical form with
     its positions, a draft with problems as drawn (so nothing is lost).
 
     Returns:
-        ``{"path", "validation"}`` (the problems name ``target``'s lines).
+        ``{"path", "validation"}`` (the problems name the file, as ``shown_as`` when given, and the
+        lines of the file as written).
 
     Raises:
         FileRefused: the file cannot be written.
     """
-    validation = validate_draft(draft, target.name, location)
+    validation = validate_draft(draft, shown_as or target.name, location)
     text = validation.text
     if validation.net is not None:
         text = dump_net(validation.net, draft_layout(draft))
+        # the problems (placement only: the net loads) at the lines of the file as written
+        validation = validate_text(text, shown_as or target.name, draft, location)
     if target.suffix.lower() != ".toml":
         if validation.net is None:
             raise FileRefused(f"{target.name}: a draft with problems can only be saved as .toml")

@@ -235,8 +235,9 @@ def parse_client_message(data: str | bytes) -> ClientMessage:
                 raise ProtocolViolation(f"start.max_seconds must be a number in (0, {MAX_RUN_SECONDS:g}] or null")
             fields["max_seconds"] = None if limit is None else float(limit)
     elif kind == "validate":
-        _keys(msg, {"type", "id", "draft"}, {"type", "id", "draft"})
+        _keys(msg, {"type", "id", "draft", "name"}, {"type", "id", "draft"})
         fields["draft"] = _draft(msg["draft"])
+        fields["name"] = None if msg.get("name") is None else _str(msg["name"], "validate.name", 1024)
     elif kind == "save":
         _keys(msg, {"type", "id", "draft", "path"}, {"type", "id", "draft", "path"})
         fields["draft"] = _draft(msg["draft"])

@@ -11,8 +11,12 @@ Record arrays (``t`` is the Unix time the record was written, seconds)::
 
     ["f", seq, transition, {consumed}, {produced}, t, pulse, [instances consumed]]
     ["s", instance, task, place, action, node, t]
-    ["r", instance, task, action, node, status, outcome, reason, wall_s, t]
-    ["o", command, place, count, accepted, reason, t]
+    ["r", instance, task, action, node, status, outcome, reason, wall_s, t, forced]
+    ["o", command, place, count, accepted, reason, t, detail]
+
+``forced`` is true for an outcome the operator forced (a drill: no measured result); ``detail`` is
+what an operator command carried besides a place and a count (a breakpoint, an injected event, a
+forced outcome; a ``pause`` a breakpoint made carries it), or null.
 
 Pure apart from the reader it is given.
 """
@@ -58,9 +62,9 @@ def _record(rec: Any) -> list[Any]:
         return ["s", rec.instance, rec.task, rec.place, rec.action, rec.node, rec.t_wall]
     if isinstance(rec, ResultRow):
         return ["r", rec.instance, rec.task, rec.action, rec.node, rec.status.value, rec.outcome, rec.reason,
-                rec.wall_s, rec.t_wall]
+                rec.wall_s, rec.t_wall, rec.forced]
     if isinstance(rec, OperatorRow):
-        return ["o", rec.command, rec.place, rec.count, rec.accepted, rec.reason, rec.t_wall]
+        return ["o", rec.command, rec.place, rec.count, rec.accepted, rec.reason, rec.t_wall, rec.detail]
     raise TypeError(type(rec).__name__)
 
 

@@ -44,7 +44,7 @@ from aiohttp import WSCloseCode, WSMsgType, web
 from coordinator.errors import JournalError
 from coordinator.operator import Command, OperatorCommand
 from coordinator.web.analysis import run_analysis
-from coordinator.web.draft import validate_draft
+from coordinator.web.draft import UNSAVED, validate_draft
 from coordinator.web.files import (
     FileRefused,
     export_draft,
@@ -690,7 +690,8 @@ class _Page:
         elif msg.type == "command":
             self._command(msg)
         elif msg.type == "validate":
-            result = await asyncio.to_thread(validate_draft, msg.fields["draft"], "drawing.toml", server.config.location)
+            result = await asyncio.to_thread(validate_draft, msg.fields["draft"], msg.fields.get("name") or UNSAVED,
+                                             server.config.location)
             self.reply(msg, ok=True, validation=result.to_json())
         elif msg.type == "save":
             await self._save(msg)
@@ -751,7 +752,8 @@ class _Page:
             return
         try:
             target = inside(server.root, msg.fields["path"], suffixes=(".toml", ".pnml"))
-            saved = await asyncio.to_thread(save_draft, msg.fields["draft"], target, server.config.location)
+            saved = await asyncio.to_thread(save_draft, msg.fields["draft"], target, server.config.location,
+                                            shown_as=server._shown(target))
         except FileRefused as exc:
             self.reply(msg, ok=False, reason=str(exc))
             return

@@ -1,7 +1,7 @@
 // Design: drawing the net with the mouse (paper section 5): tools, the element inspector, the tasks editor.
 // Every change goes through app.edit(fn), which records undo, redraws and asks the server to validate.
 
-import { addArc, deleteElements, findArc, findNode, freshId, NAME_RE, parseEvent, renameNode } from "./net.js";
+import { addArc, arcKey, arcKind, deleteElements, findArc, findNode, freshId, NAME_RE, parseEvent, renameNode } from "./net.js";
 import { el, field } from "./ui.js";
 
 const KINDS = ["plain", "resource", "primitive_task", "control"];
@@ -12,14 +12,20 @@ export function initEditor(app) {
   let tool = "select";
   let arcSource = null;
 
+  const ARC_TOOLS = { arc: "normal", inhibitor: "inhibitor", reset: "reset" };
+  const ARC_HINTS = { arc: "drag from the source of the arc to its target (or click one, then the other)",
+                      inhibitor: "drag from a place to the transition it inhibits (or click one, then the other)",
+                      reset: "drag from a place to the transition that empties it (or click one, then the other)" };
+
   function setTool(name) {
     tool = name;
     document.querySelectorAll("#tools .tool").forEach((b) => b.classList.toggle("active", b.dataset.tool === name));
     document.body.className = document.body.className.replace(/\btool-\S+/g, "").trim() + ` tool-${name}`;
     clearArcSource();
+    // with an arc tool a drag draws an arc: nodes are not moved
+    cy.autoungrabify(name in ARC_TOOLS);
     const hints = { place: "click on the canvas to add a place", transition: "click on the canvas to add a transition",
-                    arc: "click the source of the arc, then its target", inhibitor: "click a place, then the transition it inhibits",
-                    select: "" };
+                    ...ARC_HINTS, select: "" };
     app.hint(hints[name] || "");
   }
   function clearArcSource() { if (arcSource) cy.getElementById(arcSource).removeClass("arc-source"); arcSource = null; }
@@ -46,21 +52,62 @@ export function initEditor(app) {
       return;
     }
     const target = ev.target;
-    if ((tool === "arc" || tool === "inhibitor") && target.isNode() && !target.hasClass("badge")) {
+    if (tool in ARC_TOOLS && target.isNode()) {
+      if (dragged) { dragged = false; return; }  // that tap ended a drag that drew the arc already
       if (!arcSource) {
-        if (tool === "inhibitor" && target.data("kind") !== "place") { app.message("an inhibitor arc starts at a place", "bad"); return; }
+        if (tool !== "arc" && target.data("kind") !== "place") { app.message(`a${tool === "inhibitor" ? "n inhibitor" : " reset"} arc starts at a place`, "bad"); return; }
         arcSource = target.id();
         target.addClass("arc-source");
         app.hint(`now click the ${target.data("kind") === "place" ? "transition" : "place"} the arc goes to`);
         return;
       }
-      const from = arcSource, to = target.id();
+      const from = arcSource;
       clearArcSource();
-      let error = null;
-      app.edit((d) => { error = addArc(d, from, to, tool === "inhibitor"); return error === null; });
-      if (error) app.message(error, "bad");
-      app.hint(tool === "inhibitor" ? "click a place, then the transition it inhibits" : "click the source of the arc, then its target");
+      drawArc(from, target.id());
     }
+  });
+
+  function drawArc(from, to) {
+    let error = null;
+    app.edit((d) => { error = addArc(d, from, to, ARC_TOOLS[tool]); return error === null; });
+    if (error) app.message(error, "bad");
+    else app.message(`${ARC_TOOLS[tool] === "normal" ? "arc" : ARC_TOOLS[tool] + " arc"} ${from} \u2192 ${to}`);
+    app.hint(ARC_HINTS[tool] || "");
+  }
+
+  // the Arc tools' drag: from a node to another draws an arc, a rubber band follows the pointer
+  const rubber = document.getElementById("rubber");
+  const band = rubber.querySelector("line");
+  let dragFrom = null, dragged = false;
+  cy.on("tapstart", "node", (ev) => {
+    if (app.mode !== "design" || !(tool in ARC_TOOLS)) return;
+    dragFrom = ev.target.id();
+    dragged = false;
+  });
+  cy.on("tapdrag", (ev) => {
+    if (dragFrom === null) return;
+    const a = cy.getElementById(dragFrom).renderedPosition();
+    const b = ev.renderedPosition;
+    if (!b || (!dragged && Math.hypot(b.x - a.x, b.y - a.y) < 8)) return;
+    dragged = true;
+    band.setAttribute("x1", a.x); band.setAttribute("y1", a.y); band.setAttribute("x2", b.x); band.setAttribute("y2", b.y);
+    rubber.hidden = false;
+  });
+  cy.on("tapend", (ev) => {
+    const from = dragFrom;
+    dragFrom = null;
+    rubber.hidden = true;
+    if (from === null || !dragged) { dragged = false; return; }
+    const at = ev.renderedPosition || ev.position;
+    const over = cy.nodes().filter((n) => {
+      if (n.id() === from || n.style("display") === "none") return false;
+      const bb = n.renderedBoundingBox({ includeLabels: false });
+      return at && at.x >= bb.x1 - 4 && at.x <= bb.x2 + 4 && at.y >= bb.y1 - 4 && at.y <= bb.y2 + 4;
+    });
+    clearArcSource();
+    if (over.empty()) { dragged = false; app.message("drop the arc on a place or a transition"); return; }
+    drawArc(from, over[0].id());
+    setTimeout(() => { dragged = false; }, 0);
   });
 
   // moving nodes: positions are part of the file (any mode; not structural)
@@ -101,7 +148,7 @@ export function initEditor(app) {
     if (ev.ctrlKey || ev.metaKey || ev.altKey) return;
     if (ev.key === "Delete" || ev.key === "Backspace") { deleteSelection(); ev.preventDefault(); return; }
     if (ev.key === "Escape") { clearArcSource(); setTool("select"); return; }
-    const keys = { v: "select", p: "place", t: "transition", a: "arc", i: "inhibitor" };
+    const keys = { v: "select", p: "place", t: "transition", a: "arc", i: "inhibitor", r: "reset" };
     if (app.mode === "design" && keys[ev.key]) setTool(keys[ev.key]);
     if (ev.key === "f") app.graph.fit();
   });
@@ -138,11 +185,24 @@ export function initEditor(app) {
       }
       if (Object.keys(out).length) d.net.home = out; else delete d.net.home;
     }), "place=N, ... (the home marking)")));
+    const topics = [...new Set(draft.transitions.flatMap((t) => (t.events || []).filter((e) => e.startsWith("ext:"))))];
+    if (topics.length) {
+      const inject = new Set(draft.operator?.inject || []);
+      const boxes = topics.map((e) => {
+        const box = el("input", { type: "checkbox" });
+        box.checked = inject.has(e);
+        box.disabled = readOnly();
+        box.addEventListener("change", () => app.edit((d) => setRights(d, "inject", e, box.checked)));
+        return el("label", { class: "chip" }, box, " ", e);
+      });
+      panel.append(field("operator may raise", el("div", { class: "chips" }, ...boxes)));
+      panel.append(el("p", { class: "small" }, "[operator] inject: external events the operator may raise from the console (drills); the outcomes they may force are set per task in the Tasks tab"));
+    }
     const counts = `${draft.places.length} places, ${draft.transitions.length} transitions, ${draft.arcs.length} arcs, ` +
       `${Object.keys(draft.tasks).length} primitive tasks`;
     panel.append(el("p", { class: "small" }, counts));
     panel.append(el("p", { class: "small" }, app.mode === "design"
-      ? "Select an element to edit it. Tools: V select, P place, T transition, A arc, I inhibitor arc; Delete removes; Ctrl+Z / Ctrl+Y undo and redo."
+      ? "Select an element to edit it. Tools: V select, P place, T transition, A arc, I inhibitor arc, R reset arc (drag from one element to the other); Delete removes; Ctrl+Z / Ctrl+Y undo and redo."
       : app.mode === "live" ? "Following the run. Click a control place to insert or remove tokens; use the bar below to pause, step, resume or abort."
       : "Replaying a run of the journal: move along the timeline below."));
   }
@@ -200,14 +260,22 @@ export function initEditor(app) {
     panel.append(field("events", chips));
     if (!readOnly()) panel.append(field("link event", eventAdder(draft, id)));
     panel.append(field("priority", number(t.priority ?? 0, null, (v) => app.edit((d) => set(findNode(d, id).item, "priority", v, 0)))));
-    panel.append(field("weight", number(t.weight ?? 1, null, (v) => app.edit((d) => set(findNode(d, id).item, "weight", v, 1)), "any")));
+    panel.append(field("weight", expression(t.weight ?? 1, "a number > 0 or a marking expression, e.g. 1 + #queue",
+      (v) => app.edit((d) => set(findNode(d, id).item, "weight", v, 1)))));
     panel.append(field("timing", select(["immediate", "exponential"], t.kind || "immediate", (v) => app.edit((d) => {
       const it = findNode(d, id).item;
-      if (v === "immediate") { delete it.kind; delete it.rate; } else { it.kind = v; if (!it.rate) it.rate = 1.0; }
+      if (v === "immediate") { delete it.kind; delete it.rate; delete it.servers; } else { it.kind = v; if (!it.rate) it.rate = 1.0; }
     }))));
     if (t.kind === "exponential") {
-      panel.append(field("rate (1/s)", number(t.rate ?? 1, null, (v) => app.edit((d) => set(findNode(d, id).item, "rate", v)), "any")));
+      panel.append(field("rate (1/s)", expression(t.rate ?? 1, "a number > 0 (1/s per server) or a marking expression, e.g. min(#q, 3) * 2",
+        (v) => app.edit((d) => set(findNode(d, id).item, "rate", v)))));
+      const servers = t.servers ?? 1;
+      panel.append(field("servers", input(String(servers), (v) => app.edit((d) => {
+        const text = v.trim();
+        set(findNode(d, id).item, "servers", text === "infinite" ? "infinite" : text === "" ? null : Number.isInteger(Number(text)) ? Number(text) : text, 1);
+      }), "1, 2, ... or infinite")));
     }
+    panel.append(el("p", { class: "small" }, "rates and weights: a number, or a marking expression (#place, + - * /, min, max) checked like petrobot check (docs/netfile.md)"));
     const hidden = el("input", { type: "checkbox" });
     hidden.checked = t.hidden === true;
     hidden.disabled = readOnly();
@@ -221,18 +289,30 @@ export function initEditor(app) {
   function renderArcForm(draft, key) {
     const arc = findArc(draft, key);
     if (!arc) return;
+    const kind = arcKind(arc);
     panel.append(el("h3", {}, `Arc ${arc.from} \u2192 ${arc.to}`));
-    panel.append(field(arc.inhibitor ? "threshold" : "weight", number(arc.weight ?? 1, 1, (v) => app.edit((d) => {
-      const a = findArc(d, key); if (a) a.weight = v ?? 1; }))));
-    const inh = el("input", { type: "checkbox" });
-    inh.checked = arc.inhibitor === true;
-    inh.disabled = readOnly() || findNode(draft, arc.from)?.kind !== "place";
-    inh.addEventListener("change", () => app.edit((d) => {
-      const a = findArc(d, key); if (!a) return;
-      if (inh.checked) a.inhibitor = true; else delete a.inhibitor;
+    const fromPlace = findNode(draft, arc.from)?.kind === "place";
+    const kinds = fromPlace ? ["normal", "inhibitor", "reset"] : ["normal"];
+    panel.append(field("kind", select(kinds, kind, (v) => {
+      let moved = null;
+      app.edit((d) => {
+        const a = findArc(d, key); if (!a) return false;
+        delete a.inhibitor; delete a.reset;
+        if (v === "inhibitor") a.inhibitor = true;
+        if (v === "reset") { a.reset = true; delete a.weight; } else if (a.weight === undefined) a.weight = 1;
+        if (d.arcs.filter((x) => arcKey(x) === arcKey(a)).length > 1) { app.message(`there is such an arc ${a.from} -> ${a.to} already`, "bad"); return false; }
+        moved = arcKey(a);
+      });
       cy.elements().unselect();
-    }));
-    panel.append(field("inhibitor", el("label", {}, inh, " disables the transition while the place holds \u2265 threshold tokens")));
+      if (moved) cy.getElementById("arc:" + moved).select();
+    })));
+    if (kind !== "reset") {
+      panel.append(field(kind === "inhibitor" ? "threshold" : "weight", number(arc.weight ?? 1, 1, (v) => app.edit((d) => {
+        const a = findArc(d, key); if (a) a.weight = v ?? 1; }))));
+    }
+    panel.append(el("p", { class: "small" }, { normal: "consumes (input) or produces (output) weight tokens",
+      inhibitor: "disables the transition while the place holds \u2265 threshold tokens",
+      reset: "firing the transition empties the place, whatever it holds (no weight; docs/netfile.md, Reset arcs)" }[kind]));
   }
 
   function eventAdder(draft, id) {
@@ -291,6 +371,15 @@ export function initEditor(app) {
     x.disabled = readOnly();
     x.addEventListener("change", () => onChange(x.value));
     return x;
+  }
+  /** A number or a marking expression (a string the server parses, as petrobot check does). */
+  function expression(value, placeholder, onChange) {
+    return input(String(value), (v) => {
+      const text = v.trim();
+      if (text === "") { onChange(null); return; }
+      const n = Number(text);
+      onChange(Number.isFinite(n) && /^[-+0-9.eE]+$/.test(text) ? n : text);
+    }, placeholder);
   }
   function number(value, min, onChange, step = "1") {
     const x = el("input", { type: "number", value: String(value), step });
@@ -376,6 +465,18 @@ export function initEditor(app) {
           const l = { ...(d.tasks[name].learner || {}) }; if (v === null) delete l.rate; else l.rate = v; d.tasks[name].learner = l;
         }), "any")));
       }
+      const force = new Set(draft.operator?.force?.[name] || []);
+      const named = [...new Set(draft.transitions.flatMap((t) => (t.events || [])
+        .map((e) => parseEvent(e)).filter((e) => e && e.kind === "int" && e.task === name && !["ok", "error", "success", "failure"].includes(e.outcome))
+        .map((e) => `failure.${e.outcome}`)))];
+      const outcomes = [...new Set(["success", "failure", "error", ...named, ...force])];
+      box.append(field("operator may force", el("div", { class: "chips" }, ...outcomes.map((o) => {
+        const cb = el("input", { type: "checkbox" });
+        cb.checked = force.has(o);
+        cb.disabled = readOnly();
+        cb.addEventListener("change", () => app.edit((d) => setRights(d, "force", o, cb.checked, name)));
+        return el("label", { class: "chip", title: o.includes(".") ? `status ${o.split(".")[0]}, raising int:${name}.${o.split(".")[1]}` : `status ${o}` }, cb, " ", o);
+      }))));
       if (!readOnly()) {
         const rm = el("button", { class: "danger" }, "delete task");
         rm.addEventListener("click", () => app.edit((d) => { delete d.tasks[name]; }));
@@ -408,6 +509,23 @@ export function initEditor(app) {
     }
   }
   app.renderTasks = renderTasks;
+
+  /** Give or take a right of the net's [operator] table (inject an event; force an outcome of a task). */
+  function setRights(d, which, value, on, task = null) {
+    const rights = d.operator || {};
+    if (which === "inject") {
+      const list = new Set(rights.inject || []);
+      if (on) list.add(value); else list.delete(value);
+      if (list.size) rights.inject = [...list]; else delete rights.inject;
+    } else {
+      const force = { ...(rights.force || {}) };
+      const list = new Set(force[task] || []);
+      if (on) list.add(value); else list.delete(value);
+      if (list.size) force[task] = [...list]; else delete force[task];
+      if (Object.keys(force).length) rights.force = force; else delete rights.force;
+    }
+    if (Object.keys(rights).length) d.operator = rights; else delete d.operator;
+  }
 
   function editAction(task, index, change) {
     app.edit((d) => {

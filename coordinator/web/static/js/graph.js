@@ -1,19 +1,27 @@
-// The drawing: cytoscape.js elements made from the draft, tokens as dots, flashes of fired transitions,
-// badges of running actions. The draft stays the one source of truth; sync() makes the drawing follow it.
+// The drawing: cytoscape.js elements made from the draft, with a plane of small page elements over it
+// for everything that changes while a run goes (tokens, flashes of fired transitions, running actions'
+// badges) and for the marks the operator clicks (analyses' numbers linked to their definitions,
+// breakpoints, hidden error branches). The draft stays the one source of truth; sync() makes the
+// drawing follow it.
 //
-// Tokens live on a layer of small HTML elements above cytoscape's canvas, one per marked place, moved
-// with the viewport by one CSS transform: a run that moves tokens hundreds of times a second changes
-// a few small elements per screen frame, and cytoscape's whole-canvas redraw (and the canvas copy the
-// browser makes after it) happens only when the drawing itself changes.
+// The plane is moved with the viewport by one CSS transform: a run that moves tokens and fires
+// transitions hundreds of times a second changes a few small elements per screen frame, and
+// cytoscape's whole-canvas redraw (and the canvas copy the browser makes after it) happens only when
+// the drawing itself changes (an edit, a pan, an analysis shown).
+//
+// Labels: a place shows its id, then its primitive task or a short form of its label; a transition its
+// id, then its events ("names first, events second": the ids the terminal, the journal and the
+// commands use). Tidy lays the net out with ELK's layered algorithm on boxes that hold each node and
+// its label, so that no label overlaps another label or node (labelOverlaps() counts them).
 
 import { arcKey, hiddenSet } from "./net.js";
 
 const PLACE_D = 46;
 const TRANS_W = 46, TRANS_H = 12;
-
+const FONT = 16;             // model units: readable at the zoom Fit gives the paper's nets at 1400x900
 // ---- token images: dots like Fig. 1 for a few tokens, the number beyond
 const tokenCache = new Map();
-function tokenImage(n) {
+export function tokenImage(n) {
   const key = String(n);
   if (tokenCache.has(key)) return tokenCache.get(key);
   const dots = {
@@ -30,27 +38,27 @@ function tokenImage(n) {
 }
 
 function placeLabel(p) {
-  const name = p.label || p.id;
-  return p.kind === "primitive_task" || (p.task && !p.kind) ? `${name}\n[${p.task || "?"}]` : name;
+  // one line: the id (the terminal's, the journal's, the commands'), the task of a primitive-task
+  // place; the label in full on hover
+  return placeKind(p) === "primitive_task" ? `${p.id} [${p.task || "?"}]` : p.id;
 }
 
 function transitionLabel(t, mode) {
   const events = (t.events || []).join("  ");
-  const name = t.label || t.id;
-  if (mode === "events") return events || name;
-  if (mode === "names") return name;
-  return events ? `${events}\n${name}` : name;
+  if (mode === "events") return events || t.id;
+  if (mode === "names") return t.id;
+  return events ? `${t.id}\n${events}` : t.id;     // names first, events second
 }
 
-/** Cycle the transition labels: events (Fig. 1) -> events and names -> names. */
-export function nextLabelMode(mode) { return { events: "both", both: "names", names: "events" }[mode] || "events"; }
+/** Cycle the transition labels: names and events -> names -> events (as in the paper's Fig. 1). */
+export function nextLabelMode(mode) { return { both: "names", names: "events", events: "both" }[mode] || "both"; }
 
 function placeKind(p) { return p.kind || (p.task ? "primitive_task" : "plain"); }
 
 const STYLE = [
-  { selector: "node", style: { "font-size": 11, color: "#1d232b", "text-wrap": "wrap", "text-max-width": 170,
-                               "min-zoomed-font-size": 6, "text-background-color": "#fff", "text-background-opacity": 0.8,
-                               "text-background-padding": 1 } },
+  { selector: "node", style: { "font-size": FONT, color: "#1d232b", "text-wrap": "wrap", "text-max-width": 190,
+                               "min-zoomed-font-size": 5, "text-background-color": "#fff", "text-background-opacity": 0.85,
+                               "text-background-padding": 1.5, "text-background-shape": "roundrectangle" } },
   { selector: "node.place", style: {
       shape: "ellipse", width: PLACE_D, height: PLACE_D, "background-color": "#fff", "border-width": 1.6,
       "border-color": "#555", label: "data(label)", "text-valign": "bottom", "text-margin-y": 4 } },
@@ -62,32 +70,33 @@ const STYLE = [
   { selector: "node.transition", style: {
       shape: "rectangle", width: TRANS_W, height: TRANS_H, "background-color": "#2b2f36", "border-width": 0,
       label: "data(label)", "text-halign": "right", "text-valign": "center", "text-margin-x": 6,
-      "font-size": 10.5, color: "#3a4450" } },
+      "text-justification": "left", color: "#27303a" } },
   { selector: "node.transition.exponential", style: { "background-color": "#fff", "border-width": 1.6, "border-color": "#2b2f36" } },
-  { selector: "node.transition.fired", style: { "background-color": "#ff8c00", "underlay-color": "#ff8c00",
-                                                "underlay-opacity": 0.35, "underlay-padding": 7, "underlay-shape": "round-rectangle" } },
-  { selector: "node.transition.enabled", style: { "underlay-color": "#1a7f37", "underlay-opacity": 0.18, "underlay-padding": 5 } },
   { selector: ".hidden-branch", style: { opacity: 0.55 } },
   { selector: "node.transition.hidden-branch", style: { "background-color": "#8c959f", "border-style": "dashed" } },
   { selector: "edge", style: {
       width: 1.5, "line-color": "#5b6570", "target-arrow-color": "#5b6570", "target-arrow-shape": "triangle",
-      "arrow-scale": 0.9, "curve-style": "bezier", label: "data(label)", "font-size": 10, color: "#1d232b",
+      "arrow-scale": 0.9, "curve-style": "bezier", label: "data(label)", "font-size": 11, color: "#1d232b",
       "text-background-color": "#fff", "text-background-opacity": 1, "text-background-padding": 1 } },
   { selector: "edge.back", style: { "curve-style": "unbundled-bezier", "control-point-distances": "data(bend)",
                                     "control-point-weights": 0.5 } },
   { selector: "edge.inhibitor", style: { "target-arrow-shape": "circle", "target-arrow-fill": "hollow", "arrow-scale": 1.1 } },
+  { selector: "edge.reset", style: { "line-style": "dashed", "target-arrow-shape": "tee", "line-dash-pattern": [6, 3],
+                                     "line-color": "#7a4fb0", "target-arrow-color": "#7a4fb0" } },
   { selector: "edge.hidden-branch", style: { "line-style": "dashed", "line-color": "#8c959f", "target-arrow-color": "#8c959f" } },
-  { selector: "node.badge", style: {
-      width: 1, height: 1, "background-opacity": 0, "border-width": 0, label: "data(label)", "text-halign": "right",
-      "text-valign": "center", "font-size": 10, color: "#7a3e00", "text-background-color": "#fff7e6",
-      "text-background-opacity": 0.95, "text-background-padding": 3, "text-border-color": "#f0b35a",
-      "text-border-width": 1, "text-border-opacity": 1, "text-wrap": "wrap", "text-max-width": 230, events: "no" } },
-  { selector: "node.badge.latched", style: { color: "#0b4f8a", "text-background-color": "#eef6ff", "text-border-color": "#7fb0e0" } },
-  { selector: "node.badge.failing", style: { color: "#a40e26", "text-background-color": "#fff0f0", "text-border-color": "#cf222e" } },
   { selector: "node.place.failing", style: { "border-color": "#cf222e", "underlay-color": "#cf222e", "underlay-opacity": 0.25,
                                              "underlay-padding": 8, "underlay-shape": "ellipse" } },
   { selector: "node.transition.failing", style: { "background-color": "#cf222e", "underlay-color": "#cf222e",
                                                   "underlay-opacity": 0.22, "underlay-padding": 6 } },
+  // analyses drawn on the net (analysis.js)
+  { selector: "node.heat", style: { "underlay-color": "data(heat)", "underlay-opacity": 0.75, "underlay-padding": 9 } },
+  { selector: "node.place.heat", style: { "underlay-shape": "ellipse" } },
+  { selector: "node.bottleneck", style: { "underlay-color": "#cf222e", "underlay-opacity": 0.9, "underlay-padding": 11 } },
+  { selector: "node.transition.dead", style: { "background-color": "#fff", "border-width": 2, "border-color": "#cf222e",
+                                               "border-style": "dashed" } },
+  { selector: "node.transition.notlive", style: { "border-width": 2, "border-color": "#d46b08" } },
+  { selector: ".inv", style: { "underlay-color": "#8250df", "underlay-opacity": 0.45, "underlay-padding": 9 } },
+  { selector: "edge.trace", style: { "line-color": "#cf222e", "target-arrow-color": "#cf222e", width: 3 } },
   { selector: ".problem", style: { "underlay-color": "#cf222e", "underlay-opacity": 0.28, "underlay-padding": 6 } },
   { selector: "edge.problem", style: { "line-color": "#cf222e", "target-arrow-color": "#cf222e" } },
   { selector: ":selected", style: { "overlay-color": "#1f6feb", "overlay-opacity": 0.18, "overlay-padding": 6 } },
@@ -98,18 +107,19 @@ const STYLE = [
 
 export class Graph {
   constructor(container) {
-    if (window.cytoscapeElk && !Graph.elkRegistered) { cytoscape.use(window.cytoscapeElk); Graph.elkRegistered = true; }
     this.cy = cytoscape({ container, style: STYLE, minZoom: 0.05, maxZoom: 4,
                           boxSelectionEnabled: true, selectionType: "single", textureOnViewport: false,
                           pixelRatio: "auto" });
     this.showHidden = true;
-    this.labelMode = "events";   // like the paper's Fig. 1: transitions named by their events
+    this.labelMode = "both";      // names first, events second
     this.tokens = new Map();      // place id -> shown count
-    this.tokenLayer = new TokenLayer(this.cy, container);
+    this.plane = new Plane(this.cy, container);
     this.flashTimer = null;
     this.flashing = new Set();
-    this.badges = new Map();      // place id -> text
+    this.badges = new Map();      // place id -> {text, latched, failing}
     this.failing = { places: [], transitions: [] };  // a run's failing primitive tasks: places, error branches
+    this.marks = [];              // [{key, node, text, href, title, cls, at}] drawn beside nodes
+    this.onReveal = null;         // called when the operator clicks a hidden-branch mark
     this.draft = null;
   }
 
@@ -136,12 +146,12 @@ export class Graph {
       if (!wanted.has(a.from) || !wanted.has(a.to)) continue;
       const key = "arc:" + arcKey(a);
       const w = a.weight ?? 1;
-      wanted.set(key, { group: "edges", data: { id: key, source: a.from, target: a.to, label: w !== 1 ? String(w) : "",
-        kind: "arc", key: arcKey(a) }, classes: `${a.inhibitor ? "inhibitor" : ""}${hiddenOf(a) ? " hidden-branch" : ""}` });
+      const kind = a.inhibitor ? "inhibitor" : a.reset ? "reset" : "";
+      wanted.set(key, { group: "edges", data: { id: key, source: a.from, target: a.to,
+        label: w !== 1 && !a.reset ? String(w) : "", kind: "arc", key: arcKey(a) }, classes: `${kind}${hiddenOf(a) ? " hidden-branch" : ""}` });
     }
     cy.batch(() => {
       cy.elements().forEach((el) => {
-        if (el.hasClass("badge")) return;
         const want = wanted.get(el.id());
         const sameEnds = !want || want.group !== "edges" ||
           (el.data("source") === want.data.source && el.data("target") === want.data.target);
@@ -153,7 +163,9 @@ export class Graph {
           cy.add(want);
         } else {
           el.data(want.data);
-          el.classes(want.classes);
+          const keep = ["failing", "heat", "bottleneck", "dead", "notlive", "inv", "trace", "problem", "busy", "arc-source"]
+            .filter((c) => el.hasClass(c));
+          el.classes(want.classes + (keep.length ? " " + keep.join(" ") : ""));
           if (want.group === "nodes") {
             const p = el.position();
             if (Math.abs(p.x - want.position.x) > 0.01 || Math.abs(p.y - want.position.y) > 0.01) el.position(want.position);
@@ -168,6 +180,7 @@ export class Graph {
       .map((p) => [p.id, p.tokens]));
     this.setMarking(start, true);
     this.refreshBadges();
+    this.refreshMarks();
     if (fit) this.fit();
   }
 
@@ -175,35 +188,35 @@ export class Graph {
    *  bow out towards the nearer side of the drawing instead of cutting through it. */
   bendBackArcs() {
     const cy = this.cy;
-    const nodes = cy.nodes().not(".badge");
+    const nodes = cy.nodes();
     if (!nodes.length || cy.edges().length > 3000) return;
-    const bb = nodes.boundingBox();
+    const bb = nodes.boundingBox({ includeLabels: false });
     const mid = (bb.x1 + bb.x2) / 2;
     cy.edges().forEach((e) => {
       const a = e.source().position(), b = e.target().position();
       const rise = a.y - b.y;
       const length = Math.hypot(rise, b.x - a.x);
       if (rise < 160 || length < 1) { e.removeClass("back"); return; }
-      // outward: the side of the line away from the middle of the drawing
-      const outward = (a.x + b.x) / 2 >= mid ? 1 : -1;
-      // cytoscape's distances are perpendicular to source -> target; a positive one bows a climbing
-      // arc to the right on screen
-      const sign = outward;
-      e.data("bend", sign * Math.min(220, 0.25 * length));
+      const outward = (a.x + b.x) / 2 >= mid ? 1 : -1;   // the side of the line away from the middle
+      e.data("bend", outward * Math.min(220, 0.25 * length));
       e.addClass("back");
     });
   }
 
-  fit() { this.cy.fit(this.cy.elements(":visible").not(".badge"), 40); if (this.cy.zoom() > 1.6) { this.cy.zoom(1.6); this.cy.center(); } }
+  /** Fit the visible net in the canvas (labels included), never zoomed in beyond 1.6. */
+  fit() {
+    const cy = this.cy;
+    const shown = cy.elements(":visible");
+    if (!shown.length) return;
+    cy.fit(shown, 24);
+    if (cy.zoom() > 1.6) { cy.zoom(1.6); cy.center(shown); }
+  }
 
   applyHidden() {
     const show = this.showHidden;
     this.cy.elements(".hidden-branch").style("display", show ? "element" : "none");
-    this.tokenLayer.refresh();
-    this.cy.nodes(".badge").forEach((b) => {
-      const place = this.cy.getElementById(b.data("place"));
-      b.style("display", place.nonempty() && place.style("display") !== "none" ? "element" : "none");
-    });
+    this.plane.refresh();
+    this.refreshMarks();
   }
 
   setShowHidden(show) { this.showHidden = show; this.cy.batch(() => this.applyHidden()); }
@@ -218,30 +231,25 @@ export class Graph {
     for (const [id, n] of Object.entries(changes)) {
       if (this.tokens.get(id) === n) continue;
       if (n > 0) this.tokens.set(id, n); else this.tokens.delete(id);
-      this.tokenLayer.show(id, n);
+      this.plane.token(id, n);
     }
   }
 
-  /** Flash the given transitions for a moment (coalesced: one timer). */
+  /** Flash the given transitions for a moment (page elements over the canvas; one timer). */
   flash(ids) {
-    const cy = this.cy;
-    const lit = ids.filter((id) => !this.flashing.has(id));  // the others are still lit from an earlier frame
-    if (lit.length) {
-      cy.batch(() => {
-        for (const id of lit) {
-          this.flashing.add(id);
-          cy.getElementById(id).addClass("fired");
-        }
-      });
+    for (const id of ids) {
+      if (this.flashing.has(id)) continue;  // still lit from an earlier frame
+      this.flashing.add(id);
+      this.plane.flash(id, true);
     }
     clearTimeout(this.flashTimer);
     this.flashTimer = setTimeout(() => {
-      cy.batch(() => { for (const id of this.flashing) cy.getElementById(id).removeClass("fired"); });
+      for (const id of this.flashing) this.plane.flash(id, false);
       this.flashing.clear();
     }, 280);
   }
 
-  /** Badges beside places: Map place id -> {text, latched}. */
+  /** Badges beside places: Map place id -> {text, latched, failing}. */
   setBadges(map) {
     this.badges = map;
     this.refreshBadges();
@@ -249,28 +257,14 @@ export class Graph {
 
   refreshBadges() {
     const cy = this.cy;
-    cy.batch(() => {
-      cy.nodes(".badge").forEach((b) => { if (!this.badges.has(b.data("place"))) b.remove(); });
-      cy.nodes(".place.busy").forEach((n) => {
-        const badge = this.badges.get(n.id());
-        if (!badge || badge.latched || badge.failing) n.removeClass("busy");
-      });
-      for (const [pid, badge] of this.badges) {
-        const place = cy.getElementById(pid);
-        if (place.empty()) continue;
-        const id = "badge:" + pid;
-        let b = cy.getElementById(id);
-        const p = place.position();
-        const at = { x: p.x + PLACE_D / 2 + 6, y: p.y - PLACE_D / 2 - 4 };
-        if (b.empty()) b = cy.add({ group: "nodes", data: { id, place: pid, label: badge.text }, position: at,
-                                    classes: "badge", selectable: false, grabbable: false, locked: true });
-        else { b.data("label", badge.text); b.unlock(); b.position(at); b.lock(); }
-        b.toggleClass("latched", !!badge.latched);
-        b.toggleClass("failing", !!badge.failing);
-        place.toggleClass("busy", !badge.latched && !badge.failing);
-      }
-      this.applyHidden();
-    });
+    this.plane.badges(this.badges);
+    const busy = [...this.badges].filter(([, b]) => !b.latched && !b.failing).map(([id]) => id);
+    const now = new Set(busy);
+    const stale = cy.nodes(".place.busy").filter((n) => !now.has(n.id()));
+    const fresh = busy.filter((id) => !cy.getElementById(id).hasClass("busy"));
+    if (stale.length || fresh.length) {
+      cy.batch(() => { stale.removeClass("busy"); for (const id of fresh) cy.getElementById(id).addClass("busy"); });
+    }
   }
 
   /** Mark the places of primitive tasks whose last results were errors, and their error branches. */
@@ -282,7 +276,7 @@ export class Graph {
   applyFailing() {
     const cy = this.cy;
     const want = new Set([...this.failing.places, ...this.failing.transitions]);
-    cy.nodes(".failing").not(".badge").forEach((n) => { if (!want.has(n.id())) n.removeClass("failing"); });
+    cy.nodes(".failing").forEach((n) => { if (!want.has(n.id())) n.removeClass("failing"); });
     for (const id of want) cy.getElementById(id).addClass("failing");
   }
 
@@ -298,23 +292,175 @@ export class Graph {
     });
   }
 
+  /** Marks beside nodes (analyses, breakpoints): [{key, node, text, href?, title?, cls?, at?, onclick?}]. */
+  setMarks(group, marks) {
+    this.marks = this.marks.filter((m) => m.group !== group).concat(marks.map((m) => ({ ...m, group })));
+    this.refreshMarks();
+  }
+
+  refreshMarks() {
+    const chips = [];
+    if (!this.showHidden && this.draft) {
+      // hidden error branches stay one click away: a mark on each place whose branches are hidden
+      const hidden = hiddenSet(this.draft);
+      const count = new Map();
+      for (const a of this.draft.arcs) {
+        if (hidden.transitions.has(a.to) && !hidden.places.has(a.from)) count.set(a.from, (count.get(a.from) || 0) + 1);
+      }
+      for (const [place, n] of count) {
+        chips.push({ group: "hidden", key: `hidden:${place}`, node: place, at: "corner-left", cls: "reveal",
+                     text: `\u2295${n}`, title: `${n} hidden error-recovery branch${n === 1 ? "" : "es"} leave ${place}: click to show them`,
+                     onclick: () => { this.setShowHidden(true); if (this.onReveal) this.onReveal(place); } });
+      }
+    }
+    this.plane.marks([...this.marks, ...chips]);
+  }
+
   positions() {
     const out = {};
-    this.cy.nodes().not(".badge").forEach((n) => { const p = n.position(); out[n.id()] = [Math.round(p.x * 10) / 10, Math.round(p.y * 10) / 10]; });
+    this.cy.nodes().forEach((n) => { const p = n.position(); out[n.id()] = [Math.round(p.x * 10) / 10, Math.round(p.y * 10) / 10]; });
     return out;
   }
 
-  /** Lay the drawing out with ELK (layered, top to bottom); resolves with the new positions. */
-  tidy() {
-    return new Promise((resolve) => {
-      const eles = this.cy.elements().not(".badge");
-      const layout = eles.layout({ name: "elk", fit: true, padding: 40, nodeDimensionsIncludeLabels: false,
-        elk: { algorithm: "layered", "elk.direction": "DOWN", "elk.spacing.nodeNode": 50,
-               "elk.layered.spacing.nodeNodeBetweenLayers": 55, "elk.layered.nodePlacement.strategy": "BRANDES_KOEPF",
-               "elk.layered.cycleBreaking.strategy": "DEPTH_FIRST" } });
-      layout.one("layoutstop", () => { this.refreshBadges(); resolve(this.positions()); });
-      layout.run();
+  /** Every node's body and label boxes (model units), the visible ones. */
+  boxes() {
+    const out = [];
+    this.cy.nodes(":visible").forEach((n) => {
+      const body = n.boundingBox({ includeLabels: false, includeOverlays: false, includeUnderlays: false });
+      const label = n.data("label") ? n.boundingBox({ includeNodes: false, includeEdges: false, includeLabels: true,
+                                                      includeOverlays: false, includeUnderlays: false }) : null;
+      out.push({ id: n.id(), body, label: label && label.w > 0 ? label : null });
     });
+    this.cy.edges(":visible").forEach((e) => {
+      if (!e.data("label")) return;
+      const label = e.boundingBox({ includeNodes: false, includeEdges: false, includeLabels: true, includeOverlays: false });
+      if (label.w > 0) out.push({ id: e.id(), body: null, label, edge: [e.source().id(), e.target().id()] });
+    });
+    return out;
+  }
+
+  /** Labels overlapped by another label or by a node (pairs counted once), with a tolerance of 1 unit. */
+  labelOverlaps() {
+    const boxes = this.boxes();
+    const hit = (a, b) => a && b && a.x1 < b.x2 - 1 && b.x1 < a.x2 - 1 && a.y1 < b.y2 - 1 && b.y1 < a.y2 - 1;
+    const found = [];
+    for (let i = 0; i < boxes.length; i++) {
+      const a = boxes[i];
+      if (!a.label) continue;
+      for (let j = 0; j < boxes.length; j++) {
+        if (i === j) continue;
+        const b = boxes[j];
+        if (a.edge && a.edge.includes(b.id)) continue;   // an arc's weight sits on its own ends' line
+        if (j > i && hit(a.label, b.label)) found.push([a.id, b.id, "label"]);
+        if (hit(a.label, b.body)) found.push([a.id, b.id, "node"]);
+      }
+    }
+    return found;
+  }
+
+  /** How much of the canvas the fitted drawing fills, and the smallest label on screen, px. */
+  readability() {
+    const cy = this.cy;
+    const bb = cy.elements(":visible").boundingBox();
+    const z = cy.zoom();
+    return { fill: Math.max(bb.w * z / cy.width(), bb.h * z / cy.height()), fontPx: FONT * z, zoom: z };
+  }
+
+  /** Lay the drawing out with ELK (layered, each node boxed with its label so that no label overlaps
+   *  another label or node, the layout that fits the canvas at the largest zoom); resolves with the new
+   *  positions of every node. While the error-recovery branches are hidden, the net without them is
+   *  laid out on its own (what the operator reads) and the branches in a band below it. */
+  async tidy() {
+    const cy = this.cy;
+    const wasShown = this.showHidden;
+    if (!wasShown) this.setShowHidden(true);  // measure every label
+    const hiddenNodes = cy.nodes(".hidden-branch");
+    const parts = wasShown || hiddenNodes.empty() ? [cy.nodes()] : [cy.nodes().not(".hidden-branch"), hiddenNodes];
+    const positions = {};
+    let top = 0;
+    for (const part of parts) {
+      const laid = await this.layOut(part);
+      const ys = Object.values(laid).map((p) => p[1]);
+      const shift = top - Math.min(...ys);
+      for (const [id, [x, y]] of Object.entries(laid)) positions[id] = [x, Math.round((y + shift) * 10) / 10];
+      const bottom = Math.max(...part.map((n) => positions[n.id()][1] + n.boundingBox({ includeLabels: true }).h));
+      top = bottom + 60;
+    }
+    cy.batch(() => { cy.nodes().forEach((n) => { const p = positions[n.id()]; if (p) n.position({ x: p[0], y: p[1] }); }); });
+    this.bendBackArcs();
+    if (!wasShown) this.setShowHidden(false);
+    this.plane.refresh();
+    this.fit();
+    return positions;
+  }
+
+  /** ELK positions (node centres, model units) of ``nodes`` and the arcs among them. */
+  async layOut(nodes) {
+    const cy = this.cy;
+    const ids = new Set(nodes.map((n) => n.id()));
+    const margin = 6;
+    const children = [];
+    const offsets = new Map();
+    // the model order ELK keeps: the initially marked places first, then a depth-first walk from them,
+    // so that the arcs closing cycles (a resource given back, a run started again) are the ones turned
+    // around and the drawing starts where the tokens are, as a hand drawing of a task does
+    const order = [];
+    const seen = new Set();
+    const walk = (start) => {
+      const stack = [start];
+      while (stack.length) {
+        const n = stack.pop();
+        if (seen.has(n.id()) || !ids.has(n.id())) continue;
+        seen.add(n.id());
+        order.push(n);
+        for (const m of n.outgoers("node").toArray().reverse()) if (!seen.has(m.id())) stack.push(m);
+      }
+    };
+    const marked = nodes.filter((n) => n.hasClass("place") && this.tokens.get(n.id()) > 0);
+    marked.forEach((n) => { seen.add(n.id()); order.push(n); });
+    marked.forEach((n) => n.outgoers("node").forEach(walk));
+    nodes.forEach(walk);
+    for (const n of order) {
+      const bb = n.boundingBox({ includeLabels: true, includeOverlays: false, includeUnderlays: false });
+      const p = n.position();
+      offsets.set(n.id(), { x: p.x - bb.x1 + margin, y: p.y - bb.y1 + margin });
+      children.push({ id: n.id(), width: bb.w + 2 * margin, height: bb.h + 2 * margin });
+    }
+    const edges = [];
+    cy.edges().forEach((e) => {
+      if (ids.has(e.data("source")) && ids.has(e.data("target"))) {
+        edges.push({ id: e.id(), sources: [e.data("source")], targets: [e.data("target")] });
+      }
+    });
+    const aspect = Math.max(0.5, Math.min(3, cy.width() / Math.max(1, cy.height())));
+    const options = (direction, wrap) => ({
+      "elk.algorithm": "layered", "elk.direction": direction, "elk.aspectRatio": String(aspect),
+      "elk.spacing.nodeNode": "10", "elk.layered.spacing.nodeNodeBetweenLayers": "14",
+      "elk.spacing.edgeNode": "8", "elk.layered.spacing.edgeNodeBetweenLayers": "8",
+      "elk.layered.cycleBreaking.strategy": "MODEL_ORDER",
+      // network simplex places nodes best, but takes seconds beyond a hundred nodes
+      "elk.layered.nodePlacement.strategy": children.length <= 100 ? "NETWORK_SIMPLEX" : "BRANDES_KOEPF",
+      "elk.layered.considerModelOrder.strategy": "NODES_AND_EDGES",
+      "elk.layered.wrapping.strategy": wrap ? "MULTI_EDGE" : "OFF",
+      "elk.separateConnectedComponents": "true", "elk.spacing.componentComponent": "30",
+      });
+    // top to bottom as the paper draws its nets, or left to right, each also folded into rows or
+    // columns (ELK's wrapping, for a long net): the one that fits the canvas at a clearly larger zoom
+    const elk = new ELK();
+    const tries = [["DOWN", false], ["RIGHT", false], ["DOWN", true], ["RIGHT", true]];
+    const layouts = await Promise.all(tries.map(([direction, wrap]) =>
+      elk.layout({ id: "root", children: children.map((c) => ({ ...c })), edges: edges.map((e) => ({ ...e })),
+                   layoutOptions: options(direction, wrap) })));
+    const zoomOf = (g) => Math.min(cy.width() / Math.max(1, g.width), cy.height() / Math.max(1, g.height));
+    let out = layouts[0];
+    for (const g of layouts.slice(1)) if (zoomOf(g) > 1.15 * zoomOf(out)) out = g;
+    this.lastTidy = layouts.map((g, i) => [tries[i].join(" "), Math.round(g.width), Math.round(g.height), zoomOf(g)]);
+    const positions = {};
+    for (const c of out.children) {
+      const o = offsets.get(c.id);
+      positions[c.id] = [Math.round((c.x + o.x) * 10) / 10, Math.round((c.y + o.y) * 10) / 10];
+    }
+    return positions;
   }
 
   /** The whole drawing as a PNG data URL (2 px per model unit), tokens included: cytoscape draws
@@ -350,9 +496,10 @@ function loadImage(src) {
   });
 }
 
-/** Tokens as small HTML elements over cytoscape's canvas: one per marked place, placed in model
- *  coordinates on a plane that one CSS transform keeps on cytoscape's pan and zoom. */
-class TokenLayer {
+/** Small page elements over cytoscape's canvas, placed in model coordinates on a plane that one CSS
+ *  transform keeps on cytoscape's pan and zoom: tokens (one per marked place), flashes of fired
+ *  transitions, badges of running actions, and marks (links, breakpoints, hidden-branch chips). */
+class Plane {
   constructor(cy, container) {
     this.cy = cy;
     this.layer = document.createElement("div");
@@ -360,22 +507,32 @@ class TokenLayer {
     this.plane = document.createElement("div");
     this.plane.className = "token-plane";
     this.layer.append(this.plane);
-    container.after(this.layer);
-    this.dots = new Map();   // place id -> element
+    this.marksLayer = document.createElement("div");
+    this.marksLayer.className = "mark-layer";
+    this.marksPlane = document.createElement("div");
+    this.marksPlane.className = "token-plane";
+    this.marksLayer.append(this.marksPlane);
+    container.after(this.layer, this.marksLayer);
+    this.dots = new Map();    // place id -> element
+    this.flashes = new Map(); // transition id -> element
+    this.badgeEls = new Map(); // place id -> element
+    this.markEls = new Map();  // key -> {el, mark}
     cy.on("viewport resize", () => this.follow());
-    cy.on("position", "node.place", (ev) => this.place(ev.target.id()));
-    cy.on("add remove data", "node.place", (ev) => this.place(ev.target.id()));
-    cy.on("style", "node.place", (ev) => this.place(ev.target.id()));
+    cy.on("position", "node", (ev) => this.place(ev.target.id()));
+    cy.on("add remove data", "node", (ev) => this.place(ev.target.id()));
+    cy.on("style", "node", (ev) => this.place(ev.target.id()));
     this.follow();
   }
 
   follow() {
     const pan = this.cy.pan(), zoom = this.cy.zoom();
-    this.plane.style.transform = `translate(${pan.x}px, ${pan.y}px) scale(${zoom})`;
+    const t = `translate(${pan.x}px, ${pan.y}px) scale(${zoom})`;
+    this.plane.style.transform = t;
+    this.marksPlane.style.transform = t;
   }
 
   /** Show ``n`` tokens on place ``id`` (0: none). */
-  show(id, n) {
+  token(id, n) {
     let dot = this.dots.get(id);
     if (!n) { if (dot) { dot.remove(); this.dots.delete(id); } return; }
     if (!dot) {
@@ -389,19 +546,125 @@ class TokenLayer {
     dot.style.backgroundImage = `url("${tokenImage(n)}")`;
   }
 
-  /** Put a place's tokens where the place is drawn (hidden with it, faded with it). */
-  place(id) {
-    const dot = this.dots.get(id);
-    if (!dot) return;
-    const node = this.cy.getElementById(id);
-    if (node.empty() || node.removed() || node.style("display") === "none") { dot.style.display = "none"; return; }
-    const p = node.position();
-    dot.style.display = "";
-    dot.style.transform = `translate(${p.x - 22}px, ${p.y - 22}px)`;
-    dot.style.opacity = node.style("opacity");
+  flash(id, on) {
+    let el = this.flashes.get(id);
+    if (!on) { if (el) el.style.display = "none"; return; }
+    if (!el) {
+      el = document.createElement("div");
+      el.className = "flash";
+      el.dataset.transition = id;
+      this.plane.prepend(el);
+      this.flashes.set(id, el);
+    }
+    el.style.display = "";
+    this.placeFlash(id, el);
   }
 
-  refresh() { for (const id of this.dots.keys()) this.place(id); this.follow(); }
+  badges(map) {
+    for (const [id, el] of this.badgeEls) if (!map.has(id)) { el.remove(); this.badgeEls.delete(id); }
+    for (const [id, b] of map) {
+      let el = this.badgeEls.get(id);
+      if (!el) {
+        el = document.createElement("div");
+        el.dataset.place = id;
+        this.plane.append(el);
+        this.badgeEls.set(id, el);
+      }
+      const cls = "badge" + (b.latched ? " latched" : "") + (b.failing ? " failing" : "");
+      if (el.className !== cls) el.className = cls;
+      if (el.textContent !== b.text) el.textContent = b.text;
+      this.placeBadge(id, el);
+    }
+  }
+
+  marks(list) {
+    const keys = new Set(list.map((m) => m.key));
+    for (const [key, { el }] of this.markEls) if (!keys.has(key)) { el.remove(); this.markEls.delete(key); }
+    for (const mark of list) {
+      let entry = this.markEls.get(mark.key);
+      if (!entry || entry.mark.href !== mark.href) {
+        if (entry) entry.el.remove();
+        const el = document.createElement(mark.href ? "a" : mark.onclick ? "button" : "span");
+        if (mark.href) { el.href = mark.href; el.target = "_blank"; el.rel = "noopener"; }
+        this.marksPlane.append(el);
+        entry = { el, mark };
+        this.markEls.set(mark.key, entry);
+      }
+      entry.mark = mark;
+      const el = entry.el;
+      el.className = "mark " + (mark.cls || "");
+      el.textContent = mark.text;
+      el.title = mark.title || "";
+      el.dataset.node = mark.node;
+      el.dataset.key = mark.key;
+      el.onclick = mark.onclick ? (ev) => { ev.preventDefault(); ev.stopPropagation(); mark.onclick(); } : null;
+      this.placeMark(entry);
+    }
+  }
+
+  /** Put what belongs to node ``id`` where the node is drawn (hidden with it, faded with it). */
+  place(id) {
+    const node = this.cy.getElementById(id);
+    const gone = node.empty() || node.removed() || node.style("display") === "none";
+    const dot = this.dots.get(id);
+    if (dot) {
+      if (gone) dot.style.display = "none";
+      else {
+        const p = node.position();
+        dot.style.display = "";
+        dot.style.transform = `translate(${p.x - 22}px, ${p.y - 22}px)`;
+        dot.style.opacity = node.style("opacity");
+      }
+    }
+    const flash = this.flashes.get(id);
+    if (flash && flash.style.display !== "none") this.placeFlash(id, flash);
+    const badge = this.badgeEls.get(id);
+    if (badge) this.placeBadge(id, badge);
+    for (const entry of this.markEls.values()) if (entry.mark.node === id) this.placeMark(entry);
+  }
+
+  placeFlash(id, el) {
+    const node = this.cy.getElementById(id);
+    if (node.empty() || node.style("display") === "none") { el.style.display = "none"; return; }
+    const p = node.position();
+    el.style.transform = `translate(${p.x - TRANS_W / 2 - 7}px, ${p.y - TRANS_H / 2 - 7}px)`;
+  }
+
+  placeBadge(id, el) {
+    const node = this.cy.getElementById(id);
+    if (node.empty() || node.style("display") === "none") { el.style.display = "none"; return; }
+    const p = node.position();
+    el.style.display = "";
+    el.style.transform = `translate(${p.x + PLACE_D / 2 + 6}px, ${p.y - PLACE_D / 2 - 10}px)`;
+  }
+
+  placeMark(entry) {
+    const { el, mark } = entry;
+    const node = this.cy.getElementById(mark.node);
+    if (node.empty() || node.style("display") === "none") { el.style.display = "none"; return; }
+    const p = node.position();
+    const place = node.data("kind") === "place";
+    const half = place ? PLACE_D / 2 : TRANS_W / 2;
+    const at = mark.at || "above";
+    let x = p.x, y = p.y;
+    if (at === "above") { x = p.x - half; y = p.y - (place ? PLACE_D / 2 : TRANS_H / 2) - 17; }
+    else if (at === "left") { x = p.x - half - 4; y = p.y - 8; el.style.translate = "-100% 0"; }
+    else if (at === "right") { x = p.x + half + 4; y = p.y - 8; }
+    else if (at === "below-left") { x = p.x - half - 4; y = p.y + (place ? PLACE_D / 2 : TRANS_H / 2) - 6; el.style.translate = "-100% 0"; }
+    else if (at === "center") { x = p.x; y = p.y; el.style.translate = "-50% -50%"; }
+    else if (at === "corner-left") { x = p.x - half + 2; y = p.y - (place ? PLACE_D / 2 : TRANS_H / 2) + 2; el.style.translate = "-100% -100%"; }
+    else if (at === "corner-right") { x = p.x + half - 2; y = p.y - (place ? PLACE_D / 2 : TRANS_H / 2) + 2; el.style.translate = "0 -100%"; }
+    if (!["left", "below-left", "center", "corner-left", "corner-right"].includes(at)) el.style.translate = "";
+    el.style.display = "";
+    el.style.transform = `translate(${x}px, ${y}px)`;
+  }
+
+  refresh() {
+    const ids = new Set([...this.dots.keys(), ...this.flashes.keys(), ...this.badgeEls.keys(),
+                         ...[...this.markEls.values()].map((e) => e.mark.node)]);
+    for (const id of ids) this.place(id);
+    this.follow();
+  }
 }
 
 function pos(item) {

@@ -1,9 +1,14 @@
 // Follow and steer a live run (paper section 5): frames from the server are applied as they arrive and
-// drawn at most once per screen repaint, the latest marking winning; fired transitions flash; running
-// actions and latched events sit beside their places; a primitive task whose last results were errors is
-// marked red with its error branch, its last reason in full on hover or click; control places take token
-// insertions and removals. The badge follows the run (running, paused, waiting, its end state), and once
-// the run has ended the drawing keeps its final marking and the Run panel its summary.
+// drawn at most once per screen repaint, the latest marking winning, and the page says when it has
+// painted one (the server sizes its frames to that); fired transitions flash; running actions and
+// latched events sit beside their places; a primitive task whose last results were errors is marked
+// red with its error branch, its last reason in full on hover; control places take token insertions
+// and removals. A click on any other place or transition sets breakpoints on it (journaled like any
+// command, drawn as red dots) and, on a primitive task's place, forces the outcome of its running
+// action and opens its blackboard (parameters, feedback, latched results and their payloads), where
+// the net's [operator] table allows; the bar raises its external events. The badge follows the run
+// (running, paused, waiting, its end state), and once the run has ended the drawing keeps its final
+// marking and the Run panel its summary.
 
 import { el, fmt, seconds } from "./ui.js";
 
@@ -22,7 +27,8 @@ export function initLive(app) {
   const live = {
     runId: null, marking: {}, firings: 0, paused: false, state: { state: "", reason: "", detail: [] },
     running: new Map(), latched: {}, learner: {}, results: [], operator: [], errors: [], pulses: {},
-    offset: 0, ended: false, health: null, tasks: {}, summary: null,
+    offset: 0, ended: false, health: null, tasks: {}, summary: null, breakpoints: [], hits: [], injected: [],
+    blackboard: null, blackboardPlace: null,
   };
   app.live = live;
   let lastPanel = 0;
@@ -53,8 +59,11 @@ export function initLive(app) {
     live.health = toHealth(snapshot.nodes);
     live.tasks = snapshot.tasks || {};
     live.summary = snapshot.summary || null;
+    live.breakpoints = snapshot.breakpoints || [];
+    live.hits = snapshot.hits || [];
     live.offset = (snapshot.server_time || Date.now() / 1000) - Date.now() / 1000;
     live.ended = END_STATES.has(live.state.state);
+    if (live.runId !== live.blackboardRun) { live.blackboard = null; live.blackboardPlace = null; }
     if (app.mode === "live") paint(true);
   }
 
@@ -79,12 +88,18 @@ export function initLive(app) {
       const shown = oldest;
       oldest = null;
       if (shown !== null) afterPaint.port2.postMessage(shown);
+      painted.port2.postMessage(lastSeq);
     });
   }
+  // once a repaint has shown the frames received so far, the server may send the next one
+  let lastSeq = 0;
+  const painted = new MessageChannel();
+  painted.port1.onmessage = (ev) => app.link.notify("painted", { seq: ev.data });
   let panelsDue = false;
 
   function onFrame(f) {
     stats.frames++;
+    lastSeq = f.seq;
     live.offset = f.t - Date.now() / 1000;
     if (f.marking) for (const [p, n] of Object.entries(f.marking)) { if (n) live.marking[p] = n; else delete live.marking[p]; }
     for (const s of f.started || []) live.running.set(s.i, s);
@@ -102,6 +117,18 @@ export function initLive(app) {
     if (f.summary) live.summary = f.summary;
     if (f.tasks) Object.assign(live.tasks, f.tasks);
     if (f.nodes) live.health = toHealth(f.nodes);
+    if (f.breakpoints) live.breakpoints = f.breakpoints;
+    for (const h of f.hits || []) {
+      live.hits.push(h);
+      app.message(`paused at breakpoint ${h.text}: ${h.why}`, "bad");
+      document.body.dataset.hit = h.text;
+    }
+    for (const i of f.injected || []) {
+      live.injected.push(i);
+      app.message(`operator raised ${i.event}: ${i.fired} transition${i.fired === 1 ? "" : "s"} fired`, "ok");
+    }
+    if (live.injected.length > 20) live.injected.splice(0, live.injected.length - 20);
+    if (live.hits.length > 20) live.hits.splice(0, live.hits.length - 20);
     live.firings = f.firings;
     live.paused = f.paused;
     if (live.results.length > 40) live.results.splice(0, live.results.length - 40);
@@ -116,12 +143,16 @@ export function initLive(app) {
       if (f.fired) {
         app.graph.flash(Object.keys(f.fired));
         if (oldest === null) oldest = f.t_fired[0];
-        measureNextPaint();
       }
+      measureNextPaint();  // and then tell the server this frame is painted
       // badges only when actions started, ended or latched: a run firing thousands of transitions a
       // second redraws tokens and flashes, not the whole drawing's decorations
       if (f.tasks) markFailing();
       if (f.started || f.ended || f.latched || f.feedback) app.graph.setBadges(badges());
+      if (f.breakpoints || f.hits) markBreakpoints();
+      if (f.learner) app.redrawAnalysis();
+      if (live.blackboardPlace && (f.started || f.ended || f.feedback || f.latched || f.injected)) blackboardSoon();
+      if (nodePlace !== null && (f.started || f.ended || f.breakpoints)) renderNodePop();
       if (f.tasks && taskPlace !== null) showTaskPop(taskPlace);
       if (f.started || f.ended || f.learner || f.operator || f.state || f.nodes || f.pulses || f.summary) panelsDue = true;
       scheduleText();
@@ -192,9 +223,63 @@ export function initLive(app) {
   function paintDetails(force) {
     markFailing();
     app.graph.setBadges(badges());
+    markBreakpoints();
     header();
+    inject();
     if (force) renderPanelsSoon(false);
   }
+
+  // ------------------------------------------------------------------ breakpoints (coordinator/breakpoints.py)
+  const BP_TEXT = { enabled: "pause when it becomes ready to fire", fires: "pause right after it fires",
+                    count: "pause when it reaches", error: "pause when its task ends with an error" };
+  function bpText(bp) { return `${bp.kind} ${bp.target}${bp.kind === "count" ? " " + bp.count : ""}`; }
+  function markBreakpoints() {
+    const last = live.hits[live.hits.length - 1];
+    const placeOfTask = (task) => (app.liveNet?.draft?.places || []).filter((p) => p.task === task).map((p) => p.id);
+    const marks = [];
+    for (const bp of live.breakpoints) {
+      const nodes = bp.kind === "error" ? placeOfTask(bp.target) : [bp.target];
+      for (const node of nodes) {
+        const hit = live.paused && last && last.kind === bp.kind && last.target === bp.target;
+        marks.push({ key: `bp:${bpText(bp)}:${node}`, node, at: "corner-right", cls: "bp" + (hit ? " hit" : ""),
+                     text: { enabled: "E", fires: "F", count: "#", error: "!" }[bp.kind],
+                     title: `breakpoint ${bpText(bp)}: ${BP_TEXT[bp.kind]}${bp.kind === "count" ? " " + bp.count + " tokens" : ""}` +
+                            (app.control && !live.ended ? " (click to clear it)" : ""),
+                     onclick: () => { if (app.control && !live.ended) command("clear", { breakpoint: bp }); } });
+      }
+    }
+    app.graph.setMarks("breakpoints", marks);
+  }
+  app.breakpointText = bpText;
+
+  async function command(name, fields = {}) {
+    const reply = await app.link.request("command", { command: name, ...fields });
+    const what = reply.command || name;
+    if (reply.ok) app.message(`${what}: applied`, "ok");
+    else app.message(`${what} refused: ${reply.reason}`, "bad");
+    return reply;
+  }
+  app.command = command;
+
+  // ------------------------------------------------------------------ raising an external event (the net's [operator] inject)
+  function inject() {
+    const allowed = app.liveNet?.draft?.operator?.inject || [];
+    const box = document.getElementById("inject-box");
+    box.hidden = !allowed.length || app.mode !== "live";
+    const select = document.getElementById("inject-event");
+    const key = allowed.join(",");
+    if (select.dataset.key !== key) {
+      select.replaceChildren(...allowed.map((e) => el("option", { value: e }, e)));
+      select.dataset.key = key;
+    }
+    const off = !app.control || live.ended;
+    select.disabled = off;
+    document.getElementById("inject-go").disabled = off;
+  }
+  document.getElementById("inject-go").addEventListener("click", () => {
+    const event = document.getElementById("inject-event").value;
+    if (event) command("inject", { event });
+  });
 
   function paint(full) {
     if (full) app.graph.setMarking({ ...live.marking }, true);
@@ -310,7 +395,8 @@ export function initLive(app) {
       for (const r of live.results.slice(-12).reverse()) {
         const cls = r.status === "error" ? "node-bad" : r.status === "success" ? "node-ok" : "";
         t.append(el("tr", {}, el("td", { class: "mono" }, `${r.task}/${r.action}`),
-          el("td", { class: cls }, r.status + (r.outcome ? ` (${r.outcome})` : "")), el("td", { class: "num" }, seconds(r.wall_s)),
+          el("td", { class: cls }, r.status + (r.outcome ? ` (${r.outcome})` : ""), r.forced ? el("span", { class: "forced", title: "forced by the operator: no measured result" }, " forced") : ""),
+          el("td", { class: "num" }, seconds(r.wall_s)),
           el("td", { class: "small reason", title: r.reason || "" }, r.reason || "")));
       }
       panel.append(t);
@@ -322,6 +408,13 @@ export function initLive(app) {
     }
     const pulses = Object.entries(live.pulses);
     if (pulses.length) panel.append(el("p", { class: "small" }, "external events: " + pulses.map(([e, n]) => `${e} \u00d7${n}`).join(", ")));
+    panel.append(el("h4", {}, "breakpoints"));
+    if (!live.breakpoints.length) panel.append(el("p", { class: "empty" }, "none: click a place or a transition to set one"));
+    else panel.append(el("ul", { class: "mono small" }, ...live.breakpoints.map((bp) => el("li", {}, bpText(bp)))));
+    if (live.hits.length) {
+      const h = live.hits[live.hits.length - 1];
+      panel.append(el("p", { class: "small node-bad" }, `last stop: ${h.text} (${h.why})`));
+    }
   }
 
   function healthTable() {
@@ -372,25 +465,165 @@ export function initLive(app) {
   // ------------------------------------------------------------------ steering
   const pop = document.getElementById("steer-pop");
   let popPlace = null;
-  app.graph.cy.on("tap", "node.place", (ev) => {
+  app.graph.cy.on("tap", "node", (ev) => {
     if (app.mode !== "live") return;
-    const place = app.currentDraft()?.places.find((p) => p.id === ev.target.id());
-    if (place && place.task && showTaskPop(place.id, true)) { hidePop(); return; }
-    if (!place || place.kind !== "control") { hidePop(); return; }
+    const draft = app.currentDraft();
+    const place = draft?.places.find((p) => p.id === ev.target.id());
+    hideTaskPop(true);
+    if (!place || place.kind !== "control") {
+      hidePop();
+      showNodePop(ev.target.id());
+      return;
+    }
+    hideNodePop();
     popPlace = place.id;
     const rp = ev.target.renderedPosition();
     pop.style.left = `${rp.x + 30}px`;
     pop.style.top = `${Math.max(4, rp.y - 30)}px`;
-    document.getElementById("steer-title").textContent = `${place.label || place.id}`;
+    document.getElementById("steer-title").textContent = `${place.id}${place.label ? " \u2014 " + place.label : ""}`;
     updatePop();
     pop.hidden = false;
   });
-  app.graph.cy.on("tap", (ev) => { if (ev.target === app.graph.cy) { hidePop(); hideTaskPop(true); } });
-  app.graph.cy.on("viewport", () => { hidePop(); hideTaskPop(true); });
+  app.graph.cy.on("tap", (ev) => { if (ev.target === app.graph.cy) { hidePop(); hideTaskPop(true); hideNodePop(); } });
+  app.graph.cy.on("viewport", () => { hidePop(); hideTaskPop(true); hideNodePop(); });
   document.addEventListener("keydown", (ev) => {
     if (ev.key === "Escape" && !pop.hidden) hidePop();
-    if (ev.key === "Escape") hideTaskPop(true);
+    if (ev.key === "Escape") { hideTaskPop(true); hideNodePop(); }
   });
+
+  // a place's or transition's breakpoints, a running action's forced outcome, the blackboard
+  const nodePop = document.getElementById("node-pop");
+  let nodePlace = null;
+  function showNodePop(id) {
+    nodePlace = id;
+    const node = app.graph.cy.getElementById(id);
+    const rp = node.renderedPosition();
+    nodePop.style.left = `${rp.x + 30}px`;
+    nodePop.style.top = `${Math.max(4, rp.y - 30)}px`;
+    renderNodePop();
+    nodePop.hidden = false;
+  }
+  function hideNodePop() { nodePop.hidden = true; nodePlace = null; }
+  app.showNodePop = showNodePop;
+
+  function bpToggle(bp, label) {
+    const set = live.breakpoints.some((b) => b.kind === bp.kind && b.target === bp.target && (b.count ?? null) === (bp.count ?? null));
+    const box = el("input", { type: "checkbox", "data-bp": bp.kind });
+    box.checked = set;
+    box.disabled = !app.control || live.ended;
+    box.addEventListener("change", () => command(box.checked ? "break" : "clear", { breakpoint: bp }));
+    return el("label", { class: "bp-row" }, box, label);
+  }
+
+  function renderNodePop() {
+    if (nodePlace === null) return;
+    const draft = app.currentDraft();
+    const id = nodePlace;
+    const place = draft?.places.find((p) => p.id === id);
+    const transition = draft?.transitions.find((t) => t.id === id);
+    const parts = [el("div", { class: "pop-title" }, place ? `place ${id}` : `transition ${id}`)];
+    if (transition) {
+      parts.push(el("div", { class: "small mono" }, (transition.events || []).join(", ") || "no event"));
+      parts.push(el("h5", {}, "breakpoints"), bpToggle({ kind: "enabled", target: id, count: null }, BP_TEXT.enabled),
+                 bpToggle({ kind: "fires", target: id, count: null }, BP_TEXT.fires));
+    } else if (place) {
+      const set = live.breakpoints.find((b) => b.kind === "count" && b.target === id);
+      const n = el("input", { type: "number", min: "0", value: String(set ? set.count : (live.marking[id] || 0) + 1), "data-count": id });
+      const setBtn = el("button", {}, set ? "clear" : "set");
+      setBtn.disabled = !app.control || live.ended;
+      setBtn.addEventListener("click", () => {
+        if (set) command("clear", { breakpoint: set });
+        else command("break", { breakpoint: { kind: "count", target: id, count: Math.max(0, Math.trunc(Number(n.value) || 0)) } });
+      });
+      parts.push(el("h5", {}, "breakpoints"), el("div", { class: "bp-row" }, `${BP_TEXT.count} `, n, " tokens ", setBtn));
+      if (place.task) {
+        parts.push(bpToggle({ kind: "error", target: place.task, count: null }, BP_TEXT.error));
+        const allowed = draft.operator?.force?.[place.task] || [];
+        const running = [...live.running.values()].filter((r) => r.place === id);
+        if (allowed.length && running.length) {
+          parts.push(el("h5", {}, "force the outcome (a drill)"));
+          const why = el("input", { type: "text", placeholder: "reason (journaled)", size: 18, id: "force-reason" });
+          parts.push(why);
+          for (const r of running) {
+            const row = el("div", { class: "bp-row" }, el("span", { class: "mono small" }, `${r.action} [${r.i}]`));
+            for (const o of allowed) {
+              const b = el("button", { "data-outcome": o, title: `end ${r.action} now with ${o}, as the operator (never counted as measured reliability)` }, o);
+              b.disabled = !app.control || live.ended;
+              b.addEventListener("click", () => command("force", { instance: r.i, outcome: o, reason: why.value.trim() }));
+              row.append(b);
+            }
+            parts.push(row);
+          }
+        } else if (allowed.length) {
+          parts.push(el("p", { class: "pop-note" }, `the operator may force ${allowed.join(", ")} on ${place.task} while it runs`));
+        }
+        const bb = el("button", {}, "blackboard");
+        bb.addEventListener("click", () => openBlackboard(id));
+        parts.push(el("p", {}, bb));
+        const rec = live.tasks[place.task];
+        if (rec && rec.errors) {
+          const e = rec.last_error || {};
+          parts.push(el("h5", {}, `${rec.in_a_row ? errorsInARow(rec) : "errors"} (${rec.errors} of ${rec.results})`),
+                     el("div", { class: "reason small node-bad" }, `${e.action || "?"} on ${e.node || "no node"}: ${e.reason || "no reason given"}`));
+        }
+      }
+    }
+    if (!app.control) parts.push(el("p", { class: "pop-note" }, "read-only: open the console URL with its token to set breakpoints"));
+    nodePop.replaceChildren(...parts);
+  }
+
+  // ------------------------------------------------------------------ the blackboard of a place (what its actions are doing)
+  let bbTimer = null, bbBusy = false;
+  function blackboardSoon() {
+    if (bbTimer) return;
+    bbTimer = setTimeout(() => { bbTimer = null; loadBlackboard(); }, 150);
+  }
+  async function loadBlackboard() {
+    if (!live.blackboardPlace || bbBusy) return;
+    bbBusy = true;
+    const reply = await app.link.request("blackboard", { place: live.blackboardPlace });
+    bbBusy = false;
+    if (reply.ok) { live.blackboard = reply.blackboard; live.blackboardRun = live.runId; renderBlackboard(); }
+  }
+  function openBlackboard(place) {
+    live.blackboardPlace = place;
+    hideNodePop();
+    app.selectTab("blackboard");
+    loadBlackboard();
+  }
+  app.openBlackboard = openBlackboard;
+  setInterval(() => {
+    if (app.mode === "live" && live.blackboardPlace && document.getElementById("panel-blackboard").classList.contains("active")) loadBlackboard();
+  }, 1000);
+
+  function json(value) { return el("pre", { class: "json" }, value === null || value === undefined ? "null" : JSON.stringify(value, null, 1)); }
+  function renderBlackboard() {
+    const panel = document.getElementById("panel-blackboard");
+    panel.replaceChildren();
+    const b = live.blackboard;
+    if (!b) { panel.append(el("h3", {}, "Blackboard"), el("p", { class: "empty" }, "click a primitive task's place, then blackboard")); return; }
+    panel.append(el("h3", {}, `Blackboard of ${b.place}${b.task ? ` (${b.task})` : ""}`));
+    panel.append(el("h4", {}, "running"));
+    if (!b.running.length) panel.append(el("p", { class: "empty" }, "no action running"));
+    const now = nowServer();
+    for (const r of b.running) {
+      panel.append(el("p", {}, el("b", { class: "mono" }, r.action), ` on ${r.node || "not placed"} for ${seconds(now - r.t)} [${r.i}]`));
+      panel.append(el("div", { class: "small" }, "parameters"), json(r.params));
+      panel.append(el("div", { class: "small" }, `feedback (${r.feedback_count} received${r.feedback_t ? `, the latest ${seconds(Math.max(0, now - r.feedback_t))} ago` : ""})`),
+                   json(r.feedback));
+    }
+    panel.append(el("h4", {}, "latched results (waiting for a transition)"));
+    if (!b.latched.length) panel.append(el("p", { class: "empty" }, "none"));
+    for (const l of b.latched) {
+      panel.append(el("p", {}, el("span", { class: "mono" }, l.events.join(" ")), ` \u2014 ${l.action}: ${l.status || "?"}${l.outcome ? ` (${l.outcome})` : ""}`,
+        l.forced ? el("span", { class: "forced" }, " forced by the operator") : "", l.reason ? el("div", { class: "small reason" }, l.reason) : ""));
+      panel.append(el("div", { class: "small" }, "payload (the returned value)"), json(l.value));
+    }
+    panel.append(el("h4", {}, "external events, latest first"));
+    if (!b.events.length) panel.append(el("p", { class: "empty" }, "none yet"));
+    else panel.append(el("ul", { class: "mono small" }, ...b.events.map((e) => el("li", {},
+      `${e.event} ${seconds(Math.max(0, now - e.t))} ago: ${e.fired} fired${e.operator ? " (raised by the operator)" : ""}`))));
+  }
 
   // a primitive task's record (errors in a row, the last reason in full): on hover, kept by a click
   const taskPop = document.getElementById("task-pop");

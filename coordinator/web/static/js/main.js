@@ -1,11 +1,14 @@
-// The console page: modes (design, live, replay), the connection, files, and the glue between panels.
+// The console page: modes (design, live, replay), the connection, files, the runs it follows, and the
+// glue between panels.
 
 import { Graph, nextLabelMode } from "./graph.js";
 import { History, clone, emptyDraft, findNode } from "./net.js";
 import { initEditor } from "./editor.js";
 import { initLive } from "./live.js";
 import { initReplay } from "./replay.js";
-import { initAnalysis, renderProblems } from "./panels.js";
+import { renderProblems } from "./panels.js";
+import { initAnalysis } from "./analysis.js";
+import { initRuns } from "./runs.js";
 import { Link, api } from "./ws.js";
 import { el } from "./ui.js";
 
@@ -14,8 +17,9 @@ const token = params.get("token");
 
 const app = {
   token, control: false, mode: "design", servicesKnown: false, validation: null,
-  design: { draft: null, path: null, history: new History(), dirty: false },
-  liveNet: null, replayDraft: null, journal: null, nets: [],
+  design: { draft: null, path: null, history: new History(), dirty: false, saved: null },
+  liveNet: null, replayDraft: null, journal: null, nets: [], definitions: {}, runs: [],
+  wantRun: params.get("run"),
 };
 window.petrobot = app;  // for the browser tests and bench/console.py
 
@@ -31,6 +35,8 @@ app.message = (text, kind = "") => {
   messageTimer = setTimeout(() => { if (m.textContent === text) { m.textContent = ""; m.className = "message"; } }, 9000);
 };
 app.hint = (text) => { document.getElementById("hint").textContent = text; };
+/** The documentation page and section defining a kind of number (welcome's definitions). */
+app.doc = (kind) => (app.definitions[kind] ? `/docs/${app.definitions[kind]}` : null);
 
 // ------------------------------------------------------------------ drafts and modes
 app.currentDraft = () => (app.mode === "design" ? app.design.draft : app.mode === "live" ? app.liveNet?.draft : app.replayDraft);
@@ -43,7 +49,9 @@ function redraw({ fit = false } = {}) {
   if (app.mode === "design") app.graph.setBadges(new Map());
   else if (app.mode === "live") liveView.paint(false);
   else app.replaySeek && app.replaySeek();
+  analysis.redraw();
   document.getElementById("net-name").textContent = draft.net?.name || "untitled";
+  updateDirty();
 }
 app.redraw = redraw;
 
@@ -55,6 +63,7 @@ app.setMode = (mode) => {
   document.body.classList.add(`mode-${mode}`);
   document.querySelectorAll("#modes .mode").forEach((b) => b.classList.toggle("active", b.dataset.mode === mode));
   if (mode !== "design") editor.setTool("select");
+  if (changed) analysis.clear();
   redraw({ fit: changed });
   if (changed) app.selectTab(mode === "design" ? "inspect" : mode === "live" ? "run" : "timeline");
   if (mode === "replay" && !app.replay.data) app.loadRuns();
@@ -70,6 +79,7 @@ app.setMode = (mode) => {
     badge.textContent = "replay"; badge.className = "run-state"; document.getElementById("firings").textContent = "";
     app.hint(REPLAY_HINT);
   } else if (document.getElementById("hint").textContent === REPLAY_HINT) app.hint("");
+  runsView.render();
 };
 const REPLAY_HINT = "pick a run in the Runs panel on the right to replay it";
 
@@ -88,10 +98,10 @@ app.edit = (fn, { structural = true } = {}) => {
   if (structural && app.mode !== "design") { app.message("switch to Design to change the net"); return; }
   const before = clone(draft);
   if (fn(draft) === false) return;
-  if (app.mode === "design") { app.design.history.record(before); app.design.dirty = true; }
+  if (app.mode === "design") app.design.history.record(before);
   redraw();
   if (structural) { editor.renderInspector(); editor.renderTasks(); }
-  validateSoon();
+  if (app.mode === "design") validateSoon();
   updateButtons();
 };
 
@@ -118,14 +128,55 @@ function afterReplace() {
   updateButtons();
 }
 
+// ------------------------------------------------------------------ the drawing keeps your work
+/** Whether the design drawing differs from the file it was opened from or saved to. */
+function isDirty() {
+  const d = app.design;
+  return !!d.draft && d.saved !== null && JSON.stringify(d.draft) !== d.saved;
+}
+function updateDirty() {
+  app.design.dirty = isDirty();
+  const shown = app.design.dirty;
+  document.getElementById("dirty").hidden = !shown;
+  document.title = `${shown ? "\u25CF " : ""}${app.design.draft?.net?.name || "petrobot"} \u2014 petrobot console`;
+  document.body.dataset.dirty = shown ? "1" : "0";
+}
+function markSaved() { app.design.saved = JSON.stringify(app.design.draft); updateDirty(); }
+app.markSaved = markSaved;
+
+/** Ask before discarding unsaved changes; resolves true to go on. */
+app.confirmDiscard = (what) => new Promise((resolve) => {
+  updateDirty();
+  if (!app.design.dirty) { resolve(true); return; }
+  const d = document.getElementById("confirm-dialog");
+  document.getElementById("confirm-title").textContent = `${what}: discard the changes?`;
+  document.getElementById("confirm-text").textContent =
+    `The drawing of ${app.design.path || "the new net"} has changes that are not saved. ${what} discards them; Save keeps them.`;
+  let answered = false;
+  const answer = (yes) => { if (answered) return; answered = true; d.close(); resolve(yes); };
+  document.getElementById("confirm-yes").onclick = () => answer(true);
+  document.getElementById("confirm-no").onclick = () => answer(false);
+  d.onclose = () => answer(false);
+  d.showModal();
+});
+window.addEventListener("beforeunload", (ev) => {
+  if (isDirty()) { ev.preventDefault(); ev.returnValue = ""; }  // the browser asks before a reload or close
+});
+
 function updateButtons() {
   document.getElementById("undo").disabled = !app.design.history.canUndo;
   document.getElementById("redo").disabled = !app.design.history.canRedo;
   document.getElementById("save").disabled = !app.control;
   document.getElementById("save").title = app.control ? "save to the net file (Ctrl+S)" : "read-only: saving needs the console's token";
+  document.getElementById("start-run").disabled = !app.control;
+  document.getElementById("start-run").title = app.control
+    ? "start a run of a net on the nodes of services.toml, or resume an interrupted one"
+    : "read-only: starting runs needs the console's token";
   document.querySelector('#modes [data-mode="live"]').disabled = !app.liveNet;
   document.querySelector('#modes [data-mode="replay"]').disabled = !app.journal;
+  updateDirty();
 }
+app.updateButtons = updateButtons;
 
 // ------------------------------------------------------------------ validation (server side: one implementation)
 let validateTimer = null;
@@ -140,6 +191,7 @@ async function validate() {
   if (!draft || !app.link.open) return;
   if (validating) { again = true; return; }
   validating = true;
+  // an edited drawing is no file yet: its problems say "unsaved drawing" and point to their elements
   const reply = await app.link.request("validate", { draft });
   validating = false;
   if (reply.ok) {
@@ -167,21 +219,31 @@ app.focus = (problem) => {
 };
 
 // ------------------------------------------------------------------ files
-app.openNet = async (path) => {
+app.openNet = async (path, { confirm = true } = {}) => {
+  if (confirm && !(await app.confirmDiscard(`Open ${path}`))) return;
   let net;
   try { net = await api(`/api/net?path=${encodeURIComponent(path)}`, token); }
   catch (e) { app.message(String(e.message || e), "bad"); return; }
-  app.design = { draft: net.draft, path: net.path, history: new History(), dirty: false };
+  app.design = { draft: net.draft, path: net.path, history: new History(), dirty: false, saved: null };
   app.validation = net.validation;
   app.setMode("design");
   redraw({ fit: true });
+  if (net.laid_out && app.graph.cy.nodes().length <= TIDY_MAX) {
+    // no positions in the file: ELK's layout, labels kept clear (the file itself is unchanged); the
+    // error-recovery branches hidden, as the paper suggests, one click away
+    if (app.graph.cy.nodes(".hidden-branch").nonempty()) setShowHidden(false);
+    const positions = await app.graph.tidy();
+    for (const [id, xy] of Object.entries(positions)) { const node = findNode(app.design.draft, id); if (node) node.item.pos = xy; }
+  }
+  markSaved();
   renderProblems(app);
   editor.renderInspector();
   editor.renderTasks();
   updateButtons();
-  app.message(`opened ${net.path}${net.laid_out ? " (no positions in the file: laid out automatically)" : ""}`);
+  app.message(`opened ${net.path}${net.laid_out ? " (no positions in the file: laid out automatically; Save keeps this drawing)" : ""}`);
   markReady();
 };
+const TIDY_MAX = 400;
 
 function dialog(id) {
   const d = document.getElementById(id);
@@ -189,6 +251,7 @@ function dialog(id) {
   d.showModal();
   return d;
 }
+app.dialog = dialog;
 
 document.getElementById("open").addEventListener("click", async () => {
   const d = dialog("open-dialog");
@@ -225,7 +288,7 @@ app.save = async (path = null) => {
   }
   const reply = await app.link.request("save", { path, draft });
   if (!reply.ok) { app.message(`not saved: ${reply.reason}`, "bad"); return; }
-  if (app.mode === "design") { app.design.path = reply.path; app.design.dirty = false; }
+  if (app.mode === "design") { app.design.path = reply.path; markSaved(); }
   app.validation = reply.validation;
   renderProblems(app);
   const n = reply.validation.problems.length;
@@ -234,8 +297,10 @@ app.save = async (path = null) => {
 };
 document.getElementById("save").addEventListener("click", () => app.save());
 
-document.getElementById("new").addEventListener("click", () => {
-  app.design = { draft: emptyDraft(), path: null, history: new History(), dirty: false };
+document.getElementById("new").addEventListener("click", async () => {
+  if (!(await app.confirmDiscard("New"))) return;
+  app.design = { draft: emptyDraft(), path: null, history: new History(), dirty: false, saved: null };
+  app.design.saved = JSON.stringify(app.design.draft);
   app.validation = null;
   app.setMode("design");
   renderProblems(app);
@@ -271,26 +336,61 @@ function download(href, name) {
   a.remove();
 }
 
-document.getElementById("toggle-hidden").addEventListener("click", (ev) => {
-  app.graph.setShowHidden(!app.graph.showHidden);
-  ev.currentTarget.classList.toggle("on", !app.graph.showHidden);
-  app.message(app.graph.showHidden ? "error-recovery branches shown" : "error-recovery branches hidden");
+function setShowHidden(show) {
+  app.graph.setShowHidden(show);
+  document.getElementById("toggle-hidden").classList.toggle("on", !show);
+}
+document.getElementById("toggle-hidden").addEventListener("click", () => {
+  setShowHidden(!app.graph.showHidden);
+  app.message(app.graph.showHidden ? "error-recovery branches shown"
+    : "error-recovery branches hidden: the \u2295 marks beside their places show them again in one click");
 });
+app.graph.onReveal = (place) => {
+  document.getElementById("toggle-hidden").classList.toggle("on", false);
+  app.message(`error-recovery branches shown (from ${place})`);
+};
 document.getElementById("labels").addEventListener("click", () => {
   app.graph.labelMode = nextLabelMode(app.graph.labelMode);
   redraw();
-  app.message({ events: "transitions labelled with their events", both: "transitions labelled with their events and names",
-                names: "transitions labelled with their names" }[app.graph.labelMode]);
+  app.message({ both: "transitions labelled with their names, then their events", names: "transitions labelled with their names",
+                events: "transitions labelled with their events (as in the paper's Fig. 1)" }[app.graph.labelMode]);
 });
 document.getElementById("fit").addEventListener("click", () => app.graph.fit());
-document.getElementById("tidy").addEventListener("click", async () => {
+app.tidy = async () => {
   const n = app.graph.cy.nodes().length;
-  if (n > 400) { app.message("Tidy lays out nets of up to 400 elements; this one keeps its layout", "bad"); return; }
+  if (n > TIDY_MAX) { app.message(`Tidy lays out nets of up to ${TIDY_MAX} elements; this one keeps its layout`, "bad"); return; }
   const positions = await app.graph.tidy();
   app.edit((d) => {
     for (const [id, xy] of Object.entries(positions)) { const node = findNode(d, id); if (node) node.item.pos = xy; }
   }, { structural: false });
+  app.graph.fit();
+  document.body.dataset.tidied = String(Date.now());
+};
+document.getElementById("tidy").addEventListener("click", () => app.tidy());
+
+// what a node is, on hover: its id, label, kind, events (the drawing shows short labels)
+const info = document.getElementById("info-pop");
+let infoTimer = null;
+app.graph.cy.on("mouseover", "node", (ev) => {
+  clearTimeout(infoTimer);
+  const target = ev.target;
+  infoTimer = setTimeout(() => {
+    const draft = app.currentDraft();
+    const node = draft && findNode(draft, target.id());
+    if (!node || !document.getElementById("task-pop").hidden || !document.getElementById("node-pop").hidden) return;
+    const it = node.item;
+    const lines = node.kind === "place"
+      ? [`place ${it.id}`, it.label, `${it.kind || (it.task ? "primitive_task" : "plain")}${it.task ? ` of task ${it.task}` : ""}`]
+      : [`transition ${it.id}`, it.label, (it.events || []).join(", ") || "no event: fires when enabled", it.hidden ? "error-recovery branch (hidden = true)" : ""];
+    info.replaceChildren(...lines.filter(Boolean).map((t, i) => el(i ? "div" : "b", {}, t)));
+    const rp = target.renderedPosition();
+    info.style.left = `${rp.x + 28}px`;
+    info.style.top = `${Math.max(4, rp.y + 18)}px`;
+    info.hidden = false;
+  }, 350);
 });
+app.graph.cy.on("mouseout", "node", () => { clearTimeout(infoTimer); info.hidden = true; });
+app.graph.cy.on("viewport tapstart", () => { clearTimeout(infoTimer); info.hidden = true; });
 
 function markReady() {
   requestAnimationFrame(() => requestAnimationFrame(() => {
@@ -304,6 +404,8 @@ const editor = initEditor(app);
 const liveView = initLive(app);
 initReplay(app);
 const analysis = initAnalysis(app);
+app.redrawAnalysis = () => analysis.redraw();
+const runsView = initRuns(app);
 
 app.link = new Link(token, {
   onOpen() {
@@ -324,20 +426,28 @@ app.link = new Link(token, {
     app.nets = msg.nets;
     app.journal = msg.journal;
     app.servicesKnown = msg.services;
+    app.definitions = msg.definitions || {};
+    app.runs = msg.runs || [];
     const access = document.getElementById("access");
     access.textContent = msg.control ? "control" : "read-only";
     access.className = "access" + (msg.control ? " control" : "");
-    access.title = msg.control ? "this page may steer the run and save files" : "opened without the console's token: the page follows but cannot steer or save";
+    access.title = msg.control ? "this page may steer runs and save files" : "opened without the console's token: the page follows but cannot steer or save";
     updateButtons();
-    if (msg.live && msg.net) {
+    runsView.render();
+    const wanted = app.wantRun && app.runs.some((r) => r.run === app.wantRun) ? app.wantRun : null;
+    app.wantRun = null;
+    if (wanted && msg.live?.run !== wanted) {
+      app.watch(wanted);
+    } else if (msg.live && msg.net) {
       startLive(msg.live, msg.net);
     } else if (!app.design.draft) {
-      if (msg.nets.length) app.openNet(msg.nets[0]);
-      else { app.design.draft = emptyDraft(); app.setMode("design"); validateSoon(0); markReady(); }
+      if (msg.nets.length) app.openNet(msg.nets[0], { confirm: false });
+      else { app.design.draft = emptyDraft(); markSaved(); app.setMode("design"); validateSoon(0); markReady(); }
     }
     analysis.render();
   },
   run(msg) { startLive(msg.live, msg.net); },
+  runs(msg) { app.runs = msg.runs; runsView.render(); },
   frame(msg) { liveView.onFrame(msg); },
   snapshot(msg) { liveView.load(msg); },
   health(msg) { liveView.setHealth(msg); },
@@ -346,14 +456,28 @@ app.link = new Link(token, {
 
 function startLive(snapshot, net) {
   app.liveNet = net;
-  if (!app.design.draft) { app.design = { draft: clone(net.draft), path: net.path, history: new History(), dirty: false }; }
+  if (!app.design.draft) {
+    app.design = { draft: clone(net.draft), path: net.path, history: new History(), dirty: false, saved: null };
+    markSaved();
+  }
   app.validation = net.validation;
   liveView.load(snapshot);
   updateButtons();
+  const was = app.mode;
   app.setMode("live");
+  if (was === "live") redraw({ fit: true });  // another run's net
   renderProblems(app);
+  runsView.render();
+  document.body.dataset.watching = snapshot.run || "";
   markReady();
 }
+app.startLive = startLive;
+
+/** Follow another live run (its frames replace the current one's). */
+app.watch = async (runId) => {
+  const reply = await app.link.request("watch", { run: runId });
+  if (!reply.ok) app.message(reply.reason, "bad");
+};
 
 app.setMode("design");
 app.selectTab("inspect");

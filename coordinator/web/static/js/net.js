@@ -16,7 +16,10 @@ export function findNode(draft, id) {
   return null;
 }
 
-export function arcKey(a) { return `${a.from}->${a.to}${a.inhibitor ? "|inh" : ""}`; }
+export function arcKey(a) { return `${a.from}->${a.to}${a.inhibitor ? "|inh" : a.reset ? "|reset" : ""}`; }
+
+/** The kind of an arc: "normal", "inhibitor" or "reset". */
+export function arcKind(a) { return a.inhibitor ? "inhibitor" : a.reset ? "reset" : "normal"; }
 
 export function findArc(draft, key) { return draft.arcs.find((a) => arcKey(a) === key) || null; }
 
@@ -56,16 +59,26 @@ export function deleteElements(draft, nodeIds, arcKeys) {
   if (draft.net.home) for (const id of ids) delete draft.net.home[id];
 }
 
-/** Add an arc; returns an error text or null. */
-export function addArc(draft, from, to, inhibitor) {
+/** Add an arc of ``kind`` ("normal", "inhibitor" or "reset"; ``true`` means inhibitor); returns an
+ *  error text or null. Drawing a normal or inhibitor arc again adds one to its weight. */
+export function addArc(draft, from, to, kind = "normal") {
+  if (kind === true) kind = "inhibitor";
+  if (kind === false) kind = "normal";
   const a = findNode(draft, from), b = findNode(draft, to);
   if (!a || !b) return "click two elements";
+  if (from === to) return "an arc joins two elements";
   if (a.kind === b.kind) return "arcs join a place and a transition";
-  if (inhibitor && a.kind !== "place") return "an inhibitor arc goes from a place to a transition";
-  const arc = { from, to, weight: 1 };
-  if (inhibitor) arc.inhibitor = true;
+  if (kind !== "normal" && a.kind !== "place") return `a${kind === "inhibitor" ? "n inhibitor" : " reset"} arc goes from a place to a transition`;
+  const arc = { from, to };
+  if (kind !== "reset") arc.weight = 1;
+  if (kind === "inhibitor") arc.inhibitor = true;
+  if (kind === "reset") arc.reset = true;
   const existing = findArc(draft, arcKey(arc));
-  if (existing) { existing.weight = (existing.weight || 1) + 1; return null; }
+  if (existing) {
+    if (kind === "reset") return `the reset arc ${from} -> ${to} is there already`;
+    existing.weight = (existing.weight || 1) + 1;
+    return null;
+  }
   draft.arcs.push(arc);
   return null;
 }

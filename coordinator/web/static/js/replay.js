@@ -1,5 +1,8 @@
 // Replay a run from the journal (paper section 5): scrub back and forth through its records, see the
-// marking, the running actions and the latched events at any point, jump to errors.
+// marking, the running actions and the latched events at any point, jump to errors. What the
+// operator did shows as theirs: forced outcomes are marked "forced by the operator", injected events
+// "raised by the operator", and the breakpoints set at each point are drawn as on the live page, with
+// the pauses they made.
 
 import { api } from "./ws.js";
 import { clock, el, seconds } from "./ui.js";
@@ -81,8 +84,9 @@ export function initReplay(app) {
   app.openReplay = open;
 
   function emptyState() {
-    return { marking: { ...rp.data.initial }, running: new Map(), latched: new Map(), firings: 0 };
+    return { marking: { ...rp.data.initial }, running: new Map(), latched: new Map(), firings: 0, breakpoints: new Map(), hit: null };
   }
+  function bpKey(bp) { return `${bp.kind} ${bp.target}${bp.kind === "count" ? " " + bp.count : ""}`; }
   function step(s, r) {
     if (r[0] === "f") {
       for (const [p, n] of Object.entries(r[3])) s.marking[p] = (s.marking[p] || 0) - n;
@@ -94,12 +98,22 @@ export function initReplay(app) {
     } else if (r[0] === "r") {
       const run = s.running.get(r[1]);
       s.running.delete(r[1]);
-      if (run) s.latched.set(r[1], { place: run.place, action: r[3], events: latchedEvents(r[2], r[5], r[6]), status: r[5] });
+      if (run) s.latched.set(r[1], { place: run.place, action: r[3], events: latchedEvents(r[2], r[5], r[6]), status: r[5], forced: !!r[10] });
     } else if (r[0] === "o" && r[4] && (r[1] === "insert" || r[1] === "remove") && r[2]) {
       s.marking[r[2]] = (s.marking[r[2]] || 0) + (r[3] || 0) * (r[1] === "insert" ? 1 : -1);
+    } else if (r[0] === "o" && r[4] && r[7] && r[7].breakpoint) {
+      const bp = r[7].breakpoint;
+      if (r[1] === "break") s.breakpoints.set(bpKey(bp), bp);
+      else if (r[1] === "clear") s.breakpoints.delete(bpKey(bp));
+      else if (r[1] === "pause") s.hit = { ...bp, why: r[7].why };
+    } else if (r[0] === "o" && r[4] && (r[1] === "resume" || r[1] === "step")) {
+      s.hit = null;
     }
   }
-  function copy(s) { return { marking: { ...s.marking }, running: new Map(s.running), latched: new Map(s.latched), firings: s.firings }; }
+  function copy(s) {
+    return { marking: { ...s.marking }, running: new Map(s.running), latched: new Map(s.latched), firings: s.firings,
+             breakpoints: new Map(s.breakpoints), hit: s.hit };
+  }
   function buildCheckpoints() {
     rp.checkpoints = [];
     const s = emptyState();
@@ -134,9 +148,21 @@ export function initReplay(app) {
     }
     for (const l of s.latched.values()) {
       if (badges.has(l.place)) continue;
-      badges.set(l.place, { text: `${l.status === "error" ? "\u2717" : "\u2713"} ${l.events.join(" ")} (${l.action})`, latched: true });
+      badges.set(l.place, { text: `${l.status === "error" ? "\u2717" : "\u2713"} ${l.events.join(" ")} (${l.action})${l.forced ? " FORCED by the operator" : ""}`,
+                            latched: true });
     }
     app.graph.setBadges(badges);
+    const marks = [];
+    const placesOf = (task) => (rp.data.draft.places || []).filter((p) => p.task === task).map((p) => p.id);
+    for (const bp of s.breakpoints.values()) {
+      for (const node of bp.kind === "error" ? placesOf(bp.target) : [bp.target]) {
+        const hit = s.hit && bpKey(s.hit) === bpKey(bp);
+        marks.push({ key: `bp:${bpKey(bp)}:${node}`, node, at: "corner-right", cls: "bp" + (hit ? " hit" : ""),
+                     text: { enabled: "E", fires: "F", count: "#", error: "!" }[bp.kind],
+                     title: `breakpoint ${bpKey(bp)}${hit ? ` \u2014 the run paused here: ${s.hit.why}` : ""}` });
+      }
+    }
+    app.graph.setMarks("breakpoints", marks);
     header(s, last);
     renderRecords();
     renderRunPanel(s, last);
@@ -152,9 +178,17 @@ export function initReplay(app) {
     switch (r[0]) {
       case "f": return `fire #${r[1]} ${r[2]}${r[6] ? " on " + r[6] : ""}   ${places(r[3])} \u2192 ${places(r[4])}`;
       case "s": return `start ${r[2]} \u2192 ${r[4]} on ${r[5] || "?"}`;
-      case "r": return `done ${r[2]}/${r[3]}: ${r[5]}${r[6] ? " (" + r[6] + ")" : ""} in ${seconds(r[8])}${r[7] ? ": " + r[7] : ""}`;
-      default: return `operator ${r[1]}${r[2] ? " " + r[2] + " " + r[3] : ""}${r[4] ? "" : " refused: " + (r[5] || "")}`;
+      case "r": return r[10] ? `FORCED ${r[2]}/${r[3]}: ${r[5]}${r[6] ? " (" + r[6] + ")" : ""}${r[7] ? ": " + r[7] : ""}`
+        : `done ${r[2]}/${r[3]}: ${r[5]}${r[6] ? " (" + r[6] + ")" : ""} in ${seconds(r[8])}${r[7] ? ": " + r[7] : ""}`;
+      default: return `operator ${r[1]}${r[2] ? " " + r[2] + " " + r[3] : ""}${detail(r[1], r[7])}${r[4] ? "" : " refused: " + (r[5] || "")}`;
     }
+  }
+  function detail(command, d) {
+    if (!d) return "";
+    if (d.breakpoint) return command === "pause" ? ` at breakpoint ${bpKey(d.breakpoint)}: ${d.why || ""}` : ` ${bpKey(d.breakpoint)}`;
+    if (d.event) return ` ${d.event} (raised by the operator)`;
+    if (d.instance) return ` ${d.outcome} on ${d.instance}${d.reason ? ` (${d.reason})` : ""}`;
+    return "";
   }
   function places(m) { return Object.entries(m).map(([p, n]) => (n === 1 ? p : `${p}\u00d7${n}`)).join(", ") || "-"; }
 
@@ -176,7 +210,8 @@ export function initReplay(app) {
     const from = Math.max(0, rp.k - 12), to = Math.min(rp.records.length, rp.k + 12);
     for (let i = from; i < to; i++) {
       const r = rp.records[i];
-      const cls = "rec" + (i === rp.k - 1 ? " here" : "") + (r[0] === "r" && r[5] === "error" ? " err" : "") + (r[0] === "o" ? " op" : "");
+      const cls = "rec" + (i === rp.k - 1 ? " here" : "") + (r[0] === "r" && r[5] === "error" ? " err" : "") + (r[0] === "o" ? " op" : "")
+        + (r[0] === "r" && r[10] ? " forced" : "") + (r[0] === "o" && r[7] && r[7].breakpoint && r[1] === "pause" ? " bp" : "");
       const row = el("div", { class: cls, title: describe(r) }, `${String(i + 1).padStart(5)} ${describe(r)}`);
       row.addEventListener("click", () => seek(i + 1));
       box.append(row);

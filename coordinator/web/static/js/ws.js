@@ -54,6 +54,11 @@ export class Link {
 
   get open() { return this.ws && this.ws.readyState === WebSocket.OPEN; }
 
+  /** Send a message that gets no reply (``painted``). */
+  notify(type, fields = {}) {
+    if (this.open) this.ws.send(JSON.stringify({ type, ...fields }));
+  }
+
   /** Send a request; resolves with the server's reply ({ok, reason, ...}). */
   request(type, fields = {}) {
     return new Promise((resolve) => {
