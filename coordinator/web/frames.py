@@ -83,11 +83,20 @@ KEPT_RESULTS = 512
 KEPT_TOPICS = 64
 
 
+def _plain(value: Any) -> Any:
+    """What ``json`` cannot write itself: a read-only mapping as an object, a set as an array, else its repr."""
+    if isinstance(value, Mapping):
+        return dict(value)
+    if isinstance(value, (set, frozenset)):
+        return sorted(value, key=repr)
+    return repr(value)
+
+
 def json_value(data: Any, limit: int = BLACKBOARD_BYTES) -> Any:
     """``data`` as JSON-ready values for the page, or its JSON text cut to ``limit`` bytes (with a
     note) when it is larger; anything JSON cannot hold is shown by its ``repr``."""
     try:
-        text = json.dumps(data, default=repr, separators=(",", ":"))
+        text = json.dumps(data, default=_plain, separators=(",", ":"))
     except (TypeError, ValueError):
         text = json.dumps(repr(data))
     if len(text) <= limit:
@@ -444,9 +453,10 @@ class LiveFeed:
                 if len(ended) < MAX_LISTED:
                     ended.append(item)
                 self._results.append(item)
-                if item["status"] == "error":
+                if item["status"] == "error" and not event.forced:
                     self._errors.append(item)
-                tasks[event.task] = dict(self._task_result(event.task, item))
+                if not event.forced:  # a drill says nothing about how the task fares
+                    tasks[event.task] = dict(self._task_result(event.task, item))
             elif isinstance(event, LearnerUpdated):
                 learner_tasks[event.task] = event.state
             elif isinstance(event, (OperatorApplied, OperatorRefused)):

@@ -74,7 +74,7 @@ class LiveRun:
         """One line of the page's list of live runs."""
         state = self.feed.state
         engine = self.runtime.engine
-        return {"run": self.run_id, "net": self.net.get("name"), "path": self.net.get("path"),
+        return {"run": self.run_id, "net": self.runtime.net.name, "path": self.net.get("path"),
                 "state": state.get("state"), "reason": state.get("reason", ""), "firings": engine.fired,
                 "paused": engine.paused, "origin": self.origin, "ended": self.feed.ended}
 
@@ -120,12 +120,12 @@ class RunStarter:
         journal: the journal runs are written to.
         location: the parsed services.toml, or ``None`` (then nothing can start).
         key_file: the shared key file (``None``: the default, as ``petrobot run``).
-        attach: called with ``(runtime, net_path, task)`` once a run has passed its preflight and
-            has a runtime; it returns the :class:`LiveRun` the console follows.
+        attach: called with ``(runtime, net_path, task, origin)`` once a run has passed its
+            preflight and has a runtime; it returns the :class:`LiveRun` the console follows.
     """
 
     def __init__(self, *, journal: Path, location: Any, key_file: str | None,
-                 attach: Callable[[Any, Path, asyncio.Task[Any]], LiveRun]) -> None:
+                 attach: Callable[[Any, Path, asyncio.Task[Any], str], LiveRun]) -> None:
         self.journal = journal
         self.location = location
         self.key_file = key_file
@@ -182,8 +182,7 @@ class RunStarter:
         holder: dict[str, asyncio.Task[Any]] = {}
 
         def on_runtime(runtime: Any) -> None:
-            live = self._attach(runtime, path, holder["task"])
-            live.origin = "page"
+            live = self._attach(runtime, path, holder["task"], "page")
             if not ready.done():
                 ready.set_result(live)
 

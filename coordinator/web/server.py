@@ -153,7 +153,7 @@ class ConsoleServer:
         self._runs_task: asyncio.Task[None] | None = None
         self._runs_sent: list[dict[str, Any]] = []
         self.starter = RunStarter(journal=self.run_journal(), location=config.location, key_file=config.key_file,
-                                  attach=lambda runtime, path, task: self._follow(runtime, path, task))
+                                  attach=lambda runtime, path, task, origin: self._follow(runtime, path, task, origin))
         self.port = 0
         self._preloaded = {self._shown(p): p for p in config.nets}
         self.app = self._make_app()
@@ -240,7 +240,8 @@ class ConsoleServer:
         go to the pages watching it as frames, and pages with the token steer it."""
         return self._follow(runtime, net_path, None).feed
 
-    def _follow(self, runtime: Any, net_path: Path | None, task: asyncio.Task[Any] | None) -> LiveRun:
+    def _follow(self, runtime: Any, net_path: Path | None, task: asyncio.Task[Any] | None,
+                origin: str = "attached") -> LiveRun:
         feed = LiveFeed(runtime, period_s=self.config.period_s)
         runtime.add_observer(feed)
         feed_task = asyncio.get_running_loop().create_task(feed.run(), name=f"console-frames-{runtime.run_id}")
@@ -256,7 +257,7 @@ class ConsoleServer:
             net = {"path": runtime.net.name, "name": runtime.net.name, "draft": draft,
                    "validation": validate_draft(draft, runtime.net.name, self.config.location).to_json(),
                    "laid_out": True}
-        live = LiveRun(runtime, feed, net, feed_task, task=task)
+        live = LiveRun(runtime, feed, net, feed_task, origin=origin, task=task)
         self.runs[live.run_id] = live
         ended = [rid for rid, other in self.runs.items() if other.feed.ended]
         for rid in ended[:max(0, len(ended) - KEPT_ENDED)]:

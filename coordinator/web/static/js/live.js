@@ -332,7 +332,7 @@ export function initLive(app) {
     if (key === lastButtons) return;
     lastButtons = key;
     const note = !app.control ? "read-only: open the URL with its token to steer the run" : live.ended ? "the run has ended" : "";
-    for (const b of document.querySelectorAll("#live-bar button")) {
+    for (const b of document.querySelectorAll("#live-bar button[data-cmd]")) {
       const cmd = b.dataset.cmd;
       let off = !control;
       if (cmd === "pause") off = off || live.paused;
@@ -676,7 +676,7 @@ export function initLive(app) {
   document.getElementById("steer-remove").addEventListener("click", () => steer("remove"));
   setInterval(updatePop, 300);
 
-  for (const b of document.querySelectorAll("#live-bar button")) {
+  for (const b of document.querySelectorAll("#live-bar button[data-cmd]")) {
     b.setAttribute("data-title", b.title);
     b.addEventListener("click", async () => {
       const reply = await app.link.request("command", { command: b.dataset.cmd });
