@@ -129,7 +129,7 @@ export function initAnalysis(app) {
     for (const [key, title] of [["p_invariants", "P-invariants"], ["t_invariants", "T-invariants"]]) {
       const invs = q[key] || [];
       panel.append(el("p", { class: "subhead" }, link("invariant", title), ` \u2014 ${invs.length}; click one to highlight it`));
-      const list = el("ul", { class: "analysis-list" });
+      const list = el("ul", { class: "analysis-list", id: `${key.replace("_", "-")}-list` });
       invs.slice(0, 30).forEach((inv, i) => {
         const id = `${key}:${i}`;
         const li = el("li", { class: state.invariant === id ? "current" : "" }, el("span", { class: "mono" },
@@ -145,9 +145,9 @@ export function initAnalysis(app) {
     panel.append(el("h4", {}, "petrobot gspn \u2014 heat map"));
     const b = (g.bottlenecks || [])[0];
     panel.append(el("ul", { class: "small" },
-      el("li", {}, `${g.tangible_markings} tangible markings; `, g.terminates
+      el("li", {}, `${g.tangible_markings} tangible markings; `, ...(g.terminates
         ? ["the task ends: mean time to the end ", link("measures", `${fmt(g.mean_time_to_absorption)} s`)]
-        : "steady state"),
+        : ["steady state"])),
       el("li", {}, link("measures", g.terminates ? "heat: expected firings of each transition, share of the time each task runs"
         : "heat: utilisation of each place (P(marked)), throughput of each transition (1/s)")),
       b ? el("li", {}, el("b", {}, "bottleneck: "), `${nodeOf(b.transition)} `, link("measures", `(${Math.round((b.share || 0) * 100)}% of the time, ${b.criterion})`))
@@ -422,19 +422,7 @@ export function initAnalysis(app) {
       }
     }
     app.graph.setMarks("analysis", marks);
-    drawBars();
   }
-
-  /** The learner marks get small bars (the plane gives them their text; the bars are added here). */
-  function drawBars() {
-    document.querySelectorAll(".mark.learner").forEach((elm) => {
-      const mark = app.graph.marks.find((m) => m.key === elm.dataset.key);
-      if (!mark || !mark.bars) return;
-      elm.replaceChildren(...mark.bars.map(([name, pr]) => el("span", { class: "lbar" },
-        el("i", { style: { width: `${Math.max(1, Math.round((pr || 0) * 50))}px` } }), `${name} ${fmt(pr, 2)}`)));
-    });
-  }
-  app.drawLearnerBars = drawBars;
 
   return {
     render, redraw,

@@ -593,7 +593,21 @@ class Plane {
       entry.mark = mark;
       const el = entry.el;
       el.className = "mark " + (mark.cls || "");
-      el.textContent = mark.text;
+      if (mark.bars) {
+        // a learner's probabilities: one small bar per action, its length the probability
+        const key = JSON.stringify(mark.bars);
+        if (el.dataset.bars !== key) {
+          el.dataset.bars = key;
+          el.replaceChildren(...mark.bars.map(([name, p]) => {
+            const row = document.createElement("span");
+            row.className = "lbar";
+            const bar = document.createElement("i");
+            bar.style.width = `${Math.max(1, Math.round((p || 0) * 50))}px`;
+            row.append(bar, `${name} ${Number.isFinite(p) ? p.toFixed(2) : "-"}`);
+            return row;
+          }));
+        }
+      } else if (el.textContent !== mark.text) el.textContent = mark.text;
       el.title = mark.title || "";
       el.dataset.node = mark.node;
       el.dataset.key = mark.key;
