@@ -548,7 +548,9 @@ class _Page:
         if live is None:
             return
         if announce:
-            self.send({"type": "run", "live": live.feed.snapshot(), "net": live.net})
+            journal = self.server._journal()
+            self.send({"type": "run", "live": live.feed.snapshot(), "net": live.net,
+                       "journal": self.server._shown(journal) if journal else None})
         self._feed = live.feed
         live.feed.subscribe(self.offer_frame)
 

@@ -446,7 +446,10 @@ app.link = new Link(token, {
     }
     analysis.render();
   },
-  run(msg) { startLive(msg.live, msg.net); },
+  run(msg) {
+    if (msg.journal) app.journal = msg.journal;  // a run started from the page may have made the journal
+    startLive(msg.live, msg.net);
+  },
   runs(msg) { app.runs = msg.runs; runsView.render(); },
   frame(msg) { liveView.onFrame(msg); },
   snapshot(msg) { liveView.load(msg); },

@@ -168,6 +168,7 @@ export function initReplay(app) {
     renderRunPanel(s, last);
   }
   app.replaySeek = () => seek(rp.k);
+  rp.seek = (k) => { stop(); seek(k); };
 
   function lastTime(k) {
     const r = rp.records[k - 1];
