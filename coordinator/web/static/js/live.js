@@ -404,7 +404,7 @@ export function initLive(app) {
     if (live.operator.length) {
       panel.append(el("h4", {}, "operator commands"));
       panel.append(el("ul", { class: "small" }, ...live.operator.slice(-8).reverse().map((o) => el("li", { class: o.ok ? "" : "node-bad" },
-        `${o.command}${o.place ? " " + o.place + " " + o.count : ""}${o.text ? ` "${o.text}"` : ""}: ${o.ok ? "applied" : "refused: " + o.reason}`))));
+        `${o.command === "invalid" ? `"${o.text}"` : o.text || o.command}: ${o.ok ? "applied" : "refused: " + o.reason}`))));
     }
     const pulses = Object.entries(live.pulses);
     if (pulses.length) panel.append(el("p", { class: "small" }, "external events: " + pulses.map(([e, n]) => `${e} \u00d7${n}`).join(", ")));
