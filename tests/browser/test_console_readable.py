@@ -133,6 +133,7 @@ def test_edits_are_marked_unsaved_and_new_or_open_asks_before_discarding_them(pa
     # New: asked, and "keep editing" keeps the drawing
     page.page.click("#new")
     assert page.page.locator("#confirm-dialog").is_visible()
+    page.screenshot("design-confirm")
     page.page.click("#confirm-no")
     assert page.eval("window.petrobot.design.draft.places.length") == 15
     # Open lists nets only (not services.toml, not pyproject.toml), and asks too
@@ -191,6 +192,7 @@ def test_the_arc_tool_drag_draws_an_arc_and_reset_arcs_and_expressions_are_saved
     page.page.keyboard.press("r")
     drag("p2", "t1")
     page.wait("window.petrobot.design.draft.arcs.length === 3", what="the reset arc")
+    page.screenshot("design-arcs")
     assert page.eval("window.petrobot.design.draft.arcs[2]") == {"from": "p2", "to": "t1", "reset": True}
     # a weight expression and an exponential rate expression, typed in the inspector
     page.page.keyboard.press("v")
