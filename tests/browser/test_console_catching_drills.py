@@ -56,25 +56,29 @@ def test_breakpoint_on_ball_caught_injected_crossfire_and_a_forced_locate_error_
         # stop when the crossfire sensor is about to be awaited, and when ball_caught fires
         breakpoint_on(page, "crossfire", "enabled")
         breakpoint_on(page, "ball_caught", "fires")
-        caught = False
-        for attempt in range(3):  # a ball the robot misses goes on to the next run
+        page.eval("() => window.petrobot.command('insert', { place: 'runs_remaining', count: 3 })")  # room for misses
+        crossfired = caught = False
+        for attempt in range(5):  # a ball the robot misses goes on to the next run
             page.wait("window.petrobot.live.paused && document.body.dataset.hit === 'enabled crossfire'",
                       what=f"run {attempt + 1}: the pause with the sensor armed")
             assert page.eval("window.petrobot.live.marking.cup_armed") == 1
-            fired = page.eval("window.petrobot.live.firings")
             page.eval("() => { document.body.dataset.hit = ''; }")
             # resume, and the operator raises ext:ball_caught at once (the net's [operator] allows it)
             page.page.click("#cmd-resume")
             page.page.select_option("#inject-event", "ext:ball_caught")
             page.page.click("#inject-go")
-            page.wait("(f) => window.petrobot.live.firings > f && window.petrobot.live.marking.ball_in_cup === 1",
-                      arg=fired, what="crossfire fired on the operator's event")
-            page.wait("document.body.dataset.hit === 'fires ball_caught' || "
-                      "(window.petrobot.live.marking.ball_in_cup || 0) === 0", what="the catch's outcome")
+            # crossfire fires on it, unless the catch had ended first (a miss: the sensor is disarmed)
+            page.wait("window.petrobot.live.marking.ball_in_cup === 1 || !window.petrobot.live.marking.cup_armed",
+                      what="crossfire fired on the operator's event, or the catch over")
+            if page.eval("window.petrobot.live.marking.ball_in_cup") != 1:
+                continue
+            crossfired = True
+            page.wait("document.body.dataset.hit === 'fires ball_caught' || !window.petrobot.live.marking.ball_in_cup",
+                      what="the catch's outcome")
             if page.eval("document.body.dataset.hit") == "fires ball_caught":
                 caught = True
                 break
-        assert caught, "the robot missed three balls in a row"
+        assert crossfired and caught, "the robot missed five balls in a row"
         assert page.eval("window.petrobot.live.paused") is True
         assert page.eval("window.petrobot.live.marking.caught") >= 1
         page.screenshot("catch-breakpoint-ball_caught")
@@ -110,8 +114,8 @@ def test_breakpoint_on_ball_caught_injected_crossfire_and_a_forced_locate_error_
     # the journal: crossfire fired on the operator's pulse, right after the inject; the pause at ball_caught
     records = rows(journal, "SELECT entry, 'o', command, detail FROM operator WHERE accepted UNION ALL "
                             "SELECT entry, 'f', transition, pulse FROM firing ORDER BY 1")
-    inject = next(i for i, r in enumerate(records) if r[1:3] == ("o", "inject"))
-    assert records[inject + 1][1:] == ("f", "crossfire", "ext:ball_caught")
+    injects = [i for i, r in enumerate(records) if r[1:3] == ("o", "inject")]
+    assert any(records[i + 1][1:] == ("f", "crossfire", "ext:ball_caught") for i in injects)
     pauses = [json.loads(r[3]) for r in records if r[1:3] == ("o", "pause") and r[3]]
     assert {"kind": "fires", "target": "ball_caught", "count": None} in [p["breakpoint"] for p in pauses]
     hit = next(i for i, r in enumerate(records) if r[1:3] == ("o", "pause") and r[3] and "ball_caught" in r[3])

@@ -91,12 +91,12 @@ export function initEditor(app) {
     if (!b || (!dragged && Math.hypot(b.x - a.x, b.y - a.y) < 8)) return;
     dragged = true;
     band.setAttribute("x1", a.x); band.setAttribute("y1", a.y); band.setAttribute("x2", b.x); band.setAttribute("y2", b.y);
-    rubber.hidden = false;
+    rubber.removeAttribute("hidden");  // an SVG element has no hidden property
   });
   cy.on("tapend", (ev) => {
     const from = dragFrom;
     dragFrom = null;
-    rubber.hidden = true;
+    rubber.setAttribute("hidden", "");
     if (from === null || !dragged) { dragged = false; return; }
     const at = ev.renderedPosition || ev.position;
     const over = cy.nodes().filter((n) => {
