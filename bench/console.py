@@ -26,9 +26,13 @@ Debian's chromium (headless, through Playwright) on the console's page.
 * **open 1,000 nodes**: ``petrobot console`` serves a net of 500 places and 500 transitions without
   positions; the time from navigation to the page being ready (laid out, drawn, two frames later),
   then to a click on a transition showing it in the inspector.
+* **under CPU load** (``--load N``): N busy processes (a Python loop each) run beside the run and
+  the browser for the whole measurement; the run is then measured twice in the same invocation,
+  the console detached and attached in turns (the throughput ratio) and never detached (``--null``:
+  the ratio the alternation alone gives, the noise floor), and both ratios are printed side by side.
 
 Usage: python bench/console.py [--minutes M] [--phase S] [--rings R] [--length L] [--period S]
-       [--skip-open] [--skip-run] [--feed-pairs N | --feed-only] [--json]
+       [--skip-open] [--skip-run] [--feed-pairs N | --feed-only] [--load N] [--json]
 (needs /usr/bin/chromium or $PETROBOT_CHROMIUM, and the playwright package).
 """
 
@@ -304,6 +308,24 @@ def measure_open(browser: Any, pairs: int) -> dict[str, Any]:
     return {"open_1000_nodes_s": round(ready, 3), "open_then_click_s": round(clicked, 3), "open_nodes": nodes}
 
 
+class BusyLoad:
+    """``n`` busy processes (a Python loop each, bounded by ``seconds``), started and stopped around a
+    measurement: the CPU load of issue 23's target (two busy processes on two cores)."""
+
+    def __init__(self, n: int, seconds: float) -> None:
+        self.procs = [subprocess.Popen([sys.executable, "-c", f"import time\nend = time.monotonic() + {seconds}\n"
+                                        "while time.monotonic() < end:\n    pass"]) for _ in range(n)]
+
+    def __enter__(self) -> BusyLoad:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        for proc in self.procs:
+            proc.terminate()
+        for proc in self.procs:
+            proc.wait(timeout=30)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=10.0, help="length of the attached run, minutes")
@@ -320,6 +342,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--feed-pairs", type=int, default=8,
                     help="detached/attached phase pairs of the browser-less feed cost measurement (0: skip it)")
     ap.add_argument("--feed-only", action="store_true", help="only measure the feed's cost, no browser")
+    ap.add_argument("--load", type=int, default=0, metavar="N",
+                    help="run N busy processes beside the run and the browser, and measure the noise floor (--null) "
+                         "under the same load in the same invocation (default: 0, no load)")
     ap.add_argument("--json", action="store_true", help="print the results as one JSON object")
     ap.add_argument("--serve", metavar="DIR", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -341,7 +366,17 @@ def main(argv: list[str] | None = None) -> int:
         try:
             if not args.skip_open:
                 result.update(measure_open(browser, args.open_pairs))
-            if not args.skip_run:
+            if not args.skip_run and args.load > 0:
+                # the run under load, then the noise floor under the same load: the console never detached
+                budget = 2 * args.minutes * 60 + 4 * TIMEOUT_S
+                with BusyLoad(args.load, budget):
+                    result["busy_processes"] = args.load
+                    result.update(measure_run(browser, args))
+                    floor = measure_run(browser, argparse.Namespace(**{**vars(args), "null": True}))
+                result["noise_floor_ratio"] = floor["throughput_ratio"]
+                result["noise_floor_ratio_median_pair"] = floor["throughput_ratio_median_pair"]
+                result["noise_floor_firings_per_s"] = floor["firings_per_s_attached"]
+            elif not args.skip_run:
                 result.update(measure_run(browser, args))
         finally:
             browser.close()

@@ -16,8 +16,12 @@ when the page receives it (bench/console.py measures the rest).
 Frames are sized to what the pages can paint: a page that says when it has painted a frame
 (:meth:`LiveFeed.painted`, the ``painted`` message) is *pacing*, and the next frame waits until
 every pacing page has painted the previous one (at most :data:`PACE_MAX_S`), piling up what
-happens meanwhile into that one frame. A page on a loaded machine, which paints less often, thus
-gets fewer, larger frames instead of a backlog, and costs the run less CPU.
+happens meanwhile into that one frame. And frames are sized to the CPU the machine can spare: the
+feed looks at the machine's idle CPU twice a second (:class:`IdleCpu`, ``/proc/stat``) and, when
+no core is idle — the browser's work would be taken from the run — spaces its frames up to
+:data:`BUSY_PERIOD_S` (:func:`frame_period`): a browser on the run's own cores then paints a few
+larger frames a second instead of a hundred, and the run keeps its rate; with a core to spare,
+frames come every ``period_s`` as before.
 
 :func:`learner_view` is the learner panel's row data; :func:`result_json` one ended action;
 :func:`used_nodes` the nodes a net calls or hears from (the page marks the others "not used").
@@ -38,6 +42,7 @@ import collections
 import contextlib
 import json
 import logging
+import os
 import time
 from collections.abc import Callable, Mapping
 from typing import Any
@@ -57,8 +62,8 @@ from coordinator.events import (
 )
 from coordinator.operator import OperatorCommand
 
-__all__ = ["BLACKBOARD_BYTES", "DEFAULT_PERIOD_S", "FEEDBACK_CHARS", "LiveFeed", "feedback_text", "json_value",
-           "learner_view", "result_json", "used_nodes"]
+__all__ = ["BLACKBOARD_BYTES", "DEFAULT_PERIOD_S", "FEEDBACK_CHARS", "IdleCpu", "LiveFeed", "feedback_text",
+           "frame_period", "json_value", "learner_view", "result_json", "used_nodes"]
 
 log = logging.getLogger("petrobot.web")
 
@@ -71,6 +76,49 @@ HEALTH_PERIOD_S = 1.0
 #: Longest the next frame waits for a page to say it has painted the previous one, seconds (a page
 #: that paints slower than this gets its frames anyway, as a page that never says).
 PACE_MAX_S = 0.25
+#: Shortest time between two frames when no core of the machine is idle, seconds.
+BUSY_PERIOD_S = 0.2
+#: Idle CPU (in cores) from which frames come at the full rate again.
+SPARE_CORES = 0.5
+#: How often the machine's idle CPU is looked at, seconds.
+IDLE_PERIOD_S = 0.5
+
+
+def frame_period(base_s: float, idle_cores: float | None) -> float:
+    """The time between two frames given the machine's idle CPU: ``base_s`` with at least
+    :data:`SPARE_CORES` idle, :data:`BUSY_PERIOD_S` with none, linear in between; ``base_s`` when
+    the idle CPU is not known."""
+    if idle_cores is None or base_s >= BUSY_PERIOD_S:
+        return base_s
+    busy = min(1.0, max(0.0, 1.0 - idle_cores / SPARE_CORES))
+    return base_s + (BUSY_PERIOD_S - base_s) * busy
+
+
+class IdleCpu:
+    """The machine's idle CPU since the last look, in cores, from ``/proc/stat`` (``None`` where there
+    is none: the frames then keep their period)."""
+
+    def __init__(self, path: str = "/proc/stat") -> None:
+        self.path = path
+        self._last: tuple[int, int] | None = self._read()
+
+    def _read(self) -> tuple[int, int] | None:
+        try:
+            with open(self.path, encoding="ascii") as f:
+                fields = [int(x) for x in f.readline().split()[1:]]
+        except (OSError, ValueError):
+            return None
+        if len(fields) < 5:
+            return None
+        return sum(fields), fields[3] + fields[4]  # total, idle + iowait (jiffies)
+
+    def sample(self) -> float | None:
+        """Idle cores since the previous sample (``None`` before there are two, or without /proc)."""
+        now = self._read()
+        last, self._last = self._last, now
+        if now is None or last is None or now[0] <= last[0]:
+            return None
+        return (now[1] - last[1]) / (now[0] - last[0]) * (os.cpu_count() or 1)
 #: Most action starts/ends, operator notes or pulses one frame lists (a burst beyond is counted).
 MAX_LISTED = 200
 #: Feedback shown per running action: its JSON text, cut to this many characters.
@@ -232,6 +280,8 @@ class LiveFeed:
         self._ended_results: collections.OrderedDict[str, dict[str, Any]] = collections.OrderedDict()
         self._topics: collections.OrderedDict[str, dict[str, Any]] = collections.OrderedDict()
         self._hits: collections.deque[dict[str, Any]] = collections.deque(maxlen=20)
+        #: the time between two frames now (``period_s``, longer while no core is idle)
+        self.period_now = period_s
 
     # ------------------------------------------------------------------ the observer
     def __call__(self, event: RunEvent) -> None:
@@ -565,15 +615,22 @@ class LiveFeed:
 
     async def run(self) -> None:
         """Coalesce and send frames until cancelled: a first event after a quiet spell goes out
-        at once, later ones at most every ``period_s``."""
+        at once, later ones at most every ``period_s`` (longer while the machine has no idle core)."""
+        idle = IdleCpu()
+        looked = time.monotonic()
+        period = self.period_s
         while True:
+            if time.monotonic() - looked >= IDLE_PERIOD_S:
+                looked = time.monotonic()
+                period = frame_period(self.period_s, idle.sample())
+                self.period_now = period
             # a quiet run still gets its nodes' health; asyncio.timeout, not wait_for, whose 3.11
             # version can swallow the cancellation that stops this task
             with contextlib.suppress(TimeoutError):
                 async with asyncio.timeout(HEALTH_PERIOD_S):
                     await self._wake.wait()
             self._wake.clear()
-            wait = self._last_frame + self.period_s - time.monotonic()
+            wait = self._last_frame + period - time.monotonic()
             if wait > 0:
                 await asyncio.sleep(wait)
             if self._awaiting:  # a pacing page has not painted the last frame yet: let it

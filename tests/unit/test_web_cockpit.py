@@ -139,3 +139,20 @@ async def test_a_page_that_says_when_it_has_painted_paces_the_frames(tmp_path: P
             assert sum(sent[2]["fired"].values()) == 5
         finally:
             task.cancel()
+
+
+def test_frames_are_spaced_when_the_machine_has_no_idle_core(tmp_path: Path):
+    from coordinator.web.frames import BUSY_PERIOD_S, SPARE_CORES, IdleCpu, frame_period
+
+    assert frame_period(0.01, None) == 0.01               # unknown: as configured
+    assert frame_period(0.01, SPARE_CORES) == 0.01        # a core to spare: full rate
+    assert frame_period(0.01, 0.0) == BUSY_PERIOD_S       # no idle CPU: a few frames a second
+    assert 0.01 < frame_period(0.01, SPARE_CORES / 2) < BUSY_PERIOD_S
+    stat = tmp_path / "stat"
+    stat.write_text("cpu  100 0 100 800 0 0 0 0 0 0\n")
+    idle = IdleCpu(str(stat))
+    stat.write_text("cpu  200 0 200 800 0 0 0 0 0 0\n")   # 200 jiffies more, none of them idle
+    assert idle.sample() == 0.0
+    stat.write_text("cpu  200 0 200 1000 0 0 0 0 0 0\n")  # 200 more, all idle
+    assert idle.sample() == pytest.approx(float(__import__("os").cpu_count() or 1))
+    assert IdleCpu(str(tmp_path / "none")).sample() is None
