@@ -9,6 +9,7 @@ error and every console error (a Content-Security-Policy violation is one) fails
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import shutil
@@ -197,3 +198,29 @@ def without_token(url: str) -> str:
 
 def elapsed_since(t0: float) -> float:
     return time.monotonic() - t0
+
+
+@contextlib.contextmanager
+def catching_demo(petrobot: Any, tmp_path: Path, journal: Path, max_seconds: int = 240) -> Iterator[Petrobot]:
+    """``petrobot run nets/catch.toml --console 0`` against the simulated catching world (analytic
+    camera, as the demo runs it) and the vision and motion nodes; the world and the nodes are stopped
+    on leaving."""
+    from coordinator.commands.demo_start import SimWorld
+    from tests.integration.conftest import Cluster
+    from tests.integration.test_catching import SERVICES
+
+    cluster = Cluster(tmp_path)
+    cluster.write_services(SERVICES.replace("PREDICT_NODE", "vision"))
+    sim = SimWorld(["--realtime", "--seed", "3", "--renderer", "analytic", "--throws", "0", "--interval", "0",
+                    "--throw-when-home", "1.0", "--first-throw", "4", "--camera-port", str(cluster.ports["camera"]),
+                    "--can-port", str(cluster.ports["can"])])
+    try:
+        sim.wait_ready(TIMEOUT_S)
+        cluster.start("vision", "motion")
+        yield petrobot("run", str(ROOT / "nets" / "catch.toml"), "--services", str(cluster.services_path),
+                       "--key-file", str(cluster.key_file), "--journal", str(journal), "--console", "0", "--lines",
+                       "--max-seconds", str(max_seconds), env=cluster.env(), cwd=tmp_path)
+    finally:
+        for name in list(cluster.procs):
+            cluster.kill(name)
+        sim.stop()

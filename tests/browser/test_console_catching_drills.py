@@ -15,7 +15,7 @@ from typing import Any
 
 import pytest
 
-from tests.browser.conftest import ROOT, TIMEOUT_S, Page
+from tests.browser.conftest import ROOT, Page, catching_demo
 
 
 def rows(journal: Path, sql: str) -> list[tuple[Any, ...]]:
@@ -35,22 +35,8 @@ def breakpoint_on(page: Page, node: str, kind: str) -> None:
 @pytest.mark.timeout(420)
 def test_breakpoint_on_ball_caught_injected_crossfire_and_a_forced_locate_error_on_the_catching_demo(
         page: Page, petrobot: Any, tmp_path: Path):
-    from coordinator.commands.simworld import SimWorld
-    from tests.integration.conftest import Cluster
-    from tests.integration.test_catching import SERVICES
-
-    cluster = Cluster(tmp_path)
-    cluster.write_services(SERVICES.replace("PREDICT_NODE", "vision"))
-    sim = SimWorld(["--realtime", "--seed", "3", "--renderer", "analytic", "--throws", "0", "--interval", "0",
-                    "--throw-when-home", "1.0", "--first-throw", "4", "--camera-port", str(cluster.ports["camera"]),
-                    "--can-port", str(cluster.ports["can"])])
     journal = tmp_path / "j.sqlite"
-    try:
-        sim.wait_ready(TIMEOUT_S)
-        cluster.start("vision", "motion")
-        proc = petrobot("run", str(ROOT / "nets" / "catch.toml"), "--services", str(cluster.services_path),
-                        "--key-file", str(cluster.key_file), "--journal", str(journal), "--console", "0", "--lines",
-                        "--max-seconds", "360", env=cluster.env(), cwd=tmp_path)
+    with catching_demo(petrobot, tmp_path, journal, max_seconds=360) as proc:
         page.page.goto(proc.url())
         page.wait("window.petrobot.mode === 'live' && window.petrobot.live.runId", what="the live run")
         # stop when the crossfire sensor is about to be awaited, and when ball_caught fires
@@ -107,10 +93,6 @@ def test_breakpoint_on_ball_caught_injected_crossfire_and_a_forced_locate_error_
                   "window.petrobot.live.state.reason.startsWith('completed')", what="the experiment home")
         page.page.click("#cmd-end")
         assert proc.wait() == 0, proc.output()
-    finally:
-        for name in list(cluster.procs):
-            cluster.kill(name)
-        sim.stop()
     # the journal: crossfire fired on the operator's pulse, right after the inject; the pause at ball_caught
     records = rows(journal, "SELECT entry, 'o', command, detail FROM operator WHERE accepted UNION ALL "
                             "SELECT entry, 'f', transition, pulse FROM firing ORDER BY 1")

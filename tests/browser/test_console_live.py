@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from tests.browser.conftest import ROOT, TIMEOUT_S, Page, without_token
+from tests.browser.conftest import ROOT, Page, catching_demo, without_token
 
 STEPPER = """
 [net]
@@ -303,23 +303,8 @@ def test_the_page_shows_failing_tasks_unused_nodes_the_real_state_and_keeps_the_
 @pytest.mark.timeout(300)
 def test_the_catching_demo_live_tokens_move_and_emptying_runs_remaining_ends_the_experiment(
         page: Page, petrobot: Any, tmp_path: Path):
-    from coordinator.commands.demo_start import SimWorld
-    from tests.integration.conftest import Cluster
-    from tests.integration.test_catching import SERVICES
-
-    cluster = Cluster(tmp_path)
-    cluster.write_services(SERVICES.replace("PREDICT_NODE", "vision"))
-    # petrobot sim catching as the demo runs it (analytic camera)
-    sim = SimWorld(["--realtime", "--seed", "3", "--renderer", "analytic", "--throws", "0", "--interval", "0",
-                    "--throw-when-home", "1.0", "--first-throw", "4", "--camera-port", str(cluster.ports["camera"]),
-                    "--can-port", str(cluster.ports["can"])])
-    try:
-        sim.wait_ready(TIMEOUT_S)
-        cluster.start("vision", "motion")
-        journal = tmp_path / "j.sqlite"
-        proc = petrobot("run", str(ROOT / "nets" / "catch.toml"), "--services", str(cluster.services_path),
-                        "--key-file", str(cluster.key_file), "--journal", str(journal), "--console", "0", "--lines",
-                        "--max-seconds", "240", env=cluster.env(), cwd=tmp_path)
+    journal = tmp_path / "j.sqlite"
+    with catching_demo(petrobot, tmp_path, journal) as proc:
         open_live(page, proc.url())
         # tokens move: a run starts on an image sampling tick and locate runs on the vision node
         page.wait("window.petrobot.live.marking.runs_remaining === 3 && window.petrobot.live.firings >= 1",
@@ -340,10 +325,6 @@ def test_the_catching_demo_live_tokens_move_and_emptying_runs_remaining_ends_the
         page.screenshot("catch-live-home")
         page.page.click("#cmd-end")
         assert proc.wait() == 0, proc.output()
-    finally:
-        for name in list(cluster.procs):
-            cluster.kill(name)
-        sim.stop()
     started = rows(journal, "SELECT COUNT(*) FROM firing WHERE transition = 'start_run'")[0][0]
     removed = rows(journal, "SELECT SUM(count) FROM operator WHERE command = 'remove' AND accepted")[0][0]
     assert started + removed == 4 and 1 <= started < 4
