@@ -121,6 +121,7 @@ async def serve(args: argparse.Namespace) -> None:
                                              period_s=args.period))
         print(json.dumps({"url": await server.start()}), flush=True)
         feed = server.attach_run(runtime, net_path)
+        feed.adaptive = not args.fixed_period
         await loop.run_in_executor(None, sys.stdin.readline)  # the page is live
         run = loop.create_task(runtime.run())
         phases: list[dict[str, Any]] = []
@@ -208,7 +209,8 @@ def js_heap(page: Any, cdp: Any) -> dict[str, float]:
 def measure_run(browser: Any, args: argparse.Namespace) -> dict[str, Any]:
     with tempfile.TemporaryDirectory() as tmp:
         child = subprocess.Popen([sys.executable, __file__, "--serve", tmp, "--minutes", str(args.minutes),
-                                  "--phase", str(args.phase), *(["--null"] if args.null else []), "--period", str(args.period), "--rings", str(args.rings), "--length", str(args.length)],
+                                  "--phase", str(args.phase), *(["--null"] if args.null else []),
+                                  *(["--fixed-period"] if args.fixed_period else []), "--period", str(args.period), "--rings", str(args.rings), "--length", str(args.length)],
                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
                                  env={**os.environ, "PYTHONPATH": str(ROOT)})
         assert child.stdin is not None and child.stdout is not None
@@ -342,6 +344,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--feed-pairs", type=int, default=8,
                     help="detached/attached phase pairs of the browser-less feed cost measurement (0: skip it)")
     ap.add_argument("--feed-only", action="store_true", help="only measure the feed's cost, no browser")
+    ap.add_argument("--fixed-period", action="store_true",
+                    help="frames every --period even when the machine has no idle core (the console spaces them "
+                         "then, up to 0.2 s: the pipeline's own latency on a loaded machine)")
     ap.add_argument("--load", type=int, default=0, metavar="N",
                     help="run N busy processes beside the run and the browser, and measure the noise floor (--null) "
                          "under the same load in the same invocation (default: 0, no load)")

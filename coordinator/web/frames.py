@@ -282,6 +282,8 @@ class LiveFeed:
         self._hits: collections.deque[dict[str, Any]] = collections.deque(maxlen=20)
         #: the time between two frames now (``period_s``, longer while no core is idle)
         self.period_now = period_s
+        #: space the frames while the machine has no idle core (False: always every ``period_s``)
+        self.adaptive = True
 
     # ------------------------------------------------------------------ the observer
     def __call__(self, event: RunEvent) -> None:
@@ -622,7 +624,7 @@ class LiveFeed:
         while True:
             if time.monotonic() - looked >= IDLE_PERIOD_S:
                 looked = time.monotonic()
-                period = frame_period(self.period_s, idle.sample())
+                period = frame_period(self.period_s, idle.sample() if self.adaptive else None)
                 self.period_now = period
             # a quiet run still gets its nodes' health; asyncio.timeout, not wait_for, whose 3.11
             # version can swallow the cancellation that stops this task
