@@ -19,12 +19,13 @@ and ``pause`` with the breakpoint as its detail), so a replay shows them.
 :class:`BreakpointWatch` holds the breakpoints of one run and is asked after every firing, token
 insertion or removal and primitive-action result; without breakpoints it costs the run one
 attribute test per firing. Pure: the engine is read through :meth:`~coordinator.engine.Engine.ready`
-and :meth:`~coordinator.engine.Engine.counts`, nothing else.
+and :attr:`~coordinator.engine.Engine.marking`, nothing else.
 """
 
 from __future__ import annotations
 
 import enum
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -126,7 +127,8 @@ def breakpoint_problem(net: PetriNet, bp: Breakpoint) -> str | None:
 class _Engine(Protocol):
     def ready(self, transition: str) -> bool: ...
 
-    def counts(self) -> dict[str, int]: ...
+    @property
+    def marking(self) -> Mapping[str, int]: ...
 
 
 class BreakpointWatch:
@@ -159,7 +161,7 @@ class BreakpointWatch:
             raise ValueError(problem)
         if bp not in self._points and len(self._points) >= MAX_BREAKPOINTS:
             raise ValueError(f"at most {MAX_BREAKPOINTS} breakpoints")
-        self._points.setdefault(bp, self._holds(bp, engine, engine.counts()))
+        self._points.setdefault(bp, self._holds(bp, engine, engine.marking))
 
     def remove(self, bp: Breakpoint) -> None:
         """Clear ``bp``.
@@ -171,7 +173,7 @@ class BreakpointWatch:
             raise ValueError(f"no breakpoint {bp} is set")
         del self._points[bp]
 
-    def _holds(self, bp: Breakpoint, engine: _Engine, counts: dict[str, int]) -> bool:
+    def _holds(self, bp: Breakpoint, engine: _Engine, counts: Mapping[str, int]) -> bool:
         if bp.kind is BreakKind.ENABLED:
             return engine.ready(bp.target)
         if bp.kind is BreakKind.COUNT:
@@ -181,11 +183,11 @@ class BreakpointWatch:
     def _edges(self, engine: _Engine) -> Hit | None:
         """Look at the level breakpoints (enabled, count); the first that became true."""
         hit = None
-        counts: dict[str, int] | None = None
+        counts: Mapping[str, int] | None = None
         for bp, held in self._points.items():
             if bp.kind is BreakKind.ENABLED or bp.kind is BreakKind.COUNT:
                 if counts is None:
-                    counts = engine.counts()
+                    counts = engine.marking
                 now = self._holds(bp, engine, counts)
                 self._points[bp] = now
                 if now and not held and hit is None:
