@@ -303,6 +303,13 @@ class LiveFeed:
             if type(event) is ActionFeedback:  # the blackboard keeps the latest feedback in full
                 seen = self._feedback.get(event.instance)
                 self._feedback[event.instance] = (event.data, 1 + (seen[1] if seen else 0), event.t_wall)
+            elif type(event) is ActionEnded:  # and the result latched on the token, at once
+                result = event.result
+                self._ended_results[event.instance] = {
+                    "status": result.status.value, "outcome": result.outcome, "reason": result.reason,
+                    "value": json_value(result.value), "forced": event.forced, "t": event.t_wall}
+                while len(self._ended_results) > KEPT_RESULTS:
+                    self._ended_results.popitem(last=False)
         if not self._pending:
             self._pending = True
             self._wake.set()
@@ -497,11 +504,6 @@ class LiveFeed:
                 latched = True
                 item = result_json(event.instance, event.task, event.action, event.node, event.result, event.t_wall,
                                    event.forced)
-                self._ended_results[event.instance] = {
-                    "status": item["status"], "outcome": item["outcome"], "reason": item["reason"],
-                    "value": json_value(event.result.value), "forced": event.forced, "t": event.t_wall}
-                while len(self._ended_results) > KEPT_RESULTS:
-                    self._ended_results.popitem(last=False)
                 if len(ended) < MAX_LISTED:
                     ended.append(item)
                 self._results.append(item)
