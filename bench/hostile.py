@@ -89,8 +89,14 @@ def frame(obj: Any) -> bytes:
     return struct.pack(">I", len(body)) + body
 
 
-def mac(role: bytes, nonce_s: bytes, nonce_c: bytes, key: bytes = KEY) -> bytes:
-    return hmac.new(key, b"petrobot-auth-v1\x00" + role + b"\x00" + nonce_s + nonce_c, hashlib.sha256).digest()
+def mac(role: bytes, client: str, server: str, nonce_s: bytes, nonce_c: bytes, key: bytes = KEY) -> bytes:
+    """docs/protocol.md §3: the MAC over the role, both names and both nonces."""
+    def named(text: str) -> bytes:
+        data = text.encode()
+        return struct.pack(">I", len(data)) + data
+
+    msg = b"petrobot-auth-v2\x00" + role + b"\x00" + named(client) + named(server) + nonce_s + nonce_c
+    return hmac.new(key, msg, hashlib.sha256).digest()
 
 
 # --------------------------------------------------------------------------- random frames
@@ -221,7 +227,7 @@ async def login(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> N
         raise ConnectionError(f"refused: {hello}")
     nonce = os.urandom(16)
     writer.write(frame({"type": "auth", "client": "fuzzer", "nonce": nonce,
-                        "mac": mac(b"client", hello["nonce"], nonce)}))
+                        "mac": mac(b"client", "fuzzer", hello["node"], hello["nonce"], nonce)}))
     header = await reader.readexactly(4)
     welcome = msgpack.unpackb(await reader.readexactly(struct.unpack(">I", header)[0]), raw=False)
     assert welcome["type"] == "welcome", welcome

@@ -571,7 +571,7 @@ class NodeLink(WireHost):
         return wire
 
     def _new_wire(self) -> _Wire:
-        conn = Connection(Role.CLIENT, self._key, name=self.name, max_frame=self.max_frame)
+        conn = Connection(Role.CLIENT, self._key, name=self.name, node=self.node, max_frame=self.max_frame)
         return _Wire(self, conn, asyncio.get_running_loop(), tls_binding=self.tls.mode == "psk")
 
     async def _heartbeat_loop(self) -> None:

@@ -113,6 +113,10 @@ class Connection:
         role: which end this is.
         key: the shared key (bytes; 32 random bytes recommended).
         name: this endpoint's name (node name for a server, client name for a client).
+        node: client only, required: the name of the node this client means to reach (its
+            services.toml name). The server's ``hello`` must carry that name, and both MACs cover
+            it: a client never talks to a node under another name, and its MAC verifies at no
+            other node (docs/protocol.md §3, "Threat model").
         max_frame: cap on received and sent frame bodies once OPEN, bytes.
         nonce: this side's 16-byte nonce; fresh random bytes when ``None`` (pass one in tests).
         handshake_max_frame: cap on received frame bodies before OPEN, bytes (default
@@ -128,7 +132,7 @@ class Connection:
         key_index: server: which key verified the client (0 = ``key``, 1.. = ``previous_keys``).
 
     Raises:
-        LocalProtocolError: the nonce is not 16 bytes.
+        LocalProtocolError: the nonce is not 16 bytes, or a client is given no ``node``.
     """
 
     def __init__(
@@ -137,6 +141,7 @@ class Connection:
         key: bytes,
         *,
         name: str,
+        node: str | None = None,
         max_frame: int = DEFAULT_MAX_FRAME,
         nonce: bytes | None = None,
         handshake_max_frame: int | None = None,
@@ -148,6 +153,9 @@ class Connection:
         self.max_frame = max_frame
         self.peer: str | None = None
         """The peer's name once known (from ``hello`` or ``auth``)."""
+        if role is Role.CLIENT and node is None:
+            raise LocalProtocolError("a client connection needs the name of the node it means to reach")
+        self._node: str = node if node is not None and role is Role.CLIENT else name
         self.binding = b""
         self.welcome: Welcome | None = None
         self.key_index = 0
@@ -273,14 +281,20 @@ class Connection:
             if msg.version != PROTOCOL_VERSION:
                 raise RemoteProtocolError(f"server speaks protocol version {shown(msg.version)}, "
                                           f"we speak {PROTOCOL_VERSION}")
+            if msg.node != self._node:
+                raise AuthenticationError(f"the node here says it is {shown(msg.node)}, not {self._node!r}: "
+                                          "refusing it (another process on that node's port, or services.toml "
+                                          "disagrees with the node)")
             self.peer = msg.node
             self._server_nonce = msg.nonce
-            mac = handshake_mac(self._key, Role.CLIENT, msg.nonce, self._nonce, self.binding)
+            mac = handshake_mac(self._key, Role.CLIENT, client=self.name, server=self._node,
+                                server_nonce=msg.nonce, client_nonce=self._nonce, binding=self.binding)
             self._queue(Auth(client=self.name, nonce=self._nonce, mac=mac))
         elif isinstance(msg, Auth):
             self._verify_auth(msg)
         elif isinstance(msg, Welcome):
-            expect = handshake_mac(self._key, Role.SERVER, self._server_nonce, self._nonce, self.binding)
+            expect = handshake_mac(self._key, Role.SERVER, client=self.name, server=self._node,
+                                   server_nonce=self._server_nonce, client_nonce=self._nonce, binding=self.binding)
             if not macs_equal(expect, msg.mac):
                 raise AuthenticationError(f"node {shown(self.peer)} failed authentication (wrong key?)")
             self.welcome = msg
@@ -292,7 +306,9 @@ class Connection:
         # every key is tried (each comparison in constant time), so the time taken does not say which matched
         matched = -1
         for i, key in enumerate(self._keys):
-            if macs_equal(handshake_mac(key, Role.CLIENT, self._nonce, msg.nonce, self.binding), msg.mac) and matched < 0:
+            expect = handshake_mac(key, Role.CLIENT, client=msg.client, server=self.name, server_nonce=self._nonce,
+                                   client_nonce=msg.nonce, binding=self.binding)
+            if macs_equal(expect, msg.mac) and matched < 0:
                 matched = i
         if matched < 0:
             raise AuthenticationError(f"client {shown(msg.client)} failed authentication (wrong key?)")
@@ -301,7 +317,8 @@ class Connection:
         key = self._keys[matched]
         offer = self._offer() if self._offer is not None else Offer()
         self._queue(Welcome(
-            mac=handshake_mac(key, Role.SERVER, self._nonce, msg.nonce, self.binding),
+            mac=handshake_mac(key, Role.SERVER, client=msg.client, server=self.name, server_nonce=self._nonce,
+                              client_nonce=msg.nonce, binding=self.binding),
             actions=list(offer.actions) if offer.actions is not None else None,
             location=offer.location, location_changed=offer.location_changed,
         ))

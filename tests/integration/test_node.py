@@ -182,7 +182,7 @@ async def test_a_bad_frame_closes_only_that_connection(cluster: Cluster) -> None
     async with cluster.client() as client:
         assert (await client.call("echo")).status == "success"
         host, port = cluster.location.address("alpha")
-        conn = Connection(Role.CLIENT, cluster.key, name="fuzzer")
+        conn = Connection(Role.CLIENT, cluster.key, name="fuzzer", node="alpha")
         reader, writer = await asyncio.open_connection(host, port)
         try:
             conn.receive_data(await reader.read(4096))

@@ -25,9 +25,15 @@ from services.node import Node
 ORPHAN_GRACE_S = 0.5
 
 
-def mac(key: bytes, role: bytes, nonce_s: bytes, nonce_c: bytes) -> bytes:
-    """§3: HMAC-SHA256(K, "petrobot-auth-v1" || 0x00 || role || 0x00 || nonce_s || nonce_c)."""
-    return hmac.new(key, b"petrobot-auth-v1\x00" + role + b"\x00" + nonce_s + nonce_c, hashlib.sha256).digest()
+def mac(key: bytes, role: bytes, client: str, server: str, nonce_s: bytes, nonce_c: bytes) -> bytes:
+    """§3: HMAC-SHA256(K, "petrobot-auth-v2" || 0x00 || role || 0x00 || len(client) || client ||
+    len(server) || server || nonce_s || nonce_c), each length a 4-byte big-endian integer."""
+    def named(text: str) -> bytes:
+        data = text.encode()
+        return struct.pack(">I", len(data)) + data
+
+    msg = b"petrobot-auth-v2\x00" + role + b"\x00" + named(client) + named(server) + nonce_s + nonce_c
+    return hmac.new(key, msg, hashlib.sha256).digest()
 
 
 def frame(body: bytes) -> bytes:
@@ -88,7 +94,7 @@ class SpecClient:
     async def login(self, key: bytes = KEY, name: str = "spec-client") -> dict[str, Any]:
         self.hello = await self.recv_type("hello")
         self.send({"type": "auth", "client": name, "nonce": self.nonce,
-                   "mac": mac(key, b"client", self.hello["nonce"], self.nonce)})
+                   "mac": mac(key, b"client", name, self.hello["node"], self.hello["nonce"], self.nonce)})
         return await self.recv_type("welcome")
 
     async def call(self, cid: str, action: str, params: dict[str, Any] | None = None,
@@ -123,9 +129,9 @@ async def test_s3_the_node_speaks_first_with_hello_and_authenticates_itself_in_w
     welcome = await c.login()
     hello = c.hello
     assert set(hello) >= {"type", "node", "version", "nonce"}
-    assert (hello["node"], hello["version"]) == ("alpha", 1)
+    assert (hello["node"], hello["version"]) == ("alpha", 2)
     assert isinstance(hello["nonce"], bytes) and len(hello["nonce"]) == 16
-    assert welcome["mac"] == mac(KEY, b"server", hello["nonce"], c.nonce)
+    assert welcome["mac"] == mac(KEY, b"server", "spec-client", "alpha", hello["nonce"], c.nonce)
     assert welcome["actions"] == ["announce", "echo", "wait"]  # sorted
     assert isinstance(welcome["location"], str) and len(welcome["location"]) == 64
     assert welcome["location_changed"] is False
@@ -135,8 +141,18 @@ async def test_s3_the_node_speaks_first_with_hello_and_authenticates_itself_in_w
 async def test_s3_a_wrong_mac_gets_bye_auth_failed_and_the_connection_closes(node: Node) -> None:
     c = await connect(node)
     hello = await c.recv_type("hello")
-    c.send({"type": "auth", "client": "x", "nonce": c.nonce, "mac": mac(b"w" * 32, b"client", hello["nonce"], c.nonce)})
+    c.send({"type": "auth", "client": "x", "nonce": c.nonce, "mac": mac(b"w" * 32, b"client", "x", "alpha", hello["nonce"], c.nonce)})
     await c.closed_with_bye("auth_failed")
+
+
+async def test_s3_a_mac_made_for_another_node_or_another_client_name_gets_bye_auth_failed(node: Node) -> None:
+    # the client's auth says "x"; its MAC names another node, another client, or the node twice
+    for client, server in (("x", "beta"), ("y", "alpha"), ("alpha", "alpha")):
+        c = await connect(node)
+        hello = await c.recv_type("hello")
+        c.send({"type": "auth", "client": "x", "nonce": c.nonce,
+                "mac": mac(KEY, b"client", client, server, hello["nonce"], c.nonce)})
+        await c.closed_with_bye("auth_failed")
 
 
 async def test_s3_an_auth_mac_that_is_not_32_bytes_is_a_protocol_error(node: Node) -> None:

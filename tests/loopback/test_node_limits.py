@@ -36,7 +36,7 @@ async def raw(node: Node, source: str | None = None) -> tuple[asyncio.StreamRead
 
 async def logged_in(node: Node) -> tuple[Connection, asyncio.StreamReader, asyncio.StreamWriter]:
     """An authenticated connection driven by hand (the protocol's own sans-IO client)."""
-    conn = Connection(Role.CLIENT, KEY, name="by-hand")
+    conn = Connection(Role.CLIENT, KEY, name="by-hand", node=node.name)
     reader, writer = await raw(node)
     while conn.welcome is None:
         conn.receive_data(await reader.read(65536))
@@ -115,7 +115,7 @@ async def test_failed_logins_are_throttled_per_address_and_other_addresses_are_s
         for attempt in range(40):
             reader, writer = await raw(node, source="127.0.0.3")
             first = await asyncio.wait_for(reader.read(4096), 5)
-            conn = Connection(Role.CLIENT, b"wrong key, long enough", name="guesser")
+            conn = Connection(Role.CLIENT, b"wrong key, long enough", name="guesser", node=node.name)
             conn.receive_data(first)
             msg = next(conn.messages(), None)
             writer.write(conn.data_to_send())
@@ -241,7 +241,7 @@ async def test_a_handshake_over_the_open_connection_cap_gets_only_a_bye() -> Non
         held = [link(node), link(node)]
         for c in held:
             assert (await c.call("echo")).status == "success"
-        conn = Connection(Role.CLIENT, KEY, name="third")
+        conn = Connection(Role.CLIENT, KEY, name="third", node=node.name)
         reader, writer = await raw(node)
         got = []
         while conn.state.name != "CLOSED":

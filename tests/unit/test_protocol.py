@@ -45,7 +45,8 @@ class ConnectionPair:
     """A client and a server Connection whose bytes are carried by hand."""
 
     def __init__(self, client_key: bytes = KEY, server_key: bytes = KEY, max_frame: int = 1 << 20) -> None:
-        self.client = Connection(Role.CLIENT, client_key, name="coord", nonce=CLIENT_NONCE, max_frame=max_frame)
+        self.client = Connection(Role.CLIENT, client_key, name="coord", node="alpha", nonce=CLIENT_NONCE,
+                                 max_frame=max_frame)
         self.server = Connection(Role.SERVER, server_key, name="alpha", nonce=SERVER_NONCE, max_frame=max_frame)
 
     def to_client(self, byte_at_a_time: bool = False) -> list[Message]:
@@ -95,8 +96,8 @@ def test_wrong_key_raises_authentication_error_on_the_server() -> None:
 
 
 def test_a_server_without_the_key_is_caught_by_the_client() -> None:
-    client = Connection(Role.CLIENT, KEY, name="coord", nonce=CLIENT_NONCE)
-    client.receive_data(encode_frame(Hello(node="evil", version=PROTOCOL_VERSION, nonce=SERVER_NONCE)))
+    client = Connection(Role.CLIENT, KEY, name="coord", node="alpha", nonce=CLIENT_NONCE)
+    client.receive_data(encode_frame(Hello(node="alpha", version=PROTOCOL_VERSION, nonce=SERVER_NONCE)))
     assert isinstance(client.next_message(), Hello)
     client.data_to_send()
     client.receive_data(encode_frame(Welcome(mac=b"\0" * 32)))
@@ -105,23 +106,70 @@ def test_a_server_without_the_key_is_caught_by_the_client() -> None:
 
 
 def test_a_reflected_client_mac_does_not_pass_as_the_server_mac() -> None:
-    client = Connection(Role.CLIENT, KEY, name="coord", nonce=CLIENT_NONCE)
+    client = Connection(Role.CLIENT, KEY, name="coord", node="mirror", nonce=CLIENT_NONCE)
     client.receive_data(encode_frame(Hello(node="mirror", version=PROTOCOL_VERSION, nonce=SERVER_NONCE)))
     client.next_message()
     client.data_to_send()
     # a peer without the key bounces the client's own MAC back as its welcome
-    reflected = handshake_mac(KEY, Role.CLIENT, SERVER_NONCE, CLIENT_NONCE)
+    reflected = handshake_mac(KEY, Role.CLIENT, client="coord", server="mirror", server_nonce=SERVER_NONCE,
+                              client_nonce=CLIENT_NONCE)
     client.receive_data(encode_frame(Welcome(mac=reflected)))
     with pytest.raises(AuthenticationError):
         client.next_message()
 
 
-def test_mac_covers_role_and_both_nonces() -> None:
-    base = handshake_mac(KEY, Role.CLIENT, SERVER_NONCE, CLIENT_NONCE)
-    assert base != handshake_mac(KEY, Role.SERVER, SERVER_NONCE, CLIENT_NONCE)
-    assert base != handshake_mac(KEY, Role.CLIENT, CLIENT_NONCE, SERVER_NONCE)
-    assert base != handshake_mac(b"other", Role.CLIENT, SERVER_NONCE, CLIENT_NONCE)
-    assert len(base) == 32
+def test_mac_covers_role_both_names_and_both_nonces() -> None:
+    def mac(key: bytes = KEY, role: Role = Role.CLIENT, client: str = "coord", server: str = "alpha",
+            ns: bytes = SERVER_NONCE, nc: bytes = CLIENT_NONCE) -> bytes:
+        return handshake_mac(key, role, client=client, server=server, server_nonce=ns, client_nonce=nc)
+
+    base = mac()
+    others = [mac(role=Role.SERVER), mac(ns=CLIENT_NONCE, nc=SERVER_NONCE), mac(key=b"other"),
+              mac(client="node:alpha"), mac(server="beta"), mac(client="alpha", server="coord"),
+              mac(client="coorda", server="lpha")]  # the names are length-prefixed: no shifting of bytes
+    assert len(base) == 32 and base not in others and len(set(others)) == len(others)
+
+
+def test_a_hello_naming_another_node_than_the_one_meant_is_refused_by_the_client() -> None:
+    client = Connection(Role.CLIENT, KEY, name="node:drive", node="perception", nonce=CLIENT_NONCE)
+    client.receive_data(encode_frame(Hello(node="drive", version=PROTOCOL_VERSION, nonce=SERVER_NONCE)))
+    with pytest.raises(AuthenticationError, match="says it is drive, not 'perception'"):
+        client.next_message()
+    assert client.data_to_send() == b"" and client.state is State.CLOSED  # no auth went out
+
+
+def test_a_nodes_own_handshake_relayed_to_its_own_server_opens_neither_side() -> None:
+    """The reflection of issue 22: a process squatting perception's port relays the drive node's
+    outgoing handshake (meant for perception) to the drive node's own server, renaming the hello."""
+    drive_server = Connection(Role.SERVER, KEY, name="drive", nonce=SERVER_NONCE)
+    drive_link = Connection(Role.CLIENT, KEY, name="node:drive", node="perception", nonce=CLIENT_NONCE)
+    hello = drive_server.data_to_send()
+    drive_server_hello = protocol.from_map(protocol.unpack_map(hello[4:]))
+    assert isinstance(drive_server_hello, Hello)
+    renamed = dataclasses.replace(drive_server_hello, node="perception")
+    drive_link.receive_data(encode_frame(renamed))
+    assert isinstance(drive_link.next_message(), Hello)
+    drive_server.receive_data(drive_link.data_to_send())  # the drive node's auth, meant for perception
+    with pytest.raises(AuthenticationError):
+        drive_server.next_message()
+    assert drive_server.state is State.CLOSED and drive_link.state is not State.OPEN
+
+
+def test_a_servers_mac_replayed_as_a_clients_auth_does_not_verify() -> None:
+    pair = ConnectionPair()
+    pair.handshake()
+    welcome = pair.client.welcome
+    assert welcome is not None
+    server = Connection(Role.SERVER, KEY, name="alpha", nonce=SERVER_NONCE)
+    server.data_to_send()
+    server.receive_data(encode_frame(Auth(client="coord", nonce=CLIENT_NONCE, mac=welcome.mac)))
+    with pytest.raises(AuthenticationError):
+        server.next_message()
+
+
+def test_a_client_connection_must_name_the_node_it_means_to_reach() -> None:
+    with pytest.raises(LocalProtocolError, match="name of the node"):
+        Connection(Role.CLIENT, KEY, name="coord")
 
 
 def test_a_call_before_authentication_is_refused() -> None:
@@ -132,7 +180,7 @@ def test_a_call_before_authentication_is_refused() -> None:
 
 
 def test_sending_a_call_before_the_handshake_is_a_local_error() -> None:
-    client = Connection(Role.CLIENT, KEY, name="c")
+    client = Connection(Role.CLIENT, KEY, name="c", node="alpha")
     with pytest.raises(LocalProtocolError):
         client.send(Call(id="1", action="echo"))
 
@@ -284,7 +332,7 @@ def test_bye_closes_and_may_be_sent_after_a_protocol_error() -> None:
 
 
 def test_a_version_mismatch_is_refused_by_the_client() -> None:
-    client = Connection(Role.CLIENT, KEY, name="c")
+    client = Connection(Role.CLIENT, KEY, name="c", node="n")
     client.receive_data(encode_frame(Hello(node="n", version=PROTOCOL_VERSION + 1, nonce=SERVER_NONCE)))
     with pytest.raises(RemoteProtocolError, match="version"):
         client.next_message()
@@ -420,7 +468,7 @@ def test_after_authentication_the_full_frame_cap_applies() -> None:
 
 def test_a_client_accepts_a_welcome_larger_than_a_node_accepts_an_auth() -> None:
     offer = protocol.Offer(actions=tuple(f"action_{i:05d}" for i in range(2000)), location="ab" * 32)
-    client = Connection(Role.CLIENT, KEY, name="coord", nonce=CLIENT_NONCE)
+    client = Connection(Role.CLIENT, KEY, name="coord", node="alpha", nonce=CLIENT_NONCE)
     server = Connection(Role.SERVER, KEY, name="alpha", nonce=SERVER_NONCE, offer=lambda: offer)
     client.receive_data(server.data_to_send())
     client.next_message()
@@ -442,7 +490,8 @@ def test_welcome_tells_the_actions_and_the_services_digest_and_old_welcomes_stil
     pair.handshake()
     assert pair.client.welcome == Welcome(mac=pair.client.welcome.mac, actions=["echo", "wait"],  # type: ignore[union-attr]
                                           location="d" * 64, location_changed=True)
-    mac = handshake_mac(KEY, Role.SERVER, SERVER_NONCE, CLIENT_NONCE)
+    mac = handshake_mac(KEY, Role.SERVER, client="coord", server="alpha", server_nonce=SERVER_NONCE,
+                       client_nonce=CLIENT_NONCE)
     v1 = msgpack.packb({"type": "welcome", "mac": mac}, use_bin_type=True)
     assert protocol.from_map(protocol.unpack_map(v1)) == Welcome(mac=mac, actions=None, location=None,
                                                                   location_changed=False)
@@ -459,7 +508,7 @@ def test_a_query_travels_from_client_to_node_only() -> None:
 
 def test_a_node_accepts_a_previous_key_during_rotation_and_answers_with_it() -> None:
     old, new = b"o" * 32, b"n" * 32
-    client = Connection(Role.CLIENT, old, name="coord", nonce=CLIENT_NONCE)
+    client = Connection(Role.CLIENT, old, name="coord", node="alpha", nonce=CLIENT_NONCE)
     server = Connection(Role.SERVER, new, name="alpha", nonce=SERVER_NONCE, previous_keys=[old])
     client.receive_data(server.data_to_send())
     client.next_message()
@@ -467,7 +516,7 @@ def test_a_node_accepts_a_previous_key_during_rotation_and_answers_with_it() -> 
     assert isinstance(server.next_message(), Auth) and server.key_index == 1
     client.receive_data(server.data_to_send())
     assert isinstance(client.next_message(), Welcome) and client.state is State.OPEN
-    stranger = Connection(Role.CLIENT, b"s" * 32, name="coord", nonce=CLIENT_NONCE)
+    stranger = Connection(Role.CLIENT, b"s" * 32, name="coord", node="alpha", nonce=CLIENT_NONCE)
     server = Connection(Role.SERVER, new, name="alpha", nonce=SERVER_NONCE, previous_keys=[old])
     stranger.receive_data(server.data_to_send())
     stranger.next_message()
@@ -487,8 +536,8 @@ def test_macs_over_different_tls_channel_bindings_do_not_verify() -> None:
     same.client.binding = same.server.binding = b"one TLS session"
     same.handshake()
     assert same.client.state is State.OPEN
-    assert handshake_mac(KEY, Role.CLIENT, SERVER_NONCE, CLIENT_NONCE, b"") == \
-        handshake_mac(KEY, Role.CLIENT, SERVER_NONCE, CLIENT_NONCE)  # plain TCP: the version-1 MAC
+    names = {"client": "coord", "server": "alpha", "server_nonce": SERVER_NONCE, "client_nonce": CLIENT_NONCE}
+    assert handshake_mac(KEY, Role.CLIENT, **names, binding=b"") == handshake_mac(KEY, Role.CLIENT, **names)
 
 
 def test_protocol_errors_show_untrusted_text_escaped_and_short() -> None:

@@ -126,7 +126,7 @@ def test_a_node_in_its_handshake_accepts_only_a_verified_auth(body: dict[str, An
 @FUZZ
 @given(body=messages)
 def test_an_open_connection_survives_any_map_or_closes_with_a_remote_error(body: dict[str, Any]) -> None:
-    client = Connection(Role.CLIENT, KEY, name="c", nonce=bytes(16))
+    client = Connection(Role.CLIENT, KEY, name="c", node="alpha", nonce=bytes(16))
     server = Connection(Role.SERVER, KEY, name="alpha", nonce=bytes(range(16)))
     client.receive_data(server.data_to_send())
     client.next_message()
