@@ -17,6 +17,7 @@ is the thin shell that feeds a holder from a node link's events.
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable, Mapping
@@ -24,6 +25,9 @@ from dataclasses import asdict, dataclass, fields
 from typing import TYPE_CHECKING, Any
 
 from services.errors import ActionError, MalformedSetPoint
+from services.sequence import DEFAULT_MAX_STEP, SequenceGate, Verdict
+
+from services.node.logs import LogLimiter
 
 if TYPE_CHECKING:
     from services.client import NodeLink
@@ -41,6 +45,9 @@ __all__ = [
     "received_number",
     "received_seq",
 ]
+
+log = logging.getLogger(__name__)
+_limited = LogLimiter(log)
 
 SETPOINT_TOPIC = "setpoints"
 """The event topic on which the node hosting ``predict`` publishes set points."""
@@ -185,38 +192,63 @@ class LatestSetPoint:
     loaded machine delivers frames, hence set points, further apart in wall time without anything
     being lost, while a vision side that stopped lets both ages grow.
 
+    Sequence numbers go through a :class:`services.sequence.SequenceGate`: a set point not newer than
+    the latest is dropped, one more than ``max_step`` ahead of it while the stream is live is refused
+    (a forged or buggy number must not make every later set point look old), and after ``max_age``
+    without a set point taken one out of step restarts the stream (:attr:`note` says so).
+
     Args:
         max_age: a set point older than this (s) is stale.
+        max_step: largest step of sequence numbers accepted while the stream is live.
 
     Attributes:
         latest: the latest accepted set point (``None`` before the first).
         received_at: receive time of :attr:`latest`, s.
         received: set points offered (well-formed or not).
         dropped: well-formed set points not newer than the latest (by ``seq``).
+        jumps: well-formed set points refused for a sequence number too far ahead.
+        restarts: times the stream restarted after a silence with a number out of step.
         malformed: set points refused by :meth:`CatchSetPoint.from_dict`.
         last_malformed: why the latest malformed one was refused.
+        note: after an offer, a line for the log when the set point jumped or restarted the stream.
     """
 
-    def __init__(self, max_age: float = 0.2) -> None:
+    def __init__(self, max_age: float = 0.2, max_step: int = DEFAULT_MAX_STEP) -> None:
         self.max_age = max_age
         self.latest: CatchSetPoint | None = None
         self.received_at: float | None = None
         self.received = 0
         self.dropped = 0
+        self.jumps = 0
+        self.restarts = 0
         self.malformed = 0
         self.last_malformed: str | None = None
         self.closed_reason: str | None = None
+        self.note: str | None = None
+        self._gate = SequenceGate(max_age, max_step)
 
     def offer(self, sp: CatchSetPoint, now: float) -> bool:
         """Offer a received set point at time ``now`` (s); True if it became the latest.
 
         A set point whose seq is not newer than the latest one's is dropped (counted in
-        :attr:`dropped`).
+        :attr:`dropped`), one too far ahead refused (:attr:`jumps`).
         """
         self.received += 1
-        if self.latest is not None and sp.seq <= self.latest.seq:
+        self.note = None
+        before = self._gate.latest
+        silent = now - self._gate.taken_at
+        verdict = self._gate.judge(sp.seq, now)
+        if verdict is Verdict.OLD:
             self.dropped += 1
             return False
+        if verdict is Verdict.JUMP:
+            self.jumps += 1
+            self.note = (f"set point refused: seq {sp.seq} is {sp.seq - (before or 0)} ahead of {before} (at most "
+                         f"{self._gate.max_step} while the stream is live)")
+            return False
+        if verdict is Verdict.RESTART:
+            self.restarts += 1
+            self.note = f"set-point stream restarted at seq {sp.seq} (latest was {before}, none for {silent:.2f} s)"
         self.latest = sp
         self.received_at = now
         return True
@@ -231,6 +263,7 @@ class LatestSetPoint:
             sp = CatchSetPoint.from_dict(data)
         except MalformedSetPoint as exc:
             self.received += 1
+            self.note = None
             self.malformed += 1
             self.last_malformed = str(exc)
             return None
@@ -344,6 +377,10 @@ class SetPointSubscription:
     def _on_event(self, event: Event) -> None:
         self.events += 1
         now = self.clock()
-        sp = self.state.offer_data(event.data, now)
+        state = self.state
+        sp = state.offer_data(event.data, now)
+        if state.note is not None:
+            _limited.log(logging.WARNING if sp is None else logging.INFO, ("setpoints", sp is None), "node %s: %s",
+                         self.node, state.note)
         if sp is not None and self.on_set_point is not None:
             self.on_set_point(sp, now)

@@ -17,6 +17,7 @@ from services.devices.endpoint import DeviceEndpoint
 from services.errors import ActionError, LocationError
 from services.mobile.odometry import DriveGeometry, Odometry, Pose2D
 from services.mobile.setpoints import ODOMETRY_TOPIC, STEERING_TOPIC, SteeringInput
+from services.node.logs import LogLimiter
 from services.results import ActionResult
 
 __all__ = ["DEFAULT_CAN_PORT", "DriveDriver", "StopRobot"]
@@ -50,6 +51,7 @@ class DriveDriver(Driver):
         self.geometry = DriveGeometry(wheel_radius=float(p.get("wheel_radius", 0.05)),
                                       track_width=float(p.get("track_width", 0.30)))
         self.input = SteeringInput(float(p.get("stale_s", 0.25)))
+        self._limited = LogLimiter(log)
         self.latencies: list[float] = []
         """Frame capture → set point received, s (wall clocks of one host), logged every
         ``latency_every`` (param, 500) set points."""
@@ -197,6 +199,9 @@ class DriveDriver(Driver):
         with self.lock:
             bus = self.drives.sim_time if self.drives is not None else math.nan
             sp = self.input.offer(event.data, time.monotonic(), bus)
+            note = self.input.note
+        if note is not None:
+            self._limited.log(logging.WARNING if sp is None else logging.INFO, ("steering", sp is None), "%s", note)
         if sp is None:
             return
         t_capture = event.data.get("t_capture") if isinstance(event.data, dict) else None
@@ -251,7 +256,7 @@ class StopRobot(PrimitiveAction):
                     inp = drv.input
                     return ActionResult.success({
                         "t": drives.sim_time, "watchdog_stops": inp.watchdog_stops,
-                        "dropped": inp.malformed + inp.stale + inp.out_of_order,
+                        "dropped": inp.malformed + inp.stale + inp.out_of_order + inp.jumps,
                         "faults": {str(k): v for k, v in drives.faults().items()}})
             if time.monotonic() > end:
                 return ActionResult.error(f"bus: {lost}" if lost else

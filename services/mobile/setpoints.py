@@ -11,8 +11,13 @@ clock (s; latency only, not checked beyond being ignored when unusable).
 
 :class:`SteeringInput` (the drive node's side) checks each field (:func:`parse_setpoint`): a set point
 that is malformed (missing or non-numeric field, bool, non-finite, out of range), **stale** (its
-frame is more than ``stale_s`` older than the bus clock when it arrives) or **not newer** (seq not
-above the latest accepted) is dropped and counted, never used; the latest accepted wins.
+frame is more than ``stale_s`` older than the bus clock when it arrives), **not newer** (seq not
+above the latest accepted) or a **jump** (seq more than 1,000 ahead of the latest accepted while the
+stream is live, :class:`services.sequence.SequenceGate`) is dropped and counted, never used; the
+latest accepted wins. After ``stale_s`` without an accepted set point (the watchdog has stopped the
+wheels), a set point that would be dropped as not newer or as a jump restarts the stream instead (a
+restarted perception node numbers its set points afresh); :attr:`SteeringInput.note` says so, for
+the drive node's log.
 **Watchdog:** with no accepted set point for ``stale_s`` — on the wall clock *and* on the bus clock,
 so that a simulation slowed down by a loaded machine is not taken for a lost stream — the drive
 commands zero wheel speed (a controlled stop on the drives' acceleration ramp) and counts a
@@ -32,6 +37,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from services.errors import MalformedSetPoint
+from services.sequence import DEFAULT_MAX_STEP, SequenceGate, Verdict
 
 from .odometry import Pose2D
 from .steering import SteeringSetPoint
@@ -149,21 +155,28 @@ class SteeringInput:
     """The drive node's holder of the latest set point, with the watchdog (module docstring).
 
     Args:
-        stale_s: the staleness limit, s (wall clock and bus clock).
+        stale_s: the staleness limit, s (wall clock and bus clock); also the silence after which
+            the stream may restart with any sequence number.
+        max_step: largest step of sequence numbers accepted while the stream is live.
 
     Attributes:
-        accepted, malformed, stale, out_of_order: set points accepted / dropped by reason.
+        accepted, malformed, stale, out_of_order, jumps: set points accepted / dropped by reason.
+        restarts: times the stream restarted after a silence with a number out of step.
         watchdog_stops: times the watchdog stopped the wheels.
         stopped: True while the watchdog holds the wheels stopped.
         last_error: why the latest dropped set point was dropped.
+        note: after :meth:`offer`, a line for the log when the set point jumped or restarted the
+            stream, else ``None``.
     """
 
-    def __init__(self, stale_s: float = 0.25) -> None:
+    def __init__(self, stale_s: float = 0.25, max_step: int = DEFAULT_MAX_STEP) -> None:
         if not stale_s > 0:
             raise ValueError(f"stale_s must be positive, got {stale_s}")
         self.stale_s = float(stale_s)
         self.latest: SteeringSetPoint | None = None
-        self.accepted = self.malformed = self.stale = self.out_of_order = 0
+        self.accepted = self.malformed = self.stale = self.out_of_order = self.jumps = self.restarts = 0
+        self.note: str | None = None
+        self._gate = SequenceGate(self.stale_s, max_step)
         self.watchdog_stops = 0
         self.stopped = False
         self.last_error = ""
@@ -173,20 +186,34 @@ class SteeringInput:
     def offer(self, data: object, wall: float, bus: float) -> SteeringSetPoint | None:
         """Take one event's data received at wall time ``wall`` and bus time ``bus`` (NaN if the bus
         clock is not known yet); returns the set point if accepted."""
+        self.note = None
         try:
             sp = parse_setpoint(data)
         except MalformedSetPoint as exc:
             self.malformed += 1
             self.last_error = f"malformed: {exc}"
             return None
-        if self.latest is not None and sp.seq <= self.latest.seq:
-            self.out_of_order += 1
-            self.last_error = f"seq {sp.seq} not above {self.latest.seq}"
-            return None
         if math.isfinite(bus) and bus - sp.t > self.stale_s:
             self.stale += 1
             self.last_error = f"stale: frame time {sp.t:.3f} s, bus time {bus:.3f} s"
             return None
+        before = self._gate.latest
+        silent = wall - self._gate.taken_at
+        verdict = self._gate.judge(sp.seq, wall)
+        if verdict is Verdict.OLD:
+            self.out_of_order += 1
+            self.last_error = f"seq {sp.seq} not above {before}"
+            return None
+        if verdict is Verdict.JUMP:
+            self.jumps += 1
+            self.last_error = (f"seq {sp.seq} is {sp.seq - (before or 0)} ahead of {before} (at most "
+                               f"{self._gate.max_step} while the stream is live): refused")
+            self.note = f"steering set point refused: {self.last_error}"
+            return None
+        if verdict is Verdict.RESTART:
+            self.restarts += 1
+            self.note = (f"steering stream restarted at seq {sp.seq} (latest was {before}, nothing accepted "
+                         f"for {silent:.2f} s)")
         self.latest = sp
         self.accepted += 1
         self._wall, self._bus = wall, bus if math.isfinite(bus) else -math.inf

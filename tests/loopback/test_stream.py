@@ -201,3 +201,13 @@ async def test_a_subscription_says_so_when_its_link_is_down():
     finally:
         sub.close()
         await link.close()
+
+
+def test_a_sequence_number_far_ahead_is_refused_while_the_stream_is_live_and_restarts_it_after_silence():
+    h = LatestSetPoint(max_age=0.1)
+    assert h.offer(_sp(3), now=1.0)
+    assert not h.offer(_sp(2**62), now=1.01)  # one forged number must not make the rest look old
+    assert h.jumps == 1 and h.note is not None and "refused" in h.note
+    assert h.offer(_sp(4), now=1.02) and h.get(1.03).seq == 4
+    assert not h.offer(_sp(1), now=1.05)  # older, the stream live: dropped
+    assert h.offer(_sp(1), now=1.2) and h.restarts == 1 and "restarted" in (h.note or "")

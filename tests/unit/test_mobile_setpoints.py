@@ -109,3 +109,24 @@ def test_odometry_messages_are_validated_too():
 def test_the_watchdog_needs_a_positive_staleness_limit():
     with pytest.raises(ValueError):
         SteeringInput(stale_s=0.0)
+
+
+def test_a_forged_sequence_number_far_ahead_is_refused_and_the_stream_goes_on():
+    """Issue 22: one set point numbered 2**62 made every later legitimate set point look old."""
+    inp = SteeringInput(stale_s=0.25)
+    assert inp.offer(sp(100, t=1.0), wall=10.0, bus=1.0) is not None
+    assert inp.offer(sp(2**62, t=1.02, left=-50.0), wall=10.02, bus=1.02) is None
+    assert inp.jumps == 1 and inp.note is not None and "refused" in inp.note
+    assert inp.offer(sp(101, t=1.04, left=3.0, right=3.0), wall=10.04, bus=1.04) is not None
+    assert inp.note is None and inp.wheels(10.05, 1.05) == (3.0, 3.0)
+
+
+def test_after_a_silence_a_set_point_out_of_step_restarts_the_stream_and_says_so():
+    inp = SteeringInput(stale_s=0.25)
+    assert inp.offer(sp(5_000_000, t=1.0), wall=10.0, bus=1.0) is not None
+    # the perception node restarted and numbers afresh, lower: taken once the stream was silent
+    assert inp.offer(sp(7, t=1.1), wall=10.1, bus=1.1) is None
+    restarted = inp.offer(sp(8, t=1.3), wall=10.3, bus=1.3)
+    assert restarted is not None and inp.restarts == 1
+    assert inp.note is not None and "restarted at seq 8" in inp.note
+    assert inp.offer(sp(9, t=1.32), wall=10.32, bus=1.32) is not None and inp.note is None
