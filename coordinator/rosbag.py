@@ -66,12 +66,15 @@ class BagWritten:
         mcap: the MCAP file in it.
         counts: messages per topic (as read back from the file).
         note: what was left out and why, or ``""``.
+        damaged: the journal's damaged records left out (one line each, naming table, row and
+            field), empty when none.
     """
 
     directory: Path
     mcap: Path
     counts: dict[str, int]
     note: str = ""
+    damaged: tuple[str, ...] = ()
 
 
 def _tokens(mapping: Any) -> list[dict[str, Any]]:
@@ -187,6 +190,7 @@ def export_run(journal: str | os.PathLike[str], run_id: str, destination: str | 
         raise PetrobotError(f"{target} exists: choose another -o, or remove it first")
     with JournalReader.open(journal) as reader:
         messages, note = _messages(reader, run_id)
+        damaged = tuple(reader.damage_report())
     store = TypeStore({n: t for n, t in load_definitions().items()
                        if n.split("/")[0] in ("petrobot_msgs", "builtin_interfaces")})
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -218,4 +222,5 @@ def export_run(journal: str | os.PathLike[str], run_id: str, destination: str | 
         raise PetrobotError(f"cannot write the bag {target}: {exc.__class__.__name__}: {exc}") from None
     finally:
         shutil.rmtree(scratch, ignore_errors=True)
-    return BagWritten(directory=target, mcap=target / mcaps[0].name, counts={t: counts[t] for t in TOPICS}, note=note)
+    return BagWritten(directory=target, mcap=target / mcaps[0].name, counts={t: counts[t] for t in TOPICS}, note=note,
+                      damaged=damaged)

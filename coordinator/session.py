@@ -18,6 +18,8 @@ branches).
 
 from __future__ import annotations
 
+import logging
+
 from coordinator.console import Console, read_operator_commands
 from coordinator.events import Observer
 from coordinator.journal import Journal, JournalReader
@@ -27,6 +29,8 @@ from coordinator.runtime import RunSummary, Runtime
 from services.client import ServiceClient
 from services.errors import PetrobotError
 from services.location import Location
+
+log = logging.getLogger("petrobot.run")
 
 __all__ = ["NodesNotReady", "build_learner", "execute", "net_actions"]
 
@@ -52,14 +56,18 @@ def net_actions(net: PetriNet) -> list[str]:
 
 
 def build_learner(net: PetriNet, seed: int, journal: JournalReader) -> Learner:
-    """One learning automaton per primitive task (section 4), restored from the journal if saved there.
+    """One learning automaton per primitive task (section 4), restored from the journal if saved there
+    (a damaged saved state is left out, with a warning naming it: that task's learner starts afresh).
 
     Raises:
         LearnerConfigError: a task's ``learner`` table or its costs are invalid (names the task).
         JournalError: a saved state is malformed.
     """
     learner = Learner.from_net(net, seed)
+    before = journal.damage_count
     saved = {task: saved.state for task, saved in journal.learner_states().items()}
+    for line in journal.damage_report()[before:]:
+        log.warning("learner state not restored: %s", line)
     if saved:
         learner.restore(saved, strict=False)
     return learner

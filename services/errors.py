@@ -26,6 +26,8 @@ journal, analyses) derive from the same root in :mod:`coordinator.errors`::
     ├── NotEnabledError           (coordinator.errors) fire() on a transition that is not enabled
     ├── EngineError               (coordinator.errors) an engine command is illegal now
     ├── JournalError              (coordinator.errors) the SQLite journal is unusable
+    │   ├── DamagedJournal        a record, a table or the file is damaged (commands exit 2)
+    │   └── JournalTooNew         written by a newer petrobot (commands exit 2)
     └── AnalysisError             (coordinator.errors) an analysis cannot be carried out
 """
 

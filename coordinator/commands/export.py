@@ -17,6 +17,7 @@ import sys
 import textwrap
 from typing import Any
 
+from coordinator.commands import options
 from services.errors import PetrobotError
 from services.textfile import write_atomically
 
@@ -86,7 +87,7 @@ def _run_to_mcap(args: argparse.Namespace) -> int:
     print(f"run {run_id}: {written.mcap} ({counts}; read back with mcap-ros2-support)", file=sys.stderr)
     if written.note:
         print(f"petrobot export: {written.note}", file=sys.stderr)
-    return 0
+    return options.report_damage("petrobot export", written.damaged)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -69,8 +69,9 @@ def _is_interpreted(net: PetriNet) -> bool:
     return any(p.kind is PlaceKind.PRIMITIVE_TASK for p in net.places) or any(t.events for t in net.transitions)
 
 
-def report(args: argparse.Namespace) -> dict[str, Any]:
-    """Compute the ``gspn`` report as a JSON-ready dict (raises PetrobotError subclasses)."""
+def report(args: argparse.Namespace, damaged: list[str] | None = None) -> dict[str, Any]:
+    """Compute the ``gspn`` report as a JSON-ready dict (raises PetrobotError subclasses); the
+    journal's damaged records, left out, are added to ``damaged`` when given."""
     from coordinator.analysis.gspn import analyse
     from coordinator.analysis.ptimed import empirical_delays, task_stats, to_gspn
     from coordinator.journal import read_results
@@ -81,7 +82,7 @@ def report(args: argparse.Namespace) -> dict[str, Any]:
     sources: dict[str, str] = {}
     delays: dict[str, Delay] = {}
     if _is_interpreted(net):
-        records = read_results(args.journal, args.run) if args.journal else []
+        records = read_results(args.journal, args.run, damaged) if args.journal else []
         stats = task_stats(records)
         model = to_gspn(net, stats=stats, ext_rates=parse_pairs(args.ext_rate, "--ext-rate"))
         gspn, warnings, sources = model.net, model.warnings, model.sources
@@ -186,8 +187,9 @@ def run(args: argparse.Namespace) -> int:
     """Print the report; 0 on success, 2 on an unreadable net or journal, 1 if the analysis fails."""
     from coordinator.analysis.expr import ExprError
 
+    damaged: list[str] = []
     try:
-        rep = report(args)
+        rep = report(args, damaged)
     except (NetError, JournalError, OSError) as exc:
         print(f"petrobot gspn: {exc}", file=sys.stderr)
         return 2
@@ -198,4 +200,4 @@ def run(args: argparse.Namespace) -> int:
         print(f"petrobot gspn: {exc}", file=sys.stderr)
         return 1
     print(json.dumps(rep, indent=2) if args.json else render(rep))
-    return 0
+    return options.report_damage("petrobot gspn", damaged)

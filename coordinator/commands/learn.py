@@ -149,12 +149,15 @@ def print_learned(journal: Path, net: Path, demo: str = "") -> None:
           f"petrobot demo {demo + ' ' if demo else ''}--journal {journal}")
 
 
-def read_journal(path: str | Path, run: str | None = None) -> tuple[dict[str, dict[str, Any]], dict[str, list[Trial]]]:
+def read_journal(path: str | Path, run: str | None = None, damaged: list[str] | None = None
+                 ) -> tuple[dict[str, dict[str, Any]], dict[str, list[Trial]]]:
     """Read saved learner states and learning results from a journal, read-only.
 
     Args:
         path: the journal file.
         run: take the results of this run only (``None``: every run).
+        damaged: the damaged records left out are added here when given
+            (:meth:`coordinator.journal.JournalReader.damage_report`).
 
     Returns:
         ({task: state dict}, {task: [(action, status, cost), ...] in journal order}), where cost is
@@ -179,6 +182,8 @@ def read_journal(path: str | Path, run: str | None = None) -> tuple[dict[str, di
             if value is not None and (not math.isfinite(value) or value < 0.0):
                 value = None
             results.setdefault(row.task, []).append((row.action, row.status, value))
+        if damaged is not None:
+            damaged.extend(journal.damage_report())
     return states, results
 
 
@@ -380,7 +385,8 @@ def run(args: argparse.Namespace) -> int:
         from coordinator.netfile import load_any
 
         configured = Learner.from_net(load_any(args.net))
-        states, results = read_journal(args.journal, args.run)
+        damaged: list[str] = []
+        states, results = read_journal(args.journal, args.run, damaged)
         reports = build_reports(states, results, args.task, configured, fresh_from=args.run)
     except PetrobotError as exc:
         print(f"petrobot learn: {exc}", file=sys.stderr)
@@ -402,4 +408,4 @@ def run(args: argparse.Namespace) -> int:
         else:
             print(f"plot: nothing drawn (no primitive task has both a saved learner and results); {target} "
                   "not written", file=out)
-    return 0
+    return options.report_damage("petrobot learn", damaged)

@@ -10,7 +10,8 @@ building the command line stays cheap.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+import sys
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from services.errors import PetrobotError
@@ -28,7 +29,11 @@ __all__ = [
     "add_services",
     "add_view",
     "parse_pairs",
+    "report_damage",
 ]
+
+#: Damaged records a command lists on stderr before it counts the rest.
+SHOWN_DAMAGE = 20
 
 #: The location file a command reads unless told otherwise.
 DEFAULT_SERVICES = "services.toml"
@@ -114,3 +119,21 @@ def parse_pairs(items: list[str] | None, what: str, cast: Callable[[str], Any] =
         except ValueError:
             raise PetrobotError(f"bad {what} {item!r}: expected NAME=VALUE") from None
     return out
+
+
+def report_damage(prog: str, lines: Sequence[str]) -> int:
+    """Print on stderr the damaged journal records a command skipped (each naming its table, row
+    and field: :meth:`coordinator.journal.JournalReader.damage_report`), at most
+    :data:`SHOWN_DAMAGE` of them and a count of the rest.
+
+    Returns:
+        The command's exit status: 2 when records were skipped, else 0.
+    """
+    if not lines:
+        return 0
+    for line in lines[:SHOWN_DAMAGE]:
+        print(f"{prog}: damaged record skipped: {line}", file=sys.stderr)
+    if len(lines) > SHOWN_DAMAGE:
+        print(f"{prog}: ... and {len(lines) - SHOWN_DAMAGE} more damaged record line(s)", file=sys.stderr)
+    print(f"{prog}: the journal is damaged: what is shown leaves those records out (exit status 2)", file=sys.stderr)
+    return 2

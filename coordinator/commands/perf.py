@@ -53,8 +53,9 @@ def _fmt(v: float | None) -> str:
     return "-" if v is None else f"{v:.4g}"
 
 
-def report(args: argparse.Namespace) -> dict[str, Any]:
-    """Compute the ``perf`` report as a JSON-ready dict (raises PetrobotError subclasses)."""
+def report(args: argparse.Namespace, damaged: list[str] | None = None) -> dict[str, Any]:
+    """Compute the ``perf`` report as a JSON-ready dict (raises PetrobotError subclasses); the
+    journal's damaged records, left out, are added to ``damaged`` when given."""
     from coordinator.analysis.gspn_performance import gspn_task_performance
     from coordinator.journal import read_results
     from coordinator.netfile import load_any
@@ -65,7 +66,7 @@ def report(args: argparse.Namespace) -> dict[str, Any]:
     )
 
     net = load_any(args.net, interpreted=False)
-    records = read_results(args.journal, args.run)  # an outcome the operator forced measures nothing
+    records = read_results(args.journal, args.run, damaged)  # an outcome the operator forced measures nothing
     every = read_results(args.journal, args.run, forced=True)
     per_action = action_performance(net, records, measure=args.cost)
     usage = usage_frequencies(records)
@@ -133,8 +134,9 @@ def run(args: argparse.Namespace) -> int:
     """Print the report; 0 on success, 2 on an unreadable net or journal, 1 if the analysis fails."""
     from coordinator.errors import AnalysisError, JournalError, NetError
 
+    damaged: list[str] = []
     try:
-        rep = report(args)
+        rep = report(args, damaged)
     except (NetError, JournalError) as exc:
         print(f"petrobot perf: {exc}", file=sys.stderr)
         return 2
@@ -142,4 +144,4 @@ def run(args: argparse.Namespace) -> int:
         print(f"petrobot perf: {exc}", file=sys.stderr)
         return 1
     print(json.dumps(rep, indent=2) if args.json else render(rep))
-    return 0
+    return options.report_damage("petrobot perf", damaged)

@@ -22,20 +22,24 @@ def add_parser(subparsers: Any) -> None:
                     "unfinished), firings, primitive-action calls with their errors and failures, operator "
                     "commands (refused ones in brackets) and why the run ended, after the number of calls given "
                     "up on that ended on their node otherwise than the net assumed, if any. `petrobot show RUN` "
-                    "gives one run in detail. The journal is opened read-only. Exit status 0, or 1 on an unreadable "
-                    "journal.")
+                    "gives one run in detail. The journal is opened read-only. Exit status 0; 1 on a missing journal; "
+                    "2 on a damaged one (the damaged records are named on stderr and the rest is listed) or on one "
+                    "written by a newer petrobot.")
     options.add_journal(p, default="runs/journal.sqlite", help="SQLite journal (default: %(default)s)")
     p.add_argument("--net", metavar="NAME", help="only the runs of this net")
     options.add_json(p)
     p.set_defaults(func=run)
 
 
-def report(args: argparse.Namespace) -> list[dict[str, Any]]:
-    """The runs as JSON-ready dicts (raises JournalError)."""
+def report(args: argparse.Namespace, damaged: list[str] | None = None) -> list[dict[str, Any]]:
+    """The runs as JSON-ready dicts (raises JournalError); the damaged records skipped are added to
+    ``damaged`` when given."""
     from coordinator.journal import JournalReader
 
     with JournalReader.open(args.journal) as journal:
         stats = journal.run_stats()
+        if damaged is not None:
+            damaged.extend(journal.damage_report())
     return [{
         "run": s.run.id, "net": s.run.net_name, "seed": s.run.seed, "started_wall": s.run.started_wall,
         "ended_wall": s.run.ended_wall, "duration_s": round(s.duration_s, 3), "end_state": s.run.end_state,
@@ -65,13 +69,14 @@ def render(rows: list[dict[str, Any]]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Print the runs; 0, or 1 on an unreadable journal."""
+    """Print the runs; 0, 1 on a missing journal, 2 on a damaged or newer one."""
     from coordinator.errors import JournalError
 
+    damaged: list[str] = []
     try:
-        rows = report(args)
+        rows = report(args, damaged)
     except JournalError as exc:
         print(f"petrobot runs: {exc}", file=sys.stderr)
-        return 1
+        return exc.exit_status
     print(json.dumps(rows, indent=2) if args.json else render(rows))
-    return 0
+    return options.report_damage("petrobot runs", damaged)

@@ -30,8 +30,9 @@ def add_parser(subparsers: Any) -> None:
                     "the refusal), reconciliations (what a node said afterwards about a call the run had given "
                     "up on when the node was lost, marked DIFFERS when the node's final status is not the one "
                     "the net went on with) — and the errors counted by reason. RUN is a run id or a unique prefix of one "
-                    "(`petrobot runs` lists them), or `last`. The journal is opened read-only. Exit status 0, or "
-                    "1 on an unreadable journal or an unknown run.")
+                    "(`petrobot runs` lists them), or `last`. The journal is opened read-only. Exit status 0; 1 on a "
+                    "missing journal or an unknown run; 2 on a damaged journal (the damaged records are named on "
+                    "stderr, with table, row and field, and the rest is shown) or one written by a newer petrobot.")
     p.add_argument("run_id", metavar="RUN", help="run id, a unique prefix of one, or 'last'")
     options.add_journal(p, default="runs/journal.sqlite", help="SQLite journal (default: %(default)s)")
     p.add_argument("--no-firings", action="store_true", help="leave the firings out (calls and operator commands only)")
@@ -127,6 +128,7 @@ def report(args: argparse.Namespace) -> dict[str, Any]:
     with JournalReader.open(args.journal) as journal:
         row = find_run(journal, args.run_id)
         records = [r for r in journal.timeline(row.id) if not (args.no_firings and isinstance(r, FiringRow))]
+        damaged = journal.damage_report()
     reconciled = [r for r in records if isinstance(r, ReconciliationRow)]
     reasons = collections.Counter(f"{r.task}/{r.action}: {r.reason or 'no reason given'}"
                                   for r in records if isinstance(r, ResultRow) and r.status == "error")
@@ -136,6 +138,7 @@ def report(args: argparse.Namespace) -> dict[str, Any]:
         "records": [{"kind": type(r).__name__.removesuffix("Row").lower(), **_fields(r)} for r in records],
         "error_reasons": dict(reasons.most_common()),
         "reconciled": len(reconciled), "differed": sum(r.differs for r in reconciled),
+        "damaged": damaged,
         "_lines": [describe(r, row.started_wall) for r in records],
     }
 
@@ -188,16 +191,16 @@ def render(rep: dict[str, Any]) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Print the run; 0, or 1 on an unreadable journal or an unknown run."""
+    """Print the run; 0, 1 on a missing journal or an unknown run, 2 on a damaged or newer journal."""
     from coordinator.errors import JournalError
 
     try:
         rep = report(args)
     except JournalError as exc:
         print(f"petrobot show: {exc}", file=sys.stderr)
-        return 1
+        return exc.exit_status
     if args.json:
         print(json.dumps({k: v for k, v in rep.items() if not k.startswith("_")}, indent=2, default=str))
     else:
         print(render(rep))
-    return 0
+    return options.report_damage("petrobot show", rep["damaged"])

@@ -43,10 +43,10 @@ from __future__ import annotations
 
 import sqlite3
 
-from coordinator.errors import JournalError
+from coordinator.errors import DamagedJournal, JournalError, JournalTooNew
 
-__all__ = ["ADDED_IN_3", "ADDED_IN_4", "COLUMNS", "DDL", "RECORD_TABLES", "SCHEMA_VERSION", "check_schema", "migrate",
-           "schema_version"]
+__all__ = ["ADDED_IN_3", "ADDED_IN_4", "COLUMNS", "DDL", "RECORD_TABLES", "SCHEMA_VERSION", "check_schema",
+           "check_tables", "check_version", "migrate", "schema_version"]
 
 SCHEMA_VERSION = 4
 """The version this code writes (``PRAGMA user_version``)."""
@@ -136,14 +136,14 @@ def migrate(db: sqlite3.Connection, path: str) -> int:
         The version the journal had.
 
     Raises:
-        JournalError: naming ``path``, if the journal was written by a newer petrobot, or on an
-            SQLite error (the journal is then unchanged: the migration is one transaction).
+        JournalTooNew: the journal was written by a newer petrobot.
+        JournalError: naming ``path``, on an SQLite error (the journal is then unchanged: the
+            migration is one transaction).
     """
     try:
         version = schema_version(db)
         if version > SCHEMA_VERSION:
-            raise JournalError(f"{path}: journal schema {version} was written by a newer petrobot "
-                               f"(this one reads up to {SCHEMA_VERSION})")
+            raise JournalTooNew(path, version, SCHEMA_VERSION)
         if version == SCHEMA_VERSION:
             return version
         db.execute("BEGIN IMMEDIATE")
@@ -197,12 +197,27 @@ def _renumber(db: sqlite3.Connection) -> None:
         db.execute("DROP TABLE temp.renumber")
 
 
+def check_version(db: sqlite3.Connection, path: str) -> None:
+    """Refuse a journal written by a newer petrobot.
+
+    Raises:
+        JournalTooNew: its schema is newer than :data:`SCHEMA_VERSION`.
+        DamagedJournal: the file is not an SQLite database.
+    """
+    try:
+        version = schema_version(db)
+    except sqlite3.DatabaseError as exc:
+        raise DamagedJournal(path, f"cannot read the journal: {exc}") from exc
+    if version > SCHEMA_VERSION:
+        raise JournalTooNew(path, version, SCHEMA_VERSION)
+
+
 def check_schema(db: sqlite3.Connection, path: str) -> None:
     """Check that an open database has every journal table with (at least) its columns (those of
     version 1 suffice: a reader reads every version; the tables added since may be missing).
 
     Raises:
-        JournalError: naming ``path``, if a table or a column is missing, or the file cannot be
+        DamagedJournal: naming ``path``, if a table or a column is missing, or the file cannot be
             read as SQLite.
     """
     try:
@@ -211,11 +226,49 @@ def check_schema(db: sqlite3.Connection, path: str) -> None:
             if not have and table in ADDED_IN_3:
                 continue
             if not have:
-                raise JournalError(f"{path}: not a petrobot journal (no table {table!r})")
+                raise DamagedJournal(path, f"not a petrobot journal, or a damaged one (no table {table!r})")
             missing = [c for c in columns if c not in have and c not in ADDED_IN_2.get(table, ())
                        and c not in ADDED_IN_4.get(table, ())]
             if missing:
-                raise JournalError(f"{path}: not a petrobot journal (table {table!r} lacks "
-                                   f"{', '.join(missing)})")
+                raise DamagedJournal(path, f"not a petrobot journal, or a damaged one (table {table!r} lacks "
+                                     f"{', '.join(missing)})")
     except sqlite3.DatabaseError as exc:
-        raise JournalError(f"{path}: cannot read the journal: {exc}") from exc
+        raise DamagedJournal(path, f"cannot read the journal: {exc}") from exc
+
+
+def check_tables(db: sqlite3.Connection, path: str) -> bool:
+    """Before a journal is opened for writing: whether the file is new (no table at all), after
+    checking that an existing one has every table of its version.
+
+    A table missing from a journal that holds records is never created afresh (the ``IF NOT
+    EXISTS`` of :data:`DDL` would do it silently, and a resume would then replay a run without its
+    firings): the journal is refused instead.
+
+    Returns:
+        True for a file without tables (a new journal), False for an existing journal.
+
+    Raises:
+        DamagedJournal: a table of its version is missing while another holds records, or the file
+            has tables but none of a journal's, or it cannot be read.
+    """
+    try:
+        tables = {str(r[0]) for r in db.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        if not tables:
+            return True
+        version = schema_version(db)
+        wanted = [t for t in COLUMNS if not (version < 3 and t in ADDED_IN_3)]
+        missing = [t for t in wanted if t not in tables]
+        present = [t for t in wanted if t in tables]
+        if not present:
+            raise DamagedJournal(path, f"not a petrobot journal (an SQLite file with the tables "
+                                 f"{', '.join(sorted(tables)[:5])}); give a new file or an existing journal")
+        if missing:
+            held = sum(int(db.execute(f"SELECT COUNT(*) FROM {t}").fetchone()[0]) for t in present)
+            if held:
+                raise DamagedJournal(path, "the table is missing from this journal, whose other tables hold "
+                                     f"{held} record(s): it is not created afresh (a resume would replay the runs "
+                                     "without it); restore the journal from a copy, or give a new journal file",
+                                     table=missing[0])
+        return False
+    except sqlite3.DatabaseError as exc:
+        raise DamagedJournal(path, f"cannot read the journal: {exc}") from exc

@@ -29,7 +29,7 @@ from typing import Any
 from coordinator.engine import Firing
 from coordinator.errors import JournalError
 from coordinator.journal.reader import JournalReader
-from coordinator.journal.schema import DDL, RECORD_TABLES, check_schema, migrate
+from coordinator.journal.schema import DDL, RECORD_TABLES, check_schema, check_tables, check_version, migrate
 from coordinator.net import PetriNet
 from services.results import ActionResult, Status
 
@@ -60,7 +60,10 @@ class Journal(JournalReader):
         path: SQLite file (created with its tables if missing), or ``":memory:"``.
 
     Raises:
-        JournalError: if the file cannot be opened or is not a petrobot journal.
+        JournalError: if the file cannot be opened.
+        DamagedJournal: it is not a petrobot journal, or a table of it is missing
+            (:func:`~coordinator.journal.schema.check_tables`: never re-created under records).
+        JournalTooNew: it was written by a newer petrobot.
     """
 
     def __init__(self, path: str | Path) -> None:
@@ -70,9 +73,11 @@ class Journal(JournalReader):
         except sqlite3.Error as exc:
             raise JournalError(f"{name}: cannot open the journal: {exc}") from exc
         try:
+            check_version(db, name)
+            check_tables(db, name)
             db.execute("PRAGMA journal_mode=WAL")
             db.execute("PRAGMA synchronous=NORMAL")
-            db.executescript(DDL)
+            db.executescript(f"BEGIN;{DDL}COMMIT;")  # all the tables, or none
             check_schema(db, name)
             migrate(db, name)
         except sqlite3.DatabaseError as exc:
