@@ -60,7 +60,7 @@ sys.path.insert(0, str(ROOT))
 
 from services.client import NodeLink
 
-KEY_HEX = "3f" * 32
+KEY_HEX = "4be1f07a92c35d68e01b7f4c3a9d2e586f1c0b74d93a2e85c6017fb4e2d9a31c"
 KEY = bytes.fromhex(KEY_HEX)
 ANSWER_S = 10.0
 

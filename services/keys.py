@@ -15,6 +15,10 @@ Rules a key must meet:
 
 * at least :data:`MIN_KEY_BYTES` (16) bytes once decoded: a shorter key is refused, since a node
   answers guesses and a short key can be guessed;
+* not weak (:func:`key_weakness`): a key whose bytes repeat a short pattern (16 zero bytes,
+  ``passwordpassword``), count up (``0123456789abcdef``, ``bytes(range(32))``) or are too
+  few and too repetitive by their frequencies is refused as a short one is: it is long without being
+  hard to guess;
 * a key file must not be writable by other users (group or others write bits, or an owner other
   than the current user or root): whoever can write it can replace the key. A key file readable by
   other users is accepted with a warning (chmod 600 it).
@@ -25,7 +29,9 @@ and a log line says so: enough for a one-machine setup. For several hosts, copy 
 
 from __future__ import annotations
 
+import collections
 import logging
+import math
 import os
 import secrets
 import stat
@@ -42,6 +48,7 @@ __all__ = [
     "check_key",
     "decode_key",
     "default_key_path",
+    "key_weakness",
     "load_key",
     "load_keys",
 ]
@@ -52,6 +59,10 @@ DEFAULT_KEY_FILE = Path("~/.config/petrobot/key")
 """Key file used when neither ``--key-file`` nor ``PETROBOT_KEY_FILE`` is given."""
 MIN_KEY_BYTES: Final = 16
 """Shortest key accepted, bytes (128 bits)."""
+MIN_KEY_SPREAD_BITS: Final = 40.0
+"""Least spread accepted: the key's length times the Shannon entropy of its byte frequencies, bits.
+16 random bytes score about 60 (at most 64: 16 distinct bytes), 32 random bytes about 150; 16 bytes
+holding 5 values equally often score 37."""
 
 _HOW_TO_MAKE = "make one with: python -c 'import secrets; print(secrets.token_hex(32))'"
 
@@ -60,14 +71,42 @@ class SharedKeyError(PetrobotError):
     """The shared key cannot be used (empty or too short, unreadable or unsafe file)."""
 
 
+def key_weakness(key: bytes) -> str | None:
+    """Why ``key`` is weak although long enough, or ``None``.
+
+    A key is weak when its bytes repeat a pattern of at most half its length, go from one to the
+    next by at most two different steps (mod 256: ``0123…9abc…``), or spread over too few values (:data:`MIN_KEY_SPREAD_BITS`). These are the keys a
+    person types or a test writes (``00…00``, ``abab…``, ``0123…``); a key from
+    :func:`secrets.token_hex` never is.
+    """
+    n = len(key)
+    if n < 2:
+        return None
+    for period in range(1, n // 2 + 1):
+        if key[period:] == key[:-period]:
+            return f"it repeats a pattern of {period} byte{'s' * (period > 1)}"
+    steps = {(key[i + 1] - key[i]) % 256 for i in range(n - 1)}
+    if len(steps) <= 2:
+        return "its bytes go up or down by one or two constant steps (a counting sequence)"
+    counts = collections.Counter(key).values()
+    spread = -n * sum(c / n * math.log2(c / n) for c in counts)
+    if spread < MIN_KEY_SPREAD_BITS:
+        return (f"its bytes take {len(counts)} values, about {spread:.0f} bits by their frequencies "
+                f"(at least {MIN_KEY_SPREAD_BITS:.0f}; 16 random bytes give about 60)")
+    return None
+
+
 def check_key(key: bytes, where: str = "the shared key") -> bytes:
-    """Return ``key`` if it is long enough.
+    """Return ``key`` if it is long enough and not weak (:func:`key_weakness`).
 
     Raises:
-        SharedKeyError: ``key`` is shorter than :data:`MIN_KEY_BYTES`.
+        SharedKeyError: ``key`` is shorter than :data:`MIN_KEY_BYTES`, or weak.
     """
     if len(key) < MIN_KEY_BYTES:
         raise SharedKeyError(f"{where} is {len(key)} bytes; at least {MIN_KEY_BYTES} are needed ({_HOW_TO_MAKE})")
+    weak = key_weakness(key)
+    if weak is not None:
+        raise SharedKeyError(f"{where} is weak: {weak}; a key must be hard to guess ({_HOW_TO_MAKE})")
     return key
 
 

@@ -2,7 +2,8 @@
 it was and says why, with the log to read; a demo that starts keeps the previous journal under a
 name of its own and says where (real processes: the demo, its simulator, its nodes)."""
 
-from __future__ import annotations
+from __future__ import secrets
+import annotations
 
 import re
 import socket
@@ -19,7 +20,7 @@ pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 def _demo(cwd: Path, *args: str) -> subprocess.CompletedProcess[str]:
     key = cwd / "key"
     if not key.exists():
-        key.write_text("ab" * 32 + "\n")
+        key.write_text(secrets.token_hex(32) + "\n")
         key.chmod(0o600)
     return subprocess.run([sys.executable, "-m", "coordinator.cli", "demo", *args, "--key-file", str(key)],
                           cwd=cwd, capture_output=True, text=True, timeout=200, stdin=subprocess.DEVNULL)

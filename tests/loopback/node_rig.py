@@ -20,7 +20,7 @@ from typing import Any
 from services.location import load_location
 from services.node import Node
 
-KEY = bytes(range(32))
+KEY = bytes.fromhex("9c41e7d02b5f86a3147ed9c2058bf36e71a4d80c95e32fb6486a1dd7c0935e2b")
 """The shared key of the rig's node."""
 
 ACTIONS = """

@@ -29,7 +29,7 @@ from services.catching.setpoints import CatchSetPoint
 from sim.socketcand import CanGateway
 
 ROBOT_BASE = (0.75, 0.0, 0.46, math.pi)
-KEY = bytes(range(32))
+KEY = bytes.fromhex("9c41e7d02b5f86a3147ed9c2058bf36e71a4d80c95e32fb6486a1dd7c0935e2b")
 LOCATION = """
 [nodes.vision]
 host = "127.0.0.1"

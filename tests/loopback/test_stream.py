@@ -23,7 +23,7 @@ from services.catching.setpoints import (
     StreamLostError,
 )
 
-KEY = bytes(range(32))
+KEY = bytes.fromhex("9c41e7d02b5f86a3147ed9c2058bf36e71a4d80c95e32fb6486a1dd7c0935e2b")
 
 
 def _sp(seq: int, y: float = 0.1, t_frame: float = 0.5) -> CatchSetPoint:
