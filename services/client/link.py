@@ -600,19 +600,26 @@ class NodeLink(WireHost):
                     pass
 
     async def _keep_connected(self) -> None:
-        """Keep a connection up while topics are subscribed (reconnect with backoff up to 2 s)."""
+        """Keep a connection up while topics are subscribed: reconnect with backoff (50 ms doubling
+        to 2 s) after a lost connection and after a failed authentication alike (a stranger on the
+        port of a restarting node, a key being rotated: the real node may answer the next try); each
+        streak of failures is logged once, as a warning, until a connection opens."""
         delay = 0.05
+        failing = ""
         while self._topics and not self._closed:
             if self.connected:
                 delay = 0.05
+                failing = ""
                 await asyncio.sleep(self.heartbeat_s)
                 continue
             try:
                 await self._ensure_connected()
-            except AuthenticationError as exc:
-                log.error("cannot subscribe on node %s: %s", self.node, exc)
-                return
-            except (TimeoutError, OSError, ProtocolError):
+            except (AuthenticationError, TimeoutError, OSError, ProtocolError) as exc:
+                kind = "authentication" if isinstance(exc, AuthenticationError) else "connection"
+                if kind != failing:
+                    failing = kind
+                    log.warning("cannot subscribe on node %s: %s; retrying with backoff up to 2 s", self.node,
+                                describe(exc))
                 await asyncio.sleep(delay)
                 delay = min(delay * 2, 2.0)
 

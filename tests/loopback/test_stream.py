@@ -211,3 +211,31 @@ def test_a_sequence_number_far_ahead_is_refused_while_the_stream_is_live_and_res
     assert h.offer(_sp(4), now=1.02) and h.get(1.03).seq == 4
     assert not h.offer(_sp(1), now=1.05)  # older, the stream live: dropped
     assert h.offer(_sp(1), now=1.2) and h.restarts == 1 and "restarted" in (h.note or "")
+
+
+async def test_a_subscription_refused_by_a_stranger_on_the_port_retries_until_the_real_node_is_back():
+    """Issue 22: a failed authentication towards a publisher (a stranger on a restarted node's port)
+    made the subscriber give up for good; now it retries with backoff, as for a lost connection."""
+    port = _free_port()
+    stranger = Node("vision", parse_location(f'[nodes.vision]\nhost = "127.0.0.1"\nport = {port}\n'),
+                    bytes.fromhex("61f0c2b9e8d4a7135c9e0f27b86d4a1c3e5f70b2d9a8c6e41f3b57d09a2c8e61"))
+    await stranger.start()
+    link = NodeLink("vision", ("127.0.0.1", port), KEY, name="node:motion", connect_timeout_s=0.5)
+    sub = SetPointSubscription(link, max_age=5.0)
+    sub.start()
+    real = None
+    try:
+        await asyncio.sleep(0.5)  # a few refused attempts
+        assert not link.connected
+        await stranger.stop()
+        real = Node("vision", parse_location(f'[nodes.vision]\nhost = "127.0.0.1"\nport = {port}\n'), KEY)
+        await real.start()
+        await _wait(lambda: link.connected, "the link to the real node")
+        await asyncio.sleep(0.1)  # the subscription reaches the node
+        real.publish("setpoints", _sp(1, 0.2).to_dict())
+        await _wait(lambda: sub.state.latest is not None, "a set point from the real node")
+    finally:
+        sub.close()
+        await link.close()
+        if real is not None:
+            await real.stop()
