@@ -585,6 +585,7 @@ class Node(PeerHost):
             before = self._loop.time()
             await asyncio.sleep(period)
             now = self._loop.time()
+            self._limited.flush()
             try:
                 self._calls.expire(time.time())
             except Exception as exc:  # noqa: BLE001 - keep reaping whatever the store does

@@ -37,6 +37,27 @@ def test_repeated_log_lines_are_held_back_and_counted(caplog: pytest.LogCaptureF
                      "997 similar line(s) suppressed in 10 s (auth)", "refused again"]
 
 
+def test_peers_from_a_thousand_addresses_write_at_most_the_total_and_one_summary_per_interval(
+        caplog: pytest.LogCaptureFixture) -> None:
+    """Issue 22: the limit per address let a fuzz from 1,000 addresses grow a node's log to 26.7 MB."""
+    clock = Clock()
+    limiter = LogLimiter(logging.getLogger("test.limiter.total"), burst=5, interval_s=10.0, total=50, clock=clock)
+    caplog.set_level(logging.INFO, "test.limiter.total")
+    for second in range(30):  # 30 s of 1,000 addresses, each failing a login and sending a bad frame
+        clock.t = float(second)
+        for host in range(1000):
+            limiter.log(logging.WARNING, ("auth", f"10.0.{host // 250}.{host % 250}"), "refused %s", host)
+            limiter.log(logging.WARNING, ("bad frame", f"10.0.{host // 250}.{host % 250}"), "bad frame %s", host)
+    clock.t = 30.0
+    limiter.flush()
+    lines = [r.getMessage() for r in caplog.records]
+    summaries = [line for line in lines if line.startswith("log limit:")]
+    assert len(lines) <= 3 * (50 + 1) and len(summaries) == 3, len(lines)
+    assert "auth" in summaries[0] and "from 1000 sources" in summaries[0] and "bad frame" in summaries[0]
+    dropped = sum(int(line.split()[2]) for line in summaries)
+    assert dropped == 2 * 1000 * 30 - (len(lines) - len(summaries))  # every line is written or counted
+
+
 def test_the_limiter_remembers_a_bounded_number_of_keys() -> None:
     limiter = LogLimiter(logging.getLogger("test.limiter.keys"), max_keys=10)
     logging.getLogger("test.limiter.keys").setLevel(logging.INFO)
