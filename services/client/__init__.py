@@ -6,7 +6,7 @@
   through services.toml and checks a run's actions beforehand (:meth:`ServiceClient.preflight`).
 """
 
-from services.client.link import UNKNOWN_CALL, EventCallback, FeedbackCallback, NodeLink
-from services.client.service import ServiceClient
+from services.client.link import UNKNOWN_CALL, EventCallback, FeedbackCallback, NodeBusy, NodeLink
+from services.client.service import PREFLIGHT_S, ServiceClient
 
-__all__ = ["UNKNOWN_CALL", "EventCallback", "FeedbackCallback", "NodeLink", "ServiceClient"]
+__all__ = ["PREFLIGHT_S", "UNKNOWN_CALL", "EventCallback", "FeedbackCallback", "NodeBusy", "NodeLink", "ServiceClient"]

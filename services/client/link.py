@@ -58,7 +58,7 @@ from services.protocol import (
 from services.results import ActionResult
 from services.wire import FramedConnection, client_context
 
-__all__ = ["UNKNOWN_CALL", "EventCallback", "FeedbackCallback", "NodeLink", "WireHost", "describe"]
+__all__ = ["UNKNOWN_CALL", "EventCallback", "FeedbackCallback", "NodeBusy", "NodeLink", "WireHost", "describe"]
 
 log = logging.getLogger("petrobot.client")
 
@@ -68,6 +68,13 @@ FeedbackCallback = Callable[[Any], None]
 """Called with the ``data`` of each feedback message of a call; must not block."""
 
 _DEADLINE_GRACE_S = 1.0
+_BUSY_REASONS = ("overloaded", "auth_throttled", "handshake_timeout")
+
+
+class NodeBusy(ConnectionError):
+    """The node closed our connection before the handshake ended because it is at a limit
+    (``bye`` ``overloaded``, ``auth_throttled`` or ``handshake_timeout``, docs/protocol.md §6): it
+    is running, and a later try may get in."""
 UNKNOWN_CALL = "unknown_call"
 """The node's answer to a query for an id it never saw or no longer keeps."""
 
@@ -174,6 +181,8 @@ class _Wire(FramedConnection):
         elif isinstance(msg, Bye):
             if msg.reason.startswith("auth_failed") and not self.opened.done():
                 exc: Exception = AuthenticationError(f"node {host.node} refused our key (auth_failed)")
+            elif msg.reason.startswith(_BUSY_REASONS) and not self.opened.done():
+                exc = NodeBusy(f"node said bye: {shown(msg.reason, 200)}")
             else:
                 exc = ConnectionError(f"node said bye: {shown(msg.reason, 200)}")
             self.abort(exc, None)

@@ -14,12 +14,16 @@ import hashlib
 from collections.abc import Iterable
 from typing import Any, Self
 
-from services.client.link import EventCallback, FeedbackCallback, NodeLink, describe
+from services.client.link import EventCallback, FeedbackCallback, NodeBusy, NodeLink, describe
 from services.errors import AuthenticationError, LocationError, ProtocolError
 from services.location import Location
 from services.results import ActionResult
 
-__all__ = ["ServiceClient"]
+__all__ = ["PREFLIGHT_S", "ServiceClient"]
+
+PREFLIGHT_S = 10.0
+"""How long :meth:`ServiceClient.preflight` keeps trying a node that is up but busy (it refuses
+connections at a limit, or does not answer within ``connect_timeout_s``), seconds."""
 
 
 def _file_digest(path: str) -> str | None:
@@ -154,14 +158,18 @@ class ServiceClient:
             return False
         return await self._links[node].cancel(call_id)
 
-    async def preflight(self, actions: Iterable[str]) -> list[str]:
+    async def preflight(self, actions: Iterable[str], *, deadline_s: float = PREFLIGHT_S) -> list[str]:
         """Check that ``actions`` can be served before a run starts.
 
         Connects to every node that hosts one of them (at once, each within
         ``connect_timeout_s``) and reports, in plain words: an action not placed in services.toml;
         a node that cannot be reached (its address and the error); an action its node does not
         offer (the node was started from another services.toml); a node whose services.toml
-        differs from this client's, or changed on disk since the node started.
+        differs from this client's, or changed on disk since the node started. A node that is up
+        but busy — it closes the connection at a limit (``overloaded``, ``auth_throttled``) or does
+        not answer in time, as under a flood of connections — is tried again with backoff until
+        ``deadline_s`` has passed; a node that refuses the connection (nothing listens) or our key
+        is reported at once.
 
         Returns:
             The problems found, one sentence each; empty when every action is ready.
@@ -174,20 +182,31 @@ class ServiceClient:
             except LocationError:
                 problems.append(f"action {action!r} is not placed in {self.location.path} (add [actions.{action}])")
         names = sorted(by_node)
-        outcomes = await asyncio.gather(*(self._check_node(n, by_node[n]) for n in names))
+        end = asyncio.get_running_loop().time() + deadline_s
+        outcomes = await asyncio.gather(*(self._check_node(n, by_node[n], end) for n in names))
         for found in outcomes:
             problems.extend(found)
         return problems
 
-    async def _check_node(self, node: str, actions: list[str]) -> list[str]:
+    async def _check_node(self, node: str, actions: list[str], end: float) -> list[str]:
         link = self.link(node)
         host, port = link.address
-        try:
-            await link.connect()
-        except AuthenticationError as exc:
-            return [f"node {node} at {host}:{port} refused our key: {exc}"]
-        except (TimeoutError, OSError, ProtocolError) as exc:
-            return [f"node {node} at {host}:{port} is unreachable: {describe(exc)}"]
+        loop = asyncio.get_running_loop()
+        delay = 0.1
+        while True:
+            try:
+                await link.connect()
+                break
+            except AuthenticationError as exc:
+                return [f"node {node} at {host}:{port} refused our key: {exc}"]
+            except (NodeBusy, TimeoutError) as exc:  # up, but at a limit: try again until the deadline
+                if loop.time() + delay >= end:
+                    return [f"node {node} at {host}:{port} is unreachable: {describe(exc)} (busy: tried until "
+                            "the preflight's deadline)"]
+                await asyncio.sleep(delay)
+                delay = min(2 * delay, 1.0)
+            except (OSError, ProtocolError) as exc:
+                return [f"node {node} at {host}:{port} is unreachable: {describe(exc)}"]
         problems = []
         offered = link.offered_actions
         if offered is not None:

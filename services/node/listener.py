@@ -7,8 +7,10 @@ that each connection passes the node's :class:`~services.node.guard.ConnectionGu
 only unauthenticated peers:
 
 * an address throttled for failed logins has its new connections closed at once (a ``bye`` with
-  reason ``auth_throttled`` on plain TCP), before any handshake work, and so has an address
-  opening connections faster than its rate (``bye{"overloaded"}``);
+  reason ``auth_throttled`` on plain TCP), before any handshake work, unless a connection from it
+  logged in recently (another process of that host has the key); so has an address opening
+  connections faster than its rate, and any connection from an address that never logged in past
+  the total rate of those (``bye{"overloaded"}``);
 * an accepted connection may push out the oldest pending ones (the guard's caps);
 * if ``accept`` fails for want of descriptors (``EMFILE``, ``ENFILE``, ``ENOBUFS``, ``ENOMEM``),
   the oldest pending connection is closed to make room; if none is pending, a spare descriptor
@@ -127,15 +129,22 @@ class Listener:
                 return
             host = addr[0]
             now = loop.time()
-            if self.throttle.throttled(host, now):
+            guard = self.guard
+            if self.throttle.throttled(host, now) and not guard.known(host, now):
                 self._limited.log(logging.WARNING, ("throttled", host), "refused a connection from %s: "
                                   "too many failed logins from that address", host)
                 self._refuse(sock, _THROTTLED_BYE)
                 continue
-            if not self.guard.may_accept(host, now):
+            if not guard.may_accept(host, now):
                 self._limited.log(logging.WARNING, ("accept rate", host), "refused a connection from %s: "
                                   "more than %g new connections a second from that address", host,
-                                  self.guard.caps.accepts_per_s)
+                                  guard.caps.accepts_per_s)
+                self._refuse(sock, _OVERLOADED_BYE)
+                continue
+            if not guard.within_total(host, now):
+                self._limited.log(logging.WARNING, "new connections", "refused a connection from %s: more than %g "
+                                  "new connections a second from addresses that never logged in", host,
+                                  guard.caps.new_per_s)
                 self._refuse(sock, _OVERLOADED_BYE)
                 continue
             peer = self._make_peer(host, now)

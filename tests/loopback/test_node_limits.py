@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 import struct
 
 import msgpack
 import pytest
 from node_rig import ACTIONS, KEY, eventually, running_node
 
-from services.client import NodeLink
+from services.client import NodeLink, ServiceClient
 from services.node import Node
 from services.node.guard import Caps
 from services.node.peer import Peer
@@ -130,6 +131,46 @@ async def test_failed_logins_are_throttled_per_address_and_other_addresses_are_s
         good = link(node)
         assert (await good.call("echo")).status == "success"  # from 127.0.0.1
         await good.close()
+
+
+async def test_a_process_failing_logins_does_not_lock_out_a_client_of_the_same_host_that_logged_in_before() -> None:
+    """Issue 22: 20 wrong keys from 127.0.0.1 throttled every client there, the coordinator included."""
+    async with running_node() as node:
+        coordinator = link(node, source="127.0.0.4")
+        assert (await coordinator.call("echo")).status == "success"  # 127.0.0.4 logged in: it is known
+        await coordinator.close()
+        stop = asyncio.Event()
+        answers: list[str] = []
+
+        async def guesser() -> None:  # a process of the same host with a wrong key, retrying at once
+            while not stop.is_set():
+                reader, writer = await raw(node, source="127.0.0.4")
+                conn = Connection(Role.CLIENT, b"a wrong key, long enough", name="guesser", node=node.name)
+                try:
+                    while conn.state.name != "CLOSED":
+                        data = await asyncio.wait_for(reader.read(4096), 5)
+                        conn.receive_data(data)
+                        for msg in conn.messages():
+                            if isinstance(msg, Bye):
+                                answers.append(msg.reason)
+                        writer.write(conn.data_to_send())
+                except Exception:  # noqa: BLE001 - refused: try again
+                    pass
+                finally:
+                    writer.close()
+
+        task = asyncio.create_task(guesser())
+        try:
+            await eventually("30 failed logins", lambda: len(answers) >= 30, timeout_s=20)  # past the throttle's 20
+            for _ in range(3):
+                again = NodeLink("alpha", (node.host, node.port), KEY, connect_timeout_s=1.0,
+                                 local_addr=("127.0.0.4", 0))
+                assert (await again.call("echo")).status == "success"
+                await again.close()
+        finally:
+            stop.set()
+            await task
+        assert "auth_failed" in answers
 
 
 async def test_untrusted_text_is_logged_escaped_short_and_rate_limited(caplog: pytest.LogCaptureFixture) -> None:
@@ -253,3 +294,20 @@ async def test_a_handshake_over_the_open_connection_cap_gets_only_a_bye() -> Non
         writer.close()
         for c in held:
             await c.close()
+
+
+async def test_a_preflight_tries_a_busy_node_again_until_its_deadline() -> None:
+    """Issue 22: under a flood a real petrobot run failed its preflight 4 times of 5 ("node
+    unreachable") although the node was up; a node that refuses connections at a limit is now tried
+    again until the preflight's deadline."""
+    caps = Caps(accept_burst=1, accepts_per_s=0.5)  # one connection, then one every 2 s
+    async with running_node(caps=caps) as node:
+        with socket.create_connection((node.host, node.port)):  # takes the token
+            pass
+        async with ServiceClient(node.location, KEY, connect_timeout_s=0.3) as client:
+            assert await client.preflight(["echo"], deadline_s=10.0) == []
+        with socket.create_connection((node.host, node.port)):
+            pass
+        async with ServiceClient(node.location, KEY, connect_timeout_s=0.3) as client:
+            problems = await client.preflight(["echo"], deadline_s=0.5)
+        assert len(problems) == 1 and "overloaded" in problems[0] and "busy" in problems[0], problems

@@ -8,6 +8,7 @@ from services.node.guard import AuthThrottle, Caps, ConnectionGuard, budget_caps
 
 
 def guard(**caps: float) -> ConnectionGuard[str]:
+    caps.setdefault("reserved_pending", 0)  # no slots kept for known addresses unless a test asks
     return ConnectionGuard(Caps(**caps))  # type: ignore[arg-type]
 
 
@@ -138,3 +139,26 @@ def test_new_connections_are_rate_limited_per_address() -> None:
     assert not g.may_accept("h", 0.05) and g.may_accept("h", 0.1)  # one earned back per 0.1 s
     accepted = sum(g.may_accept("h", 1.0 + i / 1000) for i in range(10_000))  # 10 s of a tight loop
     assert accepted <= 5 + 10 * 10 + 1
+
+
+def test_a_flood_from_many_new_addresses_never_takes_the_slots_kept_for_known_ones() -> None:
+    """Issue 22: 1,200 reconnecting peers from spread addresses kept a legitimate client out."""
+    g = guard(max_pending=8, max_pending_per_host=8, reserved_pending=2)
+    g.accept("before", "10.0.0.1", 0.0)
+    assert g.authenticate("before")  # 10.0.0.1 is known from now on
+    flood = [f"f{i}" for i in range(100)]
+    evicted = [c for i, c in enumerate(flood) for c in g.accept(c, f"10.9.{i}.1", 1.0 + i / 100)]
+    assert g.pending == 6  # unknown addresses hold 6 of 8 at most: 2 stay for known ones
+    assert g.accept("legit", "10.0.0.1", 2.5) == [] and g.accept("legit2", "10.0.0.1", 2.6) == []
+    assert g.accept("legit3", "10.0.0.1", 2.7) == ["f94"]  # the pending slots are full: the flood gives way
+    assert len(evicted) == 94 and g.authenticate("legit") and g.authenticate("legit2")
+
+
+def test_new_connections_from_unknown_addresses_are_rate_limited_in_total_and_known_ones_are_not() -> None:
+    g = guard(new_per_s=10.0, new_burst=5)
+    assert [g.within_total(f"10.9.0.{i}", 0.0) for i in range(7)] == [True] * 5 + [False] * 2
+    assert g.within_total("10.9.1.1", 0.1)  # a token came back
+    g.accept("c", "10.0.0.1", 0.0)
+    g.authenticate("c")
+    assert all(g.within_total("10.0.0.1", 0.1) for _ in range(100))
+    assert g.known("10.0.0.1", 3000.0) and not g.known("10.0.0.1", 4000.0)  # trusted for trust_s (1 h)
