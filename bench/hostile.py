@@ -1,34 +1,49 @@
 """Hostile-network benchmark: a real node process fuzzed and flooded, and a legitimate client timed.
 
-Usage: ``python bench/hostile.py [--json] [--frames N] [--flood C] [--flood-s S] [--same-host] [--seed K]``
+Usage: ``python bench/hostile.py [--json] [--frames N] [--fuzz-addresses A] [--results N] [--relays N]
+[--flood C] [--flood-addresses A] [--flood-s S] [--reconnect-s S] [--same-host] [--seed K]``
 
 Starts a node process (``python -m services.node``) on 127.0.0.1 hosting ``echo``, ``wait`` and
 ``announce``, with its result store in a temporary state directory and its log (INFO) in a file,
 then, in this one run:
 
+0. **Relay** (``--relays``, default 20): the reflection of the node handshake (docs/protocol.md §3,
+   "Threat model"). A process without the key listens on a port of its own, standing for the port
+   of another node ("other") that is down; a link of the node's own name (``node:bench``, meaning
+   to reach "other") connects to it, and the process relays that link's handshake to the node's
+   server, half the time renaming the node's ``hello`` to "other". An attempt is refused when
+   neither side ever sends a ``welcome`` through it (``relays_refused``, target: all).
 1. **Fuzz** (``--frames``, default 100,000): connections before and after authentication send
    seeded random frames: garbage bytes, oversize headers, random maps, forged ``bye`` reasons
    (newlines, ANSI escapes, NUL, kilobytes), wrong MACs, and from logged-in peers calls (known
    and unknown actions, random ids and parameters up to 256 KiB), queries, cancels, pings,
    subscriptions to random topics, deep nesting, booleans for numbers, extension types. Each
    connection ends by waiting for the node to answer a ping or to close it: a connection where
-   neither happens within 10 s is a **hang**.
+   neither happens within 10 s is a **hang**. Unauthenticated garbage comes from
+   ``--fuzz-addresses`` loopback addresses (default 1,000: the node's log limit per address alone
+   let such a fuzz grow its log to 26.7 MB).
+   Then ``--results`` calls (default 24) of ``echo`` whose kept results are 1 to 16 MiB each, so
+   that the node's result store runs at its 64 MiB budget (``rss_after_results_mib``).
 2. **Flood** (``--flood``, default 2,000 connections for ``--flood-s`` seconds): slow-handshake
    peers that connect and then send one byte a second, and connect again when the node drops
-   them (``--reconnect-s`` later, default 1 s; 0 for a tight loop); from 127.0.0.2–127.0.0.9
-   (other "hosts"), or half of them from the client's own 127.0.0.1 with ``--same-host``. The
+   them (``--reconnect-s`` later, default 1 s; 0 for at once); from ``--flood-addresses`` loopback
+   addresses (default 1,000, other "hosts" that never logged in), or half of them from the client's
+   own 127.0.0.1 with ``--same-host``. The
    flood runs in two processes of its own at the lowest CPU priority (nice 19): on a network the
    attackers' CPU would not be the node's. ``--flood 1`` gives the baseline of the same
    measurement without a flood. Meanwhile a legitimate client (127.0.0.1) repeatedly opens a connection,
    authenticates and makes one call (its latency: ``legit_*``), and makes calls over a link it
    keeps open (``established_*``).
 
-Reports (``--json``): ``frames``, ``connections``, ``hangs``, ``rss_start_mib``, ``rss_end_mib``,
-``rss_growth_mib`` (the node's RSS after the fuzz and the flood minus after warm-up),
+Reports (``--json``): ``relays``, ``relays_refused``, ``frames``, ``connections``, ``hangs``,
+``rss_start_mib``, ``rss_after_results_mib``, ``rss_end_mib``, ``rss_growth_mib`` (the node's
+highest RSS after the fuzz, the results and the flood, minus after warm-up),
 ``legit_p50_s_under_flood``, ``legit_p99_s_under_flood``, ``legit_failures``,
 ``established_p99_s_under_flood``, ``flood_connections`` (connections the flood opened in all),
-``node_log_bytes``, ``node_alive``. Targets (hostile-network issue): 0 hangs, RSS growth <= 50 MiB,
-legitimate p99 <= 50 ms under a 2,000-connection slow-handshake flood.
+``node_log_bytes``, ``node_log_lines``, ``node_log_limit_lines`` (the log limit's summaries),
+``node_alive``. Targets (issue 22): every relay refused, 0 hangs, RSS growth <= 50 MiB, legitimate
+p99 <= 50 ms and 0 failures under a flood of slow handshakes reconnecting from many addresses, the
+log bounded.
 
 The soft ``RLIMIT_NOFILE`` of this process is raised (within the hard limit) to hold the flood.
 """
@@ -195,6 +210,14 @@ class Garbage:
 # --------------------------------------------------------------------------- fuzz
 
 
+FUZZ_ADDRESSES = 1000
+
+
+def spread_address(i: int, block: int) -> str:
+    """The ``i``-th loopback address of block ``block`` (127.BLOCK.x.y: other "hosts" for the node)."""
+    return f"127.{block}.{i // 250}.{i % 250 + 1}"
+
+
 class Stats:
     def __init__(self) -> None:
         self.frames = 0
@@ -235,7 +258,7 @@ async def login(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> N
 
 async def fuzz_one(port: int, g: Garbage, stats: Stats, frames: int, authenticated: bool) -> None:
     # unauthenticated garbage comes from other addresses (it gets them throttled for failed logins)
-    source = "127.0.0.1" if authenticated else f"127.0.0.{g.rng.randrange(20, 100)}"
+    source = "127.0.0.1" if authenticated else spread_address(g.rng.randrange(FUZZ_ADDRESSES), 2)
     try:
         reader, writer = await asyncio.open_connection("127.0.0.1", port, local_addr=(source, 0))
     except OSError:
@@ -362,8 +385,11 @@ def _flood_process(cpus: set[int] | None) -> Any:
     return setup
 
 
+FLOOD_ADDRESSES = 1000
+
+
 async def flood(port: int, conns: int, seconds: float, same_host: bool) -> dict[str, Any]:
-    sources = [f"127.0.0.{2 + i % 8}" for i in range(conns)]
+    sources = [spread_address(i % FLOOD_ADDRESSES, 3) for i in range(conns)]
     if same_host:
         sources = [("127.0.0.1" if i % 2 else s) for i, s in enumerate(sources)]
     workers = []
@@ -406,6 +432,78 @@ async def flood(port: int, conns: int, seconds: float, same_host: bool) -> dict[
     }
 
 
+# --------------------------------------------------------------------------- relay
+
+
+async def read_map(reader: asyncio.StreamReader) -> dict[str, Any] | None:
+    try:
+        header = await reader.readexactly(4)
+        body = await reader.readexactly(struct.unpack(">I", header)[0])
+    except (asyncio.IncompleteReadError, ConnectionError):
+        return None
+    obj = msgpack.unpackb(body, raw=False)
+    return obj if isinstance(obj, dict) else None
+
+
+async def relay(port: int, attempts: int) -> dict[str, Any]:
+    """Relay the handshake of a link named for this node to this node's server (module docstring)."""
+    welcomes = 0
+    done: asyncio.Queue[None] = asyncio.Queue()
+    rename = [False]
+
+    async def handle(victim_r: asyncio.StreamReader, victim_w: asyncio.StreamWriter) -> None:
+        nonlocal welcomes
+        server_r, server_w = await asyncio.open_connection("127.0.0.1", port)
+        try:
+            hello = await read_map(server_r)
+            if hello is not None:
+                if rename[0]:
+                    hello["node"] = "other"
+                victim_w.write(frame(hello))
+                auth = await read_map(victim_r)
+                if auth is not None:
+                    server_w.write(frame(auth))
+                    answer = await read_map(server_r)
+                    if answer is not None:
+                        welcomes += answer.get("type") == "welcome"
+                        victim_w.write(frame(answer))
+                        back = await read_map(victim_r)
+                        welcomes += back is not None and back.get("type") == "welcome"
+        finally:
+            victim_w.close()
+            server_w.close()
+            done.put_nowait(None)
+
+    squatter = await asyncio.start_server(handle, "127.0.0.1", 0)
+    squat_port = squatter.sockets[0].getsockname()[1]
+    try:
+        for i in range(attempts):
+            rename[0] = i % 2 == 0
+            link = NodeLink("other", ("127.0.0.1", squat_port), KEY, name="node:bench", connect_timeout_s=2.0)
+            await link.call("echo", {"relayed": i})
+            await link.close()
+            await asyncio.wait_for(done.get(), ANSWER_S)
+    finally:
+        squatter.close()
+    return {"relays": attempts, "relays_refused": attempts - welcomes}
+
+
+async def big_results(port: int, calls: int, seed: int) -> None:
+    """``calls`` echo calls whose results are 1 to 16 MiB (random bytes), kept by the node."""
+    rng = random.Random(seed)
+    # committing a 16 MiB result to the node's store can hold its event loop for seconds on a loaded
+    # disk (SQLite writes, its checkpoints): this phase measures memory, so a heartbeat that waits
+    link = NodeLink("bench", ("127.0.0.1", port), KEY, name="results", connect_timeout_s=10.0, heartbeat_s=5.0)
+    try:
+        for i in range(calls):
+            size = rng.randrange(1 << 20, 16 << 20)
+            res = await link.call("echo", {"blob": rng.randbytes(size), "i": i}, deadline_s=60.0)
+            if res.status != "success":
+                raise RuntimeError(f"echo of {size} bytes: {res.reason}")
+    finally:
+        await link.close()
+
+
 # --------------------------------------------------------------------------- run
 
 
@@ -427,10 +525,14 @@ async def alive(port: int) -> bool:
 async def measure(args: argparse.Namespace, port: int, pid: int) -> dict[str, Any]:
     await warm_up(port)
     rss_start = rss_mib(pid)
+    relays = await relay(port, args.relays) if args.relays else {"relays": 0, "relays_refused": 0}
     t0 = time.monotonic()
     stats = await fuzz(port, args.frames, args.seed) if args.frames else Stats()
     fuzz_s = time.monotonic() - t0
     after_fuzz = rss_mib(pid)
+    if args.results:
+        await big_results(port, args.results, args.seed)
+    after_results = rss_mib(pid)
     cpu0 = proc_cpu_s(pid)
     children0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     fl = await flood(port, args.flood, args.flood_s, args.same_host) if args.flood else {}
@@ -441,16 +543,21 @@ async def measure(args: argparse.Namespace, port: int, pid: int) -> dict[str, An
     ok = await alive(port)
     rss_end = rss_mib(pid)
     return {
+        **relays,
         "frames": stats.frames,
         "connections": stats.connections,
         "hangs": stats.hangs,
         "fuzz_s": fuzz_s,
+        "fuzz_addresses": FUZZ_ADDRESSES,
         "rss_start_mib": rss_start,
         "rss_after_fuzz_mib": after_fuzz,
+        "results_1_to_16_mib": args.results,
+        "rss_after_results_mib": after_results,
         "rss_end_mib": rss_end,
-        "rss_growth_mib": max(after_fuzz, rss_end) - rss_start,
+        "rss_growth_mib": max(after_fuzz, after_results, rss_end) - rss_start,
         **fl,
         "flood": args.flood,
+        "flood_addresses": FLOOD_ADDRESSES,
         "flood_s": args.flood_s,
         "same_host": args.same_host,
         "reconnect_s": args.reconnect_s,
@@ -476,9 +583,16 @@ def wait_listening(port: int, proc: subprocess.Popen[bytes], timeout: float = 20
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description="fuzz and flood a node; time a legitimate client")
     p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--relays", type=int, default=20, help="relayed handshakes to try (default 20; 0: none)")
     p.add_argument("--frames", type=int, default=100_000, help="fuzz frames to send (default 100000; 0: none)")
+    p.add_argument("--fuzz-addresses", type=int, default=1000,
+                   help="loopback addresses the unauthenticated fuzz comes from (default 1000)")
+    p.add_argument("--results", type=int, default=24,
+                   help="calls whose kept results are 1-16 MiB each, after the fuzz (default 24; 0: none)")
     p.add_argument("--flood", type=int, default=2000, help="slow-handshake connections (default 2000; 0: none)")
     p.add_argument("--flood-s", type=float, default=15.0, help="seconds the flood lasts (default 15)")
+    p.add_argument("--flood-addresses", type=int, default=1000,
+                   help="loopback addresses the flood comes from (default 1000)")
     p.add_argument("--same-host", action="store_true", help="half the flood also comes from the client's 127.0.0.1")
     p.add_argument("--reconnect-s", type=float, default=1.0,
                    help="a dropped flood peer reconnects after this (default 1 s; 0: at once)")
@@ -499,6 +613,8 @@ def main(argv: list[str] | None = None) -> int:
         print(asyncio.run(flood_worker(int(port), sources.split(","), float(seconds))))
         return 0
     globals()["RECONNECT_S"] = args.reconnect_s
+    globals()["FUZZ_ADDRESSES"] = max(1, args.fuzz_addresses)
+    globals()["FLOOD_ADDRESSES"] = max(1, args.flood_addresses)
     if args.pin:
         cpus = sorted(os.sched_getaffinity(0))
         if len(cpus) < 2:
@@ -535,10 +651,15 @@ def main(argv: list[str] | None = None) -> int:
             )
         try:
             wait_listening(port, node)
-            res = asyncio.run(measure(args, port, node.pid))
+            try:
+                res = asyncio.run(measure(args, port, node.pid))
+            finally:
+                if args.keep_log:
+                    shutil.copyfile(log_path, args.keep_log)
             res["node_log_bytes"] = log_path.stat().st_size
-            if args.keep_log:
-                shutil.copyfile(log_path, args.keep_log)
+            log_text = log_path.read_text(errors="replace")
+            res["node_log_lines"] = log_text.count("\n")
+            res["node_log_limit_lines"] = log_text.count("log limit:")
         finally:
             node.terminate()
             try:
@@ -548,12 +669,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(res, indent=2))
     else:
-        print(f"fuzz: {res['frames']} frames over {res['connections']} connections in {res['fuzz_s']:.1f} s, "
-              f"{res['hangs']} hangs (target 0)")
+        print(f"relay of the node's own handshake: {res['relays_refused']} of {res['relays']} refused (target: all)")
+        print(f"fuzz: {res['frames']} frames over {res['connections']} connections in {res['fuzz_s']:.1f} s "
+              f"(unauthenticated ones from {res['fuzz_addresses']} addresses), {res['hangs']} hangs (target 0)")
         print(f"node RSS: {res['rss_start_mib']:.1f} -> {res['rss_after_fuzz_mib']:.1f} (after fuzz) -> "
+              f"{res['rss_after_results_mib']:.1f} (after {res['results_1_to_16_mib']} results of 1-16 MiB) -> "
               f"{res['rss_end_mib']:.1f} MiB; growth {res['rss_growth_mib']:.1f} MiB (target <= 50)")
         if args.flood:
-            print(f"flood: {args.flood} slow-handshake peers for {args.flood_s:g} s ({res['flood_connections']} "
+            print(f"flood: {args.flood} slow-handshake peers from {res['flood_addresses']} addresses for "
+                  f"{args.flood_s:g} s, reconnecting {args.reconnect_s:g} s after a drop ({res['flood_connections']} "
                   f"connections opened{', half from the client host' if args.same_host else ''})")
             print(f"legitimate connect+login+call: p50 {res['legit_p50_s_under_flood'] * 1e3:.1f} ms, "
                   f"p99 {res['legit_p99_s_under_flood'] * 1e3:.1f} ms (target <= 50), max "
@@ -563,9 +687,9 @@ def main(argv: list[str] | None = None) -> int:
                   f"p99 {res['established_p99_s_under_flood'] * 1e3:.2f} ms")
             print(f"CPU during the flood: node {res['node_cpu_s_during_flood']:.1f} s, flood processes "
                   f"{res['flood_cpu_s']:.1f} s")
-        print(f"node log: {res['node_log_bytes']} bytes; node alive: {res['node_alive']}; "
-              f"load average {res['load_average_1min']:.2f}")
-    return 0 if res["node_alive"] and res["hangs"] == 0 else 1
+        print(f"node log: {res['node_log_bytes']} bytes, {res['node_log_lines']} lines ({res['node_log_limit_lines']} "
+              f"log-limit summaries); node alive: {res['node_alive']}; load average {res['load_average_1min']:.2f}")
+    return 0 if res["node_alive"] and res["hangs"] == 0 and res["relays_refused"] == res["relays"] else 1
 
 
 if __name__ == "__main__":

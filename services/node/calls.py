@@ -29,10 +29,13 @@ kept either way.
 Kept results live behind the small :class:`ResultCache` interface (``get``, ``put``, ``expire``,
 ``begin``, ``flush``) so that a store which survives node restarts
 (:class:`services.node.store.SqliteResultCache`) can replace the in-memory :class:`MemoryResultCache`.
-The in-memory cache is bounded by **bytes** and by **age**, not by count: each kept result is
-charged the length of its encoded ``result`` frame plus :data:`ENTRY_OVERHEAD` (the objects that
-hold it in memory); the oldest results are dropped when the charge exceeds ``max_bytes`` (default
-64 MiB), and results older than ``max_age_s`` (default 600 s) when :meth:`CallTable.expire` runs.
+The in-memory cache is bounded by **bytes** and by **age**, not by count: it keeps each result as
+its encoded ``result`` frame (the bytes sent to the callers, decoded again only when a repeated id
+asks for it), so that what it is charged — the frame's length plus :data:`ENTRY_OVERHEAD`, the
+objects that hold it — is the memory it holds, whatever the value (a list of a million small
+numbers is 9 MB as a frame, 36 MB as Python objects); the oldest results are dropped when the
+charge exceeds ``max_bytes`` (default 64 MiB), and results older than ``max_age_s`` (default
+600 s) when :meth:`CallTable.expire` runs.
 There is no count cap: the per-entry overhead makes the byte cap bound the count too (at most
 ``max_bytes / ENTRY_OVERHEAD`` results, about 131,000 with the defaults).
 """
@@ -45,7 +48,8 @@ from collections.abc import Collection, Iterable
 from dataclasses import dataclass
 from typing import Final, Generic, NamedTuple, Protocol, TypeAlias, TypeVar
 
-from services.protocol import Call, Result
+from services.protocol import Call, Result, encode_frame, from_map, unpack_map
+from services.protocol.framing import HEADER_BYTES
 
 __all__ = [
     "CALLER_GONE",
@@ -108,8 +112,9 @@ class KeptResult(NamedTuple):
         result: the ``result`` message sent to the callers.
         size: length of its encoded frame, bytes.
         stored_at: when it was kept, seconds on the clock the caller passes to the cache.
-        frame: the encoded frame, when the caller has it (a store that writes frames uses it
-            instead of encoding the result again; the in-memory cache does not keep it).
+        frame: the encoded frame, when the caller has it (the caches keep it instead of the
+            :class:`Result` and give it back with it, so that a repeat is answered with the very
+            bytes first sent).
     """
 
     call_id: str
@@ -152,8 +157,15 @@ class ResultCache(Protocol):
         ...
 
 
+class _Stored(NamedTuple):
+    action: str
+    frame: bytes
+    stored_at: float
+
+
 class MemoryResultCache:
-    """Kept results in memory, oldest first, bounded by bytes and by age (see the module docstring).
+    """Kept results in memory as their frames, oldest first, bounded by bytes and by age (see the
+    module docstring).
 
     Args:
         max_bytes: cap on the bytes charged (frame length + ``entry_overhead`` per result); the
@@ -181,8 +193,8 @@ class MemoryResultCache:
         self.max_age_s = max_age_s
         self.entry_overhead = entry_overhead
         self.nbytes = 0
-        """Bytes charged for the results kept now."""
-        self._kept: collections.OrderedDict[str, KeptResult] = collections.OrderedDict()
+        """Bytes charged for the results kept now: their frames' lengths plus the overhead each."""
+        self._kept: collections.OrderedDict[str, _Stored] = collections.OrderedDict()
 
     def __len__(self) -> int:
         return len(self._kept)
@@ -191,23 +203,28 @@ class MemoryResultCache:
         return call_id in self._kept
 
     def get(self, call_id: str) -> KeptResult | None:
-        """The kept result of ``call_id``, or ``None``."""
-        return self._kept.get(call_id)
+        """The kept result of ``call_id`` (decoded from its frame, the frame given too), or ``None``."""
+        stored = self._kept.get(call_id)
+        if stored is None:
+            return None
+        msg = from_map(unpack_map(stored.frame[HEADER_BYTES:]))
+        assert isinstance(msg, Result)
+        return KeptResult(call_id, stored.action, msg, len(stored.frame), stored.stored_at, stored.frame)
 
     def put(self, kept: KeptResult) -> None:
-        """Keep ``kept`` as the newest result, then drop the oldest while over ``max_bytes``."""
+        """Keep ``kept``'s frame (encoded here if it has none) as the newest result, then drop the
+        oldest while over ``max_bytes``."""
         results = self._kept
         cid = kept.call_id
-        if kept.frame is not None:
-            kept = kept._replace(frame=None)  # the Result is kept; its bytes would be counted twice
+        frame = kept.frame if kept.frame is not None else encode_frame(kept.result)
         if cid in results:
-            self.nbytes -= results.pop(cid).size + self.entry_overhead
-        results[cid] = kept
-        self.nbytes += kept.size + self.entry_overhead
+            self.nbytes -= len(results.pop(cid).frame) + self.entry_overhead
+        results[cid] = _Stored(kept.action, frame, kept.stored_at)
+        self.nbytes += len(frame) + self.entry_overhead
         if self.nbytes > self.max_bytes:
             while self.nbytes > self.max_bytes and len(results) > 1:
                 _, dropped = results.popitem(last=False)
-                self.nbytes -= dropped.size + self.entry_overhead
+                self.nbytes -= len(dropped.frame) + self.entry_overhead
 
     def expire(self, now: float) -> int:
         """Drop the results kept before ``now - max_age_s`` (s); return how many were dropped."""
@@ -215,11 +232,11 @@ class MemoryResultCache:
         too_old = now - self.max_age_s
         n = 0
         while results:
-            first = next(iter(results.values()))
+            cid, first = next(iter(results.items()))
             if first.stored_at >= too_old:
                 break
-            del results[first.call_id]
-            self.nbytes -= first.size + self.entry_overhead
+            del results[cid]
+            self.nbytes -= len(first.frame) + self.entry_overhead
             n += 1
         return n
 

@@ -226,9 +226,9 @@ class ConnectionGuard(Generic[C]):
     def _oldest_of_busiest(self, *, unknown_only: bool) -> C:
         """The oldest pending connection of the address holding the most (the first listed among
         equals), among the connections from unknown addresses when ``unknown_only``."""
-        hosts = self._pending_by_host.values()
+        hosts = list(self._pending_by_host.values())
         if unknown_only:
-            hosts = [q for q in hosts if not self._pending[next(iter(q))][2]] or list(hosts)
+            hosts = [q for q in hosts if not self._pending[next(iter(q))][2]] or hosts
         busiest = max(hosts, key=len)
         return next(iter(busiest))
 

@@ -74,6 +74,7 @@ from services.node.calls import (
     Answer,
     CallTable,
     Join,
+    KeptResult,
     MemoryResultCache,
     Reject,
     ResultCache,
@@ -450,7 +451,7 @@ class Node(PeerHost):
             peer.send(Rejected(id=cid, reason=reason))
         elif type(verdict) is Answer:
             peer.send(Accepted(id=cid))
-            peer.send(verdict.kept.result)
+            self._send_kept(peer, verdict.kept)
             log.info("call %s (%s) from %r: repeated, answered with the first result", shown(cid, 64),
                      shown(call.action, 64), peer)
         else:  # Join: the peer now waits for the running call's result too
@@ -464,7 +465,7 @@ class Node(PeerHost):
         verdict = self._calls.query(cid, peer)
         if type(verdict) is Answer:
             peer.send(Accepted(id=cid))
-            peer.send(verdict.kept.result)
+            self._send_kept(peer, verdict.kept)
             log.info("query %s from %r: answered with its result", shown(cid, 64), peer)
         elif type(verdict) is Join:
             peer.send(Accepted(id=cid))
@@ -474,6 +475,14 @@ class Node(PeerHost):
             peer.send(Rejected(id=cid, reason=verdict.reason.value))
             self._limited.log(logging.INFO, ("query", peer.peer_host), "query %s from %r: %s", shown(cid, 64),
                               peer, verdict.reason.value)
+
+    @staticmethod
+    def _send_kept(peer: Peer, kept: KeptResult) -> None:
+        """Send a kept result: its frame as first sent, when the cache gives it."""
+        if kept.frame is not None:
+            peer.send_frame(kept.frame)
+        else:
+            peer.send(kept.result)
 
     def cancel_call(self, cid: str, reason: str = "cancelled") -> None:
         """Cancel call ``cid`` with ``reason`` if it runs."""
@@ -547,7 +556,7 @@ class Node(PeerHost):
             result = _unsendable(result, exc)
             frame = encode_frame(result, self.max_frame)
         durable = self._durable
-        self._calls.finish(result, size=len(frame), now=time.time(), frame=frame if durable else None)
+        self._calls.finish(result, size=len(frame), now=time.time(), frame=frame)
         if durable:
             self._unsent.append((rec, frame))
             if not self._tasks:  # no other call runs: nothing to wait for to share the commit

@@ -205,7 +205,7 @@ class SqliteResultCache:
         action, frame, size, at = row
         msg = from_map(unpack_map(frame[HEADER_BYTES:]))
         assert isinstance(msg, Result)
-        return KeptResult(call_id, action, msg, size, at)
+        return KeptResult(call_id, action, msg, size, at, bytes(frame))
 
     def put(self, kept: KeptResult) -> None:
         """Keep ``kept``; written at the next :meth:`flush`.

@@ -143,7 +143,8 @@ def test_a_local_only_action_that_is_not_hosted_is_a_value_error() -> None:
 
 
 def kept(cid: str, size: int, at: float) -> KeptResult:
-    return KeptResult(cid, "echo", result(cid), size, at)
+    """A kept result whose frame is ``size`` bytes (the cache charges what it holds: the frame)."""
+    return KeptResult(cid, "echo", result(cid), size, at, bytes(size))
 
 
 def test_kept_results_older_than_the_age_cap_expire_oldest_first() -> None:
@@ -193,6 +194,23 @@ def test_putting_an_id_again_replaces_its_result_and_its_charge() -> None:
     cache.put(kept("c1", 10, 0.0))
     cache.put(kept("c1", 30, 1.0))
     assert len(cache) == 1 and cache.nbytes == 30
+
+
+def test_the_memory_cache_holds_the_frame_only_and_charges_what_it_holds() -> None:
+    """Issue 22: results were charged their payload bytes while kept as Python objects, many times
+    larger for a value of many small items (the node's RSS grew 30 -> 147 MiB under a 64 MiB cap)."""
+    import sys
+
+    cache = MemoryResultCache()
+    value = list(range(100_000, 300_000))  # 200,000 ints: ~1 MB as a frame, ~7 MB as Python objects
+    res = result("c1", value)
+    frame = encode_frame(res)
+    cache.put(KeptResult("c1", "echo", res, len(frame), 0.0))  # no frame given: encoded by the cache
+    stored = cache._kept["c1"]
+    assert cache.nbytes == len(frame) + ENTRY_OVERHEAD and stored.frame == frame
+    assert sys.getsizeof(stored.frame) < len(frame) + 64 and not hasattr(stored, "result")
+    got = cache.get("c1")
+    assert got is not None and got.result == res and got.frame == frame
 
 
 def test_the_cache_bounds_must_be_positive() -> None:
