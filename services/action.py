@@ -176,6 +176,11 @@ class PrimitiveAction:
     """True if a call may finish when its caller is gone (a motion that must not stop halfway);
     otherwise the node cancels a call nobody has waited for during the heartbeat window, with reason
     ``"caller_gone"`` (docs/protocol.md §5). ``unattended = true`` in services.toml sets it too."""
+    motion: bool = False
+    """True if the action moves the robot: a call that loses its caller is cancelled at once, not
+    after the heartbeat window, and the action brings the robot to rest when cancelled (it handles
+    :class:`asyncio.CancelledError`); a caller silent for three heartbeat periods counts as lost
+    (docs/protocol.md §5). Unless ``unattended``. ``motion = true`` in services.toml sets it too."""
 
     async def setup(self, node: NodeContext) -> None:
         """Prepare once at node start (drivers are already set up)."""
@@ -208,6 +213,7 @@ class FunctionAction(PrimitiveAction):
         self.fn = fn
         self.name = getattr(fn, "__name__", "")
         self.unattended = bool(getattr(fn, "unattended", False))
+        self.motion = bool(getattr(fn, "motion", False))
 
     async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
         out = await self.fn(params, ctx)

@@ -31,6 +31,7 @@ Format (every section optional except ``[nodes.*]``)::
     deadline_s = 5.0              # optional default deadline, seconds
     params = { k = 1 }            # optional default params, merged under the call's params
     unattended = false            # optional: may finish when its caller is gone (else cancelled)
+    motion = false                # optional: moves the robot: cancelled at once when its caller is gone
 
     [drivers.camera]              # optional background components started with the node
     node = "alpha"
@@ -181,6 +182,9 @@ class ActionPlacement:
         params: default parameters, merged under each call's params.
         unattended: the call may finish when its caller is gone; otherwise the node cancels a
             call nobody waits for (docs/protocol.md §5, "Orphaned calls").
+        motion: the action moves the robot: a call that loses its caller is cancelled at once
+            (the action brings the robot to rest), not after the grace period, unless
+            ``unattended``.
         ros2: the ROS 2 action, service or topic this action is (its ``ros2`` table), or ``None``.
     """
 
@@ -191,6 +195,7 @@ class ActionPlacement:
     deadline_s: float | None = None
     params: Mapping[str, Any] = field(default_factory=lambda: MappingProxyType({}))
     unattended: bool = False
+    motion: bool = False
     ros2: Ros2ActionSpec | None = None
 
 
@@ -378,7 +383,7 @@ TOP_KEYS = frozenset({"nodes", "actions", "drivers", "events", "memory", "tls", 
 """The tables a location file may have."""
 NODE_KEYS = frozenset({"host", "port", "max_in_flight", "state_dir", "tls", "ros2"})
 """The keys of a ``[nodes.NAME]`` table."""
-ACTION_KEYS = frozenset({"node", "impl", "local_only", "deadline_s", "params", "unattended", "ros2"})
+ACTION_KEYS = frozenset({"node", "impl", "local_only", "deadline_s", "params", "unattended", "motion", "ros2"})
 """The keys of an ``[actions.NAME]`` table."""
 DRIVER_KEYS = frozenset({"node", "impl", "params"})
 """The keys of a ``[drivers.NAME]`` table."""
@@ -489,6 +494,7 @@ class _LocationLoader:
         self.check_name(name, _ACTION_RE, where, "actions", name)
         local_only = self.flag(entry, "local_only", where, "actions", name)
         unattended = self.flag(entry, "unattended", where, "actions", name)
+        motion = self.flag(entry, "motion", where, "actions", name)
         deadline = entry.get("deadline_s")
         if deadline is not None and (isinstance(deadline, bool) or not isinstance(deadline, (int, float))
                                      or not 0 < deadline < math.inf):
@@ -504,6 +510,7 @@ class _LocationLoader:
             deadline_s=float(deadline) if deadline is not None else None,
             params=self.params_of(entry, where, "actions", name),
             unattended=unattended,
+            motion=motion,
         )
 
     def driver(self, name: str, entry: Any) -> DriverSpec:

@@ -65,15 +65,27 @@ def _driver(ctx: CallContext) -> PumaDriver:
 class MoveHome(PrimitiveAction):
     """Return the cup to the home pose (middle of the catch line).
 
+    A motion: cancelled (by its caller, or at once when the caller is gone), it brakes the arm to
+    rest (:meth:`PumaDriver.stop_motion`) before it ends.
     Before moving, faulted drives are reset and enabled again (:meth:`PumaDriver.ensure_ready`).
     Params: ``timeout_s`` (5.0, bus time, with three times as much wall time as a backstop),
     ``tolerance_rad`` (0.01, on the actual joint positions).
     Value: ``{"q": [6 joint angles, rad], "recovered": what was recovered or None}``.
     """
 
+    motion = True
+
     async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
-        t0 = time.monotonic()
         drv = _driver(ctx)
+        try:
+            return await self._home(params, drv)
+        except asyncio.CancelledError:
+            drv.stop_motion()
+            raise
+
+    @staticmethod
+    async def _home(params: dict[str, Any], drv: PumaDriver) -> ActionResult:
+        t0 = time.monotonic()
         timeout = float(params.get("timeout_s", 5.0))
         tol = float(params.get("tolerance_rad", 0.01))
         try:
@@ -110,6 +122,9 @@ class Catch(PrimitiveAction):
     seconds of bus time (the simulated time the set points and the ball live in, which a loaded
     machine slows down), with three times as much wall time as a backstop.
 
+    A motion: cancelled (by its caller, its deadline, or at once when the caller is gone: a
+    coordinator killed mid-catch), it brakes the arm to rest before it ends, as the watchdog does.
+
     The set points may stop once the bus time is within ``stream_end_s`` of the predicted
     crossing: the predictor stops when the ball reaches the line, and the cup stays at the last
     set point. Set points that stop earlier (none for ``setpoint_max_age_s``) trigger the
@@ -125,9 +140,18 @@ when it started, bus time).
     Cost: wall seconds.
     """
 
+    motion = True
+
     async def run(self, params: dict[str, Any], ctx: CallContext) -> ActionResult:
-        t0 = time.monotonic()
         drv = _driver(ctx)
+        try:
+            return await self._catch(params, drv)
+        except asyncio.CancelledError:
+            drv.stop_motion()
+            raise
+
+    async def _catch(self, params: dict[str, Any], drv: PumaDriver) -> ActionResult:
+        t0 = time.monotonic()
         timeout = float(params.get("timeout_s", 5.0))
         grace = float(params.get("miss_grace_s", 0.3))
         first_wait = float(params.get("first_setpoint_s", timeout))

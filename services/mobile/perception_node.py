@@ -247,11 +247,17 @@ def _perception(ctx: CallContext) -> PerceptionDriver:
 
 
 class _Streaming(PrimitiveAction):
-    """A loop over camera frames around one task controller, streaming its set points."""
+    """A loop over camera frames around one task controller, streaming its set points.
+
+    A motion (:attr:`PrimitiveAction.motion`): cancelled — by the caller, its deadline, or at once
+    when its caller is gone (a coordinator killed mid-course) — it sends a zero-speed set point
+    before it ends, so the drive node brakes on its ramp at once instead of waiting for its
+    watchdog."""
 
     task = ""
     uses_image = True
     uses_beacons = False
+    motion = True
 
     def make(self, memory: CourseMemory) -> Any:
         """The task controller of one call (each subclass builds its own from :mod:`services.mobile.tasks`)."""
@@ -298,50 +304,56 @@ class _Streaming(PrimitiveAction):
                 out["cross_track_proxy_m"] = math.sqrt(sum(x * x for x in lateral) / len(lateral))
             return out
 
-        while True:
-            frame = await drv.next_frame(seq, frame_timeout)
-            if frame is None:
-                return ActionResult.error(f"camera lost: no frame for {frame_timeout} s ({drv.lost or 'no reason'})",
-                                          value=result_value("camera lost"), cost=cpu)
-            seq = frame.seq
-            t0 = frame.t if t0 is None else t0
-            t_last = frame.t
-            odo = drv.odometry
-            if odo is None or time.monotonic() - drv.odometry_wall > odo_timeout:
-                memory.stop(frame.t)
-                return ActionResult.error(f"drive node silent: no odometry for {odo_timeout} s",
-                                          value=result_value("drive lost"), cost=cpu)
-            if first_seq is not None and odo.seq >= first_seq:
-                if stops_base is None:
-                    stops_base = odo.stops
-                elif odo.stops > stops_base:
-                    return ActionResult.error("drive watchdog stopped the wheels: set points stopped reaching "
-                                              "the drive node", value=result_value("watchdog"), cost=cpu)
-            if odo.state.startswith("fault"):
-                return ActionResult.error(f"drive {odo.state}", value=result_value("drive fault"), cost=cpu)
-            if frame.t - t0 > timeout:
-                ctx.publish(topic, setpoint_to_dict(memory.stop(frame.t), time.time()))
-                return ActionResult.error(f"timeout: {timeout} s of camera time", value=result_value("timeout"),
-                                          cost=cpu)
-            pose = Pose2D(odo.pose.x, odo.pose.y, odo.pose.theta, odo.pose.s, frame.t)
-            beacons = drv.take_scans()
-            c0 = time.thread_time()
-            step = self.step(task, frame, pose, beacons)
-            cpu += time.thread_time() - c0
-            line = memory.last_line
-            if self.uses_image and line is not None and line[0] is not None and line[0].t == frame.t:
-                lateral.append(line[1].lateral_at(memory.camera.x_centre))
-            ctx.publish(topic, setpoint_to_dict(step.setpoint, time.time(), frame.t_wall or None))
-            if first_seq is None:
-                first_seq = step.setpoint.seq
-            sent += 1
-            if step.outcome is not None:
-                named = None if step.outcome == "ok" else step.outcome
-                value = result_value(step.note)
-                ok, why = self.judge(task, step, params)
-                if ok:
-                    return ActionResult.success(value, outcome=named, cost=cpu)
-                return ActionResult.failure(value, outcome=named, cost=cpu, reason=why or step.note)
+        try:
+            while True:
+                frame = await drv.next_frame(seq, frame_timeout)
+                if frame is None:
+                    return ActionResult.error(f"camera lost: no frame for {frame_timeout} s ({drv.lost or 'no reason'})",
+                                              value=result_value("camera lost"), cost=cpu)
+                seq = frame.seq
+                t0 = frame.t if t0 is None else t0
+                t_last = frame.t
+                odo = drv.odometry
+                if odo is None or time.monotonic() - drv.odometry_wall > odo_timeout:
+                    memory.stop(frame.t)
+                    return ActionResult.error(f"drive node silent: no odometry for {odo_timeout} s",
+                                              value=result_value("drive lost"), cost=cpu)
+                if first_seq is not None and odo.seq >= first_seq:
+                    if stops_base is None:
+                        stops_base = odo.stops
+                    elif odo.stops > stops_base:
+                        return ActionResult.error("drive watchdog stopped the wheels: set points stopped reaching "
+                                                  "the drive node", value=result_value("watchdog"), cost=cpu)
+                if odo.state.startswith("fault"):
+                    return ActionResult.error(f"drive {odo.state}", value=result_value("drive fault"), cost=cpu)
+                if frame.t - t0 > timeout:
+                    ctx.publish(topic, setpoint_to_dict(memory.stop(frame.t), time.time()))
+                    return ActionResult.error(f"timeout: {timeout} s of camera time", value=result_value("timeout"),
+                                              cost=cpu)
+                pose = Pose2D(odo.pose.x, odo.pose.y, odo.pose.theta, odo.pose.s, frame.t)
+                beacons = drv.take_scans()
+                c0 = time.thread_time()
+                step = self.step(task, frame, pose, beacons)
+                cpu += time.thread_time() - c0
+                line = memory.last_line
+                if self.uses_image and line is not None and line[0] is not None and line[0].t == frame.t:
+                    lateral.append(line[1].lateral_at(memory.camera.x_centre))
+                ctx.publish(topic, setpoint_to_dict(step.setpoint, time.time(), frame.t_wall or None))
+                if first_seq is None:
+                    first_seq = step.setpoint.seq
+                sent += 1
+                if step.outcome is not None:
+                    named = None if step.outcome == "ok" else step.outcome
+                    value = result_value(step.note)
+                    ok, why = self.judge(task, step, params)
+                    if ok:
+                        return ActionResult.success(value, outcome=named, cost=cpu)
+                    return ActionResult.failure(value, outcome=named, cost=cpu, reason=why or step.note)
+        except asyncio.CancelledError:  # brake now rather than on the drive's watchdog
+            t_now = drv.frame.t if drv.frame is not None else t_last  # the newest frame: not stale at the drive
+            if t_now is not None:
+                ctx.publish(topic, setpoint_to_dict(memory.stop(t_now), time.time()))
+            raise
 
 
 class _Follow(_Streaming):

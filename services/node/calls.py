@@ -23,8 +23,10 @@ A ``query`` (:meth:`CallTable.query`) is answered the same way for a kept or run
 its id (once each). When the last one goes (:meth:`CallTable.detach`) the call is *orphaned*; a
 repeated ``call`` or a ``query`` of its id adopts it again. :meth:`CallTable.orphans` names the
 calls orphaned for longer than a grace period so that the shell cancels them with reason
-``"caller_gone"``, except calls of ``unattended`` actions, which run to the end. Their results are
-kept either way.
+``"caller_gone"``, except calls of ``unattended`` actions, which run to the end. Calls of ``motion``
+actions (those that move the robot) have no grace period: they are due as soon as they are
+orphaned, so that a robot whose coordinator died comes to rest within its own watchdog's bound.
+Their results are kept either way.
 
 Kept results live behind the small :class:`ResultCache` interface (``get``, ``put``, ``expire``,
 ``begin``, ``flush``) so that a store which survives node restarts
@@ -258,16 +260,18 @@ class RunningCall(Generic[W]):
         waiters: who gets its result, each once, in the order they came: the first caller, then
             every caller that joined it (a dict used as an ordered set).
         unattended: its action may finish with nobody waiting.
+        motion: its action moves the robot (no grace period once orphaned).
         cancel_reason: why it is being cancelled (``"cancelled"``, ``"caller_gone"``), else ``None``.
         orphaned_since: when its last waiter went (s, the shell's monotonic clock), else ``None``.
     """
 
-    __slots__ = ("call", "cancel_reason", "orphaned_since", "unattended", "waiters")
+    __slots__ = ("call", "cancel_reason", "motion", "orphaned_since", "unattended", "waiters")
 
-    def __init__(self, call: Call, first: W, *, unattended: bool = False) -> None:
+    def __init__(self, call: Call, first: W, *, unattended: bool = False, motion: bool = False) -> None:
         self.call = call
         self.waiters: dict[W, None] = {first: None}
         self.unattended = unattended
+        self.motion = motion
         self.cancel_reason: str | None = None
         self.orphaned_since: float | None = None
 
@@ -326,6 +330,7 @@ class CallTable(Generic[W]):
         actions: names of the actions hosted here.
         local_only: those of them served only to local peers.
         unattended: those of them that may finish when nobody waits for them.
+        motion: those of them that move the robot (cancelled at once when orphaned).
         max_in_flight: cap on calls running at once (>= 1).
         cache: where results are kept; a :class:`MemoryResultCache` with its defaults if ``None``.
 
@@ -334,6 +339,7 @@ class CallTable(Generic[W]):
         max_in_flight: the cap on running calls.
         unattended: the actions whose calls may finish with nobody waiting (a node adds those whose
             implementation says so).
+        motion: the actions that move the robot (likewise).
         stopping: set by :meth:`stop`; new calls are then rejected with ``shutdown``.
 
     Raises:
@@ -341,7 +347,7 @@ class CallTable(Generic[W]):
             ``actions``.
     """
 
-    __slots__ = ("_actions", "_local_only", "_running", "cache", "max_in_flight", "stopping", "unattended")
+    __slots__ = ("_actions", "_local_only", "_running", "cache", "max_in_flight", "motion", "stopping", "unattended")
 
     def __init__(
         self,
@@ -349,12 +355,14 @@ class CallTable(Generic[W]):
         *,
         local_only: Collection[str] = (),
         unattended: Collection[str] = (),
+        motion: Collection[str] = (),
         max_in_flight: int = 16,
         cache: ResultCache | None = None,
     ) -> None:
         self._actions = frozenset(actions)
         self._local_only = frozenset(local_only)
         self.unattended = frozenset(unattended)
+        self.motion = frozenset(motion)
         if max_in_flight < 1:
             raise ValueError("max_in_flight must be >= 1")
         if not self._local_only <= self._actions:
@@ -402,7 +410,7 @@ class CallTable(Generic[W]):
             return _REJECT[RejectReason.BUSY]
         if self.stopping:
             return _REJECT[RejectReason.SHUTDOWN]
-        running = RunningCall(call, waiter, unattended=action in self.unattended)
+        running = RunningCall(call, waiter, unattended=action in self.unattended, motion=action in self.motion)
         self._running[cid] = running
         self.cache.begin(cid, action, now)
         return Start(running)
@@ -456,17 +464,25 @@ class CallTable(Generic[W]):
         return orphaned
 
     def orphans(self, now: float, grace_s: float) -> list[RunningCall[W]]:
-        """The calls to cancel now: orphaned for at least ``grace_s`` seconds, not yet cancelled,
-        and not of an ``unattended`` action. Each is marked cancelled with reason ``"caller_gone"``.
+        """The calls to cancel now: orphaned for at least ``grace_s`` seconds (a ``motion`` call:
+        orphaned at all), not yet cancelled, and not of an ``unattended`` action. Each is marked
+        cancelled with reason ``"caller_gone"``.
         """
         due = []
         cutoff = now - grace_s
         for running in self._running.values():
             since = running.orphaned_since
-            if since is not None and since <= cutoff and not running.unattended and running.cancel_reason is None:
+            if since is not None and (running.motion or since <= cutoff) and not running.unattended \
+                    and running.cancel_reason is None:
                 running.cancel_reason = CALLER_GONE
                 due.append(running)
         return due
+
+    def motion_waiters(self) -> set[W]:
+        """Whoever waits for a running call of a ``motion`` action that may not finish unattended
+        (the shell watches their heartbeats more closely)."""
+        return {w for running in self._running.values() if running.motion and not running.unattended
+                for w in running.waiters}
 
     def finish(self, result: Result, *, size: int, now: float, frame: bytes | None = None) -> RunningCall[W]:
         """End the running call ``result.id``: keep ``result`` and return the call (its waiters).

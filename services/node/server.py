@@ -20,7 +20,9 @@ What the shell adds:
 * each admitted call runs as its own task; the deadline (``deadline_ms``) cuts it off with status
   ``error`` and reason ``"deadline"``; a ``cancel`` cuts it off with reason ``"cancelled"``; a call
   nobody has waited for during ``peer_timeout_s`` with ``"caller_gone"`` (unless its action is
-  unattended); stopping the node with ``"node shutdown"``;
+  unattended) — a call of a ``motion`` action as soon as nobody waits for it, its caller's
+  connection closed or silent for ``motion_silence_s`` (three heartbeat periods); stopping the node
+  with ``"node shutdown"``;
 * with a durable store, a call's start is committed before its action runs (at the end of the read
   that brought the call: its task starts on the next loop iteration) and its result before it is
   sent (at once when no other call runs, else once per loop iteration for all the calls that
@@ -117,7 +119,7 @@ from services.protocol import (
 from services.results import ActionResult, Status
 from services.wire import server_context
 
-__all__ = ["DEFAULT_MAX_OUTPUT", "Node"]
+__all__ = ["DEFAULT_MAX_OUTPUT", "MOTION_SILENCE_S", "Node"]
 
 log = logging.getLogger("petrobot.node")
 
@@ -125,6 +127,10 @@ ActionRun = Callable[[dict[str, Any], CallContext], Awaitable[Any]]
 
 DEFAULT_MAX_OUTPUT = 1024 * 1024
 """Bytes that may wait to go out to one peer before the node stops reading from it."""
+MOTION_SILENCE_S = 0.75
+"""Silence after which a peer waiting for a motion call counts as lost, seconds."""
+_MOTION_CHECK_S = 0.05
+"""How often the reaper looks at the peers of motion calls while any runs, seconds."""
 
 
 class Node(PeerHost):
@@ -153,6 +159,9 @@ class Node(PeerHost):
         location_digest: hex SHA-256 of the services.toml bytes ``location`` was parsed from
             (default: the digest of the file at ``location.path`` now, if it exists).
         locality: decides which peers are on this host (default: :class:`Locality`).
+        motion_silence_s: a peer waiting for a call of a ``motion`` action is dropped when silent
+            this long, seconds (three of a client's 0.25 s heartbeats; the protocol has it send a
+            frame every 0.5 s at least); its motion calls are then cancelled at once.
 
     Raises:
         LocationError: ``name`` is not a node of ``location``.
@@ -178,8 +187,10 @@ class Node(PeerHost):
         max_output: int = DEFAULT_MAX_OUTPUT,
         location_digest: str | None = None,
         locality: Locality | None = None,
+        motion_silence_s: float = MOTION_SILENCE_S,
     ) -> None:
         self.name = name
+        self.motion_silence_s = motion_silence_s
         self.location = location
         location.address(name)  # raises LocationError naming the file if the node is unknown
         self.spec = location.nodes[name]
@@ -203,6 +214,7 @@ class Node(PeerHost):
         self._calls: CallTable[Peer] = CallTable(
             self._placements, local_only=[a for a, p in self._placements.items() if p.local_only],
             unattended=[a for a, p in self._placements.items() if p.unattended],
+            motion=[a for a, p in self._placements.items() if p.motion],
             max_in_flight=self.max_in_flight, cache=results,
         )
         self._tasks: dict[str, asyncio.Task[None]] = {}
@@ -272,6 +284,7 @@ class Node(PeerHost):
             else:
                 self._actions[aname] = make_action(self._placements[aname].impl, aname)
         self._calls.unattended |= {a for a, action in self._actions.items() if action.unattended}
+        self._calls.motion |= {a for a, action in self._actions.items() if action.motion}
         for action in self._actions.values():
             await action.setup(self.context)
         soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
@@ -403,10 +416,13 @@ class Node(PeerHost):
         self._fanout.remove(peer)
         if not peer.authenticated:
             return
-        for rec in self._calls.detach(peer, self._loop.time()):
+        now = self._loop.time()
+        for rec in self._calls.detach(peer, now):
             log.info("call %s %s lost its last caller: %s", shown(rec.call.id, 64), shown(rec.call.action, 64),
                      "it may finish unattended" if rec.unattended
+                     else "a motion: cancelled now, the robot brought to rest" if rec.motion
                      else f"cancelled in {self.peer_timeout_s:g} s unless it is asked for again")
+        self._cancel_orphans(now)
 
     def subscribe(self, peer: Peer, topic: str) -> None:
         """Send ``peer`` the events of ``topic``, unless over its subscription caps (logged)."""
@@ -587,13 +603,29 @@ class Node(PeerHost):
 
     async def _reap(self) -> None:
         """Every ``peer_timeout_s / 4`` (at most 0.5 s): drop silent peers and overdue handshakes,
-        cancel orphaned calls past their grace period, expire kept results."""
+        cancel orphaned calls past their grace period, expire kept results. While a motion call
+        runs, every 50 ms: drop its callers once silent for ``motion_silence_s`` (their motion calls
+        are then cancelled at once)."""
         period = min(0.5, self.peer_timeout_s / 4)
         checkpoint: Callable[[], None] | None = getattr(self._calls.cache, "checkpoint", None)
+        loop = self._loop
+        slow_due = loop.time() + period
         while True:
-            before = self._loop.time()
-            await asyncio.sleep(period)
-            now = self._loop.time()
+            before = loop.time()
+            watched = self._calls.motion_waiters()
+            await asyncio.sleep(min(_MOTION_CHECK_S, period) if watched else max(0.0, slow_due - before))
+            now = loop.time()
+            blocked = now - before > 2 * (min(_MOTION_CHECK_S, period) if watched else period)
+            if watched and not blocked:  # our own loop was blocked: peers' frames may be waiting unread
+                cutoff = now - self.motion_silence_s
+                for peer in watched:
+                    if peer.last_rx < cutoff and not peer.closed:
+                        log.info("dropping %r: silent for %.2f s while a motion call waits for it", peer,
+                                 now - peer.last_rx)
+                        peer.close("heartbeat_timeout")
+            if now < slow_due:
+                continue
+            slow_due = now + period
             self._limited.flush()
             try:
                 self._calls.expire(time.time())
@@ -603,8 +635,8 @@ class Node(PeerHost):
             if checkpoint is not None and (previous is None or previous.done()):
                 if previous is not None and not previous.cancelled() and previous.exception():
                     self._limited.log(logging.ERROR, "store", "checkpoint failed: %s", previous.exception())
-                self._checkpointing = self._loop.create_task(asyncio.to_thread(checkpoint))
-            if now - before > 2 * period:
+                self._checkpointing = loop.create_task(asyncio.to_thread(checkpoint))
+            if blocked:
                 continue  # our loop was blocked: peers' frames may be waiting unread
             for peer in list(self._guard.overdue(now)):
                 self._limited.log(logging.INFO, ("handshake timeout", peer.peer_host),
@@ -616,12 +648,17 @@ class Node(PeerHost):
                 if peer.authenticated and peer.last_rx < cutoff and not peer.closed:
                     log.info("dropping %r: silent for %.1f s", peer, self.peer_timeout_s)
                     peer.close("heartbeat_timeout")
-            for rec in self._calls.orphans(now, self.peer_timeout_s):
-                task = self._tasks.get(rec.call.id)
-                if task is not None and not task.done():
-                    log.info("call %s %s: nobody asked for it for %g s: cancelling it (%s)", shown(rec.call.id, 64),
-                             shown(rec.call.action, 64), self.peer_timeout_s, rec.cancel_reason)
-                    task.cancel(rec.cancel_reason)
+            self._cancel_orphans(now)
+
+    def _cancel_orphans(self, now: float) -> None:
+        """Cancel the orphaned calls that are due (:meth:`CallTable.orphans`)."""
+        for rec in self._calls.orphans(now, self.peer_timeout_s):
+            task = self._tasks.get(rec.call.id)
+            if task is not None and not task.done():
+                log.info("call %s %s: nobody waits for it%s: cancelling it (%s)", shown(rec.call.id, 64),
+                         shown(rec.call.action, 64), "" if rec.motion else f" since {self.peer_timeout_s:g} s",
+                         rec.cancel_reason)
+                task.cancel(rec.cancel_reason)
 
 
 def _open_fds() -> int:
