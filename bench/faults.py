@@ -4,6 +4,7 @@ Usage::
 
     python bench/faults.py [--rounds 10] [--scenarios node-sigkill,...] [--seed S] [--json] [--keep DIR]
     python bench/faults.py check --journal J --node NAME=STATE_DIR[:LOG] ... [--run RUN] [--json]
+    python bench/faults.py mobile-stop [--rounds 5] [--json] [--keep DIR]
 
 **The campaign** runs each scenario ``--rounds`` times with real processes on 127.0.0.1: two nodes
 (``python -m services.node``: ``alpha`` hosts ``echo`` and the global memory, ``beta`` hosts
@@ -27,6 +28,16 @@ assumed), disagreements (must be 0), calls run twice (must be 0), resumed runs c
 coordinator's exit codes. The exit status is 0 when there is no disagreement, no call ran twice
 and every round ended its run, else 1.
 
+**mobile-stop** (``python bench/faults.py mobile-stop [--rounds 5]``) kills the coordinator of the
+mobile robot mid-course (issue 22, section 2): the simulated world (``petrobot sim mobile``, ground
+truth every 20 ms), the perception and drive nodes and ``petrobot run`` on a short course, each
+its own process; 1.3 s into the first ``follow_track`` (the robot at cruise speed) the coordinator
+gets SIGKILL, and the world's ground truth says how long after the kill (simulated time) and how far
+the robot went before it came to rest (< 0.01 m/s). Target: at rest within 0.7 s. The follow action
+is a motion: the node cancels it as soon as its caller's connection drops and it sends a zero-speed
+set point, on which the drive brakes at once (before: cancelled 2.5 s later, then the watchdog:
+3.9-4.3 s and 2.0-2.4 m).
+
 **check** compares any journal with nodes' state directories (and their logs, for calls started
 twice): every call id the journal started is either absent from every node (it never ran there,
 or the node no longer keeps it) or its final status on the node equals the journal's last word on
@@ -38,7 +49,9 @@ from __future__ import annotations
 
 import argparse
 import collections
+import itertools
 import json
+import math
 import os
 import random
 import re
@@ -62,8 +75,8 @@ from coordinator.journal import JournalReader
 from services.protocol import Result, from_map, unpack_map
 from services.protocol.framing import HEADER_BYTES
 
-__all__ = ["SCENARIOS", "Agreement", "NodeRecord", "Rig", "campaign", "check", "node_starts", "node_store",
-           "run_round"]
+__all__ = ["SCENARIOS", "Agreement", "MobileRig", "NodeRecord", "Rig", "StopMeasure", "campaign", "check",
+           "mobile_coordinator_kill", "node_starts", "node_store", "run_round"]
 
 SCENARIOS = ("node-sigkill", "node-sigstop", "node-restart", "coordinator-sigkill", "coordinator-sigint")
 TIMEOUT_S = 120.0  # generous bound of every wait: a failing round fails, a loaded machine passes
@@ -565,9 +578,233 @@ def _parse_nodes(specs: list[str]) -> dict[str, tuple[str, str | None]]:
     return nodes
 
 
+# ------------------------------------------------------------------------------------ mobile-stop
+
+MOBILE_SERVICES = """
+[nodes.perception]
+host = "127.0.0.1"
+port = {perception}
+
+[nodes.drive]
+host = "127.0.0.1"
+port = {drive}
+
+[drivers.mobile_camera]
+node = "perception"
+impl = "services.mobile.perception_node:PerceptionDriver"
+params = {{ port = {camera} }}
+
+[actions.follow_centroid]
+node = "perception"
+impl = "services.mobile.perception_node:FollowCentroid"
+
+[actions.follow_ransac]
+node = "perception"
+impl = "services.mobile.perception_node:FollowRansac"
+
+[actions.follow_scanline]
+node = "perception"
+impl = "services.mobile.perception_node:FollowScanline"
+
+[actions.find_beacon]
+node = "perception"
+impl = "services.mobile.perception_node:FindBeaconAction"
+
+[actions.goto_beacon]
+node = "perception"
+impl = "services.mobile.perception_node:GotoBeaconAction"
+
+[actions.reacquire_track]
+node = "perception"
+impl = "services.mobile.perception_node:ReacquireTrackAction"
+
+[actions.stop_at_t]
+node = "perception"
+impl = "services.mobile.perception_node:StopAtTAction"
+
+[drivers.wheels]
+node = "drive"
+impl = "services.mobile.drive_node:DriveDriver"
+params = {{ can_port = {can} }}
+
+[actions.stop_robot]
+node = "drive"
+impl = "services.mobile.drive_node:StopRobot"
+"""
+MOBILE_NET = ROOT / "tests" / "data" / "mobile_min.toml"
+MOBILE_COURSE = ROOT / "tests" / "data" / "course_short.toml"
+POSE_PERIOD_S = 0.02
+REST_SPEED = 0.01  # m/s
+
+
+@dataclass
+class StopMeasure:
+    """How the mobile robot came to rest after its coordinator was killed (ground truth).
+
+    Attributes:
+        speed_mps: its speed when the coordinator was killed, m/s.
+        stop_s: simulated time from the kill to the first ground-truth sample at rest, s.
+        distance_m: the path it drove meanwhile, m.
+        follow: status and reason of the follow call, as its node kept it (``error``, ``caller_gone``).
+        drive_log: the drive node's lines about the stop (watchdog, set points).
+    """
+
+    speed_mps: float = 0.0
+    stop_s: float | None = None
+    distance_m: float | None = None
+    follow: tuple[str, str | None] | None = None
+    drive_log: list[str] = field(default_factory=list)
+
+
+class MobileRig:
+    """The mobile robot's world, its two nodes and ``petrobot run`` as processes of their own.
+
+    Args:
+        workdir: where services.toml, the key, the journal, the nodes' states and logs go.
+    """
+
+    def __init__(self, workdir: Path) -> None:
+        from coordinator.commands.demo_start import SimWorld
+
+        self.dir = workdir
+        workdir.mkdir(parents=True, exist_ok=True)
+        self.key_file = workdir / "key"
+        self.key_file.write_text(secrets.token_hex(32) + "\n")
+        self.key_file.chmod(0o600)
+        self.ports = {n: _free_port() for n in ("perception", "drive", "camera", "can")}
+        self.services = workdir / "services.toml"
+        self.services.write_text(MOBILE_SERVICES.format(**self.ports))
+        self.journal = workdir / "journal.sqlite"
+        self.world = SimWorld(["--realtime", "--renderer", "analytic", "--course", str(MOBILE_COURSE),
+                               "--pose-every", str(POSE_PERIOD_S), "--camera-port", str(self.ports["camera"]),
+                               "--can-port", str(self.ports["can"])], log=workdir / "sim.log", world="mobile")
+        self.nodes: dict[str, subprocess.Popen[bytes]] = {}
+        self.coordinator: subprocess.Popen[bytes] | None = None
+
+    def env(self) -> dict[str, str]:
+        env = dict(os.environ)
+        env.pop("PETROBOT_KEY", None)
+        env["PYTHONPATH"] = str(ROOT) + os.pathsep + env.get("PYTHONPATH", "")
+        return env
+
+    def log(self, name: str) -> str:
+        path = self.dir / f"{name}.log"
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def start(self) -> None:
+        """The world, then the nodes (each listening), then ``petrobot run`` on the short course."""
+        self.world.wait_ready(TIMEOUT_S)
+        for name in ("perception", "drive"):
+            with open(self.dir / f"{name}.log", "ab") as log:
+                self.nodes[name] = subprocess.Popen(
+                    [sys.executable, "-m", "services.node", name, "--services", str(self.services), "--key-file",
+                     str(self.key_file), "--state-dir", str(self.dir / "state" / name)],
+                    cwd=ROOT, env=self.env(), stdout=log, stderr=subprocess.STDOUT)
+        for name, proc in self.nodes.items():
+            wait_until(f"node {name} listening", lambda proc=proc, name=name: (
+                proc.poll() is None or _raise(f"node {name} exited:\n{self.log(name)[-2000:]}"))
+                and f"node {name} listening on " in self.log(name))
+        out = open(self.dir / "run.out", "wb")  # noqa: SIM115 - closed by the child's end
+        self.coordinator = subprocess.Popen(
+            [sys.executable, "-m", "coordinator.cli", "run", str(MOBILE_NET), "--services", str(self.services),
+             "--key-file", str(self.key_file), "--journal", str(self.journal), "--lines", "--no-input",
+             "--max-seconds", "200"],
+            cwd=ROOT, env=self.env(), stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
+        out.close()
+
+    def output(self) -> str:
+        path = self.dir / "run.out"
+        return path.read_text(errors="replace") if path.exists() else ""
+
+    def poses(self) -> list[dict[str, Any]]:
+        return [e for e in list(self.world.events) if e.get("event") == "pose"]
+
+    def close(self) -> None:
+        if self.coordinator is not None and self.coordinator.poll() is None:
+            self.coordinator.kill()
+            self.coordinator.wait(timeout=10)
+        for proc in self.nodes.values():
+            if proc.poll() is None:
+                proc.terminate()
+                try:
+                    proc.wait(timeout=20)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait(timeout=10)
+        self.world.stop()
+
+
+def _raise(message: str) -> bool:
+    raise RuntimeError(message)
+
+
+def measure_stop(poses: list[dict[str, Any]], t_kill_wall: float) -> StopMeasure:
+    """The robot's stop after a kill at wall time ``t_kill_wall``, from ground-truth pose lines."""
+    before = [p for p in poses if p["wall"] <= t_kill_wall]
+    out = StopMeasure()
+    if not before:
+        return out
+    kill = before[-1]
+    out.speed_mps = float(kill["v"])
+    after = [p for p in poses if p["t"] > kill["t"]]
+    rest = next((i for i, p in enumerate(after) if p["v"] < REST_SPEED), None)
+    if rest is None:
+        return out
+    out.stop_s = float(after[rest]["t"]) - float(kill["t"])
+    path = [kill, *after[:rest + 1]]
+    out.distance_m = sum(math.hypot(b["x"] - a["x"], b["y"] - a["y"]) for a, b in itertools.pairwise(path))
+    return out
+
+
+def mobile_coordinator_kill(workdir: Path, *, delay_s: float = 1.3) -> StopMeasure:
+    """One round of mobile-stop (module docstring) in ``workdir``."""
+    rig = MobileRig(workdir)
+    try:
+        rig.start()
+        wait_until("the first follow_track", lambda: "start follow_track -> " in rig.output()
+                   or (rig.coordinator is not None and rig.coordinator.poll() is not None
+                       and _raise(f"the run ended first:\n{rig.output()[-3000:]}")))
+        time.sleep(delay_s)  # at cruise speed on the first straight
+        assert rig.coordinator is not None
+        t_kill = time.time()
+        rig.coordinator.send_signal(signal.SIGKILL)
+        rig.coordinator.wait(timeout=30)
+        wait_until("the robot at rest on the ground truth", lambda: any(
+            p["wall"] > t_kill and p["v"] < REST_SPEED for p in rig.poses()))
+        time.sleep(0.5)
+        out = measure_stop(rig.poses(), t_kill)
+        out.drive_log = [line for line in rig.log("drive").splitlines() if "watchdog" in line or "steering" in line]
+    finally:
+        rig.close()
+    follow = [r for r in node_store("perception", workdir / "state" / "perception").values()
+              if r.action.startswith("follow_")]
+    if follow:
+        out.follow = (follow[-1].status, follow[-1].reason)
+    return out
+
+
+def mobile_stop(rounds: int, keep: Path | None = None, progress: Callable[[StopMeasure], None] | None = None
+                ) -> dict[str, Any]:
+    """``rounds`` rounds of mobile-stop; the stop times and distances with their worst."""
+    base = keep or Path(tempfile.mkdtemp(prefix="petrobot-mobile-stop-"))
+    done = []
+    for i in range(rounds):
+        got = mobile_coordinator_kill(base / f"round-{i}")
+        done.append(got)
+        if progress is not None:
+            progress(got)
+    stops = [d.stop_s for d in done if d.stop_s is not None]
+    dist = [d.distance_m for d in done if d.distance_m is not None]
+    return {"date": time.strftime("%Y-%m-%d %H:%M"), "rounds": rounds, "load": os.getloadavg(),
+            "cpus": os.cpu_count(), "stop_s": stops, "distance_m": dist,
+            "stop_s_max": max(stops) if stops else None, "distance_m_max": max(dist) if dist else None,
+            "at_rest": len(stops), "target_stop_s": 0.7,
+            "runs": [asdict(d) for d in done], "workdir": str(base) if keep else None}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("what", nargs="?", default="campaign", choices=["campaign", "check"])
+    parser.add_argument("what", nargs="?", default="campaign", choices=["campaign", "check", "mobile-stop"])
     parser.add_argument("--rounds", type=int, default=10, help="rounds per scenario (default: %(default)s)")
     parser.add_argument("--scenarios", default=",".join(SCENARIOS), help="comma-separated scenarios (default: all)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the fault moments (default: %(default)s)")
@@ -578,6 +815,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--run", help="check: only this run of the journal")
     parser.add_argument("--json", action="store_true", help="print JSON")
     args = parser.parse_args(argv)
+    if args.what == "mobile-stop":
+        def said(got: StopMeasure) -> None:
+            print(f"coordinator killed at {got.speed_mps:.2f} m/s: at rest after "
+                  f"{'-' if got.stop_s is None else f'{got.stop_s:.2f} s'} and "
+                  f"{'-' if got.distance_m is None else f'{got.distance_m:.2f} m'}; follow call {got.follow}",
+                  file=sys.stderr, flush=True)
+
+        rep = mobile_stop(args.rounds, keep=args.keep, progress=said)
+        if args.json:
+            print(json.dumps(rep, indent=2))
+        else:
+            print(f"{rep['at_rest']}/{rep['rounds']} rounds at rest; stop time max {rep['stop_s_max']} s "
+                  f"(target <= 0.7), distance max {rep['distance_m_max']} m; load {rep['load']}")
+        worst = rep["stop_s_max"]
+        return 0 if rep["at_rest"] == rep["rounds"] and worst is not None and worst <= 0.7 else 1
     if args.what == "check":
         if not args.journal or not args.node:
             parser.error("check needs --journal and at least one --node")

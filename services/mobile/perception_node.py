@@ -224,7 +224,10 @@ class PerceptionDriver(Driver):
                 return None
             self._new_frame.clear()
             try:
-                await asyncio.wait_for(self._new_frame.wait(), left)
+                # asyncio.timeout, not wait_for: on Python 3.11 wait_for loses a cancel that comes as the
+                # frame arrives, and a cancelled motion would drive on (issue 22: 1 round in 3)
+                async with asyncio.timeout(left):
+                    await self._new_frame.wait()
             except TimeoutError:
                 return None
         self._consumed.set()

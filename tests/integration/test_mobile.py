@@ -222,3 +222,27 @@ def test_killing_the_drive_node_mid_course_stops_the_wheels_on_their_rpdo_timeou
     assert all(f["code"] == "0x8250" for f in faults), faults  # RPDO timeout
     poses = [e for e in truth(tmp_path) if e["event"] == "pose"]
     assert poses[-1]["v"] < 0.01, poses[-3:]
+
+
+def _faults() -> Any:
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("petrobot_bench_faults", ROOT / "bench" / "faults.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_killing_the_coordinator_mid_course_brings_the_robot_to_rest_within_the_watchdog_bound(tmp_path: Path):
+    """Issue 22: the coordinator killed at cruise speed, the robot drove on 3.9-4.3 s and 2.0-2.4 m (its
+    follow call was cancelled 2.5 s after the connection closed, then the drive's watchdog acted).
+    The follow action is a motion: cancelled at once, it sends a zero-speed set point. Ground truth
+    from the world process; the world, both nodes and petrobot run are processes of their own
+    (bench/faults.py mobile-stop)."""
+    got = _faults().mobile_coordinator_kill(tmp_path)
+    assert got.speed_mps > 0.5, got  # it was driving when the coordinator died
+    assert got.follow == ("error", "caller_gone"), got
+    assert got.stop_s is not None and got.stop_s <= 0.7, got  # the watchdog's bound at 0.8 m/s
+    print(f"robot at rest {got.stop_s:.2f} s and {got.distance_m:.2f} m after the coordinator was killed")
