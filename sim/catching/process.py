@@ -23,7 +23,9 @@ frame are not charged to the master; a silent master is not waited for (the driv
 
 The thrower rolls a ball every ``--interval`` seconds of simulated time. Stdout gets one JSON line
 per event: ``ready`` (ports), ``throw``, ``crossing`` (ground truth of the catch-line crossing, table
-and robot base frames), ``result`` (``caught``: the ball ended in the cup), ``drive_fault`` (a
+and robot base frames), ``result`` (``caught``: the ball ended in the cup), ``arm`` (ground truth of
+the arm every ``--arm-every`` s of simulated time, when asked: bus time, the wall clock it was taken
+at, each joint's speed over the last camera period in rad/s), ``drive_fault`` (a
 drive's fault: bus time, node, EMCY code, reason, the joint's speed, and ``stop_s``, how long its
 quick stop took, once at rest) and ``stopped`` (frames, throws, the worst real-time lag, the
 master waits that ran out).
@@ -83,6 +85,8 @@ def add_arguments(c: argparse.ArgumentParser) -> None:
                         f"else {DEFAULT_CAN_PORT}; 0: any)")
     c.add_argument("--host", default="127.0.0.1",
                    help="address the camera server and the CAN gateway listen on (default 127.0.0.1)")
+    c.add_argument("--arm-every", type=float, default=0.0, metavar="S",
+                   help="ground-truth arm line period (joint speeds), s of simulated time (default 0: none)")
     c.add_argument("--camera-wait-ms", type=float, default=100.0, metavar="MS",
                    help="--realtime: wall time waited after each frame for a connected camera client "
                         "to take it (default 100; 0: never wait)")
@@ -174,11 +178,20 @@ def run(args: argparse.Namespace, out: TextIO | None = None) -> int:
         next_throw = math.inf if args.after_camera_client else args.first_throw
         active: dict[str, Any] | None = None
         home_since: float | None = 0.0
+        q_last, t_last = cw.joint_positions(), world.t
+        next_arm = 0.0
         proc.begin()
         while not proc.stopping and (args.duration <= 0 or world.t < args.duration):
             world.advance(period)
             proc.report_faults(drives)
             t_wall = time.time()
+            if args.arm_every > 0:
+                q = cw.joint_positions()
+                if world.t >= next_arm and world.t > t_last:
+                    next_arm = world.t + args.arm_every
+                    qd = np.abs(q - q_last) / (world.t - t_last)
+                    proc.emit("arm", t=round(world.t, 4), wall=t_wall, qd=[round(float(v), 4) for v in qd])
+                q_last, t_last = q, world.t
             proc.publish(Frame(seq, world.t, render(), t_wall))
             seq += 1
             if math.isinf(next_throw) and thrown == 0 and server.client_count:

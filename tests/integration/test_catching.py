@@ -136,3 +136,26 @@ def test_a_vision_node_killed_mid_run_turns_the_catch_into_an_error_and_takes_th
     assert fired[-1] == "at_home", out  # the error branch returns the robot home; no token is lost
     assert "final marking: {'aborted_runs': 1, 'camera_free': 1, 'home_retries_left': 3, 'robot_ready': 1}" in out, out
     assert (tmp_path / "logs" / "motion.log").exists() and (tmp_path / "logs" / "sim.log").exists()
+
+
+def _faults() -> Any:
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("petrobot_bench_faults", ROOT / "bench" / "faults.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module  # dataclasses look their module up
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_killing_the_coordinator_mid_catch_brings_the_arm_to_rest_within_the_watchdog_bound(tmp_path: Path):
+    """Issue 22, section 2, on the catching testbed: the coordinator killed while catch moves the
+    arm; catch is a motion, cancelled as soon as its caller's connection drops, and brakes every
+    joint at its acceleration limit. Ground truth of the joints from the world process; the world,
+    both nodes and petrobot run are processes of their own (bench/faults.py catching-stop)."""
+    got = _faults().catching_coordinator_kill(tmp_path)
+    assert got.speed > 0.5, got  # the arm was moving when the coordinator died
+    assert got.call == ("error", "caller_gone"), got
+    assert got.stop_s is not None and got.bound_s is not None and got.stop_s <= got.bound_s, got
+    print(f"arm at rest {got.stop_s:.2f} s after the coordinator was killed (bound {got.bound_s:.2f} s)")
