@@ -31,9 +31,18 @@ Debian's chromium (headless, through Playwright) on the console's page.
   the console detached and attached in turns (the throughput ratio) and never detached (``--null``:
   the ratio the alternation alone gives, the noise floor), and both ratios are printed side by side.
 
+* **viewers** (``--viewers``, no browser; issue 22): the same run and console, the console attached
+  in every phase, and pages without the token (WebSocket clients in a process of their own at the
+  lowest CPU priority, as other hosts would be) on in every other phase of ``--phase`` seconds:
+  first four read-only pages asking, each in a loop, for the validation of a 3.3 MB drawing of
+  20,000 places, of a 0.4 MB one of 2,500 places, and for a DOT export of the large one; then 200
+  idle read-only viewers. The firing rate of the phases with them over that of the phases without
+  them (target: >= 0.9), and what the console answered them (checked, refused, closed).
+
 Usage: python bench/console.py [--minutes M] [--phase S] [--rings R] [--length L] [--period S]
        [--skip-open] [--skip-run] [--feed-pairs N | --feed-only] [--load N] [--json]
-(needs /usr/bin/chromium or $PETROBOT_CHROMIUM, and the playwright package).
+       python bench/console.py --viewers [--viewer-minutes M] [--phase S] [--json]
+(needs /usr/bin/chromium or $PETROBOT_CHROMIUM, and the playwright package, except --viewers).
 """
 
 from __future__ import annotations
@@ -328,6 +337,138 @@ class BusyLoad:
             proc.wait(timeout=30)
 
 
+# ---------------------------------------------------------------------- read-only pages (--viewers)
+def viewer_draft(places: int) -> str:
+    """A drawing of ``places`` places and as many transitions in one ring, as JSON text."""
+    return json.dumps({"net": {"name": f"big{places}"},
+                       "places": [{"id": f"p{i}", "tokens": int(i == 0), "pos": [i * 10.0, 0.0]} for i in range(places)],
+                       "transitions": [{"id": f"t{i}", "pos": [i * 10.0 + 5, 40.0]} for i in range(places)],
+                       "arcs": [a for i in range(places) for a in ({"from": f"p{i}", "to": f"t{i}"},
+                                                                    {"from": f"t{i}", "to": f"p{(i + 1) % places}"})]})
+
+
+async def viewer_clients(url: str, kind: str) -> None:
+    """The read-only pages of ``--viewers``, on while stdin says ``on``; counts on stdout at ``end``."""
+    import aiohttp
+
+    base = url.split("/?")[0]
+    ws_url = base.replace("http", "ws") + "/ws"
+    large, medium = viewer_draft(20_000), viewer_draft(2_500)
+    counts: dict[str, int] = {}
+    on = asyncio.Event()
+
+    def count(what: str) -> None:
+        counts[what] = counts.get(what, 0) + 1
+
+    async def validator(http: aiohttp.ClientSession, i: int) -> None:
+        n = 0
+        while True:
+            await on.wait()
+            try:
+                async with http.ws_connect(ws_url, max_msg_size=0) as ws:
+                    await ws.send_str(json.dumps({"type": "hello", "v": 1}))
+                    while on.is_set():
+                        n += 1
+                        draft = large if n % 3 == 0 else medium
+                        await ws.send_str('{"type":"validate","id":%d,"draft":%s}' % (n, draft))
+                        while True:
+                            msg = await ws.receive()
+                            if msg.type != aiohttp.WSMsgType.TEXT:
+                                count(f"closed {ws.close_code}")
+                                raise ConnectionError
+                            data = json.loads(msg.data)
+                            if data.get("type") == "reply" and data.get("id") == n:
+                                count("checked" if data.get("ok") else "refused")
+                                break
+                        if n % 5 == 0:
+                            async with http.post(base + "/api/export?format=dot", data=large) as res:
+                                count(f"export {res.status}")
+            except (ConnectionError, aiohttp.ClientError):
+                await asyncio.sleep(0.05)
+
+    async def viewer(http: aiohttp.ClientSession) -> None:
+        while True:
+            await on.wait()
+            try:
+                async with http.ws_connect(ws_url, max_msg_size=0) as ws:
+                    await ws.send_str(json.dumps({"type": "hello", "v": 1}))
+                    first = True
+                    while on.is_set():
+                        msg = await ws.receive()
+                        if msg.type != aiohttp.WSMsgType.TEXT:
+                            count(f"closed {ws.close_code}")
+                            while on.is_set():  # refused: wait for the next phase with viewers
+                                await asyncio.sleep(0.2)
+                            break
+                        if first:
+                            count("viewing")
+                            first = False
+            except (ConnectionError, aiohttp.ClientError):
+                await asyncio.sleep(0.2)
+
+    loop = asyncio.get_running_loop()
+    async with aiohttp.ClientSession() as http:
+        tasks = [loop.create_task(validator(http, i)) for i in range(4)] if kind == "validators" else \
+            [loop.create_task(viewer(http)) for _ in range(200)]
+        while True:
+            line = (await loop.run_in_executor(None, sys.stdin.readline)).strip()
+            if line == "on":
+                on.set()
+            elif line == "off":
+                on.clear()
+            else:
+                break
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+    print(json.dumps(counts), flush=True)
+
+
+def measure_viewers(args: argparse.Namespace, kind: str) -> dict[str, Any]:
+    """One ``--viewers`` measurement: the run's rate with ``kind`` pages on in every other phase."""
+    with tempfile.TemporaryDirectory() as tmp:
+        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        child = subprocess.Popen([sys.executable, __file__, "--serve", tmp, "--minutes", str(args.viewer_minutes),
+                                  "--phase", str(args.phase), "--null", "--period", str(args.period),
+                                  "--rings", str(args.rings), "--length", str(args.length)],
+                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+        assert child.stdin is not None and child.stdout is not None
+        url = json.loads(child.stdout.readline())["url"]
+        clients = subprocess.Popen([sys.executable, __file__, "--clients", kind, "--url", url],
+                                   stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env,
+                                   preexec_fn=lambda: os.nice(19))  # noqa: PLW1509 - no threads yet
+        assert clients.stdin is not None and clients.stdout is not None
+        child.stdin.write("go\n")
+        child.stdin.flush()
+        with_them = False
+        phases: list[dict[str, Any]] = []
+        for line in child.stdout:
+            msg = json.loads(line)
+            if "phases" in msg:
+                break
+            phases.append({**msg["phase"], "with": with_them})
+            with_them = not with_them  # the next phase has them or not
+            clients.stdin.write("on\n" if with_them else "off\n")
+            clients.stdin.flush()
+        clients.stdin.write("end\n")
+        clients.stdin.flush()
+        answered = json.loads(clients.stdout.readline() or "{}")
+        clients.wait(timeout=TIMEOUT_S)
+        child.wait(timeout=TIMEOUT_S)
+    phases = phases[1:]  # the first phase warms up
+
+    def rate(flag: bool) -> float:
+        chosen = [p for p in phases if p["with"] is flag]
+        return sum(p["firings"] for p in chosen) / max(1e-9, sum(p["seconds"] for p in chosen))
+
+    pairs = [(a, b) for a, b in itertools.pairwise(phases) if not a["with"] and b["with"]]
+    ratios = sorted((b["firings"] / b["seconds"]) / max(1e-9, a["firings"] / a["seconds"]) for a, b in pairs)
+    return {f"{kind}_firings_per_s_without": round(rate(False)), f"{kind}_firings_per_s_with": round(rate(True)),
+            f"{kind}_ratio": round(rate(True) / max(1e-9, rate(False)), 3),
+            f"{kind}_ratio_median_pair": round(statistics.median(ratios), 3) if ratios else None,
+            f"{kind}_phases": len(phases), f"{kind}_answered": answered}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--minutes", type=float, default=10.0, help="length of the attached run, minutes")
@@ -350,11 +491,29 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--load", type=int, default=0, metavar="N",
                     help="run N busy processes beside the run and the browser, and measure the noise floor (--null) "
                          "under the same load in the same invocation (default: 0, no load)")
+    ap.add_argument("--viewers", action="store_true",
+                    help="only measure the run's rate with read-only pages asking for work and with 200 idle "
+                         "viewers (no browser)")
+    ap.add_argument("--viewer-minutes", type=float, default=1.0,
+                    help="--viewers: minutes of each of its two measurements (default 1)")
     ap.add_argument("--json", action="store_true", help="print the results as one JSON object")
     ap.add_argument("--serve", metavar="DIR", help=argparse.SUPPRESS)
+    ap.add_argument("--clients", choices=("validators", "viewers"), help=argparse.SUPPRESS)
+    ap.add_argument("--url", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     if args.serve:
         asyncio.run(serve(args))
+        return 0
+    if args.clients:
+        asyncio.run(viewer_clients(args.url, args.clients))
+        return 0
+    if args.viewers:
+        out: dict[str, Any] = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+                               "load_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count()}
+        for kind in ("validators", "viewers"):
+            out.update(measure_viewers(args, kind))
+        out["load_1min_after"] = round(os.getloadavg()[0], 2)
+        print(json.dumps(out, indent=1) if args.json else "\n".join(f"{k:36} {v}" for k, v in out.items()))
         return 0
     result: dict[str, Any] = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
                               "load_1min": round(os.getloadavg()[0], 2), "cpus": os.cpu_count()}

@@ -19,7 +19,12 @@ Security (docs/console.md, "Security"):
 * every response carries a Content-Security-Policy allowing scripts from this server only, and
   refuses framing, sniffing and referrers;
 * a malformed or hostile WebSocket message closes that socket with a reason; the run is not
-  touched. Each page has a bounded outbound queue: a page that cannot keep up gets a fresh
+  touched;
+* what a page without the token may cost the run is bounded (:mod:`.limits`): at most 32 such pages,
+  drawings of at most 512 KiB, their validations, exports and replays rate-limited and queued at
+  most one deep, wrong tokens rate-limited per address; checking and converting drawings runs in
+  the console's worker process (:mod:`.worker`), at a lower priority than the run, never on its
+  event loop. Each page has a bounded outbound queue: a page that cannot keep up gets a fresh
   snapshot instead of an ever-growing backlog.
 """
 
@@ -32,6 +37,7 @@ import hmac
 import ipaddress
 import json
 import logging
+import os
 import secrets
 import time
 from collections.abc import Awaitable, Callable
@@ -47,13 +53,13 @@ from coordinator.web.analysis import run_analysis
 from coordinator.web.draft import UNSAVED, validate_draft
 from coordinator.web.files import (
     FileRefused,
-    export_draft,
     inside,
     list_nets,
     open_net,
     save_draft,
 )
 from coordinator.web.frames import DEFAULT_PERIOD_S, LiveFeed
+from coordinator.web.limits import ConsoleGuard, ConsoleLimits
 from coordinator.web.runs import LiveRun, RunRefused, RunStarter, StartRequest
 from coordinator.web.protocol import (
     CLOSE_POLICY,
@@ -63,6 +69,7 @@ from coordinator.web.protocol import (
     ProtocolViolation,
     parse_client_message,
 )
+from coordinator.web.worker import Worker, WorkFailed
 
 __all__ = ["STATIC", "ConsoleConfig", "ConsoleServer", "is_loopback"]
 
@@ -117,6 +124,7 @@ class ConsoleConfig:
             the default key, as ``petrobot run``).
         run_journal: the journal runs started from the page write to when ``journal`` is not
             given (``ROOT/runs/journal.sqlite``).
+        limits: what pages without the token may cost (:mod:`.limits`).
     """
 
     root: Path = field(default_factory=Path.cwd)
@@ -130,6 +138,7 @@ class ConsoleConfig:
     period_s: float = DEFAULT_PERIOD_S
     key_file: str | None = None
     run_journal: Path | None = None
+    limits: ConsoleLimits = field(default_factory=ConsoleLimits)
 
 
 class ConsoleServer:
@@ -147,6 +156,8 @@ class ConsoleServer:
         self.token = config.token or secrets.token_urlsafe(24)
         self.root = config.root.resolve()
         self.pages: set[_Page] = set()
+        self.guard = ConsoleGuard(config.limits)
+        self.worker = Worker()
         #: the runs this console follows, by run id, oldest first (:mod:`.runs`)
         self.runs: dict[str, LiveRun] = {}
         self._runner: web.AppRunner | None = None
@@ -206,6 +217,7 @@ class ConsoleServer:
             live.runtime.remove_observer(live.feed)
         if self._runner is not None:
             await self._runner.cleanup()
+        await self.worker.close()
 
     # ------------------------------------------------------------------ the runs it follows
     def run_journal(self) -> Path:
@@ -345,7 +357,33 @@ class ConsoleServer:
         return web.json_response({"error": text}, status=status)
 
     def _control(self, request: web.Request) -> bool:
-        return self.has_token(request.headers.get("X-Petrobot-Token"))
+        """Whether the request carries the token; a wrong one costs its address (:mod:`.limits`).
+
+        Raises:
+            web.HTTPTooManyRequests: the address gave too many wrong tokens lately.
+        """
+        given = request.headers.get("X-Petrobot-Token")
+        if given is None:
+            return False
+        if self.has_token(given):
+            return True
+        if not self.guard.wrong_token(request.remote or ""):
+            raise web.HTTPTooManyRequests(text="too many wrong tokens from this address: wait")
+        return False
+
+    async def _work(self, control: bool, size: int, kind: str, message: str, **fields: Any) -> Any:
+        """One job of the worker process within the guard's bounds.
+
+        Raises:
+            WorkFailed: refused by a bound, or failed in the worker.
+        """
+        refused = self.guard.may_work(control, size)
+        if refused is not None:
+            raise WorkFailed(refused)
+        try:
+            return await self.worker.run(kind, message, **fields)
+        finally:
+            self.guard.work_done(control)
 
     async def _api_nets(self, request: web.Request) -> web.StreamResponse:
         opened = list(self._preloaded)
@@ -409,9 +447,6 @@ class ConsoleServer:
                                   "following": list(self.runs)})
 
     async def _api_replay(self, request: web.Request) -> web.StreamResponse:
-        from coordinator.journal import JournalReader
-        from coordinator.web.replay import replay_json
-
         path = self._journal()
         run = request.query.get("run", "")
         if path is None:
@@ -419,6 +454,19 @@ class ConsoleServer:
         run_id = request.query.get("run", "")
         following = self.runs.get(run_id)
         fallback = following.net["draft"] if following is not None else self.live_net["draft"] if self.live_net else None
+        control = self._control(request)
+        refused = self.guard.may_work(control, 0)
+        if refused is not None:
+            return self._error(429, refused)
+        try:
+            return await self._replay(path, run, following, fallback)
+        finally:
+            self.guard.work_done(control)
+
+    async def _replay(self, path: Path, run: str, following: LiveRun | None, fallback: dict[str, Any] | None
+                      ) -> web.StreamResponse:
+        from coordinator.journal import JournalReader
+        from coordinator.web.replay import replay_json
 
         def read() -> dict[str, Any]:
             with JournalReader.open(path) as reader:
@@ -455,16 +503,21 @@ class ConsoleServer:
 
     async def _api_export(self, request: web.Request) -> web.StreamResponse:
         fmt = request.query.get("format", "toml")
-        try:
-            body = await request.text()
-            draft = parse_client_message(json.dumps({"type": "validate", "id": 0, "draft": json.loads(body)}))
-        except (ValueError, ProtocolViolation) as exc:
-            return self._error(400, f"not a drawing: {exc}")
+        control = self._control(request)
+        limit = self.config.limits.viewer_bytes
+        if not control and (request.content_length or 0) > limit:
+            self.guard.refused += 1
+            return self._error(413, f"a read-only page may send drawings of at most {limit >> 10} KiB: open the URL "
+                                    "with its token")
+        body = await request.text()
         hidden = request.query.get("hidden", "1") != "0"
+        # the drawing goes to the worker as the text it came in, inside a message the worker checks
+        message = '{"type":"validate","id":0,"draft":' + body + "}"
         try:
-            text, media = await asyncio.to_thread(export_draft, draft.fields["draft"], fmt, hidden=hidden)
-        except FileRefused as exc:
-            return self._error(400, str(exc))
+            text, media = await self._work(control, len(body), "export", message, format=fmt, hidden=hidden)
+        except WorkFailed as exc:
+            status = 429 if "busy" in str(exc) else 413 if "at most" in str(exc) else 400
+            return self._error(status, f"not exported: {exc}")
         return web.Response(text=text, content_type=media, charset="utf-8")
 
     async def _websocket(self, request: web.Request) -> web.StreamResponse:
@@ -475,7 +528,7 @@ class ConsoleServer:
         # reason; beyond aiohttp's limit it closes the socket itself (code 1009)
         ws = web.WebSocketResponse(max_msg_size=MAX_MESSAGE_BYTES + (1 << 20), compress=False, heartbeat=30.0)
         await ws.prepare(request)
-        page = _Page(self, ws)
+        page = _Page(self, ws, request.remote or "")
         self.pages.add(page)
         try:
             await page.serve()
@@ -499,11 +552,14 @@ class ConsoleServer:
 class _Page:
     """One page's WebSocket: its reading loop, its bounded outbound queue and sender task."""
 
-    def __init__(self, server: ConsoleServer, ws: web.WebSocketResponse) -> None:
+    def __init__(self, server: ConsoleServer, ws: web.WebSocketResponse, host: str = "") -> None:
         self.server = server
         self.ws = ws
+        self.host = host
         self.control = False
         self.greeted = False
+        self.viewer = False  # counted among the read-only pages
+        self._raw = ""  # the text of the message being handled
         self._frames: collections.deque[str] = collections.deque()
         self._replies: collections.deque[str] = collections.deque()
         self._resync = False
@@ -584,10 +640,20 @@ class _Page:
         async for msg in self.ws:
             if msg.type == WSMsgType.TEXT:
                 data = msg.data
+                limit = self.server.config.limits.viewer_bytes
+                if not self.control and len(data) > limit:  # closed unread: not parsed on the run's loop
+                    self.server.guard.refused += 1
+                    await self.close(1009, f"read-only page: message larger than {limit >> 10} KiB")
+                    break
                 if len(data.encode("utf-8")) > MAX_MESSAGE_BYTES:
                     await self.close(1009, f"message larger than {MAX_MESSAGE_BYTES} bytes")
                     break
+                self._raw = data
                 try:
+                    if self.greeted and not self.control and len(data) > self.server.config.limits.small_bytes:
+                        self._count()
+                        await self._validate_unread(data)  # parsed in the worker, not on the run's loop
+                        continue
                     msg = parse_client_message(data)
                     if msg.type == "painted":
                         self._count_painted()
@@ -639,6 +705,9 @@ class _Page:
             await self.ws.close(code=code, message=reason.encode("utf-8")[:123])
 
     def stop(self) -> None:
+        if self.viewer:
+            self.viewer = False
+            self.server.guard.viewer_leaves()
         if self._feed is not None:
             self._feed.unsubscribe(self.offer_frame)
         for task in (self._sender, *self._tasks):
@@ -660,7 +729,15 @@ class _Page:
             if self.greeted:
                 raise ProtocolViolation("hello twice")
             self.greeted = True
-            self.control = server.has_token(msg.fields["token"])
+            token = msg.fields["token"]
+            self.control = server.has_token(token)
+            if not self.control:
+                if token and not server.guard.wrong_token(self.host):
+                    raise ProtocolViolation("too many wrong tokens from this address: wait")
+                if not server.guard.viewer_joins():
+                    raise ProtocolViolation(f"{server.guard.viewers} read-only pages already: close one, or open "
+                                            "the URL with its token", code=1013)
+                self.viewer = True
             live = server.live
             self.send(server.welcome(self.control, live))
             self.watch(live, announce=False)
@@ -693,9 +770,7 @@ class _Page:
         elif msg.type == "command":
             self._command(msg)
         elif msg.type == "validate":
-            result = await asyncio.to_thread(validate_draft, msg.fields["draft"], msg.fields.get("name") or UNSAVED,
-                                             server.config.location)
-            self.reply(msg, ok=True, validation=result.to_json())
+            await self._validate(msg)
         elif msg.type == "save":
             await self._save(msg)
         elif msg.type == "analyze":
@@ -747,6 +822,47 @@ class _Page:
             return
         self.watch(live)
         self.reply(msg, ok=True, run=live.run_id)
+
+    async def _validate(self, msg: ClientMessage) -> None:
+        """Check a drawing: a small one of a page with the token in a thread, as it is drawn; any
+        other in the worker process, within the guard's bounds (:mod:`.limits`)."""
+        server = self.server
+        name = msg.fields.get("name") or UNSAVED
+        if self.control and len(self._raw) <= server.config.limits.small_bytes:
+            result = await asyncio.to_thread(validate_draft, msg.fields["draft"], name, server.config.location)
+            self.reply(msg, ok=True, validation=result.to_json())
+            return
+        try:
+            answer = await server._work(self.control, len(self._raw), "validate", self._raw, name=name,
+                                        services=self._services())
+        except WorkFailed as exc:
+            self.reply(msg, ok=False, reason=str(exc))
+            return
+        self.reply(msg, ok=True, validation=answer["validation"])
+
+    def _services(self) -> str | None:
+        """The services.toml the worker checks placement against: the console's, if it came from a file."""
+        location = self.server.config.location
+        path = getattr(location, "path", None) if location is not None else None
+        return str(path) if path and os.path.isfile(path) else None
+
+    async def _validate_unread(self, data: str) -> None:
+        """A read-only page's message too large to parse on the run's loop (over ``small_bytes``):
+        it may only be a ``validate``, and it goes to the worker as text, within the guard's bounds.
+        A page whose budget is spent is closed (code 1013, try again later): its message was not
+        read, so there is no id to reply to.
+
+        Raises:
+            ProtocolViolation: the budget is spent, or the message breaks the protocol.
+        """
+        try:
+            answer = await self.server._work(False, len(data), "validate", data, services=self._services())
+        except WorkFailed as exc:
+            if exc.violation is not None:
+                raise ProtocolViolation(str(exc), exc.violation) from None
+            raise ProtocolViolation(f"read-only page: {exc}", code=1013) from None
+        self.send({"type": "reply", "id": answer["id"], "to": "validate", "ok": True,
+                   "validation": answer["validation"]})
 
     async def _save(self, msg: ClientMessage) -> None:
         server = self.server
