@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sqlite3
 import stat
 from pathlib import Path
 
@@ -158,3 +159,27 @@ def test_bad_bounds_are_refused(state: Path) -> None:
         SqliteResultCache(state, now=0.0, max_bytes=0)
     with pytest.raises(ValueError):
         SqliteResultCache(state, now=0.0, synchronous="OFF")
+
+
+def test_a_store_of_a_without_rowid_table_is_rebuilt_keeping_its_results_and_its_running_calls(state: Path) -> None:
+    # in a WITHOUT ROWID table the whole row is the key: every lookup read the overflow pages of
+    # the results of megabytes it passed by; the call id now has an index of its own
+    state.mkdir(parents=True)
+    db = sqlite3.connect(state / DB_NAME)
+    db.executescript("""
+        CREATE TABLE calls (call_id TEXT PRIMARY KEY, action TEXT NOT NULL, frame BLOB, size INTEGER NOT NULL,
+                            at REAL NOT NULL) WITHOUT ROWID;
+        CREATE INDEX kept_by_age ON calls (at) WHERE frame IS NOT NULL;""")
+    frame = encode_frame(result("c1", b"\x01" * 100_000))
+    db.execute("INSERT INTO calls VALUES ('c1', 'echo', ?, ?, 1.0)", (frame, len(frame)))
+    db.execute("INSERT INTO calls VALUES ('w1', 'wait', NULL, 0, 1.0)")
+    db.commit()
+    db.close()
+    store = SqliteResultCache(state, now=2.0)
+    got = store.get("c1")
+    assert got is not None and got.frame == frame
+    assert store.restarted == frozenset({"w1"}) and len(store) == 2
+    (sql,) = store._db.execute("SELECT sql FROM sqlite_master WHERE name = 'calls'").fetchone()
+    assert "WITHOUT ROWID" not in sql.upper()
+    assert store._db.execute("SELECT name FROM sqlite_master WHERE name = 'kept_by_age'").fetchone() is not None
+    store.close()
