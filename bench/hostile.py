@@ -38,7 +38,7 @@ then, in this one run:
 Reports (``--json``): ``relays``, ``relays_refused``, ``frames``, ``connections``, ``hangs``,
 ``rss_start_mib``, ``rss_after_results_mib``, ``rss_end_mib``, ``rss_growth_mib`` (the node's
 highest RSS after the fuzz, the results and the flood, minus after warm-up),
-``legit_p50_s_under_flood``, ``legit_p99_s_under_flood``, ``legit_failures``,
+``legit_p50_s_under_flood``, ``legit_p99_s_under_flood``, ``legit_failures`` (and ``legit_failure_reasons``),
 ``established_p99_s_under_flood``, ``flood_connections`` (connections the flood opened in all),
 ``node_log_bytes``, ``node_log_lines``, ``node_log_limit_lines`` (the log limit's summaries),
 ``node_alive``. Targets (issue 22): every relay refused, 0 hangs, RSS growth <= 50 MiB, legitimate
@@ -52,6 +52,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import collections
 import hashlib
 import hmac
 import json
@@ -404,16 +405,20 @@ async def flood(port: int, conns: int, seconds: float, same_host: bool) -> dict[
     fresh: list[float] = []
     established: list[float] = []
     failures = 0
+    reasons: collections.Counter[str] = collections.Counter()
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         try:
             fresh.append(await legit_round(port))
-        except Exception:  # noqa: BLE001 - counted, not fatal
+        except Exception as exc:  # noqa: BLE001 - counted, not fatal
             failures += 1
+            reasons[f"fresh: {exc}"[:120]] += 1
         t0 = time.perf_counter()
         res = await keeper.call("echo", {"x": 1})
         established.append(time.perf_counter() - t0)
-        failures += res.status != "success"
+        if res.status != "success":
+            failures += 1
+            reasons[f"established: {res.reason}"[:120]] += 1
         await asyncio.sleep(0.02)
     await keeper.close()
     opened = 0
@@ -426,6 +431,7 @@ async def flood(port: int, conns: int, seconds: float, same_host: bool) -> dict[
         "legit_p99_s_under_flood": percentile(fresh, 0.99),
         "legit_max_s_under_flood": max(fresh) if fresh else float("nan"),
         "legit_failures": failures,
+        "legit_failure_reasons": dict(reasons),
         "established_p50_s_under_flood": percentile(established, 0.5),
         "established_p99_s_under_flood": percentile(established, 0.99),
         "flood_connections": opened,
@@ -683,6 +689,8 @@ def main(argv: list[str] | None = None) -> int:
                   f"p99 {res['legit_p99_s_under_flood'] * 1e3:.1f} ms (target <= 50), max "
                   f"{res['legit_max_s_under_flood'] * 1e3:.1f} ms over {res['legit_rounds']} rounds, "
                   f"{res['legit_failures']} failures")
+            for reason, n in res["legit_failure_reasons"].items():
+                print(f"  failed {n}x: {reason}")
             print(f"established link call: p50 {res['established_p50_s_under_flood'] * 1e3:.2f} ms, "
                   f"p99 {res['established_p99_s_under_flood'] * 1e3:.2f} ms")
             print(f"CPU during the flood: node {res['node_cpu_s_during_flood']:.1f} s, flood processes "
