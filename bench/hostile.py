@@ -1,7 +1,7 @@
 """Hostile-network benchmark: a real node process fuzzed and flooded, and a legitimate client timed.
 
 Usage: ``python bench/hostile.py [--json] [--frames N] [--fuzz-addresses A] [--results N] [--relays N]
-[--flood C] [--flood-addresses A] [--flood-s S] [--reconnect-s S] [--same-host] [--seed K]``
+[--flood C] [--flood-addresses A] [--flood-s S] [--baseline-s S] [--reconnect-s S] [--same-host] [--seed K]``
 
 Starts a node process (``python -m services.node``) on 127.0.0.1 hosting ``echo``, ``wait`` and
 ``announce``, with its result store in a temporary state directory and its log (INFO) in a file,
@@ -33,7 +33,9 @@ then, in this one run:
    attackers' CPU would not be the node's. ``--flood 1`` gives the baseline of the same
    measurement without a flood. Meanwhile a legitimate client (127.0.0.1) repeatedly opens a connection,
    authenticates and makes one call (its latency: ``legit_*``), and makes calls over a link it
-   keeps open (``established_*``).
+   keeps open (``established_*``). The same client runs for ``--baseline-s`` seconds (default 10)
+   just before the flood, in the same state of the node and of the machine (``*_no_flood``): the
+   baseline of this run, since on a shared machine the tail moves with the other jobs' load.
 
 Reports (``--json``): ``relays``, ``relays_refused``, ``frames``, ``connections``, ``hangs``,
 ``rss_start_mib``, ``rss_after_results_mib``, ``rss_end_mib``, ``rss_growth_mib`` (the node's
@@ -400,6 +402,18 @@ async def flood(port: int, conns: int, seconds: float, same_host: bool) -> dict[
             sys.executable, __file__, "--flood-worker", f"{port}:{seconds + 2.0}:{RECONNECT_S}:{mine}",
             stdout=asyncio.subprocess.PIPE, preexec_fn=_flood_process(FLOOD_CPUS)))
     await asyncio.sleep(2.0)  # the flood builds up
+    timed = await legit_client(port, seconds, "under_flood")
+    opened = 0
+    for proc in workers:
+        out, _ = await proc.communicate()
+        opened += int(out.decode().strip() or 0)
+    return {**timed, "flood_connections": opened}
+
+
+async def legit_client(port: int, seconds: float, suffix: str) -> dict[str, Any]:
+    """For ``seconds``: a legitimate client on 127.0.0.1 opens a connection, logs in and makes one
+    call, again and again, and makes calls over a link it keeps open; their latencies (keys ending
+    in ``suffix``), failures and why."""
     keeper = NodeLink("bench", ("127.0.0.1", port), KEY, name="legit-established", connect_timeout_s=5.0)
     await keeper.connect()
     fresh: list[float] = []
@@ -421,20 +435,16 @@ async def flood(port: int, conns: int, seconds: float, same_host: bool) -> dict[
             reasons[f"established: {res.reason}"[:120]] += 1
         await asyncio.sleep(0.02)
     await keeper.close()
-    opened = 0
-    for proc in workers:
-        out, _ = await proc.communicate()
-        opened += int(out.decode().strip() or 0)
+    tail = "" if suffix == "under_flood" else f"_{suffix}"
     return {
-        "legit_rounds": len(fresh),
-        "legit_p50_s_under_flood": percentile(fresh, 0.5),
-        "legit_p99_s_under_flood": percentile(fresh, 0.99),
-        "legit_max_s_under_flood": max(fresh) if fresh else float("nan"),
-        "legit_failures": failures,
-        "legit_failure_reasons": dict(reasons),
-        "established_p50_s_under_flood": percentile(established, 0.5),
-        "established_p99_s_under_flood": percentile(established, 0.99),
-        "flood_connections": opened,
+        f"legit_rounds{tail}": len(fresh),
+        f"legit_p50_s_{suffix}": percentile(fresh, 0.5),
+        f"legit_p99_s_{suffix}": percentile(fresh, 0.99),
+        f"legit_max_s_{suffix}": max(fresh) if fresh else float("nan"),
+        f"legit_failures{tail}": failures,
+        f"legit_failure_reasons{tail}": dict(reasons),
+        f"established_p50_s_{suffix}": percentile(established, 0.5),
+        f"established_p99_s_{suffix}": percentile(established, 0.99),
     }
 
 
@@ -539,6 +549,8 @@ async def measure(args: argparse.Namespace, port: int, pid: int) -> dict[str, An
     if args.results:
         await big_results(port, args.results, args.seed)
     after_results = rss_mib(pid)
+    # the same client in the same state of the node and of the machine, without the flood: the baseline
+    base = await legit_client(port, args.baseline_s, "no_flood") if args.baseline_s > 0 and args.flood else {}
     cpu0 = proc_cpu_s(pid)
     children0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     fl = await flood(port, args.flood, args.flood_s, args.same_host) if args.flood else {}
@@ -561,6 +573,7 @@ async def measure(args: argparse.Namespace, port: int, pid: int) -> dict[str, An
         "rss_after_results_mib": after_results,
         "rss_end_mib": rss_end,
         "rss_growth_mib": max(after_fuzz, after_results, rss_end) - rss_start,
+        **base,
         **fl,
         "flood": args.flood,
         "flood_addresses": FLOOD_ADDRESSES,
@@ -597,6 +610,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="calls whose kept results are 1-16 MiB each, after the fuzz (default 24; 0: none)")
     p.add_argument("--flood", type=int, default=2000, help="slow-handshake connections (default 2000; 0: none)")
     p.add_argument("--flood-s", type=float, default=15.0, help="seconds the flood lasts (default 15)")
+    p.add_argument("--baseline-s", type=float, default=10.0,
+                   help="seconds of the legitimate client without a flood, just before it (default 10; 0: none)")
     p.add_argument("--flood-addresses", type=int, default=1000,
                    help="loopback addresses the flood comes from (default 1000)")
     p.add_argument("--same-host", action="store_true", help="half the flood also comes from the client's 127.0.0.1")
@@ -693,6 +708,11 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"  failed {n}x: {reason}")
             print(f"established link call: p50 {res['established_p50_s_under_flood'] * 1e3:.2f} ms, "
                   f"p99 {res['established_p99_s_under_flood'] * 1e3:.2f} ms")
+            if "legit_p99_s_no_flood" in res:
+                print(f"the same client just before the flood ({args.baseline_s:g} s): connect+login+call p50 "
+                      f"{res['legit_p50_s_no_flood'] * 1e3:.1f} ms, p99 {res['legit_p99_s_no_flood'] * 1e3:.1f} ms, "
+                      f"{res['legit_failures_no_flood']} failures; established p99 "
+                      f"{res['established_p99_s_no_flood'] * 1e3:.2f} ms")
             print(f"CPU during the flood: node {res['node_cpu_s_during_flood']:.1f} s, flood processes "
                   f"{res['flood_cpu_s']:.1f} s")
         print(f"node log: {res['node_log_bytes']} bytes, {res['node_log_lines']} lines ({res['node_log_limit_lines']} "
