@@ -37,7 +37,8 @@ Debian's chromium (headless, through Playwright) on the console's page.
   first four read-only pages asking, each in a loop, for the validation of a 3.3 MB drawing of
   20,000 places, of a 0.4 MB one of 2,500 places, and for a DOT export of the large one; then 200
   idle read-only viewers. The firing rate of the phases with them over that of the phases without
-  them (target: >= 0.9), and what the console answered them (checked, refused, closed).
+  them (target: >= 0.9), what the console answered them (checked, refused, closed), and the
+  console process's resident memory at the first phase and at its highest.
 
 Usage: python bench/console.py [--minutes M] [--phase S] [--rings R] [--length L] [--period S]
        [--skip-open] [--skip-run] [--feed-pairs N | --feed-only] [--load N] [--json]
@@ -424,6 +425,18 @@ async def viewer_clients(url: str, kind: str) -> None:
     print(json.dumps(counts), flush=True)
 
 
+def rss_mib(pid: int) -> float:
+    """The resident memory of process ``pid``, MiB (0 once it is gone)."""
+    try:
+        with open(f"/proc/{pid}/status") as fh:
+            for line in fh:
+                if line.startswith("VmRSS:"):
+                    return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return 0.0
+
+
 def measure_viewers(args: argparse.Namespace, kind: str) -> dict[str, Any]:
     """One ``--viewers`` measurement: the run's rate with ``kind`` pages on in every other phase."""
     with tempfile.TemporaryDirectory() as tmp:
@@ -442,10 +455,12 @@ def measure_viewers(args: argparse.Namespace, kind: str) -> dict[str, Any]:
         child.stdin.flush()
         with_them = False
         phases: list[dict[str, Any]] = []
+        rss: list[float] = []
         for line in child.stdout:
             msg = json.loads(line)
             if "phases" in msg:
                 break
+            rss.append(rss_mib(child.pid))
             phases.append({**msg["phase"], "with": with_them})
             with_them = not with_them  # the next phase has them or not
             clients.stdin.write("on\n" if with_them else "off\n")
@@ -466,7 +481,8 @@ def measure_viewers(args: argparse.Namespace, kind: str) -> dict[str, Any]:
     return {f"{kind}_firings_per_s_without": round(rate(False)), f"{kind}_firings_per_s_with": round(rate(True)),
             f"{kind}_ratio": round(rate(True) / max(1e-9, rate(False)), 3),
             f"{kind}_ratio_median_pair": round(statistics.median(ratios), 3) if ratios else None,
-            f"{kind}_phases": len(phases), f"{kind}_answered": answered}
+            f"{kind}_phases": len(phases), f"{kind}_answered": answered,
+            f"{kind}_console_rss_mib_first_max": [round(rss[0], 1), round(max(rss), 1)] if rss else None}
 
 
 def main(argv: list[str] | None = None) -> int:

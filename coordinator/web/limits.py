@@ -7,7 +7,12 @@ and it takes frames. Without bounds, four read-only pages validating 2.7 MB draw
 decides, from :class:`ConsoleLimits`:
 
 * **viewers**: at most ``max_viewers`` read-only pages at once; one more is closed at its
-  ``hello`` (WebSocket code 1013, try again later). Pages with the token are not counted;
+  ``hello`` (WebSocket code 1013, try again later). Pages with the token are not counted. A
+  read-only page the console closes for breaking a bound (a message too large, work over the
+  budget, a protocol violation) costs its address a token of a bucket of ``closures``, earned back
+  one every ``closure_refill_s``; an address with none left has its next read-only pages closed at
+  their ``hello`` (1013), before they can send anything large: a page that reconnects as soon as it
+  is closed no longer makes the console read megabytes each time;
 * **work** (validation and export of a drawing, a replay): a read-only page's drawing is at most
   ``viewer_bytes`` of JSON (a page's message over that is closed unread, an HTTP body refused with
   413); read-only jobs come from one token bucket for all such pages (``viewer_jobs_per_s``,
@@ -47,6 +52,8 @@ class ConsoleLimits:
         max_queue: jobs of any page waiting for the worker at once.
         token_failures: wrong tokens an address may give in a row.
         token_refill_s: seconds for an address to earn back one wrong token.
+        closures: read-only pages of an address the console may close for breaking a bound, in a row.
+        closure_refill_s: seconds for an address to earn back one such closure.
     """
 
     max_viewers: int = 32
@@ -58,6 +65,8 @@ class ConsoleLimits:
     max_queue: int = 8
     token_failures: int = 10
     token_refill_s: float = 2.0
+    closures: int = 4
+    closure_refill_s: float = 5.0
 
 
 class ConsoleGuard:
@@ -81,15 +90,24 @@ class ConsoleGuard:
         """Jobs and pages refused so far (viewers over the cap, jobs over a bound, wrong tokens throttled)."""
         self._jobs = TokenBuckets(burst=limits.viewer_job_burst, per_s=limits.viewer_jobs_per_s, max_hosts=1)
         self._tokens = TokenBuckets(burst=limits.token_failures, per_s=1.0 / limits.token_refill_s)
+        self._closures = TokenBuckets(burst=limits.closures, per_s=1.0 / limits.closure_refill_s)
 
     # ---- pages
-    def viewer_joins(self) -> bool:
-        """A read-only page said hello: whether it may stay (counted if so)."""
+    def viewer_joins(self, host: str) -> str | None:
+        """A read-only page from ``host`` said hello: ``None`` if it may stay (it is counted then),
+        else why not, in words."""
+        if self._closures.tokens(host, self._clock()) < 1.0:
+            self.refused += 1
+            return "read-only pages from this address broke the console's bounds too often: wait"
         if self.viewers >= self.limits.max_viewers:
             self.refused += 1
-            return False
+            return f"{self.viewers} read-only pages already: close one, or open the URL with its token"
         self.viewers += 1
-        return True
+        return None
+
+    def viewer_closed(self, host: str) -> None:
+        """A read-only page from ``host`` was closed for breaking a bound (module docstring)."""
+        self._closures.spend(host, self._clock())
 
     def viewer_leaves(self) -> None:
         """A read-only page counted by :meth:`viewer_joins` closed."""

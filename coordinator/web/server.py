@@ -643,6 +643,7 @@ class _Page:
                 limit = self.server.config.limits.viewer_bytes
                 if not self.control and len(data) > limit:  # closed unread: not parsed on the run's loop
                     self.server.guard.refused += 1
+                    self.server.guard.viewer_closed(self.host)
                     await self.close(1009, f"read-only page: message larger than {limit >> 10} KiB")
                     break
                 if len(data.encode("utf-8")) > MAX_MESSAGE_BYTES:
@@ -662,6 +663,8 @@ class _Page:
                     await self.handle(msg)
                 except ProtocolViolation as exc:
                     log.info("closing a console WebSocket: %s", exc.reason)
+                    if self.viewer:  # a read-only page let in, now closed for what it sent
+                        self.server.guard.viewer_closed(self.host)
                     await self.close(exc.code, exc.reason)
                     break
             elif msg.type == WSMsgType.BINARY:
@@ -734,9 +737,9 @@ class _Page:
             if not self.control:
                 if token and not server.guard.wrong_token(self.host):
                     raise ProtocolViolation("too many wrong tokens from this address: wait")
-                if not server.guard.viewer_joins():
-                    raise ProtocolViolation(f"{server.guard.viewers} read-only pages already: close one, or open "
-                                            "the URL with its token", code=1013)
+                refused = server.guard.viewer_joins(self.host)
+                if refused is not None:
+                    raise ProtocolViolation(refused, code=1013)
                 self.viewer = True
             live = server.live
             self.send(server.welcome(self.control, live))

@@ -144,3 +144,21 @@ async def test_a_read_only_pages_medium_drawing_is_answered_from_the_worker_unre
             await ws.send_str(json.dumps({"type": "save", "id": 9, "draft": big_draft(1000), "path": "ring.json"}))
             code, reason = await closed_with(ws)  # a large message of a read-only page is a drawing to check or nothing
             assert code == 1008 and "save message larger than" in reason
+
+
+async def test_an_address_whose_read_only_pages_keep_breaking_the_bounds_is_closed_at_hello_before_it_sends_more(
+        console: Console):
+    console.server.guard = ConsoleGuard(ConsoleLimits(closures=2, closure_refill_s=600.0))
+    huge = json.dumps({"type": "validate", "id": 1, "draft": big_draft(6000)})  # > 512 KiB
+    async with aiohttp.ClientSession() as http:
+        for _ in range(2):
+            async with http.ws_connect(console.ws_url(), max_msg_size=0) as ws:
+                await hello(ws, None)
+                await ws.send_str(huge)
+                assert (await closed_with(ws))[0] == 1009
+        async with http.ws_connect(console.ws_url()) as ws:
+            await ws.send_str(json.dumps({"type": "hello", "v": 1}))
+            code, reason = await closed_with(ws)
+            assert code == 1013 and "broke the console's bounds too often" in reason
+        async with http.ws_connect(console.ws_url()) as operator:  # the token's holder is not a viewer
+            assert (await hello(operator, console.server.token))["control"] is True
