@@ -227,7 +227,7 @@ class ConnectionGuard(Generic[C]):
         """The oldest pending connection of the address holding the most (the first listed among
         equals), among the connections from unknown addresses when ``unknown_only``."""
         hosts = list(self._pending_by_host.values())
-        if unknown_only:
+        if unknown_only and self._pending_unknown < len(self._pending):  # (all unknown: nothing to sift)
             hosts = [q for q in hosts if not self._pending[next(iter(q))][2]] or hosts
         busiest = max(hosts, key=len)
         return next(iter(busiest))
