@@ -24,8 +24,9 @@ Security (docs/console.md, "Security"):
   drawings of at most 512 KiB, their validations, exports and replays rate-limited and queued at
   most one deep, wrong tokens rate-limited per address; checking and converting drawings runs in
   the console's worker process (:mod:`.worker`), at a lower priority than the run, never on its
-  event loop. Each page has a bounded outbound queue: a page that cannot keep up gets a fresh
-  snapshot instead of an ever-growing backlog.
+  event loop, and so does reading any page's replays from the journal. Each page has a bounded
+  outbound queue: a page that cannot keep up gets a fresh snapshot instead of an ever-growing
+  backlog.
 """
 
 from __future__ import annotations
@@ -465,41 +466,16 @@ class ConsoleServer:
 
     async def _replay(self, path: Path, run: str, following: LiveRun | None, fallback: dict[str, Any] | None
                       ) -> web.StreamResponse:
-        from coordinator.journal import JournalReader
-        from coordinator.web.replay import replay_json
-
-        def read() -> dict[str, Any]:
-            with JournalReader.open(path) as reader:
-                found = run
-                if run == "last":
-                    runs = reader.runs()
-                    if not runs:
-                        raise JournalError(f"{path}: no runs")
-                    found = runs[-1].id
-                opened = fallback
-                if opened is None:
-                    row = reader.run(found)
-                    for shown, p in self._preloaded.items():
-                        with contextlib.suppress(Exception):
-                            candidate = open_net(p, None, shown_as=shown)
-                            if candidate["draft"].get("net", {}).get("name", p.stem) == row.net_name:
-                                opened = candidate["draft"]
-                                break
-                return replay_json(reader, found, fallback=opened)
+        """A run's replay, read from the journal and laid out in the worker process (:mod:`.worker`):
+        its body is sent on as the worker wrote it."""
+        shown = following.net if following is not None else self.live_net
         try:
-            data = await asyncio.to_thread(read)
-        except JournalError as exc:
-            return self._error(404, str(exc))
-        if data["draft"] is not None:
-            from coordinator.web.files import with_layout
-
-            shown = following.net if following is not None else self.live_net
-            if shown is not None and data["draft"].get("net", {}).get("name") == \
-                    shown["draft"].get("net", {}).get("name"):
-                data["draft"] = shown["draft"]
-            else:
-                data["draft"] = await asyncio.to_thread(with_layout, data["draft"])
-        return web.json_response(data)
+            body = await self.worker.run("replay", "", journal=str(path), run=run, fallback=fallback,
+                                         preloaded=[[name, str(p)] for name, p in self._preloaded.items()],
+                                         shown=shown["draft"] if shown is not None else None)
+        except WorkFailed as exc:
+            return self._error(404 if exc.journal else 503, str(exc))
+        return web.Response(body=body, content_type="application/json")
 
     async def _api_export(self, request: web.Request) -> web.StreamResponse:
         fmt = request.query.get("format", "toml")

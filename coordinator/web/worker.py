@@ -1,10 +1,11 @@
 """Heavy console work in a process of its own, with a budget: validating and exporting drawings.
 
 The web console serves the run it follows on the run's own event loop (docs/console.md). Checking
-or converting a large drawing — 20,000 places, megabytes of JSON — takes the CPU for a while, and a
-thread of the same process would hold the interpreter's lock as long: four read-only pages asking
-for it took a run from 2,000 firings a second to 4 (issue 22). :class:`Worker` runs that work in
-one child process (``python -m coordinator.web.worker``), started on first use and kept:
+or converting a large drawing — 20,000 places, megabytes of JSON — or reading a long run's replay
+from the journal takes the CPU for a while, and a thread of the same process would hold the
+interpreter's lock as long: four read-only pages asking for it took a run from 2,000 firings a
+second to 4 (issue 22). :class:`Worker` runs that work in one child process (``python -m
+coordinator.web.worker``), started on first use and kept:
 
 * one job at a time, in the order asked; :class:`~coordinator.web.limits.ConsoleGuard` bounds who
   may queue how much;
@@ -19,9 +20,13 @@ one child process (``python -m coordinator.web.worker``), started on first use a
 line (``{"id", "kind": "validate" | "export", "message": TEXT, "name", "services", "format",
 "hidden"}``), checks the message as the server does (:func:`coordinator.web.protocol.parse_client_message`),
 does the work and writes ``{"id", "ok": true, "result": ...}`` or ``{"id", "ok": false, "error": TEXT}``
-(with ``"violation": CODE`` when the message breaks the protocol). A ``validate`` job's result is
-``{"id": the message's id, "validation": ...}``: the server need not parse a read-only page's large
-message at all to answer it.
+(with ``"violation": CODE`` when the message breaks the protocol, ``"journal": true`` when the
+journal is missing or damaged). A ``validate`` job's result is ``{"id": the message's id,
+"validation": ...}``: the server need not parse a read-only page's large message at all to answer
+it. A ``replay`` job (``{"id", "kind": "replay", "journal", "run", "fallback", "preloaded",
+"shown"}``, :func:`replay_text`) answers ``{"id", "ok": true, "raw": N}`` followed by the N bytes
+of the HTTP response's JSON body, which the server sends on as they are (nothing of it is parsed
+or built on the run's loop).
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ import sys
 from pathlib import Path
 from typing import Any, Final
 
-__all__ = ["JOB_TIMEOUT_S", "MEMORY_BYTES", "NICE", "Worker", "WorkFailed", "serve"]
+__all__ = ["JOB_TIMEOUT_S", "MEMORY_BYTES", "NICE", "Worker", "WorkFailed", "replay_text", "serve"]
 
 JOB_TIMEOUT_S: Final = 20.0
 """Longest one job may take, seconds (validating a 20,000-place drawing takes about 2 s)."""
@@ -55,9 +60,11 @@ class WorkFailed(Exception):
             (:class:`~coordinator.web.protocol.ProtocolViolation`), else ``None``.
     """
 
-    def __init__(self, reason: str, violation: int | None = None) -> None:
+    def __init__(self, reason: str, violation: int | None = None, journal: bool = False) -> None:
         super().__init__(reason)
         self.violation = violation
+        self.journal = journal
+        """Whether the journal asked for is missing or damaged (:class:`~coordinator.errors.JournalError`)."""
 
 
 class Worker:
@@ -98,7 +105,8 @@ class Worker:
 
         Returns:
             ``validate``: ``{"id": the message's id, "validation": the validation's JSON}``;
-            ``export``: ``[text, media type]``.
+            ``export``: ``[text, media type]``; ``replay`` (``message`` empty; fields of
+            :func:`replay_text`): the response body, bytes of JSON.
 
         Raises:
             WorkFailed: with the reason, in words.
@@ -122,10 +130,19 @@ class Worker:
             if not answer:
                 self._kill()
                 raise WorkFailed("the worker process died (out of memory?)")
+            got = json.loads(answer)
+            if got.get("ok") and "raw" in got:
+                try:
+                    async with asyncio.timeout(self.timeout_s):
+                        raw = await proc.stdout.readexactly(int(got["raw"]))
+                except (TimeoutError, asyncio.IncompleteReadError):
+                    self._kill()
+                    raise WorkFailed("the worker process stopped in the middle of its answer") from None
+                self.jobs += 1
+                return raw
             self.jobs += 1
-        got = json.loads(answer)
         if not got.get("ok"):
-            raise WorkFailed(str(got.get("error")), got.get("violation"))
+            raise WorkFailed(str(got.get("error")), got.get("violation"), bool(got.get("journal")))
         return got["result"]
 
     def _kill(self) -> None:
@@ -147,11 +164,60 @@ class Worker:
 
 
 # ---------------------------------------------------------------------------------- the child's side
+def replay_text(journal: str, run: str, fallback: dict[str, Any] | None, preloaded: list[list[str]],
+                shown: dict[str, Any] | None) -> bytes:
+    """The console's ``/api/replay`` answer for ``run`` of ``journal`` (``"last"``: its latest run),
+    as the bytes of its JSON body (:func:`coordinator.web.replay.replay_json`).
+
+    Args:
+        journal: the journal's path.
+        run: a run id, or ``"last"``.
+        fallback: the draft to show when the run did not store its net's text, or ``None``: then the
+            first of ``preloaded`` (``[shown name, path]`` pairs) that is the run's net.
+        shown: the draft the console shows now; the replay uses it (and its layout) when it is of
+            the same net, else the replay's own draft is laid out.
+
+    Raises:
+        JournalError: the journal or the run is missing or damaged.
+    """
+    from coordinator.errors import JournalError
+    from coordinator.journal import JournalReader
+    from coordinator.web.files import open_net, with_layout
+    from coordinator.web.replay import replay_json
+
+    with JournalReader.open(Path(journal)) as reader:
+        found = run
+        if run == "last":
+            runs = reader.runs()
+            if not runs:
+                raise JournalError(f"{journal}: no runs")
+            found = runs[-1].id
+        opened = fallback
+        if opened is None:
+            row = reader.run(found)
+            for name, path in preloaded:
+                with contextlib.suppress(Exception):
+                    candidate = open_net(Path(path), None, shown_as=name)
+                    if candidate["draft"].get("net", {}).get("name", Path(path).stem) == row.net_name:
+                        opened = candidate["draft"]
+                        break
+        data = replay_json(reader, found, fallback=opened)
+    if data["draft"] is not None:
+        if shown is not None and data["draft"].get("net", {}).get("name") == shown.get("net", {}).get("name"):
+            data["draft"] = shown
+        else:
+            data["draft"] = with_layout(data["draft"])
+    return json.dumps(data, separators=(",", ":"), default=str).encode("utf-8")
+
+
 def _job(request: dict[str, Any], locations: dict[str, Any]) -> Any:
     from coordinator.web.draft import UNSAVED, validate_draft
     from coordinator.web.files import export_draft
     from coordinator.web.protocol import ProtocolViolation, parse_client_message
 
+    if request["kind"] == "replay":
+        return replay_text(str(request["journal"]), str(request["run"]), request.get("fallback"),
+                           list(request.get("preloaded") or []), request.get("shown"))
     msg = parse_client_message(request["message"])
     if msg.type != "validate":
         raise ProtocolViolation(f"a {msg.type} message larger than the console takes on its event loop")
@@ -175,6 +241,7 @@ def _job(request: dict[str, Any], locations: dict[str, Any]) -> Any:
 
 def serve() -> int:
     """The child: limits itself, then answers one job per line of stdin until it closes."""
+    from coordinator.errors import JournalError
     from coordinator.web.protocol import ProtocolViolation
 
     with contextlib.suppress(OSError):
@@ -186,10 +253,17 @@ def serve() -> int:
     locations: dict[str, Any] = {}
     for line in sys.stdin:
         jid = None
+        raw = b""
         try:
             request = json.loads(line)
             jid = request.get("id")
-            out = {"id": jid, "ok": True, "result": _job(request, locations)}
+            result = _job(request, locations)
+            if isinstance(result, bytes):
+                out, raw = {"id": jid, "ok": True, "raw": len(result)}, result
+            else:
+                out = {"id": jid, "ok": True, "result": result}
+        except JournalError as exc:
+            out = {"id": jid, "ok": False, "error": str(exc), "journal": True}
         except ProtocolViolation as exc:
             out = {"id": jid, "ok": False, "error": exc.reason, "violation": exc.code}
         except MemoryError:
@@ -197,6 +271,9 @@ def serve() -> int:
         except Exception as exc:  # noqa: BLE001 - every failure is the answer to its job
             out = {"id": jid, "ok": False, "error": getattr(exc, "reason", None) or f"{type(exc).__name__}: {exc}"}
         sys.stdout.write(json.dumps(out, separators=(",", ":"), default=str) + "\n")
+        if raw:
+            sys.stdout.flush()
+            sys.stdout.buffer.write(raw)
         sys.stdout.flush()
     return 0
 

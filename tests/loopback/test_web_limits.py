@@ -162,3 +162,14 @@ async def test_an_address_whose_read_only_pages_keep_breaking_the_bounds_is_clos
             assert code == 1013 and "broke the console's bounds too often" in reason
         async with http.ws_connect(console.ws_url()) as operator:  # the token's holder is not a viewer
             assert (await hello(operator, console.server.token))["control"] is True
+
+
+async def test_a_replay_is_read_from_the_journal_in_the_worker_and_a_missing_run_is_a_clear_404(console: Console):
+    await console.fired(3)
+    async with aiohttp.ClientSession() as http:
+        async with http.get(console.base + f"/api/replay?run={console.runtime.run_id}") as res:
+            data = await res.json()
+        assert console.server.worker.jobs == 1  # not in a thread of the run's process
+        assert data["draft"]["net"]["name"] == "ticked" and [r for r in data["records"] if r[0] == "f"]
+        async with http.get(console.base + "/api/replay?run=no-such-run") as res:
+            assert res.status == 404 and "no-such-run" in (await res.json())["error"]
