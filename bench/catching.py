@@ -70,6 +70,7 @@ from sim.catching.camera import (
     overhead_camera,
 )
 from sim.catching.drives import SimDrives
+from sim.drives import POSITION_UNIT
 from sim.catching.world import CatchingWorld, Thrower
 from sim.world import World
 
@@ -104,6 +105,13 @@ class InProcessDrives:
         self.drives = drives
         self.world = world
         self.port = drives.bus.connect()
+        self.layouts: dict[int, Any] = {}
+
+    def rpdo(self, node: int, cw: int, q: float) -> cf.CanFrame:
+        """RPDO1 of drive ``node`` with the mapping of its EDS: controlword and target, rad."""
+        if node not in self.layouts:
+            self.layouts[node] = self.drives.rpdo_layout(node)
+        return cf.CanFrame(0x200 + node, self.layouts[node].pack([cw, round(q / POSITION_UNIT)]))
 
     def enable(self) -> None:
         self.port.send(cf.nmt_frame(cf.NmtCommand.START, 0))
@@ -112,7 +120,7 @@ class InProcessDrives:
         for cw in (cf.Controlword.FAULT_RESET, cf.Controlword.SHUTDOWN, cf.Controlword.SWITCH_ON,
                    cf.Controlword.ENABLE_OPERATION):
             for node, qi in zip(cf.DRIVE_IDS, q):
-                self.port.send(cf.encode_rpdo1(node, cw, qi))
+                self.port.send(self.rpdo(node, cw, qi))
             self.world.step(6)
         self.port.recv_all()
         states = self.drives.states()
@@ -121,7 +129,7 @@ class InProcessDrives:
 
     def send_targets(self, q: np.ndarray) -> None:
         for node, qi in zip(cf.DRIVE_IDS, q):
-            self.port.send(cf.encode_rpdo1(node, cf.Controlword.ENABLE_OPERATION, float(qi)))
+            self.port.send(self.rpdo(node, cf.Controlword.ENABLE_OPERATION, float(qi)))
         self.port.recv_all()
 
 

@@ -5,12 +5,16 @@ services.toml (example)::
     [drivers.puma]
     node = "motion"
     impl = "services.catching.arm:PumaDriver"
-    params = { can_host = "127.0.0.1", can_port = 7211 }
+    params = { can_host = "127.0.0.1", can_port = 7211, bus = "devices/puma.toml" }
 
 :class:`PumaDriver` params (all optional):
 
-* ``can_host`` ("127.0.0.1"), ``can_port`` (7211), ``channel`` ("can0"): the sim's socketcand
-  gateway;
+* ``bus`` (the project's ``devices/puma.toml``; a relative path is taken from the directory of
+  services.toml): the device file of the PUMA's CAN bus (:mod:`services.devices.devicefile`: the
+  interface and channel, each joint drive's node id, EDS file, mode, unit scaling, heartbeat and
+  deadline times and PDO mappings, the crossfire module);
+* ``can_host`` ("127.0.0.1"), ``can_port`` (7211): the socketcand server (the sim's gateway) when the
+  device file's interface is socketcand;
 * ``setpoints_from`` (default: the node services.toml places the action ``predict`` on) and
   ``setpoint_topic`` ("setpoints"): where the set points come from, as events of that node
   (:mod:`services.catching.setpoints`); ``setpoint_max_age_s`` (0.2): a set point older than this (wall
@@ -32,9 +36,11 @@ one set of RPDO targets. The crossfire sensor's rising edge publishes the extern
 
 Faults: before every action the driver makes sure the drives are usable, the way a CiA 402 master
 does: a drive in FAULT (following error, RPDO timeout, lost master heartbeat; the drive's EMCY says
-which) is reset and enabled again (:meth:`services.devices.drives.CanDrives.enable`) and the servo
-restarts where the arm is; a lost bus is reconnected. ``move_home`` reports a recovery in its value
-(``recovered``).
+which) or one that left OPERATIONAL (an NMT command of another station) is started, reset and
+enabled again (:meth:`services.devices.drives.CanDrives.enable`) and the servo restarts where the arm
+is; a lost bus is reconnected (and the drives configured again over SDO). ``move_home`` reports a
+recovery in its value (``recovered``). Drives that another master is commanding (its RPDOs seen on
+the bus within the last second) are not recovered: the action ends ``error`` saying so.
 """
 
 from __future__ import annotations
@@ -52,8 +58,9 @@ import numpy as np
 from services.action import Driver, NodeContext
 from services.catching.robot import motion_control as mc
 from services.catching.setpoints import SETPOINT_TOPIC, SetPointSubscription
-from services.devices import cia402 as cf
 from services.catching.drives import PumaDrives
+from services.devices import cia402 as cf
+from services.devices.devicefile import BusSpec, DeviceFileError, load_bus, resolve_device_file
 from services.devices.drives import BusError
 from services.devices.endpoint import DeviceEndpoint
 from services.errors import ActionError, LocationError
@@ -97,7 +104,8 @@ class PumaDriver(Driver):
         p = self.params
         self.can_host = str(p.get("can_host", "127.0.0.1"))
         self.can_port = int(p.get("can_port", 7211))
-        self.channel = str(p.get("channel", "can0"))
+        self.bus_file = str(p["bus"]) if "bus" in p else None
+        self.bus: BusSpec | None = None
         self.robot_base = tuple(float(v) for v in p.get("robot_base", DEFAULT_ROBOT_BASE))
         if len(self.robot_base) != 4:
             raise ValueError("robot_base needs x, y, z, yaw")
@@ -148,6 +156,7 @@ class PumaDriver(Driver):
         node's event loop, so a 5 ms slice could make it miss cycles on its own.
         """
         self._loop = asyncio.get_running_loop()
+        self.bus = self.load_bus(node.location.path)
         switch = float(self.params.get("switch_interval_s", 0.001))
         if 0 < switch < sys.getswitchinterval():
             sys.setswitchinterval(switch)
@@ -155,6 +164,17 @@ class PumaDriver(Driver):
             await self.ensure_ready()
         except BusError as exc:
             log.warning("PUMA drives not ready yet (%s); actions will retry", exc)
+
+    def load_bus(self, services_path: str | None = None) -> BusSpec:
+        """Read the device file (param ``bus``; relative to services.toml's directory).
+
+        Raises:
+            BusError: the file cannot be read or is wrong (``FILE:LINE: problem``).
+        """
+        try:
+            return load_bus(resolve_device_file(self.bus_file, services_path, "puma.toml"))
+        except DeviceFileError as exc:
+            raise BusError(str(exc)) from exc
 
     async def teardown(self) -> None:
         """Stop the control thread, disable and disconnect the drives, unsubscribe the set points."""
@@ -186,26 +206,33 @@ class PumaDriver(Driver):
         """Make the drives usable, as a CiA 402 master does, before an action moves the arm.
 
         Connected with the control thread running and every drive operation enabled: nothing to
-        do. A drive faulted or not enabled: pause the control thread, reset the fault and enable
-        the drives again (:meth:`PumaDrives.enable`), restart the servo where the arm is. No bus, a
-        lost one (a heartbeat missing) or no control thread: reconnect (waiting up to
-        ``connect_timeout_s`` for the gateway) and enable, which resets faults too.
+        do. A drive faulted, not enabled or no longer operational (another station's NMT command):
+        restart the drives, reset the fault and enable them again (:meth:`PumaDrives.enable`, which
+        NMT-starts them), restart the servo where the arm is. No bus, a lost one (a heartbeat
+        missing) or no control thread: reconnect (waiting up to ``connect_timeout_s`` for the
+        gateway), configure and enable, which resets faults too.
 
         Returns:
             What was recovered, in words (``None`` if nothing was wrong).
 
         Raises:
-            BusError: the bus cannot be opened or the drives cannot be enabled (the message names
-                each drive's state and fault cause).
+            BusError: the bus cannot be opened, the drives cannot be enabled (the message names
+                each drive's state and fault cause), or another master is commanding them.
         """
         drives = self.drives
+        if drives is not None and drives.lost() is None:
+            await asyncio.to_thread(drives.refresh, 0.5)  # judge the drives as they are now
         lost = drives.lost() if drives is not None else "not connected"
         if drives is not None and lost is None and self.fault is None and self._thread is not None \
                 and self._thread.is_alive():
+            if drives.taken_over():
+                raise BusError(drives.trouble() or "another master is commanding the drives")
+            trouble = drives.trouble()
             faults = drives.faults()
-            if not faults and drives.all_enabled():
+            if not faults and trouble is None and drives.all_enabled():
                 return None
-            what = "; ".join(f"drive {n}: {c}" for n, c in sorted(faults.items())) or "drives not enabled"
+            what = ("; ".join(f"drive {n}: {c}" for n, c in sorted(faults.items())) or trouble
+                    or "drives not enabled")
             log.warning("recovering the PUMA drives (%s): fault reset and enable", what)
             await asyncio.to_thread(self._recover_drives)
             return f"fault reset and enable ({what})"
@@ -218,10 +245,10 @@ class PumaDriver(Driver):
         return f"bus reconnected ({why})" if drives is not None else None
 
     def _start_drives(self) -> None:
-        drives = PumaDrives(
-            self.can_host, self.can_port, self.channel, heartbeat_timeout=self.heartbeat_timeout,
-            silence_timeout=self.bus_silence,
-        )
+        if self.bus is None:
+            self.bus = self.load_bus()
+        drives = PumaDrives(self.can_host, self.can_port, heartbeat_timeout=self.heartbeat_timeout,
+                            silence_timeout=self.bus_silence, bus=self.bus)
         drives.open(timeout=self.connect_timeout)
         try:
             drives.start(timeout=self.connect_timeout)

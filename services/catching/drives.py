@@ -1,10 +1,9 @@
 """The PUMA's CAN bus as the motion node sees it: six CiA 402 joint drives and the crossfire module.
 
-The catching testbed's use of the framework's CAN master (:class:`services.devices.drives.CanDrives`):
-the joint drives are nodes 1..6 (:data:`services.devices.cia402.DRIVE_IDS`), in cyclic synchronous
-position mode; the cup's crossfire sensor is an I/O module (node
-:data:`services.devices.cia402.CROSSFIRE_ID`) whose TPDO1 says whether its light beam is
-interrupted. Frame layout and units: :mod:`services.devices.cia402`.
+The catching testbed's use of the framework's CANopen master (:class:`services.devices.drives.CanDrives`):
+the device file (``devices/puma.toml``) names the joint drives (nodes 1..6 in the simulated world, in
+cyclic synchronous position mode) and the cup's crossfire sensor, an I/O module (``[io.crossfire]``,
+a CiA 401 digital input: bit 0 of its first input byte says whether the light beam is interrupted).
 """
 
 from __future__ import annotations
@@ -12,25 +11,32 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
-from services.devices import cia402 as cf
+from services.devices.devicefile import BusSpec
 from services.devices.drives import CanDrives
 
-__all__ = ["CrossfireCallback", "PumaDrives"]
+__all__ = ["CROSSFIRE", "CrossfireCallback", "PumaDrives"]
+
+CROSSFIRE = "crossfire"
+"""Name of the crossfire module's table in the device file (``[io.crossfire]``)."""
 
 CrossfireCallback = Callable[[bool, float], None]
 """Called from the receive thread with the crossfire state (True: beam interrupted) and its bus time, s."""
 
 
 class PumaDrives(CanDrives):
-    """The PUMA's joint drives and crossfire module (arguments as :class:`CanDrives`'s)."""
+    """The PUMA's joint drives and crossfire module (arguments as :class:`CanDrives`'s; the device
+    file must have an ``[io.crossfire]`` table).
 
-    def __init__(self, host: str, port: int, channel: str = "can0", heartbeat_timeout: float = 0.5,
-                 silence_timeout: float = 2.0, clock: Callable[[], float] = time.monotonic) -> None:
-        super().__init__(host, port, channel, heartbeat_timeout, silence_timeout, clock,
-                         nodes=cf.DRIVE_IDS, io_nodes=(cf.CROSSFIRE_ID,))
+    Raises:
+        services.devices.devicefile.DeviceFileError: the device file names no crossfire module.
+    """
+
+    def __init__(self, host: str, port: int, heartbeat_timeout: float = 0.5, silence_timeout: float = 2.0,
+                 clock: Callable[[], float] = time.monotonic, *, bus: BusSpec) -> None:
+        super().__init__(host, port, heartbeat_timeout, silence_timeout, clock, bus=bus)
         self._crossfire: bool | None = None
         self._crossfire_callbacks: list[CrossfireCallback] = []
-        self.on_io(cf.CROSSFIRE_ID, self._crossfire_report)
+        self.on_io(bus.io_node(CROSSFIRE).node_id, self._crossfire_report)
 
     @property
     def crossfire(self) -> bool | None:
@@ -42,6 +48,8 @@ class PumaDrives(CanDrives):
         self._crossfire_callbacks.append(callback)
 
     def _crossfire_report(self, data: bytes, t: float) -> None:
-        self._crossfire = cf.decode_crossfire(data)
+        if not data:
+            return
+        self._crossfire = bool(data[0] & 0x01)
         for cb in list(self._crossfire_callbacks):
             cb(self._crossfire, t)

@@ -1,90 +1,84 @@
-"""CAN frames of the robot drives (CiA 301/402 style): identifiers, payloads, the drive state machine.
+"""CiA 301/402 vocabulary of the robot drives: identifiers, objects, NMT, EMCY, the drive state machine.
 
-Pure (no sockets, no clocks): the motion node's CAN master (:mod:`services.devices.drives`) encodes and
-decodes these frames on a real or simulated bus; the simulated drives (:mod:`sim.drives`) use the
-same codec and state machine, so the two can never disagree. Tested without I/O.
+Pure (no sockets, no clocks). The CAN master of the motion and drive nodes
+(:mod:`services.devices.drives`, on the ``canopen`` library) and the simulated drives
+(:mod:`sim.drives`, ``canopen`` local nodes) share these names and, on the drive side, the power state
+machine; what each PDO carries is not fixed here but read from the object dictionaries (EDS files in
+``devices/``) and the device files (:mod:`services.devices.devicefile`), and packed by
+:mod:`services.devices.pdo`. Tested without I/O.
 
 Bus layout (11-bit identifiers, CANopen pre-defined connection set):
 
 =========  ==============  ===============================================================
 COB-ID     direction       payload
 =========  ==============  ===============================================================
-0x000      master -> all   NMT: ``[command, node]`` (0x01 start, 0x80 pre-operational,
-                           0x81 reset node; node 0 = all)
-0x080      sim -> all      SYNC, no data, every 2 ms of simulated time (the sim is the
-                           SYNC producer so that its clock paces the bus in both lock-step
-                           and real-time modes)
-0x200+id   master -> id    RPDO1: controlword uint16 LE, target position int32 LE
-0x180+id   id -> master    TPDO1: statusword uint16 LE, actual position int32 LE; sent by
-                           each drive right after every SYNC while operational
-0x190      crossfire       TPDO1 of the crossfire I/O module (node 0x10): 1 byte, bit 0 =
-                           beam interrupted; sent on change and on NMT start
-0x700+id   id -> master    heartbeat: 1 byte NMT state (0x00 boot-up, 0x05 operational,
-                           0x7F pre-operational), every 100 ms of simulated time
-0x77F      master -> all   the master's own heartbeat (node :data:`MASTER_ID`), every 100 ms of
-                           bus time while it commands the drives; the drives consume it
-0x080+id   id -> master    EMCY (CiA 301 emergency): error code uint16 LE, error register
-                           uint8, 5 bytes zero; sent when a drive faults (code 0x0000 when
-                           a fault reset clears it)
+0x000      master -> all   NMT: ``[command, node]`` (0x01 start, 0x02 stop, 0x80 pre-operational,
+                           0x81 reset node, 0x82 reset communication; node 0 = all)
+0x080      producer        SYNC, no data (the simulated world produces it, every 2 ms of simulated
+                           time on the PUMA's bus and 8 ms on the wheels': its clock paces the bus
+                           in both lock-step and real-time modes; a device file may make the master
+                           the producer)
+0x080+id   id -> master    EMCY (CiA 301 emergency): error code uint16 LE, error register uint8, 5
+                           bytes zero; sent when a drive faults (code 0x0000 when a fault reset
+                           clears it)
+0x180+id   id -> master    TPDO1 (0x280+id TPDO2, ...): what the drive's mapping (0x1A00..) says,
+0x200+id   master -> id    RPDO1 (0x300+id RPDO2, ...): what its mapping (0x1600..) says
+0x580+id   id -> master    SDO responses (canopen's SDO server on the simulated drives)
+0x600+id   master -> id    SDO requests: the master configures each drive at start-up
+0x700+id   id -> master    heartbeat: 1 byte NMT state (0x00 boot-up, 0x04 stopped, 0x05 operational,
+                           0x7F pre-operational), every 0x1017 ms of bus time
+0x77F      master -> all   the master's own heartbeat (node :data:`MASTER_ID`), watched by the drives
+                           through their consumer heartbeat time 0x1016
 =========  ==============  ===============================================================
 
-Drive node ids 1..6 are joints 1..6. Positions on the bus are int32 in units of 1e-5 rad
-(:data:`POSITION_UNIT`; range +-21474 rad), the drive's user-unit scaling. A target received in an
-RPDO is latched at the next SYNC and interpolated linearly over the following 2 ms cycle.
+Default PDOs of the drives' EDS files: RPDO1 = controlword 0x6040 + target position 0x607A (the
+PUMA's joints, cyclic synchronous position) or target velocity 0x60FF (the wheels, profile
+velocity); TPDO1 = statusword 0x6041 + position actual value 0x6064; the wheels' TPDO2 = velocity
+actual value 0x606C + torque actual value 0x6077; the crossfire module's TPDO1 = digital inputs
+0x6000:01, on change. A device file may map them otherwise (the master writes the mappings over SDO
+at start-up).
 
-CiA 402 power state machine (minimal subset, statusword values with the "remote" bit clear):
+CiA 402 power state machine (statusword values with the "remote" bit clear):
 ``SWITCH_ON_DISABLED (0x0040) -shutdown 0x06-> READY_TO_SWITCH_ON (0x0021) -switch on 0x07->
 SWITCHED_ON (0x0023) -enable operation 0x0F-> OPERATION_ENABLED (0x0027)``; ``disable voltage
-(0x00)`` returns to SWITCH_ON_DISABLED. A fault (following error, no target from the master for
-:data:`TARGET_TIMEOUT_CYCLES` cycles, the master's heartbeat lost) starts the fault reaction: FAULT
-REACTION ACTIVE (0x000F) while the drive brings its joint to rest on a quick-stop ramp, then FAULT
-(0x0008), where it holds; the EMCY frame says why (:class:`EmcyCode`). A rising edge of controlword
-bit 7 (fault reset, 0x80) leaves FAULT for SWITCH_ON_DISABLED; a reset during the fault reaction is
-ignored. A CiA 402 master therefore recovers a faulted drive by waiting for FAULT, then sending
-``0x00`` (bit 7 low), ``0x80`` (the edge), and the enable sequence again.
+(0x00)`` returns to SWITCH_ON_DISABLED. A fault (following error, no target from the master within
+the RPDO deadline, the master's heartbeat lost) starts the fault reaction: FAULT REACTION ACTIVE
+(0x000F) while the drive brings its axis to rest on a quick-stop ramp, then FAULT (0x0008), where it
+holds; the EMCY frame says why (:class:`EmcyCode`). A rising edge of controlword bit 7 (fault reset,
+0x80) leaves FAULT for SWITCH_ON_DISABLED; a reset during the fault reaction is ignored. A CiA 402
+master therefore recovers a faulted drive by waiting for FAULT, then sending ``0x00`` (bit 7 low),
+``0x80`` (the edge), and the enable sequence again.
 
-Profile velocity mode (modes of operation 0x6060 = 3; the mobile robot's wheel drives, node ids
-1 = left, 2 = right): RPDO1 maps the controlword and the **target velocity** (0x60FF) instead of
-a target position, int32 LE in units of :data:`VELOCITY_UNIT` (1e-4 rad/s); TPDO1 keeps the
-statusword and the **position actual value** (0x6064, 1e-5 rad); **TPDO2** (0x280+id) carries the
-**velocity actual value** (0x606C, int32 LE, 1e-4 rad/s) and the torque actual value (0x6077,
-int16 LE, mN m), after every SYNC while operational. A target velocity holds until the next one
-(no interpolation); a drive that gets no RPDO for its RPDO timeout faults and brakes the wheel to
-rest on its quick-stop ramp (:mod:`sim.mobile.candrives`).
-
-Cyclic synchronous position (CSP) targets: a drive that gets no new target at a SYNC keeps moving
-at its last demand velocity (extrapolation), for at most :data:`TARGET_TIMEOUT_CYCLES` cycles in a
-row; then it faults with :attr:`EmcyCode.RPDO_TIMEOUT` and stops on the ramp. A master that falls
-behind therefore steps its trajectory by the number of cycles that passed (at most that many), so
-that its next target continues where the drive's extrapolation has taken the joint.
+Cyclic synchronous position (CSP) targets: a target received in an RPDO is latched at the next SYNC
+and interpolated linearly over the following cycle. A drive that gets no new target at a SYNC keeps
+moving at its last demand velocity (extrapolation), for at most its RPDO deadline; then it faults
+with :attr:`EmcyCode.RPDO_TIMEOUT` and stops on the ramp. A master that falls behind therefore steps
+its trajectory by the number of cycles that passed, so that its next target continues where the
+drive's extrapolation has taken the joint. In profile velocity mode a target velocity holds until
+the next one.
 """
 
 from __future__ import annotations
 
 import enum
-import math
 import struct
 from dataclasses import dataclass, field
 
 from services.errors import PetrobotError
 
 __all__ = [
-    "CONSUMER_HEARTBEAT_S",
     "CROSSFIRE_ID",
     "CYCLE_S",
     "DRIVE_IDS",
     "EMCY_BASE",
     "HEARTBEAT_BASE",
-    "HEARTBEAT_PERIOD_S",
     "MASTER_ID",
     "NMT_ID",
-    "POSITION_UNIT",
+    "OBJECTS",
     "RPDO1_BASE",
     "SYNC_ID",
     "TARGET_TIMEOUT_CYCLES",
     "TPDO1_BASE",
-    "TPDO2_BASE",
-    "VELOCITY_UNIT",
     "WHEEL_IDS",
     "CanFrame",
     "Cia402StateMachine",
@@ -94,51 +88,51 @@ __all__ = [
     "FrameError",
     "NmtCommand",
     "NmtState",
-    "decode_crossfire",
     "decode_emcy",
     "decode_heartbeat",
-    "decode_rpdo1",
-    "decode_tpdo1",
-    "decode_tpdo2",
-    "decode_velocity_rpdo1",
-    "encode_crossfire",
     "encode_emcy",
     "encode_heartbeat",
-    "encode_rpdo1",
-    "encode_tpdo1",
-    "encode_tpdo2",
-    "encode_velocity_rpdo1",
     "nmt_frame",
-    "rad_to_units",
     "state_from_statusword",
     "statusword",
-    "units_to_rad",
 ]
 
 NMT_ID = 0x000
 SYNC_ID = 0x080
-RPDO1_BASE = 0x200
-TPDO1_BASE = 0x180
-TPDO2_BASE = 0x280
+RPDO1_BASE = 0x200  # + node id; RPDO2 0x300, RPDO3 0x400, RPDO4 0x500
+TPDO1_BASE = 0x180  # + node id; TPDO2 0x280, TPDO3 0x380, TPDO4 0x480
 HEARTBEAT_BASE = 0x700
 EMCY_BASE = 0x080  # + node id (1..127); 0x080 itself is SYNC
 DRIVE_IDS = (1, 2, 3, 4, 5, 6)
+"""Node ids of the PUMA's joint drives (joints 1..6) in the simulated world."""
 CROSSFIRE_ID = 0x10
+"""Node id of the PUMA's crossfire I/O module in the simulated world."""
 MASTER_ID = 0x7F
-"""Node id of the motion node's CAN master (its heartbeat is 0x77F)."""
-POSITION_UNIT = 1e-5  # rad per bus unit
-VELOCITY_UNIT = 1e-4  # rad/s per bus unit (profile velocity mode: 0x60FF, 0x606C)
+"""Node id of the motion and drive nodes' CAN master (its heartbeat is 0x77F) in the project's device files."""
 WHEEL_IDS = (1, 2)
 """Node ids of the mobile robot's wheel drives: 1 = left, 2 = right."""
 CYCLE_S = 0.002
-HEARTBEAT_PERIOD_S = 0.1
+"""SYNC period of the PUMA's bus, s of simulated time."""
 TARGET_TIMEOUT_CYCLES = 25
-"""SYNC cycles in a row a drive extrapolates a missing target before it faults (50 ms)."""
-CONSUMER_HEARTBEAT_S = 0.35
-"""Heartbeat consumer time of the drives for the master's heartbeat, s of bus time (CiA 301
-object 0x1016: 3.5 periods of the master's 100 ms heartbeat)."""
+"""SYNC cycles in a row a PUMA joint drive extrapolates a missing target before it faults (its RPDO
+deadline, 50 ms, over the 2 ms cycle)."""
 
-_INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
+OBJECTS: dict[str, tuple[int, int]] = {
+    "error_code": (0x603F, 0),
+    "controlword": (0x6040, 0),
+    "statusword": (0x6041, 0),
+    "modes_of_operation": (0x6060, 0),
+    "modes_of_operation_display": (0x6061, 0),
+    "position_demand_value": (0x6062, 0),
+    "position_actual_value": (0x6064, 0),
+    "velocity_demand_value": (0x606B, 0),
+    "velocity_actual_value": (0x606C, 0),
+    "torque_actual_value": (0x6077, 0),
+    "target_position": (0x607A, 0),
+    "target_velocity": (0x60FF, 0),
+    "digital_inputs": (0x6000, 1),
+}
+"""CiA 402 (and CiA 401) objects by the names device files use: ``(index, subindex)``."""
 
 
 class FrameError(PetrobotError, ValueError):
@@ -161,6 +155,7 @@ class NmtCommand(enum.IntEnum):
     STOP = 0x02
     PRE_OPERATIONAL = 0x80
     RESET_NODE = 0x81
+    RESET_COMMUNICATION = 0x82
 
 
 class Controlword(enum.IntEnum):
@@ -174,12 +169,15 @@ class Controlword(enum.IntEnum):
 
 
 class DriveState(enum.Enum):
-    """CiA 402 power states (minimal subset)."""
+    """CiA 402 power states (the simulated drives use all but NOT READY TO SWITCH ON and QUICK STOP
+    ACTIVE, which a real drive may report)."""
 
+    NOT_READY_TO_SWITCH_ON = "not ready to switch on"
     SWITCH_ON_DISABLED = "switch on disabled"
     READY_TO_SWITCH_ON = "ready to switch on"
     SWITCHED_ON = "switched on"
     OPERATION_ENABLED = "operation enabled"
+    QUICK_STOP_ACTIVE = "quick stop active"
     FAULT_REACTION_ACTIVE = "fault reaction active"
     FAULT = "fault"
 
@@ -210,15 +208,15 @@ _EMCY_TEXT = {
 }
 
 _STATUSWORDS = {
+    DriveState.NOT_READY_TO_SWITCH_ON: 0x0000,
     DriveState.SWITCH_ON_DISABLED: 0x0040,
     DriveState.READY_TO_SWITCH_ON: 0x0021,
     DriveState.SWITCHED_ON: 0x0023,
     DriveState.OPERATION_ENABLED: 0x0027,
+    DriveState.QUICK_STOP_ACTIVE: 0x0007,
     DriveState.FAULT_REACTION_ACTIVE: 0x000F,
     DriveState.FAULT: 0x0008,
 }
-# Masks as in CiA 402: bits 0-3, 5, 6 identify the state.
-_STATE_MASK = 0x006F
 _FOLLOWING_ERROR_BIT = 0x2000  # statusword bit 13 (in position modes: following error)
 
 
@@ -243,107 +241,6 @@ class CanFrame:
             raise FrameError(f"CAN frame with {len(self.data)} data bytes (max 8)")
 
 
-def rad_to_units(q: float) -> int:
-    """Radians to bus position units (1e-5 rad), rounded.
-
-    Raises:
-        FrameError: the value does not fit an int32.
-    """
-    units = round(q / POSITION_UNIT)
-    if not _INT32_MIN <= units <= _INT32_MAX:
-        raise FrameError(f"position {q} rad does not fit an int32 of 1e-5 rad")
-    return int(units)
-
-
-def units_to_rad(units: int) -> float:
-    """Bus position units (1e-5 rad) to radians."""
-    return units * POSITION_UNIT
-
-
-def encode_rpdo1(node: int, controlword: int, target_rad: float) -> CanFrame:
-    """RPDO1 to a drive: controlword (uint16 LE) and target position (int32 LE, 1e-5 rad)."""
-    return CanFrame(RPDO1_BASE + node, struct.pack("<Hi", controlword & 0xFFFF, rad_to_units(target_rad)))
-
-
-def decode_rpdo1(data: bytes) -> tuple[int, float]:
-    """Inverse of :func:`encode_rpdo1`: ``(controlword, target_rad)``.
-
-    Raises:
-        FrameError: wrong length.
-    """
-    if len(data) != 6:
-        raise FrameError(f"RPDO1 needs 6 bytes, got {len(data)}")
-    cw, units = struct.unpack("<Hi", data)
-    return int(cw), units_to_rad(units)
-
-
-def encode_tpdo1(node: int, status: int, actual_rad: float, t: float = 0.0) -> CanFrame:
-    """TPDO1 from a drive: statusword (uint16 LE) and actual position (int32 LE, 1e-5 rad)."""
-    return CanFrame(TPDO1_BASE + node, struct.pack("<Hi", status & 0xFFFF, rad_to_units(actual_rad)), t)
-
-
-def decode_tpdo1(data: bytes) -> tuple[int, float]:
-    """Inverse of :func:`encode_tpdo1`: ``(statusword, actual_rad)``.
-
-    Raises:
-        FrameError: wrong length.
-    """
-    if len(data) != 6:
-        raise FrameError(f"TPDO1 needs 6 bytes, got {len(data)}")
-    sw, units = struct.unpack("<Hi", data)
-    return int(sw), units_to_rad(units)
-
-
-def _velocity_units(v: float) -> int:
-    if not math.isfinite(v):
-        raise FrameError(f"velocity {v} is not a finite number")
-    units = round(v / VELOCITY_UNIT)
-    if not _INT32_MIN <= units <= _INT32_MAX:
-        raise FrameError(f"velocity {v} rad/s does not fit an int32 of 1e-4 rad/s")
-    return int(units)
-
-
-def encode_velocity_rpdo1(node: int, controlword: int, target_velocity: float) -> CanFrame:
-    """RPDO1 of a drive in profile velocity mode: controlword (uint16 LE) and target velocity
-    0x60FF (int32 LE, 1e-4 rad/s).
-
-    Raises:
-        FrameError: the velocity is not finite or does not fit.
-    """
-    return CanFrame(RPDO1_BASE + node, struct.pack("<Hi", controlword & 0xFFFF, _velocity_units(target_velocity)))
-
-
-def decode_velocity_rpdo1(data: bytes) -> tuple[int, float]:
-    """Inverse of :func:`encode_velocity_rpdo1`: ``(controlword, target velocity rad/s)``.
-
-    Raises:
-        FrameError: wrong length.
-    """
-    if len(data) != 6:
-        raise FrameError(f"RPDO1 needs 6 bytes, got {len(data)}")
-    cw, units = struct.unpack("<Hi", data)
-    return int(cw), units * VELOCITY_UNIT
-
-
-def encode_tpdo2(node: int, velocity: float, torque: float, t: float = 0.0) -> CanFrame:
-    """TPDO2 of a velocity-mode drive: velocity actual 0x606C (int32 LE, 1e-4 rad/s) and torque
-    actual 0x6077 (int16 LE, mN m, saturated)."""
-    mnm = max(-32768, min(32767, round(torque * 1000.0))) if math.isfinite(torque) else 0
-    return CanFrame(TPDO2_BASE + node, struct.pack("<ih", _velocity_units(velocity), mnm), t)
-
-
-def decode_tpdo2(data: bytes) -> tuple[float, float]:
-    """Inverse of :func:`encode_tpdo2`: ``(velocity rad/s, torque N m)``.
-
-    Raises:
-        FrameError: wrong length.
-    """
-    if len(data) != 6:
-        raise FrameError(f"TPDO2 needs 6 bytes, got {len(data)}")
-    units, mnm = struct.unpack("<ih", data)
-    return units * VELOCITY_UNIT, mnm / 1000.0
-
-
 def encode_heartbeat(node: int, state: NmtState, t: float = 0.0) -> CanFrame:
     """Heartbeat (0x700 + node) carrying the NMT state."""
     return CanFrame(HEARTBEAT_BASE + node, bytes([int(state)]), t)
@@ -361,22 +258,6 @@ def decode_heartbeat(data: bytes) -> NmtState:
         return NmtState(data[0] & 0x7F)  # bit 7 is the node-guarding toggle bit
     except ValueError as exc:
         raise FrameError(f"unknown NMT state {data[0]:#x}") from exc
-
-
-def encode_crossfire(blocked: bool, t: float = 0.0) -> CanFrame:
-    """TPDO1 of the crossfire I/O module: bit 0 set when the light beam is interrupted."""
-    return CanFrame(TPDO1_BASE + CROSSFIRE_ID, bytes([1 if blocked else 0]), t)
-
-
-def decode_crossfire(data: bytes) -> bool:
-    """Beam state from a crossfire TPDO payload.
-
-    Raises:
-        FrameError: wrong length.
-    """
-    if len(data) != 1:
-        raise FrameError(f"crossfire TPDO needs 1 byte, got {len(data)}")
-    return bool(data[0] & 0x01)
 
 
 def encode_emcy(node: int, code: int, register: int = 0, t: float = 0.0) -> CanFrame:
@@ -409,19 +290,28 @@ def statusword(state: DriveState, following_error: bool = False) -> int:
 
 
 def state_from_statusword(sw: int) -> DriveState:
-    """Power state from a statusword.
+    """Power state from a statusword (the masks of CiA 402's statusword table: bits 0-3 and 6, and
+    bit 5 for the states where quick stop tells them apart).
 
     Raises:
-        FrameError: the statusword does not encode a state of the subset.
+        FrameError: the statusword encodes no CiA 402 state.
     """
-    if sw & 0x004F == 0x0008:
-        return DriveState.FAULT
-    if sw & 0x004F == 0x000F:
-        return DriveState.FAULT_REACTION_ACTIVE
-    for state, value in _STATUSWORDS.items():
-        if sw & _STATE_MASK == value:
+    for state, (mask, value) in _STATE_BITS.items():
+        if sw & mask == value:
             return state
-    raise FrameError(f"statusword {sw:#06x} encodes no supported CiA 402 state")
+    raise FrameError(f"statusword {sw:#06x} encodes no CiA 402 state")
+
+
+_STATE_BITS = {
+    DriveState.NOT_READY_TO_SWITCH_ON: (0x004F, 0x0000),
+    DriveState.SWITCH_ON_DISABLED: (0x004F, 0x0040),
+    DriveState.READY_TO_SWITCH_ON: (0x006F, 0x0021),
+    DriveState.SWITCHED_ON: (0x006F, 0x0023),
+    DriveState.OPERATION_ENABLED: (0x006F, 0x0027),
+    DriveState.QUICK_STOP_ACTIVE: (0x006F, 0x0007),
+    DriveState.FAULT_REACTION_ACTIVE: (0x004F, 0x000F),
+    DriveState.FAULT: (0x004F, 0x0008),
+}
 
 
 @dataclass

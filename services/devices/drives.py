@@ -1,156 +1,263 @@
-"""The master of CiA 402 drives on a CAN bus, as a node's driver sees them (position or velocity mode).
+"""The CANopen master of CiA 402 drives on a CAN bus, as a node's driver sees them (position or velocity mode).
 
-The framework's generic device link to drives: a testbed's driver says which node ids its drives
-and I/O modules have (the PUMA's six joint drives and its crossfire module:
-:class:`services.catching.drives.PumaDrives`; the mobile robot's two wheel drives in profile
-velocity mode: :class:`VelocityCanDrives` with the wheels' ids), and the master does the rest. A
-real bus or another CAN stack replaces this module, not the testbeds' drivers.
+The framework's generic device link to drives, on the ``canopen`` library (over python-can): a
+testbed's driver gives the bus's device file (:mod:`services.devices.devicefile`: per drive its node
+id, EDS or DCF file, mode of operation, unit scaling, heartbeat and deadline times, PDO mappings) and
+the master does the rest. Each drive and I/O module is a :class:`canopen.RemoteNode` made from its
+EDS file on a :class:`canopen.Network`, and the master uses canopen for
 
-Talks to the bus through python-can's ``socketcand`` interface (the sim's gateway in
-:class:`sim.socketcand.CanGateway`, or any socketcand server); on real hardware the same frames would go through
-``interface="socketcan"``. Frame layout and units: :mod:`services.devices.cia402`.
+* NMT (pre-operational for the configuration, start, and the state each node's heartbeat reports:
+  canopen's NMT master per node, its heartbeat consumer);
+* SDO: at start-up it configures every drive as a real one is configured: heartbeat producer time
+  0x1017, consumer heartbeat time 0x1016 (the drive watches the master's heartbeat), mode of
+  operation 0x6060 (checked against 0x6502 and read back from 0x6061), the PDO mappings of the
+  device file (or of the EDS file, or read from the drive) written with canopen's PDO objects, the
+  RPDO deadline (event timer 0x1400:05), and the mappings read back over SDO;
+* PDOs: canopen's PDO maps receive the drives' TPDOs (their callbacks hand the data on); the
+  cyclic RPDOs are sent through canopen's network;
+* EMCY: canopen's EMCY consumer per node, whose codes say why a drive faulted;
+* SYNC: the consumer of another station's SYNC (the simulated world's), or its producer
+  (canopen's SYNC producer, once per cycle of :meth:`CanDrives.wait_sync`), as the device file says.
 
-A receive thread keeps the latest actual positions and statuswords (TPDO1), heartbeat times,
-the drives' emergency messages (EMCY), the I/O modules' reports (handed to :meth:`CanDrives.on_io`
-callbacks) and the latest SYNC; :meth:`CanDrives.wait_sync` lets a control loop run once per bus
-cycle. Supervision, on
-two clocks: a node whose latest heartbeat is older than ``heartbeat_timeout`` seconds of *bus* time
-(the time the SYNCs carry: a node gone silent on a live bus), a bus on which nothing at all arrived
-for ``silence_timeout`` seconds of *wall* time (the bus, or the simulation behind it, stopped), or a
-closed connection, makes :meth:`CanDrives.check` raise :class:`BusError`; so does a drive in
-FAULT, naming the cause its EMCY gave. (A simulation slowed down by a loaded machine delivers its
-heartbeats further apart in wall time without anything being lost; judged on the wall clock alone,
-0.5 s, that stall failed catches of the demo.) The master produces its own heartbeat (node
-:data:`services.devices.cia402.MASTER_ID`, every 100 ms of bus time while it sends targets), which
-the drives consume. :meth:`CanDrives.enable` is also the CiA 402 fault recovery: it waits out a
-running fault reaction, resets the fault (controlword 0x00, then the rising edge 0x80) and walks
-every drive to OPERATION_ENABLED again.
+The CiA 402 power state machine is ours over those objects (the statusword decoded by
+:func:`services.devices.cia402.state_from_statusword`, the controlword sent in the same RPDO as the
+cyclic target), not canopen's :class:`canopen.profiles.p402.BaseNode402`, whose ``state`` setter
+walks one drive at a time with fixed wall-clock timeouts (0.4-0.8 s, more than a loaded machine's
+simulation may take), sends the controlword alone (a CSP drive needs a target in every cycle's RPDO,
+and a synchronous RPDO it does not send at all), whose fault reset waits for a fault to clear before
+the rising edge of bit 7 that clears it has been sent (its own FIXME: it always runs into its
+timeout), and whose TPDO cache decodes every object of every TPDO through the object dictionary (about
+10 µs per PDO, 60 ms of CPU per second with six drives at 500 SYNCs/s). The PDO data of the cyclic
+path are packed and read with layouts compiled from canopen's PDO maps
+(:class:`services.devices.pdo.PdoLayout`, one struct call per PDO).
+
+Talks to the bus through python-can: ``interface = "socketcand"`` (the simulated world's gateway,
+:class:`sim.socketcand.CanGateway`, or a socketcand daemon beside a real bus) at ``host:port``, or any
+other python-can interface the device file names (``"socketcan"`` on a host with a CAN interface).
+
+Supervision, on two clocks: a node whose latest heartbeat is older than ``heartbeat_timeout`` seconds
+of *bus* time (the time the frames carry: a node gone silent on a live bus), a bus on which nothing
+at all arrived for ``silence_timeout`` seconds of *wall* time (the bus, or the simulation behind it,
+stopped), or a closed connection, makes :meth:`CanDrives.check` raise :class:`BusError` (and
+:meth:`CanDrives.lost` say why); so does a drive in FAULT, naming the cause its EMCY gave. (A
+simulation slowed down by a loaded machine delivers its heartbeats further apart in wall time without
+anything being lost; judged on the wall clock alone, 0.5 s, that stall failed catches of the demo.)
+
+A CAN bus has no keys: any station may send anything. The master cannot prevent another station from
+taking its drives over, but it sees it, and :meth:`CanDrives.trouble` (and so :meth:`CanDrives.check`)
+says so at once: an NMT command on the bus (the master never receives its own frames, so any NMT frame
+it sees is another station's), an RPDO to one of its drives that it did not send (a second master),
+a drive whose heartbeat reports it left OPERATIONAL (stopped, pre-operational, reset), a drive whose
+TPDOs stopped while SYNCs go on, and, where a drive's TPDO echoes its target (0x607A or 0x60FF
+mapped), a target the master did not send. The master produces its own heartbeat (every
+``master_heartbeat_ms`` of bus time while it sends targets), which the drives consume.
+:meth:`CanDrives.enable` is also the CiA 402 fault recovery: it waits out a running fault reaction,
+resets the fault (controlword 0x00, then the rising edge 0x80) and walks every drive to
+OPERATION_ENABLED again.
 """
 
 from __future__ import annotations
 
+import collections
+import functools
 import logging
+import math
+import socket
 import threading
 import time
 from collections.abc import Callable, Sequence
-from typing import Self
+from dataclasses import dataclass, field
+from typing import Any, Self
 
 import can
+import canopen
 import numpy as np
+from canopen.sdo import SdoAbortedError, SdoCommunicationError
 from numpy.typing import NDArray
 
 from services.devices import cia402 as cf
+from services.devices.devicefile import MODES, BusSpec, DriveSpec, IoSpec
+from services.devices.pdo import PdoLayout, PdoLayoutError
 from services.errors import ActionError
 
 __all__ = ["BusError", "CanDrives", "IoCallback", "VelocityCanDrives"]
 
+log = logging.getLogger(__name__)
+
 # python-can's socketcand client logs every TCP read that splits a frame message as a warning;
 # that is ordinary stream fragmentation, not a fault.
 logging.getLogger("can.interfaces.socketcand.socketcand").setLevel(logging.ERROR)
+# canopen logs every SDO transfer and every PDO map entry at INFO: the configuration of six drives would be
+# hundreds of lines in a node's log; this module says what matters itself.
+logging.getLogger("canopen").setLevel(logging.WARNING)
+
+_SUPPORTED_MODE_BITS = {1: 0x01, 3: 0x04, 8: 0x80, 9: 0x100, 10: 0x200}
+_POSITION_MODES = ("csp", "pp")
+_NMT_NAMES = {0x01: "start", 0x02: "stop", 0x80: "enter pre-operational", 0x81: "reset node",
+              0x82: "reset communication"}
+_TPDO_STALE_CYCLES = 10
+"""SYNCs in a row without a drive's TPDO after which it counts as silent (its synchronous TPDOs stopped)."""
+_FOREIGN_HOLD_S = 1.0
+"""A second master's RPDOs keep the drives in trouble until none came for this long, s (wall)."""
 
 
 class BusError(ActionError):
-    """The CAN bus or a drive is unusable: connection lost, heartbeat missing, drive fault."""
+    """The CAN bus or a drive is unusable: connection lost, heartbeat missing, drive fault, a drive
+    taken over by another station."""
 
 
 IoCallback = Callable[[bytes, float], None]
-"""Called from the receive thread with an I/O module's TPDO1 data and its bus time, s."""
+"""Called from the receive thread with an I/O module's TPDO data and its bus time, s."""
+
+
+@dataclass(eq=False)
+class _Drive:
+    """What the master knows of one drive."""
+
+    spec: DriveSpec
+    node: Any  # canopen.RemoteNode
+    rpdos: list[tuple[int, PdoLayout]] = field(default_factory=list)  # the cyclic RPDOs: (COB-ID, layout)
+    target_index: int = 0x607A
+    statusword: int = 0
+    position: float = math.nan
+    velocity: float = math.nan
+    seen: bool = False  # a TPDO with the statusword arrived
+    tpdo_sync: int = 0  # SYNC count at the latest TPDO
+    nmt: cf.NmtState | None = None
+    nmt_t: float = math.nan  # bus time of the latest heartbeat
+    emcy: tuple[int, float] | None = None
+    sent: collections.deque[int] = field(default_factory=lambda: collections.deque(maxlen=8))
+    wrong_target: str | None = None
 
 
 class CanDrives:
-    """CiA 402 drives in cyclic synchronous position mode as seen from a node (the master).
+    """CiA 402 drives as seen from a node (the CANopen master), in the modes their device file gives.
 
-    Lifecycle: ``CanDrives(host, port, nodes=...)`` only configures; :meth:`open` connects (or use it
-    as a context manager); :meth:`enable` brings every drive to OPERATION_ENABLED;
-    :meth:`send_targets` once per cycle; :meth:`close` disables and disconnects.
+    Lifecycle: ``CanDrives(host, port, bus=spec)`` only configures; :meth:`open` connects (or use it as
+    a context manager); :meth:`start` configures the drives over SDO (once per connection) and starts
+    them; :meth:`enable` brings every drive to OPERATION_ENABLED; :meth:`send_targets` once per cycle;
+    :meth:`close` disables and disconnects.
 
     Args:
-        host, port: the socketcand server (the sim's CAN gateway).
-        channel: bus name on the server.
+        host, port: the socketcand server (the sim's CAN gateway), for ``interface = "socketcand"``.
         heartbeat_timeout: seconds of bus time without a heartbeat after which a node counts as lost.
         silence_timeout: seconds of wall time without any frame after which the bus counts as lost.
         clock: monotonic clock for supervision (seconds).
-        nodes: node ids of the drives, 1..n in order.
-        io_nodes: node ids of the other modules on the bus (I/O), whose heartbeats are supervised
-            too and whose TPDO1 reports go to :meth:`on_io` callbacks.
+        bus: the device file's bus: drives (in order) and I/O modules (whose heartbeats are supervised
+            too and whose TPDO reports go to :meth:`on_io` callbacks).
     """
 
     def __init__(
         self,
         host: str,
         port: int,
-        channel: str = "can0",
         heartbeat_timeout: float = 0.5,
         silence_timeout: float = 2.0,
         clock: Callable[[], float] = time.monotonic,
         *,
-        nodes: tuple[int, ...],
-        io_nodes: tuple[int, ...] = (),
+        bus: BusSpec,
     ) -> None:
-        self.nodes = tuple(nodes)
-        self.io_nodes = tuple(io_nodes)
+        self.spec = bus
+        self.nodes = bus.node_ids
+        self.io_nodes = tuple(io.node_id for io in bus.io)
         self.host = host
         self.port = port
-        self.channel = channel
+        self.channel = bus.channel
         self.heartbeat_timeout = heartbeat_timeout
         self.silence_timeout = silence_timeout
-        self._last_rx = 0.0
         self._clock = clock
-        self._bus: can.BusABC | None = None
-        self._thread: threading.Thread | None = None
-        self._stop = threading.Event()
+        self._network: canopen.Network | None = None
+        self._drives: list[_Drive] = []
+        self._io_specs: tuple[IoSpec, ...] = bus.io
+        self._io_nodes: dict[int, Any] = {}
+        self._io: dict[int, list[IoCallback]] = {node: [] for node in self.io_nodes}
+        self._io_state: dict[int, tuple[float, cf.NmtState]] = {}
         self._cond = threading.Condition()
-        n = len(self.nodes)
-        self._positions = np.full(n, np.nan)
-        self._velocities = np.full(n, np.nan)
-        self._statuswords = [0] * n
-        self._tpdo_seen = [False] * n
-        self._heartbeats: dict[int, tuple[float, cf.NmtState]] = {}  # node -> (bus time, state)
+        self._last_rx = 0.0
+        self._bus_now = math.nan  # bus time of the latest frame
         self._sync_count = 0
         self._sync_returned = 0
-        self._sync_t = float("nan")
-        self._io: dict[int, list[IoCallback]] = {node: [] for node in self.io_nodes}
-        self._emcy: dict[int, tuple[int, float]] = {}
+        self._sync_t = math.nan
+        self.sync_arrived: float | None = None
+        """Monotonic time at which the latest SYNC arrived (or was produced)."""
+        self._stop_sync = threading.Event()
+        self._sync_thread: threading.Thread | None = None
         self._expect_enabled = False
-        self._heartbeat_sent_t = -float("inf")
+        self._expect_operational = False
+        self._configured = False
+        self._heartbeat_sent_t = -math.inf
         self._dead: str | None = None
         self._opened_at = 0.0
-        self._send_lock = threading.Lock()
+        self._foreign: str | None = None  # another station's NMT command or RPDOs, in words
+        self._foreign_t = -math.inf  # wall time it was last seen
+        self._foreign_rpdo = False
 
     # --- connection ------------------------------------------------------------------------------
 
     def open(self, timeout: float = 5.0) -> Self:
-        """Connect to the bus and start the receive thread.
+        """Connect to the bus, make the nodes from their EDS files and start receiving.
 
         Raises:
-            BusError: the server cannot be reached or refuses the bus within ``timeout``.
+            BusError: the server cannot be reached or refuses the bus within ``timeout``, or an EDS
+                file cannot be read.
         """
         try:
-            self._bus = _connect(self.host, self.port, self.channel, timeout)
+            raw = _connect(self.spec, self.host, self.port, timeout)
         except (OSError, can.CanError, TimeoutError, BusError) as exc:
             raise BusError(f"cannot open CAN bus {self.channel} at {self.host}:{self.port}: {exc}") from exc
+        network = canopen.Network(raw)
+        network.NOTIFIER_CYCLE = 0.05  # type: ignore[misc]  # close() waits at most this long for the receive thread
+        network.listeners.append(_Watch(self))
+        try:
+            for spec in self.spec.drives:
+                node = canopen.RemoteNode(spec.node_id, canopen.import_od(spec.eds, spec.node_id))
+                network.add_node(node)
+                node.sdo.RESPONSE_TIMEOUT = self.spec.sdo_timeout_s
+                node.nmt.add_heartbeat_callback(functools.partial(self._on_heartbeat, len(self._drives)))
+                node.emcy.add_callback(functools.partial(self._on_emcy, len(self._drives)))
+                self._drives.append(_Drive(spec, node, target_index=0x607A if spec.mode in _POSITION_MODES else 0x60FF))
+            for io in self._io_specs:
+                node = canopen.RemoteNode(io.node_id, canopen.import_od(io.eds, io.node_id))
+                network.add_node(node)
+                node.sdo.RESPONSE_TIMEOUT = self.spec.sdo_timeout_s
+                node.nmt.add_heartbeat_callback(functools.partial(self._on_io_heartbeat, io.node_id))
+                self._io_nodes[io.node_id] = node
+        except (OSError, ValueError, KeyError) as exc:
+            raw.shutdown()
+            raise BusError(f"cannot read an EDS file of {self.spec.path}: {exc}") from exc
+        network.subscribe(cf.SYNC_ID, self._on_sync)
+        network.subscribe(cf.NMT_ID, self._on_nmt_command)
         self._opened_at = self._last_rx = self._clock()
-        self._stop.clear()
-        self._thread = threading.Thread(target=self._rx_loop, name="puma-drives-rx", daemon=True)
-        self._thread.start()
+        network.connect()
+        self._network = network
+        if self.spec.sync == "producer":
+            self._stop_sync.clear()
+            self._sync_thread = threading.Thread(target=self._produce_syncs, name="can-sync-producer", daemon=True)
+            self._sync_thread.start()
         return self
 
     def close(self) -> None:
         """Disable the drives (best effort) and disconnect."""
-        if self._bus is None:
+        network = self._network
+        if network is None:
             return
         self._expect_enabled = False
+        self._expect_operational = False
         try:
-            if self._dead is None:
-                for node in self.nodes:
-                    self._send(self._hold_rpdo(node, cf.Controlword.DISABLE_VOLTAGE))
+            if self._dead is None and self._configured:
+                for d in self._drives:
+                    self._send_hold(d, cf.Controlword.DISABLE_VOLTAGE)
         except BusError:
             pass
-        self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-        self._bus.shutdown()
-        self._bus = None
+        self._stop_sync.set()
+        if self._sync_thread is not None:
+            self._sync_thread.join(timeout=2.0)
+            self._sync_thread = None
+        self._network = None
+        try:
+            network.disconnect()
+        except (can.CanError, OSError, RuntimeError):
+            pass
 
     def __enter__(self) -> Self:
         return self.open()
@@ -161,22 +268,22 @@ class CanDrives:
     # --- state -----------------------------------------------------------------------------------
 
     def positions(self) -> NDArray[np.float64]:
-        """Latest actual positions of the drives, shape (n,), rad (NaN until a drive reported)."""
+        """Latest actual positions of the drives, shape (n,), SI units (rad; NaN until a drive reported)."""
         with self._cond:
-            return self._positions.copy()
+            return np.array([d.position for d in self._drives])
 
     def states(self) -> list[cf.DriveState | None]:
-        """Latest CiA 402 state of drives 1..n (``None`` until reported or not understood)."""
+        """Latest CiA 402 state of the drives (``None`` until reported or not understood)."""
         with self._cond:
             return self._states_locked()
 
     @property
     def sim_time(self) -> float:
-        """Bus time (s) stamped on the latest SYNC."""
+        """Bus time (s) of the latest SYNC."""
         return self._sync_t
 
     def on_io(self, node: int, callback: IoCallback) -> None:
-        """Call ``callback(data, t)`` from the receive thread on every TPDO1 of I/O module ``node``.
+        """Call ``callback(data, t)`` from the receive thread on every TPDO of I/O module ``node``.
 
         Raises:
             ValueError: ``node`` is not one of the ``io_nodes``.
@@ -191,27 +298,57 @@ class CanDrives:
             return self._dead
         now = self._clock()
         with self._cond:
-            beats = dict(self._heartbeats)
-            bus_now = self._sync_t
             silent = now - self._last_rx
+            bus_now = self._bus_now
+            beats = [(d.spec.node_id, d.nmt_t) for d in self._drives]
+            beats += [(node, self._io_state.get(node, (math.nan, None))[0]) for node in self.io_nodes]
         if silent > self.silence_timeout:
             return f"nothing on the CAN bus for {silent:.2f} s (no SYNC, no heartbeats): bus lost"
-        for node in (*self.nodes, *self.io_nodes):
-            seen = beats.get(node)
-            if seen is None:
+        for node, seen in beats:
+            if math.isnan(seen):
                 if now - self._opened_at > self.silence_timeout:
                     return f"no heartbeat from CAN node {node} since the bus was opened: node lost"
-            elif bus_now - seen[0] > self.heartbeat_timeout:
-                return (f"no heartbeat from CAN node {node} for {bus_now - seen[0]:.2f} s of bus time: "
-                        "node lost")
+            elif bus_now - seen > self.heartbeat_timeout:
+                return f"no heartbeat from CAN node {node} for {bus_now - seen:.2f} s of bus time: node lost"
         return None
 
+    def trouble(self) -> str | None:
+        """Why the drives are not (or no longer) the master's alone, or ``None``: another station's NMT
+        command or RPDOs, a drive whose heartbeat says it left OPERATIONAL, a drive whose TPDOs
+        stopped, a drive reporting a target it was not sent (module docstring)."""
+        with self._cond:
+            if self._foreign is not None and (not self._foreign_rpdo
+                                              or self._clock() - self._foreign_t < _FOREIGN_HOLD_S):
+                return self._foreign
+            if not self._expect_operational:
+                return None
+            for d in self._drives:
+                if d.nmt is not None and d.nmt is not cf.NmtState.OPERATIONAL:
+                    return (f"drive {d.spec.node_id} left operational: its heartbeat says NMT state "
+                            f"{d.nmt.name.lower().replace('_', '-')}")
+                if d.seen and self._sync_count - d.tpdo_sync > _TPDO_STALE_CYCLES:
+                    return (f"drive {d.spec.node_id} sent no TPDO for {self._sync_count - d.tpdo_sync} SYNC "
+                            "cycles: it left operational")
+                if d.wrong_target is not None:
+                    return d.wrong_target
+        return None
+
+    def taken_over(self) -> bool:
+        """Another station is commanding the drives now (its RPDOs were seen within the last second):
+        recovering them would fight it."""
+        with self._cond:
+            return self._foreign_rpdo and self._clock() - self._foreign_t < _FOREIGN_HOLD_S
+
     def check(self) -> None:
-        """Raise :class:`BusError` if the bus is lost, a heartbeat is missing, a drive faulted, or
-        (after :meth:`enable`) a drive is no longer operation enabled; the message says which."""
+        """Raise :class:`BusError` if the bus is lost, a heartbeat is missing, a drive faulted or was
+        taken over, or (after :meth:`enable`) a drive is no longer operation enabled; the message says
+        which."""
         lost = self.lost()
         if lost is not None:
             raise BusError(lost)
+        trouble = self.trouble()
+        if trouble is not None:
+            raise BusError(trouble)
         with self._cond:
             states = self._states_locked()
         for node, state in zip(self.nodes, states):
@@ -242,21 +379,173 @@ class CanDrives:
         """True when every drive reported OPERATION_ENABLED in its latest TPDO."""
         return all(s is cf.DriveState.OPERATION_ENABLED for s in self.states())
 
+    def refresh(self, timeout: float = 0.5) -> bool:
+        """Wait until every drive has reported (a TPDO) after the next SYNC, so that :meth:`states`,
+        :meth:`faults` and :meth:`trouble` judge the drives as they are now and not as they were before
+        a receive thread starved by a loaded machine caught up (at most ``timeout`` s, wall clock).
+
+        Returns:
+            True when every drive reported in time (False: some are silent; :meth:`trouble` or
+            :meth:`lost` say why).
+        """
+        with self._cond:
+            target = self._sync_count + 1
+        try:
+            self._wait(lambda: all(d.tpdo_sync >= target for d in self._drives), self._clock() + timeout, "")
+        except BusError:
+            return False
+        return True
+
+    def sdo_read(self, node: int, index: int, subindex: int = 0) -> int:
+        """Read an integer object of drive or module ``node`` over SDO (a blocking request).
+
+        Raises:
+            BusError: the bus is not open, the node is unknown, or the SDO transfer failed (the
+                abort code's text said).
+        """
+        for candidate in [d.node for d in self._drives] + list(self._io_nodes.values()):
+            if candidate.id == node:
+                try:
+                    var = candidate.sdo[index]
+                    return int(var.raw if subindex == 0 and not hasattr(var, "keys") else var[subindex].raw)
+                except (SdoAbortedError, SdoCommunicationError, KeyError) as exc:
+                    raise BusError(f"SDO read of {index:#06x}:{subindex:02x} from node {node} failed: {exc}") from exc
+        raise BusError(f"node {node} is not on this bus")
+
     # --- commands --------------------------------------------------------------------------------
 
+    def configure(self, timeout: float = 10.0) -> None:
+        """Configure every drive over SDO as the device file says (module docstring); the drives are
+        put in NMT pre-operational first. Done by :meth:`start` once per connection.
+
+        Raises:
+            BusError: a drive refused a value (the object and the abort code named), did not answer,
+                does not support the mode, or its PDO mapping lacks what the master needs.
+        """
+        network = self._require_network()
+        network.nmt.send_command(cf.NmtCommand.PRE_OPERATIONAL)
+        deadline = self._clock() + timeout
+        for d in self._drives:
+            if self._clock() > deadline:
+                raise BusError(f"configuring the drives took longer than {timeout} s")
+            try:
+                self._configure_drive(d)
+            except (SdoAbortedError, SdoCommunicationError) as exc:
+                raise BusError(f"drive {d.spec.node_id} ({d.spec.name}): SDO configuration failed: {exc}") from exc
+        for node in self._io_nodes.values():
+            try:
+                node.tpdo.read(from_od=True)
+            except (KeyError, ValueError) as exc:
+                raise BusError(f"I/O node {node.id}: its EDS's TPDOs are unusable: {exc}") from exc
+            for m in node.tpdo.map.values():
+                if m.enabled:
+                    m.add_callback(functools.partial(self._on_io_tpdo, node.id))
+        self._configured = True
+
+    def _configure_drive(self, d: _Drive) -> None:
+        node, spec = d.node, d.spec
+        mode = MODES[spec.mode]
+        if 0x6502 in node.object_dictionary:
+            supported = int(node.sdo[0x6502].raw)
+            if not supported & _SUPPORTED_MODE_BITS.get(mode, 0):
+                raise BusError(f"drive {spec.node_id} does not support mode {spec.mode} "
+                               f"(0x6502 = {supported:#06x})")
+        node.sdo[0x6060].raw = mode
+        shown = int(node.sdo[0x6061].raw)
+        if shown != mode:
+            raise BusError(f"drive {spec.node_id} shows mode {shown} in 0x6061 after 0x6060 = {mode}")
+        node.sdo[0x1017].raw = spec.heartbeat_ms
+        if 0x1016 in node.object_dictionary:
+            node.sdo[0x1016][1].raw = ((self.spec.master_node_id << 16 | spec.master_heartbeat_timeout_ms)
+                                       if spec.master_heartbeat_timeout_ms else 0)
+        if spec.pdo_mapping == "write":
+            node.rpdo.read(from_od=True)
+            node.tpdo.read(from_od=True)
+            self._remap(node.rpdo, spec.rpdo, spec.rpdo_timeout_ms, d.target_index)
+            self._remap(node.tpdo, spec.tpdo, None, None)
+            node.rpdo.save()
+            node.tpdo.save()
+        node.rpdo.read()  # what the drive holds now, over SDO
+        node.tpdo.read()
+        self._use_mappings(d)
+
+    @staticmethod
+    def _remap(pdos: Any, wanted: tuple[tuple[tuple[int, int], ...], ...] | None, deadline_ms: int | None,
+               target_index: int | None) -> None:
+        """Set canopen's PDO maps to the device file's mapping (``None``: keep the EDS's), synchronous."""
+        for number, m in pdos.map.items():
+            if wanted is not None:
+                m.clear()
+                if number <= len(wanted):
+                    for index, subindex in wanted[number - 1]:
+                        if m.add_variable(index, subindex) is None:
+                            raise BusError(f"object {index:#06x}:{subindex:02x} is not in node "
+                                           f"{pdos.node.id}'s EDS")
+                m.enabled = number <= len(wanted) and bool(wanted[number - 1])
+            if m.cob_id in (None, 0) and m.predefined_cob_id is not None:
+                m.cob_id = m.predefined_cob_id
+            if m.enabled:
+                m.trans_type = 1
+            if deadline_ms is not None and 5 in m.com_record.od:
+                carries = target_index is not None and any(v.index == target_index for v in m.map)
+                m.event_timer = deadline_ms if (m.enabled and carries) else 0
+
+    def _use_mappings(self, d: _Drive) -> None:
+        """Compile the layouts of the drive's enabled PDOs and hook its TPDOs; check that the RPDOs
+        carry the controlword and the target and the TPDOs the statusword and the position."""
+        rpdos: list[tuple[int, PdoLayout]] = []
+        for m in d.node.rpdo.map.values():
+            if m.enabled:
+                layout = _layout(m)
+                if 0x6040 in layout or d.target_index in layout:
+                    rpdos.append((m.cob_id, layout))
+                    self._require_network().subscribe(
+                        m.cob_id, functools.partial(self._on_foreign_rpdo, d.spec.node_id))
+        tpdo_objects: set[int] = set()
+        for m in d.node.tpdo.map.values():
+            if m.enabled:
+                layout = _layout(m)
+                tpdo_objects.update(layout.indices)
+                m.add_callback(functools.partial(self._on_tpdo, d, layout))
+        needed = {0x6040: rpdos and any(0x6040 in lay for _, lay in rpdos),
+                  d.target_index: any(d.target_index in lay for _, lay in rpdos)}
+        missing = [f"{i:#06x} in an RPDO" for i, ok in needed.items() if not ok]
+        missing += [f"{i:#06x} in a TPDO" for i in (0x6041, 0x6064) if i not in tpdo_objects]
+        if isinstance(self, VelocityCanDrives) and 0x606C not in tpdo_objects:
+            missing.append("0x606c in a TPDO")
+        if missing:
+            raise BusError(f"drive {d.spec.node_id} ({d.spec.name}): its PDO mapping lacks {', '.join(missing)}")
+        d.rpdos = rpdos
+
     def start(self, timeout: float = 3.0) -> None:
-        """NMT-start every node, send the master's heartbeat, and wait until every drive has
-        reported (TPDO1: its position and state) and no fault reaction is running any more.
+        """Configure the drives (first time on this connection), NMT-start every node, send the master's
+        heartbeat, and wait until every drive has reported (its TPDOs: its position and state) and no
+        fault reaction is running any more.
 
         After it, :meth:`positions` are the joints' resting positions: a control loop can start
         from them (and send targets) before :meth:`enable`.
 
         Raises:
-            BusError: not within ``timeout`` s, or the bus is lost.
+            BusError: not within ``timeout`` s, a drive refused its configuration, or the bus is lost.
         """
-        self._send(cf.nmt_frame(cf.NmtCommand.START, 0))
+        network = self._require_network()
+        if not self._configured:
+            self.configure(max(timeout, 10.0))
+        with self._cond:
+            if not self._foreign_rpdo:
+                self._foreign = None  # a foreign NMT command is undone by this start
+            for d in self._drives:
+                d.wrong_target = None
+                d.sent.clear()
+            started = self._sync_count
+        self._send_message(cf.NMT_ID, bytes([cf.NmtCommand.START, 0]), network)
         deadline = self._clock() + timeout
-        self._wait(lambda: all(self._tpdo_seen), deadline, "no TPDO1 from every drive after NMT start")
+        self._wait(lambda: all(d.seen and d.tpdo_sync > started for d in self._drives),
+                   deadline, "no TPDO from every drive after NMT start")
+        with self._cond:
+            for d in self._drives:
+                d.nmt = cf.NmtState.OPERATIONAL if d.nmt is not None else None
+            self._expect_operational = True
         self._send_heartbeat()
         self._wait(lambda: not any(s is cf.DriveState.FAULT_REACTION_ACTIVE for s in self._states_locked()),
                    deadline, "a drive's fault reaction did not end")
@@ -267,10 +556,11 @@ class CanDrives:
         The CiA 402 recovery of a faulted drive: wait until its fault reaction has brought the
         joint to rest (FAULT), send controlword 0x00 so that bit 7 is low, then the fault reset
         0x80 (the rising edge), then shutdown, switch on, enable operation, each checked on the
-        statuswords. Each RPDO carries the drive's own actual position as target, so enabling
-        does not move the arm. A control loop may run meanwhile, sending enable-operation RPDOs
-        with targets at the resting positions (the motion node's does, so that cyclic targets flow
-        from the first enabled cycle on): a drive it enables from SWITCHED_ON counts as switched on.
+        statuswords. Each RPDO carries the drive's own actual position as target (a velocity drive
+        zero velocity), so enabling does not move the axis. A control loop may run meanwhile,
+        sending enable-operation RPDOs with targets at the resting positions (the motion node's does,
+        so that cyclic targets flow from the first enabled cycle on): a drive it enables from
+        SWITCHED_ON counts as switched on.
 
         Raises:
             BusError: a drive did not reach OPERATION_ENABLED within ``timeout`` s (its state and
@@ -287,8 +577,8 @@ class CanDrives:
             (cf.Controlword.ENABLE_OPERATION, (on,)),
         )
         for cw, states in steps:
-            for node in self.nodes:
-                self._send(self._hold_rpdo(node, cw))
+            for d in self._drives:
+                self._send_hold(d, cw)
             if states:
                 self._wait(
                     lambda ok=states: all(st in ok for st in self._states_locked()),  # type: ignore[misc]
@@ -303,21 +593,22 @@ class CanDrives:
     def disable(self) -> None:
         """Disable voltage on every drive (they hold position, brakes on)."""
         self._expect_enabled = False
-        for node in self.nodes:
-            self._send(self._hold_rpdo(node, cf.Controlword.DISABLE_VOLTAGE))
+        for d in self._drives:
+            self._send_hold(d, cf.Controlword.DISABLE_VOLTAGE)
 
     def send_targets(self, q: Sequence[float] | NDArray[np.float64]) -> None:
-        """Send one RPDO1 per drive: enable-operation controlword and target, rad, shape (n,).
+        """Send each drive its RPDOs: enable-operation controlword and target position, SI units (rad),
+        shape (n,); also the master's heartbeat every ``master_heartbeat_ms`` of bus time.
 
         Raises:
             BusError: the connection is lost.
             ValueError: not one target per drive.
         """
-        if len(q) != len(self.nodes):
-            raise ValueError(f"expected {len(self.nodes)} joint targets, got {len(q)}")
-        for node, target in zip(self.nodes, q):
-            self._send(cf.encode_rpdo1(node, cf.Controlword.ENABLE_OPERATION, float(target)))
-        if self._sync_t - self._heartbeat_sent_t >= cf.HEARTBEAT_PERIOD_S - 1e-9:
+        if len(q) != len(self._drives):
+            raise ValueError(f"expected {len(self._drives)} joint targets, got {len(q)}")
+        for d, target in zip(self._drives, q):
+            self._send_cycle(d, cf.Controlword.ENABLE_OPERATION, float(target) / d.spec.position_unit)
+        if self._sync_t - self._heartbeat_sent_t >= self.spec.master_heartbeat_ms / 1000.0 - 1e-9:
             self._send_heartbeat()
 
     def wait_sync(self, timeout: float = 0.1) -> float:
@@ -325,7 +616,8 @@ class CanDrives:
 
         A SYNC that arrived since the previous call is returned at once (a control loop answers
         every SYNC, never skips one it has not answered yet); several that arrived meanwhile count
-        as one, the latest.
+        as one, the latest. (When the device file makes the master the SYNC producer, a thread of its
+        own sends SYNC every period of the wall clock.)
 
         Raises:
             BusError: no SYNC within ``timeout`` s (wall clock), or the bus is lost.
@@ -342,42 +634,81 @@ class CanDrives:
 
     # --- internals -------------------------------------------------------------------------------
 
+    def _require_network(self) -> canopen.Network:
+        if self._network is None:
+            raise BusError("CAN bus not open")
+        if self._dead is not None:
+            raise BusError(self._dead)
+        return self._network
+
+    def _produce_syncs(self) -> None:
+        """The SYNC producer's thread (device file ``sync = "producer"``): canopen's SYNC every period
+        of the wall clock, each also counted as received (the master does not hear its own frames)."""
+        period = self.spec.sync_period_s
+        due = time.monotonic()
+        while not self._stop_sync.is_set() and self._dead is None:
+            network = self._network
+            if network is None:
+                return
+            try:
+                network.sync.transmit()
+            except (can.CanError, OSError, RuntimeError) as exc:
+                self._mark_dead(f"CAN bus connection lost while sending SYNC: {exc}")
+                return
+            self._on_sync(cf.SYNC_ID, bytearray(), time.monotonic())
+            due = max(due + period, time.monotonic() - period)
+            self._stop_sync.wait(max(0.0, due - time.monotonic()))
+
     def _send_heartbeat(self) -> None:
-        """The master's heartbeat (NMT state operational), stamped with the bus time."""
+        """The master's heartbeat (NMT state operational), on the bus clock."""
         t = self._sync_t
-        self._heartbeat_sent_t = -float("inf") if np.isnan(t) else t
-        self._send(cf.encode_heartbeat(cf.MASTER_ID, cf.NmtState.OPERATIONAL))
+        self._heartbeat_sent_t = -math.inf if math.isnan(t) else t
+        self._send_message(cf.HEARTBEAT_BASE + self.spec.master_node_id, bytes([cf.NmtState.OPERATIONAL]))
 
     def _states_locked(self) -> list[cf.DriveState | None]:
         out: list[cf.DriveState | None] = []
-        for seen, sw in zip(self._tpdo_seen, self._statuswords):
+        for d in self._drives:
             try:
-                out.append(cf.state_from_statusword(sw) if seen else None)
+                out.append(cf.state_from_statusword(d.statusword) if d.seen else None)
             except cf.FrameError:
                 out.append(None)
         return out
 
-    def _hold_rpdo(self, node: int, cw: int) -> cf.CanFrame:
-        """An RPDO1 carrying controlword ``cw`` and a target that does not move the drive (its own
-        actual position; a velocity-mode master sends zero velocity)."""
-        return cf.encode_rpdo1(node, cw, self._pos_or0(node))
+    def _hold_value(self, d: _Drive) -> float:
+        """A target that does not move the drive, in counts: its actual position (a velocity-mode
+        drive: zero)."""
+        if d.target_index == 0x60FF:
+            return 0.0
+        return 0.0 if math.isnan(d.position) else d.position / d.spec.position_unit
 
-    def _pos_or0(self, node: int) -> float:
-        q = float(self._positions[node - 1])
-        return 0.0 if np.isnan(q) else q
+    def _send_hold(self, d: _Drive, cw: int) -> None:
+        self._send_cycle(d, cw, self._hold_value(d))
 
-    def _send(self, frame: cf.CanFrame) -> None:
-        if self._bus is None:
-            raise BusError("CAN bus not open")
+    def _send_cycle(self, d: _Drive, cw: int, target_counts: float) -> None:
+        """Send the drive's cyclic RPDOs with controlword ``cw`` and the target in counts."""
+        if not d.rpdos:
+            raise BusError(f"drive {d.spec.node_id} is not configured (no RPDO)")
+        if not math.isfinite(target_counts):
+            raise cf.FrameError(f"target of drive {d.spec.node_id} is not a finite number")
+        units = round(target_counts)
+        d.sent.append(units)
+        for cob_id, layout in d.rpdos:
+            values = [cw if e.index == 0x6040 else units if e.index == d.target_index else 0 for e in layout.entries]
+            try:
+                data = layout.pack(values)
+            except PdoLayoutError as exc:
+                raise cf.FrameError(f"target of drive {d.spec.node_id} does not fit its RPDO: {exc}") from exc
+            self._send_message(cob_id, data)
+
+    def _send_message(self, can_id: int, data: bytes, network: canopen.Network | None = None) -> None:
+        net = network or self._require_network()
         if self._dead is not None:
             raise BusError(self._dead)
-        msg = can.Message(arbitration_id=frame.can_id, data=frame.data, is_extended_id=False)
         try:
-            with self._send_lock:
-                self._bus.send(msg)
-        except (OSError, can.CanError) as exc:
-            self._dead = f"CAN bus connection lost while sending: {exc}"
-            raise BusError(self._dead) from exc
+            net.send_message(can_id, data)
+        except (OSError, can.CanError, RuntimeError) as exc:
+            self._mark_dead(f"CAN bus connection lost while sending: {exc}")
+            raise BusError(self._dead or "bus lost") from exc
 
     def _wait(self, pred: Callable[[], bool], deadline: float, what: str, describe: bool = False) -> None:
         with self._cond:
@@ -395,7 +726,7 @@ class CanDrives:
                 self._cond.wait(min(left, 0.05))
 
     def _cause_locked(self, node: int) -> str:
-        emcy = self._emcy.get(node)
+        emcy = next((d.emcy for d in self._drives if d.spec.node_id == node), None)
         if emcy is None or emcy[0] == cf.EmcyCode.NO_ERROR:
             return "unknown cause"
         try:
@@ -408,66 +739,145 @@ class CanDrives:
             target = self._sync_count + n
         self._wait(lambda: self._sync_count >= target, deadline, "no SYNC on the CAN bus")
 
-    def _rx_loop(self) -> None:
-        assert self._bus is not None
-        bus = self._bus
-        while not self._stop.is_set():
-            try:
-                msg = bus.recv(timeout=0.05)
-            except (OSError, can.CanError, ValueError) as exc:
-                self._mark_dead(f"CAN bus connection lost: {exc}")
-                return
-            if msg is None or msg.is_error_frame:
-                continue
-            try:
-                self._handle(cf.CanFrame(msg.arbitration_id, bytes(msg.data), float(msg.timestamp)))
-            except cf.FrameError:
-                continue
-
     def _mark_dead(self, reason: str) -> None:
         with self._cond:
             if self._dead is None:
                 self._dead = reason
             self._cond.notify_all()
 
-    def _handle(self, frame: cf.CanFrame) -> None:
-        cid = frame.can_id
-        callbacks: list[IoCallback] = []
+    # --- receive callbacks (the notifier's thread) -----------------------------------------------
+
+    def _received(self, timestamp: float) -> None:
         self._last_rx = self._clock()
+        self._bus_now = timestamp
+
+    def _on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         with self._cond:
-            if cid == cf.SYNC_ID:
-                self._sync_count += 1
-                self._sync_t = frame.t
-            elif cf.TPDO1_BASE + 1 <= cid <= cf.TPDO1_BASE + len(self.nodes):
-                i = cid - cf.TPDO1_BASE - 1
-                sw, q = cf.decode_tpdo1(frame.data)
-                self._statuswords[i] = sw
-                self._positions[i] = q
-                self._tpdo_seen[i] = True
-            elif cf.TPDO2_BASE + 1 <= cid <= cf.TPDO2_BASE + len(self.nodes):
-                self._velocities[cid - cf.TPDO2_BASE - 1] = cf.decode_tpdo2(frame.data)[0]
-            elif cid - cf.TPDO1_BASE in self._io:
-                callbacks = list(self._io[cid - cf.TPDO1_BASE])
-            elif cf.EMCY_BASE + 1 <= cid <= cf.EMCY_BASE + 0x7F:
-                code, _register = cf.decode_emcy(frame.data)
-                self._emcy[cid - cf.EMCY_BASE] = (code, frame.t)
-            elif cf.HEARTBEAT_BASE <= cid <= cf.HEARTBEAT_BASE + 0x7F:
-                self._heartbeats[cid - cf.HEARTBEAT_BASE] = (frame.t, cf.decode_heartbeat(frame.data))
-            else:
-                return
+            self._sync_count += 1
+            self._sync_t = timestamp
+            self.sync_arrived = time.monotonic()
             self._cond.notify_all()
-        for cb in callbacks:
-            cb(frame.data, frame.t)
+
+    def _on_tpdo(self, d: _Drive, layout: PdoLayout, pdo_map: Any) -> None:
+        try:
+            values = layout.unpack(pdo_map.data)
+        except PdoLayoutError:
+            return
+        with self._cond:
+            for e, v in zip(layout.entries, values):
+                if e.index == 0x6041:
+                    d.statusword = v
+                    d.seen = True
+                elif e.index == 0x6064:
+                    d.position = v * d.spec.position_unit
+                elif e.index == 0x606C:
+                    d.velocity = v * d.spec.velocity_unit
+                elif e.index == d.target_index and d.sent and self._expect_operational and v not in d.sent:
+                    d.wrong_target = (f"drive {d.spec.node_id} reports target {v} (counts), which this master "
+                                      f"did not send (its last: {d.sent[-1]}): another master?")
+            d.tpdo_sync = self._sync_count
+            self._cond.notify_all()
+
+    def _on_heartbeat(self, k: int, state: int) -> None:
+        d = self._drives[k]
+        try:
+            nmt = cf.NmtState(state & 0x7F)
+        except ValueError:
+            return
+        with self._cond:
+            if nmt is not d.nmt and self._expect_operational and nmt is not cf.NmtState.OPERATIONAL:
+                log.warning("CAN drive %d reports NMT state %s in its heartbeat", d.spec.node_id, nmt.name)
+            d.nmt = nmt
+            d.nmt_t = float(d.node.nmt.timestamp or math.nan)
+            self._cond.notify_all()
+
+    def _on_io_heartbeat(self, node: int, state: int) -> None:
+        try:
+            nmt = cf.NmtState(state & 0x7F)
+        except ValueError:
+            return
+        with self._cond:
+            self._io_state[node] = (float(self._io_nodes[node].nmt.timestamp or math.nan), nmt)
+
+    def _on_emcy(self, k: int, entry: Any) -> None:
+        d = self._drives[k]
+        with self._cond:
+            d.emcy = (int(entry.code), float(entry.timestamp))
+            self._cond.notify_all()
+        if entry.code:
+            log.warning("CAN drive %d: EMCY %#06x (%s)", d.spec.node_id, entry.code, self._cause_locked(d.spec.node_id))
+
+    def _on_io_tpdo(self, node: int, pdo_map: Any) -> None:
+        data, t = bytes(pdo_map.data), float(pdo_map.timestamp or 0.0)
+        for cb in list(self._io.get(node, ())):
+            cb(data, t)
+
+    def _on_nmt_command(self, can_id: int, data: bytearray, timestamp: float) -> None:
+        """An NMT frame on the bus: the master never receives its own, so it is another station's."""
+        if len(data) != 2:
+            return
+        command, node = data[0], data[1]
+        mine = set(self.nodes) | set(self.io_nodes)
+        if node != 0 and node not in mine:
+            return
+        what = _NMT_NAMES.get(command, f"command {command:#04x}")
+        whom = "all nodes" if node == 0 else f"node {node}"
+        reason = f"another station on the CAN bus sent NMT '{what}' to {whom}: the drives are not this master's alone"
+        with self._cond:
+            if self._foreign is None:
+                log.error("%s", reason)
+            self._foreign = reason
+            self._foreign_t = self._clock()
+            self._cond.notify_all()
+
+    def _on_foreign_rpdo(self, node: int, can_id: int, data: bytearray, timestamp: float) -> None:
+        """An RPDO to one of this master's drives that it did not send: a second master on the bus."""
+        with self._cond:
+            if not self._foreign_rpdo:
+                reason = (f"another station on the CAN bus sends RPDO {can_id:#05x} to drive {node}: "
+                          "a second master is commanding the drives")
+                log.error("%s", reason)
+                self._foreign = reason
+            self._foreign_rpdo = True
+            self._foreign_t = self._clock()
+            self._cond.notify_all()
 
 
-def _connect(host: str, port: int, channel: str, timeout: float) -> can.BusABC:
-    """Open python-can's socketcand bus, failing fast when nothing listens.
+class _Watch(can.Listener):
+    """Every received frame marks the bus alive (wall and bus clocks); a receive error marks it dead."""
 
-    python-can retries a refused connection for 10 s; probe the port first so that a missing
-    gateway is reported within ``timeout``.
+    def __init__(self, owner: CanDrives) -> None:
+        self.owner = owner
+
+    def on_message_received(self, msg: can.Message) -> None:
+        self.owner._received(float(msg.timestamp))
+
+    def on_error(self, exc: Exception) -> bool:
+        self.owner._mark_dead(f"CAN bus connection lost: {exc}")
+        return False  # the notifier's thread ends
+
+
+def _layout(pdo_map: Any) -> PdoLayout:
+    """The layout of one of canopen's PDO maps.
+
+    Raises:
+        BusError: it cannot be compiled (bit-granular entries, an unmappable type).
     """
-    import socket
+    try:
+        return PdoLayout.compile([(v.index, v.subindex, v.length) for v in pdo_map.map],
+                                 {(v.index, v.subindex): v.od.data_type for v in pdo_map.map})
+    except PdoLayoutError as exc:
+        raise BusError(f"{pdo_map.name}: {exc}") from exc
 
+
+def _connect(spec: BusSpec, host: str, port: int, timeout: float) -> can.BusABC:
+    """Open the python-can bus the device file names; for socketcand, fail fast when nothing listens.
+
+    python-can retries a refused socketcand connection for 10 s; probe the port first so that a
+    missing gateway is reported within ``timeout``.
+    """
+    if spec.interface != "socketcand":
+        return can.Bus(interface=spec.interface, channel=spec.channel)
     deadline = time.monotonic() + timeout
     while True:
         try:
@@ -478,35 +888,31 @@ def _connect(host: str, port: int, channel: str, timeout: float) -> can.BusABC:
             if time.monotonic() > deadline:
                 raise BusError(f"no socketcand server at {host}:{port}: {exc}") from exc
             time.sleep(0.05)
-    return can.Bus(interface="socketcand", host=host, port=port, channel=channel, tcp_tune=True)
+    return can.Bus(interface="socketcand", host=host, port=port, channel=spec.channel, tcp_tune=True)
 
 
 class VelocityCanDrives(CanDrives):
     """CiA 402 drives in profile velocity mode (the mobile robot's wheels, node 1 left, node 2
-    right): the same master (connection, supervision, NMT start, fault recovery by :meth:`enable`,
-    the master's heartbeat, :meth:`wait_sync`) with velocity RPDOs.
-
-    Frames: :mod:`services.devices.cia402` (RPDO1 = controlword + target velocity 0x60FF; TPDO1 =
-    statusword + position actual 0x6064; TPDO2 = velocity actual 0x606C).
+    right): the same master (connection, configuration, supervision, NMT start, fault recovery by
+    :meth:`enable`, the master's heartbeat, :meth:`wait_sync`) with target velocities (0x60FF) in
+    their RPDOs and velocity actual values (0x606C) from their TPDOs.
     """
 
-    def _hold_rpdo(self, node: int, cw: int) -> cf.CanFrame:
-        return cf.encode_velocity_rpdo1(node, cw, 0.0)
-
     def send_velocities(self, *velocities: float) -> None:
-        """One RPDO1 per drive, in node order: enable-operation controlword and target velocity,
-        rad/s (also the master's heartbeat every 100 ms of bus time).
+        """The drives' RPDOs, in node order: enable-operation controlword and target velocity,
+        SI units (rad/s) (also the master's heartbeat every ``master_heartbeat_ms`` of bus time).
 
         Raises:
             BusError: the connection is lost.
-            FrameError: a velocity is not finite.
+            FrameError: a velocity is not finite or does not fit.
         """
-        for node, velocity in zip(self.nodes, velocities, strict=True):
-            self._send(cf.encode_velocity_rpdo1(node, cf.Controlword.ENABLE_OPERATION, float(velocity)))
-        if self._sync_t - self._heartbeat_sent_t >= cf.HEARTBEAT_PERIOD_S - 1e-9:
+        for d, velocity in zip(self._drives, velocities, strict=True):
+            self._send_cycle(d, cf.Controlword.ENABLE_OPERATION, float(velocity) / d.spec.velocity_unit)
+        if self._sync_t - self._heartbeat_sent_t >= self.spec.master_heartbeat_ms / 1000.0 - 1e-9:
             self._send_heartbeat()
 
     def velocities(self) -> NDArray[np.float64]:
-        """Latest velocity actual values (TPDO2) of the drives, in node order, rad/s (NaN before)."""
+        """Latest velocity actual values of the drives, in node order, SI units (rad/s; NaN before)."""
         with self._cond:
-            return self._velocities.copy()
+            return np.array([d.velocity for d in self._drives])
+

@@ -11,7 +11,7 @@ import time
 from typing import Any
 
 from services.action import CallContext, Driver, NodeContext, PrimitiveAction
-from services.devices import cia402 as cf
+from services.devices.devicefile import BusSpec, DeviceFileError, load_bus, resolve_device_file
 from services.devices.drives import BusError, VelocityCanDrives
 from services.devices.endpoint import DeviceEndpoint
 from services.errors import ActionError, LocationError
@@ -33,10 +33,19 @@ DEFAULT_CAN_PORT = 7221
 class DriveDriver(Driver):
     """The wheel drives, odometry, the steering set points and the watchdog (module docstring).
 
-    Params: ``can_host`` ("127.0.0.1"), ``can_port`` (7221), ``channel`` ("can0"); ``steering_from``
+    Params: ``bus`` (the project's ``devices/wheels.toml``; relative to services.toml's directory): the
+    device file of the wheels' CAN bus (:mod:`services.devices.devicefile`: interface, channel, each
+    drive's node id, EDS file, mode, unit scaling, times, PDO mappings; left wheel first);
+    ``can_host`` ("127.0.0.1"), ``can_port`` (7221): the socketcand server; ``steering_from``
     (default: the node of ``follow_ransac``); ``stale_s`` (0.25); ``wheel_radius`` (0.05 m),
     ``track_width`` (0.30 m): the odometry's drive geometry; ``heartbeat_timeout_s`` (0.5),
     ``bus_silence_s`` (2.0), ``connect_timeout_s`` (10.0).
+
+    A drive that faults, leaves OPERATIONAL (another station's NMT command) or is commanded by a
+    second master (its RPDOs on the bus) puts ``fault: <cause>`` in the odometry's state at once,
+    which ends the running primitive action of the perception node with ``error``; the cause is
+    logged. Faulted or stopped drives are reset, started and enabled again in the background
+    (every 0.5 s), drives another master commands only once its RPDOs stopped for a second.
     """
 
     def __init__(self, name: str, params: dict[str, Any]) -> None:
@@ -44,7 +53,9 @@ class DriveDriver(Driver):
         p = self.params
         self.can_host = str(p.get("can_host", "127.0.0.1"))
         self.can_port = int(p.get("can_port", DEFAULT_CAN_PORT))
-        self.channel = str(p.get("channel", "can0"))
+        self.bus_file = str(p["bus"]) if "bus" in p else None
+        self.bus: BusSpec | None = None
+        self._reported: str | None = None
         self.connect_timeout = float(p.get("connect_timeout_s", 10.0))
         self.heartbeat_timeout = float(p.get("heartbeat_timeout_s", 0.5))
         self.bus_silence = float(p.get("bus_silence_s", 2.0))
@@ -76,8 +87,17 @@ class DriveDriver(Driver):
                               int(params.get("can_port", DEFAULT_CAN_PORT)), "petrobot sim mobile", "socketcand")
 
     async def setup(self, node: NodeContext) -> None:
-        """Subscribe to the steering set points; connect to the drives in the background."""
+        """Read the device file, subscribe to the steering set points; connect to the drives in the
+        background.
+
+        Raises:
+            BusError: the device file cannot be read or is wrong (``FILE:LINE: problem``).
+        """
         self._loop = asyncio.get_running_loop()
+        try:
+            self.bus = load_bus(resolve_device_file(self.bus_file, node.location.path, "wheels.toml"))
+        except DeviceFileError as exc:
+            raise BusError(str(exc)) from exc
         source = self.params.get("steering_from")
         if source is None:
             try:
@@ -106,18 +126,20 @@ class DriveDriver(Driver):
                     log.info("wheel drives enabled")
                 except BusError as exc:
                     log.warning("wheel drives not ready (%s); retrying", exc)
-            elif self.drives.faults():
+            elif (self.drives.faults() or self.drives.trouble()) and not self.drives.taken_over():
+                why = "; ".join(f"drive {k}: {c}" for k, c in self.drives.faults().items()) or self.drives.trouble()
                 try:
                     await asyncio.to_thread(self.drives.enable, self.connect_timeout)
-                    log.warning("wheel drive fault reset and enabled again")
+                    log.warning("wheel drives started, reset and enabled again (%s)", why)
                 except BusError as exc:
                     log.warning("wheel drive recovery failed: %s", exc)
             await asyncio.sleep(0.5)
 
     def _start(self) -> None:
-        drives = VelocityCanDrives(self.can_host, self.can_port, self.channel,
-                                   heartbeat_timeout=self.heartbeat_timeout, silence_timeout=self.bus_silence,
-                                   nodes=cf.WHEEL_IDS)
+        if self.bus is None:
+            self.bus = load_bus(resolve_device_file(self.bus_file, None, "wheels.toml"))
+        drives = VelocityCanDrives(self.can_host, self.can_port, heartbeat_timeout=self.heartbeat_timeout,
+                                   silence_timeout=self.bus_silence, bus=self.bus)
         drives.open(timeout=self.connect_timeout)
         try:
             drives.start(timeout=self.connect_timeout)
@@ -184,12 +206,18 @@ class DriveDriver(Driver):
             self.speeds = (wl, wr)
             v, w = self.geometry.twist(wl, wr)
             state = "ok"
+            trouble = self.drives.trouble() if self.drives is not None else None
             if self.fault is not None:
                 state = f"fault: {self.fault}"
             elif self.drives is not None and self.drives.faults():
                 state = "fault: " + "; ".join(f"drive {k}: {c}" for k, c in self.drives.faults().items())
+            elif trouble is not None:
+                state = f"fault: {trouble}"
             elif inp.stopped:
                 state = "watchdog"
+            if state.startswith("fault") and state != self._reported:
+                log.error("wheel drives: %s", state)
+            self._reported = state if state.startswith("fault") else None
             data = {"t": t, "x": pose.x, "y": pose.y, "theta": pose.theta, "s": pose.s, "v": v, "w": w,
                     "seq": inp.latest.seq if inp.latest is not None else -1, "stops": inp.watchdog_stops,
                     "state": state}

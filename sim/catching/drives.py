@@ -1,22 +1,23 @@
 """The PUMA's six joint drives and its crossfire I/O module on the simulated CAN bus (paper section 6).
 
-Frame layout, units and state machine: :mod:`services.devices.cia402`; what every simulated drive
-does (boot-up, NMT, SYNC, heartbeats, the watchdogs, waiting for the master):
-:class:`sim.drives.SimCanDrives`. The bus and its ports are :mod:`sim.canbus`'s, the gateway that
-serves it to the motion node is :class:`sim.socketcand.CanGateway`.
+Each joint drive is a CANopen slave made from ``devices/puma_joint_drive.eds`` (node ids 1..6), the
+crossfire module one made from ``devices/crossfire_io.eds`` (node 0x10); what every simulated device
+does (boot-up, NMT, SDO, PDOs from its object dictionary, SYNC, heartbeats, the watchdogs, waiting
+for the master): :class:`sim.drives.SimCanDrives`. The bus and its ports are :mod:`sim.canbus`'s, the
+gateway that serves it to the motion node is :class:`sim.socketcand.CanGateway`.
 
 Threads: the world calls :meth:`SimDrives.step` from its own (simulation) thread every 1 ms of
 simulated time; only that thread touches pybullet.
 
-Drive model (per joint, cyclic synchronous position mode): a target received in RPDO1 is latched at
+Drive model (per joint, cyclic synchronous position mode): a target received in an RPDO is latched at
 the next SYNC (every 2 ms of simulated time) and interpolated linearly over the cycle; the demand
 goes to pybullet's position motor with the joint's speed and torque limits. A missing target is
-extrapolated at the last demand velocity for a bounded number of cycles (the RPDO-timeout
-watchdog), and the master's heartbeat is watched (the consumer-heartbeat watchdog). If
-``|demand - actual|`` exceeds :data:`FOLLOWING_ERROR_LIMIT`, or a watchdog runs out, the drive
-faults: it brings the joint to rest on a quick-stop ramp (FAULT REACTION ACTIVE), then holds in
-FAULT, and says why in an EMCY frame. A drive that is not enabled holds its position (the PUMA's
-brakes).
+extrapolated at the last demand velocity for a bounded number of cycles (the RPDO deadline,
+0x1400:05), and the master's heartbeat is watched (the consumer heartbeat, 0x1016). If
+``|demand - actual|`` exceeds the following error window (0x6065, counts of 1e-5 rad: 0.1 rad by
+default), or a watchdog runs out, the drive faults: it brings the joint to rest on a quick-stop ramp
+(FAULT REACTION ACTIVE), then holds in FAULT, and says why in an EMCY frame. A drive that is not
+enabled holds its position (the PUMA's brakes).
 """
 
 from __future__ import annotations
@@ -28,15 +29,20 @@ from typing import Any
 
 from services.catching.robot import puma560
 from services.devices import cia402 as cf
+from services.devices.devicefile import PROJECT_DEVICES
 from sim.canbus import SimBus
-from sim.drives import FaultRecord, SimCanDrives, SimDrive
+from sim.drives import POSITION_UNIT, VELOCITY_UNIT, FaultRecord, SimCanDrives, SimDrive, SimIoModule
 
-__all__ = ["FOLLOWING_ERROR_LIMIT", "FaultRecord", "SimDrives"]
+__all__ = ["FOLLOWING_ERROR_LIMIT", "JOINT_EDS", "CROSSFIRE_EDS", "FaultRecord", "SimDrives"]
 
-FOLLOWING_ERROR_LIMIT = 0.1  # rad
+FOLLOWING_ERROR_LIMIT = 0.1  # rad: the EDS's following error window 0x6065 (10000 counts)
+JOINT_EDS = PROJECT_DEVICES / "puma_joint_drive.eds"
+"""The object dictionary of the simulated joint drives."""
+CROSSFIRE_EDS = PROJECT_DEVICES / "crossfire_io.eds"
+"""The object dictionary of the simulated crossfire module."""
 
 
-@dataclass(kw_only=True)
+@dataclass(kw_only=True, eq=False)
 class _Drive(SimDrive):
     joint: int
     pending: float | None = None
@@ -48,6 +54,7 @@ class _Drive(SimDrive):
     ramp_q: float = 0.0  # fault reaction: demand position, rad
     ramp_v: float = 0.0  # fault reaction: demand velocity, rad/s
     t_tick: float = 0.0  # time of the previous tick, s
+    following_limit: float = FOLLOWING_ERROR_LIMIT  # rad, from 0x6065
 
 
 class SimDrives(SimCanDrives[_Drive]):
@@ -59,14 +66,14 @@ class SimDrives(SimCanDrives[_Drive]):
     simulated time from the simulation thread.
 
     Watchdogs (the CiA 301/402 behaviour of a drive whose master goes silent): an enabled drive
-    that gets no target at a SYNC keeps its last demand velocity for at most
-    ``target_timeout_cycles`` cycles, then faults (EMCY 0x8250, RPDO timeout); once the master's
-    heartbeat (node :data:`services.devices.cia402.MASTER_ID`) has been seen, an enabled drive
-    that hears none for ``consumer_heartbeat_s`` of bus time faults too (EMCY 0x8130). A fault,
-    including a following error, starts the fault reaction: the joint's demand goes from where the
-    joint is, at its speed, to rest at the quick-stop deceleration ``qdd_max``; then the drive is
-    in FAULT and holds. Every fault is kept in :attr:`faults` (bus time, node, code, reason, when
-    the joint was at rest again).
+    that gets no target at a SYNC keeps its last demand velocity for at most its RPDO deadline
+    (0x1400:05 over the 2 ms cycle: 25 cycles by default), then faults (EMCY 0x8250, RPDO timeout);
+    once the master's heartbeat has been seen, an enabled drive that hears none for its consumer
+    heartbeat time (0x1016: 0.35 s by default) faults too (EMCY 0x8130). A fault, including a
+    following error, starts the fault reaction: the joint's demand goes from where the joint is, at
+    its speed, to rest at the quick-stop deceleration ``qdd_max``; then the drive is in FAULT and
+    holds. Every fault is kept in :attr:`faults` (bus time, node, code, reason, when the joint was at
+    rest again).
 
     Pacing (``master_wait_s`` > 0, :class:`sim.drives.SimCanDrives`): the sim waits at each SYNC for
     the targets of a master that answered the previous one; once a wait has run out, only until
@@ -79,9 +86,8 @@ class SimDrives(SimCanDrives[_Drive]):
         qd_max, tau_max: per-joint speed (rad/s) and torque (N m) limits of the motors, shape (6,).
         q_min, q_max: joint limits (rad) targets are clamped to, shape (6,).
         qdd_max: quick-stop deceleration of the fault reaction, rad/s², shape (6,).
-        target_timeout_cycles: missing targets in a row before an RPDO-timeout fault.
-        consumer_heartbeat_s: heartbeat consumer time for the master, s of bus time.
         master_wait_s: wall time waited at a SYNC for the master's targets (0: never wait).
+        sync_producer: the world produces SYNC (default); ``False``: the master does.
     """
 
     def __init__(
@@ -93,13 +99,11 @@ class SimDrives(SimCanDrives[_Drive]):
         q_max: Sequence[float] = tuple(puma560.Q_MAX),
         qdd_max: Sequence[float] = tuple(puma560.QDD_MAX),
         *,
-        target_timeout_cycles: int = cf.TARGET_TIMEOUT_CYCLES,
-        consumer_heartbeat_s: float = cf.CONSUMER_HEARTBEAT_S,
         master_wait_s: float = 0.0,
+        sync_producer: bool = True,
     ) -> None:
-        super().__init__(bus, cycle_s=cf.CYCLE_S, target_timeout_cycles=target_timeout_cycles,
-                         consumer_heartbeat_s=consumer_heartbeat_s, master_wait_s=master_wait_s,
-                         silent_pace_s=cf.CYCLE_S, kind="drive")
+        super().__init__(bus, cycle_s=cf.CYCLE_S, master_wait_s=master_wait_s, silent_pace_s=cf.CYCLE_S,
+                         kind="drive", sync_producer=sync_producer)
         self.qd_max = [float(v) for v in qd_max]
         self.tau_max = [float(v) for v in tau_max]
         self.q_min = [float(v) for v in q_min]
@@ -108,8 +112,7 @@ class SimDrives(SimCanDrives[_Drive]):
         self._client: Any = None
         self._body = -1
         self._crossfire: Callable[[], bool] | None = None
-        self._crossfire_nmt = cf.NmtState.PRE_OPERATIONAL
-        self._crossfire_state: bool | None = None
+        self.add_module(SimIoModule(cf.CROSSFIRE_ID, self._read_crossfire), CROSSFIRE_EDS)
 
     # --- set-up ----------------------------------------------------------------------------------
 
@@ -134,12 +137,13 @@ class SimDrives(SimCanDrives[_Drive]):
         """
         if len(joint_indices) != 6:
             raise ValueError(f"expected 6 joint indices, got {len(joint_indices)}")
+        if self._drives:
+            raise ValueError("the drives are attached already")
         self._client = client
         self._body = body_id
-        self._drives = []
         for node, joint in zip(cf.DRIVE_IDS, joint_indices):
             q = float(client.getJointState(body_id, joint)[0])
-            self._drives.append(_Drive(node=node, joint=joint, start=q, end=q, hold=q))
+            self.add_drive(_Drive(node=node, joint=joint, start=q, end=q, hold=q), JOINT_EDS)
         if crossfire is not None:
             self._crossfire = crossfire
         for d in self._drives:
@@ -185,35 +189,30 @@ class SimDrives(SimCanDrives[_Drive]):
             return
         super().step(t)
 
-    def other_nodes(self) -> list[tuple[int, cf.NmtState]]:
-        return [(cf.CROSSFIRE_ID, self._crossfire_nmt)]
+    def _read_crossfire(self) -> int:
+        return 1 if self._crossfire is not None and self._crossfire() else 0
 
-    def other_nmt(self, node: int, state: cf.NmtState, t: float) -> None:
-        if node in (0, cf.CROSSFIRE_ID):
-            self._crossfire_nmt = state
-            if state is cf.NmtState.OPERATIONAL and self._crossfire is not None:
-                self._crossfire_state = bool(self._crossfire())
-                self.bus.transmit(cf.encode_crossfire(self._crossfire_state, t))
+    def configured(self, d: _Drive) -> None:
+        if d.has(0x6065):
+            d.following_limit = d.raw(0x6065) * POSITION_UNIT
 
-    def decode_target(self, data: bytes) -> tuple[int, float]:
-        return cf.decode_rpdo1(data)
-
-    def take_target(self, d: _Drive, before: cf.DriveState, after: cf.DriveState, target: float, t: float) -> None:
+    def take_target(self, d: _Drive, before: cf.DriveState, after: cf.DriveState, values: dict[int, int],
+                    t: float) -> None:
         self.master_answered()
         if after is cf.DriveState.OPERATION_ENABLED and before is not after:
             # Bumpless start: interpolate from where the joint is.
             q = float(self._client.getJointState(self._body, d.joint)[0])
             d.start = d.end = q
             d.missed = 0
-        if after is cf.DriveState.OPERATION_ENABLED:
+        if after is cf.DriveState.OPERATION_ENABLED and 0x607A in values:
             j = d.node - 1
-            d.pending = min(max(target, self.q_min[j]), self.q_max[j])
+            d.pending = min(max(values[0x607A] * POSITION_UNIT, self.q_min[j]), self.q_max[j])
 
     def has_target(self, d: _Drive) -> bool:
         return d.pending is not None
 
     def on_sync(self, t: float) -> None:
-        for d, q in zip(self._drives, self.positions()):
+        for d in self._drives:
             if d.sm.state is cf.DriveState.OPERATION_ENABLED:
                 start = self._demand(d, t)
                 if d.pending is not None:
@@ -226,18 +225,24 @@ class SimDrives(SimCanDrives[_Drive]):
                     # CSP extrapolation: keep the last demand velocity, within the joint limits
                     end = min(max(start + (d.end - d.start), self.q_min[j]), self.q_max[j])
                 d.start, d.end, d.t_latch = start, end, t
-            if d.nmt is cf.NmtState.OPERATIONAL:
-                self.bus.transmit(cf.encode_tpdo1(d.node, d.sm.statusword, q, t))
+
+    def actual_values(self) -> list[dict[int, int]]:
+        states = self._client.getJointStates(self._body, [d.joint for d in self._drives])
+        out = []
+        for d, st in zip(self._drives, states):
+            q, qd = float(st[0]), float(st[1])
+            tau = float(st[3])
+            rated = 100.0  # N m: 0x6076 = 100000 mN m
+            out.append({0x6064: round(q / POSITION_UNIT), 0x606C: round(qd / VELOCITY_UNIT),
+                        0x6062: round(d.hold / POSITION_UNIT),
+                        0x606B: round((d.end - d.start) / cf.CYCLE_S / VELOCITY_UNIT),
+                        0x6077: max(-32768, min(32767, round(1000.0 * tau / rated)))})
+        return out
 
     def tick(self, t: float) -> None:
         states = self._client.getJointStates(self._body, [d.joint for d in self._drives])
         for d, st in zip(self._drives, states):
             self._drive_tick(d, float(st[0]), float(st[1]), t)
-        if self._crossfire is not None and self._crossfire_nmt is cf.NmtState.OPERATIONAL:
-            blocked = bool(self._crossfire())
-            if blocked != self._crossfire_state:
-                self._crossfire_state = blocked
-                self.bus.transmit(cf.encode_crossfire(blocked, t))
 
     @staticmethod
     def _demand(d: _Drive, t: float) -> float:
@@ -254,7 +259,7 @@ class SimDrives(SimCanDrives[_Drive]):
     def _drive_tick(self, d: _Drive, q: float, qd: float, t: float) -> None:
         if d.sm.state is cf.DriveState.OPERATION_ENABLED:
             demand = self._demand(d, t)
-            if abs(demand - q) > FOLLOWING_ERROR_LIMIT:
+            if abs(demand - q) > d.following_limit:
                 self.fault(d, t, cf.EmcyCode.FOLLOWING_ERROR, f"{demand - q:+.3f} rad")
                 self._ramp(d, t)
                 return

@@ -1,20 +1,22 @@
 """The mobile robot's wheel drives on the simulated CAN bus: two CiA 402 drives in profile
 velocity mode in front of :class:`sim.mobile.robot.WheelDrives`.
 
-Frame layout and units: :mod:`services.devices.cia402` (velocity mode: RPDO1 = controlword + target
-velocity 0x60FF, TPDO1 = statusword + position actual 0x6064, TPDO2 = velocity actual 0x606C +
-torque actual 0x6077). The bus itself and its in-process ports are :mod:`sim.canbus`'s, the
-socketcand gateway :class:`sim.socketcand.CanGateway`; boot-up, NMT, SYNC, heartbeats, the
-watchdogs and the waits for the master are those of every simulated drive
-(:class:`sim.drives.SimCanDrives`, shared with the PUMA's drives).
+Each wheel drive is a CANopen slave made from ``devices/wheel_drive.eds`` (node 1 left, node 2
+right): what every simulated device does (boot-up, NMT, SDO, PDOs from its object dictionary, SYNC,
+heartbeats, the watchdogs and the waits for the master) is :class:`sim.drives.SimCanDrives`'s, shared
+with the PUMA's drives. Default PDOs: RPDO1 = controlword + target velocity 0x60FF, TPDO1 =
+statusword + position actual 0x6064, TPDO2 = velocity actual 0x606C + torque actual 0x6077. The bus
+itself and its in-process ports are :mod:`sim.canbus`'s, the socketcand gateway
+:class:`sim.socketcand.CanGateway`.
 
 Drive model: the target velocity of the latest RPDO is handed to ``WheelDrives.set_velocity`` (which
 ramps the demand at the drive's acceleration ramp and applies the torque limit); a drive that is
 not operation enabled holds its wheel at rest (target 0, holding torque: a drive with a holding
-brake). Watchdogs, as the PUMA's drives: an enabled drive that gets no RPDO for
-``target_timeout_cycles`` SYNC cycles faults (EMCY 0x8250), and once the master's heartbeat has
-been seen, none for ``consumer_heartbeat_s`` faults every enabled drive (EMCY 0x8130). The fault
-reaction is a quick stop: target 0 on the drive's ramp until the wheel is at rest, then FAULT.
+brake). Watchdogs, as the PUMA's drives: an enabled drive that gets no RPDO within its RPDO deadline
+(0x1400:05, 200 ms by default: 25 SYNC cycles) faults (EMCY 0x8250), and once the master's heartbeat
+has been seen, none for its consumer heartbeat time (0x1016) faults every enabled drive (EMCY
+0x8130). The fault reaction is a quick stop: target 0 on the drive's ramp until the wheel is at
+rest, then FAULT.
 
 The world calls :meth:`SimWheelCan.step` from its step hook before every physics step; SYNC goes
 out every :data:`CYCLE_S` of simulated time (the sim is the SYNC producer, as on the PUMA's bus).
@@ -29,17 +31,22 @@ from dataclasses import dataclass
 from typing import Protocol
 
 from services.devices import cia402 as cf
+from services.devices.devicefile import PROJECT_DEVICES
 from sim.canbus import SimBus
-from sim.drives import SimCanDrives, SimDrive
+from sim.drives import POSITION_UNIT, VELOCITY_UNIT, SimCanDrives, SimDrive
 
-__all__ = ["CYCLE_S", "REST_SPEED", "TARGET_TIMEOUT_CYCLES", "SimWheelCan", "WheelActuator"]
+__all__ = ["CYCLE_S", "REST_SPEED", "TARGET_TIMEOUT_CYCLES", "WHEEL_EDS", "SimWheelCan", "WheelActuator"]
 
 CYCLE_S = 0.008
 """SYNC period of the mobile robot's bus, s (125 Hz: two physics steps of 4 ms)."""
 TARGET_TIMEOUT_CYCLES = 25
-"""SYNC cycles without an RPDO before an enabled wheel drive faults (200 ms)."""
+"""SYNC cycles without an RPDO before an enabled wheel drive faults (its EDS's RPDO deadline, 200 ms)."""
 REST_SPEED = 0.05
 """A wheel turning slower than this is at rest (end of the fault reaction), rad/s."""
+WHEEL_EDS = PROJECT_DEVICES / "wheel_drive.eds"
+"""The object dictionary of the simulated wheel drives."""
+RATED_TORQUE = 1.0
+"""N m: the wheel drives' rated torque 0x6076 (torque actual 0x6077 is in per mille of it)."""
 
 
 class WheelActuator(Protocol):
@@ -51,7 +58,7 @@ class WheelActuator(Protocol):
     def torques(self) -> tuple[float, float]: ...
 
 
-@dataclass(kw_only=True)
+@dataclass(kw_only=True, eq=False)
 class _Wheel(SimDrive):
     target: float = 0.0
     got_target: bool = False
@@ -64,30 +71,29 @@ class SimWheelCan(SimCanDrives[_Wheel]):
         wheels: the wheel actuator (``MobileWorld.robot.drives``).
         bus: the bus (a new one if ``None``); serve it with :class:`sim.socketcand.CanGateway`.
         cycle_s: SYNC period, s of simulated time.
-        target_timeout_cycles: missing RPDOs in a row before an RPDO-timeout fault.
-        consumer_heartbeat_s: heartbeat consumer time for the master, s of bus time.
         master_wait_s: wall time waited at a SYNC for the targets of a master that answered the
             previous one (0: never wait); a master that missed a wait is not waited for again until
-            it answers (its drives' RPDO timeout then runs on real time).
+            it answers, but the bus then runs no faster than real time (one SYNC per ``cycle_s`` of
+            wall time at most), so that its drives' RPDO deadline (200 ms of bus time) is 200 ms of
+            wall time too and not a burst of SYNCs in which the world catches up after a stall.
+        sync_producer: the world produces SYNC (default); ``False``: the master does.
 
     Attributes:
         faults: every fault (bus time, node, code, reason, speed, when the wheel was at rest).
     """
 
     def __init__(self, wheels: WheelActuator, bus: SimBus | None = None, *, cycle_s: float = CYCLE_S,
-                 target_timeout_cycles: int = TARGET_TIMEOUT_CYCLES,
-                 consumer_heartbeat_s: float = cf.CONSUMER_HEARTBEAT_S, master_wait_s: float = 0.0) -> None:
-        super().__init__(bus, cycle_s=cycle_s, target_timeout_cycles=target_timeout_cycles,
-                         consumer_heartbeat_s=consumer_heartbeat_s, master_wait_s=master_wait_s,
-                         kind="wheel drive")
+                 master_wait_s: float = 0.0, sync_producer: bool = True) -> None:
+        super().__init__(bus, cycle_s=cycle_s, master_wait_s=master_wait_s, silent_pace_s=cycle_s,
+                         kind="wheel drive", sync_producer=sync_producer)
         self.wheels = wheels
-        self._drives = [_Wheel(node=node) for node in cf.WHEEL_IDS]
+        for node in cf.WHEEL_IDS:
+            self.add_drive(_Wheel(node=node), WHEEL_EDS)
 
-    def decode_target(self, data: bytes) -> tuple[int, float]:
-        return cf.decode_velocity_rpdo1(data)
-
-    def take_target(self, d: _Wheel, before: cf.DriveState, after: cf.DriveState, target: float, t: float) -> None:
+    def take_target(self, d: _Wheel, before: cf.DriveState, after: cf.DriveState, values: dict[int, int],
+                    t: float) -> None:
         if after is cf.DriveState.OPERATION_ENABLED:
+            target = values.get(0x60FF, round(d.target / VELOCITY_UNIT)) * VELOCITY_UNIT
             d.target = target if before is cf.DriveState.OPERATION_ENABLED else 0.0
             d.got_target = True
             self.master_answered()
@@ -98,16 +104,21 @@ class SimWheelCan(SimCanDrives[_Wheel]):
         return d.got_target
 
     def on_sync(self, t: float) -> None:
-        positions = self.wheels.encoders()
-        speeds = self.wheels.velocities()
-        torques = self.wheels.torques()
-        for d, q, v, tau in zip(self._drives, positions, speeds, torques):
+        for d in self._drives:
             if d.sm.state is cf.DriveState.OPERATION_ENABLED:
                 got, d.got_target = d.got_target, False
                 self.count_target(d, got, t)
-            if d.nmt is cf.NmtState.OPERATIONAL:
-                self.bus.transmit(cf.encode_tpdo1(d.node, d.sm.statusword, q, t))
-                self.bus.transmit(cf.encode_tpdo2(d.node, v, tau, t))
+
+    def actual_values(self) -> list[dict[int, int]]:
+        positions = self.wheels.encoders()
+        speeds = self.wheels.velocities()
+        torques = self.wheels.torques()
+        out = []
+        for d, q, v, tau in zip(self._drives, positions, speeds, torques):
+            torque = round(1000.0 * tau / RATED_TORQUE) if tau == tau else 0
+            out.append({0x6064: round(q / POSITION_UNIT), 0x606C: round(v / VELOCITY_UNIT),
+                        0x606B: round(d.target / VELOCITY_UNIT), 0x6077: max(-32768, min(32767, torque))})
+        return out
 
     def start_fault_reaction(self, d: _Wheel, t: float) -> float:
         """Quick stop: target 0 on the drive's ramp."""

@@ -1,11 +1,13 @@
 """The mobile robot's wheel drives in CiA 402 profile velocity mode on the simulated CAN bus
-(sim/mobile/candrives.py; frames in services/devices/cia402.py), driven in process (no sockets)."""
+(sim/mobile/candrives.py: CANopen slaves made from devices/wheel_drive.eds), driven in process (no
+sockets)."""
 
 from __future__ import annotations
 
 import pytest
 
 from services.devices import cia402 as cf
+from sim.drives import POSITION_UNIT, VELOCITY_UNIT
 from sim.mobile.candrives import CYCLE_S, TARGET_TIMEOUT_CYCLES, SimWheelCan
 
 
@@ -58,32 +60,37 @@ class Rig:
     def send(self, frame: cf.CanFrame) -> None:
         self.port.send(frame)
 
+    def rpdo(self, node: int, cw: int, velocity: float) -> cf.CanFrame:
+        """RPDO1 as the drive's mapping has it: controlword and target velocity, rad/s."""
+        data = self.can.rpdo_layout(node).pack_objects({0x6040: cw, 0x60FF: round(velocity / VELOCITY_UNIT)})
+        return cf.CanFrame(0x200 + node, data)
+
+    def report(self, frame: cf.CanFrame) -> dict[int, int]:
+        """A TPDO's objects by index (counts)."""
+        number = (frame.can_id - 0x180) // 0x100 + 1
+        return self.can.tpdo_layout(frame.can_id & 0x7F, number).unpack_objects(frame.data)
+
     def enable(self) -> None:
         self.send(cf.nmt_frame(cf.NmtCommand.START))
         self.run(0.02)
         for cw in (cf.Controlword.SHUTDOWN, cf.Controlword.SWITCH_ON, cf.Controlword.ENABLE_OPERATION):
             for node in cf.WHEEL_IDS:
-                self.send(cf.encode_velocity_rpdo1(node, cw, 0.0))
+                self.send(self.rpdo(node, cw, 0.0))
             self.run(0.02)
 
     def velocity(self, left: float, right: float) -> None:
-        self.send(cf.encode_velocity_rpdo1(1, cf.Controlword.ENABLE_OPERATION, left))
-        self.send(cf.encode_velocity_rpdo1(2, cf.Controlword.ENABLE_OPERATION, right))
+        self.send(self.rpdo(1, cf.Controlword.ENABLE_OPERATION, left))
+        self.send(self.rpdo(2, cf.Controlword.ENABLE_OPERATION, right))
         self.send(cf.encode_heartbeat(cf.MASTER_ID, cf.NmtState.OPERATIONAL))
 
 
-def test_velocity_rpdos_and_tpdo2_round_trip_in_units_of_a_tenth_of_a_milliradian_per_second():
-    f = cf.encode_velocity_rpdo1(2, cf.Controlword.ENABLE_OPERATION, -12.3456)
-    assert f.can_id == 0x202
-    cw, v = cf.decode_velocity_rpdo1(f.data)
-    assert cw == 0x0F and v == pytest.approx(-12.3456, abs=1e-4)
-    v2, tau = cf.decode_tpdo2(cf.encode_tpdo2(1, 3.25, 0.7).data)
-    assert cf.encode_tpdo2(1, 3.25, 0.7).can_id == 0x281
-    assert v2 == pytest.approx(3.25) and tau == pytest.approx(0.7)
-    with pytest.raises(cf.FrameError):
-        cf.encode_velocity_rpdo1(1, 0x0F, float("nan"))
-    with pytest.raises(cf.FrameError):
-        cf.decode_tpdo2(b"\x00")
+def test_the_wheel_drives_pdos_are_those_of_their_eds_in_units_of_a_tenth_of_a_milliradian_per_second():
+    rig = Rig()
+    assert rig.can.rpdo_layout(2).indices == (0x6040, 0x60FF)
+    assert rig.can.tpdo_layout(1, 1).indices == (0x6041, 0x6064)
+    assert rig.can.tpdo_layout(1, 2).indices == (0x606C, 0x6077)
+    f = rig.rpdo(2, cf.Controlword.ENABLE_OPERATION, -12.3456)
+    assert f.can_id == 0x202 and f.data == bytes([0x0F, 0x00]) + (-123456).to_bytes(4, "little", signed=True)
 
 
 def test_enabled_wheel_drives_take_target_velocities_and_report_position_and_velocity_after_each_sync():
@@ -92,11 +99,12 @@ def test_enabled_wheel_drives_take_target_velocities_and_report_position_and_vel
     assert rig.can.states() == [cf.DriveState.OPERATION_ENABLED] * 2
     rig.run(0.5, each_sync=lambda: rig.velocity(8.0, 6.0))
     assert rig.wheels.v == pytest.approx([8.0, 6.0])
-    tpdo2 = [f for f in rig.frames if f.can_id == cf.TPDO2_BASE + 1]
-    assert cf.decode_tpdo2(tpdo2[-1].data)[0] == pytest.approx(8.0, abs=0.2)
+    tpdo2 = [f for f in rig.frames if f.can_id == 0x280 + 1]
+    assert rig.report(tpdo2[-1])[0x606C] * VELOCITY_UNIT == pytest.approx(8.0, abs=0.2)
     tpdo1 = [f for f in rig.frames if f.can_id == cf.TPDO1_BASE + 2]
-    sw, q = cf.decode_tpdo1(tpdo1[-1].data)
-    assert cf.state_from_statusword(sw) is cf.DriveState.OPERATION_ENABLED and q > 1.0
+    values = rig.report(tpdo1[-1])
+    assert cf.state_from_statusword(values[0x6041]) is cf.DriveState.OPERATION_ENABLED
+    assert values[0x6064] * POSITION_UNIT > 1.0
     syncs = [f.t for f in rig.frames if f.can_id == cf.SYNC_ID]
     assert syncs[-1] - syncs[-2] == pytest.approx(CYCLE_S, abs=0.0041)
 
@@ -134,7 +142,7 @@ def test_a_faulted_wheel_drive_is_reset_by_the_rising_edge_of_bit_7_and_enabled_
     assert rig.can.states() == [cf.DriveState.FAULT] * 2
     for cw in (cf.Controlword.DISABLE_VOLTAGE, cf.Controlword.FAULT_RESET):
         for node in cf.WHEEL_IDS:
-            rig.send(cf.encode_velocity_rpdo1(node, cw, 0.0))
+            rig.send(rig.rpdo(node, cw, 0.0))
         rig.run(0.02)
     assert rig.can.states() == [cf.DriveState.SWITCH_ON_DISABLED] * 2
     rig.enable()
@@ -148,8 +156,8 @@ def test_the_masters_heartbeat_lost_faults_the_enabled_drives():
     rig.enable()
 
     def targets_without_heartbeat() -> None:
-        rig.send(cf.encode_velocity_rpdo1(1, cf.Controlword.ENABLE_OPERATION, 2.0))
-        rig.send(cf.encode_velocity_rpdo1(2, cf.Controlword.ENABLE_OPERATION, 2.0))
+        rig.send(rig.rpdo(1, cf.Controlword.ENABLE_OPERATION, 2.0))
+        rig.send(rig.rpdo(2, cf.Controlword.ENABLE_OPERATION, 2.0))
 
     rig.run(0.1, each_sync=lambda: rig.velocity(2.0, 2.0))
     rig.run(0.6, each_sync=targets_without_heartbeat)
