@@ -5,13 +5,17 @@ Frames sent by one port (an in-process client, or one connection of the socketca
 simulated drives, :mod:`sim.drives`), as on a real bus. Frame layout: :mod:`services.devices.cia402`.
 
 Threads: any thread may send; the sim's devices drain their inbound queue from the simulation
-thread (:meth:`SimBus.take_inbound`, :meth:`SimBus.wait_inbound`).
+thread (:meth:`SimBus.take_inbound`, :meth:`SimBus.wait_inbound`), except the frames a device asked
+to take at once (:meth:`SimBus.take_at_once`: SDO requests, which a real device answers within a
+millisecond whatever the simulation is busy with), handed to it in the sender's thread.
 """
 
 from __future__ import annotations
 
 import queue
 import threading
+
+from collections.abc import Callable, Container
 
 from services.devices import cia402 as cf
 
@@ -71,6 +75,12 @@ class SimBus:
         self._ports: list[BusPort] = []
         self._lock = threading.Lock()
         self._inbound: queue.SimpleQueue[cf.CanFrame] = queue.SimpleQueue()
+        self._at_once: tuple[Container[int], Callable[[cf.CanFrame], None]] | None = None
+
+    def take_at_once(self, ids: Container[int], handler: Callable[[cf.CanFrame], None]) -> None:
+        """Hand frames with these identifiers that ports send to ``handler`` in the sender's thread,
+        instead of queueing them for the simulation thread (the handler must be thread-safe)."""
+        self._at_once = (ids, handler)
 
     def connect(self) -> BusPort:
         """A new port on the bus."""
@@ -93,7 +103,11 @@ class SimBus:
             if port is not origin:
                 port._deliver(frame)
         if origin is not None:
-            self._inbound.put(frame)
+            at_once = self._at_once
+            if at_once is not None and frame.can_id in at_once[0]:
+                at_once[1](frame)
+            else:
+                self._inbound.put(frame)
 
     def wait_inbound(self, timeout: float) -> cf.CanFrame | None:
         """The next frame sent by a port, waiting up to ``timeout`` s; ``None`` if none came."""

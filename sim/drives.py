@@ -48,8 +48,11 @@ Units of the simulated drives (their EDS comments say the same): position 1e-5 r
 torque 0x6076 (mN m).
 
 Threads: the world calls :meth:`SimCanDrives.step` from its simulation thread before every physics
-step; frames from other ports reach the devices through the bus's inbound queue, and the canopen
-objects of the simulated side are used from that thread only.
+step; frames from other ports reach the devices through the bus's inbound queue, except SDO requests,
+which the devices answer at once in the sender's thread (a real drive answers within a millisecond,
+whatever the simulation is busy with: rendering a camera frame takes tens), under a lock that the
+simulation thread holds while it does the bus's work. An SDO read of an actual value (0x6064, ...)
+gives the value of the latest SYNC.
 """
 
 from __future__ import annotations
@@ -57,6 +60,7 @@ from __future__ import annotations
 import logging
 import math
 import struct
+import threading
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -282,7 +286,10 @@ class SimCanDrives(Generic[D]):
         self._last_sync_wall: float | None = None
         self._booted = False
         self._next_sync = 0.0
+        self._lock = threading.RLock()
+        self._actuals: list[dict[int, int]] = []  # the actual values at the latest SYNC, per drive
         self.network.subscribe(cf.NMT_ID, self._after_nmt)
+        self.bus.take_at_once(range(0x601, 0x680), self._sdo_request)
 
     # --- making the devices ------------------------------------------------------------------------
 
@@ -362,6 +369,16 @@ class SimCanDrives(Generic[D]):
     def step(self, t: float) -> None:
         """Advance the devices to bus time ``t`` (s): received frames, SYNC and PDOs, heartbeats,
         the watchdogs; then :meth:`tick`."""
+        with self._lock:
+            self._step(t)
+
+    def _sdo_request(self, frame: cf.CanFrame) -> None:
+        """An SDO request from a port, in the sender's thread: answered at once (module docstring)."""
+        with self._lock:
+            if self._booted:
+                self.receive(frame, self.network.t)
+
+    def _step(self, t: float) -> None:
         self.network.t = t
         if not self._booted:
             self._booted = True
@@ -395,7 +412,7 @@ class SimCanDrives(Generic[D]):
 
     def _sync(self, t: float) -> None:
         self.on_sync(t)
-        actual = self.actual_values()
+        actual = self._actuals = self.actual_values()
         for d, values in zip(self._drives, actual):
             if d.nmt is not cf.NmtState.OPERATIONAL:
                 continue
@@ -597,9 +614,8 @@ class SimCanDrives(Generic[D]):
             return int(dev.sm.fault_code)
         if index == 0x1001:
             return 0x01 if dev.sm.faulted else 0x00
-        if 0x6062 <= index <= 0x6077 and subindex == 0:
-            values = self.actual_values()[self._drives.index(dev)]  # type: ignore[arg-type]
-            return values.get(index)
+        if 0x6062 <= index <= 0x6077 and subindex == 0 and self._actuals:
+            return self._actuals[self._drives.index(dev)].get(index)  # type: ignore[arg-type]
         return None
 
     def _write_object(self, dev: SimDevice, index: int, subindex: int, data: bytes) -> None:
@@ -664,7 +680,11 @@ class SimCanDrives(Generic[D]):
                     self._master_in_step = False
                     self.master_misses += 1
                 break
-            frame = self.bus.wait_inbound(left)
+            self._lock.release()  # SDO requests are answered meanwhile
+            try:
+                frame = self.bus.wait_inbound(left)
+            finally:
+                self._lock.acquire()
             if frame is not None:
                 self.receive(frame, t)
         self._last_sync_wall = time.monotonic()
@@ -685,11 +705,13 @@ class SimIoModule(SimDevice):
         self.read_input = read_input
         self.owner: SimCanDrives[Any] | None = None
         self._last: int | None = None
+        self._inputs = 0
 
     def read(self, index: int, subindex: int) -> int | None:
-        """Live value of an object for SDO reads (``None``: the object dictionary's)."""
+        """Value of an object for SDO reads (``None``: the object dictionary's): the inputs as of the
+        latest step (an SDO request is answered in another thread than the simulation's)."""
         if index == 0x6000 and subindex == 1:
-            return int(self.read_input()) & 0xFF
+            return self._inputs
         return None
 
     def started(self, t: float) -> None:
@@ -699,9 +721,9 @@ class SimIoModule(SimDevice):
 
     def poll(self, t: float) -> None:
         """Send the event-driven TPDOs if the inputs changed (call every step)."""
+        value = self._inputs = int(self.read_input()) & 0xFF
         if self.nmt is not cf.NmtState.OPERATIONAL or self.owner is None:
             return
-        value = int(self.read_input()) & 0xFF
         if value == self._last:
             return
         self._last = value

@@ -59,6 +59,7 @@ OPERATION_ENABLED again.
 from __future__ import annotations
 
 import collections
+import concurrent.futures
 import functools
 import logging
 import math
@@ -424,14 +425,18 @@ class CanDrives:
         """
         network = self._require_network()
         network.nmt.send_command(cf.NmtCommand.PRE_OPERATIONAL)
-        deadline = self._clock() + timeout
-        for d in self._drives:
-            if self._clock() > deadline:
-                raise BusError(f"configuring the drives took longer than {timeout} s")
-            try:
-                self._configure_drive(d)
-            except (SdoAbortedError, SdoCommunicationError) as exc:
-                raise BusError(f"drive {d.spec.node_id} ({d.spec.name}): SDO configuration failed: {exc}") from exc
+        # one thread per drive: each drive answers its own SDO channel, so N drives take the time of one
+        with concurrent.futures.ThreadPoolExecutor(max_workers=max(1, len(self._drives)),
+                                                   thread_name_prefix="can-configure") as pool:
+            futures = [(d, pool.submit(self._configure_drive, d)) for d in self._drives]
+            done, pending = concurrent.futures.wait([f for _, f in futures], timeout=timeout)
+            for d, f in futures:
+                if f in pending:
+                    raise BusError(f"configuring drive {d.spec.node_id} ({d.spec.name}) took longer than {timeout} s")
+                try:
+                    f.result()
+                except (SdoAbortedError, SdoCommunicationError) as exc:
+                    raise BusError(f"drive {d.spec.node_id} ({d.spec.name}): SDO configuration failed: {exc}") from exc
         for node in self._io_nodes.values():
             try:
                 node.tpdo.read(from_od=True)

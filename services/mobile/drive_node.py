@@ -56,6 +56,8 @@ class DriveDriver(Driver):
         self.bus_file = str(p["bus"]) if "bus" in p else None
         self.bus: BusSpec | None = None
         self._reported: str | None = None
+        self.enabled = False
+        """The wheel drives were enabled on this connection (odometry says ``enabling`` before)."""
         self.connect_timeout = float(p.get("connect_timeout_s", 10.0))
         self.heartbeat_timeout = float(p.get("heartbeat_timeout_s", 0.5))
         self.bus_silence = float(p.get("bus_silence_s", 2.0))
@@ -151,6 +153,7 @@ class DriveDriver(Driver):
             self._thread = threading.Thread(target=self._control_loop, name="wheel-control", daemon=True)
             self._thread.start()
             drives.enable(timeout=self.connect_timeout)
+            self.enabled = True
         except BusError:
             self._stop.set()
             self.drives = None
@@ -158,6 +161,7 @@ class DriveDriver(Driver):
             raise
 
     def _shutdown(self) -> None:
+        self.enabled = False
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
@@ -213,6 +217,8 @@ class DriveDriver(Driver):
                 state = "fault: " + "; ".join(f"drive {k}: {c}" for k, c in self.drives.faults().items())
             elif trouble is not None:
                 state = f"fault: {trouble}"
+            elif not self.enabled:
+                state = "enabling"
             elif inp.stopped:
                 state = "watchdog"
             if state.startswith("fault") and state != self._reported:

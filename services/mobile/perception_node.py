@@ -203,15 +203,22 @@ class PerceptionDriver(Driver):
         return self.memory
 
     async def wait_ready(self, timeout: float) -> None:
-        """Wait for camera info, a frame and fresh odometry.
+        """Wait for camera info, a frame, fresh odometry and wheel drives that are enabled (the drive
+        node's odometry says ``enabling`` while it configures and enables them).
 
         Raises:
             ActionError: not within ``timeout`` s (wall clock), saying what is missing.
         """
         end = time.monotonic() + timeout
-        while self.info is None or self.frame is None or time.monotonic() - self.odometry_wall > 1.0:
+        while (self.info is None or self.frame is None or time.monotonic() - self.odometry_wall > 1.0
+               or self.odometry is None or self.odometry.state == "enabling"):
             if time.monotonic() > end:
-                what = ("camera" if self.info is None or self.frame is None else "odometry from the drive node")
+                if self.info is None or self.frame is None:
+                    what = "camera"
+                elif self.odometry is not None and self.odometry.state == "enabling":
+                    what = "enabled wheel drives (the drive node is still enabling them)"
+                else:
+                    what = "odometry from the drive node"
                 raise ActionError(f"no {what} after {timeout:.0f} s ({self.lost or 'waiting'})")
             await asyncio.sleep(0.02)
 

@@ -26,7 +26,8 @@ the ramp (0.25 s + 16 rad/s ÷ 40 rad/s² = 0.65 s from 0.8 m/s), measured in do
 
 The drive node publishes its odometry on :data:`ODOMETRY_TOPIC` (``{t, x, y, theta, s, v, w,
 seq, stops, state}``: bus time, odometry pose, speeds, the latest set point applied, the watchdog
-stops so far, ``"ok"`` / ``"watchdog"`` / ``"fault: ..."``); :func:`parse_odometry` checks it on the
+stops so far, ``"ok"`` / ``"enabling"`` (the wheel drives are being configured and enabled) /
+``"watchdog"`` / ``"fault: ..."``); :func:`parse_odometry` checks it on the
 perception node.
 """
 
