@@ -1,4 +1,5 @@
-"""Test helper: a pybullet PUMA 560 on its simulated CAN bus, stepped by hand or in real time."""
+"""Test helpers: a pybullet PUMA 560 on its simulated CAN bus, stepped by hand or in real time; a
+control loop answering every SYNC, as the PUMA driver's control thread does."""
 
 from __future__ import annotations
 
@@ -66,3 +67,49 @@ class SimRig:
         if self._thread is not None:
             self._thread.join(timeout=5)
         self.pb.disconnect()
+
+
+class ControlLoop:
+    """A thread answering every SYNC with the targets :attr:`q` (at first the drives' resting positions),
+    as the PUMA driver's control thread does; start it before :meth:`CanDrives.enable` (a drive enabled
+    without targets flowing faults on its RPDO deadline). A context manager; a bus error in the thread
+    is raised on exit and by :meth:`wait`."""
+
+    def __init__(self, drives) -> None:
+        self.drives = drives
+        self.q = drives.positions()
+        self.answered = 0
+        self.error: Exception | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        from services.devices.drives import BusError
+
+        try:
+            while not self._stop.is_set():
+                self.drives.wait_sync(timeout=5.0)
+                self.drives.send_targets(self.q)
+                self.answered += 1
+        except BusError as exc:
+            self.error = exc
+
+    def wait(self, cycles: int, timeout: float = 20.0) -> None:
+        """Until ``cycles`` more SYNCs were answered."""
+        end = self.answered + cycles
+        deadline = time.monotonic() + timeout
+        while self.answered < end:
+            if self.error is not None:
+                raise self.error
+            assert time.monotonic() < deadline, "the control loop stalled"
+            time.sleep(0.005)
+
+    def __enter__(self) -> ControlLoop:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        if self.error is not None:
+            raise self.error

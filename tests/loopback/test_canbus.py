@@ -5,14 +5,13 @@ node's CANopen master."""
 from __future__ import annotations
 
 import socket
-import threading
 import time
 
 import can
 import numpy as np
 import pytest
 from can.interfaces.socketcand.socketcand import convert_ascii_message_to_can_message
-from puma_rig import SimRig
+from puma_rig import ControlLoop, SimRig
 
 from services.catching.drives import PumaDrives
 from services.catching.robot import puma560 as P
@@ -521,47 +520,8 @@ def test_a_simulation_that_stalls_for_a_while_is_not_a_lost_bus(served):
             time.sleep(0.8)
             assert drives.lost() is None  # heartbeats are judged on the bus clock, which stood still too
             rig.running.set()
-            answered = loop.answered
-            while loop.answered < answered + 100:
-                loop.check()
-                time.sleep(0.01)
+            loop.wait(100)
         drives.check()
-
-
-class ControlLoop:
-    """A thread answering every SYNC with the drives' resting positions, as the PUMA driver's
-    control thread does (from before :meth:`CanDrives.enable`: a drive enabled without targets
-    flowing faults on its RPDO deadline)."""
-
-    def __init__(self, drives: PumaDrives) -> None:
-        self.drives = drives
-        self.q = drives.positions()
-        self.answered = 0
-        self.error: Exception | None = None
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-
-    def _run(self) -> None:
-        try:
-            while not self._stop.is_set():
-                self.drives.wait_sync(timeout=5.0)
-                self.drives.send_targets(self.q)
-                self.answered += 1
-        except BusError as exc:
-            self.error = exc
-
-    def check(self) -> None:
-        if self.error is not None:
-            raise self.error
-
-    def __enter__(self) -> ControlLoop:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5)
-        self.check()
 
 
 @pytest.mark.timeout(30)
