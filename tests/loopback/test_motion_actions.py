@@ -7,9 +7,12 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import math
 import socket
+import struct
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -26,6 +29,7 @@ from services.node.server import Node
 from services.catching.robot import motion_control as mc
 from services.catching.robot import puma560 as P
 from services.catching.setpoints import CatchSetPoint
+from services.results import ActionResult
 from sim.socketcand import CanGateway
 
 ROBOT_BASE = (0.75, 0.0, 0.46, math.pi)
@@ -80,6 +84,9 @@ class Bench:
         )
         self.driver.bind(self.ctx)
         self._sender: asyncio.Task[None] | None = None
+        self.log_records: list[logging.LogRecord] = []
+        self._handler = _Records(self.log_records)
+        logging.getLogger("services").addHandler(self._handler)
 
     def _link(self, name: str) -> NodeLink:
         if name not in self._links:
@@ -146,6 +153,7 @@ class Bench:
         await asyncio.sleep(0.1)
 
     async def close(self) -> None:
+        logging.getLogger("services").removeHandler(self._handler)
         await self.stop_stream()
         await self.driver.teardown()
         for link in self._links.values():
@@ -153,6 +161,15 @@ class Bench:
         await self.vision.stop()
         self.gw.stop()
         self.rig.close()
+
+
+class _Records(logging.Handler):
+    def __init__(self, records: list[logging.LogRecord]) -> None:
+        super().__init__(logging.WARNING)
+        self.records = records
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.records.append(record)
 
 
 @pytest.fixture
@@ -308,3 +325,55 @@ async def test_a_new_catch_waits_for_the_next_stream_after_the_last_one_ended(be
     bench.stream(y=-0.2, lead_s=0.7)
     out = await second
     assert out.status == "success" and out.value["y_pred"] == pytest.approx(-0.2), out
+
+
+# --- devices taken over on the bus (a CAN bus has no keys: the master detects, it cannot prevent) ----------
+
+
+def _rpdo1(node: int, controlword: int, target_counts: int) -> cf.CanFrame:
+    """RPDO1 of the drives' default mapping (controlword, target position), as a second master sends it."""
+    return cf.CanFrame(0x200 + node, struct.pack("<Hi", controlword, target_counts))
+
+
+async def _catch_with(bench: Bench, inject: Callable[[Any], None]) -> tuple[ActionResult, float]:
+    """Run a catch; 0.3 s into it ``inject(port)`` puts frames on the bus as another station would.
+    Returns the result and the bus time of the injection."""
+    bench.stream(y=0.2, lead_s=2.5)
+    catch = asyncio.create_task(Catch().run({"timeout_s": 5.0}, bench.call("catch")))
+    await asyncio.sleep(0.3)
+    assert not catch.done(), catch.result()
+    port = bench.rig.drives.bus.connect()
+    t_inject = bench.rig.t
+    inject(port)
+    out = await catch
+    port.close()
+    return out, t_inject
+
+
+@pytest.mark.timeout(60)
+async def test_an_nmt_stop_from_another_station_mid_catch_is_an_error_within_a_heartbeat_period(bench):
+    out, t_inject = await _catch_with(bench, lambda port: port.send(cf.nmt_frame(cf.NmtCommand.STOP, 0)))
+    assert out.status == "error" and out.outcome == "bus", out
+    assert "another station on the CAN bus sent NMT 'stop' to all nodes" in (out.reason or ""), out
+    assert bench.driver.bus_time() - t_inject <= 0.1 + 0.01  # noticed within one heartbeat period of bus time
+    logged = "\n".join(r.getMessage() for r in bench.log_records)
+    assert "sent NMT 'stop'" in logged
+    # the next action starts the drives again (a stop is no takeover): move_home succeeds
+    home = await MoveHome().run({"timeout_s": 5.0}, bench.call("move_home"))
+    assert home.status == "success" and "NMT 'stop'" in home.value["recovered"], home
+
+
+@pytest.mark.timeout(60)
+async def test_a_second_master_s_rpdos_mid_catch_are_an_error_and_block_recovery_while_they_come(bench):
+    def second_master(port: Any) -> None:
+        port.send(_rpdo1(4, 0x0F, 0))  # one frame is enough to be seen
+
+    out, t_inject = await _catch_with(bench, second_master)
+    assert out.status == "error" and out.outcome == "bus", out
+    assert "sends RPDO 0x204 to drive 4: a second master" in (out.reason or ""), out
+    assert bench.driver.bus_time() - t_inject <= 0.1 + 0.01
+    home = await MoveHome().run({"timeout_s": 5.0}, bench.call("move_home"))
+    assert home.status == "error" and "second master" in (home.reason or ""), home  # no fighting over the drives
+    await asyncio.sleep(1.1)  # its RPDOs stopped a second ago: the master takes the drives back
+    home = await MoveHome().run({"timeout_s": 5.0}, bench.call("move_home"))
+    assert home.status == "success", home
