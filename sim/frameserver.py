@@ -8,8 +8,10 @@ world its downward camera with the beacon scans in each frame's ``meta``); the n
 from __future__ import annotations
 
 import functools
+import logging
 import socket
 import threading
+import time
 from typing import Any
 
 import numpy as np
@@ -20,32 +22,48 @@ from services.protocol.framing import pack_map, recv_frame, unpack_map
 
 __all__ = ["Frame", "FrameServer"]
 
+log = logging.getLogger(__name__)
+
 
 class FrameServer:
-    """Serves the latest camera frame over TCP (grab-latest), one thread per client.
+    """Serves the latest camera frame over TCP (grab-latest), one thread per client, at most
+    ``max_clients`` clients at once.
 
     Args:
         host: address to listen on (127.0.0.1).
         port: TCP port, 0 for any free one (see :attr:`port` after :meth:`start`).
         info: a msgpack-able map served on request ``{"op": "info"}`` (the camera's data sheet and
             calibration: image size, homography, robot base pose...).
+        max_clients: connections (and so serving threads) at most. A connection beyond it closes the
+            one that has waited longest for its next request (a camera client asks again within a
+            frame period: the idle ones go first); when every connection is inside a request, the new
+            one is closed instead. The port is unauthenticated (a camera's): 500 idle connections
+            cost ``max_clients`` threads, not 500, and never lock the nodes' grabbers out.
+        idle_timeout: a connection that sends no request for this long is closed, s.
 
     A connection counts as a camera client (:attr:`client_count`, what the world waits for) from
     its first grab on: one that only asks for the info map (a probe, a node reading the
     calibration) changes nothing in the world.
     """
 
-    def __init__(self, host: str = "127.0.0.1", port: int = 0, info: dict[str, Any] | None = None) -> None:
+    def __init__(self, host: str = "127.0.0.1", port: int = 0, info: dict[str, Any] | None = None, *,
+                 max_clients: int = 16, idle_timeout: float = 30.0) -> None:
+        if max_clients < 1:
+            raise ValueError(f"max_clients must be at least 1, not {max_clients}")
         self.host = host
         self.info = dict(info or {})
+        self.max_clients = max_clients
+        self.idle_timeout = idle_timeout
         self._requested_port = port
         self.port = 0
         self._cond = threading.Condition()
         self._latest: Frame | None = None
         self._closed = False
         self._sock: socket.socket | None = None
-        self._threads: list[threading.Thread] = []
-        self._clients: list[socket.socket] = []  # every connection
+        self._accept_thread: threading.Thread | None = None
+        self._clients: dict[socket.socket, threading.Thread] = {}  # every connection and its thread
+        self._waiting: dict[socket.socket, float] = {}  # those waiting for a request: since when (monotonic)
+        self._evicted = 0
         self._grabbing: set[socket.socket] = set()  # those that asked for a frame
         self._last_sent = -1
 
@@ -57,7 +75,7 @@ class FrameServer:
         self.port = s.getsockname()[1]
         th = threading.Thread(target=self._accept_loop, name="frame-server", daemon=True)
         th.start()
-        self._threads.append(th)
+        self._accept_thread = th
         return self.port
 
     def publish(self, frame: Frame) -> None:
@@ -70,6 +88,12 @@ class FrameServer:
     def client_count(self) -> int:
         """Number of connected clients that take frames."""
         return len(self._grabbing)
+
+    @property
+    def connection_count(self) -> int:
+        """Number of open connections (each has a serving thread), at most ``max_clients``."""
+        with self._cond:
+            return len(self._clients)
 
     def wait_sent(self, seq: int, timeout: float) -> bool:
         """Wait until frame ``seq`` (or a later one) has been sent to some client (lock-step pacing).
@@ -85,31 +109,57 @@ class FrameServer:
         with self._cond:
             self._closed = True
             self._cond.notify_all()
-        for c in list(self._clients):
-            try:
-                c.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-            c.close()
+            clients = dict(self._clients)
+        for c in clients:
+            _shut(c)
         if self._sock is not None:
             self._sock.close()
-        for th in self._threads:
+        if self._accept_thread is not None:
+            self._accept_thread.join(timeout=2.0)
+        for th in clients.values():
             th.join(timeout=2.0)
 
     def _accept_loop(self) -> None:
         assert self._sock is not None
         while not self._closed:
             try:
-                conn, _ = self._sock.accept()
+                conn, peer = self._sock.accept()
             except TimeoutError:
                 continue
             except OSError:
                 return
+            if not self._make_room(peer):
+                _shut(conn)
+                conn.close()
+                continue
             conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
-            self._clients.append(conn)
-            th = threading.Thread(target=self._serve, args=(conn,), daemon=True)
+            conn.settimeout(self.idle_timeout)
+            th = threading.Thread(target=self._serve, args=(conn,), name="frame-server-client", daemon=True)
+            with self._cond:
+                self._clients[conn] = th
+                self._waiting[conn] = time.monotonic()
             th.start()
-            self._threads.append(th)
+
+    def _make_room(self, peer: Any) -> bool:
+        """Below ``max_clients`` connections, or one closed to make room (the one idle longest, its
+        thread joined); False when every connection is inside a request."""
+        with self._cond:
+            if len(self._clients) < self.max_clients:
+                return True
+            if not self._waiting:
+                log.warning("camera server: %d connections all busy, refusing %s", len(self._clients), peer)
+                return False
+            victim = min(self._waiting, key=self._waiting.__getitem__)
+            del self._waiting[victim]
+            thread = self._clients.get(victim)
+            self._evicted += 1
+            if self._evicted == 1 or self._evicted % 100 == 0:
+                log.warning("camera server: %d connections, closed the one idle longest for %s (%d so far)",
+                            len(self._clients), peer, self._evicted)
+        _shut(victim)
+        if thread is not None:
+            thread.join(timeout=1.0)
+        return True
 
     def _newer(self, after: int) -> bool:
         return self._closed or (self._latest is not None and self._latest.seq > after)
@@ -117,7 +167,12 @@ class FrameServer:
     def _serve(self, conn: socket.socket) -> None:
         try:
             while not self._closed:
+                with self._cond:
+                    self._waiting[conn] = time.monotonic()
                 req = unpack_map(recv_frame(conn, MAX_HEADER))
+                with self._cond:
+                    if self._waiting.pop(conn, None) is None:
+                        return  # closed to make room meanwhile
                 if req.get("op") == "info":
                     conn.sendall(pack_map({"info": self.info}, MAX_HEADER))
                     continue
@@ -149,5 +204,13 @@ class FrameServer:
         finally:
             conn.close()
             self._grabbing.discard(conn)
-            if conn in self._clients:
-                self._clients.remove(conn)
+            with self._cond:
+                self._clients.pop(conn, None)
+                self._waiting.pop(conn, None)
+
+
+def _shut(conn: socket.socket) -> None:
+    try:
+        conn.shutdown(socket.SHUT_RDWR)
+    except OSError:
+        pass

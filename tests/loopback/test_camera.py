@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import socket
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -100,3 +102,65 @@ def test_frame_client_sees_a_closed_server_as_a_connection_error():
         for _ in range(3):
             client.grab(timeout=0.1)
     client.close()
+
+
+@pytest.mark.timeout(60)
+def test_five_hundred_idle_connections_cost_a_bounded_number_of_threads_and_lock_no_grabber_out():
+    server = FrameServer()  # as the worlds start it: at most 16 connections
+    port = server.start()
+    img = np.zeros((2, 2, 3), dtype=np.uint8)
+    stop = threading.Event()
+    grabbed: list[int] = []
+    failed: list[BaseException] = []
+
+    def camera() -> None:
+        seq = 0
+        while not stop.wait(0.005):
+            server.publish(Frame(seq, seq * 0.005, img))
+            seq += 1
+
+    def grabber() -> None:  # a node's grabber, connected before the flood and grabbing through it
+        client = FrameClient("127.0.0.1", port)
+        try:
+            seq = -1
+            while not stop.is_set():
+                f = client.grab(after=seq, timeout=1.0)
+                if f is not None:
+                    seq = f.seq
+                    grabbed.append(f.seq)
+        except (ConnectionError, OSError) as exc:
+            failed.append(exc)
+        finally:
+            client.close()
+
+    before = threading.active_count()
+    workers = [threading.Thread(target=camera), threading.Thread(target=grabber)]
+    for w in workers:
+        w.start()
+    idle: list[socket.socket] = []
+    most = 0
+    try:
+        while len(grabbed) < 3:
+            time.sleep(0.01)
+        for _ in range(500):
+            idle.append(socket.create_connection(("127.0.0.1", port), timeout=5.0))
+            most = max(most, threading.active_count())
+        n = len(grabbed)
+        while len(grabbed) < n + 3:  # the grabber goes on taking frames after the flood
+            time.sleep(0.01)
+        late = FrameClient("127.0.0.1", port)  # and a client connecting after it gets in
+        try:
+            assert late.grab(after=-1, timeout=2.0) is not None
+        finally:
+            late.close()
+    finally:
+        stop.set()
+        for w in workers:
+            w.join(timeout=5.0)
+        for s in idle:
+            s.close()
+        server.close()
+    assert not failed, failed
+    # the test's two threads, the accept loop and at most max_clients serving threads (+1 being joined)
+    assert most <= before + 2 + 1 + 16 + 1, (most, before)
+    assert server.connection_count == 0
