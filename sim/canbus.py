@@ -12,6 +12,7 @@ millisecond whatever the simulation is busy with), handed to it in the sender's 
 
 from __future__ import annotations
 
+import dataclasses
 import queue
 import threading
 
@@ -69,13 +70,19 @@ class BusPort:
 
 
 class SimBus:
-    """A simulated CAN bus: fan-out between ports plus an inbound queue for the sim's devices."""
+    """A simulated CAN bus: fan-out between ports plus an inbound queue for the sim's devices.
+
+    Every frame a port receives carries the bus's time (the simulated time of the latest frame a sim
+    device sent), as every station of a real bus sees one gateway's receive clock: a frame that a
+    port sent is stamped with it on the way to the other ports, whatever clock its sender used.
+    """
 
     def __init__(self) -> None:
         self._ports: list[BusPort] = []
         self._lock = threading.Lock()
         self._inbound: queue.SimpleQueue[cf.CanFrame] = queue.SimpleQueue()
         self._at_once: tuple[Container[int], Callable[[cf.CanFrame], None]] | None = None
+        self._now = 0.0  # bus time: the latest sim device frame's
 
     def take_at_once(self, ids: Container[int], handler: Callable[[cf.CanFrame], None]) -> None:
         """Hand frames with these identifiers that ports send to ``handler`` in the sender's thread,
@@ -99,9 +106,13 @@ class SimBus:
         """Put a frame on the bus from a port (``origin``) or from a sim device (``None``)."""
         with self._lock:
             ports = list(self._ports)
+            if origin is None:
+                self._now = frame.t
+            now = self._now
+        seen = frame if origin is None else dataclasses.replace(frame, t=now)
         for port in ports:
             if port is not origin:
-                port._deliver(frame)
+                port._deliver(seen)
         if origin is not None:
             at_once = self._at_once
             if at_once is not None and frame.can_id in at_once[0]:

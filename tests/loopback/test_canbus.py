@@ -19,6 +19,7 @@ from services.devices import cia402 as cf
 from services.devices.devicefile import PROJECT_DEVICES, load_bus
 from services.devices.drives import BusError
 from sim import socketcand
+from sim.canbus import SimBus
 from sim.drives import POSITION_UNIT
 from sim.socketcand import CanGateway
 
@@ -179,6 +180,16 @@ def test_python_can_send_text_parses_back_to_the_same_frame():
     frames = proto.receive_data(convert_can_message_to_ascii_message(msg).encode())
     assert frames == [cf.CanFrame(0x205, bytes(msg.data))]
     assert socketcand.format_send(frames[0]) == b"< send 205 6 0F 00 AB CD EF 01 >"
+
+
+def test_a_frame_another_station_sends_reaches_the_others_stamped_with_the_bus_time():
+    bus = SimBus()
+    master, intruder = bus.connect(), bus.connect()
+    bus.transmit(cf.CanFrame(cf.SYNC_ID, b"", 5.25))  # a sim device: the bus time is now 5.25 s
+    assert master.recv(timeout=1.0) == cf.CanFrame(cf.SYNC_ID, b"", 5.25)
+    intruder.send(cf.nmt_frame(cf.NmtCommand.STOP, 0))  # stamped on the sender's clock (a gateway's monotonic)
+    got = master.recv(timeout=1.0)
+    assert got is not None and got.can_id == cf.NMT_ID and got.t == 5.25  # not 12,000 s ahead of the heartbeats
 
 
 # --- simulated drives ------------------------------------------------------------------------------
