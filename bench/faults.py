@@ -5,6 +5,7 @@ Usage::
     python bench/faults.py [--rounds 10] [--scenarios node-sigkill,...] [--seed S] [--json] [--keep DIR]
     python bench/faults.py check --journal J --node NAME=STATE_DIR[:LOG] ... [--run RUN] [--json]
     python bench/faults.py mobile-stop|catching-stop [--rounds 5] [--json] [--keep DIR]
+    python bench/faults.py device-takeover [--rounds 2] [--testbeds mobile,catching] [--json] [--keep DIR]
 
 **The campaign** runs each scenario ``--rounds`` times with real processes on 127.0.0.1: two nodes
 (``python -m services.node``: ``alpha`` hosts ``echo`` and the global memory, ``beta`` hosts
@@ -41,6 +42,15 @@ the vision and motion nodes): the coordinator killed while ``catch`` moves the a
 than 0.5 rad/s on the world's ground truth, every camera frame), every joint at rest within the
 bound of the catch's own watchdog: 0.2 s of stale set points plus the slowest joint's braking time
 at its acceleration limit.
+
+**device-takeover** (issue 22, section 3) puts another station on the CAN gateway's port (python-can's
+socketcand client, as any process on the lab network can) while a motion runs on its testbed: the
+mobile robot 1.3 s into its first ``follow_track``, the arm while ``catch`` moves it. Each round sends
+either one NMT "stop" to all nodes (``nmt-stop``) or a second master's RPDOs to one drive, every 8 ms
+for 0.3 s (``second-master``: the left wheel at cruise speed, or joint 4 to zero). It reports the time
+from the first foreign frame to the moment the running motion's node kept its ``error`` result (the
+node's result store, wall clock), and the reason. Target: one heartbeat period of the drives (their
+device files' ``heartbeat_ms``, 100 ms).
 
 **check** compares any journal with nodes' state directories (and their logs, for calls started
 twice): every call id the journal started is either absent from every node (it never ran there,
@@ -80,7 +90,7 @@ from services.protocol import Result, from_map, unpack_map
 from services.protocol.framing import HEADER_BYTES
 
 __all__ = ["SCENARIOS", "Agreement", "NodeRecord", "Rig", "StopMeasure", "TestbedRig", "campaign",
-           "catching_coordinator_kill", "check", "mobile_coordinator_kill", "node_starts", "node_store", "run_round",
+           "catching_coordinator_kill", "check", "device_takeover", "mobile_coordinator_kill", "node_starts", "node_store", "run_round",
            "stops"]
 
 SCENARIOS = ("node-sigkill", "node-sigstop", "node-restart", "coordinator-sigkill", "coordinator-sigint")
@@ -903,6 +913,116 @@ def catching_coordinator_kill(workdir: Path, *, moving: float = 0.5) -> StopMeas
     return out
 
 
+TAKEOVERS = ("nmt-stop", "second-master")
+HEARTBEAT_S = 0.1  # the drives' heartbeat period (devices/puma.toml, devices/wheels.toml: heartbeat_ms)
+
+
+@dataclass
+class Takeover:
+    """How fast a running motion erred when another station took its drives over.
+
+    Attributes:
+        testbed: ``mobile`` or ``catching``.
+        how: ``nmt-stop`` or ``second-master``.
+        detect_s: wall time from the first foreign frame to the node keeping the motion's result, s.
+        call: status and reason of the running motion call, as its node kept it.
+        log: the motion node's lines naming the takeover.
+    """
+
+    testbed: str
+    how: str
+    detect_s: float | None = None
+    call: tuple[str, str | None] | None = None
+    log: list[str] = field(default_factory=list)
+
+
+def _kept_at(state_dir: Path, action: str, after: float) -> tuple[float, str, str | None] | None:
+    """The wall time a node kept its first result of ``action`` (a prefix) after ``after``, with its
+    status and reason (``None``: not yet)."""
+    path = state_dir / "results.sqlite3"
+    if not path.exists():
+        return None
+    db = sqlite3.connect(f"{path.resolve().as_uri()}?mode=ro", uri=True, timeout=10.0)
+    try:
+        rows = db.execute("SELECT at, frame FROM calls WHERE frame IS NOT NULL AND action LIKE ? AND at > ? "
+                          "ORDER BY at LIMIT 1", (action + "%", after)).fetchall()
+    finally:
+        db.close()
+    if not rows:
+        return None
+    msg = from_map(unpack_map(bytes(rows[0][1])[HEADER_BYTES:]))
+    assert isinstance(msg, Result)
+    return float(rows[0][0]), msg.result.status.value, msg.result.reason
+
+
+def device_takeover(workdir: Path, *, testbed: str, how: str) -> Takeover:
+    """One round of device-takeover (module docstring) in ``workdir``."""
+    import struct
+
+    import can
+
+    out = Takeover(testbed, how)
+    if testbed == "mobile":
+        rig = TestbedRig(workdir, world="mobile", services=MOBILE_SERVICES, nodes=("perception", "drive"),
+                         net=MOBILE_NET, sim_args=["--realtime", "--renderer", "analytic", "--course",
+                                                   str(MOBILE_COURSE)])
+        node, action, started = "perception", "follow_", "start follow_track -> "
+        drive, target = 1, round(16.0 / 1e-4)  # the left wheel at 16 rad/s (0.8 m/s), in counts of 0x60FF
+    else:
+        rig = TestbedRig(workdir, world="catching", services=CATCHING_SERVICES, nodes=("vision", "motion"),
+                         net=CATCHING_NET, sim_args=["--realtime", "--renderer", "analytic", "--throws", "0",
+                                                     "--interval", "0", "--throw-when-home", "1.0", "--first-throw",
+                                                     "4", "--after-camera-client"])
+        node, action, started = "motion", "catch", "start catch -> catch on motion"
+        drive, target = 4, 0
+    bus: can.BusABC | None = None
+    try:
+        rig.start()
+        rig.wait_output(started)
+        bus = can.Bus(interface="socketcand", host="127.0.0.1", port=rig.ports["can"], channel="can0")
+        time.sleep(1.3 if testbed == "mobile" else 0.6)  # at cruise speed; the arm on its way
+        t_inject = time.time()
+        if how == "nmt-stop":
+            bus.send(can.Message(arbitration_id=0x000, data=bytes([0x02, 0]), is_extended_id=False))
+        else:
+            rpdo = struct.pack("<Hi", 0x0F, target)
+            for _ in range(int(0.3 / 0.008)):
+                bus.send(can.Message(arbitration_id=0x200 + drive, data=rpdo, is_extended_id=False))
+                time.sleep(0.008)
+        kept = wait_until(f"the {action} call's result", lambda: _kept_at(rig.dir / "state" / node, action, t_inject))
+        out.detect_s = kept[0] - t_inject
+        out.call = (kept[1], kept[2])
+        motion = "drive" if testbed == "mobile" else "motion"
+        out.log = [line for line in rig.log(motion).splitlines()
+                   if "another station" in line or "left operational" in line or "wheel drives: fault" in line][:3]
+    finally:
+        if bus is not None:
+            bus.shutdown()
+        rig.close()
+    return out
+
+
+def takeovers(rounds: int, testbeds: tuple[str, ...] = ("mobile", "catching"), keep: Path | None = None,
+              progress: Callable[[Takeover], None] | None = None) -> dict[str, Any]:
+    """``rounds`` rounds of each takeover on each testbed; the detection times with their worst."""
+    base = keep or Path(tempfile.mkdtemp(prefix="petrobot-takeover-"))
+    done = []
+    for testbed in testbeds:
+        for how in TAKEOVERS:
+            for i in range(rounds):
+                got = device_takeover(base / f"{testbed}-{how}-{i}", testbed=testbed, how=how)
+                done.append(got)
+                if progress is not None:
+                    progress(got)
+    times = [d.detect_s for d in done if d.detect_s is not None]
+    erred = [d for d in done if d.call is not None and d.call[0] == "error"]
+    within = [d for d in erred if d.detect_s is not None and d.detect_s <= HEARTBEAT_S]
+    return {"date": time.strftime("%Y-%m-%d %H:%M"), "what": "device-takeover", "rounds": len(done),
+            "load": os.getloadavg(), "cpus": os.cpu_count(), "heartbeat_s": HEARTBEAT_S, "detect_s": times,
+            "detect_s_max": max(times) if times else None, "erred": len(erred), "within_bound": len(within),
+            "runs": [asdict(d) for d in done], "workdir": str(base) if keep else None}
+
+
 def stops(kind: str, rounds: int, keep: Path | None = None, progress: Callable[[StopMeasure], None] | None = None
           ) -> dict[str, Any]:
     """``rounds`` rounds of mobile-stop or catching-stop; the stop times (and distances) with their worst."""
@@ -926,8 +1046,8 @@ def stops(kind: str, rounds: int, keep: Path | None = None, progress: Callable[[
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("what", nargs="?", default="campaign",
-                        choices=["campaign", "check", "mobile-stop", "catching-stop"])
-    parser.add_argument("--rounds", type=int, default=10, help="rounds per scenario (default: %(default)s)")
+                        choices=["campaign", "check", "mobile-stop", "catching-stop", "device-takeover"])
+    parser.add_argument("--rounds", type=int, help="rounds per scenario (default: 10; device-takeover: 2)")
     parser.add_argument("--scenarios", default=",".join(SCENARIOS), help="comma-separated scenarios (default: all)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the fault moments (default: %(default)s)")
     parser.add_argument("--keep", type=Path, help="keep every round's files (journal, logs, stores) under this directory")
@@ -935,8 +1055,25 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--node", action="append", default=[], metavar="NAME=STATE_DIR[:LOG]",
                         help="check: a node's state directory and, optionally, its log file (repeatable)")
     parser.add_argument("--run", help="check: only this run of the journal")
+    parser.add_argument("--testbeds", default="mobile,catching",
+                        help="device-takeover: comma-separated testbeds (default: %(default)s)")
     parser.add_argument("--json", action="store_true", help="print JSON")
     args = parser.parse_args(argv)
+    if args.what == "device-takeover":
+        def told(got: Takeover) -> None:
+            print(f"{got.testbed} {got.how}: motion call {got.call} "
+                  f"{'-' if got.detect_s is None else f'{got.detect_s * 1000:.0f} ms'} after the first foreign frame",
+                  file=sys.stderr, flush=True)
+
+        rep = takeovers(args.rounds or 2, tuple(t for t in args.testbeds.split(",") if t),
+                        keep=args.keep, progress=told)
+        if args.json:
+            print(json.dumps(rep, indent=2))
+        else:
+            worst = "-" if rep["detect_s_max"] is None else f"{rep['detect_s_max'] * 1000:.0f} ms"
+            print(f"{rep['erred']}/{rep['rounds']} motions ended in error, {rep['within_bound']} within one heartbeat "
+                  f"period ({rep['heartbeat_s'] * 1000:.0f} ms); detection max {worst}; load {rep['load']}")
+        return 0 if rep["within_bound"] == rep["rounds"] else 1
     if args.what in ("mobile-stop", "catching-stop"):
         def said(got: StopMeasure) -> None:
             unit = "m/s" if args.what == "mobile-stop" else "rad/s (fastest joint)"
@@ -946,7 +1083,7 @@ def main(argv: list[str] | None = None) -> int:
                   + ("" if got.distance_m is None else f" and {got.distance_m:.2f} m") + f"; motion call {got.call}",
                   file=sys.stderr, flush=True)
 
-        rep = stops(args.what, args.rounds, keep=args.keep, progress=said)
+        rep = stops(args.what, args.rounds or 10, keep=args.keep, progress=said)
         if args.json:
             print(json.dumps(rep, indent=2))
         else:
@@ -973,7 +1110,7 @@ def main(argv: list[str] | None = None) -> int:
               f"reconciled={done.reconciled} differed={done.differed} exit={done.exit_code} "
               f"{done.end_state}{'  ' + '; '.join(bad) if bad else ''}", file=sys.stderr, flush=True)
 
-    report = campaign(args.rounds, scenarios, seed=args.seed, keep=args.keep, progress=progress)
+    report = campaign(args.rounds or 10, scenarios, seed=args.seed, keep=args.keep, progress=progress)
     print(json.dumps(report, indent=2) if args.json else render(report))
     table = report["scenarios"].values()
     ended = all(r["end_state"] is not None for r in report["runs"])

@@ -246,3 +246,18 @@ def test_killing_the_coordinator_mid_course_brings_the_robot_to_rest_within_the_
     assert got.call == ("error", "caller_gone"), got
     assert got.stop_s is not None and got.stop_s <= 0.7, got  # the watchdog's bound at 0.8 m/s
     print(f"robot at rest {got.stop_s:.2f} s and {got.distance_m:.2f} m after the coordinator was killed")
+
+
+@pytest.mark.parametrize("how", ["nmt-stop", "second-master"])
+def test_another_station_taking_the_wheel_drives_over_mid_course_is_an_error_of_the_follow_action(
+        tmp_path: Path, how: str):
+    """Issue 22, section 3: one NMT stop on the CAN gateway's port stopped both wheels for good and the
+    follow action ran on for 60 s, unnoticed; a second master's RPDOs drove the robot 0.57 m. The drive
+    node's master sees both on the bus: the running follow action ends in error naming the cause, and the
+    drive node logs it (bench/faults.py device-takeover, which also times it)."""
+    got = _faults().device_takeover(tmp_path, testbed="mobile", how=how)
+    assert got.call is not None and got.call[0] == "error", got
+    cause = "sent NMT 'stop' to all nodes" if how == "nmt-stop" else "sends RPDO 0x201 to drive 1: a second master"
+    assert cause in (got.call[1] or ""), got
+    assert any("another station on the CAN bus" in line for line in got.log), got
+    print(f"{how}: the follow action erred {got.detect_s * 1000:.0f} ms after the first foreign frame")
