@@ -4,7 +4,10 @@
 "services.catching.camera:CameraDriver"``, params ``host``, ``port``, ``tick_every``,
 ``connect_timeout_s``) is the frame-grabber card. A thread (:class:`CameraLink`) grabs every frame
 from the camera server (:mod:`services.devices.framegrabber`; the simulated one is
-``sim.frameserver.FrameServer``), keeps the last few and a background image (per-pixel median of frames
+``sim.frameserver.FrameServer``) or, when the params name a ``source``, from any OpenCV
+``VideoCapture`` source (a V4L2 device, a video file, an RTSP/HTTP/GStreamer URL, with the calibration
+from the ``calibration`` JSON file: :mod:`services.devices.capture`, which says where frame times come
+from), keeps the last few and a background image (per-pixel median of frames
 at least 0.3 s apart), and the driver publishes the external event ``image_sampling_tick``
 (``{"seq", "t"}``) for every ``tick_every``-th frame. After a lost camera the next action call
 reconnects (:meth:`CameraDriver.reconnect_if_lost`), so a restarted camera server is picked up.
@@ -28,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from services.action import CallContext, Driver, NodeContext
+from services.devices.capture import CaptureClient, CaptureSpec, open_grabber
 from services.devices.endpoint import DeviceEndpoint
 from services.devices.framegrabber import Frame, FrameClient
 from services.errors import ActionError
@@ -102,14 +106,16 @@ class CameraLink:
         on_frame: optional callback run in the event loop for each frame.
         history: frames kept for multi-frame locators.
         frame_timeout: s without a frame after which the camera counts as lost.
+        capture: an OpenCV source to read instead of the camera server at ``host:port``.
     """
 
     def __init__(
         self, host: str, port: int, *, on_frame: Callable[[Frame], None] | None = None,
-        history: int = 16, frame_timeout: float = 2.0,
+        history: int = 16, frame_timeout: float = 2.0, capture: CaptureSpec | None = None,
     ) -> None:
         self.host = host
         self.port = port
+        self.capture = capture
         self.on_frame = on_frame
         self.frame_timeout = frame_timeout
         self.frames: collections.deque[Frame] = collections.deque(maxlen=history)
@@ -119,7 +125,7 @@ class CameraLink:
         self._bg_last_t = -math.inf
         self.lost: str | None = None
         self.info: dict[str, Any] = {}
-        self._client: FrameClient | None = None
+        self._client: FrameClient | CaptureClient | None = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -135,14 +141,14 @@ class CameraLink:
         deadline = time.monotonic() + connect_timeout
         while True:
             try:
-                self._client = await asyncio.to_thread(FrameClient, self.host, self.port)
+                self._client = await asyncio.to_thread(open_grabber, self.capture, self.host, self.port)
                 self.info = await asyncio.to_thread(self._client.info)
                 break
             except (OSError, ConnectionError) as exc:
                 if time.monotonic() > deadline:
-                    raise CameraLostError(
-                        f"camera server {self.host}:{self.port} unreachable: {exc}"
-                    ) from exc
+                    where = (f"camera source {self.capture.source}" if self.capture is not None
+                             else f"camera server {self.host}:{self.port}")
+                    raise CameraLostError(f"{where} unreachable: {exc}") from exc
                 await asyncio.sleep(0.2)
         self._thread = threading.Thread(target=self._grab_loop, name="camera-grab", daemon=True)
         self._thread.start()
@@ -228,21 +234,29 @@ class CameraDriver(Driver):
     def __init__(self, name: str, params: dict[str, Any]) -> None:
         super().__init__(name, params)
         self.link: CameraLink | None = None
+        self.capture: CaptureSpec | None = None
         self.config: VisionConfig | None = None
         self.tick_every = max(1, int(self.params.get("tick_every", 1)))
 
     @classmethod
-    def device(cls, params: dict[str, Any]) -> DeviceEndpoint:
-        """The camera server this driver connects to (params ``host``, ``port``)."""
+    def device(cls, params: dict[str, Any]) -> DeviceEndpoint | None:
+        """The camera server this driver connects to (params ``host``, ``port``); ``None`` with an
+        OpenCV ``source`` (no server to probe)."""
+        if "source" in params:
+            return None
         return DeviceEndpoint("camera server", str(params.get("host", "127.0.0.1")),
                               int(params.get("port", DEFAULT_CAMERA_PORT)),
                               "petrobot sim catching", "frames")
 
     async def setup(self, node: NodeContext) -> None:
+        try:
+            self.capture = CaptureSpec.from_params(self.params, node.location.path)
+        except ValueError as exc:
+            raise ActionError(f"driver {self.name}: {exc}") from exc
         self.link = CameraLink(
             str(self.params.get("host", "127.0.0.1")),
             int(self.params.get("port", DEFAULT_CAMERA_PORT)),
-            on_frame=self._tick,
+            on_frame=self._tick, capture=self.capture,
         )
         await self.link.start(float(self.params.get("connect_timeout_s", 10.0)))
         self.config = VisionConfig.from_info(self.link.info)
@@ -260,7 +274,7 @@ class CameraDriver(Driver):
         if self.link is None or self.link.lost is None:
             return
         await self.link.close()
-        link = CameraLink(self.link.host, self.link.port, on_frame=self._tick)
+        link = CameraLink(self.link.host, self.link.port, on_frame=self._tick, capture=self.capture)
         self.link = link
         await link.start(timeout)
         self.config = VisionConfig.from_info(link.info)

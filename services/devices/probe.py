@@ -33,7 +33,8 @@ def device_endpoints(location: Location, nodes: Iterable[str] | None = None) -> 
     """The device servers of the drivers of ``nodes`` (default: every node), in file order.
 
     A driver whose impl cannot be imported is left out (the node itself says what is wrong with
-    it when it starts), as is one that needs no device server.
+    it when it starts), as is one that needs no device server (no ``device`` method, or one that
+    returns ``None``: a camera read through OpenCV).
     """
     from services.action import import_impl
 
@@ -47,8 +48,9 @@ def device_endpoints(location: Location, nodes: Iterable[str] | None = None) -> 
         except PetrobotError:
             continue
         device = getattr(cls, "device", None)
-        if device is not None:
-            out.append((spec, device(dict(spec.params))))
+        endpoint = None if device is None else device(dict(spec.params))
+        if endpoint is not None:
+            out.append((spec, endpoint))
     return out
 
 

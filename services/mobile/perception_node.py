@@ -12,6 +12,7 @@ from typing import Any
 
 from services.action import CallContext, Driver, NodeContext, PrimitiveAction
 from services.devices.endpoint import DeviceEndpoint
+from services.devices.capture import CaptureClient, CaptureSpec, open_grabber
 from services.devices.framegrabber import Frame, FrameClient
 from services.errors import ActionError, LocationError
 from services.mobile.beacon import BeaconModel, BeaconObservation
@@ -58,7 +59,9 @@ DEFAULT_CAMERA_PORT = 7220
 class PerceptionDriver(Driver):
     """Camera and beacon sensor of the mobile robot, and the drive node's odometry.
 
-    Params: ``host`` ("127.0.0.1"), ``port`` (7220): the world's frame server; ``drive_node``
+    Params: ``host`` ("127.0.0.1"), ``port`` (7220): the world's frame server, or ``source`` (with
+    ``calibration``, ``api``, ``timestamps``, ``pace``, ``loop``): any OpenCV ``VideoCapture`` source
+    instead (:mod:`services.devices.capture`; its frames carry no beacon scans); ``drive_node``
     (default: the node services.toml places ``stop_robot`` on): whose odometry to follow;
     ``connect_timeout_s`` (10); ``consume_wait_s`` (0.05): after handing a frame to the actions the
     grabbing thread waits up to this long for an action to take it before it grabs the next, so that
@@ -71,6 +74,7 @@ class PerceptionDriver(Driver):
         self.host = str(self.params.get("host", "127.0.0.1"))
         self.port = int(self.params.get("port", DEFAULT_CAMERA_PORT))
         self.connect_timeout = float(self.params.get("connect_timeout_s", 10.0))
+        self.capture: CaptureSpec | None = None
         self.info: dict[str, Any] | None = None
         self.memory: CourseMemory | None = None
         self.frame: Frame | None = None
@@ -90,13 +94,23 @@ class PerceptionDriver(Driver):
         self._link: Any = None
 
     @classmethod
-    def device(cls, params: dict[str, Any]) -> DeviceEndpoint:
-        """The frame server this driver connects to."""
+    def device(cls, params: dict[str, Any]) -> DeviceEndpoint | None:
+        """The frame server this driver connects to (``None`` with an OpenCV ``source``)."""
+        if "source" in params:
+            return None
         return DeviceEndpoint("mobile camera server", str(params.get("host", "127.0.0.1")),
                               int(params.get("port", DEFAULT_CAMERA_PORT)), "petrobot sim mobile", "frames")
 
     async def setup(self, node: NodeContext) -> None:
-        """Start the grabbing thread and subscribe to the drive node's odometry."""
+        """Start the grabbing thread and subscribe to the drive node's odometry.
+
+        Raises:
+            ActionError: the params' OpenCV source options are wrong.
+        """
+        try:
+            self.capture = CaptureSpec.from_params(self.params, node.location.path)
+        except ValueError as exc:
+            raise ActionError(f"driver {self.name}: {exc}") from exc
         self._loop = asyncio.get_running_loop()
         self._new_frame = asyncio.Event()
         self._new_odometry = asyncio.Event()
@@ -122,12 +136,12 @@ class PerceptionDriver(Driver):
 
     # --- threads and callbacks -------------------------------------------------------------------
     def _grab_loop(self) -> None:
-        client: FrameClient | None = None
+        client: FrameClient | CaptureClient | None = None
         seq = -1
         while not self._stop.is_set():
             try:
                 if client is None:
-                    client = FrameClient(self.host, self.port, connect_timeout=2.0)
+                    client = open_grabber(self.capture, self.host, self.port, connect_timeout=2.0)
                     info = client.info()
                     self.info = info
                     self.lost = None
