@@ -473,6 +473,9 @@ class CanDrives:
         node.rpdo.read()  # what the drive holds now, over SDO
         node.tpdo.read()
         self._use_mappings(d)
+        log.info("CAN drive %d (%s) configured over SDO: mode %s, heartbeat %d ms; read back: RPDO %s, TPDO %s",
+                 spec.node_id, spec.name, spec.mode, spec.heartbeat_ms,
+                 _mapped(node.rpdo), _mapped(node.tpdo))
 
     @staticmethod
     def _remap(pdos: Any, wanted: tuple[tuple[tuple[int, int], ...], ...] | None, deadline_ms: int | None,
@@ -860,6 +863,12 @@ class _Watch(can.Listener):
     def on_error(self, exc: Exception) -> bool:
         self.owner._mark_dead(f"CAN bus connection lost: {exc}")
         return False  # the notifier's thread ends
+
+
+def _mapped(pdos: Any) -> str:
+    """The enabled PDOs of one of canopen's PDO sets in words: ``0x201 [0x6040, 0x607a]; ...``."""
+    return "; ".join(f"{m.cob_id:#05x} [{', '.join(f'{v.index:#06x}' for v in m.map)}]"
+                     for m in pdos.map.values() if m.enabled) or "none"
 
 
 def _layout(pdo_map: Any) -> PdoLayout:
