@@ -3,6 +3,7 @@ control loop answering every SYNC, as the PUMA driver's control thread does."""
 
 from __future__ import annotations
 
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -15,8 +16,17 @@ from sim.catching import puma560 as P
 from sim.catching.drives import SimDrives
 
 
+REALTIME_MASTER_WAIT_S = 0.1
+"""In real time the rig waits this long (wall) at a SYNC for a master in step, as ``petrobot sim`` does
+(``--master-wait-ms`` 100): without it a rig that fell behind the wall clock caught up in a burst of up
+to 50 SYNCs that a master thread starved by a loaded machine could not answer, and its drives faulted on
+their RPDO deadline (50 ms) although the master was alive (the world never charges a master with its
+own bursts)."""
+
+
 class SimRig:
-    """A pybullet PUMA with SimDrives, stepped by hand or by a real-time thread."""
+    """A pybullet PUMA with SimDrives, stepped by hand or by a real-time thread (which paces the bus to
+    the master as the world does, :data:`REALTIME_MASTER_WAIT_S`, unless ``master_wait_s`` is given)."""
 
     def __init__(self, tmp_path, q0=K.Q_HOME, crossfire: Callable[[], bool] | None = None, **drive_options):
         self.pb = bullet_client.BulletClient(connection_mode=pybullet.DIRECT)
@@ -26,6 +36,7 @@ class SimRig:
         for j, q in zip(joints, q0):
             self.pb.resetJointState(body, j, float(q))
         self.crossfire_state = False
+        self._paced = "master_wait_s" in drive_options
         self.drives = SimDrives(**drive_options)
         self.drives.attach(self.pb, body, joints, crossfire=crossfire or (lambda: self.crossfire_state))
         self.t = 0.0
@@ -42,6 +53,8 @@ class SimRig:
                 self.t = round(self.t + 0.001, 9)
 
     def start(self):
+        if not self._paced:
+            self.drives.master_wait_s = REALTIME_MASTER_WAIT_S
         self.running.set()
 
         def loop():
@@ -67,6 +80,11 @@ class SimRig:
         if self._thread is not None:
             self._thread.join(timeout=5)
         self.pb.disconnect()
+
+
+SWITCH_INTERVAL_S = 0.001
+"""The interpreter's thread switch interval of the motion node (services.catching.arm, param
+``switch_interval_s``): the control thread answers a SYNC every 2 ms beside the CAN receive thread."""
 
 
 class ControlLoop:
@@ -105,6 +123,8 @@ class ControlLoop:
             time.sleep(0.005)
 
     def __enter__(self) -> ControlLoop:
+        if sys.getswitchinterval() > SWITCH_INTERVAL_S:  # as the PUMA driver sets it in the motion node
+            sys.setswitchinterval(SWITCH_INTERVAL_S)
         self._thread.start()
         return self
 

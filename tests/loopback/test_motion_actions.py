@@ -64,7 +64,7 @@ class Bench:
         self.rim_goal: np.ndarray | None = None
         self.t_rim = math.inf
         self.catchable = True
-        self.rig = SimRig(tmp_path, crossfire=self._crossfire, master_wait_s=0.05)
+        self.rig = SimRig(tmp_path, crossfire=self._crossfire)  # paced to the master as the world is
         self.gw = CanGateway(self.rig.drives.bus)
         self.can_port = self.gw.start()
         self.rig.start()
@@ -112,8 +112,10 @@ class Bench:
 
     def stream(self, y: float, lead_s: float, stop_after_s: float | None = None,
                bad: dict[str, Any] | None = None) -> None:
-        """Publish set points at 100 Hz (wall) for a ball crossing the catch line lead_s from now;
-        with ``bad``, every third set point has these fields replaced (malformed)."""
+        """Publish set points at 100 Hz (wall) for a ball crossing the catch line lead_s from now (bus
+        time), until stop_after_s of bus time has passed (the camera's clock: on a loaded machine the
+        simulation, and with it the ball, runs slower than the wall clock); with ``bad``, every third
+        set point has these fields replaced (malformed)."""
         t_cross = self.rig.t + lead_s
         vx = 0.9
         xb, yb, vxb, vyb = table_to_base(0.0, y, vx, 0.0, ROBOT_BASE)
@@ -121,9 +123,9 @@ class Bench:
         self.rim_goal, self.t_rim = target.rim, target.t_rim
 
         async def run() -> None:
-            t0 = time.monotonic()
+            t0 = self.rig.t  # bus time, as the ball's: a predictor stops when the ball reaches the line
             seq = 0
-            while stop_after_s is None or time.monotonic() - t0 <= stop_after_s:
+            while stop_after_s is None or self.rig.t - t0 <= stop_after_s:
                 sp = CatchSetPoint(seq=seq, t_frame=self.rig.t, t_capture=time.time(), t_sent=time.time(),
                               x=0.0, y=y, t=t_cross, vx=vx, vy=0.0).to_dict()
                 if bad is not None and seq % 3 == 2:
