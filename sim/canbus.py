@@ -109,9 +109,11 @@ class SimBus:
             if origin is None:
                 self._now = frame.t
             now = self._now
-        seen = frame if origin is None else dataclasses.replace(frame, t=now)
+        seen = frame
         for port in ports:
             if port is not origin:
+                if seen.t != now:  # restamped once, and only when another port takes it
+                    seen = dataclasses.replace(frame, t=now)
                 port._deliver(seen)
         if origin is not None:
             at_once = self._at_once
