@@ -223,6 +223,7 @@ class SimDrive(SimDevice):
     controlword: int = 0
     mode: int = 0
     consumers: dict[int, float] = field(default_factory=dict)  # watched node -> consumer heartbeat time, s
+    received: dict[int, int] = field(default_factory=dict)  # latest value of each object an RPDO or SDO set
 
 
 D = TypeVar("D", bound=SimDrive)
@@ -417,7 +418,7 @@ class SimCanDrives(Generic[D]):
             if d.nmt is not cf.NmtState.OPERATIONAL:
                 continue
             d.syncs += 1
-            values = {**values, 0x6041: d.sm.statusword, 0x6061: d.mode, 0x603F: int(d.sm.fault_code)}
+            values = {**d.received, **values, 0x6041: d.sm.statusword, 0x6061: d.mode, 0x603F: int(d.sm.fault_code)}
             for cob_id, layout, trans in d.tpdos or ():
                 if 1 <= trans <= 240 and d.syncs % trans == 0:
                     self.bus.transmit(cf.CanFrame(cob_id, layout.pack_objects(values), t))
@@ -503,6 +504,7 @@ class SimCanDrives(Generic[D]):
             log.warning("%s %d: RPDO %#05x of %d bytes does not match its mapping (%s)", self.kind, d.node,
                         cob_id, len(data), layout.describe())
             return
+        d.received.update(values)  # what a TPDO mapping these objects echoes (a real drive's 0x607A)
         before = d.sm.state
         if 0x6040 in values:
             d.controlword = values[0x6040]
@@ -646,6 +648,8 @@ class SimCanDrives(Generic[D]):
         elif isinstance(dev, SimDrive) and index == 0x6040:
             dev.controlword = int.from_bytes(data, "little")
             dev.sm.on_controlword(dev.controlword)
+        elif isinstance(dev, SimDrive) and index in (0x607A, 0x60FF) and len(data) == 4:
+            dev.received[index] = struct.unpack("<i", data)[0]  # echoed by a TPDO mapping it
         dev.dirty = True  # the caches are made again once the value has landed (canopen stores it after us)
 
     @staticmethod

@@ -128,6 +128,7 @@ class _Drive:
     nmt_t: float = math.nan  # bus time of the latest heartbeat
     emcy: tuple[int, float] | None = None
     sent: collections.deque[int] = field(default_factory=lambda: collections.deque(maxlen=8))
+    echoed: bool = False  # a TPDO echoed one of the targets sent since start (the echo is in step)
     wrong_target: str | None = None
 
 
@@ -544,6 +545,7 @@ class CanDrives:
                 self._foreign = None  # a foreign NMT command is undone by this start
             for d in self._drives:
                 d.wrong_target = None
+                d.echoed = False
                 d.sent.clear()
             started = self._sync_count
         self._send_message(cf.NMT_ID, bytes([cf.NmtCommand.START, 0]), network)
@@ -780,9 +782,12 @@ class CanDrives:
                     d.position = v * d.spec.position_unit
                 elif e.index == 0x606C:
                     d.velocity = v * d.spec.velocity_unit
-                elif e.index == d.target_index and d.sent and self._expect_operational and v not in d.sent:
-                    d.wrong_target = (f"drive {d.spec.node_id} reports target {v} (counts), which this master "
-                                      f"did not send (its last: {d.sent[-1]}): another master?")
+                elif e.index == d.target_index and d.sent and self._expect_operational:
+                    if v in d.sent:
+                        d.echoed = True
+                    elif d.echoed:  # not the target it held before this master's first one reached it
+                        d.wrong_target = (f"drive {d.spec.node_id} reports target {v} (counts), which this "
+                                          f"master did not send (its last: {d.sent[-1]}): another master?")
             d.tpdo_sync = self._sync_count
             self._cond.notify_all()
 

@@ -149,3 +149,32 @@ def test_the_master_can_be_the_sync_producer(tmp_path: Path):
     finally:
         gw.stop()
         rig.close()
+
+
+@pytest.mark.timeout(60)
+def test_a_drive_echoing_a_target_the_master_did_not_send_is_a_takeover(served):
+    """Issue 22, section 3: a drive whose TPDO echoes its target (0x607A mapped) and reports one this
+    master never sent (here another station writes it over SDO, which the master does not watch) is
+    trouble at once, named; while only the master commands it, the echo is no trouble."""
+    rig, port = served
+    bus = parse_bus(REMAPPED.replace('["velocity_actual_value", "position_demand_value"]', '["target_position"]'))
+    with PumaDrives("127.0.0.1", port, bus=bus) as drives:
+        drives.start()
+        with ControlLoop(drives) as loop:
+            drives.enable()
+            loop.wait(100)
+            assert drives.trouble() is None  # its own targets, echoed
+            intruder = rig.drives.bus.connect()
+            foreign = round(loop.q[3] / 1e-5) + 12345
+            # the master skips a few cycles (the drives extrapolate; 25 are allowed), so that its next
+            # target does not overwrite the written one before the drive's TPDO echoes it
+            drives.send_targets = lambda q: None  # type: ignore[method-assign]
+            loop.wait(1)
+            intruder.send(cf.CanFrame(0x604, bytes([0x23, 0x7A, 0x60, 0x00]) + foreign.to_bytes(4, "little", signed=True)))
+            loop.wait(4)
+            del drives.send_targets
+            intruder.close()
+            trouble = drives.trouble() or ""
+            assert f"drive 4 reports target {foreign} (counts), which this master did not send" in trouble, trouble
+            with pytest.raises(BusError, match="another master"):
+                drives.check()
