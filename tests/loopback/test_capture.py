@@ -14,6 +14,8 @@ from services.catching.camera import VisionConfig
 from services.catching.vision import locate_threshold
 from services.devices.capture import CaptureClient, CaptureSpec, record
 from services.devices.framegrabber import Frame
+from services.devices.probe import device_endpoints
+from services.location import parse_location
 
 ROOT = Path(__file__).resolve().parents[2]
 VIDEO = ROOT / "tests" / "data" / "catching_camera.mkv"
@@ -92,3 +94,27 @@ def test_sources_in_services_toml_params_are_taken_relative_to_its_directory(tmp
         CaptureSpec.from_params({"source": "0", "api": "directshow"}, services)
     with pytest.raises(ConnectionError, match="no such file"):
         CaptureSpec(str(tmp_path / "missing.mkv")).open()
+
+
+def test_a_camera_read_through_videocapture_needs_no_camera_server_before_its_node_starts():
+    location = parse_location("""
+[nodes.vision]
+host = "127.0.0.1"
+port = 7103
+
+[nodes.perception]
+host = "127.0.0.1"
+port = 7105
+
+[drivers.camera]
+node = "vision"
+impl = "services.catching.camera:CameraDriver"
+params = { source = "/dev/video0", calibration = "table.json" }
+
+[drivers.mobile_camera]
+node = "perception"
+impl = "services.mobile.perception_node:PerceptionDriver"
+params = { port = 7220 }
+""")
+    found = [(spec.name, endpoint.port) for spec, endpoint in device_endpoints(location)]
+    assert found == [("mobile_camera", 7220)]  # petrobot up probes the frame server only
