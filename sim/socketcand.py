@@ -200,27 +200,37 @@ class CanGateway:
         host: listen address (loopback only by default).
         port: TCP port, 0 for any free port.
         channels: bus names served.
+        max_connections: connections at most (each costs two threads and a port whose queue holds every
+            bus frame). A connection beyond it closes the one that has sent nothing for the longest
+            (a master sends every SYNC cycle: idle strangers go first). The port has no key (a CAN bus
+            has none), so this bounds what 500 idle connections cost, not who may send.
     """
 
     def __init__(
-        self, bus: SimBus, host: str = "127.0.0.1", port: int = 0, channels: Sequence[str] = ("can0",)
+        self, bus: SimBus, host: str = "127.0.0.1", port: int = 0, channels: Sequence[str] = ("can0",),
+        *, max_connections: int = 16,
     ) -> None:
+        if max_connections < 1:
+            raise ValueError(f"max_connections must be at least 1, not {max_connections}")
         self.bus = bus
         self.host = host
         self.port = port
         self.channels = tuple(channels)
+        self.max_connections = max_connections
         self._server: socket.socket | None = None
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._conns: list[socket.socket] = []
+        self._live: dict[socket.socket, _Connection] = {}
         self._lock = threading.Lock()
+        self._evicted = 0
 
     def start(self) -> int:
         """Start listening; returns the TCP port."""
         srv = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
         srv.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         srv.bind((self.host, self.port))
-        srv.listen(8)
+        srv.listen(64)  # a burst of connections waits in the backlog instead of a 1 s SYN retry
         srv.settimeout(0.1)
         self._server = srv
         self.port = srv.getsockname()[1]
@@ -271,9 +281,26 @@ class CanGateway:
             except OSError:  # the peer is already gone
                 conn.close()
                 continue
+            peer = f"{addr[0]}:{addr[1]}"
+            self._make_room(peer)
+            connection = _Connection(self, conn, peer)
             with self._lock:
                 self._conns.append(conn)
-            _Connection(self, conn, f"{addr[0]}:{addr[1]}").start()
+                self._live[conn] = connection
+                self._threads = [th for th in self._threads if th.is_alive()]
+            connection.start()
+
+    def _make_room(self, peer: str) -> None:
+        """At ``max_connections``, close the connection that has sent nothing for the longest."""
+        with self._lock:
+            if len(self._live) < self.max_connections:
+                return
+            victim = min(self._live.values(), key=lambda c: c.last_heard)
+            self._evicted += 1
+            if self._evicted == 1 or self._evicted % 100 == 0:
+                log.warning("CAN gateway: %d connections, closed %s (silent longest) for %s (%d so far)",
+                            len(self._live), victim.peer, peer, self._evicted)
+        victim.close()
 
 
 class _Connection:
@@ -293,6 +320,7 @@ class _Connection:
         self.raw_since: float | None = None
         self.forwarding = False
         self.done = threading.Event()
+        self.last_heard = time.monotonic()  # when the peer last sent something
 
     def start(self) -> None:
         if not self._flush():  # the greeting, before any thread may close the socket
@@ -321,6 +349,7 @@ class _Connection:
                 data = self.sock.recv(4096)
                 if not data:
                     break
+                self.last_heard = time.monotonic()
                 with self.lock:
                     frames = self.proto.receive_data(data, time.monotonic())
                     if self.proto.mode is ServerMode.RAW and self.raw_since is None:
@@ -354,6 +383,14 @@ class _Connection:
             if not self._flush():
                 return
 
+    def close(self) -> None:
+        """End this connection (its threads end on their next wake-up)."""
+        try:
+            self.sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self._close()
+
     def _close(self) -> None:
         with self.lock:
             if self.done.is_set():
@@ -367,3 +404,4 @@ class _Connection:
         with self.gw._lock:
             if self.sock in self.gw._conns:
                 self.gw._conns.remove(self.sock)
+            self.gw._live.pop(self.sock, None)

@@ -5,6 +5,7 @@ node's CANopen master."""
 from __future__ import annotations
 
 import socket
+import threading
 import time
 
 import can
@@ -475,6 +476,31 @@ def test_the_gateway_survives_peers_that_connect_and_leave_at_once(served):
             elif n % 3 == 2:
                 sock.sendall(b"< open can0 >< rawmode >< send 1")
     assert _sees_sync(port), "the gateway stopped serving after peers that left at once"
+
+
+@pytest.mark.timeout(60)
+def test_a_hundred_idle_connections_to_the_gateway_cost_bounded_threads_and_never_cut_the_master(served):
+    """The gateway's port has no key (a CAN bus has none): 100 idle connections must not cost 200
+    threads (two per connection) nor push out the master, which sends every SYNC cycle."""
+    _rig, _, port = served
+    before = threading.active_count()
+    idle: list[socket.socket] = []
+    most = 0
+    with PumaDrives("127.0.0.1", port, bus=PUMA_BUS) as drives:
+        drives.start()
+        with ControlLoop(drives) as loop:
+            drives.enable()
+            try:
+                for _ in range(100):
+                    idle.append(socket.create_connection(("127.0.0.1", port), timeout=5.0))
+                    most = max(most, threading.active_count())
+                loop.wait(100)  # the master goes on answering every SYNC
+                drives.check()
+            finally:
+                for sock in idle:
+                    sock.close()
+    # 16 connections of two threads each (one being closed at a time), whatever the master's own threads
+    assert most <= before + 8 + 2 * 16 + 2, (most, before)
 
 
 @pytest.mark.timeout(60)
