@@ -2,10 +2,10 @@
 it was and says why, with the log to read; a demo that starts keeps the previous journal under a
 name of its own and says where (real processes: the demo, its simulator, its nodes)."""
 
-from __future__ import secrets
-import annotations
+from __future__ import annotations
 
 import re
+import secrets
 import socket
 import subprocess
 import sys
