@@ -47,6 +47,7 @@ __all__ = [
     "conservative",
     "consistent",
     "place_bounds",
+    "semiflow_cover",
     "semiflow_support",
     "total_bound",
 ]
@@ -351,3 +352,49 @@ def place_bounds(sn: SparseNet, *, seconds: float = 5.0, seen: np.ndarray | None
                      f"reached had their own LP within {seconds:g} s; the others keep the bound of the total "
                      "token count's LP")
     return PlaceBounds(total=tb.value, bounds=bounds, own=own, certified=cert, complete=complete, notes=notes)
+
+
+def semiflow_cover(sn: SparseNet, *, seconds: float = 3.0, covered: np.ndarray | None = None) -> list[np.ndarray]:
+    """Small-support P-semiflows covering the places, one LP per place not yet covered.
+
+    For a place p, ``min Σ y  s.t.  yᵀC = 0, y_p ≥ 1, y ≥ 0`` has a vertex solution of small support
+    (a sum of minimal semiflows through p at most); rebuilt as an integer vector and checked exactly
+    (yᵀC = 0), it is kept. Cheaper than the Farkas enumeration (:mod:`.invariants`) when that one
+    explodes, and enough where only some semiflows are needed (groups and order of a decision
+    diagram, :mod:`.mdd_order`).
+
+    Args:
+        sn: the net's sparse matrices.
+        seconds: time for all the LPs together.
+        covered: (|P|,) places to skip (already covered by known semiflows).
+
+    Returns:
+        Integer semiflows (|P|,) int64, each checked exactly.
+    """
+    start = time.monotonic()
+    n = sn.n_places
+    c_t = sp.csr_matrix(sn.incidence.T, dtype=np.float64)
+    c_int = sp.csr_matrix(sn.incidence.T).astype(np.int64)
+    done = np.zeros(n, dtype=bool) if covered is None else np.asarray(covered, dtype=bool).copy()
+    out: list[np.ndarray] = []
+    zeros = np.zeros(c_t.shape[0])
+    for p in range(n):
+        left = seconds - (time.monotonic() - start)
+        if left <= 0:
+            break
+        if done[p]:
+            continue
+        bounds = [(0.0, None)] * n
+        bounds[p] = (1.0, None)
+        res = _solve(np.ones(n), None, None, c_t if c_t.shape[0] else None, zeros if c_t.shape[0] else None,
+                     bounds, left)
+        if res.status != 0:
+            done[p] = True
+            continue
+        for cand in _rationalised(np.maximum(np.asarray(res.x), 0.0)):
+            if cand[p] > 0 and (cand >= 0).all() and not any(_exact_product(c_int, cand)):
+                out.append(cand)
+                done |= cand > 0
+                break
+        done[p] = True
+    return out

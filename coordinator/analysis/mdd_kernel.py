@@ -1,0 +1,810 @@
+"""Compiled multi-valued decision diagrams and saturation (internal to :mod:`.symbolic`).
+
+Pure: no I/O. Compiled by numba (``cache=True``, in the user's cache directory, :mod:`.jit`) and
+driven by :mod:`coordinator.analysis.symbolic`, which documents the results. What is here:
+
+* **A quasi-reduced MDD store.** Levels 0 (the root's) to K − 1, one per variable (a place, or a
+  group of places: :mod:`.symbolic` decides), level K holds the terminal. Node 0 is the empty set,
+  node 1 the terminal {ε}; a node at level k has children at level k + 1 for the local values
+  0 .. dom[k] − 1, stored up to its last non-empty child (``size``). Nodes are unique (a hash table
+  over level and children), so two sets are equal iff their nodes are (Bryant 1986, for MDDs:
+  Kam, Villa, Brayton, Sangiovanni-Vincentelli 1998). No node is ever empty but node 0.
+* **Saturation** (Ciardo, Lüttgen, Siminiceanu 2001; constrained: Zhao, Ciardo 2009): an event (a
+  transition) has a top and a bottom level (the highest and lowest levels it reads or changes) and a
+  local function per level in between (``next``: local value → local value, or −1 where the event
+  is disabled). A node at level k is saturated when its set is closed under every event whose top
+  is at k or below, and its children are saturated: ``SAT`` saturates the children first, then
+  fires the events of level k on the node in place until nothing changes (``NODE``); ``FIRE``
+  applies one event to a saturated node below its top and saturates the result. A constraint node
+  (same level) keeps every intermediate set inside it (backward reachability inside the reachable
+  set). With saturation off, ``FIRE`` is a plain image (breadth-first layers for witnesses).
+* **Set operations** (``APPLY``: union, intersection, difference) and ``RESTRICT`` (the markings of a
+  set in which an event is enabled, or disabled).
+
+numba cannot load a recursive function from its cache (it crashes: checked on numba 0.68), so the
+recursion runs on an explicit stack of frames, each with a program counter; a frame's node under
+construction lives in an arena of child buffers with stack discipline. Results of operations go
+to a lossy computed table (a direct-mapped cache, as in CUDD), which never changes a result, only
+what is recomputed. Buffers grow inside the one compiled call, within a byte budget (status
+``MEMORY`` when it is reached). The store is handed back to the caller, who passes it to the next
+call; nothing is ever freed (the store lives as long as one analysis).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+import numpy as np
+from numba import njit, objmode
+
+__all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "MEMORY", "MODE_APPLY", "MODE_IMAGE",
+           "MODE_RESTRICT", "MODE_SATURATE", "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "count",
+           "max_weight", "new_store", "node_of_path", "presence", "run", "set_watch", "clear_cache"]
+
+EMPTY, TERMINAL = 0, 1
+NO_CONSTRAINT = -1
+#: run statuses: done; a firing left a level's values; the byte budget; the deadline (or the watch)
+OK, OVERFLOW, MEMORY, STOPPED = 0, 1, 2, 3
+#: loop steps between two calls of the watch (in the interpreter)
+_WATCH_STEPS = 1 << 20
+#: what :func:`run` computes
+MODE_SATURATE, MODE_IMAGE, MODE_APPLY, MODE_RESTRICT = 0, 1, 2, 3
+APPLY_UNION, APPLY_INTER, APPLY_DIFF = 0, 1, 2
+#: frame kinds
+_SAT, _FIRE, _NODE, _APPLY, _RESTRICT, _IMAGE = 0, 1, 2, 3, 4, 5
+#: operation tags in the computed table
+_OP_SAT, _OP_FIRE, _OP_APPLY, _OP_RESTRICT, _OP_IMAGE = 1, 2, 3, 4, 5
+#: meta array layout: nodes used, kid slots used, entries of the unique table, level of an overflow
+META_NODES, META_KIDS, META_UNIQUE, META_OVERFLOW_LEVEL, META_CT_USED = 0, 1, 2, 3, 4
+META_SIZE = 5
+#: largest computed table (entries of 20 bytes)
+_CT_MAX = 1 << 24
+_M1 = np.uint64(0xBF58476D1CE4E5B9)
+_M2 = np.uint64(0x94D049BB133111EB)
+_GOLD = np.uint64(0x9E3779B97F4A7C15)
+
+
+_watch = threading.local()
+
+
+def set_watch(deadline: float | None, progress: Callable[[int], None] | None = None) -> None:
+    """Stop this thread's :func:`run` calls at ``deadline`` (``time.monotonic()`` seconds; None: no
+    deadline) and report the store's node count to ``progress`` every million steps or so."""
+    _watch.deadline = deadline
+    _watch.progress = progress
+
+
+def _tick(nodes: int) -> int:
+    """Called from :func:`run` in the interpreter: 1 to stop (past the deadline), else 0. Ctrl-C
+    raises here."""
+    progress = getattr(_watch, "progress", None)
+    if progress is not None:
+        progress(int(nodes))
+    deadline = getattr(_watch, "deadline", None)
+    return int(deadline is not None and time.monotonic() > deadline)
+
+
+def new_store(dom: np.ndarray, path: np.ndarray) -> tuple[tuple[np.ndarray, ...], int]:
+    """A fresh store ``(meta, level, offset, size, kids, unique, ct_k0, ct_k1, ct_v)`` with nodes 0
+    (empty), 1 (terminal) and the single path of the level values ``path`` (the initial marking),
+    and that path's root node. The computed table (``ct_*``) is part of the store, so that a call
+    stopped at its deadline resumes from the results it had (:func:`clear_cache` when the events
+    change)."""
+    n_levels = dom.shape[0]
+    nodes = max(1 << 12, 4 * n_levels + 16)
+    meta = np.zeros(META_SIZE, np.int64)
+    level = np.zeros(nodes, np.int32)
+    offset = np.zeros(nodes, np.int64)
+    size = np.zeros(nodes, np.int32)
+    kids = np.zeros(max(nodes * 2, 4 * int(dom.sum()) + 16), np.int32)
+    unique = np.zeros(4 * nodes, np.int32)
+    meta[META_NODES] = 2
+    node = TERMINAL
+    for k in range(n_levels - 1, -1, -1):
+        buf = np.zeros(int(dom[k]), np.int32)
+        buf[int(path[k])] = node
+        node = int(_checkin(k, buf, 0, buf.shape[0], meta, level, offset, size, kids, unique))
+    return (meta, level, offset, size, kids, unique, np.full(1 << 12, -1, np.int64), np.zeros(1 << 12, np.int64),
+            np.zeros(1 << 12, np.int32)), node
+
+
+def clear_cache(store: tuple[np.ndarray, ...]) -> None:
+    """Forget the computed table of a store (its results depend on the events of the calls)."""
+    store[0][META_CT_USED] = 0
+    store[6][:] = -1
+
+
+@njit(cache=True)
+def _mix(x: np.uint64) -> np.uint64:
+    x = (x ^ (x >> np.uint64(30))) * _M1
+    x = (x ^ (x >> np.uint64(27))) * _M2
+    return x ^ (x >> np.uint64(31))
+
+
+@njit(cache=True)
+def _node_hash(k: int, buf: np.ndarray, off: int, n: int) -> np.uint64:
+    h = _mix(np.uint64(k + 1) * _GOLD)
+    for i in range(n):
+        h = _mix(h ^ (np.uint64(buf[off + i]) + np.uint64(i) * _GOLD))
+    return h
+
+
+@njit(cache=True)
+def _slot(k0: int, k1: int, mask: int) -> int:
+    return np.int64(_mix(_mix(np.uint64(k0) * _GOLD) ^ np.uint64(k1)) & np.uint64(mask))  # type: ignore[return-value]
+
+
+@njit(cache=True)
+def _checkin(k: int, arena: np.ndarray, b0: int, n: int, meta: np.ndarray, level: np.ndarray,
+             offset: np.ndarray, size: np.ndarray, kids: np.ndarray, unique: np.ndarray) -> int:
+    """The unique node at level k with children ``arena[b0:b0 + n]`` (trailing empties trimmed):
+    found in the hash table, or added (the caller made room for one node)."""
+    while n > 0 and arena[b0 + n - 1] == EMPTY:
+        n -= 1
+    if n == 0:
+        return EMPTY
+    mask = unique.shape[0] - 1
+    s = np.int64(_node_hash(k, arena, b0, n) & np.uint64(mask))
+    while unique[s] != 0:
+        nd = unique[s]
+        if level[nd] == k and size[nd] == n:
+            o = offset[nd]
+            same = True
+            for i in range(n):
+                if kids[o + i] != arena[b0 + i]:
+                    same = False
+                    break
+            if same:
+                return nd  # type: ignore[no-any-return]
+        s = (s + 1) & mask
+    r = meta[META_NODES]
+    nk = meta[META_KIDS]
+    level[r] = k
+    offset[r] = nk
+    size[r] = n
+    for i in range(n):
+        kids[nk + i] = arena[b0 + i]
+    meta[META_KIDS] = nk + n
+    meta[META_NODES] = r + 1
+    meta[META_UNIQUE] += 1
+    unique[s] = r
+    return r  # type: ignore[no-any-return]
+
+
+@njit(cache=True)
+def _rehash(unique: np.ndarray, n_nodes: int, level: np.ndarray, offset: np.ndarray, size: np.ndarray,
+            kids: np.ndarray) -> None:
+    mask = unique.shape[0] - 1
+    for nd in range(2, n_nodes):
+        s = np.int64(_node_hash(level[nd], kids, offset[nd], size[nd]) & np.uint64(mask))
+        while unique[s] != 0:
+            s = (s + 1) & mask
+        unique[s] = nd
+
+
+@njit(cache=True)
+def _kid(kids: np.ndarray, offset: np.ndarray, size: np.ndarray, node: int, i: int) -> int:
+    """Child i of a node; for the constraint sentinel NO_CONSTRAINT, NO_CONSTRAINT."""
+    if node == NO_CONSTRAINT:
+        return NO_CONSTRAINT
+    if i < size[node]:
+        return kids[offset[node] + i]  # type: ignore[no-any-return]
+    return EMPTY
+
+
+@njit(cache=True)
+def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, n_levels: int,
+             ev_bot: np.ndarray) -> tuple[int, int, int, int, int]:
+    """For a call of kind ``ty``: its result when it is immediate (else -1), its operands in canonical
+    order, and its two computed-table key words."""
+    if ty == _SAT:
+        if a == EMPTY or k == n_levels:
+            return a, a, b, 0, 0
+        return -1, a, b, (_OP_SAT << 40) + a, c
+    if ty == _FIRE:
+        if a == EMPTY or k > ev_bot[e]:
+            return a, a, b, 0, 0
+        return -1, a, b, ((_OP_FIRE if saturating else _OP_IMAGE) << 40) + a, (c << 24) + e
+    if ty == _APPLY:
+        if e == APPLY_UNION:
+            if a == EMPTY or a == b:
+                return b, a, b, 0, 0
+            if b == EMPTY:
+                return a, a, b, 0, 0
+        elif e == APPLY_INTER:
+            if a == EMPTY or b == EMPTY:
+                return EMPTY, a, b, 0, 0
+            if a == b:
+                return a, a, b, 0, 0
+        else:
+            if a == EMPTY or a == b:
+                return EMPTY, a, b, 0, 0
+            if b == EMPTY:
+                return a, a, b, 0, 0
+        if e != APPLY_DIFF and a > b:
+            a, b = b, a
+        return -1, a, b, (_OP_APPLY << 40) + (e << 36) + a, b
+    # _RESTRICT: b is 1 to keep the markings where event e is enabled, 0 where it is disabled
+    if a == EMPTY:
+        return EMPTY, a, b, 0, 0
+    if k > ev_bot[e]:
+        return (a if b == 1 else EMPTY), a, b, 0, 0
+    return -1, a, b, (_OP_RESTRICT << 40) + a, (e << 2) + b
+
+
+@njit(cache=True)
+def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray,
+        ev_slot: np.ndarray, slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray,
+        meta: np.ndarray, level: np.ndarray, offset: np.ndarray, size: np.ndarray, kids: np.ndarray,
+        unique: np.ndarray, ct_k0: np.ndarray, ct_k1: np.ndarray, ct_v: np.ndarray, a_in: int, b_in: int,
+        c_in: int, arg: int, check_overflow: bool, max_bytes: int) -> tuple:  # type: ignore[type-arg]
+    """One operation on the store (see the module docstring).
+
+    Args:
+        mode: MODE_SATURATE (the saturated closure of ``a_in`` under every event, inside ``c_in``),
+            MODE_IMAGE (one step of every event from ``a_in``, inside ``c_in``, not saturated),
+            MODE_APPLY (``arg`` in APPLY_UNION/INTER/DIFF of ``a_in`` and ``b_in``) or MODE_RESTRICT
+            (the markings of ``a_in`` in which event ``arg`` is enabled if ``b_in`` is 1, disabled if 0).
+        dom: (K,) int64 local domain sizes, level 0 at the root.
+        ev_top, ev_bot: (E,) int64 top and bottom level of each event.
+        ev_slot_ptr, ev_slot: for event e and level k in [top, bot], ``ev_slot[ev_slot_ptr[e] + k -
+            top]`` is the index of its local function, or -1 where the event leaves the level alone.
+        slot_ptr, nxt: local function s maps value i to ``nxt[slot_ptr[s] + i]`` (-1: disabled).
+        evtop_ptr, evtop: the events whose top is level k: ``evtop[evtop_ptr[k]:evtop_ptr[k + 1]]``.
+        meta, level, offset, size, kids, unique, ct_k0, ct_k1, ct_v: the store (:func:`new_store`, or
+            a previous result).
+        a_in, b_in, c_in: operand nodes (c_in: a constraint node at the root level, or NO_CONSTRAINT).
+        arg: the APPLY operation or the RESTRICT event.
+        check_overflow: a firing that leaves a level's domain is an error (status OVERFLOW, with the
+            level in meta) instead of being dropped.
+        max_bytes: byte budget of the store, computed table, frames and buffers (status MEMORY
+            beyond it; the store is then still consistent).
+
+    Returns:
+        ``(status, result node, meta, level, offset, size, kids, unique, ct_k0, ct_k1, ct_v)``.
+    """
+    n_levels = dom.shape[0]
+    max_dom = 1
+    for k in range(n_levels):
+        max_dom = max(max_dom, dom[k])
+    saturating = mode == MODE_SATURATE
+    # computed table: direct mapped (key words and value), grown (and refilled) as it fills up
+    ccap = ct_k0.shape[0]
+    ct_used = meta[META_CT_USED]
+    # frames: along the stack the level grows by one per frame, but for NODE frames (at the level of
+    # the SAT or FIRE frame below them) and the IMAGE frame, so the depth stays below 2K + 4
+    fcap = 2 * n_levels + 8
+    f_ty = np.zeros(fcap, np.int64)
+    f_pc = np.zeros(fcap, np.int64)
+    f_k = np.zeros(fcap, np.int64)
+    f_a = np.zeros(fcap, np.int64)
+    f_b = np.zeros(fcap, np.int64)
+    f_c = np.zeros(fcap, np.int64)
+    f_e = np.zeros(fcap, np.int64)
+    f_i = np.zeros(fcap, np.int64)
+    f_j = np.zeros(fcap, np.int64)
+    f_buf = np.zeros(fcap, np.int64)
+    f_k0 = np.zeros(fcap, np.int64)
+    f_k1 = np.zeros(fcap, np.int64)
+    arena = np.zeros((fcap + 1) * max_dom, np.int32)
+    atop = 0
+    fixed = fcap * 96 + arena.shape[0] * 4
+    status = OK
+    ret = EMPTY
+    depth = 0
+    if mode == MODE_IMAGE:
+        f_ty[0] = _IMAGE
+        f_a[0] = a_in
+        f_c[0] = c_in
+        depth = 1
+    else:
+        ty0 = _SAT if mode == MODE_SATURATE else (_APPLY if mode == MODE_APPLY else _RESTRICT)
+        quick, a0, b0_, key0, key1 = _prepare(ty0, 0, a_in, b_in, c_in, arg, saturating, n_levels, ev_bot)
+        if quick >= 0:
+            ret = quick
+        else:
+            f_ty[0] = ty0
+            f_a[0] = a0
+            f_b[0] = b0_
+            f_c[0] = c_in
+            f_e[0] = arg
+            f_k0[0] = key0
+            f_k1[0] = key1
+            depth = 1
+    # a call: the caller sets (cty, ck, ca, cb, cc, ce) and its own continuation pc, then jumps to
+    # ``call``; an immediate or cached result comes back in ret at once, else a frame is pushed
+    steps = 0
+    while depth > 0:
+        steps += 1
+        if steps == _WATCH_STEPS:
+            steps = 0
+            stop = 0
+            with objmode(stop="int64"):
+                stop = _tick(meta[META_NODES])
+            if stop != 0:
+                status = STOPPED
+                break
+        n_nodes = meta[META_NODES]
+        if (n_nodes + 2 > level.shape[0] or meta[META_KIDS] + max_dom > kids.shape[0]
+                or 2 * (meta[META_UNIQUE] + 1) > unique.shape[0] or (4 * ct_used > ccap and ccap < _CT_MAX)):
+            # grow what is full; the old and the new buffer are both held during the copy
+            gn = level.shape[0] * 2 if n_nodes + 2 > level.shape[0] else level.shape[0]
+            gk = kids.shape[0]
+            if meta[META_KIDS] + max_dom > gk:
+                gk = max(2 * gk, meta[META_KIDS] + 2 * max_dom)
+            gu = unique.shape[0]
+            while 2 * (meta[META_UNIQUE] + 1) > gu:
+                gu *= 2
+            gc = ccap
+            while 4 * ct_used > gc and gc < _CT_MAX:
+                gc *= 2
+            held = level.shape[0] * 16 + kids.shape[0] * 4 + unique.shape[0] * 4 + ccap * 20 + fixed
+            extra = 0
+            if gn != level.shape[0]:
+                extra += gn * 16
+            if gk != kids.shape[0]:
+                extra += gk * 4
+            if gu != unique.shape[0]:
+                extra += gu * 4
+            if gc != ccap:
+                extra += gc * 20
+            if held + extra > max_bytes:
+                status = MEMORY
+                break
+            if gn != level.shape[0]:
+                nl = np.zeros(gn, np.int32)
+                no = np.zeros(gn, np.int64)
+                ns = np.zeros(gn, np.int32)
+                nl[:n_nodes] = level[:n_nodes]
+                no[:n_nodes] = offset[:n_nodes]
+                ns[:n_nodes] = size[:n_nodes]
+                level, offset, size = nl, no, ns
+            if gk != kids.shape[0]:
+                nk = np.zeros(gk, np.int32)
+                nk[:meta[META_KIDS]] = kids[:meta[META_KIDS]]
+                kids = nk
+            if gu != unique.shape[0]:
+                unique = np.zeros(gu, np.int32)
+                _rehash(unique, n_nodes, level, offset, size, kids)
+            if gc != ccap:
+                # a larger table, refilled with the entries of the old one
+                n0 = np.full(gc, -1, np.int64)
+                n1 = np.zeros(gc, np.int64)
+                nv = np.zeros(gc, np.int32)
+                ct_used = 0
+                for x in range(ccap):
+                    if ct_k0[x] != -1:
+                        y = _slot(ct_k0[x], ct_k1[x], gc - 1)
+                        if n0[y] == -1:
+                            ct_used += 1
+                        n0[y] = ct_k0[x]
+                        n1[y] = ct_k1[x]
+                        nv[y] = ct_v[x]
+                ccap = gc
+                ct_k0, ct_k1, ct_v = n0, n1, nv
+        cmask = ccap - 1
+        d = depth - 1
+        ty = f_ty[d]
+        pc = f_pc[d]
+        k = f_k[d]
+        # what this step calls, if anything (cty >= 0)
+        cty = -1
+        ck = 0
+        ca = 0
+        cb = 0
+        cc = NO_CONSTRAINT
+        ce = 0
+        if ty == _NODE:
+            # Ciardo's loop: the dirty values of the node (its own flags, after the node's buffer in
+            # the arena) are fired by every event of the level until none is left
+            lo = evtop_ptr[k]
+            hi = evtop_ptr[k + 1]
+            b0 = f_buf[d]
+            fl = f_j[d]
+            if pc == 0:
+                f_j[d] = atop
+                fl = atop
+                for x in range(dom[k]):
+                    arena[atop + x] = 1 if arena[b0 + x] != EMPTY else 0
+                atop += dom[k]
+                f_i[d] = -1
+                f_e[d] = hi
+                pc = 2
+            if pc == 3:  # a firing is back
+                i = f_i[d]
+                e = evtop[f_e[d]]
+                j = nxt[slot_ptr[ev_slot[ev_slot_ptr[e]]] + i]
+                if ret != EMPTY:
+                    if j >= dom[k]:
+                        status = OVERFLOW
+                        meta[META_OVERFLOW_LEVEL] = k
+                        break
+                    f_b[d] = j
+                    cty = _APPLY
+                    ck = k + 1
+                    ca = arena[b0 + j]
+                    cb = ret
+                    ce = APPLY_UNION
+                    f_pc[d] = 4
+                else:
+                    f_e[d] += 1
+                    pc = 2
+            elif pc == 4:  # the union is back
+                j = f_b[d]
+                if ret != arena[b0 + j]:
+                    arena[b0 + j] = ret
+                    arena[fl + j] = 1
+                f_e[d] += 1
+                pc = 2
+            while pc == 2 and cty < 0:
+                ei = f_e[d]
+                if ei == hi:  # the next dirty value
+                    i = -1
+                    for x in range(dom[k]):
+                        if arena[fl + x] != 0:
+                            i = x
+                            break
+                    if i < 0:
+                        pc = 5
+                        break
+                    arena[fl + i] = 0
+                    f_i[d] = i
+                    f_e[d] = lo
+                    continue
+                i = f_i[d]
+                v = arena[b0 + i]
+                e = evtop[ei]
+                j = nxt[slot_ptr[ev_slot[ev_slot_ptr[e]]] + i]  # the top level always has a function
+                if v == EMPTY or j < 0 or (j >= dom[k] and not check_overflow):
+                    f_e[d] = ei + 1
+                    continue
+                cons = NO_CONSTRAINT
+                if f_c[d] != NO_CONSTRAINT:
+                    cons = _kid(kids, offset, size, f_c[d], j)
+                    if cons == EMPTY:
+                        f_e[d] = ei + 1
+                        continue
+                cty = _FIRE
+                ck = k + 1
+                ca = v
+                cc = cons
+                ce = e
+                f_pc[d] = 3
+            if pc == 5:
+                atop = fl
+                depth -= 1
+                continue
+        elif ty == _IMAGE:
+            if pc == 0:
+                f_i[d] = 0
+                f_j[d] = EMPTY
+                pc = 1
+            elif pc == 2:  # an event's image is back: add it
+                cty = _APPLY
+                ck = 0
+                ca = f_j[d]
+                cb = ret
+                ce = APPLY_UNION
+                f_pc[d] = 3
+            elif pc == 3:
+                f_j[d] = ret
+                f_i[d] += 1
+                pc = 1
+            if pc == 1:
+                e = f_i[d]
+                if e == ev_top.shape[0]:
+                    ret = f_j[d]
+                    depth -= 1
+                    continue
+                cty = _FIRE
+                ck = 0
+                ca = f_a[d]
+                cc = f_c[d]
+                ce = e
+                f_pc[d] = 2
+        else:
+            b0 = f_buf[d]
+            if pc == 0:
+                f_buf[d] = atop
+                b0 = atop
+                for x in range(dom[k]):
+                    arena[atop + x] = EMPTY
+                atop += dom[k]
+                f_i[d] = 0
+                pc = 1
+            elif pc == 2:  # a child's result is back
+                i = f_i[d]
+                if ty == _FIRE:
+                    if ret != EMPTY:
+                        j = f_j[d]
+                        if j >= dom[k]:
+                            status = OVERFLOW
+                            meta[META_OVERFLOW_LEVEL] = k
+                            break
+                        cur = arena[b0 + j]
+                        if cur == EMPTY:
+                            arena[b0 + j] = ret
+                        else:  # two values fire to the same one (a reset arc): union
+                            cty = _APPLY
+                            ck = k + 1
+                            ca = cur
+                            cb = ret
+                            ce = APPLY_UNION
+                            f_pc[d] = 3
+                else:
+                    arena[b0 + i] = ret
+                if cty < 0:
+                    f_i[d] = i + 1
+                    pc = 1
+            elif pc == 3:
+                arena[b0 + f_j[d]] = ret
+                f_i[d] += 1
+                pc = 1
+            while pc == 1 and cty < 0:
+                # the next child to compute, or the node is complete
+                i = f_i[d]
+                x = f_a[d]
+                if ty == _APPLY:
+                    op = f_e[d]
+                    y = f_b[d]
+                    n = max(size[x], size[y]) if op == APPLY_UNION else (
+                        min(size[x], size[y]) if op == APPLY_INTER else size[x])
+                    if i >= n:
+                        pc = 9
+                        break
+                    cty = _APPLY
+                    ck = k + 1
+                    ca = _kid(kids, offset, size, x, i)
+                    cb = _kid(kids, offset, size, y, i)
+                    ce = op
+                    f_pc[d] = 2
+                    break
+                if i >= size[x]:
+                    if ty == _SAT or (ty == _FIRE and saturating):
+                        pc = 8  # saturate the node's own events, then check it in
+                    else:
+                        pc = 9
+                    break
+                ch = kids[offset[x] + i]
+                if ch == EMPTY:
+                    f_i[d] = i + 1
+                    continue
+                if ty == _SAT:
+                    cty = _SAT
+                    ck = k + 1
+                    ca = ch
+                    cc = _kid(kids, offset, size, f_c[d], i)
+                    f_pc[d] = 2
+                elif ty == _FIRE:
+                    e = f_e[d]
+                    j = i
+                    if k >= ev_top[e]:
+                        sl = ev_slot[ev_slot_ptr[e] + k - ev_top[e]]
+                        if sl >= 0:
+                            j = nxt[slot_ptr[sl] + i]
+                    if j < 0 or (j >= dom[k] and not check_overflow):
+                        f_i[d] = i + 1
+                        continue
+                    cons = NO_CONSTRAINT
+                    if f_c[d] != NO_CONSTRAINT:
+                        cons = _kid(kids, offset, size, f_c[d], j)
+                        if cons == EMPTY:
+                            f_i[d] = i + 1
+                            continue
+                    f_j[d] = j
+                    cty = _FIRE
+                    ck = k + 1
+                    ca = ch
+                    cc = cons
+                    ce = e
+                    f_pc[d] = 2
+                else:  # _RESTRICT
+                    e = f_e[d]
+                    if k >= ev_top[e]:
+                        sl = ev_slot[ev_slot_ptr[e] + k - ev_top[e]]
+                        if sl >= 0 and nxt[slot_ptr[sl] + i] < 0:
+                            arena[b0 + i] = EMPTY if f_b[d] == 1 else ch
+                            f_i[d] = i + 1
+                            continue
+                    cty = _RESTRICT
+                    ck = k + 1
+                    ca = ch
+                    cb = f_b[d]
+                    ce = e
+                    f_pc[d] = 2
+            if pc == 8:
+                f_pc[d] = 9
+                f_ty[depth] = _NODE
+                f_pc[depth] = 0
+                f_k[depth] = k
+                f_buf[depth] = b0
+                f_c[depth] = f_c[d]
+                depth += 1
+                continue
+            if pc == 9:
+                # check the node in, remember the result, free the buffer
+                r = _checkin(k, arena, b0, dom[k], meta, level, offset, size, kids, unique)
+                key0 = f_k0[d]
+                key1 = f_k1[d]
+                s = _slot(key0, key1, cmask)
+                if ct_k0[s] == -1:
+                    ct_used += 1
+                ct_k0[s] = key0
+                ct_k1[s] = key1
+                ct_v[s] = r
+                if ty == _SAT:  # a saturated node is its own saturation
+                    key0 = (_OP_SAT << 40) + r
+                    s = _slot(key0, key1, cmask)
+                    if ct_k0[s] == -1:
+                        ct_used += 1
+                    ct_k0[s] = key0
+                    ct_k1[s] = key1
+                    ct_v[s] = r
+                atop = b0
+                depth -= 1
+                ret = r
+                continue
+        if cty < 0:
+            f_pc[d] = pc
+            continue
+        # the call: immediate, cached, or a new frame
+        quick, ca, cb, key0, key1 = _prepare(cty, ck, ca, cb, cc, ce, saturating, n_levels, ev_bot)
+        if quick < 0:
+            s = _slot(key0, key1, cmask)
+            if ct_k0[s] == key0 and ct_k1[s] == key1:
+                quick = ct_v[s]
+        if quick >= 0:
+            ret = quick
+            continue
+        f_ty[depth] = cty
+        f_pc[depth] = 0
+        f_k[depth] = ck
+        f_a[depth] = ca
+        f_b[depth] = cb
+        f_c[depth] = cc
+        f_e[depth] = ce
+        f_k0[depth] = key0
+        f_k1[depth] = key1
+        depth += 1
+    meta[META_CT_USED] = ct_used
+    if status != OK:
+        ret = EMPTY
+    return status, ret, meta, level, offset, size, kids, unique, ct_k0, ct_k1, ct_v
+
+
+@njit(cache=True)
+def count(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, n_levels: int, level: np.ndarray,
+          done: np.ndarray, approx: np.ndarray, residue: np.ndarray, primes: np.ndarray) -> None:
+    """Number of paths (markings) below every node reachable from ``root``, into the per-node
+    tables: ``approx`` (float64) and ``residue`` (int64, modulo each prime of ``primes``, all below
+    2**62 so that a sum of two fits); ``done`` (uint8) marks the nodes already counted (kept between
+    calls: a node's count never changes). Iterative depth-first post-order (paths have K levels)."""
+    n_pr = primes.shape[0]
+    if root <= 1:
+        return
+    stack = np.zeros(n_levels + 2, np.int64)
+    child = np.zeros(n_levels + 2, np.int64)
+    depth = 0
+    if done[root] == 0:
+        stack[0] = root
+        child[0] = 0
+        depth = 1
+    while depth > 0:
+        n = stack[depth - 1]
+        i = child[depth - 1]
+        if i < size[n]:
+            child[depth - 1] = i + 1
+            c = kids[offset[n] + i]
+            if c > 1 and done[c] == 0:
+                stack[depth] = c
+                child[depth] = 0
+                depth += 1
+            continue
+        tot = 0.0
+        for r in range(n_pr):
+            residue[n, r] = 0
+        for i2 in range(size[n]):
+            c = kids[offset[n] + i2]
+            if c == 0:
+                continue
+            if c == 1:
+                tot += 1.0
+                for r in range(n_pr):
+                    residue[n, r] = (residue[n, r] + 1) % primes[r]
+            else:
+                tot += approx[c]
+                for r in range(n_pr):
+                    residue[n, r] = (residue[n, r] + residue[c, r]) % primes[r]
+        approx[n] = tot
+        done[n] = 1
+        depth -= 1
+
+
+@njit(cache=True)
+def presence(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, level: np.ndarray,
+             dom_ptr: np.ndarray, seen: np.ndarray, out: np.ndarray) -> int:
+    """Mark in ``out[dom_ptr[k] + i]`` every value i of level k that some path below ``root`` takes
+    (every stored node leads to the terminal, so a non-empty child is a value some marking has);
+    ``seen`` (uint8, zero, one per node) is scratch. Returns the number of nodes visited."""
+    if root <= 1:
+        return 0
+    stack = np.zeros(1024, np.int64)
+    stack[0] = root
+    top = 1
+    seen[root] = 1
+    visited = 0
+    while top > 0:
+        top -= 1
+        n = stack[top]
+        visited += 1
+        k = level[n]
+        for i in range(size[n]):
+            c = kids[offset[n] + i]
+            if c == 0:
+                continue
+            out[dom_ptr[k] + i] = 1
+            if c > 1 and seen[c] == 0:
+                seen[c] = 1
+                if top == stack.shape[0]:
+                    grown = np.zeros(2 * stack.shape[0], np.int64)
+                    grown[:top] = stack[:top]
+                    stack = grown
+                stack[top] = c
+                top += 1
+    return visited
+
+
+@njit(cache=True)
+def max_weight(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, level: np.ndarray,
+               n_levels: int, dom_ptr: np.ndarray, weight: np.ndarray, best: np.ndarray,
+               done: np.ndarray) -> int:
+    """The largest sum of ``weight[dom_ptr[k] + value]`` along a path below ``root`` (-1 for the empty
+    set); ``best`` (int64) and ``done`` (uint8) are per-node scratch, zero."""
+    if root == 0:
+        return -1
+    if root == 1:
+        return 0
+    stack = np.zeros(n_levels + 2, np.int64)
+    child = np.zeros(n_levels + 2, np.int64)
+    stack[0] = root
+    depth = 1
+    while depth > 0:
+        n = stack[depth - 1]
+        i = child[depth - 1]
+        if i < size[n]:
+            child[depth - 1] = i + 1
+            c = kids[offset[n] + i]
+            if c > 1 and done[c] == 0:
+                stack[depth] = c
+                child[depth] = 0
+                depth += 1
+            continue
+        k = level[n]
+        top = -1
+        for i2 in range(size[n]):
+            c = kids[offset[n] + i2]
+            if c == 0:
+                continue
+            below = 0 if c == 1 else best[c]
+            top = max(top, weight[dom_ptr[k] + i2] + below)
+        best[n] = top
+        done[n] = 1
+        depth -= 1
+    return best[root]  # type: ignore[no-any-return]
+
+
+@njit(cache=True)
+def node_of_path(root: int, values: np.ndarray, offset: np.ndarray, size: np.ndarray, kids: np.ndarray) -> int:
+    """The node reached from ``root`` following ``values`` (one per level): 1 if the path is in the
+    set, 0 if not."""
+    n = root
+    for k in range(values.shape[0]):
+        if n <= 1:
+            return 0
+        v = values[k]
+        if v < 0 or v >= size[n]:
+            return 0
+        n = kids[offset[n] + v]
+    return n

@@ -1,0 +1,510 @@
+"""How the markings of a bounded net become paths of a decision diagram (pure, no I/O).
+
+Internal to :mod:`.symbolic`. Three decisions, each from the net's structure alone:
+
+1. **Variables.** A level of the diagram holds one place, or a group of places whose joint token
+   counts are few: the support of a P-semiflow y (y·M is the same in every reachable marking, so
+   the places of a state machine component hold one token between them, and a one-hot encoded
+   variable of a coloured net is one such group). The values of a level are its *local markings*,
+   found by closing the initial marking of the group under every transition's effect on the group
+   alone, each place capped by its proven bound: an over-approximation of the local markings that
+   occur (the diagram only ever holds those that do), finite because every place is bounded
+   (Ciardo, Lüttgen, Siminiceanu 2001 use such local state spaces; Pastor, Cortadella 1998 encode
+   state machine components the same way). A group is kept when it has at most :data:`MAX_LOCAL`
+   local markings; groups are disjoint, the larger first; the remaining places get a level each
+   with the values 0 .. bound.
+2. **Order.** Levels are ordered so that transitions and P-semiflows span few levels (saturation
+   works on the levels between an event's top and bottom): FORCE (Aloul, Markov, Sakallah 2003:
+   each level moves to the mean centre of gravity of its hyperedges), from several starts, each
+   followed by sifting (every level moved to its best position while that lowers the score); the
+   score is the sum of the spans of transitions and semiflows.
+3. **Events.** A transition becomes an event: its top and bottom levels and a local function per
+   level it reads or changes (local value → local value, -1 where it is disabled). Events that are
+   equal on every level but one, where they are enabled on disjoint values, are merged into one (the
+   unfolded transitions of a coloured net that differ in the colour they read), which divides the
+   work of saturation; deadlocks and saturation use merged events, counts per transition the
+   original ones, backward reachability the inverse functions.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from math import comb
+
+import numpy as np
+import scipy.sparse as sp
+from numba import njit
+
+from coordinator.analysis.matrices import SparseNet
+from coordinator.errors import AnalysisError
+
+__all__ = ["MAX_LOCAL", "Encoding", "Events", "encode", "events", "touched_places"]
+
+#: most local markings of a group of places on one level
+MAX_LOCAL = 512
+#: most values of a level (a place with a larger bound makes the symbolic engine refuse the net)
+MAX_DOMAIN = 1 << 16
+
+
+@dataclass(frozen=True)
+class Encoding:
+    """Levels of the diagram (level 0 at the root) and their local markings.
+
+    Attributes:
+        levels: the place indices of each level, top to bottom.
+        local: per level, its local markings, shape (values, places of the level), int64.
+        dom: (K,) int64 number of values of each level.
+        place_level: (|P|,) int64 level of each place; place_col: its column in that level.
+        m0: (K,) int64 value of each level in the initial marking.
+        weight: per level, (values,) int64 tokens of each local marking (for max tokens per marking).
+        groups: levels holding more than one place.
+        score: the order's score (sum of spans of transitions and semiflows over levels).
+        seconds: time spent finding groups and order.
+    """
+
+    levels: tuple[np.ndarray, ...]
+    local: tuple[np.ndarray, ...]
+    dom: np.ndarray
+    place_level: np.ndarray
+    place_col: np.ndarray
+    m0: np.ndarray
+    weight: tuple[np.ndarray, ...]
+    groups: int
+    score: float
+    seconds: float
+    index: tuple[dict[tuple[int, ...], int], ...] = field(default_factory=tuple)
+
+    @property
+    def n_levels(self) -> int:
+        """Number of levels K."""
+        return int(self.dom.shape[0])
+
+    def value_of(self, k: int, marking: np.ndarray) -> int:
+        """The value of level k in a full marking (|P|,), or -1 if that local marking is not a value."""
+        key = tuple(int(marking[p]) for p in self.levels[k])
+        return self.index[k].get(key, -1)
+
+
+@dataclass(frozen=True)
+class Events:
+    """Events for :func:`.mdd_kernel.run`: arrays (see there) and the transitions behind each.
+
+    Attributes:
+        top, bot, slot_ptr, slot, fn_ptr, fn, by_top_ptr, by_top: the kernel's event tables.
+        members: the transition indices of each event (one, or several merged).
+    """
+
+    top: np.ndarray
+    bot: np.ndarray
+    slot_ptr: np.ndarray
+    slot: np.ndarray
+    fn_ptr: np.ndarray
+    fn: np.ndarray
+    by_top_ptr: np.ndarray
+    by_top: np.ndarray
+    members: tuple[tuple[int, ...], ...]
+
+    def tables(self) -> tuple[np.ndarray, ...]:
+        """The arrays in the order :func:`.mdd_kernel.run` takes them after ``dom``."""
+        return (self.top, self.bot, self.slot_ptr, self.slot, self.fn_ptr, self.fn, self.by_top_ptr, self.by_top)
+
+    @property
+    def n_events(self) -> int:
+        """Number of events."""
+        return int(self.top.shape[0])
+
+
+def touched_places(sn: SparseNet) -> list[np.ndarray]:
+    """The places each transition reads or changes (input, output, inhibitor, reset), sorted."""
+    mats = [sn.pre, sn.post, sn.inhibitor] + ([sn.reset] if sn.reset is not None and sn.reset.nnz else [])
+    both = sp.csc_matrix(sum((abs(m) for m in mats), sp.csc_matrix(sn.pre.shape, dtype=np.int64)))
+    both.sort_indices()
+    return [both.indices[both.indptr[t]:both.indptr[t + 1]].astype(np.int64) for t in range(sn.n_transitions)]
+
+
+def _local_space(places: np.ndarray, sn: SparseNet, bounds: np.ndarray, trans: np.ndarray,
+                 cap: int) -> np.ndarray | None:
+    """The local markings of a group of places (module docstring), shape (n, len(places)); None if
+    more than ``cap``."""
+    rows = np.asarray(places, dtype=np.int64)
+    pre = sn.pre[rows][:, trans].toarray().T
+    post = sn.post[rows][:, trans].toarray().T
+    inh = sn.inhibitor[rows][:, trans].toarray().T
+    reset = (sn.reset[rows][:, trans].toarray().T > 0) if sn.reset is not None and sn.reset.nnz else None
+    top = bounds[rows]
+    start = tuple(int(v) for v in sn.m0[rows])
+    seen = {start: 0}
+    states = [start]
+    i = 0
+    while i < len(states):
+        m = np.array(states[i], dtype=np.int64)
+        i += 1
+        ok = (m[None, :] >= pre).all(axis=1) & ((inh == 0) | (m[None, :] < inh)).all(axis=1)
+        for r in np.flatnonzero(ok).tolist():
+            nxt = m - pre[r] + post[r]
+            if reset is not None:
+                nxt = np.where(reset[r], post[r], nxt)
+            if (nxt > top).any():
+                continue  # beyond a proven bound: never reached
+            key = tuple(int(v) for v in nxt)
+            if key not in seen:
+                seen[key] = len(states)
+                states.append(key)
+                if len(states) > cap:
+                    return None
+    return np.array(states, dtype=np.int64).reshape(len(states), rows.size)
+
+
+def _groups(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], touched: list[np.ndarray],
+            deadline: float) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Disjoint groups of places (semiflow supports) with their local markings, the larger first."""
+    n_p = sn.n_places
+    trans_of: list[list[int]] = [[] for _ in range(n_p)]
+    for t, ps in enumerate(touched):
+        for p in ps.tolist():
+            trans_of[p].append(t)
+    # candidates by an upper bound of their local markings (a weighted count y·M = y·M0 caps each
+    # place at ⌊y·M0 / y_p⌋): those surely within MAX_LOCAL first, the larger support first among
+    # them; then the others, the smallest bound first
+    cands: list[tuple[float, int, np.ndarray]] = []
+    for y in flows:
+        support = np.flatnonzero(y)
+        if support.size < 2:
+            continue
+        total = int(np.dot(y[support], sn.m0[support]))
+        caps = np.minimum(bounds[support], total // y[support])
+        upper = float(np.prod((caps + 1).astype(np.float64)))
+        if (y[support] == 1).all() and total < 64:
+            upper = min(upper, float(comb(support.size + total - 1, total)))
+        cands.append((upper, -support.size, support))
+    cands.sort(key=lambda c: (c[0] > MAX_LOCAL, c[1] if c[0] <= MAX_LOCAL else c[0], c[1]))
+    used = np.zeros(n_p, dtype=bool)
+    out: list[tuple[np.ndarray, np.ndarray]] = []
+    seen: set[bytes] = set()
+    for upper, _, support in cands:
+        if time.monotonic() > deadline:
+            break
+        if used[support].any() or support.tobytes() in seen:
+            continue
+        seen.add(support.tobytes())
+        product = float(np.prod((bounds[support] + 1).astype(np.float64)))
+        if product <= 1:
+            continue
+        trans = np.array(sorted({t for p in support.tolist() for t in trans_of[p]}), dtype=np.int64)
+        local = _local_space(support, sn, bounds, trans, MAX_LOCAL)
+        if local is None or local.shape[0] >= product:
+            continue  # too many local markings, or no correlation between the places
+        used[support] = True
+        out.append((support.astype(np.int64), local))
+    for p in np.flatnonzero(~used).tolist():
+        out.append((np.array([p], dtype=np.int64), np.arange(int(bounds[p]) + 1, dtype=np.int64)[:, None]))
+    return out
+
+
+def _score(pos: np.ndarray, hp: np.ndarray, hidx: np.ndarray) -> float:
+    lo = np.minimum.reduceat(pos[hidx], hp[:-1]) if hidx.size else np.zeros(0)
+    hi = np.maximum.reduceat(pos[hidx], hp[:-1]) if hidx.size else np.zeros(0)
+    return float((hi - lo).sum())
+
+
+@njit(cache=True)
+def _span(h: int, pos: np.ndarray, hp: np.ndarray, hidx: np.ndarray) -> int:
+    lo = 1 << 62
+    hi = -1
+    for y in range(hp[h], hp[h + 1]):
+        v = pos[hidx[y]]
+        lo = min(lo, v)
+        hi = max(hi, v)
+    return hi - lo
+
+
+@njit(cache=True)
+def _swap(p: int, q: int, pos: np.ndarray, order: np.ndarray, hp: np.ndarray, hidx: np.ndarray,
+          vp: np.ndarray, vidx: np.ndarray, mark: np.ndarray) -> int:
+    """Swap the neighbours p and q; return the change of the score (only hyperedges holding exactly
+    one of them change)."""
+    for x in range(vp[q], vp[q + 1]):
+        mark[vidx[x]] += 1
+    for x in range(vp[p], vp[p + 1]):
+        mark[vidx[x]] += 2
+    before = 0
+    for x in range(vp[p], vp[p + 1]):
+        if mark[vidx[x]] != 3:
+            before += _span(vidx[x], pos, hp, hidx)
+    for x in range(vp[q], vp[q + 1]):
+        if mark[vidx[x]] != 3:
+            before += _span(vidx[x], pos, hp, hidx)
+    a = pos[p]
+    b = pos[q]
+    order[a] = q
+    order[b] = p
+    pos[p] = b
+    pos[q] = a
+    after = 0
+    for x in range(vp[p], vp[p + 1]):
+        if mark[vidx[x]] != 3:
+            after += _span(vidx[x], pos, hp, hidx)
+    for x in range(vp[q], vp[q + 1]):
+        if mark[vidx[x]] != 3:
+            after += _span(vidx[x], pos, hp, hidx)
+    for x in range(vp[q], vp[q + 1]):
+        mark[vidx[x]] = 0
+    for x in range(vp[p], vp[p + 1]):
+        mark[vidx[x]] = 0
+    return after - before
+
+
+@njit(cache=True)
+def _sift(order: np.ndarray, hp: np.ndarray, hidx: np.ndarray, vp: np.ndarray, vidx: np.ndarray,
+          rounds: int) -> None:
+    """Sifting, in place: move each level to the position of the lowest score, by neighbour swaps."""
+    n = order.shape[0]
+    pos = np.empty(n, np.int64)
+    for i in range(n):
+        pos[order[i]] = i
+    mark = np.zeros(hp.shape[0], np.int64)
+    for _ in range(rounds):
+        improved = False
+        for p in range(n):
+            start = pos[p]
+            best = 0
+            best_pos = start
+            for direction in (-1, 1):
+                cur = 0
+                while 0 <= pos[p] + direction < n:
+                    cur += _swap(p, order[pos[p] + direction], pos, order, hp, hidx, vp, vidx, mark)
+                    if cur < best:
+                        best = cur
+                        best_pos = pos[p]
+                while pos[p] != start:
+                    step = 1 if start > pos[p] else -1
+                    _swap(p, order[pos[p] + step], pos, order, hp, hidx, vp, vidx, mark)
+            while pos[p] != best_pos:
+                step = 1 if best_pos > pos[p] else -1
+                _swap(p, order[pos[p] + step], pos, order, hp, hidx, vp, vidx, mark)
+            if best < 0:
+                improved = True
+        if not improved:
+            break
+
+
+def _order(n: int, hypers: list[np.ndarray], deadline: float, starts: int = 8, seed: int = 0
+           ) -> tuple[np.ndarray, float]:
+    """The best order of ``n`` levels found by FORCE and sifting from several starts (module
+    docstring), and its score."""
+    hypers = [h for h in hypers if h.size > 1]
+    if n <= 1 or not hypers:
+        return np.arange(n, dtype=np.int64), 0.0
+    sizes = np.array([h.size for h in hypers], dtype=np.int64)
+    hp = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    hidx = np.concatenate(hypers).astype(np.int64)
+    rows = np.repeat(np.arange(len(hypers)), sizes)
+    mat = sp.csr_matrix((np.ones(hidx.size), (rows, hidx)), shape=(len(hypers), n))
+    mat_t = sp.csr_matrix(mat.T)
+    deg = np.asarray(mat_t.sum(axis=1)).ravel()
+    by_v = mat_t.indices.astype(np.int64)
+    vp = mat_t.indptr.astype(np.int64)
+    rng = np.random.default_rng(0x5A7 + 7919 * seed)
+    best: tuple[float, np.ndarray] | None = None
+    for s in range(starts):
+        if best is not None and time.monotonic() > deadline:
+            break
+        start = np.arange(n) if s == 0 else (np.arange(n)[::-1] if s == 1 else rng.permutation(n))
+        pos = np.empty(n)
+        pos[start] = np.arange(n)
+        cand: tuple[float, np.ndarray] | None = None
+        for _ in range(30):  # FORCE: levels to the mean centre of gravity of their hyperedges
+            cog = (mat @ pos) / sizes
+            moved = np.where(deg > 0, (mat_t @ cog) / np.maximum(deg, 1), pos)
+            order = np.lexsort((pos, moved))
+            pos = np.empty(n)
+            pos[order] = np.arange(n)
+            score = _score(pos.astype(np.int64), hp, hidx)
+            if cand is None or score < cand[0]:
+                cand = (score, order.astype(np.int64))
+        assert cand is not None
+        order = cand[1].copy()
+        _sift(order, hp, hidx, vp, by_v, 20)
+        pos_i = np.empty(n, dtype=np.int64)
+        pos_i[order] = np.arange(n)
+        score = _score(pos_i, hp, hidx)
+        if best is None or score < best[0]:
+            best = (score, order)
+    assert best is not None
+    return best[1], best[0]
+
+
+def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, seconds: float = 5.0,
+           seed: int = 0) -> Encoding:
+    """Levels, local markings and order of the diagram of a bounded net (module docstring).
+
+    Args:
+        sn: the net's sparse matrices.
+        bounds: (|P|,) proven upper bound of every place (≥ 0).
+        flows: P-semiflows (y ≥ 0, yᵀC = 0), for groups and order; may be empty.
+        seconds: time allowed to the search of groups and order.
+        seed: the random starts of the order (another seed, another candidate order).
+
+    Raises:
+        AnalysisError: a place has no bound, or a bound above :data:`MAX_DOMAIN`.
+    """
+    start = time.monotonic()
+    bounds = np.asarray(bounds, dtype=np.int64)
+    if (bounds < 0).any():
+        raise AnalysisError("the symbolic engine needs a proven bound for every place")
+    if bounds.size and int(bounds.max()) >= MAX_DOMAIN:
+        raise AnalysisError(f"a place is bounded by {int(bounds.max()):,} tokens only: the symbolic engine "
+                            f"takes places of at most {MAX_DOMAIN - 1:,}")
+    touched = touched_places(sn)
+    groups = _groups(sn, bounds, flows, touched, start + seconds / 2)
+    n_k = len(groups)
+    owner = np.empty(sn.n_places, dtype=np.int64)
+    for k, (ps, _) in enumerate(groups):
+        owner[ps] = k
+    hypers = [np.unique(owner[ps]) for ps in touched if ps.size]
+    hypers += [np.unique(owner[np.flatnonzero(y)]) for y in flows]
+    order, score = _order(n_k, hypers, start + seconds, seed=seed)
+    groups = [groups[int(i)] for i in order]
+    levels = tuple(ps for ps, _ in groups)
+    local = tuple(loc for _, loc in groups)
+    place_level = np.empty(sn.n_places, dtype=np.int64)
+    place_col = np.empty(sn.n_places, dtype=np.int64)
+    for k, ps in enumerate(levels):
+        place_level[ps] = k
+        place_col[ps] = np.arange(ps.size)
+    index = tuple({tuple(int(v) for v in row): i for i, row in enumerate(loc)} for loc in local)
+    m0 = np.array([index[k][tuple(int(sn.m0[p]) for p in ps)] for k, ps in enumerate(levels)], dtype=np.int64)
+    return Encoding(levels=levels, local=local, dom=np.array([loc.shape[0] for loc in local], dtype=np.int64),
+                    place_level=place_level, place_col=place_col, m0=m0,
+                    weight=tuple(loc.sum(axis=1) for loc in local), groups=sum(ps.size > 1 for ps in levels),
+                    score=score, seconds=time.monotonic() - start, index=index)
+
+
+def _functions(sn: SparseNet, enc: Encoding, t: int, places: np.ndarray) -> dict[int, np.ndarray]:
+    """Transition t's local function on each level it reads or changes: value → value (-1:
+    disabled; a value beyond the level's local markings is ``dom``, an overflow)."""
+    out: dict[int, np.ndarray] = {}
+    reset = sn.reset if sn.reset is not None and sn.reset.nnz else None
+    for k in np.unique(enc.place_level[places]).tolist():
+        rows = enc.levels[k]
+        loc = enc.local[k]
+        pre = sn.pre[rows, t].toarray().ravel()
+        post = sn.post[rows, t].toarray().ravel()
+        inh = sn.inhibitor[rows, t].toarray().ravel()
+        ok = (loc >= pre).all(axis=1) & ((inh == 0) | (loc < inh)).all(axis=1)
+        nxt = loc - pre + post
+        if reset is not None:
+            rs = reset[rows, t].toarray().ravel() > 0
+            nxt = np.where(rs[None, :], post[None, :], nxt)
+        index = enc.index[k]
+        dom = int(enc.dom[k])
+        out[k] = np.array([index.get(tuple(int(v) for v in nxt[i]), dom) if ok[i] else -1
+                           for i in range(loc.shape[0])], dtype=np.int64)
+    return out
+
+
+def _merge(funcs: list[dict[int, np.ndarray]], members: list[tuple[int, ...]]
+           ) -> tuple[list[dict[int, np.ndarray]], list[tuple[int, ...]]]:
+    """Merge events equal on every level but one, enabled on disjoint values there (module docstring)."""
+    changed = True
+    while changed:
+        changed = False
+        groups: dict[tuple[tuple[int, ...], int, tuple[bytes, ...]], list[int]] = {}
+        for idx, f in enumerate(funcs):
+            levels = tuple(sorted(f))
+            for a in levels:
+                key = (levels, a, tuple(f[k].tobytes() for k in levels if k != a))
+                groups.setdefault(key, []).append(idx)
+        gone: set[int] = set()
+        new_f: list[dict[int, np.ndarray]] = []
+        new_m: list[tuple[int, ...]] = []
+        for key, idxs in groups.items():
+            idxs = [i for i in idxs if i not in gone]
+            if len(idxs) < 2:
+                continue
+            a = key[1]
+            merged = funcs[idxs[0]][a].copy()
+            used = [idxs[0]]
+            for i in idxs[1:]:
+                tab = funcs[i][a]
+                if ((merged >= 0) & (tab >= 0)).any():
+                    continue
+                merged = np.where(tab >= 0, tab, merged)
+                used.append(i)
+            if len(used) > 1:
+                f = dict(funcs[used[0]])
+                f[a] = merged
+                new_f.append(f)
+                new_m.append(tuple(sorted(t for i in used for t in members[i])))
+                gone.update(used)
+                changed = True
+        funcs = [f for i, f in enumerate(funcs) if i not in gone] + new_f
+        members = [m for i, m in enumerate(members) if i not in gone] + new_m
+    return funcs, members
+
+
+def _inverse(f: dict[int, np.ndarray], dom: np.ndarray) -> dict[int, np.ndarray] | None:
+    """The inverse local functions, or None when one is not injective (a reset arc)."""
+    out: dict[int, np.ndarray] = {}
+    for k, tab in f.items():
+        inv = np.full(int(dom[k]), -1, dtype=np.int64)
+        for i, j in enumerate(tab.tolist()):
+            if 0 <= j < dom[k]:
+                if inv[j] >= 0:
+                    return None
+                inv[j] = i
+        out[k] = inv
+    return out
+
+
+def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool = False,
+           transitions: np.ndarray | None = None) -> Events:
+    """The events of the net's transitions (module docstring).
+
+    Args:
+        sn, enc: the net and its encoding.
+        merge: merge events that differ on one level only (for saturation and deadlocks).
+        inverse: the inverse functions (backward reachability).
+        transitions: the transitions to include (default all that read or change some place).
+
+    Raises:
+        AnalysisError: ``inverse`` on a net with reset arcs.
+    """
+    touched = touched_places(sn)
+    ts = range(sn.n_transitions) if transitions is None else transitions.tolist()
+    funcs: list[dict[int, np.ndarray]] = []
+    members: list[tuple[int, ...]] = []
+    for t in ts:
+        if touched[t].size == 0:
+            continue
+        f = _functions(sn, enc, t, touched[t])
+        if inverse:
+            g = _inverse(f, enc.dom)
+            if g is None:
+                raise AnalysisError("backward reachability is not available on a net with reset arcs")
+            f = g
+        funcs.append(f)
+        members.append((t,))
+    if merge:
+        funcs, members = _merge(funcs, members)
+    top, bot, slot_ptr, slot, fn_ptr, fn = [], [], [0], [], [0], []
+    for f in funcs:
+        ks = sorted(f)
+        lo, hi = ks[0], ks[-1]
+        slots = [-1] * (hi - lo + 1)
+        for k in ks:
+            slots[k - lo] = len(fn_ptr) - 1
+            fn.append(f[k])
+            fn_ptr.append(fn_ptr[-1] + f[k].size)
+        top.append(lo)
+        bot.append(hi)
+        slot.extend(slots)
+        slot_ptr.append(len(slot))
+    top_a = np.array(top, dtype=np.int64)
+    counts = np.bincount(top_a, minlength=enc.n_levels) if top_a.size else np.zeros(enc.n_levels, np.int64)
+    return Events(top=top_a, bot=np.array(bot, dtype=np.int64), slot_ptr=np.array(slot_ptr, dtype=np.int64),
+                  slot=np.array(slot, dtype=np.int64), fn_ptr=np.array(fn_ptr, dtype=np.int64),
+                  fn=np.concatenate(fn).astype(np.int64) if fn else np.zeros(0, np.int64),
+                  by_top_ptr=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
+                  by_top=np.argsort(top_a, kind="stable").astype(np.int64), members=tuple(members))

@@ -1,0 +1,151 @@
+"""The symbolic engine (coordinator.analysis.symbolic) against the explicit search and the contest's answers."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+from analysis_nets import make_net
+
+from coordinator.analysis import lp
+from coordinator.analysis.matrices import sparse_net
+from coordinator.analysis.structure import analyse
+from coordinator.analysis.symbolic import SymbolicResult, analyse_symbolic
+from coordinator.errors import AnalysisError
+from coordinator.net import Marking, PetriNet
+from coordinator.netfile.pnml import load_pnml
+from tests.unit.mcc_models import MCC, ROOT
+
+SCALE = ROOT / "tests" / "data" / "mcc-scale"
+
+
+def rows(folder: Path) -> list[dict[str, str]]:
+    with (folder / "oracle.tsv").open(encoding="utf-8") as fh:
+        return list(csv.DictReader(fh, delimiter="\t"))
+
+
+def proven_bounds(net: PetriNet) -> tuple[np.ndarray, list[np.ndarray]]:
+    sn = sparse_net(net)
+    pb = lp.place_bounds(sn, seconds=10.0)
+    return pb.bounds, lp.semiflow_cover(sn, seconds=3.0)
+
+
+def columns(r: SymbolicResult) -> dict[str, object]:
+    top = int(r.place_bounds.max(initial=0))
+    return {"states": r.states, "edges": r.edges, "max_token_in_place": top,
+            "max_token_per_marking": r.max_token_per_marking, "deadlock": r.deadlock, "live": r.live,
+            "quasi_live": bool(r.fireable.all()), "one_safe": top <= 1, "stable_marking": bool(r.stable.any())}
+
+
+def expected(row: dict[str, str]) -> dict[str, object]:
+    return {k: (v == "true" if v in ("true", "false") else int(v)) for k, v in row.items() if k != "model"}
+
+
+def replays_to(net: PetriNet, sequence: list[str], marking: dict[str, int]) -> bool:
+    m = net.initial_marking
+    for t in sequence:
+        assert t in net.enabled_transitions(m), f"{t} is not enabled on the way to the deadlock"
+        m = net.fire(m, t)
+    return m == Marking(marking) and not net.enabled_transitions(m)
+
+
+def assert_agrees_with_oracle(folder: Path, row: dict[str, str]) -> None:
+    net = load_pnml(folder / row["model"] / "model.pnml")
+    bounds, flows = proven_bounds(net)
+    r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0)
+    assert columns(r) == expected(row)
+    if r.deadlock:
+        assert r.deadlock_sequence is not None and r.deadlock_marking is not None
+        assert replays_to(net, r.deadlock_sequence, r.deadlock_marking)
+
+
+@pytest.mark.parametrize("row", rows(MCC), ids=lambda r: r["model"])
+def test_every_mcc_model_in_tests_data_agrees_with_its_oracle_on_all_nine_columns(row: dict[str, str]) -> None:
+    assert_agrees_with_oracle(MCC, row)
+
+
+FAST_SCALE = ["HouseConstruction-PT-00010", "Eratosthenes-PT-050", "CircularTrains-PT-048"]
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("row", [r for r in rows(SCALE) if r["model"] in FAST_SCALE], ids=lambda r: r["model"])
+def test_the_fastest_scale_models_agree_with_their_oracle_beyond_explicit_reach(row: dict[str, str]) -> None:
+    assert_agrees_with_oracle(SCALE, row)
+
+
+def generated_net(seed: int) -> PetriNet:
+    """A random net: half the seeds conservative (tokens move, state machine like, so P-semiflows
+    group places), half with weighted arcs, inhibitor arcs and token sources held by inhibitors."""
+    rng = np.random.default_rng(seed)
+    n_p = int(rng.integers(3, 8))
+    places = [f"p{i}" for i in range(n_p)]
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    inhibitors: dict[str, dict[str, int]] = {}
+    conservative = seed % 2 == 0
+    for t in range(int(rng.integers(3, 10))):
+        if conservative:
+            k = int(rng.integers(1, 3))
+            ins = rng.choice(places, size=k, replace=False)
+            outs = rng.choice(places, size=k, replace=False)
+            transitions[f"t{t}"] = ({str(p): 1 for p in ins}, {str(p): 1 for p in outs})
+        else:
+            ins = rng.choice(places, size=int(rng.integers(0, 3)), replace=False)
+            outs = rng.choice(places, size=int(rng.integers(0, 3)), replace=False)
+            transitions[f"t{t}"] = ({str(p): int(rng.integers(1, 3)) for p in ins},
+                                    {str(p): int(rng.integers(1, 3)) for p in outs})
+            for p in outs:  # keep every place that grows bounded: an inhibitor arc on it
+                inhibitors.setdefault(f"t{t}", {})[str(p)] = int(rng.integers(2, 5))
+        if rng.random() < 0.3:
+            inhibitors.setdefault(f"t{t}", {})[str(rng.choice(places))] = int(rng.integers(1, 4))
+    marking = {p: int(rng.integers(0, 3)) for p in places}
+    return make_net(f"generated-{seed}", marking, transitions, places=tuple(places), inhibitors=inhibitors)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_generated_nets_agree_with_the_explicit_search_on_every_property(seed: int) -> None:
+    net = generated_net(seed)
+    a = analyse(net, max_states=200_000)
+    assert a.complete and a.liveness is not None
+    per_place = np.array([a.place_bounds[p.id] for p in net.places], dtype=np.int64)
+    rng = np.random.default_rng(1000 + seed)
+    bounds, flows = proven_bounds(net)
+    # any valid upper bound will do: the LP's where it has one, else the true bound plus some slack
+    loose = per_place + rng.integers(0, 3, size=per_place.size)
+    bounds = np.where((bounds >= per_place) & (bounds < 40), bounds, loose)
+    r = analyse_symbolic(net, bounds, flows=flows, seconds=30.0)
+    assert r.states == a.states and r.edges == a.edges
+    assert r.deadlock == a.deadlock and r.n_deadlocks == a.n_deadlocks
+    assert r.place_bounds.tolist() == per_place.tolist()
+    assert r.max_token_per_marking == a.max_token_per_marking
+    assert [net.places[int(i)].id for i in np.flatnonzero(r.stable)] == a.stable_places
+    assert r.fireable.tolist() == [a.liveness[t.id] >= 1 for t in net.transitions]
+    assert r.reversible == a.reversible
+    assert r.live == a.live
+    for decided, t in zip(r.live_transitions.tolist(), net.transitions):  # None: undecided, never a guess
+        assert decided is None or decided == (a.liveness[t.id] == 4)
+    if r.deadlock:
+        assert r.deadlock_sequence is not None and r.deadlock_marking is not None
+        assert replays_to(net, r.deadlock_sequence, r.deadlock_marking)
+
+
+def test_a_count_beyond_two_to_the_64_is_exact() -> None:
+    n = 70
+    net = make_net("toggles", {f"off{i}": 1 for i in range(n)},
+                   {**{f"on{i}": ({f"off{i}": 1}, {f"lit{i}": 1}) for i in range(n)},
+                    **{f"out{i}": ({f"lit{i}": 1}, {f"off{i}": 1}) for i in range(n)}})
+    bounds, flows = proven_bounds(net)
+    r = analyse_symbolic(net, bounds, flows=flows)
+    assert r.states == 2**n
+    assert r.edges == n * 2**n
+    assert r.live is True and r.reversible is True and r.deadlock is False
+
+
+def test_a_bound_below_the_truth_is_an_error_not_a_wrong_count() -> None:
+    net = make_net("pile", {"go": 1}, {"put": ({"go": 1}, {"go": 1, "pile": 1})}, inhibitors={"put": {"pile": 5}})
+    with pytest.raises(AnalysisError, match="place bounds"):
+        analyse_symbolic(net, np.array([1, 3], dtype=np.int64))
+    r = analyse_symbolic(net, np.array([1, 5], dtype=np.int64))
+    assert r.states == 6 and r.deadlock and r.deadlock_sequence == ["put"] * 5
