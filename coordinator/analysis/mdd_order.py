@@ -43,6 +43,8 @@ __all__ = ["MAX_LOCAL", "Encoding", "Events", "encode", "events", "touched_place
 
 #: most local markings of a group of places on one level
 MAX_LOCAL = 512
+#: most levels sifted (each level tries every position: quadratic)
+MAX_SIFTED = 2000
 #: most values of a level (a place with a larger bound makes the symbolic engine refuse the net)
 MAX_DOMAIN = 1 << 16
 
@@ -325,7 +327,8 @@ def _order(n: int, hypers: list[np.ndarray], deadline: float, starts: int = 8, s
                 cand = (score, order.astype(np.int64))
         assert cand is not None
         order = cand[1].copy()
-        _sift(order, hp, hidx, vp, by_v, 20)
+        if n <= MAX_SIFTED:  # sifting is quadratic in the levels: FORCE alone beyond
+            _sift(order, hp, hidx, vp, by_v, 20)
         pos_i = np.empty(n, dtype=np.int64)
         pos_i[order] = np.arange(n)
         score = _score(pos_i, hp, hidx)

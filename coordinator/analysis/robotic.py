@@ -565,12 +565,14 @@ def _environment_note(limits: dict[str, int], dropped: list[str]) -> str:
 
 
 def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None = None,
-           progress: Callable[[int, int], None] | None = None) -> dict[str, Any]:
+           progress: Callable[[int, int], None] | None = None, engine: str = "auto",
+           phase: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Analyse a task net and return the JSON-ready report of ``petrobot analyze --json``.
 
     Keys: ``net``, ``places``, ``transitions``, ``states``, ``edges``, ``complete``, ``truncated``
     (null, or ``{"by": "max_states" | "max_memory", ...}``), ``budget`` (``max_states``,
-    ``max_memory_bytes``), ``bounded``, ``place_bounds``, ``place_bounds_exact`` (places whose bound
+    ``max_memory_bytes``), ``engine`` (``used``: "explicit" or "symbolic", ``reason``, and the same
+    for the ``environment`` net), ``bounded``, ``place_bounds``, ``place_bounds_exact`` (places whose bound
     is exact; the others are upper bounds), ``unbounded_places``, ``max_token_in_place``,
     ``max_token_per_marking``, ``one_safe``, ``deadlock``, ``deadlocks`` (marking + firing sequence
     each), ``n_deadlocks``, ``liveness`` (transition → "L0".."L4"), ``dead_transitions``, ``live``,
@@ -594,12 +596,17 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
         max_states: state limit of the reachability graph.
         max_bytes: memory budget of the analysis (see :func:`~coordinator.analysis.structure.analyse`).
         progress: state-space progress callback.
+        engine: ``"auto"``, ``"explicit"`` or ``"symbolic"`` (see
+            :func:`~coordinator.analysis.structure.analyse`); the report's ``engine`` says which ran
+            (``used``) and why (``reason``), for the net and for its environment net.
+        phase: called with a line when a phase of the symbolic engine starts.
     """
     budget = default_max_bytes() if max_bytes is None else int(max_bytes)
-    a = analyse(net, max_states=max_states, max_bytes=budget, progress=progress)
+    a = analyse(net, max_states=max_states, max_bytes=budget, progress=progress, engine=engine, phase=phase)
     records = record_only_places(net)
     env_net, limits = with_environment(without_places(net, records))
-    env = analyse(env_net, max_states=max_states, max_bytes=budget, progress=progress) if limits else None
+    env = analyse(env_net, max_states=max_states, max_bytes=budget, progress=progress, engine=engine,
+                  phase=phase) if limits else None
     verdicts = robotic_reading(a, net, env)
     if limits:
         note = _environment_note(limits, records)
@@ -623,6 +630,8 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
         "complete": a.complete,
         "truncated": truncated,
         "budget": {"max_states": max_states, "max_memory_bytes": budget},
+        "engine": {"used": a.engine, "reason": a.engine_reason,
+                   "environment": None if env is None else {"used": env.engine, "reason": env.engine_reason}},
         "bounded": a.bounded,
         "place_bounds": a.place_bounds,
         "place_bounds_exact": a.exact_bounds if len(a.exact_bounds) < len(a.place_bounds) else "all",

@@ -75,6 +75,7 @@ from coordinator.analysis.invariants import (
 from coordinator.analysis.lp import PlaceBounds, Support
 from coordinator.analysis.matrices import SparseNet, sparse_net
 from coordinator.analysis.statespace import StateSpace, default_max_bytes, explore
+from coordinator.errors import AnalysisError
 from coordinator.net import Marking, PetriNet
 
 __all__ = [
@@ -236,6 +237,8 @@ class Analysis:
         stopped_by: why the search stopped early: ``"max_states"``, ``"max_memory"``, or None.
         stable_marking_partial: on a truncated graph, False when every place varies among the
             markings found (then no place is stable); else None.
+        engine: ``"explicit"`` (reachability graph) or ``"symbolic"`` (decision diagram: ``space`` is
+            None, every count is exact); engine_reason: which engine and why, one sentence.
     """
 
     net: PetriNet
@@ -274,6 +277,8 @@ class Analysis:
     graph_work_done: bool = True
     stopped_by: str | None = None
     stable_marking_partial: bool | None = None
+    engine: str = "explicit"
+    engine_reason: str = ""
 
     @property
     def stable_marking(self) -> bool | None:
@@ -423,33 +428,41 @@ def _conflicts(net: PetriNet, space: StateSpace | None, *, seconds: float = 10.0
                       effective=effective[p]) for p, ts in shared], finished)
 
 
-def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None = None,
-            max_coverability_nodes: int = 200_000, max_invariant_rows: int = 20_000,
-            invariant_seconds: float = 5.0, lp_seconds: float = 10.0, coverability_seconds: float = 30.0,
-            progress: Callable[[int, int], None] | None = None) -> Analysis:
-    """Analyse the ordinary view of ``net`` (see the module docstring for the decision procedure).
+#: the explicit search's share in the automatic choice: it runs up to this many markings (a few
+#: seconds); a net whose graph is larger and whose places all have a proven bound goes symbolic
+AUTO_PROBE_STATES = 1_000_000
+#: time budget of the symbolic engine inside :func:`analyse` (seconds)
+SYMBOLIC_SECONDS = 300.0
+#: the engines :func:`analyse` takes
+ENGINES = ("auto", "explicit", "symbolic")
 
-    Args:
-        net: the (interpreted or plain) net.
-        max_states: limit of the reachability graph.
-        max_bytes: memory budget of the whole analysis, bytes (default
-            :func:`~coordinator.analysis.statespace.default_max_bytes`): half goes to the
-            reachability graph's search, up to a quarter (at most 512 MiB) to each invariant
-            enumeration (before the search, freed after), and the passes over a complete graph
-            (liveness, recovery) run only if their estimated need fits in the budget beside the graph.
-        max_coverability_nodes: limit of the Karp–Miller graph (lowered to what the budget holds).
-        max_invariant_rows: size guard of the Farkas algorithm.
-        invariant_seconds: time budget of each Farkas enumeration.
-        lp_seconds: time budget of each linear program (the per-place bounds share one such budget).
-        coverability_seconds: time budget of the Karp–Miller construction.
-        progress: passed to :func:`~coordinator.analysis.statespace.explore`.
 
-    Returns:
-        An :class:`Analysis`.
-    """
-    net = ordinary_view(net)
-    budget = default_max_bytes() if max_bytes is None else int(max_bytes)
-    sn = sparse_net(net)
+@dataclass
+class _Structure:
+    """What the structure says before any search (:func:`_structure_phase`)."""
+
+    pinv: Invariants
+    tinv: Invariants
+    psup: Support
+    tsup: Support
+    structural: Structural
+    bounding_pinv: Invariants
+    sbounds: np.ndarray
+    total: int | None
+    total_cert: bool
+    notes: list[str]
+    sources: dict[str, str]
+
+    @property
+    def bounded(self) -> bool:
+        """The state equation or the P-invariants bound the net."""
+        return self.total is not None or bool(self.bounding_pinv.complete and (self.sbounds >= 0).all())
+
+
+def _structure_phase(net: PetriNet, sn: SparseNet, budget: int, max_invariant_rows: int, invariant_seconds: float,
+                     lp_seconds: float) -> _Structure:
+    """What linear programming and the invariants say before any search: supports, invariants (the
+    reset-arc reading, :func:`_without_reset_results`), the total token bound, the invariant bounds."""
     notes: list[str] = []
     sources: dict[str, str] = {}
     psup = lp.conservative(sn, seconds=lp_seconds)
@@ -474,15 +487,18 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     structural = Structural(p_support=psup, t_support=tsup, total_bound=total, total_certified=total_cert)
     if not total_done:
         notes.append("the state-equation LP of the total token count did not finish in time")
-    sbounds = structural_bounds(net, bounding_pinv)
-    by_invariants = bool(bounding_pinv.complete and (sbounds >= 0).all())
-    structurally_bounded = total is not None or by_invariants
-    has_inhibitors = bool(sn.inhibitor.nnz)
-    graph_bytes = budget // 2
+    return _Structure(pinv=pinv, tinv=tinv, psup=psup, tsup=tsup, structural=structural,
+                      bounding_pinv=bounding_pinv, sbounds=structural_bounds(net, bounding_pinv), total=total,
+                      total_cert=total_cert, notes=notes, sources=sources)
 
+
+def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,
+                  progress: Callable[[int, int], None] | None) -> tuple[StateSpace, CoveringWitness | None]:
+    """The reachability graph within its limits, and a pumping witness of unboundedness when the
+    structure does not bound the net (a short probe first: unboundedness is often cheap to see)."""
     space: StateSpace | None = None
     witness: CoveringWitness | None = None
-    if not structurally_bounded and max_states > PROBE_STATES:
+    if not st.bounded and max_states > PROBE_STATES:
         probe = explore(net, max_states=PROBE_STATES, progress=progress, max_bytes=graph_bytes)
         if probe.complete:
             space = probe
@@ -492,11 +508,98 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                 space = probe
     if space is None:
         space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes)
-        if not space.complete and not structurally_bounded and witness is None:
+        if not space.complete and not st.bounded and witness is None:
             witness = covering_witness(space)
+    return space, witness
 
+
+def _upper_bounds(sn: SparseNet, st: _Structure, lp_seconds: float, seen: np.ndarray) -> tuple[PlaceBounds, np.ndarray]:
+    """Per-place upper bounds of a bounded net: the state equation's (one LP per place not yet
+    reached by ``seen``) and the P-invariants', the smaller of the two; -1 where neither bounds."""
+    flows = tuple(v for v in st.bounding_pinv.vectors) + (
+        (st.psup.semiflow,) if st.psup.semiflow is not None else ())
+    pb = lp.place_bounds(sn, seconds=lp_seconds, seen=seen, semiflows=flows)
+    upper = pb.bounds.copy()
+    if st.bounding_pinv.complete:
+        both = (st.sbounds >= 0) & ((upper < 0) | (st.sbounds < upper))
+        upper[both] = st.sbounds[both]
+    return pb, upper
+
+
+def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None = None,
+            max_coverability_nodes: int = 200_000, max_invariant_rows: int = 20_000,
+            invariant_seconds: float = 5.0, lp_seconds: float = 10.0, coverability_seconds: float = 30.0,
+            progress: Callable[[int, int], None] | None = None, engine: str = "explicit",
+            symbolic_seconds: float = SYMBOLIC_SECONDS, phase: Callable[[str], None] | None = None) -> Analysis:
+    """Analyse the ordinary view of ``net`` (see the module docstring for the decision procedure).
+
+    Args:
+        net: the (interpreted or plain) net.
+        max_states: limit of the reachability graph.
+        max_bytes: memory budget of the whole analysis, bytes (default
+            :func:`~coordinator.analysis.statespace.default_max_bytes`): half goes to the
+            reachability graph's search, up to a quarter (at most 512 MiB) to each invariant
+            enumeration (before the search, freed after), and the passes over a complete graph
+            (liveness, recovery) run only if their estimated need fits in the budget beside the graph;
+            the symbolic engine has the whole budget.
+        max_coverability_nodes: limit of the Karp–Miller graph (lowered to what the budget holds).
+        max_invariant_rows: size guard of the Farkas algorithm.
+        invariant_seconds: time budget of each Farkas enumeration.
+        lp_seconds: time budget of each linear program (the per-place bounds share one such budget).
+        coverability_seconds: time budget of the Karp–Miller construction.
+        progress: passed to :func:`~coordinator.analysis.statespace.explore`.
+        engine: ``"explicit"`` (the reachability graph), ``"symbolic"`` (the reachable set as a
+            decision diagram, :mod:`.symbolic`; needs a proven bound on every place) or ``"auto"``:
+            explicit up to :data:`AUTO_PROBE_STATES` markings, symbolic beyond when every place has
+            a proven bound (:attr:`Analysis.engine_reason` says which and why).
+        symbolic_seconds: time budget of the symbolic engine.
+        phase: called with a short line when a phase of the symbolic engine starts.
+
+    Returns:
+        An :class:`Analysis`.
+
+    Raises:
+        AnalysisError: ``engine="symbolic"`` on a net the symbolic engine cannot take (a place
+            without a proven bound, its time or memory budget), or an unknown engine.
+    """
+    if engine not in ENGINES:
+        raise AnalysisError(f"unknown analysis engine {engine!r}; choose one of {', '.join(ENGINES)}")
+    net = ordinary_view(net)
+    budget = default_max_bytes() if max_bytes is None else int(max_bytes)
+    sn = sparse_net(net)
+    st = _structure_phase(net, sn, budget, max_invariant_rows, invariant_seconds, lp_seconds)
+    if engine == "symbolic":
+        return _symbolic_phase(net, sn, st, budget, lp_seconds, symbolic_seconds, phase,
+                               "symbolic: asked for (--engine symbolic)")
+    limit = max_states
+    if engine == "auto" and st.bounded:
+        limit = min(max_states, AUTO_PROBE_STATES)
+    reason = "explicit: asked for (--engine explicit)"
+    space, witness = _search_phase(net, sn, st, limit, budget // 2, progress)
+    if engine == "auto" and space.complete:
+        reason = f"explicit: the reachability graph is complete with {space.n_states:,} markings" + (
+            f", within the explicit search's share of {limit:,}" if st.bounded else "")
+    elif engine == "auto" and st.bounded:
+        why = "its memory budget" if space.stopped_by == "max_memory" else f"{space.n_states:,} markings"
+        reason = (f"symbolic: the explicit search stopped at {why} and every place has a proven bound, so the "
+                  "symbolic engine takes over")
+        try:
+            return _symbolic_phase(net, sn, st, budget, lp_seconds, symbolic_seconds, phase, reason)
+        except AnalysisError as exc:
+            reason = f"explicit: the symbolic engine gave up ({exc})"
+            st.notes.append(f"the symbolic engine gave up ({exc}); the explicit search goes on to its limits")
+        if limit < max_states:
+            space, witness = _search_phase(net, sn, st, max_states, budget // 2, progress)
+    elif engine == "auto":
+        reason = "explicit: not every place has a proven bound, so only the explicit search (and coverability) apply"
+    pinv, tinv, psup, tsup, structural = st.pinv, st.tinv, st.psup, st.tsup, st.structural
+    notes, sources, total, total_cert = st.notes, st.sources, st.total, st.total_cert
+    structurally_bounded = st.bounded
+    has_inhibitors = bool(sn.inhibitor.nnz)
+    graph_bytes = budget // 2
     if space.complete:
-        return _from_graph(net, space, pinv, tinv, psup, tsup, structural, notes, sources, budget)
+        return replace(_from_graph(net, space, pinv, tinv, psup, tsup, structural, notes, sources, budget),
+                       engine="explicit", engine_reason=reason)
     if space.stopped_by == "max_memory":
         notes.append(f"the reachability graph was stopped by the memory budget ({graph_bytes / 2**30:.2f} GiB of "
                      f"{budget / 2**30:.2f} GiB) after {space.n_states:,} markings")
@@ -519,14 +622,9 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     seen_max = space.states.max(axis=0).astype(np.int64) if space.n_states else np.zeros(len(ids), np.int64)
     if structurally_bounded:
         bounded = True
-        flows = tuple(v for v in bounding_pinv.vectors) + ((psup.semiflow,) if psup.semiflow is not None else ())
-        pb = lp.place_bounds(sn, seconds=lp_seconds, seen=seen_max, semiflows=flows)
+        pb, upper = _upper_bounds(sn, st, lp_seconds, seen_max)
         structural = replace(structural, place_bounds=pb)
         notes.extend(pb.notes)
-        upper = pb.bounds.copy()
-        if bounding_pinv.complete:
-            both = (sbounds >= 0) & ((upper < 0) | (sbounds < upper))
-            upper[both] = sbounds[both]
         place_bounds = {pid: (int(b) if b >= 0 else None) for pid, b in zip(ids, upper)}
         exact = [pid for pid, b, m in zip(ids, upper, seen_max) if b >= 0 and m == b]
         if total is not None:
@@ -669,6 +767,74 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         p_invariants=pinv, t_invariants=tinv, conservative=psup.all_covered, consistent=tsup.all_covered,
         conflicts=conflicts, notes=notes, projection=projection, sources=sources, structural=structural,
         exact_bounds=exact, stopped_by=space.stopped_by, stable_marking_partial=stable_known,
+        engine="explicit", engine_reason=reason,
+    )
+
+
+def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, lp_seconds: float, seconds: float,
+                    phase: Callable[[str], None] | None, reason: str) -> Analysis:
+    """The analysis from the symbolic engine (:mod:`.symbolic`): the reachable set as a decision
+    diagram over the proven place bounds, every count exact. Liveness levels (L1 vs L3), home
+    states and the effectiveness of conflicts need the graph and stay undecided.
+
+    Raises:
+        AnalysisError: a place without a proven bound, or the engine's time or memory budget.
+    """
+    if not st.bounded:
+        raise AnalysisError("the symbolic engine needs a bounded net: neither the state equation nor the "
+                            "P-invariants bound every place")
+    _, upper = _upper_bounds(sn, st, lp_seconds, np.asarray(sn.m0, dtype=np.int64))
+    if (upper < 0).any():
+        raise AnalysisError("the symbolic engine needs a proven bound on every place; "
+                            f"{int((upper < 0).sum())} places have none")
+    from coordinator.analysis import jit
+
+    jit.configure()  # numba's cache directory, before the kernel (and numba) is imported
+    from coordinator.analysis.symbolic import analyse_symbolic
+
+    flows = lp.semiflow_cover(sn, seconds=min(lp_seconds, 3.0))
+    r = analyse_symbolic(net, upper, flows=flows, max_bytes=budget, seconds=seconds, progress=phase)
+    ids = [p.id for p in net.places]
+    tids = [t.id for t in net.transitions]
+    notes = list(st.notes)
+    sources = dict(st.sources)
+    how = f"symbolic reachable set ({r.levels} levels, {r.nodes:,} decision-diagram nodes)"
+    for key in ("bounded", "place_bounds", "max_token_in_place", "max_token_per_marking", "one_safe", "deadlock",
+                "quasi_live", "stable_marking"):
+        sources[key] = how
+    if r.live is not None:
+        sources["live"] = how + ", backward reachability"
+    if r.reversible is not None:
+        sources["reversible"] = how + ", backward reachability"
+    deadlocks: list[Deadlock] = []
+    if r.deadlock_marking is not None and r.deadlock_sequence is not None:
+        deadlocks.append(Deadlock(marking=r.deadlock_marking, firing_sequence=r.deadlock_sequence))
+    elif r.deadlock_marking is not None:
+        notes.append(f"a dead marking: {r.deadlock_marking}; its firing sequence was not traced")
+    dead = [tids[t] for t in np.flatnonzero(~r.fireable)]
+    if dead:
+        notes.append("dead transitions (L0): " + ", ".join(dead))
+    undecided = [tids[t] for t, v in enumerate(r.live_transitions.tolist()) if v is None]
+    if r.live is False and undecided and len(undecided) < len(tids):
+        notes.append("live transitions (L4): " + (", ".join(tids[t] for t, v in enumerate(r.live_transitions.tolist())
+                                                             if v is True) or "none"))
+    notes.append("the symbolic engine gives the number of markings and edges, deadlocks, quasi-liveness, bounds, "
+                 "liveness and reversibility; the liveness level of each transition (L1/L3), home states and the "
+                 "effectiveness of conflicts need the explicit graph and are not given")
+    notes.extend(r.notes)
+    conflicts, _ = _conflicts(net, None)
+    stable = [ids[p] for p in np.flatnonzero(r.stable)]
+    top = int(r.place_bounds.max(initial=0))
+    return Analysis(
+        net=net, space=None, coverability=None, states=r.states, edges=r.edges, complete=True, bounded=True,
+        place_bounds={pid: int(b) for pid, b in zip(ids, r.place_bounds)}, unbounded_places=[], covering=None,
+        max_token_in_place=top, max_token_per_marking=r.max_token_per_marking, one_safe=top <= 1,
+        deadlock=r.deadlock, deadlocks=deadlocks, n_deadlocks=r.n_deadlocks, liveness=None,
+        quasi_live=bool(r.fireable.all()), live=r.live, reversible=r.reversible, home_states=None,
+        home_marking_is_home=None, stable_places=stable, p_invariants=st.pinv, t_invariants=st.tinv,
+        conservative=st.psup.all_covered, consistent=st.tsup.all_covered, conflicts=conflicts, notes=notes,
+        sources=sources, structural=st.structural, exact_bounds=list(ids), engine="symbolic",
+        engine_reason=reason,
     )
 
 

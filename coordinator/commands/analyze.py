@@ -1,10 +1,11 @@
-"""``petrobot analyze NET [--json] [--max-states N] [--max-memory SIZE] [--progress]``: qualitative
-analysis of a task net.
+"""``petrobot analyze NET [--json] [--max-states N] [--max-memory SIZE] [--engine E] [--progress]``:
+qualitative analysis of a task net.
 
 Thin shell over :func:`coordinator.analysis.robotic.report` (paper section 2, "Qualitative
 Performance Evaluation"): loads the net (TOML or PNML), analyses its ordinary view (events dropped)
 within a state limit and a memory budget, and prints a readable report, or the JSON report with
-``--json``. Progress of long state-space constructions goes to stderr, on a terminal or with
+``--json``. The engine (explicit reachability graph or symbolic decision diagram) is chosen by the
+analysis unless ``--engine`` forces one; the report says which ran and why. Progress of long state-space constructions goes to stderr, on a terminal or with
 ``--progress``; a one-line notice goes to stderr when the compiled search has to be compiled first
 (once per machine).
 """
@@ -76,6 +77,12 @@ def add_parser(subparsers: Any) -> None:
                         help="memory budget of the analysis, e.g. 512M or 8G (default: half the physical "
                              f"memory or 4 GiB, whichever is smaller; here {default_max_bytes() / 2**30:.1f} GiB); "
                              "a search that reaches it stops with a partial, labelled report")
+    parser.add_argument("--engine", choices=("auto", "explicit", "symbolic"), default="auto",
+                        help="explicit: the reachability graph, marking by marking (every property, up to the "
+                             "state limit); symbolic: the reachable set as a decision diagram (exact counts, "
+                             "deadlocks, bounds, liveness, reversibility of nets of 10^12 markings and more; needs "
+                             "a proven bound on every place); auto (default): explicit up to 1,000,000 markings, "
+                             "symbolic beyond when every place has a proven bound. The report says which ran and why")
     parser.add_argument("--progress", action="store_true",
                         help="report state-space progress on stderr even when stderr is not a terminal")
 
@@ -91,6 +98,14 @@ def _progress(stream: TextIO) -> Callable[[int, int], None]:
         last[0] = now
         rate = states / max(now - start, 1e-9)
         stream.write(f"\r  {states:>12,} markings  {edges:>14,} edges  {rate:>11,.0f} markings/s")
+        stream.flush()
+
+    return show
+
+
+def _phase(stream: TextIO) -> Callable[[str], None]:
+    def show(text: str) -> None:
+        stream.write(f"\n  {text}")
         stream.flush()
 
     return show
@@ -169,7 +184,15 @@ def render(rep: dict[str, Any]) -> str:
     kept = (f" (markings that differ only in the counts {', '.join(records)} are told apart; the robotic reading "
             f"below uses another graph, of {env_states:,} markings: without those counts, with the operator's "
             "additions)" if records and env_states else "")
-    lines.append(f"reachability graph: {rep['states']:,} markings, {rep['edges']:,} edges of the net as written{full}{kept}")
+    engine = rep.get("engine") or {}
+    if engine.get("used") == "symbolic":
+        lines.append(f"reachable set (symbolic): {rep['states']:,} markings, {rep['edges']:,} edges of the net as "
+                     f"written, exact{kept}")
+    else:
+        lines.append(f"reachability graph: {rep['states']:,} markings, {rep['edges']:,} edges of the net as "
+                     f"written{full}{kept}")
+    if engine.get("reason"):
+        lines.append(f"engine: {engine['reason']}")
     if trunc and trunc.get("undecided"):
         lines.append(f"undecided: {', '.join(trunc['undecided'])}")
     lines.append("")
@@ -293,7 +316,8 @@ def run(args: argparse.Namespace) -> int:
         sys.stderr.write(f" {load_search():.1f} s\n")
     progress = _progress(sys.stderr) if show else None
     try:
-        rep = report(net, max_states=args.max_states, max_bytes=args.max_memory, progress=progress)
+        rep = report(net, max_states=args.max_states, max_bytes=args.max_memory, progress=progress,
+                     engine=args.engine, phase=_phase(sys.stderr) if show else None)
     except PetrobotError as exc:
         print(f"petrobot analyze: {exc}", file=sys.stderr)
         return 1

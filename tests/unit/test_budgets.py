@@ -47,7 +47,7 @@ def test_a_20000_place_ring_ends_with_an_honest_partial_report(tmp_path: Path,
                                                                capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "ring20000.toml"
     path.write_text(hostile().ring_toml(20_000), encoding="utf-8")
-    rep = run_json([str(path), "--max-states", "1000"], capsys)
+    rep = run_json([str(path), "--max-states", "1000", "--engine", "explicit"], capsys)
     assert rep["states"] == 1000 and rep["complete"] is False
     assert rep["truncated"]["by"] == "max_states"  # type: ignore[index]
     assert rep["bounded"] is True and rep["one_safe"] is True and rep["max_token_in_place"] == 1
@@ -63,7 +63,7 @@ def test_a_20000_place_ring_under_a_small_memory_budget_stops_the_search_not_the
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "ring20000.toml"
     path.write_text(hostile().ring_toml(20_000), encoding="utf-8")
-    rep = run_json([str(path), "--max-memory", "256M"], capsys)
+    rep = run_json([str(path), "--max-memory", "256M", "--engine", "explicit"], capsys)
     assert rep["complete"] is False and rep["truncated"]["by"] == "max_memory"  # type: ignore[index]
     # a marking of 20,000 places costs ~100 kB in the search: a quarter of 256 MiB holds a few hundred
     assert 1 < rep["states"] < 2000  # type: ignore[operator]
@@ -85,7 +85,7 @@ def test_the_text_report_names_the_limit_that_stopped_the_search(tmp_path: Path,
                                                                  capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "ring50.toml"
     path.write_text(hostile().ring_toml(50, tokens=3), encoding="utf-8")
-    assert main(["analyze", str(path), "--max-states", "100"]) == 0
+    assert main(["analyze", str(path), "--max-states", "100", "--engine", "explicit"]) == 0
     out = capsys.readouterr().out
     assert "partial: stopped by the state limit" in out and "undecided:" in out and "decided by:" in out
 

@@ -1,0 +1,72 @@
+"""``petrobot analyze`` picks the explicit or the symbolic engine, says which and why, and the two agree."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from coordinator.cli import main
+from tests.unit.mcc_models import MCC, ROOT
+
+SHARED_MEMORY = str(MCC / "SharedMemory-PT-000005" / "model.pnml")
+
+
+def run_json(args: list[str], capsys: pytest.CaptureFixture[str]) -> dict[str, object]:
+    assert main(["analyze", "--json", *args]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert isinstance(out, dict)
+    return out
+
+
+def test_importing_the_cli_and_the_analysis_imports_neither_numba_nor_a_decision_diagram_library() -> None:
+    code = ("import sys, coordinator.cli, coordinator.commands.analyze, coordinator.analysis.structure, "
+            "coordinator.analysis.robotic; "
+            "print(sorted(m for m in ('numba', 'oxidd', 'dd', 'coordinator.analysis.mdd_kernel', "
+            "'coordinator.analysis.symbolic') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_beyond_the_explicit_share_the_symbolic_engine_takes_over_and_agrees_with_the_explicit_one(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    explicit = run_json([SHARED_MEMORY, "--engine", "explicit"], capsys)
+    auto = run_json([SHARED_MEMORY, "--max-states", "100"], capsys)
+    assert explicit["engine"]["used"] == "explicit"  # type: ignore[index]
+    assert auto["engine"]["used"] == "symbolic"  # type: ignore[index]
+    assert "stopped at 100 markings" in auto["engine"]["reason"]  # type: ignore[index]
+    for key in ("states", "edges", "bounded", "place_bounds", "max_token_in_place", "max_token_per_marking",
+                "one_safe", "deadlock", "n_deadlocks", "quasi_live", "live", "reversible", "stable_places",
+                "conservative", "consistent"):
+        assert auto[key] == explicit[key], key
+    assert auto["complete"] is True and auto["truncated"] is None
+
+
+def test_a_small_net_stays_explicit_and_says_so(capsys: pytest.CaptureFixture[str]) -> None:
+    rep = run_json([SHARED_MEMORY], capsys)
+    assert rep["engine"]["used"] == "explicit"  # type: ignore[index]
+    assert "complete with 1,863 markings" in rep["engine"]["reason"]  # type: ignore[index]
+
+
+def test_forcing_the_symbolic_engine_gives_a_deadlock_with_its_firing_sequence(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    rep = run_json([str(MCC / "Philosophers-PT-000005" / "model.pnml"), "--engine", "symbolic"], capsys)
+    assert rep["engine"]["used"] == "symbolic" and "asked for" in rep["engine"]["reason"]  # type: ignore[index]
+    assert (rep["states"], rep["edges"], rep["deadlock"], rep["n_deadlocks"]) == (243, 945, True, 2)
+    assert len(rep["deadlocks"][0]["firing_sequence"]) == 5  # type: ignore[index]
+    assert main(["analyze", str(MCC / "Philosophers-PT-000005" / "model.pnml"), "--engine", "symbolic"]) == 0
+    text = capsys.readouterr().out
+    assert "reachable set (symbolic): 243 markings" in text and "engine: symbolic" in text
+
+
+def test_forcing_the_symbolic_engine_on_an_unbounded_net_is_a_clear_error(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "pump.toml"
+    path.write_text('[net]\nname = "pump"\nformat = 1\n[[place]]\nid = "go"\ntokens = 1\n[[place]]\nid = "out"\n'
+                    '[[transition]]\nid = "t"\ninputs = { go = 1 }\noutputs = { go = 1, out = 1 }\n',
+                    encoding="utf-8")
+    assert main(["analyze", str(path), "--engine", "symbolic"]) == 1
+    assert "symbolic engine needs a bounded net" in capsys.readouterr().err
