@@ -21,6 +21,13 @@ stage, built from the structure of the contest's Kanban-PT-00005 (found through
 41,644,800 markings. ``--max-memory`` is the explorer's byte budget (default 16 GiB): a search that
 reaches it stops and says so (``stopped_by``).
 
+``--symbolic`` runs the symbolic engine (:mod:`coordinator.analysis.symbolic`) instead, one cold run
+per model in its own process, the way ``petrobot analyze --engine symbolic`` does (bounds, groups,
+saturation, then every property): states, edges, deadlock, the other oracle columns, seconds (wall
+and CPU, bounds included, the kernel's load excluded: ``load_seconds``), ``phase_seconds``,
+``nodes``, ``peak_rss_bytes``, and ``oracle_disagrees`` (the columns that differ from the
+``oracle.tsv`` beside a ``model.pnml``; empty when all nine agree).
+
 ``--structural`` adds, per model, the structural path that needs no state space: the two semiflow
 LPs (conservative, consistent) and the state-equation place bounds (:mod:`coordinator.analysis.lp`),
 with their times and whether they decide boundedness (``structural_bounded``, ``structural_max_bound``).
@@ -29,6 +36,7 @@ Usage::
 
     python bench/statespace.py [--json] [--pm4py-timeout S] [--repeat-budget S] [--no-pm4py]
                                [--max-memory GIB] [--structural] [--mcc DIR] MODEL...
+    python bench/statespace.py --symbolic [--json] [--seconds S] [--max-memory GIB] MODEL...
 """
 
 from __future__ import annotations
@@ -43,6 +51,8 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -166,6 +176,73 @@ def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None 
             "rss_before_bytes": before, "bytes_per_marking": (peak - before) / max(space.n_states, 1)}
 
 
+def _oracle_row(spec: str) -> dict[str, str] | None:
+    """The contest's answers for a model folder's ``model.pnml``: the row of ``oracle.tsv`` beside it."""
+    path = Path(spec)
+    table = path.parent.parent / "oracle.tsv"
+    if path.name != "model.pnml" or not table.is_file():
+        return None
+    import csv
+
+    with table.open(encoding="utf-8") as fh:
+        for row in csv.DictReader(fh, delimiter="\t"):
+            if row["model"] == path.parent.name:
+                return dict(row)
+    return None
+
+
+def child_symbolic(spec: str, max_bytes: int, seconds: float, mcc: str | None = None) -> dict[str, Any]:
+    """The symbolic engine as ``petrobot analyze --engine symbolic`` runs it: state-equation and
+    P-semiflow bounds, small semiflows for the groups, then :func:`analyse_symbolic`; one cold run
+    (the compiled kernel loaded first, untimed), checked against the model's oracle when it has one."""
+    sys.path.insert(0, str(ROOT))
+    from coordinator.analysis import jit
+
+    jit.configure()
+    from coordinator.analysis import lp
+    from coordinator.analysis.matrices import sparse_net
+    from coordinator.analysis.symbolic import analyse_symbolic
+    from coordinator.net import Arc, Marking, PetriNet, Place, Transition
+
+    start = time.perf_counter()
+    one = PetriNet(name="load", places=(Place(id="p"),), transitions=(Transition(id="t"),),
+                   arcs=(Arc(source="p", target="t"), Arc(source="t", target="p")), initial_marking=Marking({"p": 1}))
+    analyse_symbolic(one, np.array([1], dtype=np.int64))
+    load = time.perf_counter() - start
+    net = load_model(spec, mcc)
+    before = _rss_now()
+    start = time.perf_counter()
+    cpu = time.process_time()
+    sn = sparse_net(net)
+    pb = lp.place_bounds(sn, seconds=10.0)
+    flows = lp.semiflow_cover(sn, seconds=3.0)
+    t_bounds = time.perf_counter() - start
+    out: dict[str, Any] = {"engine": "symbolic", "load_seconds": load, "bounds_seconds": t_bounds,
+                           "places": sn.n_places, "transitions": sn.n_transitions}
+    try:
+        r = analyse_symbolic(net, pb.bounds, flows=flows, max_bytes=max_bytes, seconds=seconds)
+    except Exception as exc:  # noqa: BLE001 - a bench row says why the engine gave up
+        out.update({"complete": False, "error": str(exc), "seconds": time.perf_counter() - start,
+                    "cpu_seconds": time.process_time() - cpu, "peak_rss_bytes": _peak_rss()})
+        return out
+    wall = time.perf_counter() - start
+    top = int(r.place_bounds.max(initial=0))
+    got = {"states": r.states, "edges": r.edges, "max_token_in_place": top,
+           "max_token_per_marking": r.max_token_per_marking, "deadlock": r.deadlock, "live": r.live,
+           "quasi_live": bool(r.fireable.all()), "one_safe": top <= 1, "stable_marking": bool(r.stable.any())}
+    out.update(got)
+    out.update({"complete": True, "seconds": wall, "cpu_seconds": time.process_time() - cpu,
+                "phase_seconds": r.seconds, "levels": r.levels, "groups": r.groups, "nodes": r.nodes,
+                "n_deadlocks": r.n_deadlocks, "reversible": r.reversible,
+                "deadlock_sequence_length": None if r.deadlock_sequence is None else len(r.deadlock_sequence),
+                "peak_rss_bytes": _peak_rss(), "rss_before_bytes": before, "notes": r.notes})
+    oracle = _oracle_row(spec)
+    if oracle is not None:
+        want = {k: (v == "true" if v in ("true", "false") else int(v)) for k, v in oracle.items() if k != "model"}
+        out["oracle_disagrees"] = sorted(k for k in want if got.get(k) != want[k])
+    return out
+
+
 def child_pm4py(path: str, cap: float, budget: float, mcc: str | None = None) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
     from pm4py.objects.petri_net.obj import Marking as PMarking
@@ -268,7 +345,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--structural", action="store_true",
                         help="also time the structural path: semiflow LPs and state-equation place bounds")
     parser.add_argument("--mcc", metavar="DIR", help="folder of the MCC models (default: where the tests find them)")
-    parser.add_argument("--child", choices=["ours", "pm4py", "structural"], help=argparse.SUPPRESS)
+    parser.add_argument("--symbolic", action="store_true",
+                        help="run the symbolic engine instead of the explicit search (no pm4py): one cold run per "
+                             "model, its counts checked against the model's oracle.tsv when it has one")
+    parser.add_argument("--seconds", type=float, default=600.0, metavar="S",
+                        help="time budget of the symbolic engine per model (default 600)")
+    parser.add_argument("--child", choices=["ours", "pm4py", "structural", "symbolic"], help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     extra = ["--max-memory", str(args.max_memory)] + (["--mcc", args.mcc] if args.mcc else [])
     if args.child:
@@ -277,12 +359,22 @@ def main(argv: list[str] | None = None) -> int:
                                 int(args.max_memory * 2**30), args.mcc)
         elif args.child == "structural":
             result = child_structural(args.models[0], args.mcc)
+        elif args.child == "symbolic":
+            result = child_symbolic(args.models[0], int(args.max_memory * 2**30), args.seconds, args.mcc)
         else:
             result = child_pm4py(args.models[0], args.pm4py_timeout, args.repeat_budget, args.mcc)
         print(json.dumps(result))
         return 0
     rows = []
     for path in args.models:
+        if args.symbolic:
+            found = run_child("symbolic", path, args.seconds + 600.0, args.max_states, 0.0,
+                              extra=[*extra, "--seconds", str(args.seconds)])
+            row = {"model": model_name(path), **(found or {"complete": False, "error": "killed"})}
+            rows.append(row)
+            if not args.json:
+                _print_symbolic(row)
+            continue
         row = bench(path, args.pm4py_timeout, not args.no_pm4py, args.max_states, args.repeat_budget, extra,
                     args.structural)
         rows.append(row)
@@ -292,6 +384,17 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps({"date": time.strftime("%Y-%m-%d"), "python": sys.version.split()[0],
                           "cpus": os.cpu_count(), "models": rows}, indent=2))
     return 0
+
+
+def _print_symbolic(row: dict[str, Any]) -> None:
+    if not row.get("complete"):
+        print(f"{row['model']:<28} symbolic: gave up after {row.get('seconds', 0):.1f} s: {row.get('error')}", flush=True)
+        return
+    oracle = row.get("oracle_disagrees")
+    check = "" if oracle is None else ("  oracle: all nine columns agree" if not oracle else f"  ORACLE DIFFERS: {oracle}")
+    print(f"{row['model']:<28} symbolic {row['states']:>22,} markings  deadlock={row['deadlock']}  "
+          f"{row['seconds']:7.1f} s (cpu {row['cpu_seconds']:.1f} s)  peak {row['peak_rss_bytes'] / 2**20:6.0f} MiB  "
+          f"{row['nodes']:,} nodes{check}", flush=True)
 
 
 def _print_row(row: dict[str, Any]) -> None:

@@ -398,12 +398,7 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         free = np.array([not ps.size for ps in touched_places(sn)], dtype=bool)
         fireable = free.copy()
         edges = int(free.sum()) * states
-        for e in range(single.n_events):
-            en = store.call(mk.MODE_RESTRICT, single, reach, 1, arg=e)
-            n = store.count(en)
-            edges += n
-            for t in single.members[e]:
-                fireable[t] = n > 0
+        edges += _fireable(store, fwd, single, reach, fireable)
         dead = reach if not free.any() else mk.EMPTY
         for e in range(fwd.n_events):
             if dead == mk.EMPTY:
@@ -438,6 +433,47 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         return result
     finally:
         mk.set_watch(None, None)
+
+
+def _level_functions(ev: Events, e: int) -> dict[int, np.ndarray]:
+    """Event e's local function on each level it reads or changes."""
+    top = int(ev.top[e])
+    out: dict[int, np.ndarray] = {}
+    for k in range(top, int(ev.bot[e]) + 1):
+        sl = int(ev.slot[ev.slot_ptr[e] + k - top])
+        if sl >= 0:
+            out[k] = ev.fn[ev.fn_ptr[sl]:ev.fn_ptr[sl + 1]]
+    return out
+
+
+def _fireable(store: _Store, fwd: Events, single: Events, reach: int, fireable: np.ndarray) -> int:
+    """Mark the transitions enabled in some reachable marking; return the number of edges (reachable
+    marking, enabled transition). One restriction per *merged* event: its members are enabled on
+    disjoint values of the levels where they differ, so each marking of the restriction enables
+    exactly one member (its count is the members' edges), and a member is enabled in some marking of
+    it iff one of the values the restriction takes on the level where the member differs enables it
+    (exact for one such level; a member that differs on more gets its own restriction)."""
+    own_event = {ms[0]: i for i, ms in enumerate(single.members)}
+    edges = 0
+    for e in range(fwd.n_events):
+        en = store.call(mk.MODE_RESTRICT, fwd, reach, 1, arg=e)
+        n = store.count(en)
+        edges += n
+        members = fwd.members[e]
+        if len(members) == 1 or n == 0:
+            fireable[list(members)] = n > 0
+            continue
+        merged = _level_functions(fwd, e)
+        present = store.presence(en)
+        for t in members:
+            own = _level_functions(single, own_event[t])
+            differ = [k for k in own if not np.array_equal(own[k], merged.get(k))]
+            ok = all((own[k][np.flatnonzero(present[store.dom_ptr[k]:store.dom_ptr[k + 1]])] >= 0).any()
+                     for k in differ)
+            if ok and len(differ) > 1:
+                ok = store.call(mk.MODE_RESTRICT, single, reach, 1, arg=own_event[t]) != mk.EMPTY
+            fireable[t] = ok
+    return edges
 
 
 #: candidate variable orders raced against each other, and the first time slice of each (seconds)
