@@ -593,8 +593,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     elif engine == "auto":
         reason = "explicit: not every place has a proven bound, so only the explicit search (and coverability) apply"
     pinv, tinv, psup, tsup, structural = st.pinv, st.tinv, st.psup, st.tsup, st.structural
-    notes, sources, total, total_cert = st.notes, st.sources, st.total, st.total_cert
-    structurally_bounded = st.bounded
+    notes, sources = st.notes, st.sources
     has_inhibitors = bool(sn.inhibitor.nnz)
     graph_bytes = budget // 2
     if space.complete:
@@ -605,170 +604,200 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                      f"{budget / 2**30:.2f} GiB) after {space.n_states:,} markings")
     else:
         notes.append(f"the reachability graph was stopped at the state limit ({max_states:,} markings)")
+    v = _Partial(place_bounds={p.id: None for p in net.places})
+    seen_max = space.states.max(axis=0).astype(np.int64) if space.n_states else np.zeros(len(net.places), np.int64)
+    if st.bounded:
+        structural = _partial_from_bounds(v, sn, st, space, seen_max, lp_seconds)
+    elif not has_inhibitors and not sn.n_resets:
+        _partial_from_coverability(v, net, st, witness, min(max_coverability_nodes, (budget // 4) // (
+            96 * max(len(net.places), 1) + 256)), coverability_seconds)
+    elif witness is None:
+        arcs = "inhibitor and reset" if has_inhibitors and sn.n_resets else ("inhibitor" if has_inhibitors else "reset")
+        notes.append(f"the net has {arcs} arcs, its reachability graph exceeds the limit and the state "
+                     "equation does not bound it: boundedness is undecidable in general and was not decided "
+                     "(Karp-Miller coverability is unsound for such nets and was not run)")
+    _partial_from_explored(v, net, st, space, witness, seen_max)
+    _partial_from_projection(v, net, sn, st, lambda small: analyse(
+        small, max_states=max_states, max_bytes=budget, max_coverability_nodes=max_coverability_nodes,
+        max_invariant_rows=max_invariant_rows, invariant_seconds=invariant_seconds, lp_seconds=lp_seconds,
+        coverability_seconds=coverability_seconds, progress=progress))
+    conflicts, _ = _conflicts(net, None)
+    return Analysis(
+        net=net, space=space, coverability=v.cover, states=space.n_states, edges=space.n_edges, complete=False,
+        bounded=v.bounded, place_bounds=v.place_bounds, unbounded_places=v.unbounded, covering=witness,
+        max_token_in_place=v.max_in_place, max_token_per_marking=v.max_per_marking, one_safe=v.one_safe,
+        deadlock=v.deadlock, deadlocks=v.deadlocks, n_deadlocks=None, liveness=v.levels, quasi_live=v.quasi,
+        live=v.live, reversible=v.reversible, home_states=None, home_marking_is_home=None, stable_places=None,
+        p_invariants=pinv, t_invariants=tinv, conservative=psup.all_covered, consistent=tsup.all_covered,
+        conflicts=conflicts, notes=notes, projection=v.projection, sources=sources, structural=structural,
+        exact_bounds=v.exact, stopped_by=space.stopped_by, stable_marking_partial=v.stable_known,
+        engine="explicit", engine_reason=reason,
+    )
+
+
+@dataclass
+class _Partial:
+    """The verdicts on a net whose reachability graph is not complete, filled phase by phase."""
+
+    place_bounds: dict[str, int | None]
     cover: Coverability | None = None
-    ids = [p.id for p in net.places]
-    place_bounds: dict[str, int | None] = {pid: None for pid in ids}
-    exact: list[str] = []
-    unbounded: list[str] = []
+    exact: list[str] = field(default_factory=list)
+    unbounded: list[str] = field(default_factory=list)
     bounded: bool | None = None
     deadlock: bool | None = None
-    deadlocks: list[Deadlock] = []
+    deadlocks: list[Deadlock] = field(default_factory=list)
     quasi: bool | None = None
     levels: dict[str, int] | None = None
     live: bool | None = None
     max_in_place: int | None = None
     max_per_marking: int | None = None
     one_safe: bool | None = None
-    seen_max = space.states.max(axis=0).astype(np.int64) if space.n_states else np.zeros(len(ids), np.int64)
-    if structurally_bounded:
-        bounded = True
-        pb, upper = _upper_bounds(sn, st, lp_seconds, seen_max)
-        structural = replace(structural, place_bounds=pb)
-        notes.extend(pb.notes)
-        place_bounds = {pid: (int(b) if b >= 0 else None) for pid, b in zip(ids, upper)}
-        exact = [pid for pid, b, m in zip(ids, upper, seen_max) if b >= 0 and m == b]
-        if total is not None:
-            sources["bounded"] = "state equation (LP" + (", exact certificate)" if total_cert else ", floating point)")
-        else:
-            sources["bounded"] = "P-invariants"
-        sources["place_bounds"] = ("upper bounds from the state equation (LP) and the P-invariants; exact where the "
-                                   "explored markings reach them")
-        if (upper >= 0).all():
-            top = int(upper.max(initial=0))
-            if top <= 1:
-                one_safe = True
-                sources["one_safe"] = sources["bounded"]
-            if int(seen_max.max(initial=0)) == top:
-                max_in_place = top
-                sources["max_token_in_place"] = "explored markings reach the structural upper bound"
-        if total is not None and space.n_states:
-            reached = int(space.states.sum(axis=1, dtype=np.int64).max())
-            if reached == total:
-                max_per_marking = total
-                sources["max_token_per_marking"] = "explored markings reach the state-equation bound"
-        notes.append(f"the net is bounded ({sources['bounded']}); the place bounds listed are upper bounds, "
-                     f"exact for {len(exact)} of {len(ids)} places (reached by an explored marking)")
-    elif not has_inhibitors and not sn.n_resets:
-        node_bytes = 96 * max(len(ids), 1) + 256
-        nodes = max(1, min(max_coverability_nodes, (budget // 4) // node_bytes))
-        cover = karp_miller(net, max_nodes=nodes, seconds=coverability_seconds)
-        if cover.complete:
-            bounded = cover.bounded
-            place_bounds = dict(zip(ids, cover.place_bounds()))
-            exact = [pid for pid, b in place_bounds.items() if b is not None]
-            unbounded = cover.unbounded_places()
-            fire = cover.fireable_transitions()
-            quasi = bool(fire.all())
-            sources["bounded"] = sources["place_bounds"] = sources["quasi_live"] = "Karp-Miller coverability graph"
-            if not quasi:
-                levels = None
-                live = False
-                sources["live"] = "Karp-Miller coverability graph"
-            for node in cover.dead_nodes()[:MAX_WITNESSES]:
-                deadlocks.append(Deadlock(marking=_omega_marking(net, cover.markings[node]),
-                                          firing_sequence=cover.firing_sequence(int(node))))
-            deadlock = True if deadlocks else None
-            if deadlock:
-                sources["deadlock"] = "Karp-Miller coverability graph"
-            notes.append("the reachability graph is infinite or too large; boundedness, place bounds, "
-                         "quasi-liveness and dead transitions come from the Karp–Miller coverability graph; "
-                         "liveness and reversibility are not decided on it")
-            if not quasi:
-                notes.append("dead transitions: " + ", ".join(
-                    t.id for t, f in zip(net.transitions, fire) if not f))
-            if bounded:
-                max_in_place = max([0, *(b for b in place_bounds.values() if b is not None)])
-                one_safe = max_in_place <= 1
-                sources["max_token_in_place"] = sources["one_safe"] = "Karp-Miller coverability graph"
-        elif witness is not None:
-            bounded = False
-            notes.append(f"the coverability graph {cover.stopped}; unboundedness comes from a pumping witness")
-        else:
-            notes.append(f"the coverability graph {cover.stopped}, and the state-equation LP does not bound the "
-                         "net: boundedness is not decided")
+    reversible: bool | None = None
+    stable_known: bool | None = None
+    projection: Analysis | None = None
+
+
+def _partial_from_bounds(v: _Partial, sn: SparseNet, st: _Structure, space: StateSpace, seen_max: np.ndarray,
+                         lp_seconds: float) -> Structural:
+    """A structurally bounded net: the per-place upper bounds, exact where explored markings reach
+    them, and the maxima they settle; returns the structural results with the place bounds."""
+    ids = list(v.place_bounds)
+    sources = st.sources
+    v.bounded = True
+    pb, upper = _upper_bounds(sn, st, lp_seconds, seen_max)
+    st.notes.extend(pb.notes)
+    v.place_bounds = {pid: (int(b) if b >= 0 else None) for pid, b in zip(ids, upper)}
+    v.exact = [pid for pid, b, m in zip(ids, upper, seen_max) if b >= 0 and m == b]
+    if st.total is not None:
+        sources["bounded"] = "state equation (LP" + (", exact certificate)" if st.total_cert else ", floating point)")
     else:
-        if witness is None:
-            arcs = "inhibitor and reset" if has_inhibitors and sn.n_resets else (
-                "inhibitor" if has_inhibitors else "reset")
-            notes.append(f"the net has {arcs} arcs, its reachability graph exceeds the limit and the state "
-                         "equation does not bound it: boundedness is undecidable in general and was not decided "
-                         "(Karp-Miller coverability is unsound for such nets and was not run)")
+        sources["bounded"] = "P-invariants"
+    sources["place_bounds"] = ("upper bounds from the state equation (LP) and the P-invariants; exact where the "
+                               "explored markings reach them")
+    if (upper >= 0).all():
+        top = int(upper.max(initial=0))
+        if top <= 1:
+            v.one_safe = True
+            sources["one_safe"] = sources["bounded"]
+        if int(seen_max.max(initial=0)) == top:
+            v.max_in_place = top
+            sources["max_token_in_place"] = "explored markings reach the structural upper bound"
+    if st.total is not None and space.n_states:
+        reached = int(space.states.sum(axis=1, dtype=np.int64).max())
+        if reached == st.total:
+            v.max_per_marking = st.total
+            sources["max_token_per_marking"] = "explored markings reach the state-equation bound"
+    st.notes.append(f"the net is bounded ({sources['bounded']}); the place bounds listed are upper bounds, "
+                    f"exact for {len(v.exact)} of {len(ids)} places (reached by an explored marking)")
+    return replace(st.structural, place_bounds=pb)
+
+
+def _partial_from_coverability(v: _Partial, net: PetriNet, st: _Structure, witness: CoveringWitness | None,
+                               max_nodes: int, seconds: float) -> None:
+    """A net the structure does not bound, without inhibitor or reset arcs: the Karp–Miller graph."""
+    sources, notes = st.sources, st.notes
+    cover = v.cover = karp_miller(net, max_nodes=max(1, max_nodes), seconds=seconds)
+    if cover.complete:
+        v.bounded = cover.bounded
+        v.place_bounds = dict(zip(v.place_bounds, cover.place_bounds()))
+        v.exact = [pid for pid, b in v.place_bounds.items() if b is not None]
+        v.unbounded = cover.unbounded_places()
+        fire = cover.fireable_transitions()
+        v.quasi = bool(fire.all())
+        sources["bounded"] = sources["place_bounds"] = sources["quasi_live"] = "Karp-Miller coverability graph"
+        if not v.quasi:
+            v.live = False
+            sources["live"] = "Karp-Miller coverability graph"
+        for node in cover.dead_nodes()[:MAX_WITNESSES]:
+            v.deadlocks.append(Deadlock(marking=_omega_marking(net, cover.markings[node]),
+                                        firing_sequence=cover.firing_sequence(int(node))))
+        v.deadlock = True if v.deadlocks else None
+        if v.deadlock:
+            sources["deadlock"] = "Karp-Miller coverability graph"
+        notes.append("the reachability graph is infinite or too large; boundedness, place bounds, "
+                     "quasi-liveness and dead transitions come from the Karp–Miller coverability graph; "
+                     "liveness and reversibility are not decided on it")
+        if not v.quasi:
+            notes.append("dead transitions: " + ", ".join(t.id for t, f in zip(net.transitions, fire) if not f))
+        if v.bounded:
+            v.max_in_place = max([0, *(b for b in v.place_bounds.values() if b is not None)])
+            v.one_safe = v.max_in_place <= 1
+            sources["max_token_in_place"] = sources["one_safe"] = "Karp-Miller coverability graph"
+    elif witness is not None:
+        v.bounded = False
+        notes.append(f"the coverability graph {cover.stopped}; unboundedness comes from a pumping witness")
+    else:
+        notes.append(f"the coverability graph {cover.stopped}, and the state-equation LP does not bound the "
+                     "net: boundedness is not decided")
+
+
+def _partial_from_explored(v: _Partial, net: PetriNet, st: _Structure, space: StateSpace,
+                           witness: CoveringWitness | None, seen_max: np.ndarray) -> None:
+    """What a pumping witness and the explored part prove on their own: its dead markings are
+    reachable deadlocks, a transition that fired there is not dead, a count above 1 breaks safeness,
+    a place that varies is not stable."""
+    sources = st.sources
     if witness is not None:
-        bounded = False
+        v.bounded = False
         sources["bounded"] = "pumping witness (a firing sequence that can repeat for ever)"
-        one_safe = False
+        v.one_safe = False
         sources["one_safe"] = sources["bounded"]
         for pid in witness.growing:
-            if pid not in unbounded:
-                unbounded.append(pid)
-    for pid in unbounded:
-        place_bounds[pid] = None
-        if pid in exact:
-            exact.remove(pid)
-    # what the explored part proves on its own: its dead markings are reachable deadlocks, a
-    # transition that fired there is not dead, a count above 1 breaks safeness, a place that varies
-    # is not stable
+            if pid not in v.unbounded:
+                v.unbounded.append(pid)
+    for pid in v.unbounded:
+        v.place_bounds[pid] = None
+        if pid in v.exact:
+            v.exact.remove(pid)
     dead_seen = space.deadlocks()
     if dead_seen.size:
-        deadlock = True
+        v.deadlock = True
         sources["deadlock"] = "reachability graph (explored part)"
-        if not deadlocks:
-            deadlocks = [Deadlock(marking=space.marking(int(i)).to_dict(), firing_sequence=space.firing_sequence(int(i)))
-                         for i in dead_seen[:MAX_WITNESSES]]
-    if quasi is None and space.n_edges and np.unique(space.transition).size == len(net.transitions):
-        quasi = True
+        if not v.deadlocks:
+            v.deadlocks = [Deadlock(marking=space.marking(int(i)).to_dict(),
+                                    firing_sequence=space.firing_sequence(int(i))) for i in dead_seen[:MAX_WITNESSES]]
+    if v.quasi is None and space.n_edges and np.unique(space.transition).size == len(net.transitions):
+        v.quasi = True
         sources["quasi_live"] = "reachability graph (explored part)"
-    if one_safe is None and int(seen_max.max(initial=0)) > 1:
-        one_safe = False
+    if v.one_safe is None and int(seen_max.max(initial=0)) > 1:
+        v.one_safe = False
         sources["one_safe"] = "reachability graph (explored part)"
-    stable_known: bool | None = None
     if space.n_states and (space.states.min(axis=0) != space.states.max(axis=0)).all():
-        stable_known = False
+        v.stable_known = False
         sources["stable_marking"] = "reachability graph (explored part): every place varies"
-    projection: Analysis | None = None
-    reversible: bool | None = None
+
+
+def _partial_from_projection(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structure,
+                             analyse_small: Callable[[PetriNet], Analysis]) -> None:
+    """When the growth is in record-only places (no transition reads them), liveness, deadlocks and
+    reversibility of the net without them (same enabled transitions in every marking)."""
+    sources, notes = st.sources, st.notes
     record = record_only_places(net)
-    growth_is_recorded = bounded is not False or (bool(unbounded) and set(unbounded) <= set(record))
+    growth_is_recorded = v.bounded is not False or (bool(v.unbounded) and set(v.unbounded) <= set(record))
     if record and len(record) < len(net.places) and growth_is_recorded:
-        projection = analyse(without_places(net, record), max_states=max_states, max_bytes=budget,
-                             max_coverability_nodes=max_coverability_nodes, max_invariant_rows=max_invariant_rows,
-                             invariant_seconds=invariant_seconds, lp_seconds=lp_seconds,
-                             coverability_seconds=coverability_seconds, progress=progress)
+        projection = analyse_small(without_places(net, record))
         if projection.complete and projection.graph_work_done:
             # record-only places never change what is enabled: liveness and deadlocks carry over
-            levels, quasi, live = projection.liveness, projection.quasi_live, projection.live
-            deadlock = projection.deadlock
-            deadlocks = list(projection.deadlocks)
+            v.levels, v.quasi, v.live = projection.liveness, projection.quasi_live, projection.live
+            v.deadlock = projection.deadlock
+            v.deadlocks = list(projection.deadlocks)
             # the projection of a path is a path; the record places come back only if never written
             post = sp.csr_matrix(sn.post)
             writers = {int(t) for p in record for t in post.indices[post.indptr[net.place_index[p]]:
                                                                    post.indptr[net.place_index[p] + 1]]}
             written = any((projection.liveness or {}).get(net.transitions[t].id, 0) > 0 for t in writers)
-            reversible = bool(projection.reversible) and not written
+            v.reversible = bool(projection.reversible) and not written
             for key in ("deadlock", "quasi_live", "live", "reversible"):
                 sources[key] = "reachability graph of the net without its record-only places"
             notes.append(f"liveness, deadlocks and reversibility come from the net without its record-only "
                          f"places ({', '.join(record)}), which has the same enabled transitions in every marking "
                          "and a finite reachability graph")
-        else:
-            projection = None
-    if set(unbounded) & set(record):
-        reversible = False  # a record-only place never loses tokens: once it has grown, M0 is out of reach
+            v.projection = projection
+    if set(v.unbounded) & set(record):
+        v.reversible = False  # a record-only place never loses tokens: once it has grown, M0 is out of reach
         sources["reversible"] = "a record-only place grows for ever"
-    if projection is None and levels is None:
+    if v.projection is None and v.levels is None:
         notes.append("liveness and reversibility need the whole reachability graph and were not decided")
-    conflicts, _ = _conflicts(net, None)
-    return Analysis(
-        net=net, space=space, coverability=cover, states=space.n_states, edges=space.n_edges, complete=False,
-        bounded=bounded, place_bounds=place_bounds, unbounded_places=unbounded, covering=witness,
-        max_token_in_place=max_in_place, max_token_per_marking=max_per_marking, one_safe=one_safe,
-        deadlock=deadlock, deadlocks=deadlocks, n_deadlocks=None, liveness=levels, quasi_live=quasi, live=live,
-        reversible=reversible, home_states=None, home_marking_is_home=None, stable_places=None,
-        p_invariants=pinv, t_invariants=tinv, conservative=psup.all_covered, consistent=tsup.all_covered,
-        conflicts=conflicts, notes=notes, projection=projection, sources=sources, structural=structural,
-        exact_bounds=exact, stopped_by=space.stopped_by, stable_marking_partial=stable_known,
-        engine="explicit", engine_reason=reason,
-    )
 
 
 def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, lp_seconds: float, seconds: float,

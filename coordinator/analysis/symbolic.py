@@ -467,7 +467,7 @@ def _fireable(store: _Store, fwd: Events, single: Events, reach: int, fireable: 
         present = store.presence(en)
         for t in members:
             own = _level_functions(single, own_event[t])
-            differ = [k for k in own if not np.array_equal(own[k], merged.get(k))]
+            differ = [k for k in own if k not in merged or not np.array_equal(own[k], merged[k])]
             ok = all((own[k][np.flatnonzero(present[store.dom_ptr[k]:store.dom_ptr[k + 1]])] >= 0).any()
                      for k in differ)
             if ok and len(differ) > 1:
