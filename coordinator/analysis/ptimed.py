@@ -152,9 +152,55 @@ def to_gspn(
     ext_rates = dict(ext_rates or {})
     warnings: list[str] = []
     sources: dict[str, str] = {}
+    used_mean, used_normal = _task_parameters(net, stats, means, normal, warnings, sources)
+    places, transitions, arcs, timed, done_of = _timed_transitions(net, used_mean)
+    exit_priority, measured, dropped = _exits(net, stats, normal, done_of, warnings)
+    used_ext: dict[str, float] = {}
+    rewired: dict[tuple[str, str], str] = {}
+    for t in net.transitions:
+        weight, weight_expr = t.weight, t.weight_expr
+        kind, rate, servers, rate_expr = t.kind, t.rate, t.servers, t.rate_expr
+        exits: list[tuple[str, str]] = []
+        for event in t.internal_events:
+            _, tname, outcome = parse_event(event)
+            for pid in net.input_places[t.id]:
+                if net.place(pid).task == tname and pid in done_of:
+                    rewired[(pid, t.id)] = done_of[pid]
+                    exits.append((tname, outcome))
+        if t.id in dropped:
+            warnings.append(f"transition {t.id!r}: no journal result takes this exit; left out of the GSPN")
+            continue
+        if exits:
+            weight_expr = None  # an exit's weight is its measured or a-priori probability
+            weight = _exit_weight(net, t, exits[0], stats, used_normal, measured, warnings)
+        for event in t.external_events:
+            topic = parse_event(event)[1]
+            if topic in ext_rates:
+                used_ext[topic], sources[event] = float(ext_rates[topic]), "given"
+            else:
+                used_ext[topic], sources[event] = DEFAULT_EXT_RATE, "default"
+                warnings.append(f"external event {event!r}: no rate given; using {DEFAULT_EXT_RATE}/s")
+            kind, rate, servers = TransitionKind.EXPONENTIAL, used_ext[topic], 1
+            rate_expr = None
+        label = t.label or (" ".join(t.events) if t.events else "")
+        priority = exit_priority.get(t.id, t.priority)
+        transitions.append(replace(t, events=(), kind=kind, rate=rate, servers=servers, weight=weight,
+                                   label=label, priority=priority, rate_expr=rate_expr, weight_expr=weight_expr))
+    arcs = [replace(a, source=rewired.get((a.source, a.target), a.source)) if not a.inhibitor else a for a in arcs
+            if not ({a.source, a.target} & dropped)]
+    gspn = PetriNet(name=f"{net.name}_gspn", places=tuple(places), transitions=tuple(transitions), arcs=tuple(arcs),
+                    initial_marking=net.initial_marking, tasks=net.tasks,
+                    description=f"GSPN (P-timed) view of {net.name}", home_marking=net.home_marking)
+    return PTimedNet(gspn, used_mean, used_normal, used_ext, sources, warnings, timed)
+
+
+def _task_parameters(net: PetriNet, stats: Mapping[str, TaskStats], means: Mapping[str, float] | None,
+                     normal: Mapping[str, float] | None, warnings: list[str],
+                     sources: dict[str, str]) -> tuple[dict[str, float], dict[str, float]]:
+    """Mean delay (s) and probability of the normal exit of every primitive task: given, else from
+    the journal, else a-priori (the task's declaration), else a default with a warning."""
     used_mean: dict[str, float] = {}
     used_normal: dict[str, float] = {}
-    used_ext: dict[str, float] = {}
     for name, task in net.tasks.items():
         st = stats.get(name)
         given = float(means[name]) if means and name in means else None
@@ -182,10 +228,17 @@ def to_gspn(
             warnings.append(f"primitive task {name!r}: no journal results and no reliability; "
                             "assuming the normal exit is always taken")
         sources[name] = f"time:{src} reliability:{rsrc}"
+    return used_mean, used_normal
 
+
+def _timed_transitions(net: PetriNet, used_mean: Mapping[str, float]
+                       ) -> tuple[list[Place], list[Transition], list[Arc], dict[str, str], dict[str, str]]:
+    """The places and arcs of the net with, for each primitive-task place p, a timed transition
+    ``p.run`` (exponential, infinite servers, rate 1/mean) into a new place ``p.done``; returns
+    places, the new transitions, arcs, ``{p: p.run}`` and ``{p: p.done}``."""
     places = list(net.places)
     transitions: list[Transition] = []
-    arcs = [a for a in net.arcs]
+    arcs = list(net.arcs)
     timed: dict[str, str] = {}
     done_of: dict[str, str] = {}
     for p in net.places:
@@ -198,8 +251,14 @@ def to_gspn(
         transitions.append(Transition(id=run, kind=TransitionKind.EXPONENTIAL, rate=1.0 / used_mean[p.task],
                                       servers=INFINITE_SERVERS, label=f"{p.task} running"))
         arcs += [Arc(source=p.id, target=run), Arc(source=run, target=done)]
+    return places, transitions, arcs, timed, done_of
 
-    # Exits of one task place form one random switch: give them one priority (their highest).
+
+def _exits(net: PetriNet, stats: Mapping[str, TaskStats], normal: Mapping[str, float] | None,
+           done_of: Mapping[str, str], warnings: list[str]) -> tuple[dict[str, int], dict[str, float], set[str]]:
+    """The exits of each primitive-task place as one random switch: their common priority (the
+    highest among them), the probability the engine takes each (journal results), and the exits no
+    journal result takes while another exit of their place is taken (left out)."""
     exits_of: dict[str, list[Transition]] = {}
     for t in net.transitions:
         for event in t.internal_events:
@@ -213,7 +272,7 @@ def to_gspn(
         for u in group:
             exit_priority[u.id] = max(exit_priority.get(u.id, top), top)
     measured: dict[str, float] = {}  # exit id -> probability the engine takes it (journal results)
-    dropped: set[str] = set()  # exits that no journal result takes, while another exit of their place is taken
+    dropped: set[str] = set()
     for pid, group in exits_of.items():
         tname = net.place(pid).task or ""
         st = stats.get(tname)
@@ -226,75 +285,47 @@ def to_gspn(
             if lost:
                 warnings.append(f"primitive task {tname!r}: {sum(lost.values()):.0%} of its results "
                                 f"({', '.join(lost)}) enable no exit of place {pid!r}; left out of its random switch")
-    rewired: dict[tuple[str, str], str] = {}
-    for t in net.transitions:
-        weight, weight_expr = t.weight, t.weight_expr
-        kind, rate, servers, rate_expr = t.kind, t.rate, t.servers, t.rate_expr
-        exits: list[tuple[str, str]] = []
-        for event in t.internal_events:
-            _, tname, outcome = parse_event(event)
-            for pid in net.input_places[t.id]:
-                if net.place(pid).task == tname and pid in done_of:
-                    rewired[(pid, t.id)] = done_of[pid]
-                    exits.append((tname, outcome))
-        if t.id in dropped:
-            warnings.append(f"transition {t.id!r}: no journal result takes this exit; left out of the GSPN")
-            continue
-        if exits:
-            weight_expr = None  # an exit's weight is its measured or a-priori probability
-        if exits and t.id in measured:
-            weight = measured[t.id]
-            if weight <= 0:
-                warnings.append(f"transition {t.id!r}: probability 0 measured; weight {MIN_WEIGHT} kept")
-                weight = MIN_WEIGHT
-        elif exits:
-            tname, outcome = exits[0]
-            same = [u for u in net.transitions if any(
-                parse_event(e)[1] == tname and (parse_event(e)[2] == "error") == (outcome == "error")
-                for e in u.internal_events)]
-            if outcome == "error":
-                weight = (1.0 - used_normal[tname]) / max(1, len(same))
-            else:
-                st = stats.get(tname)
-                share = st.outcomes.get(outcome, 0.0) if st is not None and st.outcomes else None
-                normal_exits = [u for u in same if all(parse_event(e)[2] != "error" for e in u.internal_events
-                                                       if parse_event(e)[1] == tname)]
-                declared = share is None and any(u.weight != 1.0 for u in normal_exits)
-                if declared:  # a-priori shares of the outcomes, written as the exits' weights
-                    share = t.weight / sum(u.weight for u in normal_exits)
-                    n_same = 1
-                elif share is None:
-                    outs = {parse_event(e)[2] for u in same for e in u.internal_events
-                            if parse_event(e)[1] == tname}
-                    share = 1.0 / max(1, len(outs))
-                    if len(outs) > 1:
-                        warnings.append(f"transition {t.id!r}: no journal share of outcome {outcome!r} "
-                                        f"of {tname!r}; assuming 1/{len(outs)} of the normal exits")
-                if not declared:
-                    n_same = sum(1 for u in same if any(parse_event(e)[2] == outcome for e in u.internal_events))
-                weight = used_normal[tname] * share / max(1, n_same)
-            if weight <= 0:
-                warnings.append(f"transition {t.id!r}: probability 0 measured; weight {MIN_WEIGHT} kept")
-                weight = MIN_WEIGHT
-        for event in t.external_events:
-            topic = parse_event(event)[1]
-            if topic in ext_rates:
-                used_ext[topic], sources[event] = float(ext_rates[topic]), "given"
-            else:
-                used_ext[topic], sources[event] = DEFAULT_EXT_RATE, "default"
-                warnings.append(f"external event {event!r}: no rate given; using {DEFAULT_EXT_RATE}/s")
-            kind, rate, servers = TransitionKind.EXPONENTIAL, used_ext[topic], 1
-            rate_expr = None
-        label = t.label or (" ".join(t.events) if t.events else "")
-        priority = exit_priority.get(t.id, t.priority)
-        transitions.append(replace(t, events=(), kind=kind, rate=rate, servers=servers, weight=weight,
-                                   label=label, priority=priority, rate_expr=rate_expr, weight_expr=weight_expr))
-    arcs = [replace(a, source=rewired.get((a.source, a.target), a.source)) if not a.inhibitor else a for a in arcs
-            if not ({a.source, a.target} & dropped)]
-    gspn = PetriNet(name=f"{net.name}_gspn", places=tuple(places), transitions=tuple(transitions), arcs=tuple(arcs),
-                    initial_marking=net.initial_marking, tasks=net.tasks,
-                    description=f"GSPN (P-timed) view of {net.name}", home_marking=net.home_marking)
-    return PTimedNet(gspn, used_mean, used_normal, used_ext, sources, warnings, timed)
+    return exit_priority, measured, dropped
+
+
+def _exit_weight(net: PetriNet, t: Transition, first_exit: tuple[str, str], stats: Mapping[str, TaskStats],
+                 used_normal: Mapping[str, float], measured: Mapping[str, float], warnings: list[str]) -> float:
+    """The random-switch weight of an exit t of a primitive task: its measured probability, else its
+    share of the task's normal (or error) probability, split among the exits of the same outcome."""
+    if t.id in measured:
+        weight = measured[t.id]
+        if weight <= 0:
+            warnings.append(f"transition {t.id!r}: probability 0 measured; weight {MIN_WEIGHT} kept")
+            weight = MIN_WEIGHT
+        return weight
+    tname, outcome = first_exit
+    same = [u for u in net.transitions if any(
+        parse_event(e)[1] == tname and (parse_event(e)[2] == "error") == (outcome == "error")
+        for e in u.internal_events)]
+    if outcome == "error":
+        weight = (1.0 - used_normal[tname]) / max(1, len(same))
+    else:
+        st = stats.get(tname)
+        share = st.outcomes.get(outcome, 0.0) if st is not None and st.outcomes else None
+        normal_exits = [u for u in same if all(parse_event(e)[2] != "error" for e in u.internal_events
+                                               if parse_event(e)[1] == tname)]
+        declared = share is None and any(u.weight != 1.0 for u in normal_exits)
+        if declared:  # a-priori shares of the outcomes, written as the exits' weights
+            share = t.weight / sum(u.weight for u in normal_exits)
+            n_same = 1
+        elif share is None:
+            outs = {parse_event(e)[2] for u in same for e in u.internal_events if parse_event(e)[1] == tname}
+            share = 1.0 / max(1, len(outs))
+            if len(outs) > 1:
+                warnings.append(f"transition {t.id!r}: no journal share of outcome {outcome!r} "
+                                f"of {tname!r}; assuming 1/{len(outs)} of the normal exits")
+        if not declared:
+            n_same = sum(1 for u in same if any(parse_event(e)[2] == outcome for e in u.internal_events))
+        weight = used_normal[tname] * share / max(1, n_same)
+    if weight <= 0:
+        warnings.append(f"transition {t.id!r}: probability 0 measured; weight {MIN_WEIGHT} kept")
+        weight = MIN_WEIGHT
+    return weight
 
 
 def _exit_probabilities(task: str, group: list[Transition], classes: Mapping[tuple[str, str | None], float]
