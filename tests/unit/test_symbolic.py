@@ -76,6 +76,17 @@ def test_the_fastest_scale_models_agree_with_their_oracle_beyond_explicit_reach(
     assert_agrees_with_oracle(SCALE, row)
 
 
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_neoelection_pt_3_has_its_published_974325_markings() -> None:
+    net = load_pnml(ROOT / "tests" / "data" / "mcc-large" / "NeoElection-PT-3" / "model.pnml")
+    bounds, flows = proven_bounds(net)
+    r = analyse_symbolic(net, bounds, flows=flows, seconds=200.0)
+    assert r.states == 974_325 and int(r.place_bounds.max()) == 1
+    assert r.deadlock and r.deadlock_sequence is not None and r.deadlock_marking is not None
+    assert replays_to(net, r.deadlock_sequence, r.deadlock_marking)
+
+
 def generated_net(seed: int) -> PetriNet:
     """A random net: half the seeds conservative (tokens move, state machine like, so P-semiflows
     group places), half with weighted arcs, inhibitor arcs and token sources held by inhibitors."""
