@@ -22,6 +22,7 @@ COMMANDS = (
     "check",     # validate a net against services.toml
     "export",    # net to PNML, DOT or TOML
     "analyze",   # qualitative analysis (ordinary-net view)
+    "example",   # generated example nets (a fleet of N robots)
     "gspn",      # quantitative analysis (GSPN view)
     "perf",      # J = 1 - R + rho C from the journal
     "learn",     # learning automata state from the journal
