@@ -17,6 +17,11 @@ the question ``petrobot analyze`` answers for the fleet. ``safe=True`` adds the 
 corridor token: a robot enters the aisles-and-lift corridor only with the token and gives it back
 when it leaves, so the corridor holds one robot at a time and the fleet is deadlock-free.
 
+``missions=M`` gives each robot M missions (a control place ``r<i>_missions`` of M tokens that its
+start takes), so that a run of the net ends: completed once every robot is parked again, stuck if
+the fleet deadlocks on the way. Without it the robots go round for ever, the net the analysis is
+about. ``services.toml`` places simulated actions for the primitive tasks (services/actions/fleet.py).
+
 The state space grows as about 5^N (each robot outside the corridor loads, charges, recovers or
 waits): explicit search up to N ≈ 8, the symbolic engine beyond (docs/analysis.md, section 9).
 """
@@ -38,20 +43,23 @@ _TASKS = {
 }
 
 
-def fleet_toml(robots: int, *, chargers: int | None = None, safe: bool = False) -> str:
+def fleet_toml(robots: int, *, chargers: int | None = None, safe: bool = False, missions: int | None = None) -> str:
     """The fleet's task net as the TOML net format (``petrobot example fleet``).
 
     Args:
         robots: N ≥ 1 robots.
         chargers: charging stations (default ⌈N / 4⌉).
         safe: add the corridor token (module docstring): deadlock-free.
+        missions: M ≥ 1 missions per robot, then the run ends (module docstring); ``None``: endless.
 
     Returns:
         The net file's text (loads with :func:`coordinator.netfile.loader.loads_net`).
 
     Raises:
-        ValueError: robots outside 1 .. :data:`MAX_ROBOTS`, or fewer than one charger.
+        ValueError: robots outside 1 .. :data:`MAX_ROBOTS`, fewer than one charger, or missions < 1.
     """
+    if missions is not None and missions < 1:
+        raise ValueError(f"missions must be at least 1, not {missions}")
     if not 1 <= robots <= MAX_ROBOTS:
         raise ValueError(f"robots must be between 1 and {MAX_ROBOTS}, not {robots}")
     chargers = max(1, -(-robots // 4)) if chargers is None else chargers
@@ -62,7 +70,8 @@ def fleet_toml(robots: int, *, chargers: int | None = None, safe: bool = False) 
     out = [f"# {robots} robots, two aisles, a lift and {chargers} charger(s): coordinator.netfile.fleet",
            "", "[net]", f'name = "{name}"',
            f'description = "{robots} mobile robots sharing two aisles, a lift and {chargers} charger(s)'
-           f'{" (one robot in the corridor at a time)" if safe else ""}."',
+           f'{" (one robot in the corridor at a time)" if safe else ""}'
+           f'{f", {missions} mission(s) each" if missions else ""}."',
            "format = 1",
            f"home = {{ {home}, aisle_1_free = 1, lift_free = 1, aisle_2_free = 1, chargers_free = {chargers}"
            + (", corridor_free = 1 }" if safe else " }"), ""]
@@ -113,7 +122,11 @@ def fleet_toml(robots: int, *, chargers: int | None = None, safe: bool = False) 
             place(f"{r}_{suffix}", "primitive_task", task=task, label=f"robot {i}: {suffix.replace('_', ' ')}")
             place(f"{r}_recover_{suffix}", "primitive_task", task="recover",
                   label=f"robot {i}: recovery after {suffix.replace('_', ' ')}")
-        transition(f"{r}_start", {f"{r}_ready": 1}, {f"{r}_loading": 1})
+        start = {f"{r}_ready": 1}
+        if missions:
+            place(f"{r}_missions", "control", missions, label=f"missions left for robot {i}")
+            start[f"{r}_missions"] = 1
+        transition(f"{r}_start", start, {f"{r}_loading": 1})
         for k, (suffix, task, held) in enumerate(steps):
             here = f"{r}_{suffix}"
             nxt = steps[k + 1] if k + 1 < len(steps) else None

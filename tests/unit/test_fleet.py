@@ -56,3 +56,14 @@ def test_example_writes_the_fleet_and_analyze_hands_it_to_the_symbolic_engine_be
 def test_a_fleet_size_out_of_range_is_a_clear_error(capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["example", "fleet", "--robots", "0"]) == 2
     assert "robots must be between 1 and" in capsys.readouterr().err
+
+
+def test_with_missions_the_safe_fleet_ends_only_at_home_and_the_endless_one_never_ends() -> None:
+    rep = report(loads_net(fleet_toml(2, safe=True, missions=1)))
+    assert rep["deadlock"] is True and rep["ends"]["stuck"] == 0 and rep["ends"]["intended"] == rep["n_deadlocks"] > 0
+    assert report(loads_net(fleet_toml(2, safe=True)))["deadlock"] is False
+
+
+def test_missions_below_one_are_a_clear_error(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["example", "fleet", "--robots", "2", "--missions", "0"]) == 2
+    assert "missions must be at least 1" in capsys.readouterr().err
