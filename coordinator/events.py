@@ -113,7 +113,8 @@ class ActionEnded:
 class ActionFeedback:
     """A running primitive action sent feedback (progress, an estimate) through its node.
 
-    Not journaled: feedback is for the operator's eyes (paper section 5); results are what count.
+    Journaled as sampled (:mod:`coordinator.feedback`: at most a few a second per call, always the
+    last one before the result), and shown on the consoles (paper section 5).
 
     Attributes:
         instance, task, action: the running call (``instance`` is the call id).

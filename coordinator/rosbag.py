@@ -12,14 +12,16 @@ topic                           type                                 one message
 ``/petrobot/firing``            ``petrobot_msgs/msg/Firing``         firing
 ``/petrobot/marking``           ``petrobot_msgs/msg/Marking``        firing, plus the initial one
 ``/petrobot/action_start``      ``petrobot_msgs/msg/ActionStart``    primitive action started
+``/petrobot/action_feedback``   ``petrobot_msgs/msg/ActionFeedback`` feedback the journal kept
 ``/petrobot/action_result``     ``petrobot_msgs/msg/ActionResult``   primitive action ended
 ``/petrobot/operator``          ``petrobot_msgs/msg/OperatorCommand`` operator command
 ``/petrobot/reconciliation``    ``petrobot_msgs/msg/Reconciliation`` reconciliation
 ==============================  ===================================  ===========================
 
 The markings are replayed from the net's initial marking (the net text the run stored) and each
-firing's consumed and produced tokens. Feedback is not in the bag: the journal does not keep it
-(feedback is for the operator's eyes; results are what count).
+firing's consumed and produced tokens. The feedback is what the journal kept of it: sampled per
+running call (:mod:`coordinator.feedback`: at most ten a second, and the last one before the
+result), stamped with the time the coordinator received it.
 
 The bag is a directory (``metadata.yaml`` and ``<name>.mcap``), written beside its destination and
 renamed into place once complete and read back: the ``.mcap`` is read with Foxglove's
@@ -50,6 +52,7 @@ TOPICS = {
     "/petrobot/firing": "petrobot_msgs/msg/Firing",
     "/petrobot/marking": "petrobot_msgs/msg/Marking",
     "/petrobot/action_start": "petrobot_msgs/msg/ActionStart",
+    "/petrobot/action_feedback": "petrobot_msgs/msg/ActionFeedback",
     "/petrobot/action_result": "petrobot_msgs/msg/ActionResult",
     "/petrobot/operator": "petrobot_msgs/msg/OperatorCommand",
     "/petrobot/reconciliation": "petrobot_msgs/msg/Reconciliation",
@@ -106,7 +109,7 @@ def _initial_marking(net_text: str | None) -> dict[str, int] | None:
 
 def _messages(reader: JournalReader, run_id: str) -> tuple[list[tuple[int, str, dict[str, Any]]], str]:
     """Every message of the bag, in the journal's order: (stamp ns, topic, fields); and a note."""
-    from coordinator.journal import FiringRow, OperatorRow, ReconciliationRow, ResultRow, StartRow
+    from coordinator.journal import FeedbackRow, FiringRow, OperatorRow, ReconciliationRow, ResultRow, StartRow
 
     run = reader.run(run_id)
     out: list[tuple[int, str, dict[str, Any]]] = [(_stamp(run.started_wall), "/petrobot/run", {
@@ -118,7 +121,9 @@ def _messages(reader: JournalReader, run_id: str) -> tuple[list[tuple[int, str, 
     if marking is not None:
         out.append((_stamp(run.started_wall), "/petrobot/marking", {"run": run.id, "seq": 0,
                                                                      "places": _tokens(marking)}))
-    for record in reader.timeline(run_id):
+    records: list[Any] = [*reader.timeline(run_id), *reader.feedback_messages(run_id)]
+    records.sort(key=lambda r: (r.entry, r.t_wall))
+    for record in records:
         stamp = _stamp(record.t_wall)
         if isinstance(record, FiringRow):
             out.append((stamp, "/petrobot/firing", {
@@ -137,6 +142,10 @@ def _messages(reader: JournalReader, run_id: str) -> tuple[list[tuple[int, str, 
             out.append((stamp, "/petrobot/action_start", {
                 "run": run.id, "instance": record.instance, "task": record.task, "place": record.place,
                 "action": record.action, "node": record.node or "", "params_json": _json(dict(record.params))}))
+        elif isinstance(record, FeedbackRow):
+            out.append((stamp, "/petrobot/action_feedback", {
+                "run": run.id, "instance": record.instance, "task": record.task, "action": record.action,
+                "data_json": _json(record.data)}))
         elif isinstance(record, ResultRow):
             out.append((stamp, "/petrobot/action_result", {
                 "run": run.id, "instance": record.instance, "task": record.task, "action": record.action,

@@ -54,6 +54,7 @@ from coordinator.engine import (
 )
 from coordinator.engine.rest import at_rest, home_marking, work_places
 from coordinator.errors import EngineError
+from coordinator.feedback import FeedbackSampler
 from coordinator.events import (
     ActionEnded,
     ActionFeedback,
@@ -232,6 +233,7 @@ class Runtime:
         self._commands: collections.deque[OperatorCommand | _Invalid] = collections.deque()
         self._wake = asyncio.Event()
         self._inflight: dict[str, InFlight] = {}
+        self._feedback: FeedbackSampler[ActionFeedback] = FeedbackSampler()
         self._dead_topics: set[str] = set()
         self._deadline: float | None = None
         self._ending: _End | None = None
@@ -393,6 +395,7 @@ class Runtime:
             if flight.call is not None:
                 flight.call.cancel()  # the client sends the node a cancel
             del self._inflight[instance]
+            self._feedback_ended(instance)
             self._follow_up(instance, flight.start, flight.node, None)
         if self._reconciler.pending:
             await self._reconciler.settle(self._reconcile_s)
@@ -664,6 +667,7 @@ class Runtime:
         if flight.call is not None:
             flight.call.cancel()
         start, node = flight.start, flight.node
+        self._feedback_ended(start.instance)
         self.journal.action_result(self.run_id, start.instance, start.task, start.action, node, result, forced=True)
         self._emit(ActionEnded(self.run_id, start.instance, start.task, start.action, node, result, forced=True))
         self.engine.complete(start.instance, result)
@@ -733,17 +737,31 @@ class Runtime:
         self._wake.set()
 
     def _feedback_to_observers(self, start: StartAction) -> Callable[[Any], None]:
-        """The call's feedback callback: each feedback becomes an :class:`ActionFeedback` event."""
+        """The call's feedback callback: each feedback becomes an :class:`ActionFeedback` event, and
+        is journaled as :class:`FeedbackSampler` samples it (the last one before the result always)."""
         def feedback(data: Any) -> None:
             if start.instance in self._inflight:
-                self._emit(ActionFeedback(self.run_id, start.instance, start.task, start.action, data))
+                event = ActionFeedback(self.run_id, start.instance, start.task, start.action, data)
+                if self._feedback.offer(start.instance, time.monotonic(), event) is not None:
+                    self._journal_feedback(event)
+                self._emit(event)
         return feedback
+
+    def _journal_feedback(self, event: ActionFeedback) -> None:
+        self.journal.feedback(self.run_id, event.instance, event.task, event.action, event.data, event.t_wall)
+
+    def _feedback_ended(self, instance: str) -> None:
+        """A call ended: journal the feedback held back since its last journaled one, before its result."""
+        held = self._feedback.finish(instance)
+        if held is not None:
+            self._journal_feedback(held)
 
     def _on_result(self, instance: str, result: ActionResult) -> None:
         flight = self._inflight.pop(instance, None)
         if flight is None:
             return
         start, node = flight.start, flight.node
+        self._feedback_ended(instance)
         self.journal.action_result(self.run_id, instance, start.task, start.action, node, result)
         self._follow_up(instance, start, node, result)
         key = (start.task, start.action)

@@ -9,6 +9,7 @@
 
 from coordinator.journal.reader import JournalReader, Record, read_results
 from coordinator.journal.records import (
+    FeedbackRow,
     FiringRow,
     LearnerState,
     OperatorRow,
@@ -22,6 +23,7 @@ from coordinator.journal.records import (
 from coordinator.journal.writer import Journal
 
 __all__ = [
+    "FeedbackRow",
     "FiringRow",
     "Journal",
     "JournalReader",

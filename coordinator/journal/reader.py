@@ -27,6 +27,7 @@ from typing import Any, Self, TypeVar
 from coordinator.engine import Instance
 from coordinator.errors import DamagedJournal, JournalError
 from coordinator.journal.records import (
+    FeedbackRow,
     FiringRow,
     LearnerState,
     OperatorRow,
@@ -39,6 +40,7 @@ from coordinator.journal.records import (
 )
 from coordinator.journal.rows import (
     decode_text,
+    feedback_row,
     firing_row,
     learner_row,
     operator_row,
@@ -105,6 +107,8 @@ class JournalReader:
         self._forced_col = "forced" if "forced" in results else "0"
         try:  # a journal of version 1 or 2 (read-only) has no reconciliation table
             self._reconciliation = bool(db.execute("PRAGMA table_info(reconciliation)").fetchall())
+            # one of version 1 to 4 (read-only) has no feedback table
+            self._feedback = bool(db.execute("PRAGMA table_info(feedback)").fetchall())
         except sqlite3.DatabaseError as exc:
             raise DamagedJournal(path, f"cannot read the journal: {exc}") from exc
 
@@ -313,6 +317,15 @@ class JournalReader:
         return self._rows("reconciliation", "SELECT entry, run, instance, task, action, node, assumed, status, "
                           "outcome, reason, cost, wall_s, cpu_s, value, t_wall "
                           f"FROM reconciliation{where} ORDER BY entry", args, reconciliation_row)
+
+    def feedback_messages(self, run: str | None = None) -> list[FeedbackRow]:
+        """The feedback the runtime kept of the running actions (sampled: docs/journal.md), in journal
+        order (none in a journal written before feedback was kept)."""
+        if not self._feedback:
+            return []
+        where, args = _where_run(run)
+        return self._rows("feedback", "SELECT entry, run, instance, task, action, data, t_wall "
+                          f"FROM feedback{where} ORDER BY entry", args, feedback_row)
 
     def final_words(self, run: str | None = None) -> dict[str, ResultRow | ReconciliationRow]:
         """The journal's last word on each call id (instance) that has one: its reconciliation if a

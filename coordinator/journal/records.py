@@ -18,7 +18,7 @@ from coordinator.performance import ActionRecord
 from coordinator.reconcile import differs
 from services.results import ActionResult, Status
 
-__all__ = ["FiringRow", "LearnerState", "OperatorRow", "ReconciliationRow", "Recovered", "ResultRow", "RunRow", "RunStats",
+__all__ = ["FeedbackRow", "FiringRow", "LearnerState", "OperatorRow", "ReconciliationRow", "Recovered", "ResultRow", "RunRow", "RunStats",
            "StartRow"]
 
 
@@ -121,6 +121,31 @@ class _HoldsResult:
     def action_result(self) -> ActionResult | None:
         """The result the row holds, or ``None``."""
         raise NotImplementedError
+
+
+@dataclass(frozen=True, slots=True)
+class FeedbackRow:
+    """One feedback message of a running primitive action (progress, an estimate), as the runtime
+    sampled it for the journal: at most a few a second per call, and always the last one before the
+    call's result (docs/journal.md, "Feedback").
+
+    Attributes:
+        run: run id.
+        instance: the call (its instance id).
+        task, action: the primitive task and the primitive action that sent it.
+        data: the feedback as the action sent it, through JSON (maps, lists, numbers, strings); a
+            feedback too large to keep is ``{"truncated": true, "bytes": N, "head": "..."}``.
+        t_wall: when the coordinator received it, Unix s.
+        entry: order among every record of the journal.
+    """
+
+    run: str
+    instance: str
+    task: str
+    action: str
+    data: Any
+    t_wall: float
+    entry: int = 0
 
 
 @dataclass(frozen=True, slots=True, kw_only=True)

@@ -24,6 +24,7 @@ from typing import Any, NoReturn
 
 from coordinator.errors import DamagedJournal
 from coordinator.journal.records import (
+    FeedbackRow,
     FiringRow,
     LearnerState,
     OperatorRow,
@@ -39,6 +40,7 @@ __all__ = [
     "STATUSES",
     "Fields",
     "decode_text",
+    "feedback_row",
     "firing_row",
     "learner_row",
     "operator_row",
@@ -249,6 +251,14 @@ def reconciliation_row(path: str, values: tuple[Any, ...]) -> ReconciliationRow:
                              f.name("action", action), f.text("node", node, optional=True),
                              f.status("assumed", assumed, optional=True), truth, f.number("t_wall", t_wall),
                              int(entry))
+
+
+def feedback_row(path: str, values: tuple[Any, ...]) -> FeedbackRow:
+    """``(entry, run, instance, task, action, data, t_wall)``."""
+    entry, run, instance, task, action, data, t_wall = values
+    f = Fields(path, "feedback", entry)
+    return FeedbackRow(f.name("run", run), f.name("instance", instance), f.name("task", task),
+                       f.name("action", action), f.json("data", data), f.number("t_wall", t_wall), int(entry))
 
 
 def learner_row(path: str, values: tuple[Any, ...]) -> LearnerState:

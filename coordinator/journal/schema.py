@@ -11,10 +11,11 @@ in which they were written, so a run can be replayed in order)::
     operator(entry, run, command, place, count, t_wall, accepted, reason, detail)
     reconciliation(entry, run, instance, task, action, node, assumed, status, outcome, reason, cost,
                    wall_s, cpu_s, value, t_wall)
+    feedback(entry, run, instance, task, action, data, t_wall)
     learner_state(task, scheme, state, updated_wall)
 
-JSON columns: ``consumed``/``produced`` (place → tokens), ``instances`` (list of ids), ``params``
-and ``value`` (JSON of the call's parameters and returned value, when JSON can hold them),
+JSON columns: ``consumed``/``produced`` (place → tokens), ``instances`` (list of ids), ``params``,
+``value`` and ``feedback.data`` (JSON of the call's parameters and returned value, when JSON can hold them),
 ``state`` (the learner's state dict, :mod:`coordinator.learning.state`), ``operator.detail`` (what a
 command carries besides a place and a count: a breakpoint, an injected event, a forced outcome). Times: ``t_wall``,
 ``started_wall``, ``ended_wall`` and ``updated_wall`` are Unix times in seconds; ``wall_s`` and
@@ -25,14 +26,17 @@ what a node said, when asked afterwards, about a call the coordinator had given 
 ``assumed`` is the status the net went on with (NULL if no result was journaled), ``status`` the
 node's final status (NULL if the node does not know the call: it never ran, or its result expired).
 ``action_result.forced`` is 1 for an outcome the operator forced (a drill, ``[operator]`` of the net):
-never a measured result.
+never a measured result. A ``feedback`` row is one feedback message of a running primitive action, as
+the runtime sampled it (at most :data:`coordinator.feedback.FEEDBACK_PER_S` a second per call,
+plus always the last one before the result; docs/journal.md).
 
 Schema versions (``PRAGMA user_version``): 1 (no version set) had one ``entry`` sequence per table
-and no ``accepted``/``reason``; 2 added them; 3 added ``reconciliation``; 4 (:data:`SCHEMA_VERSION`)
-added ``operator.detail`` and ``action_result.forced``. :func:`migrate` brings an older journal to
-version 4 when it is opened for writing (a version-1 journal's entries renumbered in the order of
-their times); a read-only reader reads every version (a journal without ``reconciliation`` has no
-reconciliations, one without ``forced`` no forced outcome, one without ``detail`` no details). The user-facing description:
+and no ``accepted``/``reason``; 2 added them; 3 added ``reconciliation``; 4 added ``operator.detail``
+and ``action_result.forced``; 5 (:data:`SCHEMA_VERSION`) added ``feedback``. :func:`migrate` brings an
+older journal to version 5 when it is opened for writing (a version-1 journal's entries renumbered in
+the order of their times); a read-only reader reads every version (a journal without
+``reconciliation`` has no reconciliations, one without ``feedback`` no feedback, one without
+``forced`` no forced outcome, one without ``detail`` no details). The user-facing description:
 ``docs/journal.md``.
 
 Only :mod:`coordinator.journal` reads and writes these tables; every other module goes through
@@ -45,10 +49,10 @@ import sqlite3
 
 from coordinator.errors import DamagedJournal, JournalError, JournalTooNew
 
-__all__ = ["ADDED_IN_3", "ADDED_IN_4", "COLUMNS", "DDL", "RECORD_TABLES", "SCHEMA_VERSION", "check_schema",
+__all__ = ["ADDED_IN_3", "ADDED_IN_4", "ADDED_IN_5", "COLUMNS", "DDL", "RECORD_TABLES", "SCHEMA_VERSION", "check_schema",
            "check_tables", "check_version", "migrate", "schema_version"]
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 """The version this code writes (``PRAGMA user_version``)."""
 
 DDL = """
@@ -79,6 +83,10 @@ CREATE TABLE IF NOT EXISTS reconciliation (
     action TEXT NOT NULL, node TEXT, assumed TEXT, status TEXT, outcome TEXT, reason TEXT, cost REAL,
     wall_s REAL, cpu_s REAL, value TEXT, t_wall REAL NOT NULL
 );
+CREATE TABLE IF NOT EXISTS feedback (
+    entry INTEGER PRIMARY KEY, run TEXT NOT NULL, instance TEXT NOT NULL, task TEXT NOT NULL,
+    action TEXT NOT NULL, data TEXT NOT NULL, t_wall REAL NOT NULL
+);
 CREATE TABLE IF NOT EXISTS learner_state (
     task TEXT PRIMARY KEY, scheme TEXT, state TEXT NOT NULL, updated_wall REAL NOT NULL
 );
@@ -88,6 +96,7 @@ CREATE INDEX IF NOT EXISTS result_run ON action_result(run);
 CREATE INDEX IF NOT EXISTS result_action ON action_result(task, action);
 CREATE INDEX IF NOT EXISTS operator_run ON operator(run);
 CREATE INDEX IF NOT EXISTS reconciliation_run ON reconciliation(run, instance);
+CREATE INDEX IF NOT EXISTS feedback_run ON feedback(run, instance);
 """
 """The tables and their indexes (idempotent: ``IF NOT EXISTS``)."""
 
@@ -100,6 +109,7 @@ COLUMNS: dict[str, tuple[str, ...]] = {
     "operator": ("entry", "run", "command", "place", "count", "t_wall", "accepted", "reason", "detail"),
     "reconciliation": ("entry", "run", "instance", "task", "action", "node", "assumed", "status", "outcome",
                        "reason", "cost", "wall_s", "cpu_s", "value", "t_wall"),
+    "feedback": ("entry", "run", "instance", "task", "action", "data", "t_wall"),
     "learner_state": ("task", "scheme", "state", "updated_wall"),
 }
 """Table → its columns, as :data:`DDL` creates them."""
@@ -113,7 +123,10 @@ ADDED_IN_3 = ("reconciliation",)
 ADDED_IN_4: dict[str, tuple[str, ...]] = {"operator": ("detail",), "action_result": ("forced",)}
 """Columns a journal of version 1 to 3 lacks (a reader supplies NULL and 0)."""
 
-RECORD_TABLES = ("firing", "action_start", "action_result", "operator", "reconciliation")
+ADDED_IN_5 = ("feedback",)
+"""Tables a journal of version 1 to 4 lacks (a reader of such a journal finds no rows in them)."""
+
+RECORD_TABLES = ("firing", "action_start", "action_result", "operator", "reconciliation", "feedback")
 """The tables whose rows share the ``entry`` sequence."""
 
 
@@ -130,7 +143,7 @@ def migrate(db: sqlite3.Connection, path: str) -> int:
     tables, ordered by ``t_wall`` (then firing, start, result, operator, then the old entry), which
     is the order the records were written in. Version 2 → 3: adds the (empty) ``reconciliation``
     table. Version 3 → 4: adds ``operator.detail`` (NULL) and ``action_result.forced`` (0: every
-    older result was measured). A fresh journal only gets its version set.
+    older result was measured). Version 4 → 5: adds the (empty) ``feedback`` table. A fresh journal only gets its version set.
 
     Returns:
         The version the journal had.
@@ -154,13 +167,15 @@ def migrate(db: sqlite3.Connection, path: str) -> int:
                     db.execute("ALTER TABLE operator ADD COLUMN accepted INTEGER NOT NULL DEFAULT 1")
                 if "reason" not in have:
                     db.execute("ALTER TABLE operator ADD COLUMN reason TEXT")
-            for statement in _RECONCILIATION_DDL:  # version 3 (also made by DDL: idempotent)
+            for statement in _table_ddl("reconciliation"):  # version 3 (also made by DDL: idempotent)
                 db.execute(statement)
             for table, columns in ADDED_IN_4.items():  # version 4
                 have = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
                 for column in columns:
                     if column not in have:
                         db.execute(f"ALTER TABLE {table} ADD COLUMN {_ADDED_DDL[column]}")
+            for statement in _table_ddl("feedback"):  # version 5 (likewise)
+                db.execute(statement)
             if version < 2:
                 _renumber(db)
             db.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
@@ -175,9 +190,12 @@ def migrate(db: sqlite3.Connection, path: str) -> int:
 
 _ADDED_DDL = {"detail": "detail TEXT", "forced": "forced INTEGER NOT NULL DEFAULT 0"}
 
-_RECONCILIATION_DDL = tuple(
-    part.strip() for part in DDL.split(";")
-    if "reconciliation" in part and part.strip().startswith(("CREATE TABLE", "CREATE INDEX")))
+
+
+def _table_ddl(table: str) -> tuple[str, ...]:
+    """The statements of :data:`DDL` that create ``table`` and its indexes."""
+    return tuple(part.strip() for part in DDL.split(";")
+                 if part.strip().startswith(f"CREATE TABLE IF NOT EXISTS {table} (") or f" ON {table}(" in part)
 
 
 def _renumber(db: sqlite3.Connection) -> None:
@@ -223,7 +241,7 @@ def check_schema(db: sqlite3.Connection, path: str) -> None:
     try:
         for table, columns in COLUMNS.items():
             have = {row[1] for row in db.execute(f"PRAGMA table_info({table})")}
-            if not have and table in ADDED_IN_3:
+            if not have and (table in ADDED_IN_3 or table in ADDED_IN_5):
                 continue
             if not have:
                 raise DamagedJournal(path, f"not a petrobot journal, or a damaged one (no table {table!r})")
@@ -256,7 +274,7 @@ def check_tables(db: sqlite3.Connection, path: str) -> bool:
         if not tables:
             return True
         version = schema_version(db)
-        wanted = [t for t in COLUMNS if not (version < 3 and t in ADDED_IN_3)]
+        wanted = [t for t in COLUMNS if not (version < 3 and t in ADDED_IN_3) and not (version < 5 and t in ADDED_IN_5)]
         missing = [t for t in wanted if t not in tables]
         present = [t for t in wanted if t in tables]
         if not present:

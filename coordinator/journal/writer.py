@@ -33,7 +33,10 @@ from coordinator.journal.schema import DDL, RECORD_TABLES, check_schema, check_t
 from coordinator.net import PetriNet
 from services.results import ActionResult, Status
 
-__all__ = ["Journal"]
+__all__ = ["FEEDBACK_BYTES", "Journal"]
+
+FEEDBACK_BYTES = 4096
+"""The longest feedback (its JSON text, characters) the journal keeps whole."""
 
 
 def _json(value: Any) -> str | None:
@@ -193,6 +196,18 @@ class Journal(JournalReader):
             "cpu_s, value, t_wall",
             (run, instance, task, action, node, None if assumed is None else assumed.value, *values, time.time()),
         )
+
+    def feedback(self, run: str, instance: str, task: str, action: str, data: Any, t_wall: float) -> None:
+        """Record one feedback message of a running action, received at ``t_wall`` (Unix s); the
+        runtime samples which (:class:`coordinator.feedback.FeedbackSampler`). A feedback whose JSON
+        is longer than :data:`FEEDBACK_BYTES` is kept as ``{"truncated": true, "bytes": N, "head":
+        its first characters}``, one that JSON cannot hold as ``{"unjsonable": type name}``."""
+        text = _json(data)
+        if text is None:
+            text = _json({"unjsonable": type(data).__name__})
+        elif len(text) > FEEDBACK_BYTES:
+            text = _json({"truncated": True, "bytes": len(text), "head": text[:FEEDBACK_BYTES // 2]})
+        self._record("feedback", "run, instance, task, action, data, t_wall", (run, instance, task, action, text, t_wall))
 
     def operator(self, run: str, command: str, place: str | None = None, count: int | None = None, *,
                  accepted: bool = True, reason: str | None = None, detail: Mapping[str, Any] | None = None) -> None:

@@ -16,7 +16,9 @@ driver had its own module).
   when it crosses the catch line, and publishes each prediction as a set point (table frame, as
   :class:`services.catching.setpoints.CatchSetPoint` specifies; the motion node turns it into its base frame) on
   the node's event topic ``setpoints`` (param ``topic``), to which the motion node subscribes
-  through its authenticated node link (:mod:`services.catching.setpoints`). ``success`` once the ball has
+  through its authenticated node link (:mod:`services.catching.setpoints`); each prediction is also the
+  call's feedback (``y`` m and ``t`` s where and when the ball crosses the catch line, their standard
+  deviations ``sigma_y``, ``sigma_t``, set points sent and frames seen). ``success`` once the ball has
   crossed, with the last prediction; ``failure`` when the ball stops or vanishes before the line;
   ``error`` when the camera is lost. If the node hosts no camera driver (the action was moved to
   another node in services.toml), it opens its own connection to the camera server (params
@@ -288,6 +290,9 @@ class Predict(PrimitiveAction):
                     ctx.publish(topic, sp.to_dict())
                     sent += 1
                     last = pred
+                    # the predicted catching point, for the operator's consoles and the journal
+                    ctx.feedback({"y": pred.y, "t": pred.t, "sigma_y": pred.sigma_y, "sigma_t": pred.sigma_t,
+                                  "setpoints": sent, "frames": frames})
                     if first is None:
                         first = frame.t
                 seen = tracker.last_position

@@ -14,6 +14,9 @@ from typing import Any
 
 import pytest
 
+from coordinator.journal import JournalReader
+from coordinator.rosbag import export_run
+
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -96,6 +99,15 @@ def test_a_two_run_catch_net_catches_both_balls_across_processes(cluster: Any, t
     fired = [t for (t,) in journal_rows(journal, "SELECT transition FROM firing ORDER BY seq")]
     assert fired.count("ball_caught") == 2
     assert fired.count("crossfire") == 2  # ext:ball_caught from the motion node's crossfire sensor
+    # predict's feedback (its predicted catching point) is journaled, sampled, and exported with the run
+    with JournalReader.open(journal) as reader:
+        run = reader.runs()[-1].id
+        kept = reader.feedback_messages(run)
+        predicts = [r for r in reader.results(run) if r.task == "predict"]
+    assert {f.task for f in kept} == {"predict"} and {"y", "t", "sigma_y"} <= set(kept[-1].data)
+    assert {f.instance for f in kept} == {r.instance for r in predicts}
+    bag = export_run(journal, run, tmp_path / "run.bag")
+    assert bag.counts["/petrobot/action_feedback"] == len(kept)
 
 
 def test_moving_the_prediction_to_the_motion_node_is_an_edit_of_services_toml_only(cluster: Any, tmp_path: Path):

@@ -23,6 +23,7 @@ from conftest import Cluster, free_port
 from test_run_cli import Output, petrobot
 
 from coordinator.journal import JournalReader
+from coordinator.rosbag import export_run
 from services.results import Status
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -249,6 +250,8 @@ def test_a_net_calls_the_service_and_the_action_then_fires_on_the_topics_rising_
         add = _result(reader, "add_two_ints")
         fib = _result(reader, "fibonacci")
         firings = [f.transition for f in reader.firings()]
+        kept = [f for f in reader.feedback_messages() if f.action == "fibonacci"]
+        run = reader.runs()[-1].id
     assert firings == ["start", "planned", "counted", "crossed"]
     # what the robot saw, call by call
     (call,) = world.robot.seen("service")
@@ -260,6 +263,11 @@ def test_a_net_calls_the_service_and_the_action_then_fires_on_the_topics_rising_
     assert fib.status == Status.SUCCESS
     assert fib.value == {"status": "SUCCEEDED", "goal_id": goal["goal_id"], "result": {"sequence": ended["sequence"]}}
     assert ended["sequence"] == [0, 1, 1, 2, 3, 5, 8]
+    # the action's feedback is journaled (sampled, the last one always) and exported with the run
+    assert kept and kept[-1].instance == fib.instance and kept[-1].entry < fib.entry
+    assert kept[-1].data["sequence"] == ended["sequence"][:len(kept[-1].data["sequence"])]
+    bag = export_run(journal, run, journal.with_suffix(".bag"))
+    assert bag.counts["/petrobot/action_feedback"] == len(kept)
 
 
 def test_feedback_reaches_the_caller_and_the_ros_graph_shows_petrobots_node(world: Ros2World):

@@ -340,7 +340,7 @@ def test_a_journal_of_version_2_is_read_without_reconciliations_and_migrated_whe
         journal.reconciliation("r2", "r2-1", "w", "a", "alpha", Status.ERROR, ActionResult.success(7))
         assert [r.entry for r in journal.timeline("r2")] == [1, 2, 3, 4, 5, 6]
     with sqlite3.connect(path) as db:
-        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 4
+        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 5
 
 
 def test_a_reconciliation_is_the_journals_last_word_on_a_call_and_says_whether_it_differs(tmp_path: Path):
@@ -366,3 +366,56 @@ def test_a_reconciliation_is_the_journals_last_word_on_a_call_and_says_whether_i
     assert words[first.instance] == finished and words[second.instance] == never
     assert (stats.reconciled, stats.differed) == (2, 1)
     assert kinds == ["ResultRow", "ResultRow", "ReconciliationRow", "ReconciliationRow"]
+
+
+def version_4_journal(path: Path) -> Path:
+    """A journal as petrobot wrote it before it kept feedback: version 4, no feedback table."""
+    net = loads_net(NET)
+    with Journal(path) as journal:
+        run = journal.begin_run(net, run_id="r4")
+        _, starts = journaled_engine(journal, net, run)
+        journal.action_result(run, starts[0].instance, "w", "a", "alpha", ActionResult.success(3))
+    with sqlite3.connect(path) as db:
+        db.execute("DROP TABLE feedback")
+        db.execute("PRAGMA user_version=4")
+    return path
+
+
+def test_a_journal_of_version_4_is_read_without_feedback_and_migrated_when_opened_for_writing(tmp_path: Path):
+    path = version_4_journal(tmp_path / "v4.sqlite")
+    with JournalReader.open(path) as reader:
+        assert reader.feedback_messages() == [] and reader.damage_report() == []
+        kinds = [type(r).__name__ for r in reader.timeline("r4")]
+    with sqlite3.connect(path) as db:  # reading changed nothing
+        assert not db.execute("SELECT name FROM sqlite_master WHERE name='feedback'").fetchall()
+    with Journal(path) as journal:
+        assert [type(r).__name__ for r in journal.timeline("r4")] == kinds  # nothing lost
+        journal.feedback("r4", "r4-2", "w", "a", {"progress": 0.5}, 1.0)
+        (row,) = journal.feedback_messages("r4")
+        assert (row.instance, row.data, row.entry) == ("r4-2", {"progress": 0.5}, len(kinds) + 1)
+    with sqlite3.connect(path) as db:
+        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION == 5
+
+
+def test_a_feedback_too_large_or_not_json_is_kept_as_what_it_was(tmp_path: Path):
+    with Journal(tmp_path / "j.sqlite") as journal:
+        run = journal.begin_run(loads_net(NET))
+        journal.feedback(run, "i-1", "w", "a", {"image": "x" * 100_000}, 1.0)
+        journal.feedback(run, "i-1", "w", "a", object(), 2.0)
+        big, odd = journal.feedback_messages(run)
+    assert big.data["truncated"] is True and big.data["bytes"] > 100_000 and len(big.data["head"]) == 2048
+    assert odd.data == {"unjsonable": "object"}
+
+
+def test_a_damaged_feedback_row_is_skipped_and_named(tmp_path: Path):
+    path = tmp_path / "j.sqlite"
+    with Journal(path) as journal:
+        run = journal.begin_run(loads_net(NET))
+        journal.feedback(run, "i-1", "w", "a", {"progress": 1}, 1.0)
+        journal.feedback(run, "i-1", "w", "a", {"progress": 2}, 2.0)
+    with sqlite3.connect(path) as db:
+        db.execute("UPDATE feedback SET data='{not json' WHERE entry=1")
+    with JournalReader.open(path) as reader:
+        assert [f.data for f in reader.feedback_messages(run)] == [{"progress": 2}]
+        (line,) = reader.damage_report()
+    assert "table feedback, row 1, field data" in line

@@ -288,6 +288,30 @@ async def test_feedback_of_a_running_action_reaches_the_observers_as_events(tmp_
     assert seen.index(feedback[0]) < ended
 
 
+async def test_a_burst_of_feedback_journals_its_first_and_its_last_message_before_the_result(tmp_path: Path):
+    burst = [{"progress": i / 499} for i in range(500)]  # a 500 Hz stream's second, at once
+    client = FakeClient({"act": ActionResult.success()}, feedback={"act": burst})
+    with Journal(tmp_path / "j.sqlite") as journal:
+        runtime = Runtime(tasks(), client, journal)
+        await asyncio.wait_for(runtime.run(max_seconds=30), TIMEOUT_S)
+        kept = journal.feedback_messages(runtime.run_id)
+        (result,) = journal.results(runtime.run_id)
+    assert [f.data for f in kept] == [burst[0], burst[-1]]
+    assert kept[-1].entry < result.entry and kept[0].instance == result.instance and kept[0].action == "act"
+
+
+def test_the_feedback_sampler_keeps_at_most_its_rate_per_call_and_always_the_last():
+    from coordinator.feedback import FeedbackSampler
+
+    sampler: FeedbackSampler[int] = FeedbackSampler(per_s=10)
+    kept = [i for i in range(1000) if sampler.offer("a", i / 500, i) is not None]  # 500 Hz for 2 s
+    other = sampler.offer("b", 0.001, -1)  # another call has a rate of its own
+    assert 20 <= len(kept) <= 21 and kept[0] == 0 and other == -1
+    assert sampler.finish("a") == 999 and sampler.finish("a") is None and len(sampler) == 1
+    with pytest.raises(ValueError):
+        FeedbackSampler(per_s=0)
+
+
 # ---------------------------------------------------------------------- waiting and coming to rest
 @pytest.mark.parametrize("gate, hold, command", [
     (0, 0, OperatorCommand(Command.INSERT, "gate", 1)),
