@@ -161,13 +161,16 @@ class CallReconciled:
 @dataclass(frozen=True, slots=True)
 class PulseDelivered:
     """An external event arrived as a pulse; ``fired`` transitions fired on it; ``operator``: the
-    operator raised it (``inject``), not its publisher."""
+    operator raised it (``inject``), not its publisher; ``payload``: what the event carried (the
+    publisher's event data, msgpack-decoded; a ROS 2 topic's message fields; the operator's JSON),
+    or ``None``."""
 
     run: str
     event: str
     fired: int
     t_wall: float = field(default_factory=_now)
     operator: bool = False
+    payload: Any = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -13,6 +13,7 @@ journals each command and applies it through the engine, or journals its refusal
 from __future__ import annotations
 
 import enum
+import json
 import shlex
 from dataclasses import dataclass
 from typing import Any
@@ -22,7 +23,7 @@ from coordinator.breakpoints import Breakpoint, parse_breakpoint
 __all__ = ["Command", "OperatorCommand", "parse_operator_command", "USAGE"]
 
 USAGE = ("+ PLACE [N] | - PLACE [N] | pause | step | resume | abort | end | break BREAKPOINT | clear BREAKPOINT"
-         " | inject ext:TOPIC | force INSTANCE OUTCOME [REASON]")
+         " | inject ext:TOPIC [JSON] | force INSTANCE OUTCOME [REASON]")
 """One-line summary of the typed command syntax."""
 
 
@@ -65,6 +66,8 @@ class OperatorCommand:
         count: number of tokens for ``insert``/``remove`` (≥ 1).
         breakpoint: the breakpoint of ``break``/``clear``, else ``None``.
         event: the ``ext:<topic>`` event of ``inject``, else ``None``.
+        payload: what the injected event carries (a JSON value, as a publisher's event data), or
+            ``None``.
         instance: the running instance (call id) of ``force``, else ``None``.
         outcome: what ``force`` ends it with: ``success``, ``failure``, ``error`` or
             ``status.named`` (``failure.no_ball``), else ``None``.
@@ -79,6 +82,7 @@ class OperatorCommand:
     instance: str | None = None
     outcome: str | None = None
     reason: str = ""
+    payload: Any = None
 
     def __str__(self) -> str:
         if self.place is not None:
@@ -86,7 +90,8 @@ class OperatorCommand:
         if self.breakpoint is not None:
             return f"{self.command.value} {self.breakpoint}"
         if self.event is not None:
-            return f"{self.command.value} {self.event}"
+            payload = "" if self.payload is None else " " + json.dumps(self.payload, separators=(",", ":"))
+            return f"{self.command.value} {self.event}{payload}"
         if self.instance is not None:
             reason = f" {shlex.quote(self.reason)}" if self.reason else ""
             return f"{self.command.value} {self.instance} {self.outcome}{reason}"
@@ -98,7 +103,7 @@ class OperatorCommand:
         if self.breakpoint is not None:
             return {"breakpoint": self.breakpoint.to_json()}
         if self.event is not None:
-            return {"event": self.event}
+            return {"event": self.event} if self.payload is None else {"event": self.event, "payload": self.payload}
         if self.instance is not None:
             return {"instance": self.instance, "outcome": self.outcome, "reason": self.reason}
         return None
@@ -112,7 +117,7 @@ def parse_operator_command(text: str) -> OperatorCommand:
     """Parse a typed command: ``+ PLACE [N]``, ``- PLACE [N]``, ``insert PLACE [N]``,
     ``remove PLACE [N]``, ``pause`` (``p``), ``step`` (``s``), ``resume`` (``r``), ``abort`` (``q``),
     ``end``, ``break BREAKPOINT``, ``clear BREAKPOINT`` (``enabled T``, ``fires T``, ``count P N``,
-    ``error TASK``), ``inject ext:TOPIC``, ``force INSTANCE OUTCOME [REASON]``.
+    ``error TASK``), ``inject ext:TOPIC [JSON]`` (the JSON value is the event's payload), ``force INSTANCE OUTCOME [REASON]``.
 
     Raises:
         ValueError: with a usage hint, on anything else.
@@ -129,9 +134,16 @@ def parse_operator_command(text: str) -> OperatorCommand:
     if head in (Command.BREAK, Command.CLEAR):
         return OperatorCommand(head, breakpoint=parse_breakpoint(" ".join(words[1:])))
     if head is Command.INJECT:
-        if len(words) != 2 or not words[1].startswith("ext:"):
-            raise ValueError("usage: inject ext:TOPIC")
-        return OperatorCommand(head, event=words[1])
+        parts = text.split(None, 2)
+        if len(parts) < 2 or not parts[1].startswith("ext:"):
+            raise ValueError("usage: inject ext:TOPIC [JSON]")
+        payload = None
+        if len(parts) == 3:
+            try:
+                payload = json.loads(parts[2])
+            except ValueError as exc:
+                raise ValueError(f"inject: the payload is not JSON ({exc}); usage: inject ext:TOPIC [JSON]") from None
+        return OperatorCommand(head, event=parts[1], payload=payload)
     if head is Command.FORCE:
         try:
             parts = shlex.split(text)

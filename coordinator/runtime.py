@@ -128,6 +128,7 @@ class _Completed:
 class _Pulse:
     topic: str
     operator: bool = False  # raised by the operator (inject), not by its publisher
+    payload: Any = None  # what the event carried (the publisher's data, the operator's JSON)
 
 
 @dataclass(frozen=True, slots=True)
@@ -430,7 +431,7 @@ class Runtime:
                 if isinstance(item, _Completed):
                     self._on_result(item.instance, item.result)
                 else:
-                    await self._pulse(item.topic, item.operator)
+                    await self._pulse(item)
                 continue
             if await self._fire():
                 continue
@@ -467,14 +468,15 @@ class Runtime:
             if n % self._per_tick == 0:
                 await asyncio.sleep(0)  # let results, pulses and typed commands in
 
-    async def _pulse(self, topic: str, operator: bool = False) -> None:
+    async def _pulse(self, pulse: _Pulse) -> None:
         before = self.engine.fired
-        self.engine.begin_pulse(topic)
+        self.engine.begin_pulse(pulse.topic)
         try:
             await self._fire(pulse=True)
         finally:
             self.engine.end_pulse()
-        self._emit(PulseDelivered(self.run_id, f"ext:{topic}", self.engine.fired - before, operator=operator))
+        self._emit(PulseDelivered(self.run_id, f"ext:{pulse.topic}", self.engine.fired - before,
+                                  operator=pulse.operator, payload=pulse.payload))
 
     def _break(self, hit: Hit | None) -> None:
         """Pause the run at a breakpoint that has just become true (journaled as the operator's pause)."""
@@ -642,7 +644,7 @@ class Runtime:
             raise EngineError(f"net {self.net.name!r} does not let the operator raise {event!r} (its [operator] "
                               f"inject allows: {allowed})")
         self.journal.operator(self.run_id, "inject", detail=cmd.detail())
-        self._inbox.append(_Pulse(event[4:], operator=True))
+        self._inbox.append(_Pulse(event[4:], operator=True, payload=cmd.payload))
         self._wake.set()
 
     def _force(self, cmd: OperatorCommand) -> None:
@@ -686,8 +688,9 @@ class Runtime:
                 log.warning("%s: transitions linked to ext:%s will never fire", exc, topic)
 
     def _on_event(self, topic: str) -> Callable[..., None]:
-        def deliver(*_: Any) -> None:
-            self._inbox.append(_Pulse(topic))
+        def deliver(event: Any = None, *_: Any) -> None:
+            # the node's Event (services.protocol.messages): its data is the event's payload
+            self._inbox.append(_Pulse(topic, payload=getattr(event, "data", None)))
             self._wake.set()
         return deliver
 

@@ -30,7 +30,7 @@ The *blackboard* of a primitive-task place (:meth:`LiveFeed.blackboard`, asked f
 the operator opens a place, as Groot2's blackboard view): its running actions with their
 parameters and their latest feedback in full, and the results latched on its tokens with their
 returned values (payloads), status, outcome, reason and whether the operator forced them; and the
-external events delivered lately with the time and whether the operator raised them. The feed
+external events delivered lately with the time, their payload and whether the operator raised them. The feed
 keeps these as the events pass (bounded: :data:`BLACKBOARD_BYTES` per value, the latest
 :data:`KEPT_RESULTS` results), never by asking the engine or the journal.
 """
@@ -421,7 +421,7 @@ class LiveFeed:
             ``{"place", "task", "running": [{"i", "action", "node", "t", "params", "feedback",
             "feedback_count", "feedback_t"}], "latched": [{"i", "action", "events", "status",
             "outcome", "reason", "value", "forced", "t"}], "events": [{"event", "t", "fired",
-            "operator"}]}``; values as :func:`json_value` gives them.
+            "operator", "payload"}]}``; values (a payload too) as :func:`json_value` gives them.
         """
         runtime = self.runtime
         task = None
@@ -532,7 +532,7 @@ class LiveFeed:
                 pulses[event.event] += 1
                 self._topics.pop(event.event, None)
                 self._topics[event.event] = {"event": event.event, "t": event.t_wall, "fired": event.fired,
-                                             "operator": event.operator}
+                                             "operator": event.operator, "payload": json_value(event.payload)}
                 while len(self._topics) > KEPT_TOPICS:
                     self._topics.popitem(last=False)
                 if event.operator:

@@ -32,6 +32,7 @@ __all__ = [
     "MAX_DEPTH",
     "MAX_ELEMENTS",
     "MAX_MESSAGE_BYTES",
+    "MAX_PAYLOAD_BYTES",
     "MAX_REASON",
     "PROTOCOL_VERSION",
     "ClientMessage",
@@ -57,6 +58,8 @@ _DRAFT_KEYS = frozenset({"net", "places", "transitions", "arcs", "tasks", "opera
 _ANALYSES = frozenset({"analyze", "gspn", "perf", "learn"})
 #: Longest reason an operator may give with a forced outcome, characters.
 MAX_REASON = 512
+#: Largest payload of an injected event, bytes of compact JSON (a publisher's event, not a file).
+MAX_PAYLOAD_BYTES = 4096
 #: Longest run of a live run started from the page, seconds (a day).
 MAX_RUN_SECONDS = 86_400.0
 
@@ -264,8 +267,8 @@ def parse_client_message(data: str | bytes) -> ClientMessage:
 
 def _command(msg: dict[str, Any]) -> dict[str, Any]:
     """The keys of a ``command`` message, checked for its command."""
-    _keys(msg, {"type", "id", "command", "place", "count", "breakpoint", "event", "instance", "outcome", "reason",
-                "run"}, {"type", "id", "command"})
+    _keys(msg, {"type", "id", "command", "place", "count", "breakpoint", "event", "payload", "instance", "outcome",
+                "reason", "run"}, {"type", "id", "command"})
     try:
         command = Command(_str(msg["command"], "command.command", 16))
     except ValueError:
@@ -273,9 +276,9 @@ def _command(msg: dict[str, Any]) -> dict[str, Any]:
     fields: dict[str, Any] = {"command": command,
                               "run": None if msg.get("run") is None else _str(msg["run"], "command.run", 64)}
     wanted = {Command.INSERT: {"place", "count"}, Command.REMOVE: {"place", "count"},
-              Command.BREAK: {"breakpoint"}, Command.CLEAR: {"breakpoint"}, Command.INJECT: {"event"},
+              Command.BREAK: {"breakpoint"}, Command.CLEAR: {"breakpoint"}, Command.INJECT: {"event", "payload"},
               Command.FORCE: {"instance", "outcome", "reason"}}.get(command, set())
-    extra = {"place", "count", "breakpoint", "event", "instance", "outcome", "reason"} - wanted
+    extra = {"place", "count", "breakpoint", "event", "payload", "instance", "outcome", "reason"} - wanted
     if extra & set(msg):
         raise ProtocolViolation(f"command {command.value} takes no {min(extra & set(msg))}")
     if command in (Command.INSERT, Command.REMOVE):
@@ -302,6 +305,11 @@ def _command(msg: dict[str, Any]) -> dict[str, Any]:
         if not event.startswith("ext:"):
             raise ProtocolViolation("command inject needs an external event ext:TOPIC")
         fields["event"] = event
+        if msg.get("payload") is not None:
+            size = len(json.dumps(msg["payload"], separators=(",", ":")))
+            if size > MAX_PAYLOAD_BYTES:
+                raise ProtocolViolation(f"command.payload is {size} bytes of JSON, more than {MAX_PAYLOAD_BYTES}")
+            fields["payload"] = msg["payload"]
     elif command is Command.FORCE:
         fields["instance"] = _str(msg.get("instance"), "command.instance", MAX_NAME)
         fields["outcome"] = _str(msg.get("outcome"), "command.outcome", 2 * MAX_NAME + 1)

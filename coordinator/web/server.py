@@ -778,7 +778,8 @@ class _Page:
             command = OperatorCommand(f["command"], f.get("place"), f.get("count", 1))
         else:
             command = OperatorCommand(f["command"], breakpoint=f.get("breakpoint"), event=f.get("event"),
-                                      instance=f.get("instance"), outcome=f.get("outcome"), reason=f.get("reason", ""))
+                                      instance=f.get("instance"), outcome=f.get("outcome"), reason=f.get("reason", ""),
+                                      payload=f.get("payload"))
         live.feed.expect_reply(command, lambda ok, reason: self.reply(msg, ok=ok, reason=reason,
                                                                      command=str(command)))
         live.runtime.command(command)

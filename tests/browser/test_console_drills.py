@@ -150,8 +150,13 @@ def test_breakpoints_an_injected_event_the_blackboard_and_a_forced_outcome_on_a_
     page.page.locator("#node-pop input[data-bp=fires]").check()
     page.wait("window.petrobot.live.breakpoints.length === 1", what="the breakpoint set")
     assert page.page.locator(".mark.bp[data-node='start']").is_visible()
-    # the operator raises ext:go (the net's [operator] inject allows it)
+    # the operator raises ext:go (the net's [operator] inject allows it), with a payload
     page.page.keyboard.press("Escape")
+    page.page.fill("#inject-payload", '{"by": "drill", "bin": 3')  # not JSON: nothing is sent
+    page.page.click("#inject-go")
+    assert page.eval("document.getElementById('inject-payload').validity.valid") is False
+    assert page.eval("window.petrobot.live.firings") == 0
+    page.page.fill("#inject-payload", '{"by": "drill", "bin": 3}')
     page.page.click("#inject-go")
     page.wait("window.petrobot.live.paused && document.body.dataset.hit === 'fires start'",
               what="the pause at the breakpoint")
@@ -167,8 +172,9 @@ def test_breakpoints_an_injected_event_the_blackboard_and_a_forced_outcome_on_a_
     assert board["running"][0]["params"] == {"seconds": 60.0, "step": 0.2, "target": "bin 3"}
     assert 0 <= board["running"][0]["feedback"]["fraction"] < 1
     assert board["events"][0]["event"] == "ext:go" and board["events"][0]["operator"] is True
+    assert board["events"][0]["payload"] == {"by": "drill", "bin": 3}  # the event's payload, end to end
     text = page.eval("document.getElementById('panel-blackboard').innerText")
-    assert "bin 3" in text and "fraction" in text and "raised by the operator" in text
+    assert "bin 3" in text and "fraction" in text and "raised by the operator" in text and '"by": "drill"' in text
     page.screenshot("live-blackboard")
     # an error forced for a drill, with a breakpoint on the task's errors: the run pauses, the error latched
     page.click_node("working")
@@ -190,6 +196,7 @@ def test_breakpoints_an_injected_event_the_blackboard_and_a_forced_outcome_on_a_
     journal = lab.tmp / "runs" / "journal.sqlite"
     commands = rows(journal, "SELECT command, detail FROM operator WHERE accepted ORDER BY entry")
     assert [c for c, _ in commands] == ["break", "inject", "pause", "resume", "break", "force", "pause", "resume"]
+    assert json.loads(commands[1][1]) == {"event": "ext:go", "payload": {"by": "drill", "bin": 3}}
     assert json.loads(commands[5][1]) == {"instance": board["running"][0]["i"], "outcome": "error",
                                           "reason": "drill: camera lost"}
     assert rows(journal, "SELECT status, forced FROM action_result") == [("error", 1)]

@@ -8,10 +8,12 @@ publish external events to the runtime's subscriptions.
 from __future__ import annotations
 
 import asyncio
+import time
 from collections.abc import Callable
 from typing import Any
 
 from services.errors import LocationError
+from services.protocol.messages import Event
 from services.results import ActionResult
 
 
@@ -50,6 +52,7 @@ class FakeClient:
         self.subscribers: dict[str, list[Callable[..., None]]] = {}
         self._held: dict[str, asyncio.Future[ActionResult]] = {}
         self.started = asyncio.Event()
+        self._seq = 0
 
     async def call(self, action: str, params: dict[str, Any], *, call_id: str, deadline_s: float | None = None,
                    on_feedback: Callable[[Any], None] | None = None) -> ActionResult:
@@ -82,6 +85,8 @@ class FakeClient:
             raise LocationError(f"no node publishes event {topic!r}")
         self.subscribers.setdefault(topic, []).append(callback)
 
-    def publish(self, topic: str) -> None:
+    def publish(self, topic: str, data: Any = None) -> None:
+        """Deliver an event of ``topic`` as a node link does: the protocol's ``Event``, ``data`` its payload."""
+        self._seq += 1
         for callback in self.subscribers.get(topic, []):
-            callback(topic, None)
+            callback(Event(topic=topic, t=time.time(), seq=self._seq, data=data))

@@ -148,6 +148,37 @@ async def test_breakpoints_on_an_enabled_transition_a_place_count_and_a_task_err
     assert pauses[0] == "error"
 
 
+async def test_an_events_payload_reaches_the_blackboard_from_its_publisher_and_from_the_operator(tmp_path: Path):
+    from coordinator.web.frames import LiveFeed
+
+    seen = Recorder()
+    client = FakeClient({"act": ActionResult.success(), "other": ActionResult.success()}, topics={"tick"})
+    with Journal(tmp_path / "j.sqlite") as journal:
+        runtime = Runtime(drill(runs=2), client, journal, observer=seen, operator=True)
+        feed = LiveFeed(runtime)
+        runtime.add_observer(feed)
+        run = asyncio.create_task(runtime.run(max_seconds=TIMEOUT_S))
+        await seen.wait_for(waiting)
+        client.publish("tick", {"sensor": "crossfire", "beam": [1, 0]})  # a node's event and its data
+        published = await seen.wait_for(lambda e: isinstance(e, PulseDelivered))
+        assert published.payload == {"sensor": "crossfire", "beam": [1, 0]} and not published.operator
+        feed.build_frame()  # the feed takes the events as it builds a frame
+        assert feed.blackboard("working")["events"][0]["payload"] == {"sensor": "crossfire", "beam": [1, 0]}
+        await seen.wait_for(lambda e: isinstance(e, ActionEnded))
+        runtime.command(parse_operator_command('inject ext:tick {"by": "drill"}'))
+        injected = await seen.wait_for(lambda e: isinstance(e, PulseDelivered) and e.operator)
+        assert injected.payload == {"by": "drill"}
+        feed.build_frame()
+        (event,) = feed.blackboard("working")["events"]  # the latest of each event
+        assert (event["payload"], event["operator"]) == ({"by": "drill"}, True)
+        runtime.command(OperatorCommand(Command.ABORT))
+        await asyncio.wait_for(run, TIMEOUT_S)
+    (row,) = [r for r in operator_rows(tmp_path / "j.sqlite") if r.command == "inject"]
+    assert row.detail == {"event": "ext:tick", "payload": {"by": "drill"}}
+    with pytest.raises(ValueError, match="not JSON"):
+        parse_operator_command("inject ext:tick {nope")
+
+
 async def test_an_injected_event_is_delivered_as_a_pulse_and_journaled_as_the_operators(tmp_path: Path):
     seen = Recorder()
     client = FakeClient({"act": ActionResult.success(), "other": ActionResult.success()}, topics={"tick"})
@@ -215,7 +246,7 @@ async def test_a_forced_error_takes_the_error_branch_and_is_no_measured_result(t
     assert "FORCED   work/act on fake: error" in text and "operator force error on" in text
 
 
-def test_a_journal_of_schema_3_is_migrated_to_4_keeping_its_records(tmp_path: Path):
+def test_a_journal_of_schema_3_is_migrated_to_the_current_schema_keeping_its_records(tmp_path: Path):
     path = tmp_path / "old.sqlite"
     db = sqlite3.connect(path)
     db.executescript("""
@@ -249,5 +280,5 @@ def test_a_journal_of_schema_3_is_migrated_to_4_keeping_its_records(tmp_path: Pa
         assert [r.detail for r in journal.operator_commands()] == [None, {"event": "ext:tick"}]
         assert [r.forced for r in journal.results()] == [False]
     db = sqlite3.connect(path)
-    assert db.execute("PRAGMA user_version").fetchone()[0] == 4
+    assert db.execute("PRAGMA user_version").fetchone()[0] == 5
     db.close()

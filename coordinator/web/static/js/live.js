@@ -151,7 +151,7 @@ export function initLive(app) {
       if (f.started || f.ended || f.latched || f.feedback) app.graph.setBadges(badges());
       if (f.breakpoints || f.hits) markBreakpoints();
       if (f.learner) app.redrawAnalysis();
-      if (live.blackboardPlace && (f.started || f.ended || f.feedback || f.latched || f.injected)) blackboardSoon();
+      if (live.blackboardPlace && (f.started || f.ended || f.feedback || f.latched || f.injected || f.pulses)) blackboardSoon();
       if (nodePlace !== null && (f.started || f.ended || f.breakpoints)) renderNodePop();
       if (f.tasks && taskPlace !== null) showTaskPop(taskPlace);
       if (f.started || f.ended || f.learner || f.operator || f.state || f.nodes || f.pulses || f.summary) panelsDue = true;
@@ -275,10 +275,24 @@ export function initLive(app) {
     const off = !app.control || live.ended;
     select.disabled = off;
     document.getElementById("inject-go").disabled = off;
+    document.getElementById("inject-payload").disabled = off;
   }
   document.getElementById("inject-go").addEventListener("click", () => {
     const event = document.getElementById("inject-event").value;
-    if (event) command("inject", { event });
+    const box = document.getElementById("inject-payload");
+    const text = box.value.trim();
+    let payload = null;
+    if (text) {
+      try { payload = JSON.parse(text); } catch (err) {
+        box.setCustomValidity("not JSON");
+        box.title = `the payload must be JSON: ${err.message}`;
+        box.reportValidity();
+        return;
+      }
+    }
+    box.setCustomValidity("");
+    box.title = "the event's payload, as JSON (optional)";
+    if (event) command("inject", payload === null ? { event } : { event, payload });
   });
 
   function paint(full) {
@@ -622,7 +636,9 @@ export function initLive(app) {
     panel.append(el("h4", {}, "external events, latest first"));
     if (!b.events.length) panel.append(el("p", { class: "empty" }, "none yet"));
     else panel.append(el("ul", { class: "mono small" }, ...b.events.map((e) => el("li", {},
-      `${e.event} ${seconds(Math.max(0, now - e.t))} ago: ${e.fired} fired${e.operator ? " (raised by the operator)" : ""}`))));
+      `${e.event} ${seconds(Math.max(0, now - e.t))} ago: ${e.fired} fired${e.operator ? " (raised by the operator)" : ""}`,
+      e.payload === null || e.payload === undefined ? el("div", { class: "small" }, "no payload")
+        : el("div", { class: "event-payload" }, el("div", { class: "small" }, "payload"), json(e.payload))))));
   }
 
   // a primitive task's record (errors in a row, the last reason in full): on hover, kept by a click
