@@ -71,6 +71,25 @@ class Breakpoint:
         """``{"kind", "target", "count"}`` (the console's and the journal's form)."""
         return {"kind": self.kind.value, "target": self.target, "count": self.count}
 
+    @classmethod
+    def from_json(cls, data: object) -> Breakpoint:
+        """The breakpoint of :meth:`to_json`'s form (as a journal's ``operator.detail`` holds it).
+
+        Raises:
+            ValueError: ``data`` is not that form, saying what is wrong.
+        """
+        if not isinstance(data, dict) or not {"kind", "target"} <= set(data) <= {"kind", "target", "count"}:
+            raise ValueError("a breakpoint is {kind, target, count}")
+        kind, target, count = data["kind"], data["target"], data.get("count")
+        if kind not in tuple(k.value for k in BreakKind) or not isinstance(target, str) or not target:
+            raise ValueError(f"not a breakpoint: kind {str(kind)[:20]!r}, target {str(target)[:40]!r}")
+        if BreakKind(kind) is BreakKind.COUNT:
+            if type(count) is not int or count < 0:
+                raise ValueError(f"a count breakpoint needs a token count >= 0, not {str(count)[:20]}")
+        elif count is not None:
+            raise ValueError(f"a {kind} breakpoint takes no count")
+        return cls(BreakKind(kind), target, count)
+
 
 @dataclass(frozen=True, slots=True)
 class Hit:

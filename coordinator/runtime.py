@@ -247,8 +247,11 @@ class Runtime:
                 self.stats.setdefault((row.task, row.action), ActionStats(row.task, row.action, row.node or "?")).record(
                     row.result)
         self.errors: list[str] = []
-        #: the operator's breakpoints (:mod:`coordinator.breakpoints`)
+        #: the operator's breakpoints (:mod:`coordinator.breakpoints`); a resumed run re-arms those
+        #: its journal says were set at the interruption
         self.breakpoints = BreakpointWatch(net)
+        for bp in () if recovered is None else recovered.breakpoints:
+            self.breakpoints.add(bp, self.engine)
         self._reconciler = Reconciler(client, self._reconciled)
         self._reconcile_s = reconcile_s
         self._reissued: set[str] = set()
@@ -306,7 +309,9 @@ class Runtime:
         self._subscribe()
         if self._recovered is not None:
             self.journal.reopen_run(self.run_id)
-            self._emit(RunStateChanged(self.run_id, "resumed"))
+            armed = self.breakpoints.breakpoints
+            self._emit(RunStateChanged(self.run_id, "resumed", f"breakpoints re-armed from the journal: "
+                                       f"{', '.join(map(str, armed))}" if armed else ""))
             for inst in self.engine.running_instances():
                 task = self.net.tasks[inst.task]
                 params = dict(self._recovered.params.get(inst.id, task.action(inst.action).params))

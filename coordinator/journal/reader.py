@@ -24,6 +24,7 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any, Self, TypeVar
 
+from coordinator.breakpoints import Breakpoint, breakpoint_problem
 from coordinator.engine import Instance
 from coordinator.errors import DamagedJournal, JournalError
 from coordinator.journal.records import (
@@ -432,6 +433,7 @@ class _Replay:
         self.fired = 0
         self.highest = 0
         self.seq = -1
+        self.breakpoints: dict[Breakpoint, None] = {}  # set and not cleared, in the order set
 
     def refuse(self, table: str, entry: int, problem: str) -> DamagedJournal:
         return DamagedJournal(self.path, f"run {self.run.id} does not replay on net {self.net.name!r}: {problem}",
@@ -492,6 +494,8 @@ class _Replay:
             inst.outcomes = latched_events(inst.status, rec.result.outcome)
 
     def operator(self, rec: OperatorRow) -> None:
+        if rec.accepted and rec.command in ("break", "clear"):
+            self.breakpoint(rec)
         if not rec.accepted or rec.command not in ("insert", "remove"):
             return
         if rec.place is None or rec.count is None or rec.count < 1:
@@ -501,6 +505,21 @@ class _Replay:
             raise self.refuse("operator", rec.entry, f"removes {rec.count} token(s) from place {rec.place!r}, "
                               f"which holds {held}")
         self.counts[rec.place] = held + (rec.count if rec.command == "insert" else -rec.count)
+
+
+    def breakpoint(self, rec: OperatorRow) -> None:
+        detail = rec.detail if isinstance(rec.detail, dict) else {}
+        try:
+            bp = Breakpoint.from_json(detail.get("breakpoint"))
+        except ValueError as exc:
+            raise self.refuse("operator", rec.entry, f"{rec.command} without a breakpoint in its detail ({exc})") from None
+        if rec.command == "break":
+            problem = breakpoint_problem(self.net, bp)
+            if problem is not None:
+                raise self.refuse("operator", rec.entry, f"break {bp}: {problem}")
+            self.breakpoints.setdefault(bp, None)
+        else:
+            self.breakpoints.pop(bp, None)
 
 
 def _replay(path: str, net: PetriNet, run: RunRow, records: Iterable[Record]) -> Recovered:
@@ -516,4 +535,4 @@ def _replay(path: str, net: PetriNet, run: RunRow, records: Iterable[Record]) ->
             state.operator(rec)
     marking = Marking({p: n for p, n in state.counts.items() if n})
     return Recovered(run.id, run.seed, marking, tuple(state.live.values()), state.nodes, state.params, state.fired,
-                     state.highest + 1)
+                     state.highest + 1, tuple(state.breakpoints))

@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from coordinator.breakpoints import Breakpoint
 from coordinator.engine import Instance
 from coordinator.net import Marking
 from coordinator.performance import ActionRecord
@@ -321,6 +322,8 @@ class Recovered:
         params: instance id → parameters of the call (for re-issuing it with the same call id).
         fired: number of firings journaled.
         next_instance: next free instance number.
+        breakpoints: the operator's breakpoints set at the interruption (their ``break`` commands
+            not cleared since), in the order they were set: the resumed run re-arms them.
     """
 
     run: str
@@ -331,3 +334,4 @@ class Recovered:
     params: Mapping[str, Any]
     fired: int
     next_instance: int
+    breakpoints: tuple[Breakpoint, ...] = ()

@@ -239,6 +239,10 @@ def test_several_runs_of_different_nets_are_followed_at_once_and_an_interrupted_
     page.page.locator(f"#live-runs button[data-run='{drill}']").click()
     page.wait("(r) => document.body.dataset.watching === r", arg=drill, what="the drill followed again")
     assert page.eval("window.petrobot.liveNet.draft.net.name") == "drill"
+    page.click_node("start")  # a breakpoint on the drill, which its resume re-arms
+    page.page.locator("#node-pop input[data-bp=fires]").check()
+    page.wait("window.petrobot.live.breakpoints.length === 1", what="the breakpoint set")
+    page.page.keyboard.press("Escape")
     other = Page(page.page.context.new_page())
     demo = next(r["run"] for r in page.eval("window.petrobot.runs") if r["net"] == "demo")
     other.page.goto(url + f"&run={demo}")
@@ -258,4 +262,7 @@ def test_several_runs_of_different_nets_are_followed_at_once_and_an_interrupted_
     page.wait("(r) => window.petrobot.live && window.petrobot.live.runId === r && "
               "window.petrobot.live.state.state === 'waiting'", arg=drill, what="the drill resumed")
     assert rows(journal, f"SELECT end_state FROM run WHERE id='{drill}'") == [(None,)]
+    page.wait("window.petrobot.live.breakpoints.length === 1", what="the breakpoint re-armed")
+    assert page.eval("window.petrobot.live.breakpoints[0]") == {"kind": "fires", "target": "start", "count": None}
+    assert page.page.locator(".mark.bp[data-node='start']").is_visible()
     assert other.errors == []

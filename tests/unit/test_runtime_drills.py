@@ -282,3 +282,47 @@ def test_a_journal_of_schema_3_is_migrated_to_the_current_schema_keeping_its_rec
     db = sqlite3.connect(path)
     assert db.execute("PRAGMA user_version").fetchone()[0] == 5
     db.close()
+
+
+async def test_breakpoints_set_before_an_interruption_are_re_armed_when_the_run_is_resumed(tmp_path: Path):
+    path = tmp_path / "j.sqlite"
+    net = drill(runs=2)
+    client = FakeClient({"act": ActionResult.success(), "other": ActionResult.success()}, topics={"tick"})
+    with Journal(path) as journal:
+        first = Recorder()
+        runtime = Runtime(net, client, journal, observer=first, operator=True)
+        for line in ("break fires finished", "break error work", "break count done 2", "clear error work"):
+            runtime.command(parse_operator_command(line))
+        run = asyncio.create_task(runtime.run(max_seconds=TIMEOUT_S))
+        await first.wait_for(waiting)
+        run.cancel()  # Ctrl-C
+        with pytest.raises(asyncio.CancelledError):
+            await run
+    with Journal(path) as journal:
+        recovered = journal.recover(net, runtime.run_id)
+        assert [str(bp) for bp in recovered.breakpoints] == ["fires finished", "count done 2"]
+        seen = Recorder()
+        again = Runtime(net, client, journal, observer=seen, operator=True, recovered=recovered)
+        assert [str(bp) for bp in again.breakpoints.breakpoints] == ["fires finished", "count done 2"]
+        run = asyncio.create_task(again.run(max_seconds=TIMEOUT_S))
+        resumed = await seen.wait_for(lambda e: isinstance(e, RunStateChanged) and e.state == "resumed")
+        assert resumed.reason == "breakpoints re-armed from the journal: fires finished, count done 2"
+        await seen.wait_for(waiting)
+        client.publish("tick")
+        hit = await seen.wait_for(lambda e: isinstance(e, BreakpointHit))
+        assert str(hit.breakpoint) == "fires finished"  # the resumed run pauses where the operator asked
+        again.command(OperatorCommand(Command.ABORT))
+        await asyncio.wait_for(run, TIMEOUT_S)
+
+
+def test_a_break_command_whose_breakpoint_is_damaged_refuses_the_resume(tmp_path: Path):
+    from coordinator.errors import DamagedJournal
+
+    path = tmp_path / "j.sqlite"
+    net = drill()
+    with Journal(path) as journal:
+        run = journal.begin_run(net)
+        journal.operator(run, "break", detail={"breakpoint": {"kind": "fires", "target": "nowhere", "count": None}})
+        journal.end_run(run, "interrupted")
+        with pytest.raises(DamagedJournal, match="break fires nowhere: no transition 'nowhere'"):
+            journal.recover(net, run)
