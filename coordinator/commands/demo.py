@@ -12,9 +12,12 @@ ros2`` runs ``nets/ros2.toml``, whose primitive actions are ROS 2 interfaces rea
 Reproducibility: ``--seed S`` seeds the thrower, the camera noise, the engine's random switches and
 the learners. Without ``--journal`` every demo starts from a fresh journal (``runs/catching.sqlite``;
 the previous one is kept under the time it was last written, ``runs/catching.YYYYmmdd-HHMMSS.sqlite``,
-once the new run starts), hence with fresh learners, so the same seed gives the same runs; with
-``--journal FILE`` the learners continue from the state saved there. The simulator runs in real
-time across processes, so timings differ from one demo to the next.
+once the new run starts), hence with fresh learners, so the same seed gives the same throws, the
+same warm-up of the learners, and choices and learner states that follow from the seed and the
+outcomes alone; with ``--journal FILE`` the learners continue from the state saved there. The
+simulator runs in real time in its own process, so timings differ from one demo to the next, and
+now and then an outcome (which frames an action sees depends on the machine's load). The world's
+ground truth (throws, crossings, results) is written to ``logs/sim.events.jsonl``.
 
 The node logs and the simulator's log go beside the journal, in ``logs/`` (``runs/logs/vision.log``,
 ``motion.log``, ``sim.log``), said on screen. What every demo does to start and run is
@@ -67,13 +70,15 @@ everything.
 
 Every firing, action start and result goes to the journal. Without --journal each demo starts a
 fresh one (runs/catching.sqlite, runs/mobile.sqlite, runs/ros2.sqlite or runs/demo.sqlite), so the
-learners start afresh and --seed S reproduces a demo's outcomes and choices (the simulator runs in
-real time, so timings differ); the previous journal is kept, never overwritten, under the time it was last
-written (runs/catching.YYYYmmdd-HHMMSS.sqlite), once the new run starts, and the demo says where. A
+learners start afresh and --seed S repeats the throws, the learners' warm-up and every random
+draw, so that the choices follow from the seed and the outcomes alone (the simulator runs in real
+time, so timings differ, and now and then an outcome); the previous journal is kept, never
+overwritten, under the time it was last written (runs/catching.YYYYmmdd-HHMMSS.sqlite), once the
+new run starts, and the demo says where. A
 demo that cannot start leaves every journal as it was and names the cause and the log to read.
 With --journal FILE the learners continue from FILE's saved state. The nodes' and the simulator's
 logs go to logs/ beside the journal (runs/logs/NODE.log, runs/logs/sim.log; for ros2 zenoh.log and
-ros2.log)."""
+ros2.log), the world's ground truth (throws, crossings, results) to runs/logs/sim.events.jsonl."""
 
 
 def add_parser(subparsers: Any) -> None:

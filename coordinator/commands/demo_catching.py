@@ -135,7 +135,8 @@ class CatchReport:
         return "\n".join(lines)
 
     def outcomes(self) -> list[tuple[str, str]]:
-        """(outcome, locate action) of each run: what two runs with the same seed should share."""
+        """(outcome, locate action) of each run: what two demos of one seed share on a quiet machine
+        (the README says what a seed repeats for sure)."""
         return [(r.outcome, r.locate_action) for r in self.runs]
 
 

@@ -11,17 +11,19 @@ journal, and stops everything, whatever happens. Each demo's module
 
 The journal (paper section 5: every firing, action start and result) is never lost: without
 ``--journal`` each demo starts a fresh one (``runs/catching.sqlite``...; fresh learners, so the same
-seed gives the same choices), and the previous one is moved aside, under the time it was last
+seed gives the same warm-up, and choices that follow from the seed and the outcomes), and the previous one is moved aside, under the time it was last
 written (``runs/catching.20261122-043316.sqlite``), only once the world and the nodes are up and the
 new run is about to start: a demo that cannot start leaves every journal as it was, and names the
 cause and the log to read. Nothing is ever overwritten or removed. The node logs and the world's log
-go beside the journal, in ``logs/``.
+go beside the journal, in ``logs/``, with the world's JSON event lines (its ground truth) in
+``logs/sim.events.jsonl``.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import os
 import subprocess
@@ -90,13 +92,19 @@ class SimWorld:
 
     Args:
         args: command-line arguments after ``sim WORLD``.
-        log: file for the simulator's stderr (log lines, warnings), or ``None`` to drop them.
+        log: file for the simulator's stderr (log lines, warnings), or ``None`` to drop them; its
+            JSON event lines (the world's ground truth: ``throw``, ``crossing``, ``result``...) go
+            beside it, one per line as they came, in ``<log stem>.events.jsonl``.
         world: ``catching``, ``mobile``, ``zenoh`` or ``ros2``.
     """
 
     def __init__(self, args: list[str], log: Path | None = None, world: str = "catching") -> None:
         self.log = log
         self._log = open(log, "w") if log is not None else None  # noqa: SIM115 (kept open for the process, closed by stop())
+        #: the file of the world's event lines, or ``None`` without a log
+        self.events_log = None if log is None else log.with_name(f"{log.stem}.events.jsonl")
+        self._events_log = (open(self.events_log, "w", buffering=1)  # noqa: SIM115 (closed by stop())
+                            if self.events_log is not None else None)
         self.proc = subprocess.Popen([sys.executable, "-m", "coordinator.commands.sim", world, *args],
                                      cwd=ROOT, stdout=subprocess.PIPE,
                                      stderr=self._log if self._log is not None else subprocess.DEVNULL, text=True)
@@ -115,6 +123,9 @@ class SimWorld:
                     continue
                 event["t_wall"] = time.time()
                 self.events.append(event)
+                if self._events_log is not None:
+                    with contextlib.suppress(OSError, ValueError):  # a full disk loses the copy, not the demo
+                        self._events_log.write(json.dumps(event) + "\n")
                 if event.get("event") == "ready":
                     self._ready.set()
 
@@ -162,6 +173,8 @@ class SimWorld:
         self._reader.join(timeout=5)  # the last lines ("stopped") are read before the report
         if self._log is not None:
             self._log.close()
+        if self._events_log is not None:
+            self._events_log.close()
 
 
 @dataclass(frozen=True, slots=True)

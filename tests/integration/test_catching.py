@@ -74,11 +74,12 @@ node = "motion"
 """
 
 
-def demo(cluster: Any, tmp_path: Path, runs: int, predict_node: str = "vision") -> subprocess.Popen[str]:
+def demo(cluster: Any, tmp_path: Path, runs: int, predict_node: str = "vision", seed: int = 1) -> subprocess.Popen[str]:
     cluster.write_services(SERVICES.replace("PREDICT_NODE", predict_node))
     cmd = [sys.executable, "-m", "coordinator.cli", "demo", "catching", "--runs", str(runs),
            "--renderer", "analytic", "--services", str(cluster.services_path), "--journal",
-           str(tmp_path / "j.sqlite"), "--key-file", str(cluster.key_file), "--lines", "--max-seconds", "150"]
+           str(tmp_path / "j.sqlite"), "--key-file", str(cluster.key_file), "--lines", "--max-seconds", "150",
+           "--seed", str(seed)]
     return subprocess.Popen(cmd, cwd=ROOT, env=cluster.env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True, stdin=subprocess.DEVNULL)
 
@@ -108,6 +109,52 @@ def test_a_two_run_catch_net_catches_both_balls_across_processes(cluster: Any, t
     assert {f.instance for f in kept} == {r.instance for r in predicts}
     bag = export_run(journal, run, tmp_path / "run.bag")
     assert bag.counts["/petrobot/action_feedback"] == len(kept)
+
+
+def test_a_seeded_demo_repeats_what_the_readme_promises_the_throws_the_warm_up_and_choices_that_follow_the_outcomes(
+        cluster: Any, tmp_path: Path):
+    """README: the same seed gives the same throws, the same first locate of each locator, and
+    choices and learner state that follow from the seed and the outcomes alone; the outcomes
+    themselves may differ (the world runs in real time)."""
+    from coordinator.learning import Learner
+    from coordinator.netfile import load_net
+
+    seed, demos = 11, []
+    for name in ("first", "second"):
+        folder = tmp_path / name
+        folder.mkdir()
+        proc = demo(cluster, folder, runs=3, seed=seed)
+        out, _ = proc.communicate(timeout=200)
+        assert proc.returncode == 0, out
+        throws = [(e["n"], e["speed"], e["heading"], e["y0"]) for e in map(_json_line, (folder / "logs" / "sim.events.jsonl")
+                  .read_text().splitlines()) if e.get("event") == "throw"]
+        with JournalReader.open(folder / "j.sqlite") as reader:
+            starts = [s for s in reader.starts() if s.task == "locate"]
+            results = {r.instance: r.result for r in reader.results() if r.task == "locate"}
+            learned = reader.learner_states()["locate"].state
+        demos.append((throws, starts, results, learned))
+    (throws_a, starts_a, *_), (throws_b, starts_b, *_) = demos
+    common = min(len(throws_a), len(throws_b))
+    assert common >= 3 and throws_a[:common] == throws_b[:common]  # ball n: the same start, speed and heading
+    warm_up = ["locate_threshold", "locate_bgdiff", "locate_average"]
+    assert [s.action for s in starts_a[:3]] == [s.action for s in starts_b[:3]] == warm_up
+    for throws, starts, results, learned in demos:  # choices and learner state: the seed and the outcomes
+        learner = Learner.from_net(load_net(ROOT / "nets" / "catch.toml"), seed)
+        state = None
+        for start in starts:
+            assert learner.choose("locate") == start.action
+            state = learner.update("locate", start.action, results[start.instance])
+        assert state == learned
+
+
+def _json_line(line: str) -> dict[str, Any]:
+    import json
+
+    try:
+        got = json.loads(line)
+    except ValueError:
+        return {}
+    return got if isinstance(got, dict) else {}
 
 
 def test_moving_the_prediction_to_the_motion_node_is_an_edit_of_services_toml_only(cluster: Any, tmp_path: Path):
