@@ -250,7 +250,7 @@ def check_schema(db: sqlite3.Connection, path: str) -> None:
             if missing:
                 raise DamagedJournal(path, f"not a petrobot journal, or a damaged one (table {table!r} lacks "
                                      f"{', '.join(missing)})")
-    except sqlite3.DatabaseError as exc:
+    except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:  # a name in the schema that is not UTF-8
         raise DamagedJournal(path, f"cannot read the journal: {exc}") from exc
 
 
@@ -288,5 +288,5 @@ def check_tables(db: sqlite3.Connection, path: str) -> bool:
                                      "without it); restore the journal from a copy, or give a new journal file",
                                      table=missing[0])
         return False
-    except sqlite3.DatabaseError as exc:
+    except (sqlite3.DatabaseError, UnicodeDecodeError) as exc:  # a name in the schema that is not UTF-8
         raise DamagedJournal(path, f"cannot read the journal: {exc}") from exc

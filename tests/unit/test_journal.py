@@ -419,3 +419,21 @@ def test_a_damaged_feedback_row_is_skipped_and_named(tmp_path: Path):
         assert [f.data for f in reader.feedback_messages(run)] == [{"progress": 2}]
         (line,) = reader.damage_report()
     assert "table feedback, row 1, field data" in line
+
+
+def test_a_catching_demo_journal_of_schema_3_opens_and_migrates_keeping_every_record(tmp_path: Path):
+    import shutil
+
+    path = tmp_path / "catching.sqlite"
+    shutil.copyfile(Path(__file__).resolve().parents[1] / "data" / "catching_demo_v3.sqlite", path)
+
+    def kinds(reader: JournalReader) -> list[tuple[str, int]]:
+        return [(type(r).__name__, r.entry) for run in reader.runs() for r in reader.timeline(run.id)]
+
+    with JournalReader.open(path) as reader:
+        before, learned = kinds(reader), reader.learner_states()
+        assert reader.feedback_messages() == [] and len(before) > 20
+    with Journal(path) as journal:
+        assert kinds(journal) == before and journal.learner_states() == learned
+    with sqlite3.connect(path) as db:
+        assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION

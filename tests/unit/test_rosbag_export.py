@@ -1,6 +1,7 @@
 """`petrobot export RUN --to mcap`: a run of the catching demo's journal (tests/data/catching_demo.sqlite,
-two runs of `petrobot demo catching --runs 2 --seed 3`) as a rosbag2 MCAP bag, read back with
-Foxglove's mcap + mcap-ros2-support and with rosbags' reader, message counts equal to the journal's."""
+`petrobot demo catching --runs 2 --seed 3`, journal schema 5: with the feedback of predict) as a rosbag2
+MCAP bag, read back with Foxglove's mcap + mcap-ros2-support and with rosbags' reader, message counts
+equal to the journal's."""
 
 from __future__ import annotations
 
@@ -48,6 +49,7 @@ def test_a_catching_run_reads_back_with_foxglove_and_rosbags_readers_with_the_jo
     written = export_run(journal, run, tmp_path / "run.bag")
     expected = _journal_counts(journal, run)
     assert expected["/petrobot/firing"] > 10 and expected["/petrobot/action_result"] > 3
+    assert expected["/petrobot/action_feedback"] > 2  # predict's predicted catching points
     with open(written.mcap, "rb") as fh:
         decoded = make_reader(fh, decoder_factories=[DecoderFactory()]).iter_decoded_messages()
         foxglove = Counter(channel.topic for _, channel, _, _ in decoded)
