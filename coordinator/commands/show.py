@@ -101,6 +101,7 @@ def describe(record: Record, t0: float) -> str:
 
 def operator_detail(command: str, detail: Any) -> str:
     """What an operator command carried besides a place and a count, in words (``" ext:tick"``,
+    ``' ext:tick {"by":"drill"}'`` with its payload,
     ``" at breakpoint fires ball_caught: ball_caught fired"``), or ``""``."""
     if not isinstance(detail, dict):
         return ""
@@ -109,7 +110,10 @@ def operator_detail(command: str, detail: Any) -> str:
         text = f"{bp.get('kind')} {bp.get('target')}" + (f" {bp.get('count')}" if bp.get("kind") == "count" else "")
         return f" at breakpoint {text}: {detail.get('why', '')}" if command == "pause" else f" {text}"
     if "event" in detail:
-        return f" {detail['event']}"
+        if detail.get("payload") is None:
+            return f" {detail['event']}"
+        payload = json.dumps(detail["payload"], separators=(",", ":"), default=str)
+        return f" {detail['event']} {payload if len(payload) <= 80 else payload[:79] + '…'}"
     if "instance" in detail:
         why = f" ({detail['reason']})" if detail.get("reason") else ""
         return f" {detail.get('outcome')} on {detail['instance']}{why}"

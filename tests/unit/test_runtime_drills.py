@@ -148,7 +148,8 @@ async def test_breakpoints_on_an_enabled_transition_a_place_count_and_a_task_err
     assert pauses[0] == "error"
 
 
-async def test_an_events_payload_reaches_the_blackboard_from_its_publisher_and_from_the_operator(tmp_path: Path):
+async def test_an_events_payload_reaches_the_blackboard_from_its_publisher_and_from_the_operator(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]):
     from coordinator.web.frames import LiveFeed
 
     seen = Recorder()
@@ -175,6 +176,8 @@ async def test_an_events_payload_reaches_the_blackboard_from_its_publisher_and_f
         await asyncio.wait_for(run, TIMEOUT_S)
     (row,) = [r for r in operator_rows(tmp_path / "j.sqlite") if r.command == "inject"]
     assert row.detail == {"event": "ext:tick", "payload": {"by": "drill"}}
+    assert main(["show", "last", "--journal", str(tmp_path / "j.sqlite")]) == 0
+    assert 'inject ext:tick {"by":"drill"}' in capsys.readouterr().out
     with pytest.raises(ValueError, match="not JSON"):
         parse_operator_command("inject ext:tick {nope")
 
