@@ -187,7 +187,10 @@ export function initReplay(app) {
   function detail(command, d) {
     if (!d) return "";
     if (d.breakpoint) return command === "pause" ? ` at breakpoint ${bpKey(d.breakpoint)}: ${d.why || ""}` : ` ${bpKey(d.breakpoint)}`;
-    if (d.event) return ` ${d.event} (raised by the operator)`;
+    if (d.event) {
+      const payload = d.payload === undefined || d.payload === null ? "" : ` ${JSON.stringify(d.payload)}`;
+      return ` ${d.event}${payload.length > 81 ? `${payload.slice(0, 80)}…` : payload} (raised by the operator)`;
+    }
     if (d.instance) return ` ${d.outcome} on ${d.instance}${d.reason ? ` (${d.reason})` : ""}`;
     return "";
   }
