@@ -44,9 +44,15 @@ def test_breakpoint_on_ball_caught_injected_crossfire_and_a_forced_locate_error_
         breakpoint_on(page, "ball_caught", "fires")
         page.eval("() => window.petrobot.command('insert', { place: 'runs_remaining', count: 3 })")  # room for misses
         crossfired = caught = False
-        for attempt in range(5):  # a ball the robot misses goes on to the next run
-            page.wait("window.petrobot.live.paused && document.body.dataset.hit === 'enabled crossfire'",
-                      what=f"run {attempt + 1}: the pause with the sensor armed")
+        for attempt in range(6):  # a ball the robot misses goes on to the next run
+            page.wait("window.petrobot.live.paused && ['enabled crossfire', 'fires ball_caught']"
+                      ".includes(document.body.dataset.hit)", what=f"run {attempt + 1}: the pause with the sensor armed")
+            if page.eval("document.body.dataset.hit") == "fires ball_caught":
+                # the run was ahead of the page: its first ball was located (the sensor armed) before the
+                # breakpoints were set, so "enabled crossfire" was already true and paused nothing
+                page.eval("() => { document.body.dataset.hit = ''; }")
+                page.page.click("#cmd-resume")
+                continue
             assert page.eval("window.petrobot.live.marking.cup_armed") == 1
             page.eval("() => { document.body.dataset.hit = ''; }")
             # resume, and the operator raises ext:ball_caught at once (the net's [operator] allows it)
