@@ -54,7 +54,6 @@ from coordinator.engine import (
 )
 from coordinator.engine.rest import at_rest, home_marking, work_places
 from coordinator.errors import EngineError
-from coordinator.feedback import FeedbackSampler
 from coordinator.events import (
     ActionEnded,
     ActionFeedback,
@@ -70,6 +69,7 @@ from coordinator.events import (
     RunStateChanged,
     TransitionFired,
 )
+from coordinator.feedback import FeedbackSampler
 from coordinator.journal import Journal, Recovered
 from coordinator.net import FORCE_STATUSES, PetriNet
 from coordinator.operator import Command, OperatorCommand

@@ -506,13 +506,14 @@ class _Replay:
                               f"which holds {held}")
         self.counts[rec.place] = held + (rec.count if rec.command == "insert" else -rec.count)
 
-
     def breakpoint(self, rec: OperatorRow) -> None:
+        """A ``break`` sets its breakpoint, a ``clear`` clears it (what the resumed run re-arms)."""
         detail = rec.detail if isinstance(rec.detail, dict) else {}
         try:
             bp = Breakpoint.from_json(detail.get("breakpoint"))
         except ValueError as exc:
-            raise self.refuse("operator", rec.entry, f"{rec.command} without a breakpoint in its detail ({exc})") from None
+            raise self.refuse("operator", rec.entry,
+                              f"{rec.command} without a breakpoint in its detail ({exc})") from None
         if rec.command == "break":
             problem = breakpoint_problem(self.net, bp)
             if problem is not None:

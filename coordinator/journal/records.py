@@ -19,8 +19,8 @@ from coordinator.performance import ActionRecord
 from coordinator.reconcile import differs
 from services.results import ActionResult, Status
 
-__all__ = ["FeedbackRow", "FiringRow", "LearnerState", "OperatorRow", "ReconciliationRow", "Recovered", "ResultRow", "RunRow", "RunStats",
-           "StartRow"]
+__all__ = ["FeedbackRow", "FiringRow", "LearnerState", "OperatorRow", "ReconciliationRow", "Recovered", "ResultRow",
+           "RunRow", "RunStats", "StartRow"]
 
 
 @dataclass(frozen=True, slots=True)

@@ -143,7 +143,8 @@ def migrate(db: sqlite3.Connection, path: str) -> int:
     tables, ordered by ``t_wall`` (then firing, start, result, operator, then the old entry), which
     is the order the records were written in. Version 2 → 3: adds the (empty) ``reconciliation``
     table. Version 3 → 4: adds ``operator.detail`` (NULL) and ``action_result.forced`` (0: every
-    older result was measured). Version 4 → 5: adds the (empty) ``feedback`` table. A fresh journal only gets its version set.
+    older result was measured). Version 4 → 5: adds the (empty) ``feedback`` table. A fresh journal
+    only gets its version set.
 
     Returns:
         The version the journal had.

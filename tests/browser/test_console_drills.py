@@ -215,7 +215,8 @@ def test_breakpoints_an_injected_event_the_blackboard_and_a_forced_outcome_on_a_
     page.eval("(k) => window.petrobot.replay.seek(k)", forced + 1)
     assert page.page.locator("#rp-records .rec.forced").first.inner_text().split(None, 1)[1].startswith("FORCED work/wait")
     assert page.page.locator(".mark.bp").count() == 2
-    assert 'inject ext:go {"bin":3,"by":"drill"} (raised by the operator)' in page.page.locator("#rp-records").inner_text()
+    records = page.page.locator("#rp-records").inner_text()
+    assert 'inject ext:go {"bin":3,"by":"drill"} (raised by the operator)' in records  # with its payload
     assert "FORCED by the operator" in page.page.locator(".token-plane .badge.latched").inner_text()
     page.screenshot("replay-forced")
 

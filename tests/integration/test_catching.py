@@ -126,8 +126,8 @@ def test_a_seeded_demo_repeats_what_the_readme_promises_the_throws_the_warm_up_a
         proc = demo(cluster, folder, runs=3, seed=seed)
         out, _ = proc.communicate(timeout=200)
         assert proc.returncode == 0, out
-        throws = [(e["n"], e["speed"], e["heading"], e["y0"]) for e in map(_json_line, (folder / "logs" / "sim.events.jsonl")
-                  .read_text().splitlines()) if e.get("event") == "throw"]
+        lines = (folder / "logs" / "sim.events.jsonl").read_text().splitlines()  # the world's ground truth
+        throws = [(e["n"], e["speed"], e["heading"], e["y0"]) for e in map(_json_line, lines) if e.get("event") == "throw"]
         with JournalReader.open(folder / "j.sqlite") as reader:
             starts = [s for s in reader.starts() if s.task == "locate"]
             results = {r.instance: r.result for r in reader.results() if r.task == "locate"}
