@@ -261,6 +261,8 @@ def test_the_page_shows_failing_tasks_unused_nodes_the_real_state_and_keeps_the_
     assert not any(r.startswith(("vision", "motion")) for r in rows_shown)
 
     # the failing task is marked on the drawing, with its error branch, and its last reason is there in full
+    page.wait("window.petrobot.graph.cy.$('.failing').not('.badge').length >= 2",  # painted with the next frame
+              what="the failing task marked on the drawing")
     failing = page.eval("window.petrobot.graph.cy.$('.failing').not('.badge').map(e => e.id()).sort()")
     assert failing == ["grasp_failed", "grasping"]
     (reason,) = rows(journal, "SELECT reason FROM action_result ORDER BY rowid DESC LIMIT 1")[0]
