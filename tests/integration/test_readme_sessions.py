@@ -52,6 +52,7 @@ class Session:
         self.cwd.mkdir()
         shutil.copy(ROOT / "services.toml", self.cwd / "services.toml")
         shutil.copytree(ROOT / "nets", self.cwd / "nets")
+        shutil.copytree(ROOT / "devices", self.cwd / "devices")  # services.toml names its device files
         (tmp / "home").mkdir()
         self.env = {k: v for k, v in os.environ.items() if not k.startswith("PETROBOT_")}
         self.env["HOME"] = str(tmp / "home")
