@@ -18,14 +18,14 @@ result. What they implement (the reasons and the measurements are in docs/analys
 * A queue that is the state array itself: states are numbered in order of discovery and expanded in
   that order, so the search is breadth-first, a level (the markings at one distance from M0) is a
   contiguous index range, and edges come out sorted by source, then transition.
-* A key per marking that is linear in it, ``key(M) = sum_p M(p) * R[p] mod 2**64``, so a
-  successor's key is ``key(M) + key(C[:, t])``: one addition per edge (plus, per reset arc,
-  ``(Post[r, t] - M(r)) * R[r]``). While the bit widths given
-  to the places fit in 64 bits together, ``R[p] = 2**offset[p]`` packs the marking into its key
-  exactly, so a key hit is a marking hit; a count that outgrows its width repacks every key. When
-  the widths no longer fit, ``R`` becomes random odd multipliers and a key hit is confirmed by
-  comparing the stored marking. Either way the result is exact. Keys are not stored: a state's key
-  is recomputed from its marking when it is expanded, and the table is rebuilt from the markings.
+* Markings stored packed: each place a field of a few bits (its width comes from the place's
+  proven bound, given by the caller: :func:`coordinator.analysis.statespace.packed_layout`), the
+  fields first-fit in 64-bit words, so a marking of a 1-safe net of |P| places takes about |P| / 8
+  bytes. A successor is the parent's words with the fields of the changed places rewritten, each
+  new count checked against its field: a count that does not fit stops the search (status
+  ``WIDEN``), the caller widens that field and searches again, so a field never wraps. The hash
+  table's key is a hash of the packed words; a key hit is confirmed by comparing the words. Keys
+  are not stored with the markings: the table is rebuilt from the markings when it grows.
 * An open-addressing hash table (linear probing, load at most 1/2) of (key, index + 1) pairs side
   by side in one flat uint64 array, so a lookup usually touches one cache line.
 * A byte budget: every buffer is counted, a buffer grows only if the bytes held (old and new buffer
@@ -52,15 +52,15 @@ import numpy as np
 from numba import njit, objmode, types
 
 __all__ = ["CURSOR_SIZE", "HEAD", "RESET_SIGNATURE", "RUN_SIGNATURE", "cached", "load", "load_resets", "run",
-           "set_progress", "tables"]
+           "set_progress", "tables", "unpack"]
 
 #: status codes: graph complete, or the state limit reached and its level finished; ``budget``
-#: markings expanded; a buffer is full; a token count would exceed 2**31 - 1, the largest the int32
-#: state store holds; the byte budget stopped the search.
-DONE, BUDGET, ROOM, OVERFLOW, MEMORY = 0, 1, 2, 3, 4
+#: markings expanded; a buffer is full; a token count would exceed 2**31 - 1, the largest a field
+#: holds; the byte budget stopped the search; a count outgrew its place's field.
+DONE, BUDGET, ROOM, OVERFLOW, MEMORY, WIDEN = 0, 1, 2, 3, 4, 5
 #: layout of the cursor array
-N, E, NEXT, LEVEL_END, STOPPING, N_TRUNC, MAX_COUNT, EXACT, NEED, NEED_S = range(10)
-CURSOR_SIZE = 10
+N, E, NEXT, LEVEL_END, STOPPING, N_TRUNC, MAX_COUNT, NEED, NEED_S = range(9)
+CURSOR_SIZE = 9
 #: header of the packed arc lists: offsets of in_ptr, in_p, in_w, ih_ptr, ih_p, ih_w, d_ptr, d_p,
 #: d_v, r_ptr, r_p, r_v and the end
 HEAD = 13
@@ -167,23 +167,24 @@ def _slot(key: np.uint64, bits: int) -> np.int64:
 
 
 @njit(cache=True)
-def _key(states: np.ndarray, j: int, n_p: int, mult: np.ndarray) -> np.uint64:
-    acc = np.uint64(0)
-    base = j * n_p
-    for p in range(n_p):
-        acc += np.uint64(states[base + p]) * mult[p]
-    return acc
+def _hash(words: np.ndarray, base: int, n_w: int) -> np.uint64:
+    """Hash of the packed marking ``words[base:base + n_w]`` (a multiply-xorshift chain)."""
+    h = _SEED
+    for k in range(n_w):
+        h = (h ^ words[base + k]) * _GOLDEN
+        h ^= h >> np.uint64(29)
+    return h
 
 
 @njit(cache=True)
-def _fill_table(table: np.ndarray, states: np.ndarray, n: int, n_p: int, mult: np.ndarray) -> None:
+def _fill_table(table: np.ndarray, states: np.ndarray, n: int, n_w: int) -> None:
     """(Re)build the hash table, flat (2 * 2**k,) uint64 of (key, index + 1) pairs, from states 0..n-1."""
     size = table.shape[0] // 2
     bits = _bit_length(size) - 1
     for k in range(table.shape[0]):
         table[k] = 0
     for j in range(n):
-        key = _key(states, j, n_p, mult)
+        key = _hash(states, j * n_w, n_w)
         s = _slot(key, bits)
         while table[2 * s + 1] != 0:
             s = (s + 1) & (size - 1)
@@ -192,40 +193,21 @@ def _fill_table(table: np.ndarray, states: np.ndarray, n: int, n_p: int, mult: n
 
 
 @njit(cache=True)
-def _rekey(tab: np.ndarray, width: np.ndarray, mult: np.ndarray, dkey: np.ndarray, states: np.ndarray,
-           n: int, table: np.ndarray, cursor: np.ndarray) -> None:
-    """Choose the multipliers from the widths (exact packing while it fits, else random, for good),
-    then recompute the per-transition key deltas and the hash table, in place."""
-    n_p = width.shape[0]
-    total = 0
-    for p in range(n_p):
-        total += width[p]
-    if cursor[EXACT] != 0 and total <= 64:
-        offset = 0
-        for p in range(n_p):
-            mult[p] = np.uint64(1) << np.uint64(offset)
-            offset += width[p]
-    else:
-        cursor[EXACT] = 0
-        for p in range(n_p):
-            x = _SEED + np.uint64(p) + np.uint64(0x9E3779B97F4A7C15)
-            x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-            x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-            mult[p] = (x ^ (x >> np.uint64(31))) | np.uint64(1)
-    d_ptr, d_p, d_v = tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]]
-    for t in range(dkey.shape[0]):
-        acc = np.uint64(0)
-        for k in range(d_ptr[t], d_ptr[t + 1]):
-            acc += np.uint64(d_v[k]) * mult[d_p[k]]  # wraps modulo 2**64 for negative entries
-        dkey[t] = acc
-    _fill_table(table, states, n, n_p, mult)
+def _get(states: np.ndarray, base: int, p: int, wd: np.ndarray, sh: np.ndarray, msk: np.ndarray) -> np.int64:
+    return np.int64((states[base + wd[p]] >> sh[p]) & msk[p])
+
+
+@njit(cache=True)
+def _set(words: np.ndarray, base: int, p: int, v: np.int64, wd: np.ndarray, sh: np.ndarray, msk: np.ndarray) -> None:
+    k = base + wd[p]
+    words[k] = (words[k] & ~(msk[p] << sh[p])) | (np.uint64(v) << sh[p])
 
 
 @njit(cache=True)
 def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.ndarray, use_prio: bool,
             states: np.ndarray, table: np.ndarray, dst: np.ndarray, tr: np.ndarray, out_ptr: np.ndarray,
-            parent: np.ndarray, trunc: np.ndarray, cursor: np.ndarray, width: np.ndarray, mult: np.ndarray,
-            succ: np.ndarray, dkey: np.ndarray, enabled: np.ndarray, max_states: int, budget: int,
+            parent: np.ndarray, trunc: np.ndarray, cursor: np.ndarray, wd: np.ndarray, sh: np.ndarray,
+            msk: np.ndarray, succ: np.ndarray, enabled: np.ndarray, max_states: int, budget: int,
             resets: np.ndarray | None) -> int:
     """Expand markings in breadth-first order, at most ``budget`` of them, from ``cursor[NEXT]``,
     in the given buffers (never reallocated here: ``ROOM`` says one is full, and ``cursor[NEED]``
@@ -236,21 +218,24 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             trigger place (slot |P| lists those without input places).
         prio: (|T|,) int64 priority levels, used if ``use_prio``: in each marking only the enabled
             transitions of the highest enabled level fire.
-        states: (cap·|P|,) int32 markings, row-major; table: (2·2**k,) uint64 hash table; dst:
+        states: (cap·W,) uint64 packed markings (W words each, layout ``wd``, ``sh``, ``msk``: the
+            word, shift and mask of each place's field); table: (2·2**k,) uint64 hash table; dst:
             (ecap,) int32 edge targets; tr: (ecap,) int32 their transitions; out_ptr: (cap + 1,)
             int64, the edges of state i are ``out_ptr[i]:out_ptr[i+1]``; parent: (cap,) int64 parent
             edge of each state; trunc: int64 sources that lost an edge to the state limit;
-            cursor: int64 (:data:`CURSOR_SIZE`,); width, mult, succ: per place key width, key
-            multiplier (uint64), successor scratch; dkey (|T|,) uint64 key deltas; enabled (|T|,)
+            cursor: int64 (:data:`CURSOR_SIZE`,); succ (W,) uint64 successor scratch; enabled (|T|,)
             scratch.
         max_states: a new successor beyond this many states is dropped (its source goes to
             ``trunc``) and the search stops at the end of the level.
         budget: most markings to expand in this call.
 
     Returns:
-        DONE, BUDGET, ROOM or OVERFLOW; the cursor says where the search is.
+        DONE, BUDGET, ROOM, OVERFLOW, or WIDEN (a count outgrew its place's field: ``cursor[NEED]``
+        is the place, ``cursor[NEED_S]`` the count; nothing was stored); the cursor says where the
+        search is.
     """
-    n_p = width.shape[0]
+    n_p = wd.shape[0]
+    n_w = succ.shape[0]
     in_ptr, in_p, in_w = tab[tab[0]:tab[1]], tab[tab[1]:tab[2]], tab[tab[2]:tab[3]]
     ih_ptr, ih_p, ih_w = tab[tab[3]:tab[4]], tab[tab[4]:tab[5]], tab[tab[5]:tab[6]]
     d_ptr, d_p, d_v = tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]]
@@ -260,7 +245,6 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
     n, e, i = cursor[N], cursor[E], cursor[NEXT]
     level_end, stopping, n_trunc = cursor[LEVEL_END], cursor[STOPPING], cursor[N_TRUNC]
     top = cursor[MAX_COUNT]
-    exact = cursor[EXACT] != 0
     cap = parent.shape[0]
     size = table.shape[0] // 2
     bits = _bit_length(size) - 1
@@ -275,22 +259,22 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
         if done == budget:
             status = BUDGET
             break
-        base = i * n_p
+        base = i * n_w
         # enabled transitions: those whose trigger place is marked, then the source transitions
         k = 0
         for p in range(n_p + 1):
-            if p < n_p and states[base + p] == 0:
+            if p < n_p and _get(states, base, p, wd, sh, msk) == 0:
                 continue
             for a in range(trig_ptr[p], trig_ptr[p + 1]):
                 t = trig_t[a]
                 ok = True
                 for b in range(in_ptr[t], in_ptr[t + 1]):
-                    if states[base + in_p[b]] < in_w[b]:
+                    if _get(states, base, in_p[b], wd, sh, msk) < in_w[b]:
                         ok = False
                         break
                 if ok:
                     for b in range(ih_ptr[t], ih_ptr[t + 1]):
-                        if states[base + ih_p[b]] >= ih_w[b]:
+                        if _get(states, base, ih_p[b], wd, sh, msk) >= ih_w[b]:
                             ok = False
                             break
                 if ok:
@@ -320,61 +304,50 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                     enabled[kept] = enabled[a]
                     kept += 1
             k = kept
-        key_i = _key(states, i, n_p, mult)
         dropped = False
         for a in range(k):
             t = enabled[a]
-            # counts of the places t raises: the int32 limit, and the key widths while exact
-            repack = False
+            # the successor, packed; every count written is checked against its field (never wraps)
+            for w in range(n_w):
+                succ[w] = states[base + w]
             for b in range(d_ptr[t], d_ptr[t + 1]):
+                q = d_p[b]
+                v = _get(states, base, q, wd, sh, msk) + d_v[b]
                 if d_v[b] > 0:
-                    q = d_p[b]
-                    v = np.int64(states[base + q]) + d_v[b]
                     top = max(top, v)
-                    if exact and v >> width[q]:
-                        width[q] = _bit_length(v)
-                        repack = True
-            r0 = r1 = 0
-            if resets is not None:
-                r0, r1 = r_ptr[t], r_ptr[t + 1]
-                for b in range(r0, r1):  # reset places end with r_v tokens
+                    if v > _INT32_MAX:
+                        status = OVERFLOW
+                        break
+                    if np.uint64(v) & ~msk[q]:
+                        cursor[NEED], cursor[NEED_S] = q, v
+                        status = WIDEN
+                        break
+                _set(succ, 0, q, v, wd, sh, msk)
+            if resets is not None and status == DONE:
+                for b in range(r_ptr[t], r_ptr[t + 1]):  # reset places end with r_v tokens
+                    q = r_p[b]
                     v = r_v[b]
                     top = max(top, v)
-                    if exact and v >> width[r_p[b]]:
-                        width[r_p[b]] = _bit_length(v)
-                        repack = True
-            if top > _INT32_MAX:
-                status = OVERFLOW
+                    if v > _INT32_MAX:
+                        status = OVERFLOW
+                        break
+                    if np.uint64(v) & ~msk[q]:
+                        cursor[NEED], cursor[NEED_S] = q, v
+                        status = WIDEN
+                        break
+                    _set(succ, 0, q, v, wd, sh, msk)
+            if status != DONE:
                 break
-            if repack:
-                _rekey(tab, width, mult, dkey, states, n, table, cursor)
-                exact = cursor[EXACT] != 0
-                key_i = _key(states, i, n_p, mult)
-            key = key_i + dkey[t]
-            if resets is not None:
-                for b in range(r0, r1):
-                    q = r_p[b]
-                    key += (np.uint64(r_v[b]) - np.uint64(states[base + q])) * mult[q]  # modulo 2**64
-            if not exact:
-                for p in range(n_p):
-                    succ[p] = states[base + p]
-                for b in range(d_ptr[t], d_ptr[t + 1]):
-                    succ[d_p[b]] += d_v[b]
-                if resets is not None:
-                    for b in range(r0, r1):
-                        succ[r_p[b]] = r_v[b]
+            key = _hash(succ, 0, n_w)
             s = _slot(key, bits)
             j = -1
             while table[2 * s + 1] != 0:
                 if table[2 * s] == key:
                     cand = int(table[2 * s + 1]) - 1
-                    if exact:
-                        j = cand
-                        break
                     same = True
-                    cb = cand * n_p
-                    for p in range(n_p):
-                        if states[cb + p] != succ[p]:
+                    cb = cand * n_w
+                    for w in range(n_w):
+                        if states[cb + w] != succ[w]:
                             same = False
                             break
                     if same:
@@ -387,14 +360,9 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                     stopping = 1
                     continue
                 j = n
-                jb = j * n_p
-                for p in range(n_p):
-                    states[jb + p] = states[base + p]
-                for b in range(d_ptr[t], d_ptr[t + 1]):
-                    states[jb + d_p[b]] += d_v[b]
-                if resets is not None:
-                    for b in range(r0, r1):
-                        states[jb + r_p[b]] = r_v[b]
+                jb = j * n_w
+                for w in range(n_w):
+                    states[jb + w] = succ[w]
                 table[2 * s] = key
                 table[2 * s + 1] = np.uint64(j + 1)
                 parent[j] = e
@@ -402,7 +370,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             dst[e] = j
             tr[e] = t
             e += 1
-        if status == OVERFLOW:
+        if status != DONE:
             break
         if dropped:
             trunc[n_trunc] = i
@@ -414,6 +382,18 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
     cursor[LEVEL_END], cursor[STOPPING], cursor[N_TRUNC] = level_end, stopping, n_trunc
     cursor[MAX_COUNT] = top
     return status
+
+
+@njit(cache=True)
+def unpack(words: np.ndarray, layout: np.ndarray, out: np.ndarray) -> None:
+    """Unpack markings: ``words`` (N, W) uint64 packed by ``layout`` (see :func:`run`) into ``out``
+    (N, |P|), any integer dtype wide enough for the counts."""
+    n_p = out.shape[1]
+    for i in range(words.shape[0]):
+        for p in range(n_p):
+            v = (words[i, layout[p]] >> np.uint64(layout[n_p + p])) & (
+                (np.uint64(1) << np.uint64(layout[2 * n_p + p])) - np.uint64(1))
+            out[i, p] = v
 
 
 @njit(cache=True)
@@ -444,8 +424,8 @@ def _target(cap: int, need: int, unit: int | np.int64, held: int | np.int64, max
 #: arcs, on the first such net.
 _RO2 = types.Array(types.int64, 2, "C", readonly=True)
 _RO1 = types.Array(types.int64, 1, "C", readonly=True)
-RUN_SIGNATURE = (_RO2, _RO2, _RO2, types.int64[::1], _RO1, _RO1, types.boolean, types.int64, types.int64,
-                 types.int64, types.none)
+RUN_SIGNATURE = (_RO2, _RO2, _RO2, types.int64[::1], _RO1, types.int64[::1], _RO1, types.boolean, types.int64,
+                 types.int64, types.int64, types.none)
 RESET_SIGNATURE = (*RUN_SIGNATURE[:-1], types.int64[::1])
 
 
@@ -484,7 +464,7 @@ def load_resets() -> None:
 
 @njit(cache=True)
 def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.ndarray, m0: np.ndarray,
-        prio: np.ndarray, use_prio: bool, max_states: int, max_bytes: int,
+        layout: np.ndarray, prio: np.ndarray, use_prio: bool, max_states: int, max_bytes: int,
         report_every: int, resets: np.ndarray | None) -> tuple:  # type: ignore[type-arg]
     """The whole breadth-first search of a net (see the module docstring).
 
@@ -494,6 +474,9 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         tab: packed arc lists (layout of :func:`tables`), or an empty array to build them from the
             matrices.
         m0: (|P|,) int64 initial marking.
+        layout: (3·|P|,) int64: per place the word of the packed marking that holds its field, the
+            field's shift in that word and its width in bits (1..31; a field never straddles two
+            words; :func:`coordinator.analysis.statespace.packed_layout`).
         prio, use_prio: (|T|,) int64 priority levels and whether to apply them (only the enabled
             transitions of the highest enabled level fire).
         max_states: a new marking beyond this many is dropped with its edge; the search then
@@ -505,27 +488,36 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
             else any array (``tab``): the reset lists of ``tab`` are applied.
 
     Returns:
-        ``(status, states, dst, tr, parent, expanded, out_ptr, complete, max_count)``: DONE,
-        OVERFLOW or MEMORY; states (N, |P|) int32 in breadth-first order; edges as CSR: dst (E,)
-        int32 and tr (E,) int32 sorted by source then transition, out_ptr (N+1,) int64; parent (N,)
-        int64 edge from the previous level (-1 for M0); expanded (N,) bool; whether the graph is
-        complete; the largest token count seen.
+        ``(status, states, dst, tr, parent, expanded, out_ptr, complete, max_count, place, count,
+        store_bytes)``: DONE, OVERFLOW, MEMORY or WIDEN (a count outgrew its place's field: the
+        search stopped there and ``place``, ``count`` say which; the caller widens the field and
+        searches again); states (N, W) uint64 packed markings in breadth-first order (:func:`unpack`);
+        edges as CSR: dst (E,) int32 and tr (E,) int32 sorted by source then transition, out_ptr
+        (N+1,) int64; parent (N,) int64 edge from the previous level (-1 for M0); expanded (N,) bool;
+        whether the graph is complete; the largest token count seen; the bytes of the marking store
+        and the hash table when the search ended.
     """
     arcs = tables(pre, inhibitor, incidence) if tab.shape[0] == 0 else tab
     n_p = m0.shape[0]
     n_t = arcs[1] - arcs[0] - 1
     in_ptr, in_p = arcs[arcs[0]:arcs[1]], arcs[arcs[1]:arcs[2]]
-    # one scratch allocation: the cursor, per place a key width, multiplier and successor count,
-    # per transition a key delta and an enabled slot, the trigger lists and their fill cursor
-    scratch = np.zeros(CURSOR_SIZE + 3 * n_p + 2 * n_t + 2 * (n_p + 2) + n_t, np.int64)
+    # the packed layout: per place its word, shift and mask; W words a marking
+    wd = layout[:n_p]
+    sh = np.empty(n_p, np.uint64)
+    msk = np.empty(n_p, np.uint64)
+    n_w = 1
+    for p in range(n_p):
+        sh[p] = np.uint64(layout[n_p + p])
+        msk[p] = (np.uint64(1) << np.uint64(layout[2 * n_p + p])) - np.uint64(1)
+        n_w = max(n_w, wd[p] + 1)
+    succ = np.zeros(n_w, np.uint64)
+    # one scratch allocation: the cursor, per transition an enabled slot, the trigger lists and
+    # their fill cursor
+    scratch = np.zeros(CURSOR_SIZE + n_t + 2 * (n_p + 2) + n_t, np.int64)
     cursor = scratch[:CURSOR_SIZE]
-    width = scratch[CURSOR_SIZE:CURSOR_SIZE + n_p]
-    mult = scratch[CURSOR_SIZE + n_p:CURSOR_SIZE + 2 * n_p].view(np.uint64)
-    succ = scratch[CURSOR_SIZE + 2 * n_p:CURSOR_SIZE + 3 * n_p]
-    base = CURSOR_SIZE + 3 * n_p
-    dkey = scratch[base:base + n_t].view(np.uint64)
-    enabled = scratch[base + n_t:base + 2 * n_t]
-    base += 2 * n_t
+    base = CURSOR_SIZE
+    enabled = scratch[base:base + n_t]
+    base += n_t
     trig_ptr = scratch[base:base + n_p + 2]
     slot = scratch[base + n_p + 2:base + 2 * (n_p + 2)]
     trig_t = scratch[base + 2 * (n_p + 2):base + 2 * (n_p + 2) + n_t]
@@ -541,10 +533,10 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
         trig_t[slot[first]] = t
         slot[first] += 1
-    # buffers; bytes per state: its int32 marking (and the narrowed copy the caller makes), the
-    # parent edge, the out-edge pointer (twice: the final copy) and the expanded flag; per edge:
-    # int32 target and transition
-    unit_s = np.int64(5 * n_p + 25)
+    # buffers; bytes per state: its packed marking (W uint64), the caller's unpacked copy (one
+    # byte a place in the common case), the parent edge, the out-edge pointer (twice: the final
+    # copy) and the expanded flag; per edge: int32 target and transition
+    unit_s = np.int64(8 * n_w + n_p + 25)
     unit_e = np.int64(8)
     no_ceiling = np.int64(1 << 62)
     # first capacity: room for a few levels of a small net without growing, within 1/8 of the budget
@@ -554,7 +546,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     size = 128
     while size < 2 * cap:
         size *= 2
-    states = np.empty(cap * n_p, np.int32)
+    states = np.zeros(cap * n_w, np.uint64)
     parent = np.empty(cap, np.int64)
     out_ptr = np.empty(cap + 1, np.int64)
     table = np.zeros(2 * size, np.uint64)
@@ -562,31 +554,27 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     tr = np.empty(ecap, np.int32)
     trunc = np.empty(16, np.int64)
     held = cap * unit_s + ecap * unit_e + 16 * size
-    # state 0 = M0; key widths: the 64 bits shared out evenly (spare bits save repacking), at
-    # least what M0 needs; exact packing if they fit
-    even = max(1, 64 // max(n_p, 1))
+    # state 0 = M0, packed (the caller's layout holds it)
     top = 0
-    total = 0
     for p in range(n_p):
-        states[p] = min(m0[p], _INT32_MAX)
-        width[p] = max(even, _bit_length(m0[p]))
-        total += width[p]
         top = max(top, m0[p])
-    if total > 64:
-        for p in range(n_p):
-            width[p] = max(1, _bit_length(m0[p]))
+    cursor[MAX_COUNT] = top
+    for p in range(n_p):
+        if np.uint64(m0[p]) & ~msk[p]:
+            cursor[NEED], cursor[NEED_S] = p, m0[p]
+            return (OVERFLOW if m0[p] > _INT32_MAX else WIDEN, states[:0].reshape((0, n_w)), dst[:0], tr[:0], parent[:0], np.zeros(0, np.bool_),
+                    out_ptr[:1], False, top, cursor[NEED], cursor[NEED_S], np.int64(0))
+        _set(states, 0, p, m0[p], wd, sh, msk)
     cursor[N] = 1
     cursor[LEVEL_END] = 1
-    cursor[MAX_COUNT] = top
-    cursor[EXACT] = 1
     parent[0] = -1
     out_ptr[0] = 0
-    _rekey(arcs, width, mult, dkey, states, cursor[N], table, cursor)
+    _fill_table(table, states, 1, n_w)
     status = OVERFLOW
     next_report = report_every if report_every > 0 else 1 << 62  # in expanded markings
     while top <= _INT32_MAX:
         status = _search(arcs, trig_ptr, trig_t, prio, use_prio, states, table, dst, tr, out_ptr, parent,
-                         trunc, cursor, width, mult, succ, dkey, enabled, max_states,
+                         trunc, cursor, wd, sh, msk, succ, enabled, max_states,
                          max(1, next_report - cursor[NEXT]), resets)
         if status == ROOM:
             n, e, k, ks = cursor[N], cursor[E], cursor[NEED], cursor[NEED_S]
@@ -595,7 +583,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
                 if new < 0:
                     status = MEMORY
                 else:
-                    states = _grow(states, new * n_p, n * n_p)
+                    states = _grow(states, new * n_w, n * n_w)
                     parent = _grow(parent, new, n)
                     out_ptr = _grow(out_ptr, new + 1, cursor[NEXT] + 1)
                     held += (new - cap) * unit_s
@@ -620,10 +608,10 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
                     held += 16 * (new - size)
                     size = new
                     table = np.zeros(2 * size, np.uint64)
-                    _fill_table(table, states, n, n_p, mult)
+                    _fill_table(table, states, n, n_w)
             if status == ROOM:
                 continue
-        if status == OVERFLOW:
+        if status == OVERFLOW or status == WIDEN:
             break
         if status == MEMORY:
             cursor[STOPPING] = 1
@@ -634,6 +622,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
             break
         next_report = cursor[NEXT] + report_every
     n, e, done = cursor[N], cursor[E], cursor[NEXT]
+    store = np.int64(cap * 8 * n_w + 16 * size)  # markings and hash table at the end of the search
     table = np.zeros(2, np.uint64)  # free the hash table before the result arrays are made
     ptr = np.empty(n + 1, np.int64)
     for i in range(done + 1):
@@ -654,7 +643,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         dst = _grow(dst, e, e)
         tr = _grow(tr, e, e)
     if 4 * n < 3 * cap and held + n * unit_s <= max_bytes:
-        states = _grow(states, n * n_p, n * n_p)
+        states = _grow(states, n * n_w, n * n_w)
         parent = _grow(parent, n, n)
-    return (status, states[:n * n_p].reshape((n, n_p)), dst[:e], tr[:e], parent[:n], expanded, ptr,
-            cursor[STOPPING] == 0, cursor[MAX_COUNT])
+    return (status, states[:n * n_w].reshape((n, n_w)), dst[:e], tr[:e], parent[:n], expanded, ptr,
+            cursor[STOPPING] == 0, cursor[MAX_COUNT], cursor[NEED], cursor[NEED_S], store)

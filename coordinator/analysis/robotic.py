@@ -571,7 +571,9 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
 
     Keys: ``net``, ``places``, ``transitions``, ``states``, ``edges``, ``complete``, ``truncated``
     (null, or ``{"by": "max_states" | "max_memory", ...}``), ``budget`` (``max_states``,
-    ``max_memory_bytes``), ``engine`` (``used``: "explicit" or "symbolic", ``reason``, and the same
+    ``max_memory_bytes``), ``memory_per_marking_bytes`` and ``packed_bits_per_marking`` (the explicit
+    search's marking store and hash table per marking found, and the bits of one packed marking:
+    :class:`~coordinator.analysis.statespace.StateSpace`; null when no graph was built), ``engine`` (``used``: "explicit" or "symbolic", ``reason``, and the same
     for the ``environment`` net), ``bounded``, ``place_bounds``, ``place_bounds_exact`` (places whose bound
     is exact; the others are upper bounds), ``unbounded_places``, ``max_token_in_place``,
     ``max_token_per_marking``, ``one_safe``, ``deadlock``, ``deadlocks`` (marking + firing sequence
@@ -630,6 +632,8 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
         "complete": a.complete,
         "truncated": truncated,
         "budget": {"max_states": max_states, "max_memory_bytes": budget},
+        "memory_per_marking_bytes": None if a.space is None else round(a.space.memory_per_marking_bytes, 1),
+        "packed_bits_per_marking": None if a.space is None else a.space.packed_bits,
         "engine": {"used": a.engine, "reason": a.engine_reason,
                    "environment": None if env is None else {"used": env.engine, "reason": env.engine_reason}},
         "bounded": a.bounded,

@@ -32,7 +32,7 @@ from coordinator.analysis.matrices import DENSE_LIMIT, dense_is_cheap, sparse_ne
 from coordinator.errors import AnalysisError
 from coordinator.net import Arc, Marking, PetriNet, Place, Transition
 
-__all__ = ["StateSpace", "arc_table", "default_max_bytes", "enabled_mask", "explore", "load_search"]
+__all__ = ["StateSpace", "arc_table", "default_max_bytes", "enabled_mask", "explore", "load_search", "packed_layout"]
 
 #: largest n·|P|·|T| for which enabling is computed by matrix products (see _enabled)
 _MAX_PRODUCT = 500_000
@@ -62,6 +62,10 @@ class StateSpace:
         stopped_by: why an incomplete search stopped: ``"max_states"`` (the state limit; the level
             in progress was finished) or ``"max_memory"`` (the byte budget; stopped at once);
             None when complete.
+        packed_bits: bits of one marking in the search's packed store (the sum of the places'
+            field widths, :func:`packed_layout`); 0 if not made by :func:`explore`.
+        store_bytes: bytes of the search's marking store and hash table when it ended (capacity,
+            not just the markings found); 0 if not made by :func:`explore`.
 
     ``src`` (edge sources, (E,) int32, non-decreasing) is derived from ``out_ptr`` on first use.
     """
@@ -75,6 +79,13 @@ class StateSpace:
     parent_edge: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     expanded: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
     stopped_by: str | None = None
+    packed_bits: int = 0
+    store_bytes: int = 0
+
+    @property
+    def memory_per_marking_bytes(self) -> float:
+        """Bytes per marking of the search's marking store and hash table (``store_bytes / N``)."""
+        return self.store_bytes / max(self.n_states, 1)
 
     @property
     def src(self) -> np.ndarray:
@@ -358,14 +369,62 @@ def arc_table(net: PetriNet) -> np.ndarray:
     return np.concatenate([head, *parts])
 
 
+#: field width, bits, of a place without a proven bound before it needs more; then 16, then 31
+_UNPROVEN_BITS = 8
+#: widest field: a count above 2**31 - 1 is an error of the search, not a wider field
+_MAX_BITS = 31
+
+
+def packed_layout(widths: np.ndarray) -> tuple[np.ndarray, int]:
+    """The packed form of a marking: each place a field of ``widths[p]`` bits, the fields laid
+    first-fit in 64-bit words, in place order, none straddling two words.
+
+    Args:
+        widths: (|P|,) int64 field widths, 1..31 bits.
+
+    Returns:
+        ``(layout, words)``: layout (3·|P|,) int64 — per place its word, its shift in the word, its
+        width (what :func:`.reach_kernel.run` takes) — and the number of words of a marking.
+    """
+    n_p = widths.shape[0]
+    layout = np.zeros(3 * n_p, np.int64)
+    word = used = 0
+    for p, w in enumerate(widths.tolist()):
+        if used + w > 64:
+            word, used = word + 1, 0
+        layout[p], layout[n_p + p], layout[2 * n_p + p] = word, used, w
+        used += w
+    return layout, word + 1
+
+
+def _widths(bounds: np.ndarray | None, m0: np.ndarray) -> np.ndarray:
+    """Field widths from proven place bounds (-1: none; a place bounded by b gets bit_length(b)
+    bits, at least one) and the initial marking."""
+    n_p = m0.shape[0]
+    b = np.full(n_p, -1, np.int64) if bounds is None else np.asarray(bounds, dtype=np.int64)
+    if b.shape != (n_p,):
+        raise AnalysisError(f"bounds has shape {b.shape}; expected ({n_p},)")
+    widths = np.full(n_p, _UNPROVEN_BITS, np.int64)
+    proven = b >= 0
+    widths[proven] = [max(1, int(v).bit_length()) for v in b[proven].tolist()]
+    need = np.array([int(v).bit_length() for v in np.asarray(m0).tolist()], np.int64)
+    return np.minimum(np.maximum(widths, need), _MAX_BITS)
+
+
 def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray | None = None,
-            progress: Callable[[int, int], None] | None = None, max_bytes: int | None = None) -> StateSpace:
+            progress: Callable[[int, int], None] | None = None, max_bytes: int | None = None,
+            bounds: np.ndarray | None = None) -> StateSpace:
     """Build the reachability graph of ``net`` by a compiled breadth-first search.
 
     The ordinary firing rule of :mod:`coordinator.net` is used (inhibitor arcs honoured, reset arcs
     empty their places; events, weights and rates ignored). Technique and cost: :mod:`.reach_kernel` and docs/analysis.md;
     reachability graphs: Murata 1989, section V-A. The first call in a process loads the compiled
     search (about 0.5 s; a few seconds more the first time on a machine, to compile it).
+
+    Markings are stored packed (:func:`packed_layout`): a place with a proven bound b in
+    bit_length(b) bits, one without in 8. Every count written is checked against its field: one
+    that does not fit (a place without a proven bound, or a wrong bound) stops the search, the
+    field is widened (to 16 bits, then 31) and the search starts again; a packed marking never wraps.
 
     Args:
         net: the net; its initial marking is the root.
@@ -380,13 +439,15 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         max_bytes: byte budget of the search's buffers (markings, edges, hash table, and the result's
             narrowing copy); when growing a buffer would exceed it, the search stops at once with
             what it has (``stopped_by == "max_memory"``). Default :func:`default_max_bytes`.
+        bounds: optional (|P|,) int64 proven upper bounds of the places (-1 where none), e.g. from
+            the P-invariants or the state equation (:mod:`.lp`); they size the packed fields only.
 
     Returns:
         The :class:`StateSpace`.
 
     Raises:
-        AnalysisError: on a bad ``priority`` shape, ``max_states < 1``, or a token count above
-            2**31 - 1 (the search stores counts as int32).
+        AnalysisError: on a bad ``priority`` or ``bounds`` shape, ``max_states < 1``, or a token
+            count above 2**31 - 1 (the largest field holds 31 bits).
     """
     rk = _kernel()
     if max_states < 1:
@@ -408,21 +469,33 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         tab, m0 = arc_table(net), sparse_net(net).m0
     if net.has_resets:
         rk.load_resets()  # the search of nets with reset arcs is a second compiled specialisation
+    widths = _widths(bounds, np.asarray(m0))
     rk.set_progress(progress)
     try:
-        status, states, dst, tr, parent, expanded, out_ptr, complete, top = rk.run(
-            pre, inh, inc, tab, m0, prio, use_prio, max_states, budget,
-            _PROGRESS_STATES if progress is not None else 0, tab if net.has_resets else None)
+        while True:
+            layout, _ = packed_layout(widths)
+            status, words, dst, tr, parent, expanded, out_ptr, complete, top, place, count, store = rk.run(
+                pre, inh, inc, tab, m0, layout, prio, use_prio, max_states, budget,
+                _PROGRESS_STATES if progress is not None else 0, tab if net.has_resets else None)
+            if status != rk.WIDEN:
+                break
+            # a count outgrew its field: widen it (8 -> 16 -> 31 bits) and search again
+            if widths[place] >= _MAX_BITS:
+                raise AnalysisError(f"internal: a count of {count} does not fit the widest field of place {place}")
+            widths[place] = min(_MAX_BITS, max(int(count).bit_length(), 16 if widths[place] < 16 else _MAX_BITS))
     finally:
         rk.set_progress(None)
     if status == rk.OVERFLOW:
-        raise AnalysisError(f"a token count reached {top}, above 2**31 - 1 (the search stores int32 counts), "
-                            f"after {states.shape[0]} markings; petrobot analyze decides boundedness by coverability")
+        raise AnalysisError(f"a token count reached {top}, above 2**31 - 1 (the search stores counts in at most "
+                            f"31 bits), after {words.shape[0]} markings; petrobot analyze decides boundedness "
+                            "by coverability")
     stopped = None if complete else ("max_memory" if status == rk.MEMORY else "max_states")
-    narrowed = states.astype(_storage_dtype(top))
-    del states
-    return StateSpace(net=net, states=narrowed, out_ptr=out_ptr, dst=dst, transition=tr,
-                      complete=bool(complete), parent_edge=parent, expanded=expanded, stopped_by=stopped)
+    states = np.empty((words.shape[0], len(net.places)), _storage_dtype(top))
+    rk.unpack(words, layout, states)
+    del words
+    return StateSpace(net=net, states=states, out_ptr=out_ptr, dst=dst, transition=tr,
+                      complete=bool(complete), parent_edge=parent, expanded=expanded, stopped_by=stopped,
+                      packed_bits=int(widths.sum()), store_bytes=int(store))
 
 
 def load_search() -> float:

@@ -452,6 +452,7 @@ class _Structure:
     total_cert: bool
     notes: list[str]
     sources: dict[str, str]
+    lp_bounds: np.ndarray  # per place, from the certificate of the total token count's LP (-1: none)
 
     @property
     def bounded(self) -> bool:
@@ -483,13 +484,23 @@ def _structure_phase(net: PetriNet, sn: SparseNet, budget: int, max_invariant_ro
     bounding_pinv = pinv  # every semiflow of C bounds the net, reset arcs or not
     if sn.n_resets:
         pinv, tinv, psup, tsup = _without_reset_results(net, sn, pinv, tinv, psup, tsup, notes, sources)
-    total, total_done, total_cert = lp.total_bound(sn, seconds=lp_seconds)
+    total, total_done, total_cert, lp_bounds = lp.total_place_bounds(sn, seconds=lp_seconds)
     structural = Structural(p_support=psup, t_support=tsup, total_bound=total, total_certified=total_cert)
     if not total_done:
         notes.append("the state-equation LP of the total token count did not finish in time")
     return _Structure(pinv=pinv, tinv=tinv, psup=psup, tsup=tsup, structural=structural,
                       bounding_pinv=bounding_pinv, sbounds=structural_bounds(net, bounding_pinv), total=total,
-                      total_cert=total_cert, notes=notes, sources=sources)
+                      total_cert=total_cert, notes=notes, sources=sources, lp_bounds=lp_bounds)
+
+
+def _search_bounds(st: _Structure) -> np.ndarray:
+    """Per-place bounds known before the search (-1 where none): the P-invariants' and those of the
+    total token count's LP certificate; they size the fields of the search's packed markings (a wrong one costs a wider
+    field and a new start, never a wrong graph: :func:`~coordinator.analysis.statespace.explore`)."""
+    bounds = st.sbounds.copy()
+    tighter = (st.lp_bounds >= 0) & ((bounds < 0) | (st.lp_bounds < bounds))
+    bounds[tighter] = st.lp_bounds[tighter]
+    return bounds
 
 
 def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,
@@ -498,8 +509,9 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
     structure does not bound the net (a short probe first: unboundedness is often cheap to see)."""
     space: StateSpace | None = None
     witness: CoveringWitness | None = None
+    bounds = _search_bounds(st)
     if not st.bounded and max_states > PROBE_STATES:
-        probe = explore(net, max_states=PROBE_STATES, progress=progress, max_bytes=graph_bytes)
+        probe = explore(net, max_states=PROBE_STATES, progress=progress, max_bytes=graph_bytes, bounds=bounds)
         if probe.complete:
             space = probe
         else:
@@ -507,7 +519,7 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
             if witness is not None:
                 space = probe
     if space is None:
-        space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes)
+        space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds)
         if not space.complete and not st.bounded and witness is None:
             witness = covering_witness(space)
     return space, witness
