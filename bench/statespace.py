@@ -9,7 +9,10 @@ so far took under ``--repeat-budget`` seconds, run again: ``seconds`` is the bes
 run measures mostly noise. Reported per model: states, edges, seconds, cpu_seconds (of the best
 run), first_seconds, runs, load_seconds (numba's import and the compiled search's load, once per
 process, before any run), net_matrices_seconds, peak_rss_bytes, bytes_per_marking (peak minus the
-RSS after that load and before the first PNML import, per marking), markings_per_s, and for pm4py
+RSS after that load and before the first PNML import, per marking), memory_per_marking_bytes (the
+search's packed marking store and hash table per marking) and packed_bits (one packed marking; the
+search gets the place bounds ``petrobot analyze`` proves before its search, computed untimed),
+markings_per_s, and for pm4py
 pm4py_seconds / pm4py_first_seconds / pm4py_runs / pm4py_markings_per_s / speedup (best wall clock
 against best wall clock) and speedup_cpu. pm4py runs with its own time limit (``max_elab_time``);
 when it hits the cap, its rate is measured on the part of the graph it built (``pm4py_complete``
@@ -146,6 +149,7 @@ def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None 
                mcc: str | None = None) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
     from coordinator.analysis.statespace import explore, load_search
+    from coordinator.analysis.structure import search_bounds
     from coordinator.net import PetriNet
 
     # numba's import and the compiled search's load from its cache, once per process: reported on
@@ -153,6 +157,7 @@ def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None 
     load = load_search()
 
     matrices: list[float] = []
+    bounds: list[Any] = []
 
     def build() -> PetriNet:
         # the net's own cached matrices are part of the net model, as pm4py's arc objects are of
@@ -162,18 +167,21 @@ def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None 
         for view in (net.pre, net.post, net.inhibitor, net.incidence):
             assert view.shape == (len(net.places), len(net.transitions))
         matrices.append(time.perf_counter() - start)
+        if not bounds:  # the bounds petrobot analyze proves before its search, untimed as the matrices
+            bounds.append(search_bounds(net))
         return net
 
     before = _rss_now()
     space, first, wall, cpu, runs = _best_of(
-        build, lambda net: explore(net, max_states=max_states, max_bytes=max_bytes), budget)
+        build, lambda net: explore(net, max_states=max_states, max_bytes=max_bytes, bounds=bounds[0]), budget)
     peak = _peak_rss()
     return {"states": space.n_states, "edges": space.n_edges, "complete": space.complete,
             "stopped_by": space.stopped_by, "graph_bytes": space.nbytes, "seconds": wall,
             "cpu_seconds": cpu, "first_seconds": first, "runs": runs, "load_seconds": load,
             "net_matrices_seconds": min(matrices),
             "peak_rss_bytes": peak,
-            "rss_before_bytes": before, "bytes_per_marking": (peak - before) / max(space.n_states, 1)}
+            "rss_before_bytes": before, "bytes_per_marking": (peak - before) / max(space.n_states, 1),
+            "memory_per_marking_bytes": space.memory_per_marking_bytes, "packed_bits": space.packed_bits}
 
 
 def _oracle_row(spec: str) -> dict[str, str] | None:
@@ -413,7 +421,8 @@ def _print_row(row: dict[str, Any]) -> None:
           f"{row['seconds'] * 1e3:>10,.2f} ms (best of {row['runs']}; cold {row['first_seconds'] * 1e3:,.2f} ms; "
           f"search load {row['load_seconds']:.2f} s) "
           f"{row['markings_per_s']:>10,.0f}/s peak {row['peak_rss_bytes'] / 2**20:>6.0f} MiB "
-          f"({row['bytes_per_marking']:.0f} B/marking){base}", flush=True)
+          f"({row['bytes_per_marking']:.0f} B/marking; store {row['memory_per_marking_bytes']:.0f} B/marking, "
+          f"packed {row['packed_bits']} bits){base}", flush=True)
 
 
 if __name__ == "__main__":

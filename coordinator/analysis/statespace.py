@@ -424,7 +424,7 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     Markings are stored packed (:func:`packed_layout`): a place with a proven bound b in
     bit_length(b) bits, one without in 8. Every count written is checked against its field: one
     that does not fit (a place without a proven bound, or a wrong bound) stops the search, the
-    field is widened (to 16 bits, then 31) and the search starts again; a packed marking never wraps.
+    field is doubled (8 bits to 16, then 31) and the search starts again; a packed marking never wraps.
 
     Args:
         net: the net; its initial marking is the root.
@@ -479,10 +479,11 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
                 _PROGRESS_STATES if progress is not None else 0, tab if net.has_resets else None)
             if status != rk.WIDEN:
                 break
-            # a count outgrew its field: widen it (8 -> 16 -> 31 bits) and search again
+            # a count outgrew its field: double it (8 -> 16 -> 31 bits, or what the count needs) and
+            # search again
             if widths[place] >= _MAX_BITS:
                 raise AnalysisError(f"internal: a count of {count} does not fit the widest field of place {place}")
-            widths[place] = min(_MAX_BITS, max(int(count).bit_length(), 16 if widths[place] < 16 else _MAX_BITS))
+            widths[place] = min(_MAX_BITS, max(int(count).bit_length(), 2 * int(widths[place])))
     finally:
         rk.set_progress(None)
     if status == rk.OVERFLOW:

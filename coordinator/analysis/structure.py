@@ -87,6 +87,7 @@ __all__ = [
     "analyse",
     "graph_liveness",
     "graph_pass_bytes",
+    "search_bounds",
     "liveness_levels",
     "ordinary_view",
     "record_only_places",
@@ -501,6 +502,19 @@ def _search_bounds(st: _Structure) -> np.ndarray:
     tighter = (st.lp_bounds >= 0) & ((bounds < 0) | (st.lp_bounds < bounds))
     bounds[tighter] = st.lp_bounds[tighter]
     return bounds
+
+
+def search_bounds(net: PetriNet, *, max_bytes: int | None = None, invariant_seconds: float = 5.0,
+                  lp_seconds: float = 10.0) -> np.ndarray:
+    """The place bounds :func:`analyse` proves before its explicit search and gives it to size the
+    packed markings (P-invariants, the certificate of the total token count's LP).
+
+    Returns:
+        (|P|,) int64 bounds of the ordinary view's places, -1 where none is proven.
+    """
+    net = ordinary_view(net)
+    budget = default_max_bytes() if max_bytes is None else int(max_bytes)
+    return _search_bounds(_structure_phase(net, sparse_net(net), budget, 20_000, invariant_seconds, lp_seconds))
 
 
 def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,

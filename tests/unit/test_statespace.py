@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from analysis_nets import make_net
 
-from coordinator.analysis.statespace import StateSpace, enabled_mask, explore
+from coordinator.analysis.statespace import StateSpace, enabled_mask, explore, packed_layout
 from coordinator.errors import AnalysisError
 from coordinator.net import Marking, PetriNet
 from tests.unit.mcc_models import MCC
@@ -309,3 +309,43 @@ def test_progress_can_stop_a_long_search() -> None:
         explore(net, max_states=200_000, progress=stop)
     assert calls == [65_537]
     assert explore(net, max_states=10).n_states == 10  # the hook is cleared after an interrupted search
+
+
+def test_a_count_beyond_its_narrow_field_widens_the_field_and_never_wraps() -> None:
+    # a counter to 300: with a (wrong) bound of 1, of 7 and of 255, and with none (8 bits), the
+    # field overflows; the search widens it and starts again, never storing a wrapped count
+    net = make_net("counter", {"go": 1}, {"tick": ({"go": 1}, {"go": 1, "n": 1})}, inhibitors={"tick": {"n": 300}})
+    n = net.place_index["n"]
+    for claimed in (1, 7, 255, -1):
+        bounds = np.array([1, claimed], np.int64) if n == 1 else np.array([claimed, 1], np.int64)
+        ss = assert_same_as_reference(net, bounds=bounds)
+        assert sorted(ss.states[:, n].tolist()) == list(range(301))
+        assert ss.packed_bits >= 1 + 9  # the counter's field was widened to hold 300
+
+
+def test_a_one_safe_net_packs_one_bit_a_place_and_reports_its_bytes_per_marking() -> None:
+    chain = {f"t{i}": ({f"p{i}": 1}, {f"p{i + 1}": 1}) for i in range(80)}
+    chain["back"] = ({"p80": 1}, {"p0": 1})
+    net = make_net("ring", {"p0": 1}, chain)
+    ss = assert_same_as_reference(net, bounds=np.ones(81, np.int64))  # 81 one-bit fields: two words
+    assert ss.packed_bits == 81
+    assert 16 <= ss.memory_per_marking_bytes == ss.store_bytes / ss.n_states
+    wide = explore(net)  # no proven bound: 8 bits a place, 11 words
+    assert wide.packed_bits == 8 * 81 and wide.n_states == ss.n_states
+    assert wide.memory_per_marking_bytes > ss.memory_per_marking_bytes
+
+
+def test_packed_fields_never_straddle_two_words() -> None:
+    layout, words = packed_layout(np.array([31, 31, 3, 1, 31, 31], np.int64))
+    n = 6
+    word, shift, width = layout[:n], layout[n:2 * n], layout[2 * n:]
+    assert words == 3 and word.tolist() == [0, 0, 1, 1, 1, 2]
+    assert ((shift + width) <= 64).all()
+
+
+def test_analyze_json_reports_bytes_per_marking() -> None:
+    from coordinator.analysis.robotic import report
+
+    out = report(mutex())
+    assert out["memory_per_marking_bytes"] > 0
+    assert out["packed_bits_per_marking"] == len(mutex().places)  # every place bounded by 1
