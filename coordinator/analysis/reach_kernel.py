@@ -207,8 +207,8 @@ def _set(words: np.ndarray, base: int, p: int, v: np.int64, wd: np.ndarray, sh: 
 def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.ndarray, use_prio: bool,
             states: np.ndarray, table: np.ndarray, dst: np.ndarray, tr: np.ndarray, out_ptr: np.ndarray,
             parent: np.ndarray, trunc: np.ndarray, cursor: np.ndarray, wd: np.ndarray, sh: np.ndarray,
-            msk: np.ndarray, succ: np.ndarray, enabled: np.ndarray, max_states: int, budget: int,
-            resets: np.ndarray | None) -> int:
+            msk: np.ndarray, succ: np.ndarray, cur: np.ndarray, enabled: np.ndarray, max_states: int,
+            budget: int, resets: np.ndarray | None) -> int:
     """Expand markings in breadth-first order, at most ``budget`` of them, from ``cursor[NEXT]``,
     in the given buffers (never reallocated here: ``ROOM`` says one is full, and ``cursor[NEED]``
     how many successors the state waiting to be expanded has).
@@ -223,8 +223,8 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             (ecap,) int32 edge targets; tr: (ecap,) int32 their transitions; out_ptr: (cap + 1,)
             int64, the edges of state i are ``out_ptr[i]:out_ptr[i+1]``; parent: (cap,) int64 parent
             edge of each state; trunc: int64 sources that lost an edge to the state limit;
-            cursor: int64 (:data:`CURSOR_SIZE`,); succ (W,) uint64 successor scratch; enabled (|T|,)
-            scratch.
+            cursor: int64 (:data:`CURSOR_SIZE`,); succ (W,) uint64 successor scratch; cur (|P|,)
+            int64 the marking being expanded, unpacked; enabled (|T|,) scratch.
         max_states: a new successor beyond this many states is dropped (its source goes to
             ``trunc``) and the search stops at the end of the level.
         budget: most markings to expand in this call.
@@ -260,21 +260,23 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             status = BUDGET
             break
         base = i * n_w
+        for p in range(n_p):  # the marking, unpacked once
+            cur[p] = _get(states, base, p, wd, sh, msk)
         # enabled transitions: those whose trigger place is marked, then the source transitions
         k = 0
         for p in range(n_p + 1):
-            if p < n_p and _get(states, base, p, wd, sh, msk) == 0:
+            if p < n_p and cur[p] == 0:
                 continue
             for a in range(trig_ptr[p], trig_ptr[p + 1]):
                 t = trig_t[a]
                 ok = True
                 for b in range(in_ptr[t], in_ptr[t + 1]):
-                    if _get(states, base, in_p[b], wd, sh, msk) < in_w[b]:
+                    if cur[in_p[b]] < in_w[b]:
                         ok = False
                         break
                 if ok:
                     for b in range(ih_ptr[t], ih_ptr[t + 1]):
-                        if _get(states, base, ih_p[b], wd, sh, msk) >= ih_w[b]:
+                        if cur[ih_p[b]] >= ih_w[b]:
                             ok = False
                             break
                 if ok:
@@ -312,7 +314,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                 succ[w] = states[base + w]
             for b in range(d_ptr[t], d_ptr[t + 1]):
                 q = d_p[b]
-                v = _get(states, base, q, wd, sh, msk) + d_v[b]
+                v = cur[q] + d_v[b]
                 if d_v[b] > 0:
                     top = max(top, v)
                     if v > _INT32_MAX:
@@ -511,6 +513,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         msk[p] = (np.uint64(1) << np.uint64(layout[2 * n_p + p])) - np.uint64(1)
         n_w = max(n_w, wd[p] + 1)
     succ = np.zeros(n_w, np.uint64)
+    cur = np.zeros(n_p, np.int64)
     # one scratch allocation: the cursor, per transition an enabled slot, the trigger lists and
     # their fill cursor
     scratch = np.zeros(CURSOR_SIZE + n_t + 2 * (n_p + 2) + n_t, np.int64)
@@ -574,7 +577,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     next_report = report_every if report_every > 0 else 1 << 62  # in expanded markings
     while top <= _INT32_MAX:
         status = _search(arcs, trig_ptr, trig_t, prio, use_prio, states, table, dst, tr, out_ptr, parent,
-                         trunc, cursor, wd, sh, msk, succ, enabled, max_states,
+                         trunc, cursor, wd, sh, msk, succ, cur, enabled, max_states,
                          max(1, next_report - cursor[NEXT]), resets)
         if status == ROOM:
             n, e, k, ks = cursor[N], cursor[E], cursor[NEED], cursor[NEED_S]
