@@ -22,8 +22,9 @@ result. What they implement (the reasons and the measurements are in docs/analys
   proven bound, given by the caller: :func:`coordinator.analysis.statespace.packed_layout`), the
   fields first-fit in 64-bit words, so a marking of a 1-safe net of |P| places takes about |P| / 8
   bytes. A successor is the parent's words with the fields of the changed places rewritten, each
-  new count checked against its field: a count that does not fit stops the search (status
-  ``WIDEN``), the caller widens that field and searches again, so a field never wraps. The hash
+  new count checked against its field: a count that does not fit stops the expansion of its
+  parent (status ``WIDEN``, the parent's successors found so far dropped), the field is widened,
+  every marking found is repacked, and the parent is expanded again, so a field never wraps. The hash
   table's key is a hash of the packed words; a key hit is confirmed by comparing the words. Keys
   are not stored with the markings: the table is rebuilt from the markings when it grows.
 * An open-addressing hash table (linear probing, load at most 1/2) of (key, index + 1) pairs side
@@ -251,6 +252,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
     mask = size - 1
     status = DONE
     done = 0
+    n0, e0, stopping0 = n, e, stopping
     while True:
         if i == level_end:
             if stopping != 0 or i == n:
@@ -260,6 +262,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             status = BUDGET
             break
         base = i * n_w
+        n0, e0, stopping0 = n, e, stopping  # restored if a field overflows while i is expanded
         for p in range(n_p):  # the marking, unpacked once
             cur[p] = _get(states, base, p, wd, sh, msk)
         # enabled transitions: those whose trigger place is marked, then the source transitions
@@ -380,10 +383,30 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
         out_ptr[i + 1] = e
         i += 1
         done += 1
+    if status == WIDEN:  # the successors of i found so far are dropped: i is expanded again
+        n, e, stopping = n0, e0, stopping0
     cursor[N], cursor[E], cursor[NEXT] = n, e, i
     cursor[LEVEL_END], cursor[STOPPING], cursor[N_TRUNC] = level_end, stopping, n_trunc
     cursor[MAX_COUNT] = top
     return status
+
+
+@njit(cache=True)
+def _fields(lay: np.ndarray, n_p: int, sh: np.ndarray, msk: np.ndarray) -> int:
+    """Lay the fields of widths ``lay[2|P|:3|P|]`` first-fit in 64-bit words, none straddling two
+    (fills the words ``lay[:|P|]``, shifts ``lay[|P|:2|P|]`` and ``sh``, masks ``msk``); returns W."""
+    word = used = 0
+    for p in range(n_p):
+        w = lay[2 * n_p + p]
+        if used + w > 64:
+            word += 1
+            used = 0
+        lay[p] = word
+        lay[n_p + p] = used
+        sh[p] = np.uint64(used)
+        msk[p] = (np.uint64(1) << np.uint64(w)) - np.uint64(1)
+        used += w
+    return word + 1
 
 
 @njit(cache=True)
@@ -476,9 +499,10 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         tab: packed arc lists (layout of :func:`tables`), or an empty array to build them from the
             matrices.
         m0: (|P|,) int64 initial marking.
-        layout: (3·|P|,) int64: per place the word of the packed marking that holds its field, the
-            field's shift in that word and its width in bits (1..31; a field never straddles two
-            words; :func:`coordinator.analysis.statespace.packed_layout`).
+        layout: (4·|P|,) int64: per place the word of the packed marking that holds its field, the
+            field's shift in that word, its width in bits (1..31; a field never straddles two
+            words; :func:`coordinator.analysis.statespace.packed_layout`), and the width its proven
+            bound needs (0: none), which a field that overflows takes at once.
         prio, use_prio: (|T|,) int64 priority levels and whether to apply them (only the enabled
             transitions of the highest enabled level fire).
         max_states: a new marking beyond this many is dropped with its edge; the search then
@@ -490,10 +514,9 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
             else any array (``tab``): the reset lists of ``tab`` are applied.
 
     Returns:
-        ``(status, states, dst, tr, parent, expanded, out_ptr, complete, max_count, place, count,
-        store_bytes)``: DONE, OVERFLOW, MEMORY or WIDEN (a count outgrew its place's field: the
-        search stopped there and ``place``, ``count`` say which; the caller widens the field and
-        searches again); states (N, W) uint64 packed markings in breadth-first order (:func:`unpack`);
+        ``(status, states, dst, tr, parent, expanded, out_ptr, complete, max_count, layout,
+        store_bytes)``: DONE, OVERFLOW or MEMORY; states (N, W) uint64 packed markings in
+        breadth-first order, in the final ``layout`` (fields widened during the search; :func:`unpack`);
         edges as CSR: dst (E,) int32 and tr (E,) int32 sorted by source then transition, out_ptr
         (N+1,) int64; parent (N,) int64 edge from the previous level (-1 for M0); expanded (N,) bool;
         whether the graph is complete; the largest token count seen; the bytes of the marking store
@@ -504,14 +527,11 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     n_t = arcs[1] - arcs[0] - 1
     in_ptr, in_p = arcs[arcs[0]:arcs[1]], arcs[arcs[1]:arcs[2]]
     # the packed layout: per place its word, shift and mask; W words a marking
-    wd = layout[:n_p]
+    lay = layout.copy()
+    wd = lay[:n_p]
     sh = np.empty(n_p, np.uint64)
     msk = np.empty(n_p, np.uint64)
-    n_w = 1
-    for p in range(n_p):
-        sh[p] = np.uint64(layout[n_p + p])
-        msk[p] = (np.uint64(1) << np.uint64(layout[2 * n_p + p])) - np.uint64(1)
-        n_w = max(n_w, wd[p] + 1)
+    n_w = _fields(lay, n_p, sh, msk)
     succ = np.zeros(n_w, np.uint64)
     cur = np.zeros(n_p, np.int64)
     # one scratch allocation: the cursor, per transition an enabled slot, the trigger lists and
@@ -565,8 +585,8 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     for p in range(n_p):
         if np.uint64(m0[p]) & ~msk[p]:
             cursor[NEED], cursor[NEED_S] = p, m0[p]
-            return (OVERFLOW if m0[p] > _INT32_MAX else WIDEN, states[:0].reshape((0, n_w)), dst[:0], tr[:0], parent[:0], np.zeros(0, np.bool_),
-                    out_ptr[:1], False, top, cursor[NEED], cursor[NEED_S], np.int64(0))
+            return (OVERFLOW, states[:0].reshape((0, n_w)), dst[:0], tr[:0], parent[:0], np.zeros(0, np.bool_),
+                    out_ptr[:1], False, top, lay, np.int64(0))
         _set(states, 0, p, m0[p], wd, sh, msk)
     cursor[N] = 1
     cursor[LEVEL_END] = 1
@@ -614,7 +634,39 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
                     _fill_table(table, states, n, n_w)
             if status == ROOM:
                 continue
-        if status == OVERFLOW or status == WIDEN:
+        if status == WIDEN:
+            # a count outgrew its field: widen the field (to the place's proven width, and every
+            # place still narrower than its proven width with it, at the first such overflow;
+            # else double it) and repack the markings found
+            q, v = cursor[NEED], cursor[NEED_S]
+            new_lay = lay.copy()
+            if new_lay[3 * n_p + q] > new_lay[2 * n_p + q]:
+                for p in range(n_p):
+                    new_lay[2 * n_p + p] = max(new_lay[2 * n_p + p], new_lay[3 * n_p + p])
+            if v >> new_lay[2 * n_p + q]:
+                new_lay[2 * n_p + q] = min(31, max(_bit_length(v), 2 * new_lay[2 * n_p + q]))
+            new_sh = np.empty(n_p, np.uint64)
+            new_msk = np.empty(n_p, np.uint64)
+            new_w = _fields(new_lay, n_p, new_sh, new_msk)
+            if held + cap * 8 * new_w > max_bytes:
+                status = MEMORY
+            else:
+                packed = np.zeros(cap * new_w, np.uint64)
+                for j in range(cursor[N]):
+                    for p in range(n_p):
+                        c = (states[j * n_w + wd[p]] >> sh[p]) & msk[p]
+                        packed[j * new_w + new_lay[p]] |= c << new_sh[p]
+                lay[:] = new_lay
+                sh[:] = new_sh
+                msk[:] = new_msk
+                held += cap * 8 * (new_w - n_w)
+                unit_s += 8 * (new_w - n_w)
+                states = packed
+                n_w = new_w
+                succ = np.zeros(n_w, np.uint64)
+                _fill_table(table, states, cursor[N], n_w)
+                continue
+        if status == OVERFLOW:
             break
         if status == MEMORY:
             cursor[STOPPING] = 1
@@ -649,4 +701,4 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         states = _grow(states, n * n_w, n * n_w)
         parent = _grow(parent, n, n)
     return (status, states[:n * n_w].reshape((n, n_w)), dst[:e], tr[:e], parent[:n], expanded, ptr,
-            cursor[STOPPING] == 0, cursor[MAX_COUNT], cursor[NEED], cursor[NEED_S], store)
+            cursor[STOPPING] == 0, cursor[MAX_COUNT], lay, store)

@@ -369,7 +369,7 @@ def arc_table(net: PetriNet) -> np.ndarray:
     return np.concatenate([head, *parts])
 
 
-#: field width, bits, of a place without a proven bound before it needs more; then 16, then 31
+#: field width, bits, of a place without a proven bound before it needs more (then doubled)
 _UNPROVEN_BITS = 8
 #: widest field: a count above 2**31 - 1 is an error of the search, not a wider field
 _MAX_BITS = 31
@@ -384,7 +384,7 @@ def packed_layout(widths: np.ndarray) -> tuple[np.ndarray, int]:
 
     Returns:
         ``(layout, words)``: layout (3·|P|,) int64 — per place its word, its shift in the word, its
-        width (what :func:`.reach_kernel.run` takes) — and the number of words of a marking.
+        width — and the number of words of a marking.
     """
     n_p = widths.shape[0]
     layout = np.zeros(3 * n_p, np.int64)
@@ -397,18 +397,23 @@ def packed_layout(widths: np.ndarray) -> tuple[np.ndarray, int]:
     return layout, word + 1
 
 
-def _widths(bounds: np.ndarray | None, m0: np.ndarray) -> np.ndarray:
-    """Field widths from proven place bounds (-1: none; a place bounded by b gets bit_length(b)
-    bits, at least one) and the initial marking."""
+def _widths(bounds: np.ndarray | None, m0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Starting field widths and the widths the proven bounds need (0: no bound).
+
+    A place with a proven bound b starts with the bits of its initial count (at least one) and
+    takes bit_length(b) bits at the first overflow (of any such place: all of them together, one
+    repacking); a place without starts with 8 bits and doubles when a count outgrows them."""
     n_p = m0.shape[0]
     b = np.full(n_p, -1, np.int64) if bounds is None else np.asarray(bounds, dtype=np.int64)
     if b.shape != (n_p,):
         raise AnalysisError(f"bounds has shape {b.shape}; expected ({n_p},)")
-    widths = np.full(n_p, _UNPROVEN_BITS, np.int64)
+    need = np.array([max(1, int(v).bit_length()) for v in np.asarray(m0).tolist()], np.int64)
     proven = b >= 0
-    widths[proven] = [max(1, int(v).bit_length()) for v in b[proven].tolist()]
-    need = np.array([int(v).bit_length() for v in np.asarray(m0).tolist()], np.int64)
-    return np.minimum(np.maximum(widths, need), _MAX_BITS)
+    target = np.zeros(n_p, np.int64)
+    target[proven] = [max(1, int(v).bit_length()) for v in b[proven].tolist()]
+    target = np.minimum(np.maximum(target, need), _MAX_BITS) * proven
+    start = np.where(proven, need, np.maximum(need, _UNPROVEN_BITS))
+    return np.minimum(start, _MAX_BITS), target
 
 
 def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray | None = None,
@@ -421,10 +426,11 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     reachability graphs: Murata 1989, section V-A. The first call in a process loads the compiled
     search (about 0.5 s; a few seconds more the first time on a machine, to compile it).
 
-    Markings are stored packed (:func:`packed_layout`): a place with a proven bound b in
-    bit_length(b) bits, one without in 8. Every count written is checked against its field: one
-    that does not fit (a place without a proven bound, or a wrong bound) stops the search, the
-    field is doubled (8 bits to 16, then 31) and the search starts again; a packed marking never wraps.
+    Markings are stored packed (:func:`packed_layout`): a place with a proven bound b in the bits
+    its count needs so far, bit_length(b) once one such place overflows; one without in 8 bits,
+    doubled when they do not suffice. Every count written is checked against its field: one that
+    does not fit widens the field and repacks the markings found, so a packed marking never wraps
+    (a wrong bound costs a wider field, never a wrong graph).
 
     Args:
         net: the net; its initial marking is the root.
@@ -469,21 +475,13 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         tab, m0 = arc_table(net), sparse_net(net).m0
     if net.has_resets:
         rk.load_resets()  # the search of nets with reset arcs is a second compiled specialisation
-    widths = _widths(bounds, np.asarray(m0))
+    start, target = _widths(bounds, np.asarray(m0))
+    layout = np.concatenate([packed_layout(start)[0], target])
     rk.set_progress(progress)
     try:
-        while True:
-            layout, _ = packed_layout(widths)
-            status, words, dst, tr, parent, expanded, out_ptr, complete, top, place, count, store = rk.run(
-                pre, inh, inc, tab, m0, layout, prio, use_prio, max_states, budget,
-                _PROGRESS_STATES if progress is not None else 0, tab if net.has_resets else None)
-            if status != rk.WIDEN:
-                break
-            # a count outgrew its field: double it (8 -> 16 -> 31 bits, or what the count needs) and
-            # search again
-            if widths[place] >= _MAX_BITS:
-                raise AnalysisError(f"internal: a count of {count} does not fit the widest field of place {place}")
-            widths[place] = min(_MAX_BITS, max(int(count).bit_length(), 2 * int(widths[place])))
+        status, words, dst, tr, parent, expanded, out_ptr, complete, top, layout, store = rk.run(
+            pre, inh, inc, tab, m0, layout, prio, use_prio, max_states, budget,
+            _PROGRESS_STATES if progress is not None else 0, tab if net.has_resets else None)
     finally:
         rk.set_progress(None)
     if status == rk.OVERFLOW:
@@ -491,12 +489,13 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
                             f"31 bits), after {words.shape[0]} markings; petrobot analyze decides boundedness "
                             "by coverability")
     stopped = None if complete else ("max_memory" if status == rk.MEMORY else "max_states")
-    states = np.empty((words.shape[0], len(net.places)), _storage_dtype(top))
+    n_p = len(net.places)
+    states = np.empty((words.shape[0], n_p), _storage_dtype(top))
     rk.unpack(words, layout, states)
     del words
     return StateSpace(net=net, states=states, out_ptr=out_ptr, dst=dst, transition=tr,
                       complete=bool(complete), parent_edge=parent, expanded=expanded, stopped_by=stopped,
-                      packed_bits=int(widths.sum()), store_bytes=int(store))
+                      packed_bits=int(layout[2 * n_p:3 * n_p].sum()), store_bytes=int(store))
 
 
 def load_search() -> float:

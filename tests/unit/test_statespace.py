@@ -313,7 +313,7 @@ def test_progress_can_stop_a_long_search() -> None:
 
 def test_a_count_beyond_its_narrow_field_widens_the_field_and_never_wraps() -> None:
     # a counter to 300: with a (wrong) bound of 1, of 7 and of 255, and with none (8 bits), the
-    # field overflows; the search widens it and starts again, never storing a wrapped count
+    # field overflows; the search widens it and repacks the markings found, never storing a wrapped count
     net = make_net("counter", {"go": 1}, {"tick": ({"go": 1}, {"go": 1, "n": 1})}, inhibitors={"tick": {"n": 300}})
     n = net.place_index["n"]
     for claimed in (1, 7, 255, -1):
