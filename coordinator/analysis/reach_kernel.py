@@ -327,7 +327,9 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                         cursor[NEED], cursor[NEED_S] = q, v
                         status = WIDEN
                         break
-                _set(succ, 0, q, v, wd, sh, msk)
+                # the new count fits its field, so adding the shifted change (modulo 2**64 when it
+                # is negative) rewrites that field alone
+                succ[wd[q]] += np.uint64(d_v[b]) << sh[q]
             if resets is not None and status == DONE:
                 for b in range(r_ptr[t], r_ptr[t + 1]):  # reset places end with r_v tokens
                     q = r_p[b]
