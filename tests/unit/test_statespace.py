@@ -349,3 +349,21 @@ def test_analyze_json_reports_bytes_per_marking() -> None:
     out = report(mutex())
     assert out["memory_per_marking_bytes"] > 0
     assert out["packed_bits_per_marking"] == len(mutex().places)  # every place bounded by 1
+
+
+@pytest.mark.parametrize("model", ["CircularTrains-PT-012", "FMS-PT-00002", "Railroad-PT-005"])
+def test_widening_fields_mid_search_keeps_the_graph_exact_also_when_truncated(model: str) -> None:
+    # every place claimed to hold at most 0 tokens: its field starts at the bits of M0 and each count
+    # above overflows, so fields widen while the search runs (the parent re-expanded, the markings
+    # repacked), also in a level the state limit cuts
+    from coordinator.netfile.pnml import load_pnml
+
+    net = load_pnml(str(MCC / model / "model.pnml"))
+    wrong = np.zeros(len(net.places), np.int64)
+    full = explore(net)
+    for limit in (2, 17, full.n_states // 3, full.n_states):
+        ss = explore(net, max_states=limit, bounds=wrong)
+        ref = explore(net, max_states=limit)
+        assert ss.complete == ref.complete and np.array_equal(ss.states, ref.states)
+        for name in ("out_ptr", "dst", "transition", "parent_edge", "expanded"):
+            assert np.array_equal(getattr(ss, name), getattr(ref, name)), name
