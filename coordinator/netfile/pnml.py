@@ -314,7 +314,8 @@ class _Reader:
                 force.setdefault(self.text(f.get("task", ""), "a task whose outcome the operator may force", f,
                                            MAX_NAME), []).append(
                     self.text(f.get("outcome", ""), "an outcome the operator may force", f, MAX_NAME))
-            operator = self.guarded(rights, lambda: OperatorRights(inject=tuple(inject), force=force))
+            operator = self.guarded(rights, lambda: OperatorRights(
+                inject=tuple(inject), force={task: tuple(outcomes) for task, outcomes in force.items()}))
         result = self.guarded(net, lambda: PetriNet(
             name=name, places=tuple(place_objs), transitions=tuple(trans_objs), arcs=tuple(arc_objs),
             initial_marking=Marking(marking), tasks=tasks, description=description, home_marking=home,
