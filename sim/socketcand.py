@@ -301,6 +301,8 @@ class CanGateway:
                 log.warning("CAN gateway: %d connections, closed %s (silent longest) for %s (%d so far)",
                             len(self._live), victim.peer, peer, self._evicted)
         victim.close()
+        for th in victim.threads:  # its threads gone before a new pair starts: bounded under any churn
+            th.join(timeout=1.0)
 
 
 class _Connection:
@@ -321,6 +323,7 @@ class _Connection:
         self.forwarding = False
         self.done = threading.Event()
         self.last_heard = time.monotonic()  # when the peer last sent something
+        self.threads: list[threading.Thread] = []  # its reader and writer, once started
 
     def start(self) -> None:
         if not self._flush():  # the greeting, before any thread may close the socket
@@ -328,6 +331,7 @@ class _Connection:
         for target, name in ((self._reader, "reader"), (self._writer, "writer")):
             th = threading.Thread(target=target, name=f"can-gateway-{name}", daemon=True)
             th.start()
+            self.threads.append(th)
             self.gw._threads.append(th)
 
     def _flush(self) -> bool:
