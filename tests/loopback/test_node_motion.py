@@ -81,9 +81,10 @@ async def test_a_motion_whose_caller_is_killed_is_cancelled_at_once_and_an_ordin
 async def test_a_motion_whose_caller_falls_silent_is_cancelled_after_three_heartbeat_periods() -> None:
     async with running_node(ACTIONS, peer_timeout_s=2.0) as node:
         _, ordinary = await call_and_lose(node, "slow", "s-2", silent=True)  # silent first, for longer
-        lost, writer = await call_and_lose(node, "move", "m-2", silent=True)
+        before = asyncio.get_running_loop().time()  # the caller's last frame is sent after this
+        _, writer = await call_and_lose(node, "move", "m-2", silent=True)
         await eventually("m-2 cancelled", lambda: node._calls.running("m-2") is None, timeout_s=10)
-        waited = asyncio.get_running_loop().time() - lost
+        waited = asyncio.get_running_loop().time() - before
         assert node.motion_silence_s <= waited, waited
         # before any ordinary peer is dropped: the ordinary call, silent for longer, still waits for its caller
         assert node._calls.running("s-2") is not None
