@@ -73,13 +73,17 @@ def test_a_node_frozen_inside_a_call_then_thawed_leaves_journal_and_node_agreein
         assert got.exit_code == 0, got
     assert move.inside, move  # the call lasts CALL_S: the freeze came while it ran
     # the unattended move ran to its end on the node after the coordinator declared it lost: the
-    # journal says so (a reconciliation with the node's success) and so does the console
-    assert move.reconciled == 1 and move.differed == 1, move
+    # journal says so (a reconciliation with the node's success) and so does the console. On a
+    # loaded machine another call may be given up on too (its heartbeats late, not the freeze's):
+    # it is reconciled the same way, so the target's reconciliation is looked up by its call id
+    assert move.reconciled >= 1 and move.differed >= 1, move
     out = (tmp_path / "round-1" / "run-1.out").read_text()
     assert "node beta finished move with success after the coordinator declared it lost" in out
     with JournalReader.open(tmp_path / "round-1" / "journal.sqlite") as reader:
-        (rec,) = reader.reconciliations()
-    assert (rec.instance, rec.assumed, rec.status) == (move.target, "error", "success")
+        recs = {r.instance: r for r in reader.reconciliations()}
+    assert len(recs) == move.reconciled, recs
+    rec = recs[move.target]
+    assert (rec.assumed, rec.status) == ("error", "success")
 
 
 def test_a_node_restarted_inside_a_call_leaves_journal_and_node_agreeing(tmp_path: Path):
@@ -102,7 +106,9 @@ def test_a_coordinator_interrupted_inside_a_call_resumes_and_never_runs_a_call_t
 
 def test_the_comparison_finds_a_journal_that_disagrees_with_a_node_and_a_call_run_twice(tmp_path: Path):
     got = faults.run_round("node-sigstop", tmp_path / "round", random.Random(6), action="move", call_s=CALL_S)
-    assert got.disagreements == [] and got.differed == 1, got
+    # the frozen move, and on a loaded machine now and then a call before it whose heartbeats came
+    # late: each ran to its end on the node after the coordinator gave up on it, and was reconciled
+    assert got.disagreements == [] and got.differed >= 1, got
     workdir = tmp_path / "round"
     nodes = {n: (workdir / "state" / n, (workdir / f"{n}.log").read_text()) for n in ("alpha", "beta")}
     import sqlite3
@@ -110,7 +116,8 @@ def test_the_comparison_finds_a_journal_that_disagrees_with_a_node_and_a_call_ru
     with sqlite3.connect(workdir / "journal.sqlite") as db:  # forget what the node said afterwards
         db.execute("DELETE FROM reconciliation")
     agreement = faults.check(workdir / "journal.sqlite", nodes)
-    (line,) = agreement.disagreements
+    assert len(agreement.disagreements) == got.differed, agreement
+    (line,) = [d for d in agreement.disagreements if d.startswith(f"{got.target} ")]
     assert line.startswith(f"{got.target} move: the journal says error (heartbeat timeout), node beta says success")
     alpha_state, alpha_log = nodes["alpha"]
     started = next(line for line in alpha_log.splitlines() if " call " in line and " echo from " in line)
