@@ -27,8 +27,13 @@ result. What they implement (the reasons and the measurements are in docs/analys
   every marking found is repacked, and the parent is expanded again, so a field never wraps. The hash
   table's key is a hash of the packed words; a key hit is confirmed by comparing the words. Keys
   are not stored with the markings: the table is rebuilt from the markings when it grows.
-* An open-addressing hash table (linear probing, load at most 1/2) of (key, index + 1) pairs side
-  by side in one flat uint64 array, so a lookup usually touches one cache line.
+* An open-addressing hash table (linear probing, load at most 3/4) of one uint64 a slot: the high
+  32 bits of the marking's hash beside its index + 1, so a probe compares words only when those
+  bits agree, a lookup usually touches one cache line, and a marking costs 11–21 bytes of table.
+* Edges kept (``keep_edges``: int32 target and transition, sorted by source) or only counted
+  per state, for questions that need the markings and the out-degrees alone; the breadth-first
+  tree is the state each marking was first reached from (int32), whose edge the caller finds
+  again when it needs it.
 * A byte budget: every buffer is counted, a buffer grows only if the bytes held (old and new buffer
   together, during the copy) stay within ``max_bytes``, and growth near the budget takes only what
   fits. When nothing fits the search stops (status ``MEMORY``) with the states found so far; states
@@ -50,7 +55,12 @@ import threading
 from collections.abc import Callable
 
 import numpy as np
-from numba import njit, objmode, types
+
+from coordinator.analysis import jit
+
+jit.configure()  # numba's cache in the user's cache directory: before numba is imported
+
+from numba import njit, objmode, types  # noqa: E402
 
 __all__ = ["CURSOR_SIZE", "HEAD", "RESET_SIGNATURE", "RUN_SIGNATURE", "cached", "load", "load_resets", "run",
            "set_progress", "tables", "unpack"]
@@ -66,6 +76,8 @@ CURSOR_SIZE = 9
 #: d_v, r_ptr, r_p, r_v and the end
 HEAD = 13
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
+_LOW32 = np.uint64(0xFFFF_FFFF)
+_THIRTY_TWO = np.uint64(32)
 _INT32_MAX = 2**31 - 1
 _SEED = np.uint64(0x5EED0F9E7B)
 
@@ -179,18 +191,18 @@ def _hash(words: np.ndarray, base: int, n_w: int) -> np.uint64:
 
 @njit(cache=True)
 def _fill_table(table: np.ndarray, states: np.ndarray, n: int, n_w: int) -> None:
-    """(Re)build the hash table, flat (2 * 2**k,) uint64 of (key, index + 1) pairs, from states 0..n-1."""
-    size = table.shape[0] // 2
+    """(Re)build the hash table, (2**k,) uint64 slots of (tag << 32) | (index + 1), the tag the
+    high 32 bits of the marking's hash, from states 0..n-1."""
+    size = table.shape[0]
     bits = _bit_length(size) - 1
-    for k in range(table.shape[0]):
+    for k in range(size):
         table[k] = 0
     for j in range(n):
         key = _hash(states, j * n_w, n_w)
         s = _slot(key, bits)
-        while table[2 * s + 1] != 0:
+        while table[s] != 0:
             s = (s + 1) & (size - 1)
-        table[2 * s] = key
-        table[2 * s + 1] = np.uint64(j + 1)
+        table[s] = ((key >> _THIRTY_TWO) << _THIRTY_TWO) | np.uint64(j + 1)
 
 
 @njit(cache=True)
@@ -209,7 +221,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             states: np.ndarray, table: np.ndarray, dst: np.ndarray, tr: np.ndarray, out_ptr: np.ndarray,
             parent: np.ndarray, trunc: np.ndarray, cursor: np.ndarray, wd: np.ndarray, sh: np.ndarray,
             msk: np.ndarray, succ: np.ndarray, cur: np.ndarray, enabled: np.ndarray, max_states: int,
-            budget: int, resets: np.ndarray | None) -> int:
+            budget: int, keep_edges: bool, resets: np.ndarray | None) -> int:
     """Expand markings in breadth-first order, at most ``budget`` of them, from ``cursor[NEXT]``,
     in the given buffers (never reallocated here: ``ROOM`` says one is full, and ``cursor[NEED]``
     how many successors the state waiting to be expanded has).
@@ -220,15 +232,18 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
         prio: (|T|,) int64 priority levels, used if ``use_prio``: in each marking only the enabled
             transitions of the highest enabled level fire.
         states: (cap·W,) uint64 packed markings (W words each, layout ``wd``, ``sh``, ``msk``: the
-            word, shift and mask of each place's field); table: (2·2**k,) uint64 hash table; dst:
-            (ecap,) int32 edge targets; tr: (ecap,) int32 their transitions; out_ptr: (cap + 1,)
-            int64, the edges of state i are ``out_ptr[i]:out_ptr[i+1]``; parent: (cap,) int64 parent
-            edge of each state; trunc: int64 sources that lost an edge to the state limit;
+            word, shift and mask of each place's field); table: (2**k,) uint64 hash table; dst:
+            (ecap,) int32 edge targets; tr: (ecap,) int32 their transitions (both written only if
+            ``keep_edges``); out_ptr: (cap + 1,) int64, the edges of state i are
+            ``out_ptr[i]:out_ptr[i+1]`` (counted whether kept or not); parent: (cap,) int32 the
+            state each state was first reached from; trunc: int64 sources that lost an edge to the state limit;
             cursor: int64 (:data:`CURSOR_SIZE`,); succ (W,) uint64 successor scratch; cur (|P|,)
             int64 the marking being expanded, unpacked; enabled (|T|,) scratch.
         max_states: a new successor beyond this many states is dropped (its source goes to
             ``trunc``) and the search stops at the end of the level.
         budget: most markings to expand in this call.
+        keep_edges: store each edge's target and transition in ``dst`` and ``tr``; else they are
+            only counted (``out_ptr``).
 
     Returns:
         DONE, BUDGET, ROOM, OVERFLOW, or WIDEN (a count outgrew its place's field: ``cursor[NEED]``
@@ -247,7 +262,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
     level_end, stopping, n_trunc = cursor[LEVEL_END], cursor[STOPPING], cursor[N_TRUNC]
     top = cursor[MAX_COUNT]
     cap = parent.shape[0]
-    size = table.shape[0] // 2
+    size = table.shape[0]
     bits = _bit_length(size) - 1
     mask = size - 1
     status = DONE
@@ -287,7 +302,8 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                     k += 1
         # room for k edges and for as many new states as the state limit still allows
         room = min(k, max_states - n)
-        if n + room > cap or e + k > dst.shape[0] or 2 * (n + room) > size or n_trunc == trunc.shape[0]:
+        if n + room > cap or (keep_edges and e + k > dst.shape[0]) or 4 * (n + room) > 3 * size or \
+                n_trunc == trunc.shape[0]:
             cursor[NEED] = k
             cursor[NEED_S] = room
             status = ROOM
@@ -346,11 +362,12 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             if status != DONE:
                 break
             key = _hash(succ, 0, n_w)
+            tag = (key >> _THIRTY_TWO) << _THIRTY_TWO
             s = _slot(key, bits)
             j = -1
-            while table[2 * s + 1] != 0:
-                if table[2 * s] == key:
-                    cand = int(table[2 * s + 1]) - 1
+            while table[s] != 0:
+                if (table[s] & ~_LOW32) == tag:
+                    cand = int(table[s] & _LOW32) - 1
                     same = True
                     cb = cand * n_w
                     for w in range(n_w):
@@ -370,12 +387,12 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
                 jb = j * n_w
                 for w in range(n_w):
                     states[jb + w] = succ[w]
-                table[2 * s] = key
-                table[2 * s + 1] = np.uint64(j + 1)
-                parent[j] = e
+                table[s] = tag | np.uint64(j + 1)
+                parent[j] = i
                 n += 1
-            dst[e] = j
-            tr[e] = t
+            if keep_edges:
+                dst[e] = j
+                tr[e] = t
             e += 1
         if status != DONE:
             break
@@ -452,7 +469,7 @@ def _target(cap: int, need: int, unit: int | np.int64, held: int | np.int64, max
 _RO2 = types.Array(types.int64, 2, "C", readonly=True)
 _RO1 = types.Array(types.int64, 1, "C", readonly=True)
 RUN_SIGNATURE = (_RO2, _RO2, _RO2, types.int64[::1], _RO1, types.int64[::1], _RO1, types.boolean, types.int64,
-                 types.int64, types.int64, types.none)
+                 types.int64, types.int64, types.boolean, types.none)
 RESET_SIGNATURE = (*RUN_SIGNATURE[:-1], types.int64[::1])
 
 
@@ -492,7 +509,7 @@ def load_resets() -> None:
 @njit(cache=True)
 def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.ndarray, m0: np.ndarray,
         layout: np.ndarray, prio: np.ndarray, use_prio: bool, max_states: int, max_bytes: int,
-        report_every: int, resets: np.ndarray | None) -> tuple:  # type: ignore[type-arg]
+        report_every: int, keep_edges: bool, resets: np.ndarray | None) -> tuple:  # type: ignore[type-arg]
     """The whole breadth-first search of a net (see the module docstring).
 
     Args:
@@ -512,6 +529,8 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         max_bytes: byte budget of the search's buffers (see the module docstring).
         report_every: call the progress hook (:func:`set_progress`) every this many expanded
             markings and at the end; 0 for never.
+        keep_edges: keep the edges (``dst``, ``tr``); else only count them: ``dst`` and ``tr`` come
+            back empty, ``out_ptr`` still gives each state's number of edges.
         resets: ``None`` for a net without reset arcs (the search is compiled without their code),
             else any array (``tab``): the reset lists of ``tab`` are applied.
 
@@ -519,8 +538,9 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         ``(status, states, dst, tr, parent, expanded, out_ptr, complete, max_count, layout,
         store_bytes)``: DONE, OVERFLOW or MEMORY; states (N, W) uint64 packed markings in
         breadth-first order, in the final ``layout`` (fields widened during the search; :func:`unpack`);
-        edges as CSR: dst (E,) int32 and tr (E,) int32 sorted by source then transition, out_ptr
-        (N+1,) int64; parent (N,) int64 edge from the previous level (-1 for M0); expanded (N,) bool;
+        edges as CSR: dst (E,) int32 and tr (E,) int32 sorted by source then transition (empty
+        unless ``keep_edges``), out_ptr (N+1,) int64; parent (N,) int32 the state of the previous
+        level each state was first reached from (-1 for M0); expanded (N,) bool;
         whether the graph is complete; the largest token count seen; the bytes of the marking store
         and the hash table when the search ended.
     """
@@ -558,27 +578,27 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
         trig_t[slot[first]] = t
         slot[first] += 1
-    # buffers; bytes per state: its packed marking (W uint64), the caller's unpacked copy (one
-    # byte a place in the common case), the parent edge, the out-edge pointer (twice: the final
-    # copy) and the expanded flag; per edge: int32 target and transition
-    unit_s = np.int64(8 * n_w + n_p + 25)
+    # buffers; bytes per state: its packed marking (W uint64), a consumer's unpacked copy (one
+    # byte a place in the common case; made only when asked for), the parent state, the
+    # out-edge pointer and the expanded flag; per edge: int32 target and transition
+    unit_s = np.int64(8 * n_w + n_p + 13)
     unit_e = np.int64(8)
     no_ceiling = np.int64(1 << 62)
-    # first capacity: room for a few levels of a small net without growing, within 1/8 of the budget
-    # and 16 MiB (a wide net's markings are large)
-    cap = max(1, min(max(256, 2 * n_t), max_states, min(max_bytes // 8, 1 << 24) // unit_s))
-    ecap = 4 * cap
-    size = 128
-    while size < 2 * cap:
+    # first capacity: small (the buffers grow by doubling, so what is held stays within twice what
+    # is used), within 1/8 of the budget and 16 MiB (a wide net's markings are large)
+    cap = max(1, min(16, max_states, int(min(max_bytes // 8, 1 << 24) // unit_s)))
+    ecap = 4 * cap if keep_edges else 0
+    size = 16
+    while 3 * size < 4 * cap:
         size *= 2
     states = np.zeros(cap * n_w, np.uint64)
-    parent = np.empty(cap, np.int64)
+    parent = np.empty(cap, np.int32)
     out_ptr = np.empty(cap + 1, np.int64)
-    table = np.zeros(2 * size, np.uint64)
+    table = np.zeros(size, np.uint64)
     dst = np.empty(ecap, np.int32)
     tr = np.empty(ecap, np.int32)
     trunc = np.empty(16, np.int64)
-    held = cap * unit_s + ecap * unit_e + 16 * size
+    held = cap * unit_s + ecap * unit_e + 8 * size
     # state 0 = M0, packed (the caller's layout holds it)
     top = 0
     for p in range(n_p):
@@ -600,20 +620,20 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     while top <= _INT32_MAX:
         status = _search(arcs, trig_ptr, trig_t, prio, use_prio, states, table, dst, tr, out_ptr, parent,
                          trunc, cursor, wd, sh, msk, succ, cur, enabled, max_states,
-                         max(1, next_report - cursor[NEXT]), resets)
+                         max(1, next_report - cursor[NEXT]), keep_edges, resets)
         if status == ROOM:
             n, e, k, ks = cursor[N], cursor[E], cursor[NEED], cursor[NEED_S]
             if n + ks > cap:
                 new = _target(cap, n + ks, unit_s, held, max_bytes, max_states)
                 if new < 0:
                     status = MEMORY
-                else:
+                else:  # one buffer at a time: only one old copy is held at once
                     states = _grow(states, new * n_w, n * n_w)
                     parent = _grow(parent, new, n)
                     out_ptr = _grow(out_ptr, new + 1, cursor[NEXT] + 1)
                     held += (new - cap) * unit_s
                     cap = new
-            if status == ROOM and e + k > dst.shape[0]:
+            if status == ROOM and keep_edges and e + k > dst.shape[0]:
                 new = _target(dst.shape[0], e + k, unit_e, held, max_bytes, no_ceiling)
                 if new < 0:
                     status = MEMORY
@@ -623,16 +643,17 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
                     tr = _grow(tr, new, e)
             if status == ROOM and cursor[N_TRUNC] == trunc.shape[0]:
                 trunc = _grow(trunc, 2 * trunc.shape[0], cursor[N_TRUNC])
-            if status == ROOM and 2 * (n + ks) > size:
+            if status == ROOM and 4 * (n + ks) > 3 * size:
                 new = size
-                while 2 * (n + ks) > new:
+                while 4 * (n + ks) > 3 * new:
                     new *= 2
-                if held + 16 * new > max_bytes:
+                if held + 8 * new > max_bytes:
                     status = MEMORY
                 else:
-                    held += 16 * (new - size)
+                    held += 8 * (new - size)
                     size = new
-                    table = np.zeros(2 * size, np.uint64)
+                    table = np.zeros(1, np.uint64)  # the old table is rebuilt, not copied: freed first
+                    table = np.zeros(size, np.uint64)
                     _fill_table(table, states, n, n_w)
             if status == ROOM:
                 continue
@@ -679,13 +700,10 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
             break
         next_report = cursor[NEXT] + report_every
     n, e, done = cursor[N], cursor[E], cursor[NEXT]
-    store = np.int64(cap * 8 * n_w + 16 * size)  # markings and hash table at the end of the search
-    table = np.zeros(2, np.uint64)  # free the hash table before the result arrays are made
-    ptr = np.empty(n + 1, np.int64)
-    for i in range(done + 1):
-        ptr[i] = out_ptr[i]
-    for i in range(done + 1, n + 1):
-        ptr[i] = e
+    store = np.int64(cap * 8 * n_w + 8 * size)  # markings and hash table at the end of the search
+    table = np.zeros(1, np.uint64)  # free the hash table before the result arrays are made
+    for i in range(done + 1, n + 1):  # the states not expanded have no edges
+        out_ptr[i] = e
     expanded = np.zeros(n, np.bool_)
     if cursor[STOPPING] != 0:
         for i in range(done):
@@ -702,5 +720,6 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     if 4 * n < 3 * cap and held + n * unit_s <= max_bytes:
         states = _grow(states, n * n_w, n * n_w)
         parent = _grow(parent, n, n)
-    return (status, states[:n * n_w].reshape((n, n_w)), dst[:e], tr[:e], parent[:n], expanded, ptr,
+        out_ptr = _grow(out_ptr, n + 1, n + 1)
+    return (status, states[:n * n_w].reshape((n, n_w)), dst[:e], tr[:e], parent[:n], expanded, out_ptr[:n + 1],
             cursor[STOPPING] == 0, cursor[MAX_COUNT], lay, store)

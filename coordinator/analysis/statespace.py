@@ -32,7 +32,8 @@ from coordinator.analysis.matrices import DENSE_LIMIT, dense_is_cheap, sparse_ne
 from coordinator.errors import AnalysisError
 from coordinator.net import Arc, Marking, PetriNet, Place, Transition
 
-__all__ = ["StateSpace", "arc_table", "default_max_bytes", "enabled_mask", "explore", "load_search", "packed_layout"]
+__all__ = ["StateSpace", "arc_table", "default_max_bytes", "enabled_mask", "explore", "load_search", "packed_layout",
+           "search_is_compiled"]
 
 #: largest n·|P|·|T| for which enabling is computed by matrix products (see _enabled)
 _MAX_PRODUCT = 500_000
@@ -44,52 +45,98 @@ _PROGRESS_STATES = 1 << 16
 class StateSpace:
     """The reachability graph of a net (possibly truncated at ``max_states`` or by the byte budget).
 
+    Markings are held packed, as the search stored them (``words``, ``layout``); ``states`` unpacks
+    them on first use and keeps the copy.
+
     Attributes:
         net: the explored net.
-        states: markings, shape (N, |P|), dtype uint8/uint16/uint32/int64 (the smallest that fits),
-            columns in ``net.places`` order; row 0 is the initial marking; rows are in breadth-first
-            order, so a state's index never precedes that of a state closer to M0.
+        words: packed markings, shape (N, W), uint64: place p's count is the field of
+            ``layout[2|P| + p]`` bits at shift ``layout[|P| + p]`` of word ``layout[p]``
+            (:func:`packed_layout`); row 0 is the initial marking, rows in breadth-first order.
+        layout: (3·|P|,) int64 per place its word, shift and width in bits.
         out_ptr: CSR row pointer over edges, shape (N+1,), int64: the edges of state i are
-            ``out_ptr[i]:out_ptr[i+1]``.
-        dst: edge targets, shape (E,), int32 (state indices stay below 2**31).
-        transition: transition index (column of the net's matrices) of each edge, shape (E,), int32.
+            ``out_ptr[i]:out_ptr[i+1]`` (given whether the edges were kept or only counted).
+        dst: edge targets, shape (E,), int32 (state indices stay below 2**31); empty if the edges
+            were not kept.
+        transition: transition index (column of the net's matrices) of each edge, shape (E,), int32;
+            empty if the edges were not kept.
         complete: False if the search stopped early; then the markings whose successors were not
             all computed are those with ``expanded == False`` and edges are missing.
-        parent_edge: for each state, the index of an edge from a state one level closer to M0
-            (a breadth-first tree, so following it back gives a shortest firing sequence);
-            -1 for M0. Shape (N,), int64.
+        parent: for each state, the state one level closer to M0 it was first reached from (a
+            breadth-first tree: following it back gives a shortest firing sequence); -1 for M0.
+            Shape (N,), int32.
         expanded: which states had all their successors computed, shape (N,), bool.
         stopped_by: why an incomplete search stopped: ``"max_states"`` (the state limit; the level
             in progress was finished) or ``"max_memory"`` (the byte budget; stopped at once);
             None when complete.
         packed_bits: bits of one marking in the search's packed store (the sum of the places'
-            field widths, :func:`packed_layout`); 0 if not made by :func:`explore`.
+            field widths, :func:`packed_layout`).
         store_bytes: bytes of the search's marking store and hash table when it ended (capacity,
-            not just the markings found); 0 if not made by :func:`explore`.
+            not just the markings found).
+        max_count: the largest token count of any marking found (sizes ``states``' dtype).
+        edges_kept: False if the search only counted the edges (``explore(..., edges=False)``):
+            then ``dst``, ``transition``, ``src``, ``parent_edge`` and the matrices are not
+            available, while counts, deadlocks, markings and firing sequences are.
+        priority: the priority levels the search applied, (|T|,) int64, or None.
 
     ``src`` (edge sources, (E,) int32, non-decreasing) is derived from ``out_ptr`` on first use.
     """
 
     net: PetriNet
-    states: np.ndarray
+    words: np.ndarray
+    layout: np.ndarray
     out_ptr: np.ndarray
     dst: np.ndarray
     transition: np.ndarray
     complete: bool
-    parent_edge: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    expanded: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
-    stopped_by: str | None = None
-    packed_bits: int = 0
-    store_bytes: int = 0
+    parent: np.ndarray
+    expanded: np.ndarray
+    stopped_by: str | None
+    packed_bits: int
+    store_bytes: int
+    max_count: int
+    edges_kept: bool = True
+    priority: np.ndarray | None = None
+
+    @property
+    def states(self) -> np.ndarray:
+        """Markings, shape (N, |P|), dtype uint8/uint16/uint32/int64 (the smallest that fits),
+        columns in ``net.places`` order, rows as ``words``; unpacked on first use, then kept."""
+        cached = self.__dict__.get("_states")
+        if cached is None:
+            cached = np.empty((self.n_states, len(self.net.places)), _storage_dtype(self.max_count))
+            if self.n_states:
+                _kernel().unpack(self.words, self.layout, cached)
+            object.__setattr__(self, "_states", cached)
+        return cached
+
+    def rows(self, lo: int, hi: int) -> np.ndarray:
+        """Markings ``lo:hi``, shape (hi - lo, |P|), int64, unpacked from ``words`` (a block at a
+        time, without unpacking the whole state space)."""
+        block = self.words[lo:hi]
+        out = np.empty((block.shape[0], len(self.net.places)), np.int64)
+        if block.shape[0]:
+            _kernel().unpack(np.ascontiguousarray(block), self.layout, out)
+        return out
 
     @property
     def memory_per_marking_bytes(self) -> float:
         """Bytes per marking of the search's marking store and hash table (``store_bytes / N``)."""
         return self.store_bytes / max(self.n_states, 1)
 
+    def _need_edges(self) -> None:
+        if not self.edges_kept:
+            raise AnalysisError("this state space was explored without keeping its edges (explore(..., edges=False)); "
+                                "only their number per marking is known")
+
     @property
     def src(self) -> np.ndarray:
-        """Edge sources, shape (E,), int32, non-decreasing (built from ``out_ptr`` once, then kept)."""
+        """Edge sources, shape (E,), int32, non-decreasing (built from ``out_ptr`` once, then kept).
+
+        Raises:
+            AnalysisError: if the edges were not kept.
+        """
+        self._need_edges()
         cached = self.__dict__.get("_src")
         if cached is None:
             counts = np.diff(self.out_ptr)
@@ -98,26 +145,48 @@ class StateSpace:
         return cached
 
     @property
+    def parent_edge(self) -> np.ndarray:
+        """For each state, the index of its breadth-first tree edge (from ``parent``, the first edge
+        of the search to it), -1 for M0; shape (N,), int64. Derived on first use, then kept.
+
+        Raises:
+            AnalysisError: if the edges were not kept.
+        """
+        self._need_edges()
+        cached = self.__dict__.get("_parent_edge")
+        if cached is None:
+            cached = np.full(self.n_states, -1, np.int64)
+            hit = np.flatnonzero(self.parent[self.dst] == self.src)
+            reached, first = np.unique(self.dst[hit], return_index=True)
+            cached[reached] = hit[first]
+            object.__setattr__(self, "_parent_edge", cached)
+        return cached
+
+    @property
     def nbytes(self) -> int:
-        """Bytes held by the graph's arrays (``src`` included once built)."""
-        arrays = [self.states, self.out_ptr, self.dst, self.transition, self.parent_edge, self.expanded]
-        if "_src" in self.__dict__:
-            arrays.append(self.__dict__["_src"])
+        """Bytes held by the graph's arrays (``src``, ``parent_edge`` and ``states`` included once built)."""
+        arrays = [self.words, self.out_ptr, self.dst, self.transition, self.parent, self.expanded]
+        arrays += [self.__dict__[k] for k in ("_src", "_parent_edge", "_states") if k in self.__dict__]
         return int(sum(a.nbytes for a in arrays))
 
     @property
     def n_states(self) -> int:
         """Number of reachable markings found, N."""
-        return int(self.states.shape[0])
+        return int(self.words.shape[0])
 
     @property
     def n_edges(self) -> int:
-        """Number of edges (firings between found markings), E."""
-        return int(self.dst.shape[0])
+        """Number of edges (firings between found markings), E (counted even when not kept)."""
+        return int(self.out_ptr[-1]) if self.out_ptr.shape[0] else 0
 
     def marking(self, index: int) -> Marking:
-        """Return state ``index`` as a :class:`~coordinator.net.Marking`."""
-        return self.net.marking(self.states[index])
+        """Return state ``index`` as a :class:`~coordinator.net.Marking` (negative: from the end).
+
+        Raises:
+            IndexError: if there is no such state.
+        """
+        i = range(self.n_states)[int(index)]
+        return self.net.marking(self.rows(i, i + 1)[0])
 
     def index_of(self, marking: Mapping[str, int] | np.ndarray) -> int:
         """Return the state index of a marking.
@@ -129,27 +198,37 @@ class StateSpace:
             KeyError: if the marking is not among the states found.
         """
         vec = np.asarray(marking, dtype=np.int64) if isinstance(marking, np.ndarray) else self.net.vector(marking)
-        keys, order = self._lookup()
-        k = _random_key(vec[None, :])[0]
-        lo = int(np.searchsorted(keys, k, side="left"))
-        hi = int(np.searchsorted(keys, k, side="right"))
-        for pos in range(lo, hi):
-            idx = int(order[pos])
-            if np.array_equal(self.states[idx].astype(np.int64), vec):
-                return idx
+        n_p = len(self.net.places)
+        wd, sh, width = self.layout[:n_p], self.layout[n_p:2 * n_p], self.layout[2 * n_p:]
+        if vec.shape == (n_p,) and (vec >= 0).all() and (vec < (np.int64(1) << width)).all():
+            packed = np.zeros(self.words.shape[1], np.uint64)
+            np.bitwise_or.at(packed, wd, vec.astype(np.uint64) << sh.astype(np.uint64))
+            keys, order = self._lookup()
+            k = _random_key(packed[None, :])[0]
+            lo = int(np.searchsorted(keys, k, side="left"))
+            hi = int(np.searchsorted(keys, k, side="right"))
+            for pos in range(lo, hi):
+                idx = int(order[pos])
+                if np.array_equal(self.words[idx], packed):
+                    return idx
         raise KeyError(f"marking {self.net.marking(np.maximum(vec, 0))!r} is not a reachable state found")
 
     def _lookup(self) -> tuple[np.ndarray, np.ndarray]:
         cached = self.__dict__.get("_lookup_cache")
         if cached is None:
-            keys = _random_key(self.states)
+            keys = _random_key(self.words)
             order = np.argsort(keys, kind="stable")
             cached = (keys[order], order)
             object.__setattr__(self, "_lookup_cache", cached)
         return cached
 
     def successor_matrix(self) -> sp.csr_matrix:
-        """Return the graph as a CSR matrix A of shape (N, N): ``A[i, j]`` = number of edges i → j."""
+        """Return the graph as a CSR matrix A of shape (N, N): ``A[i, j]`` = number of edges i → j.
+
+        Raises:
+            AnalysisError: if the edges were not kept.
+        """
+        self._need_edges()
         n = self.n_states
         data = np.ones(self.n_edges, dtype=np.int32)
         mat = sp.csr_matrix((data, self.dst, self.out_ptr), shape=(n, n))
@@ -161,7 +240,12 @@ class StateSpace:
         return self.successor_matrix().T.tocsr()
 
     def out_edges(self, index: int) -> np.ndarray:
-        """Return the indices of the edges leaving state ``index`` (a slice of the sorted ``src``)."""
+        """Return the indices of the edges leaving state ``index`` (a slice of the sorted ``src``).
+
+        Raises:
+            AnalysisError: if the edges were not kept.
+        """
+        self._need_edges()
         lo, hi = self.out_ptr[index], self.out_ptr[index + 1]
         return np.arange(lo, hi, dtype=np.int64)
 
@@ -173,6 +257,7 @@ class StateSpace:
     def predecessors(self, index: int) -> list[tuple[int, str]]:
         """Return ``(source state, transition id)`` for each edge entering state ``index`` (O(E))."""
         ids = self.net.transitions
+        self._need_edges()
         edges = np.flatnonzero(self.dst == index)
         return [(int(self.src[e]), ids[int(self.transition[e])].id) for e in edges]
 
@@ -186,24 +271,46 @@ class StateSpace:
             return self.expanded
         return np.ones(self.n_states, dtype=bool)
 
-    def firing_sequence(self, index: int) -> list[str]:
-        """Return a shortest firing sequence (transition ids) from M0 to state ``index``.
+    def _tree_transition(self, source: int, target: int) -> int:
+        """The transition of the first edge of the search from ``source`` to ``target``: with the
+        edges kept, read from them; else the lowest transition enabled in ``source`` (under the
+        search's priorities) whose firing gives ``target``."""
+        if self.edges_kept:
+            lo, hi = int(self.out_ptr[source]), int(self.out_ptr[source + 1])
+            k = int(np.flatnonzero(self.dst[lo:hi] == target)[0])
+            return int(self.transition[lo + k])
+        m_from, m_to = self.rows(source, source + 1)[0], self.rows(target, target + 1)[0]
+        enabled = enabled_mask(self.net, m_from[None, :], self.priority)[0]
+        for t in np.flatnonzero(enabled).tolist():
+            if np.array_equal(_fire(self.net, m_from, t), m_to):
+                return int(t)
+        raise AnalysisError(f"no transition leads from state {source} to state {target}")  # pragma: no cover
 
-        Raises:
-            AnalysisError: if the state space carries no breadth-first tree.
-        """
-        if self.parent_edge.shape[0] != self.n_states:
-            raise AnalysisError("this state space has no breadth-first tree (parent_edge)")
+    def firing_sequence(self, index: int) -> list[str]:
+        """Return a shortest firing sequence (transition ids) from M0 to state ``index``."""
         seq: list[str] = []
         node = int(index)
         for _ in range(self.n_states):
-            e = int(self.parent_edge[node])
-            if e < 0:
+            source = int(self.parent[node])
+            if source < 0:
                 break
-            seq.append(self.net.transitions[int(self.transition[e])].id)
-            node = int(self.src[e])
+            seq.append(self.net.transitions[self._tree_transition(source, node)].id)
+            node = source
         seq.reverse()
         return seq
+
+
+def _fire(net: PetriNet, marking: np.ndarray, t: int) -> np.ndarray:
+    """The marking after transition ``t`` fires in ``marking`` (assumed enabled), (|P|,) int64:
+    the search's rule (reset places end with ``Post[r, t]``)."""
+    if net.has_resets:
+        inc, after = _reset_lists(net)
+        reset: np.ndarray = marking + inc.getcol(t).toarray().ravel()
+        col = after.getcol(t).tocoo()
+        reset[col.row] = col.data - 1
+        return reset
+    out: np.ndarray = marking + sparse_net(net).incidence.getcol(t).toarray().ravel().astype(np.int64)
+    return out
 
 
 # ---------------------------------------------------------------------------------------- helpers
@@ -418,7 +525,7 @@ def _widths(bounds: np.ndarray | None, m0: np.ndarray) -> tuple[np.ndarray, np.n
 
 def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray | None = None,
             progress: Callable[[int, int], None] | None = None, max_bytes: int | None = None,
-            bounds: np.ndarray | None = None) -> StateSpace:
+            bounds: np.ndarray | None = None, edges: bool = True) -> StateSpace:
     """Build the reachability graph of ``net`` by a compiled breadth-first search.
 
     The ordinary firing rule of :mod:`coordinator.net` is used (inhibitor arcs honoured, reset arcs
@@ -442,11 +549,14 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
             1 + priority for immediate ones).
         progress: called as ``progress(states_found, edges_found)`` every 65,536 expanded markings
             and at the end.
-        max_bytes: byte budget of the search's buffers (markings, edges, hash table, and the result's
-            narrowing copy); when growing a buffer would exceed it, the search stops at once with
+        max_bytes: byte budget of the search's buffers (markings, edges, hash table, and room for
+            the unpacked ``states`` a consumer may ask for); when growing a buffer would exceed it, the search stops at once with
             what it has (``stopped_by == "max_memory"``). Default :func:`default_max_bytes`.
         bounds: optional (|P|,) int64 proven upper bounds of the places (-1 where none), e.g. from
             the P-invariants or the state equation (:mod:`.lp`); they size the packed fields only.
+        edges: keep the edges (target and transition, 8 bytes each); False counts them only (per
+            state, ``out_ptr``), for questions that need the markings, the edge count, the
+            deadlocks and their firing sequences but not the graph itself.
 
     Returns:
         The :class:`StateSpace`.
@@ -481,7 +591,7 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     try:
         status, words, dst, tr, parent, expanded, out_ptr, complete, top, layout, store = rk.run(
             pre, inh, inc, tab, m0, layout, prio, use_prio, max_states, budget,
-            _PROGRESS_STATES if progress is not None else 0, tab if net.has_resets else None)
+            _PROGRESS_STATES if progress is not None else 0, bool(edges), tab if net.has_resets else None)
     finally:
         rk.set_progress(None)
     if status == rk.OVERFLOW:
@@ -490,12 +600,10 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
                             "by coverability")
     stopped = None if complete else ("max_memory" if status == rk.MEMORY else "max_states")
     n_p = len(net.places)
-    states = np.empty((words.shape[0], n_p), _storage_dtype(top))
-    rk.unpack(words, layout, states)
-    del words
-    return StateSpace(net=net, states=states, out_ptr=out_ptr, dst=dst, transition=tr,
-                      complete=bool(complete), parent_edge=parent, expanded=expanded, stopped_by=stopped,
-                      packed_bits=int(layout[2 * n_p:3 * n_p].sum()), store_bytes=int(store))
+    return StateSpace(net=net, words=words, layout=layout[:3 * n_p].copy(), out_ptr=out_ptr, dst=dst, transition=tr,
+                      complete=bool(complete), parent=parent, expanded=expanded, stopped_by=stopped,
+                      packed_bits=int(layout[2 * n_p:3 * n_p].sum()), store_bytes=int(store), max_count=int(top),
+                      edges_kept=bool(edges), priority=None if priority is None else prio)
 
 
 def load_search() -> float:
@@ -530,6 +638,18 @@ def _kernel() -> Any:
         _RK = reach_kernel
     return _RK
 
+
+
+def search_is_compiled() -> bool | None:
+    """Whether the compiled state-space search is in numba's cache for this source and this
+    machine (True: it is loaded now), will be compiled on its first use (False), or cannot be told
+    (None). Imports :mod:`.reach_kernel` (and numba, its cache in the user's directory: :mod:`.jit`)
+    but compiles nothing."""
+    try:
+        from coordinator.analysis import reach_kernel
+    except ImportError:
+        return None
+    return reach_kernel.cached()
 
 _ONE_PLACE = PetriNet(name="load", places=(Place(id="p"),), transitions=(Transition(id="t"),),
                       arcs=(Arc(source="p", target="t"), Arc(source="t", target="p")),

@@ -367,3 +367,87 @@ def test_widening_fields_mid_search_keeps_the_graph_exact_also_when_truncated(mo
         assert ss.complete == ref.complete and np.array_equal(ss.states, ref.states)
         for name in ("out_ptr", "dst", "transition", "parent_edge", "expanded"):
             assert np.array_equal(getattr(ss, name), getattr(ref, name)), name
+
+
+@pytest.mark.parametrize("model", ["ERK-PT-000001", "FMS-PT-00002", "Railroad-PT-005", "TokenRing-PT-005"])
+def test_a_search_that_only_counts_edges_finds_the_same_markings_edge_count_deadlocks_and_firing_sequences(
+        model: str) -> None:
+    from coordinator.netfile.pnml import load_pnml
+
+    net = load_pnml(str(MCC / model / "model.pnml"))
+    full = explore(net)
+    for limit in (full.n_states // 3, full.n_states):
+        kept = explore(net, max_states=limit)
+        counted = explore(net, max_states=limit, edges=False)
+        assert not counted.edges_kept and counted.dst.size == counted.transition.size == 0
+        assert counted.complete == kept.complete and counted.n_edges == kept.n_edges
+        for name in ("words", "out_ptr", "parent", "expanded"):
+            assert np.array_equal(getattr(counted, name), getattr(kept, name)), name
+        assert counted.deadlocks().tolist() == kept.deadlocks().tolist()
+        step = max(1, kept.n_states // 40)
+        for i in [*range(0, kept.n_states, step), *kept.deadlocks().tolist()[:5]]:
+            assert counted.firing_sequence(i) == kept.firing_sequence(i)
+        assert counted.nbytes < kept.nbytes
+        with pytest.raises(AnalysisError, match="without keeping its edges"):
+            counted.successor_matrix()
+        with pytest.raises(AnalysisError, match="without keeping its edges"):
+            counted.parent_edge  # noqa: B018 - the property raises
+
+
+def test_without_its_edges_a_firing_sequence_names_the_transition_the_priorities_let_fire() -> None:
+    # t0 and t1 lead from M0 to the same marking; with t1 on the higher level only t1 fires
+    net = make_net("twins", {"a": 1}, {"t0": ({"a": 1}, {"b": 1}), "t1": ({"a": 1}, {"b": 1})})
+    order = [t.id for t in net.transitions]
+    prio = np.array([1 if t == "t1" else 0 for t in order], np.int64)
+    for edges in (True, False):
+        assert explore(net, edges=edges).firing_sequence(1) == ["t0"]
+        assert explore(net, edges=edges, priority=prio).firing_sequence(1) == ["t1"]
+
+
+def test_without_its_edges_a_firing_sequence_replays_reset_arcs() -> None:
+    from coordinator.net import Arc
+
+    base = make_net("flush", {"go": 1}, {"fill": ({"go": 1}, {"go": 1, "buf": 1}), "flush": ({"go": 1, "buf": 1}, {"done": 1})},
+                    inhibitors={"fill": {"buf": 3}})
+    net = PetriNet(name=base.name, places=base.places, transitions=base.transitions,
+                   arcs=(*base.arcs, Arc(source="buf", target="flush", reset=True)), initial_marking=base.initial_marking)
+    kept, counted = explore(net), explore(net, edges=False)
+    assert kept.complete and counted.n_states == kept.n_states == 5 and counted.n_edges == kept.n_edges
+    for i in range(kept.n_states):
+        seq = counted.firing_sequence(i)
+        assert seq == kept.firing_sequence(i)
+        m = net.initial_marking
+        for t in seq:
+            m = net.fire(m, t)
+        assert m == counted.marking(i)
+
+
+def test_markings_stay_packed_until_a_consumer_asks_for_the_unpacked_states() -> None:
+    net = mutex()
+    ss = explore(net, bounds=np.ones(len(net.places), np.int64))
+    held = ss.nbytes
+    assert ss.words.shape == (ss.n_states, 1) and ss.words.dtype == np.uint64
+    for i in range(ss.n_states):  # markings, lookups and firing sequences read the packed words
+        assert ss.index_of(ss.marking(i).to_dict()) == i
+    assert ss.nbytes == held
+    states = ss.states
+    assert ss.nbytes == held + states.nbytes and states.dtype == np.uint8
+    assert np.array_equal(states.astype(np.int64), ss.rows(0, ss.n_states))
+    assert [net.marking(row) for row in states] == [ss.marking(i) for i in range(ss.n_states)]
+    assert ss.marking(-1) == net.marking(states[-1])
+    with pytest.raises(IndexError):
+        ss.marking(ss.n_states)
+
+
+@pytest.mark.parametrize("model", ["CircularTrains-PT-012", "ERK-PT-000001", "Eratosthenes-PT-010", "FMS-PT-00002",
+                                   "Philosophers-PT-000005", "Railroad-PT-005", "ResAllocation-PT-R003C005",
+                                   "SharedMemory-PT-000005", "TokenRing-PT-005"])
+def test_bytes_per_marking_stay_within_twice_the_packed_size_plus_the_hash_tables_least_overhead(model: str) -> None:
+    # the hash table holds one 8-byte slot per marking at a load of at most 3/4: 8 / 0.75 bytes a
+    # marking at least; the buffers start small and double, so a model of 13 markings holds no
+    # room for 256
+    from coordinator.netfile.pnml import load_pnml
+
+    ss = explore(load_pnml(str(MCC / model / "model.pnml")))
+    packed = 8 * ss.words.shape[1]
+    assert ss.memory_per_marking_bytes <= 2 * (packed + 8 / 0.75)
