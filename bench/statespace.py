@@ -18,10 +18,10 @@ against best wall clock) and speedup_cpu. pm4py runs with its own time limit (``
 when it hits the cap, its rate is measured on the part of the graph it built (``pm4py_complete``
 false, ``pm4py_seconds`` null) and the outer process is killed 120 s later.
 
-A model is a PNML path, or ``kanban:N``: the Kanban net of Ciardo and Tilgner with N tokens per
-stage, built from the structure of the contest's Kanban-PT-00005 (found through
-``tests/unit/mcc_models.py``, or ``--mcc DIR``) with its initial marking scaled to N — Kanban-7 has
-41,644,800 markings. ``--max-memory`` is the explorer's byte budget (default 16 GiB): a search that
+A model is a PNML path, or ``FAMILY:N``: a contest family built at size N (``bench/families.py``:
+``kanban:N``, the Kanban net of Ciardo and Tilgner with N tokens per stage, built from the structure
+of the contest's Kanban-PT-00005 found through ``tests/unit/mcc_models.py`` or ``--mcc DIR`` —
+Kanban-7 has 41,644,800 markings; ``fms:N``, ``philosophers:N``, ``sharedmemory:N``). ``--max-memory`` is the explorer's byte budget (default 16 GiB): a search that
 reaches it stops and says so (``stopped_by``).
 
 ``--symbolic`` runs the symbolic engine (:mod:`coordinator.analysis.symbolic`) instead, one cold run
@@ -31,6 +31,10 @@ and CPU, bounds included, the kernel's load excluded: ``load_seconds``), ``phase
 ``nodes``, ``peak_rss_bytes``, and ``oracle_disagrees`` (the columns that differ from the
 ``oracle.tsv`` beside a ``model.pnml``; empty when all nine agree).
 
+``--count-edges`` has our explorer count the edges without keeping them (``explore(...,
+edges=False)``, ``edges_kept`` false in the row): what a question that needs the markings, their
+number, the edge count and the deadlocks costs without the graph's 8 bytes an edge.
+
 ``--structural`` adds, per model, the structural path that needs no state space: the two semiflow
 LPs (conservative, consistent) and the state-equation place bounds (:mod:`coordinator.analysis.lp`),
 with their times and whether they decide boundedness (``structural_bounded``, ``structural_max_bound``).
@@ -38,7 +42,7 @@ with their times and whether they decide boundedness (``structural_bounded``, ``
 Usage::
 
     python bench/statespace.py [--json] [--pm4py-timeout S] [--repeat-budget S] [--no-pm4py]
-                               [--max-memory GIB] [--structural] [--mcc DIR] MODEL...
+                               [--max-memory GIB] [--count-edges] [--structural] [--mcc DIR] MODEL...
     python bench/statespace.py --symbolic [--json] [--seconds S] [--max-memory GIB] MODEL...
 """
 
@@ -100,22 +104,29 @@ def mcc_dir(given: str | None) -> Path:
 
 
 def load_model(spec: str, mcc: str | None) -> Any:
-    """A PNML path, or ``kanban:N`` (Kanban-PT-00005's structure with N tokens per stage)."""
+    """A PNML path, or ``FAMILY:N``: a contest family at size N (:mod:`bench.families`)."""
     sys.path.insert(0, str(ROOT))
-    from coordinator.net import PetriNet
     from coordinator.netfile.pnml import load_pnml
 
-    if spec.startswith("kanban:"):
-        n = int(spec.split(":", 1)[1])
-        base = load_pnml(mcc_dir(mcc) / "Kanban-PT-00005" / "model.pnml")
-        return PetriNet(name=f"Kanban-{n}", places=base.places, transitions=base.transitions, arcs=base.arcs,
-                        initial_marking={p: n for p in base.initial_marking})
+    if _family(spec):
+        from bench.families import build
+
+        return build(spec, mcc_dir(mcc))
     return load_pnml(spec)
 
 
+def _family(spec: str) -> bool:
+    """``spec`` names a generated family (``FAMILY:N``, :mod:`bench.families`), not a file."""
+    family, sep, size = spec.partition(":")
+    return bool(sep) and size.isdigit() and not Path(spec).exists()
+
+
 def model_name(spec: str) -> str:
-    if spec.startswith("kanban:"):
-        return f"Kanban-{spec.split(':', 1)[1]} (generated)"
+    if _family(spec):
+        sys.path.insert(0, str(ROOT))
+        from bench.families import build
+
+        return f"{build(spec, mcc_dir(None)).name} (generated)"
     return Path(spec).parent.name if Path(spec).name == "model.pnml" else Path(spec).stem
 
 
@@ -146,7 +157,7 @@ def child_structural(spec: str, mcc: str | None) -> dict[str, Any]:
 
 
 def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None = None,
-               mcc: str | None = None) -> dict[str, Any]:
+               mcc: str | None = None, edges: bool = True) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
     from coordinator.analysis.statespace import explore, load_search
     from coordinator.analysis.structure import search_bounds
@@ -173,9 +184,11 @@ def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None 
 
     before = _rss_now()
     space, first, wall, cpu, runs = _best_of(
-        build, lambda net: explore(net, max_states=max_states, max_bytes=max_bytes, bounds=bounds[0]), budget)
+        build, lambda net: explore(net, max_states=max_states, max_bytes=max_bytes, bounds=bounds[0], edges=edges),
+        budget)
     peak = _peak_rss()
-    return {"states": space.n_states, "edges": space.n_edges, "complete": space.complete,
+    return {"states": space.n_states, "edges": space.n_edges, "edges_kept": space.edges_kept,
+            "complete": space.complete,
             "stopped_by": space.stopped_by, "graph_bytes": space.nbytes, "seconds": wall,
             "cpu_seconds": cpu, "first_seconds": first, "runs": runs, "load_seconds": load,
             "net_matrices_seconds": min(matrices),
@@ -338,7 +351,8 @@ def bench(path: str, cap: float, with_pm4py: bool, max_states: int, budget: floa
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("models", nargs="+", metavar="MODEL",
-                        help="PNML model files, or kanban:N (Kanban-PT-00005's structure with N tokens per stage)")
+                        help="PNML model files, or FAMILY:N, a contest family built at size N: kanban:N, fms:N, "
+                             "philosophers:N, sharedmemory:N (bench/families.py)")
     parser.add_argument("--json", action="store_true", help="print one JSON document instead of a table")
     parser.add_argument("--pm4py-timeout", type=float, default=60.0, metavar="S",
                         help="time cap of the pm4py baseline per model, seconds (default 60)")
@@ -350,6 +364,9 @@ def main(argv: list[str] | None = None) -> int:
                              "and report the best run (default 1; 0 = one cold run)")
     parser.add_argument("--max-memory", type=float, default=16.0, metavar="GIB",
                         help="byte budget of our explorer in GiB (default 16); the search stops there and says so")
+    parser.add_argument("--count-edges", action="store_true",
+                        help="our explorer counts the edges without keeping them (explore(..., edges=False)): "
+                             "the markings, edge count and deadlocks of a question that needs no graph")
     parser.add_argument("--structural", action="store_true",
                         help="also time the structural path: semiflow LPs and state-equation place bounds")
     parser.add_argument("--mcc", metavar="DIR", help="folder of the MCC models (default: where the tests find them)")
@@ -360,11 +377,12 @@ def main(argv: list[str] | None = None) -> int:
                         help="time budget of the symbolic engine per model (default 600)")
     parser.add_argument("--child", choices=["ours", "pm4py", "structural", "symbolic"], help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
-    extra = ["--max-memory", str(args.max_memory)] + (["--mcc", args.mcc] if args.mcc else [])
+    extra = ["--max-memory", str(args.max_memory)] + (["--mcc", args.mcc] if args.mcc else []) + (
+        ["--count-edges"] if args.count_edges else [])
     if args.child:
         if args.child == "ours":
             result = child_ours(args.models[0], args.max_states, args.repeat_budget,
-                                int(args.max_memory * 2**30), args.mcc)
+                                int(args.max_memory * 2**30), args.mcc, not args.count_edges)
         elif args.child == "structural":
             result = child_structural(args.models[0], args.mcc)
         elif args.child == "symbolic":
@@ -417,7 +435,8 @@ def _print_row(row: dict[str, Any]) -> None:
                  f"(max bound {row['structural_max_bound']}), conservative={row['conservative']}, "
                  f"consistent={row['consistent']}")
     stop = "" if row["complete"] else f" [stopped by {row['stopped_by']}]"
-    print(f"{row['model']:<26} {row['states']:>10,} states{stop} {row['edges']:>11,} edges "
+    kept = "" if row.get("edges_kept", True) else " (counted)"
+    print(f"{row['model']:<26} {row['states']:>10,} states{stop} {row['edges']:>11,} edges{kept} "
           f"{row['seconds'] * 1e3:>10,.2f} ms (best of {row['runs']}; cold {row['first_seconds'] * 1e3:,.2f} ms; "
           f"search load {row['load_seconds']:.2f} s) "
           f"{row['markings_per_s']:>10,.0f}/s peak {row['peak_rss_bytes'] / 2**20:>6.0f} MiB "
