@@ -10,8 +10,9 @@ before numba is imported, unless the user has set it. It also sets numba's optim
 (``NUMBA_OPT``, again only when the user has not set it and numba is not imported yet): on this
 search, level 1 compiles about 15 % faster than numba's default 3 and runs as fast or faster
 (measured on the MCC models and Kanban N = 4, 5; docs/analysis.md, section 2).
-:func:`search_is_compiled` tells a command whether the next use will compile (so it can say so on
-stderr) or load the cache.
+:func:`coordinator.analysis.statespace.search_is_compiled` tells a command whether the next use will
+compile (so it can say so on stderr) or load the cache. Each compiled module calls :func:`configure`
+before it imports numba, so whoever imports it first, the cache lands in the user's directory.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import os
 import sys
 from pathlib import Path
 
-__all__ = ["cache_dir", "configure", "search_is_compiled"]
+__all__ = ["cache_dir", "configure"]
 
 
 def cache_dir(environ: dict[str, str] | None = None) -> Path:
@@ -48,14 +49,3 @@ def configure() -> str:
             config.CACHE_DIR = chosen  # type: ignore[attr-defined]
     return chosen
 
-
-def search_is_compiled() -> bool | None:
-    """Whether the compiled state-space search is in numba's cache for this source and this
-    machine (True: it is loaded now), will be compiled on its first use (False), or cannot be told
-    (None). Imports :mod:`.reach_kernel` (and numba) but compiles nothing."""
-    configure()
-    try:
-        from coordinator.analysis import reach_kernel
-    except ImportError:
-        return None
-    return reach_kernel.cached()

@@ -20,7 +20,6 @@ from collections.abc import Callable
 from typing import Any, TextIO
 
 from coordinator.analysis.budget import default_max_bytes
-from coordinator.analysis.jit import search_is_compiled
 from services.errors import PetrobotError
 
 __all__ = ["add_parser", "parse_size", "render", "run"]
@@ -51,6 +50,13 @@ def parse_size(text: str) -> int:
         raise argparse.ArgumentTypeError(f"memory budget {text!r} is below 1 MiB")
     return size
 
+
+def _search_is_compiled() -> bool | None:
+    """:func:`coordinator.analysis.statespace.search_is_compiled`, imported when asked (scipy and
+    the search are not imported by commands that do not analyse)."""
+    from coordinator.analysis.statespace import search_is_compiled as compiled
+
+    return compiled()
 
 def add_parser(subparsers: Any) -> None:
     """Register ``analyze`` on the ``petrobot`` sub-command parser."""
@@ -307,7 +313,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"petrobot analyze: {exc}", file=sys.stderr)
         return 2
     show = args.progress or sys.stderr.isatty()
-    if search_is_compiled() is False:
+    if _search_is_compiled() is False:
         sys.stderr.write("compiling the state-space search (once per machine)...\n")
         sys.stderr.flush()
     if show:

@@ -43,16 +43,32 @@ def test_analyze_says_on_stderr_when_it_has_to_compile_the_search(tmp_path: Path
     net = tmp_path / "one.toml"
     net.write_text('[[place]]\nid = "p"\ntokens = 1\n\n[[transition]]\nid = "t"\ninputs = { p = 1 }\n'
                    'outputs = { p = 1 }\n', encoding="utf-8")
-    monkeypatch.setattr(analyze, "search_is_compiled", lambda: False)
+    monkeypatch.setattr(analyze, "_search_is_compiled", lambda: False)
     assert main(["analyze", str(net), "--json"]) == 0
     assert "compiling the state-space search (once per machine)..." in capsys.readouterr().err
-    monkeypatch.setattr(analyze, "search_is_compiled", lambda: True)
+    monkeypatch.setattr(analyze, "_search_is_compiled", lambda: True)
     assert main(["analyze", str(net), "--json"]) == 0
     assert "compiling" not in capsys.readouterr().err
 
 
 def test_the_loaded_search_reports_itself_compiled() -> None:
-    from coordinator.analysis.statespace import load_search
+    from coordinator.analysis.statespace import load_search, search_is_compiled
 
     load_search()
-    assert jit.search_is_compiled() is True
+    assert search_is_compiled() is True
+
+
+def test_the_compiled_kernels_cache_in_the_users_directory_whoever_imports_them_first(tmp_path: Path) -> None:
+    # importing a kernel directly (as a test or a bench child does), not through a
+    # command that configures numba first, must not write numba's cache beside the source
+    code = ("import coordinator.analysis.symbolic, coordinator.analysis.mdd_kernel as k, "
+            "coordinator.analysis.mdd_order as o, coordinator.analysis.reach_kernel as r\n"
+            "print('\\n'.join(f._cache._cache_path for m in (k, o, r) for f in vars(m).values() "
+            "if hasattr(f, '_cache')))")
+    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
+    env["XDG_CACHE_HOME"] = str(tmp_path)
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True,
+                         timeout=120, check=True)
+    paths = out.stdout.split()
+    assert len(paths) > 10
+    assert all(p.startswith(str(tmp_path / "petrobot" / "numba")) for p in paths), paths
