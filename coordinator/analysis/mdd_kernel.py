@@ -20,12 +20,15 @@ driven by :mod:`coordinator.analysis.symbolic`, which documents the results. Wha
   set). With saturation off, ``FIRE`` is a plain image (breadth-first layers for witnesses).
 * **Set operations** (``APPLY``: union, intersection, difference) and ``RESTRICT`` (the markings of a
   set in which an event is enabled, or disabled).
+* **Counts** that build no node: the paths of a set (:func:`count`), and per event the paths on
+  which it is enabled (:func:`enabled_counts`), exact modulo primes.
 
 numba cannot load a recursive function from its cache (it crashes: checked on numba 0.68), so the
 recursion runs on an explicit stack of frames, each with a program counter; a frame's node under
 construction lives in an arena of child buffers with stack discipline. Results of operations go
-to a lossy computed table (a direct-mapped cache, as in CUDD), which never changes a result, only
-what is recomputed. Buffers grow inside the one compiled call, within a byte budget (status
+to a lossy computed table (a direct-mapped cache, as in CUDD; an entry's two keys and its value
+side by side, so a look-up reads one cache line), which never changes a result, only what is
+recomputed. Buffers grow inside the one compiled call, within a byte budget (status
 ``MEMORY`` when it is reached). The store is handed back to the caller, who passes it to the next
 call; nothing is ever freed (the store lives as long as one analysis).
 """
@@ -37,11 +40,16 @@ import time
 from collections.abc import Callable
 
 import numpy as np
-from numba import njit, objmode
+
+from coordinator.analysis import jit
+
+jit.configure()  # numba's cache in the user's cache directory: before numba is imported
+
+from numba import njit, objmode  # noqa: E402
 
 __all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "MEMORY", "MODE_APPLY", "MODE_IMAGE",
            "MODE_RESTRICT", "MODE_SATURATE", "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "count",
-           "max_weight", "new_store", "node_of_path", "presence", "run", "set_watch", "clear_cache"]
+           "enabled_counts", "max_weight", "new_store", "node_of_path", "presence", "run", "set_watch", "clear_cache"]
 
 EMPTY, TERMINAL = 0, 1
 NO_CONSTRAINT = -1
@@ -59,7 +67,7 @@ _OP_SAT, _OP_FIRE, _OP_APPLY, _OP_RESTRICT, _OP_IMAGE = 1, 2, 3, 4, 5
 #: meta array layout: nodes used, kid slots used, entries of the unique table, level of an overflow
 META_NODES, META_KIDS, META_UNIQUE, META_OVERFLOW_LEVEL, META_CT_USED = 0, 1, 2, 3, 4
 META_SIZE = 5
-#: largest computed table (entries of 20 bytes)
+#: largest computed table (entries of 24 bytes)
 _CT_MAX = 1 << 24
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
@@ -87,7 +95,7 @@ def _tick(nodes: int) -> int:
 
 
 def new_store(dom: np.ndarray, path: np.ndarray) -> tuple[tuple[np.ndarray, ...], int]:
-    """A fresh store ``(meta, level, offset, size, kids, unique, ct_k0, ct_k1, ct_v)`` with nodes 0
+    """A fresh store ``(meta, level, offset, size, kids, unique, ct)`` with nodes 0
     (empty), 1 (terminal) and the single path of the level values ``path`` (the initial marking),
     and that path's root node. The computed table (``ct_*``) is part of the store, so that a call
     stopped at its deadline resumes from the results it had (:func:`clear_cache` when the events
@@ -106,14 +114,15 @@ def new_store(dom: np.ndarray, path: np.ndarray) -> tuple[tuple[np.ndarray, ...]
         buf = np.zeros(int(dom[k]), np.int32)
         buf[int(path[k])] = node
         node = int(_checkin(k, buf, 0, buf.shape[0], meta, level, offset, size, kids, unique))
-    return (meta, level, offset, size, kids, unique, np.full(1 << 12, -1, np.int64), np.zeros(1 << 12, np.int64),
-            np.zeros(1 << 12, np.int32)), node
+    ct = np.zeros((1 << 12, 3), np.int64)
+    ct[:, 0] = -1
+    return (meta, level, offset, size, kids, unique, ct), node
 
 
 def clear_cache(store: tuple[np.ndarray, ...]) -> None:
     """Forget the computed table of a store (its results depend on the events of the calls)."""
     store[0][META_CT_USED] = 0
-    store[6][:] = -1
+    store[6][:, 0] = -1
 
 
 @njit(cache=True)
@@ -204,7 +213,10 @@ def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, 
             return a, a, b, 0, 0
         return -1, a, b, (_OP_SAT << 40) + a, c
     if ty == _FIRE:
-        if a == EMPTY or k > ev_bot[e]:
+        # below the event's bottom a firing changes nothing, but under a constraint the node is
+        # moved to another value, whose constraint it must be cut to (and saturated within): the
+        # frame then walks down with the identity; a node that is its constraint stays as it is
+        if a == EMPTY or k == n_levels or (k > ev_bot[e] and (c == NO_CONSTRAINT or c == a)):
             return a, a, b, 0, 0
         return -1, a, b, ((_OP_FIRE if saturating else _OP_IMAGE) << 40) + a, (c << 24) + e
     if ty == _APPLY:
@@ -238,7 +250,7 @@ def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, 
 def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray,
         ev_slot: np.ndarray, slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray,
         meta: np.ndarray, level: np.ndarray, offset: np.ndarray, size: np.ndarray, kids: np.ndarray,
-        unique: np.ndarray, ct_k0: np.ndarray, ct_k1: np.ndarray, ct_v: np.ndarray, a_in: int, b_in: int,
+        unique: np.ndarray, ct: np.ndarray, a_in: int, b_in: int,
         c_in: int, arg: int, check_overflow: bool, max_bytes: int) -> tuple:  # type: ignore[type-arg]
     """One operation on the store (see the module docstring).
 
@@ -253,7 +265,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
             top]`` is the index of its local function, or -1 where the event leaves the level alone.
         slot_ptr, nxt: local function s maps value i to ``nxt[slot_ptr[s] + i]`` (-1: disabled).
         evtop_ptr, evtop: the events whose top is level k: ``evtop[evtop_ptr[k]:evtop_ptr[k + 1]]``.
-        meta, level, offset, size, kids, unique, ct_k0, ct_k1, ct_v: the store (:func:`new_store`, or
+        meta, level, offset, size, kids, unique, ct: the store (:func:`new_store`, or
             a previous result).
         a_in, b_in, c_in: operand nodes (c_in: a constraint node at the root level, or NO_CONSTRAINT).
         arg: the APPLY operation or the RESTRICT event.
@@ -263,7 +275,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
             beyond it; the store is then still consistent).
 
     Returns:
-        ``(status, result node, meta, level, offset, size, kids, unique, ct_k0, ct_k1, ct_v)``.
+        ``(status, result node, meta, level, offset, size, kids, unique, ct)``.
     """
     n_levels = dom.shape[0]
     max_dom = 1
@@ -271,7 +283,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
         max_dom = max(max_dom, dom[k])
     saturating = mode == MODE_SATURATE
     # computed table: direct mapped (key words and value), grown (and refilled) as it fills up
-    ccap = ct_k0.shape[0]
+    ccap = ct.shape[0]
     ct_used = meta[META_CT_USED]
     # frames: along the stack the level grows by one per frame, but for NODE frames (at the level of
     # the SAT or FIRE frame below them) and the IMAGE frame, so the depth stays below 2K + 4
@@ -340,7 +352,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
             gc = ccap
             while 4 * ct_used > gc and gc < _CT_MAX:
                 gc *= 2
-            held = level.shape[0] * 16 + kids.shape[0] * 4 + unique.shape[0] * 4 + ccap * 20 + fixed
+            held = level.shape[0] * 16 + kids.shape[0] * 4 + unique.shape[0] * 4 + ccap * 24 + fixed
             extra = 0
             if gn != level.shape[0]:
                 extra += gn * 16
@@ -349,7 +361,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
             if gu != unique.shape[0]:
                 extra += gu * 4
             if gc != ccap:
-                extra += gc * 20
+                extra += gc * 24
             if held + extra > max_bytes:
                 status = MEMORY
                 break
@@ -370,20 +382,19 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 _rehash(unique, n_nodes, level, offset, size, kids)
             if gc != ccap:
                 # a larger table, refilled with the entries of the old one
-                n0 = np.full(gc, -1, np.int64)
-                n1 = np.zeros(gc, np.int64)
-                nv = np.zeros(gc, np.int32)
+                nct = np.zeros((gc, 3), np.int64)
+                nct[:, 0] = -1
                 ct_used = 0
                 for x in range(ccap):
-                    if ct_k0[x] != -1:
-                        y = _slot(ct_k0[x], ct_k1[x], gc - 1)
-                        if n0[y] == -1:
+                    if ct[x, 0] != -1:
+                        y = _slot(ct[x, 0], ct[x, 1], gc - 1)
+                        if nct[y, 0] == -1:
                             ct_used += 1
-                        n0[y] = ct_k0[x]
-                        n1[y] = ct_k1[x]
-                        nv[y] = ct_v[x]
+                        nct[y, 0] = ct[x, 0]
+                        nct[y, 1] = ct[x, 1]
+                        nct[y, 2] = ct[x, 2]
                 ccap = gc
-                ct_k0, ct_k1, ct_v = n0, n1, nv
+                ct = nct
         cmask = ccap - 1
         d = depth - 1
         ty = f_ty[d]
@@ -580,7 +591,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 elif ty == _FIRE:
                     e = f_e[d]
                     j = i
-                    if k >= ev_top[e]:
+                    if ev_top[e] <= k <= ev_bot[e]:
                         sl = ev_slot[ev_slot_ptr[e] + k - ev_top[e]]
                         if sl >= 0:
                             j = nxt[slot_ptr[sl] + i]
@@ -629,19 +640,19 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 key0 = f_k0[d]
                 key1 = f_k1[d]
                 s = _slot(key0, key1, cmask)
-                if ct_k0[s] == -1:
+                if ct[s, 0] == -1:
                     ct_used += 1
-                ct_k0[s] = key0
-                ct_k1[s] = key1
-                ct_v[s] = r
+                ct[s, 0] = key0
+                ct[s, 1] = key1
+                ct[s, 2] = r
                 if ty == _SAT:  # a saturated node is its own saturation
                     key0 = (_OP_SAT << 40) + r
                     s = _slot(key0, key1, cmask)
-                    if ct_k0[s] == -1:
+                    if ct[s, 0] == -1:
                         ct_used += 1
-                    ct_k0[s] = key0
-                    ct_k1[s] = key1
-                    ct_v[s] = r
+                    ct[s, 0] = key0
+                    ct[s, 1] = key1
+                    ct[s, 2] = r
                 atop = b0
                 depth -= 1
                 ret = r
@@ -653,8 +664,8 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
         quick, ca, cb, key0, key1 = _prepare(cty, ck, ca, cb, cc, ce, saturating, n_levels, ev_bot)
         if quick < 0:
             s = _slot(key0, key1, cmask)
-            if ct_k0[s] == key0 and ct_k1[s] == key1:
-                quick = ct_v[s]
+            if ct[s, 0] == key0 and ct[s, 1] == key1:
+                quick = ct[s, 2]
         if quick >= 0:
             ret = quick
             continue
@@ -671,7 +682,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
     meta[META_CT_USED] = ct_used
     if status != OK:
         ret = EMPTY
-    return status, ret, meta, level, offset, size, kids, unique, ct_k0, ct_k1, ct_v
+    return status, ret, meta, level, offset, size, kids, unique, ct
 
 
 @njit(cache=True)
@@ -723,28 +734,28 @@ def count(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, n_l
 
 
 @njit(cache=True)
-def presence(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, level: np.ndarray,
-             dom_ptr: np.ndarray, seen: np.ndarray, out: np.ndarray) -> int:
-    """Mark in ``out[dom_ptr[k] + i]`` every value i of level k that some path below ``root`` takes
-    (every stored node leads to the terminal, so a non-empty child is a value some marking has);
-    ``seen`` (uint8, zero, one per node) is scratch. Returns the number of nodes visited."""
-    if root <= 1:
-        return 0
+def _nodes_of(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, seen: np.ndarray) -> np.ndarray:
+    """The nodes of the set ``root`` (itself and every node below it but the terminal), each once, in
+    no particular order; ``seen`` (uint8, zero, one per node) is scratch, left set on them."""
     stack = np.zeros(1024, np.int64)
+    out = np.zeros(1024, np.int64)
+    if root <= 1:
+        return out[:0]
     stack[0] = root
     top = 1
     seen[root] = 1
-    visited = 0
+    m = 0
     while top > 0:
         top -= 1
         n = stack[top]
-        visited += 1
-        k = level[n]
+        if m == out.shape[0]:
+            grown = np.zeros(2 * m, np.int64)
+            grown[:m] = out
+            out = grown
+        out[m] = n
+        m += 1
         for i in range(size[n]):
             c = kids[offset[n] + i]
-            if c == 0:
-                continue
-            out[dom_ptr[k] + i] = 1
             if c > 1 and seen[c] == 0:
                 seen[c] = 1
                 if top == stack.shape[0]:
@@ -753,7 +764,22 @@ def presence(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, 
                     stack = grown
                 stack[top] = c
                 top += 1
-    return visited
+    return out[:m]
+
+
+@njit(cache=True)
+def presence(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, level: np.ndarray,
+             dom_ptr: np.ndarray, seen: np.ndarray, out: np.ndarray) -> int:
+    """Mark in ``out[dom_ptr[k] + i]`` every value i of level k that some path below ``root`` takes
+    (every stored node leads to the terminal, so a non-empty child is a value some marking has);
+    ``seen`` (uint8, zero, one per node) is scratch. Returns the number of nodes visited."""
+    nodes = _nodes_of(root, offset, size, kids, seen)
+    for n in nodes:
+        k = level[n]
+        for i in range(size[n]):
+            if kids[offset[n] + i] != EMPTY:
+                out[dom_ptr[k] + i] = 1
+    return int(nodes.shape[0])
 
 
 @njit(cache=True)
@@ -808,3 +834,142 @@ def node_of_path(root: int, values: np.ndarray, offset: np.ndarray, size: np.nda
             return 0
         n = kids[offset[n] + v]
     return n
+
+
+@njit(cache=True)
+def _mulmod(a: int, b: int, p: int) -> int:
+    """a·b mod p for 0 ≤ a, b < p < 2**61 in int64 arithmetic (two bits of b at a time)."""
+    r = 0
+    for sh in range(60, -2, -2):
+        r = (r * 4) % p
+        d = (b >> sh) & 3 if sh >= 0 else 0
+        if d:
+            r = (r + (a * d) % p) % p
+    return r
+
+
+@njit(cache=True)
+def enabled_counts(root: int, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray,
+                   ev_slot: np.ndarray, slot_ptr: np.ndarray, nxt: np.ndarray, offset: np.ndarray,
+                   size: np.ndarray, kids: np.ndarray, level: np.ndarray, n_levels: int, n_nodes: int,
+                   residue: np.ndarray, approx: np.ndarray, primes: np.ndarray, out_res: np.ndarray,
+                   out_approx: np.ndarray) -> None:
+    """For every event e, the number of paths (markings) of the set ``root`` in which e is enabled,
+    into ``out_res[e]`` (modulo each prime of ``primes``, all below 2**61) and ``out_approx[e]``
+    (float64), building no node.
+
+    A count restricted on the levels ``top[e] .. bot[e]`` only: the paths from the root down to a
+    node n at level ``top[e]`` (``above(n)``, one top-down pass over the set's nodes, shared by all
+    events) times the paths below n that take an enabling value on every level where e has a local
+    function, down to ``bot[e]``, below which the plain count of the node (``residue``, ``approx``:
+    :func:`count` of ``root``, done before) is used. So an event costs the nodes between its top and
+    bottom levels, not the whole set. Nodes are numbered children first (a node is checked in after
+    its children), so decreasing numbers are a top-down order."""
+    n_pr = primes.shape[0]
+    if root <= 1:
+        for e in range(ev_top.shape[0]):
+            for r in range(n_pr):
+                out_res[e, r] = root
+            out_approx[e] = float(root)
+        return
+    # the set's nodes, compacted, top-down
+    ids = np.sort(_nodes_of(root, offset, size, kids, np.zeros(n_nodes, np.uint8)))[::-1].copy()
+    m = ids.shape[0]
+    comp = np.full(n_nodes, -1, np.int64)
+    for x in range(m):
+        comp[ids[x]] = x
+    # paths from the root to each node
+    above_r = np.zeros((m, n_pr), np.int64)
+    above_f = np.zeros(m, np.float64)
+    for r in range(n_pr):
+        above_r[0, r] = 1
+    above_f[0] = 1.0
+    for x in range(m):
+        nd = ids[x]
+        for i in range(size[nd]):
+            c = kids[offset[nd] + i]
+            if c > 1:
+                y = comp[c]
+                for r in range(n_pr):
+                    above_r[y, r] = (above_r[y, r] + above_r[x, r]) % primes[r]
+                above_f[y] += above_f[x]
+    # the nodes of each level
+    lp = np.zeros(n_levels + 1, np.int64)
+    for x in range(m):
+        lp[level[ids[x]] + 1] += 1
+    for k in range(n_levels):
+        lp[k + 1] += lp[k]
+    fill = lp.copy()
+    by_level = np.empty(m, np.int64)
+    for x in range(m):
+        k = level[ids[x]]
+        by_level[fill[k]] = x
+        fill[k] += 1
+    stamp = np.full(m, -1, np.int64)
+    memo_r = np.zeros((m, n_pr), np.int64)
+    memo_f = np.zeros(m, np.float64)
+    st = np.zeros(n_levels + 2, np.int64)
+    ch = np.zeros(n_levels + 2, np.int64)
+    for e in range(ev_top.shape[0]):
+        t = ev_top[e]
+        b = ev_bot[e]
+        for r in range(n_pr):
+            out_res[e, r] = 0
+        out_approx[e] = 0.0
+        for z in range(lp[t], lp[t + 1]):
+            x0 = by_level[z]
+            if stamp[x0] != e:
+                # depth-first, post-order: a node's enabled paths once its children's are known
+                stamp[x0] = e
+                for r in range(n_pr):
+                    memo_r[x0, r] = 0
+                memo_f[x0] = 0.0
+                st[0] = x0
+                ch[0] = 0
+                depth = 1
+                while depth > 0:
+                    x = st[depth - 1]
+                    nd = ids[x]
+                    k = level[nd]
+                    i = ch[depth - 1]
+                    if i == size[nd]:
+                        depth -= 1
+                        if depth > 0:
+                            p = st[depth - 1]
+                            for r in range(n_pr):
+                                memo_r[p, r] = (memo_r[p, r] + memo_r[x, r]) % primes[r]
+                            memo_f[p] += memo_f[x]
+                        continue
+                    ch[depth - 1] = i + 1
+                    c = kids[offset[nd] + i]
+                    if c == EMPTY:
+                        continue
+                    sl = ev_slot[ev_slot_ptr[e] + k - t]
+                    if sl >= 0 and nxt[slot_ptr[sl] + i] < 0:
+                        continue
+                    if k == b:
+                        if c == TERMINAL:
+                            for r in range(n_pr):
+                                memo_r[x, r] = (memo_r[x, r] + 1) % primes[r]
+                            memo_f[x] += 1.0
+                        else:
+                            for r in range(n_pr):
+                                memo_r[x, r] = (memo_r[x, r] + residue[c, r]) % primes[r]
+                            memo_f[x] += approx[c]
+                        continue
+                    y = comp[c]
+                    if stamp[y] == e:
+                        for r in range(n_pr):
+                            memo_r[x, r] = (memo_r[x, r] + memo_r[y, r]) % primes[r]
+                        memo_f[x] += memo_f[y]
+                        continue
+                    stamp[y] = e
+                    for r in range(n_pr):
+                        memo_r[y, r] = 0
+                    memo_f[y] = 0.0
+                    st[depth] = y
+                    ch[depth] = 0
+                    depth += 1
+            for r in range(n_pr):
+                out_res[e, r] = (out_res[e, r] + _mulmod(above_r[x0, r], memo_r[x0, r], primes[r])) % primes[r]
+            out_approx[e] += above_f[x0] * memo_f[x0]

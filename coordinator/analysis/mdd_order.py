@@ -11,13 +11,22 @@ Internal to :mod:`.symbolic`. Three decisions, each from the net's structure alo
    occur (the diagram only ever holds those that do), finite because every place is bounded
    (Ciardo, Lüttgen, Siminiceanu 2001 use such local state spaces; Pastor, Cortadella 1998 encode
    state machine components the same way). A group is kept when it has at most :data:`MAX_LOCAL`
-   local markings; groups are disjoint, the larger first; the remaining places get a level each
-   with the values 0 .. bound.
+   local markings; groups are disjoint, packed greedily twice (the larger first; the one most of
+   whose transitions stay inside it first) and the packing that leaves more transitions on one
+   level is kept; the remaining places get a level each with the values 0 .. bound. A group (or
+   place) with a single local marking is no level at all:
+   its places are *fixed* (their counts are the same in every reachable marking), a transition
+   disabled by them is never enabled, and the others ignore them; so events span fewer levels and
+   every path is shorter. A transition enabled by them that would change them (beyond a proven
+   bound: it never fires if the bounds are right) is left out of saturation too, and
+   :mod:`.symbolic` checks afterwards that no reachable marking enables it (else the bounds were
+   wrong: an error, as for a firing beyond a level's values).
 2. **Order.** Levels are ordered so that transitions and P-semiflows span few levels (saturation
    works on the levels between an event's top and bottom): FORCE (Aloul, Markov, Sakallah 2003:
    each level moves to the mean centre of gravity of its hyperedges), from several starts, each
    followed by sifting (every level moved to its best position while that lowers the score); the
-   score is the sum of the spans of transitions and semiflows.
+   score is the sum of the spans of transitions and semiflows. Resources shared by components that
+   meet only through them (:func:`shared_levels`) can be put below all the components instead.
 3. **Events.** A transition becomes an event: its top and bottom levels and a local function per
    level it reads or changes (local value → local value, -1 where it is disabled). Events that are
    equal on every level but one, where they are enabled on disjoint values, are merged into one (the
@@ -34,12 +43,17 @@ from math import comb
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
+
+from coordinator.analysis import jit
+
+jit.configure()  # numba's cache in the user's cache directory: before numba is imported
+
+from numba import njit  # noqa: E402
 
 from coordinator.analysis.matrices import SparseNet
 from coordinator.errors import AnalysisError
 
-__all__ = ["MAX_LOCAL", "Encoding", "Events", "encode", "events", "touched_places"]
+__all__ = ["MAX_LOCAL", "SHARED_DEGREE", "Encoding", "Events", "encode", "events", "shared_levels", "touched_places"]
 
 #: most local markings of a group of places on one level
 MAX_LOCAL = 512
@@ -63,6 +77,12 @@ class Encoding:
         groups: levels holding more than one place.
         score: the order's score (sum of spans of transitions and semiflows over levels).
         seconds: time spent finding groups and order.
+        fixed: the places on no level, whose counts never change: ``fixed_values`` (same shape),
+            in every reachable marking; ``never``: (|T|,) bool, the transitions such a place
+            disables (never enabled); ``suspect``: (|T|,) bool, those it enables but that would
+            change it (never enabled if the bounds are right). ``place_level`` is -1 for a fixed
+            place.
+        sunk: shared levels moved below all others (:func:`encode` with ``sink``), 0 if none.
     """
 
     levels: tuple[np.ndarray, ...]
@@ -76,11 +96,27 @@ class Encoding:
     score: float
     seconds: float
     index: tuple[dict[tuple[int, ...], int], ...] = field(default_factory=tuple)
+    fixed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    fixed_values: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    never: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    suspect: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    sunk: int = 0
 
     @property
     def n_levels(self) -> int:
         """Number of levels K."""
         return int(self.dom.shape[0])
+
+    @property
+    def fixed_tokens(self) -> int:
+        """Tokens on the fixed places (the same in every reachable marking)."""
+        return int(self.fixed_values.sum())
+
+    def free(self, touched: list[np.ndarray]) -> np.ndarray:
+        """(|T|,) bool: the transitions enabled in every reachable marking that change no level
+        (they read or change fixed places only, or none); ``touched``: :func:`touched_places`."""
+        return np.array([not self.never[t] and not self.suspect[t] and bool((self.place_level[ps] < 0).all())
+                         for t, ps in enumerate(touched)], dtype=bool)
 
     def value_of(self, k: int, marking: np.ndarray) -> int:
         """The value of level k in a full marking (|P|,), or -1 if that local marking is not a value."""
@@ -160,7 +196,16 @@ def _local_space(places: np.ndarray, sn: SparseNet, bounds: np.ndarray, trans: n
 
 def _groups(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], touched: list[np.ndarray],
             deadline: float) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Disjoint groups of places (semiflow supports) with their local markings, the larger first."""
+    """Disjoint groups of places (semiflow supports) with their local markings, the larger first.
+
+    Two greedy packings of the semiflow supports are built and the one that leaves more transitions
+    inside a single level is kept (a local event is fired on one level alone; an event across levels
+    makes saturation walk every level between its top and bottom): the larger support first, and the
+    support whose places are most often read and changed by transitions inside it first. They differ
+    on nets of components that share resources: the places that hold one shared resource, across
+    every component, form a semiflow larger than each component's, and taking it first splits every
+    component into single places (a fleet of robots sharing an aisle); the second packing keeps each
+    component whole."""
     n_p = sn.n_places
     trans_of: list[list[int]] = [[] for _ in range(n_p)]
     for t, ps in enumerate(touched):
@@ -176,32 +221,92 @@ def _groups(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], touched:
             continue
         total = int(np.dot(y[support], sn.m0[support]))
         caps = np.minimum(bounds[support], total // y[support])
-        upper = float(np.prod((caps + 1).astype(np.float64)))
+        with np.errstate(over="ignore"):  # a product beyond 1e308 is inf: far above MAX_LOCAL either way
+            upper = float(np.prod((caps + 1).astype(np.float64)))
         if (y[support] == 1).all() and total < 64:
             upper = min(upper, float(comb(support.size + total - 1, total)))
         cands.append((upper, -support.size, support))
     cands.sort(key=lambda c: (c[0] > MAX_LOCAL, c[1] if c[0] <= MAX_LOCAL else c[0], c[1]))
-    used = np.zeros(n_p, dtype=bool)
-    out: list[tuple[np.ndarray, np.ndarray]] = []
-    seen: set[bytes] = set()
-    for upper, _, support in cands:
-        if time.monotonic() > deadline:
-            break
-        if used[support].any() or support.tobytes() in seen:
+    found: dict[bytes, tuple[np.ndarray, np.ndarray] | None] = {}  # a support's group, None if not one
+
+    def pack(order: list[tuple[float, int, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
+        used = np.zeros(n_p, dtype=bool)
+        out: list[tuple[np.ndarray, np.ndarray]] = []
+        seen: set[bytes] = set()
+        for _, _, support in order:
+            if time.monotonic() > deadline:
+                break
+            key = support.tobytes()
+            if used[support].any() or key in seen:
+                continue
+            seen.add(key)
+            if key not in found:
+                found[key] = None
+                with np.errstate(over="ignore"):
+                    product = float(np.prod((bounds[support] + 1).astype(np.float64)))
+                if product > 1:
+                    trans = np.array(sorted({t for p in support.tolist() for t in trans_of[p]}), dtype=np.int64)
+                    local = _local_space(support, sn, bounds, trans, MAX_LOCAL)
+                    if local is not None and local.shape[0] < product:  # else too many, or uncorrelated
+                        found[key] = (support.astype(np.int64), local)
+            group = found[key]
+            if group is not None:
+                used[support] = True
+                out.append(group)
+        for p in np.flatnonzero(~used).tolist():
+            out.append((np.array([p], dtype=np.int64), np.arange(int(bounds[p]) + 1, dtype=np.int64)[:, None]))
+        return out
+
+    def inside(support: np.ndarray) -> int:
+        """Transitions that read or change places of ``support`` only."""
+        mine = np.zeros(n_p, dtype=bool)
+        mine[support] = True
+        ts = {t for p in support.tolist() for t in trans_of[p]}
+        return sum(1 for t in ts if mine[touched[t]].all())
+
+    def local_events(groups: list[tuple[np.ndarray, np.ndarray]]) -> int:
+        owner = np.empty(n_p, dtype=np.int64)
+        for k, (ps, _) in enumerate(groups):
+            owner[ps] = k
+        return sum(1 for ps in touched if ps.size and (owner[ps] == owner[ps[0]]).all())
+
+    first = pack(cands)
+    n_small = sum(1 for c in cands if c[0] <= MAX_LOCAL)
+    by_density = sorted(range(n_small), key=lambda i: (-inside(cands[i][2]) / cands[i][2].size, cands[i][1]))
+    if by_density == list(range(n_small)) or time.monotonic() > deadline:
+        return first
+    dense = [cands[i] for i in by_density] + cands[n_small:]
+    second = pack(dense)
+    return second if local_events(second) > local_events(first) else first
+
+
+def _fixed(sn: SparseNet, groups: list[tuple[np.ndarray, np.ndarray]]
+           ) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray, np.ndarray, np.ndarray]:
+    """The groups that stay levels, the fixed places (a group of one local marking), the transitions
+    they disable and those they enable but that would change them (module docstring)."""
+    never = np.zeros(sn.n_transitions, dtype=bool)
+    suspect = np.zeros(sn.n_transitions, dtype=bool)
+    keep: list[tuple[np.ndarray, np.ndarray]] = []
+    fixed: list[np.ndarray] = []
+    reset = sn.reset if sn.reset is not None and sn.reset.nnz else None
+    for ps, loc in groups:
+        if loc.shape[0] != 1:
+            keep.append((ps, loc))
             continue
-        seen.add(support.tobytes())
-        product = float(np.prod((bounds[support] + 1).astype(np.float64)))
-        if product <= 1:
-            continue
-        trans = np.array(sorted({t for p in support.tolist() for t in trans_of[p]}), dtype=np.int64)
-        local = _local_space(support, sn, bounds, trans, MAX_LOCAL)
-        if local is None or local.shape[0] >= product:
-            continue  # too many local markings, or no correlation between the places
-        used[support] = True
-        out.append((support.astype(np.int64), local))
-    for p in np.flatnonzero(~used).tolist():
-        out.append((np.array([p], dtype=np.int64), np.arange(int(bounds[p]) + 1, dtype=np.int64)[:, None]))
-    return out
+        rows = np.asarray(ps, dtype=np.int64)
+        value = loc[0]
+        pre = sn.pre[rows].toarray().T
+        post = sn.post[rows].toarray().T
+        inh = sn.inhibitor[rows].toarray().T
+        ok = (value[None, :] >= pre).all(axis=1) & ((inh == 0) | (value[None, :] < inh)).all(axis=1)
+        nxt = value[None, :] - pre + post
+        if reset is not None:
+            nxt = np.where(reset[rows].toarray().T > 0, post, nxt)
+        fixed.append(rows)
+        never |= ~ok
+        suspect |= ok & (nxt != value[None, :]).any(axis=1)
+    out = np.sort(np.concatenate(fixed)).astype(np.int64) if fixed else np.zeros(0, np.int64)
+    return keep, out, never, suspect & ~never
 
 
 def _score(pos: np.ndarray, hp: np.ndarray, hidx: np.ndarray) -> float:
@@ -338,8 +443,42 @@ def _order(n: int, hypers: list[np.ndarray], deadline: float, starts: int = 8, s
     return best[1], best[0]
 
 
+#: a shared level meets at least this many other levels through transitions (and twice the median)
+SHARED_DEGREE = 8
+
+
+def shared_levels(n: int, hypers: list[np.ndarray]) -> np.ndarray:
+    """(n,) bool: the levels of resources that the net's components share — levels that transitions
+    connect to many others (at least ``SHARED_DEGREE`` and twice the median) — when the components
+    meet only through them: no transition joins two other levels (the robots of a fleet, each one
+    level, connected only through the aisles, the lift and the chargers they take and give back).
+    None otherwise (processes that also meet each other directly, or components of several levels).
+
+    With such a level in the middle of the order, the events of all the components below it have
+    their top there, and saturating a node of that level interleaves every one of them; below all
+    the components, each component's events have their top at the component's own level and are
+    saturated there, on the saturated diagram of the components beneath (Ciardo, Lüttgen,
+    Siminiceanu 2001: an event is fired at its top level).
+    """
+    none = np.zeros(n, dtype=bool)
+    near: list[set[int]] = [set() for _ in range(n)]
+    for h in hypers:
+        ls = h.tolist()
+        if len(ls) > 1:
+            for a in ls:
+                near[a].update(ls)
+    if n < 2:
+        return none
+    degree = np.array([len(s) - 1 if s else 0 for s in near], dtype=np.int64)
+    shared = degree >= max(SHARED_DEGREE, 2 * float(np.median(degree)))
+    if not shared.any() or shared.all():
+        return none
+    joined = any(int((~shared[h]).sum()) > 1 for h in hypers)
+    return none if joined else shared
+
+
 def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, seconds: float = 5.0,
-           seed: int = 0) -> Encoding:
+           seed: int = 0, sink: bool = False) -> Encoding:
     """Levels, local markings and order of the diagram of a bounded net (module docstring).
 
     Args:
@@ -348,6 +487,8 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
         flows: P-semiflows (y ≥ 0, yᵀC = 0), for groups and order; may be empty.
         seconds: time allowed to the search of groups and order.
         seed: the random starts of the order (another seed, another candidate order).
+        sink: move the shared levels (:func:`shared_levels`) below all the others, each part in the
+            order found; ``sunk`` says how many moved (0: the net has none, the order is unchanged).
 
     Raises:
         AnalysisError: a place has no bound, or a bound above :data:`MAX_DOMAIN`.
@@ -361,18 +502,27 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
                             f"takes places of at most {MAX_DOMAIN - 1:,}")
     touched = touched_places(sn)
     groups = _groups(sn, bounds, flows, touched, start + seconds / 2)
+    groups, fixed, never, suspect = _fixed(sn, groups)
     n_k = len(groups)
-    owner = np.empty(sn.n_places, dtype=np.int64)
+    owner = np.full(sn.n_places, -1, dtype=np.int64)
     for k, (ps, _) in enumerate(groups):
         owner[ps] = k
-    hypers = [np.unique(owner[ps]) for ps in touched if ps.size]
-    hypers += [np.unique(owner[np.flatnonzero(y)]) for y in flows]
+    hypers = [np.unique(o[o >= 0]) for o in (owner[ps] for ps in touched)]
+    shared = shared_levels(n_k, hypers) if sink else np.zeros(n_k, dtype=bool)
+    hypers += [np.unique(o[o >= 0]) for o in (owner[np.flatnonzero(y)] for y in flows)]
     order, score = _order(n_k, hypers, start + seconds, seed=seed)
+    if shared.any():
+        order = np.concatenate([order[~shared[order]], order[shared[order]]])
+        pos = np.empty(n_k, dtype=np.int64)
+        pos[order] = np.arange(n_k)
+        kept = [h for h in hypers if h.size > 1]
+        score = _score(pos, np.concatenate([[0], np.cumsum([h.size for h in kept])]).astype(np.int64),
+                       np.concatenate(kept).astype(np.int64))
     groups = [groups[int(i)] for i in order]
     levels = tuple(ps for ps, _ in groups)
     local = tuple(loc for _, loc in groups)
-    place_level = np.empty(sn.n_places, dtype=np.int64)
-    place_col = np.empty(sn.n_places, dtype=np.int64)
+    place_level = np.full(sn.n_places, -1, dtype=np.int64)
+    place_col = np.full(sn.n_places, -1, dtype=np.int64)
     for k, ps in enumerate(levels):
         place_level[ps] = k
         place_col[ps] = np.arange(ps.size)
@@ -381,7 +531,9 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
     return Encoding(levels=levels, local=local, dom=np.array([loc.shape[0] for loc in local], dtype=np.int64),
                     place_level=place_level, place_col=place_col, m0=m0,
                     weight=tuple(loc.sum(axis=1) for loc in local), groups=sum(ps.size > 1 for ps in levels),
-                    score=score, seconds=time.monotonic() - start, index=index)
+                    score=score, seconds=time.monotonic() - start, index=index, fixed=fixed,
+                    fixed_values=np.asarray(sn.m0, dtype=np.int64)[fixed], never=never, suspect=suspect,
+                    sunk=int(shared.sum()))
 
 
 def _functions(sn: SparseNet, enc: Encoding, t: int, places: np.ndarray) -> dict[int, np.ndarray]:
@@ -469,7 +621,9 @@ def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool =
         sn, enc: the net and its encoding.
         merge: merge events that differ on one level only (for saturation and deadlocks).
         inverse: the inverse functions (backward reachability).
-        transitions: the transitions to include (default all that read or change some place).
+        transitions: the transitions to include (default all that read or change some level and
+            are not disabled by fixed places, :class:`Encoding`; given, those that read or change
+            some level, with their functions there).
 
     Raises:
         AnalysisError: ``inverse`` on a net with reset arcs.
@@ -479,9 +633,10 @@ def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool =
     funcs: list[dict[int, np.ndarray]] = []
     members: list[tuple[int, ...]] = []
     for t in ts:
-        if touched[t].size == 0:
-            continue
-        f = _functions(sn, enc, t, touched[t])
+        on_levels = touched[t][enc.place_level[touched[t]] >= 0]
+        if on_levels.size == 0 or (transitions is None and (enc.never[t] or enc.suspect[t])):
+            continue  # enabled everywhere and changing no level (Encoding.free), or never enabled
+        f = _functions(sn, enc, t, on_levels)
         if inverse:
             g = _inverse(f, enc.dom)
             if g is None:

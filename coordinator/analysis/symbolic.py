@@ -9,12 +9,14 @@ markings, their order, the merged events) comes from the net's structure and its
 bounds (:mod:`.mdd_order`). From the set, with exact integers of any size:
 
 * the number of markings and of edges (one per reachable marking and transition enabled in it:
-  the Model Checking Contest's count);
+  the Model Checking Contest's count), the edges counted per transition on the levels it reads
+  only, building no node (:func:`.mdd_kernel.enabled_counts`);
 * deadlocks: the dead markings (the reachable set restricted, event by event, to the markings
   where the event is disabled), their number, one of them with a firing sequence from M0: a
-  depth-first search over explicit markings that never leaves the markings able to reach a
-  deadlock (backward saturation from the dead markings inside the reachable set), so it walks
-  straight to one; breadth-first images (a shortest sequence) when that search is too long;
+  best-first search over explicit markings, nearest to one dead marking first, that never leaves
+  the markings able to reach a deadlock (backward saturation from the dead markings inside the
+  reachable set), so it mostly walks straight to one; breadth-first images (a shortest sequence)
+  when that search is too long;
 * quasi-liveness (each transition fireable in some reachable marking), the exact bound of every
   place, one-safety, the largest token count of a marking, stable places;
 * reversibility (M0 is reachable from every reachable marking: backward saturation from M0 inside
@@ -23,12 +25,14 @@ bounds (:mod:`.mdd_order`). From the set, with exact integers of any size:
   one backward saturation per transition within the time left; what is not decided in time stays
   ``None`` ("undecided"), never a guess.
 
-Counts are exact: every count is computed modulo a few primes below 2**61 (sums only) and rebuilt
-by the Chinese remainder theorem, with as many primes as a float estimate of the count asks for.
+Counts are exact: every count is computed modulo a few primes below 2**61 and rebuilt by the
+Chinese remainder theorem, with as many primes as a float estimate of the count (or a bound of the
+counts to come: markings times transitions for the edges) asks for.
 
 Budgets: ``max_bytes`` bounds the store, its tables and stacks (:class:`~coordinator.errors.
 AnalysisError` when it is reached), ``seconds`` the whole computation (the reachable set first;
-liveness and witnesses get what is left and are left undecided beyond it).
+the witness gets what is left, reversibility and liveness what is left of ``answer_seconds``, and
+what is not decided in time is left undecided).
 """
 
 from __future__ import annotations
@@ -46,11 +50,19 @@ from coordinator.analysis.mdd_order import Encoding, Events, encode, events, tou
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet
 
-__all__ = ["SymbolicResult", "analyse_symbolic", "load_kernel"]
+__all__ = ["ANSWER_SECONDS", "SymbolicResult", "analyse_symbolic", "load_kernel"]
 
 _TWO61 = (1 << 61) - 1
-#: largest |P|·|T| for which a witness is searched depth first on dense matrices
+#: default time after which reversibility and liveness are left undecided (seconds from the start of
+#: the symbolic analysis; below a minute, to leave room for the bounds proven before it)
+ANSWER_SECONDS = 50.0
+#: largest |P|·|T| for which a witness is searched over explicit markings on dense matrices
 _DENSE_WITNESS = 4_000_000
+#: longest that search may take before breadth-first images take over (seconds)
+_GUIDED_SECONDS = 10.0
+#: longest that search may take inside the reachable set alone, before the markings that can reach a
+#: deadlock are computed to guide it (seconds)
+_QUICK_SECONDS = 2.0
 
 
 def _is_prime(n: int) -> bool:
@@ -95,8 +107,8 @@ class SymbolicResult:
         states: number of reachable markings (exact, any size).
         edges: number of (reachable marking, enabled transition) pairs.
         deadlock: some reachable marking enables no transition; n_deadlocks: how many do.
-        deadlock_marking: one dead marking (place id → tokens), with deadlock_sequence: a shortest
-            firing sequence from M0 to it (None if it was not found within the time).
+        deadlock_marking: one dead marking (place id → tokens), with deadlock_sequence: a firing
+            sequence from M0 to it (None if it was not found within the time).
         fireable: (|T|,) bool: the transition is enabled in some reachable marking.
         place_bounds: (|P|,) int64 exact bound of every place; stable: (|P|,) bool, the count never changes.
         max_token_per_marking: the largest total count of a reachable marking.
@@ -185,11 +197,16 @@ class _Store:
                     break
         return out
 
-    def count(self, node: int) -> int:
+    def count(self, node: int, at_most: float = 0.0) -> int:
         """The exact number of paths (markings) of a set (the first count, of the largest set, sets
-        how many primes every count uses)."""
+        how many primes every count uses; ``at_most``: a bound of counts to come, which may ask for
+        more)."""
         if node <= mk.TERMINAL:
             return node
+        want = ceil((log2(max(at_most, 2.0)) + 3) / 60)
+        if len(self._primes) < want:
+            self._primes = _primes(want)
+            self._count_cap = 0
         if not self._primes:
             self._primes = _primes(1)
         meta, level, offset, size, kids = self.arrays[:5]
@@ -212,6 +229,23 @@ class _Store:
             self._count_cap = 0
             return self.count(node)
         return _crt([int(r) for r in self._residue[node]], self._primes)
+
+    def enabled_counts(self, node: int, ev: Events) -> list[int]:
+        """Per event of ``ev``: the exact number of markings of the set ``node`` in which it is
+        enabled (:func:`.mdd_kernel.enabled_counts`; builds no node). Counts modulo the primes of
+        the set's own :meth:`count`, so that count must have been given a bound (``at_most``) of
+        the largest of these."""
+        self.count(node)
+        meta, level, offset, size, kids = self.arrays[:5]
+        primes = np.array(self._primes, dtype=np.int64)
+        res = np.zeros((ev.n_events, len(self._primes)), np.int64)
+        approx = np.zeros(ev.n_events, np.float64)
+        mk.enabled_counts(node, ev.top, ev.bot, ev.slot_ptr, ev.slot, ev.fn_ptr, ev.fn, offset, size, kids, level,
+                          self.enc.n_levels, int(meta[mk.META_NODES]), self._residue, self._approx, primes, res,
+                          approx)
+        if approx.size and float(approx.max()) >= 2.0 ** (60 * len(self._primes) - 3):
+            raise AnalysisError("internal: an enabled count beyond the primes of the set's count")
+        return [_crt([int(r) for r in row], self._primes) for row in res]
 
     def presence(self, node: int) -> np.ndarray:
         """(Σ dom,) uint8: the values each level takes in the set (flat, per level by ``dom_ptr``)."""
@@ -252,12 +286,15 @@ def load_kernel() -> None:
 
 def _marking(enc: Encoding, values: np.ndarray, net: PetriNet) -> np.ndarray:
     out = np.zeros(len(net.places), dtype=np.int64)
+    out[enc.fixed] = enc.fixed_values
     for k, ps in enumerate(enc.levels):
         out[ps] = enc.local[k][int(values[k])]
     return out
 
 
 def _values(enc: Encoding, marking: np.ndarray) -> np.ndarray | None:
+    if (marking[enc.fixed] != enc.fixed_values).any():
+        return None
     out = np.empty(enc.n_levels, dtype=np.int64)
     for k in range(enc.n_levels):
         v = enc.value_of(k, marking)
@@ -267,54 +304,119 @@ def _values(enc: Encoding, marking: np.ndarray) -> np.ndarray | None:
     return out
 
 
-def _dfs_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, inside: int, targets: int,
-                  limit: int) -> tuple[list[str], np.ndarray] | None:
-    """A firing sequence from M0 to one of ``targets`` by a depth-first search over explicit markings
-    that never leaves ``inside`` (every marking of which can reach a target, so the search never
-    backtracks far); None when it visits ``limit`` markings first."""
+class _LevelValues:
+    """The level values of many explicit markings at once: each level's local marking read as a
+    mixed-radix number (a digit per place, its radix the place's largest local value + 1), offset
+    so that the levels' numbers never overlap, and looked up in one sorted table of every level's
+    values. Where the numbers would not fit in 62 bits, level by level through the encoding's
+    dictionaries instead."""
+
+    def __init__(self, enc: Encoding) -> None:
+        self.enc = enc
+        places = np.concatenate(enc.levels)
+        self.order = places
+        self.starts = np.cumsum([0] + [ps.size for ps in enc.levels[:-1]]).astype(np.int64)
+        self.top = np.concatenate([loc.max(axis=0) for loc in enc.local]).astype(np.int64)
+        mult: list[np.ndarray] = []
+        keys: list[np.ndarray] = []
+        vals: list[np.ndarray] = []
+        base = np.zeros(enc.n_levels, dtype=np.int64)
+        offset = 0
+        self.exact = True
+        for k, loc in enumerate(enc.local):
+            span = 1
+            m = []
+            for r in loc.max(axis=0):
+                m.append(span)
+                span *= int(r) + 1
+            if offset + span >= 1 << 62:
+                self.exact = False
+                return
+            m_arr = np.array(m, dtype=np.int64)
+            mult.append(m_arr)
+            keys.append(offset + loc.astype(np.int64) @ m_arr)
+            vals.append(np.arange(loc.shape[0], dtype=np.int64))
+            base[k] = offset
+            offset += span
+        self.mult = np.concatenate(mult)
+        self.base = base
+        every = np.concatenate(keys)
+        rank = np.argsort(every, kind="stable")
+        self.keys = every[rank]
+        self.vals = np.concatenate(vals)[rank]
+
+    def of(self, markings: np.ndarray) -> np.ndarray:
+        """(n, K) int64 level values of the (n, |P|) markings; a row is all −1 when some level's
+        local marking is not one of its values."""
+        n = markings.shape[0]
+        if not self.exact:
+            rows = [_values(self.enc, m) for m in markings]
+            return np.array([r if r is not None else np.full(self.enc.n_levels, -1) for r in rows],
+                            dtype=np.int64).reshape(n, self.enc.n_levels)
+        digits = markings[:, self.order]
+        bad = ((digits < 0) | (digits > self.top)).any(axis=1)
+        bad |= (markings[:, self.enc.fixed] != self.enc.fixed_values).any(axis=1)
+        key = np.add.reduceat(digits * self.mult, self.starts, axis=1) + self.base
+        pos = np.minimum(np.searchsorted(self.keys, key), self.keys.size - 1)
+        out = np.where(self.keys[pos] == key, self.vals[pos], -1)
+        out[bad | (out < 0).any(axis=1)] = -1
+        return out
+
+
+def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, inside: int, targets: int,
+                     goal: np.ndarray, limit: int, stop: float) -> tuple[list[str], np.ndarray] | None:
+    """A firing sequence from M0 to one of ``targets`` by a best-first search over explicit markings
+    that never leaves ``inside`` (every marking of which can reach a target), always going on from
+    the marking nearest (in tokens) to the dead marking ``goal``, the deepest first among equals; so
+    it mostly walks straight to a target. None when it has seen ``limit`` markings, or at ``stop``
+    (``time.monotonic()`` seconds), first."""
+    import heapq
+
     pre = sn.pre.toarray()
     inh = sn.inhibitor.toarray()
     inc = sn.incidence.toarray()
     has_inh = bool((inh > 0).any())
+    lookup = _LevelValues(enc)
     m0 = np.asarray(sn.m0, dtype=np.int64)
+    vals0 = lookup.of(m0[None, :])[0]
+    if vals0[0] >= 0 and store.contains(targets, vals0):
+        return [], m0
+    marks = [m0]
+    parent = [-1]
+    via = [-1]
+    depth = [0]
     seen = {m0.tobytes()}
-    path: list[int] = []
-    stack: list[tuple[np.ndarray, np.ndarray, int]] = []
-
-    def enabled(m: np.ndarray) -> np.ndarray:
+    heap = [(int(np.abs(m0 - goal).sum()), 0, 0)]
+    while heap:
+        if len(seen) > limit or time.monotonic() > stop:
+            return None
+        _, _, i = heapq.heappop(heap)
+        m = marks[i]
         ok = (m[:, None] >= pre).all(axis=0)
         if has_inh:
             ok &= ((inh == 0) | (m[:, None] < inh)).all(axis=0)
-        return np.flatnonzero(ok)
-
-    cur = m0
-    vals = _values(enc, cur)
-    if vals is not None and store.contains(targets, vals):
-        return [], cur
-    stack.append((cur, enabled(cur), 0))
-    while stack:
-        m, ts, i = stack[-1]
-        if i == ts.size:
-            stack.pop()
-            if path:
-                path.pop()
-            continue
-        stack[-1] = (m, ts, i + 1)
-        t = int(ts[i])
-        nxt = m + inc[:, t]
-        key = nxt.tobytes()
-        if key in seen:
-            continue
-        seen.add(key)
-        if len(seen) > limit:
-            return None
-        vals = _values(enc, nxt)
-        if vals is None or not store.contains(inside, vals):
-            continue
-        path.append(t)
-        if store.contains(targets, vals):
-            return [net.transitions[x].id for x in path], nxt
-        stack.append((nxt, enabled(nxt), 0))
+        ts = np.flatnonzero(ok)
+        succ = m[None, :] + inc[:, ts].T
+        vals = lookup.of(succ)
+        for j, t in enumerate(ts):
+            key = succ[j].tobytes()
+            if key in seen:
+                continue
+            seen.add(key)
+            if vals[j, 0] < 0 or not store.contains(inside, vals[j]):
+                continue
+            marks.append(succ[j])
+            parent.append(i)
+            via.append(int(t))
+            depth.append(depth[i] + 1)
+            node = len(marks) - 1
+            if store.contains(targets, vals[j]):
+                path: list[str] = []
+                while node > 0:
+                    path.append(net.transitions[via[node]].id)
+                    node = parent[node]
+                return path[::-1], succ[j]
+            heapq.heappush(heap, (int(np.abs(succ[j] - goal).sum()), -depth[-1], len(marks) - 1))
     return None
 
 
@@ -359,7 +461,7 @@ def _bfs_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fw
 
 
 def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarray] | None = None,
-                     max_bytes: int = 4 << 30, seconds: float = 600.0,
+                     max_bytes: int = 4 << 30, seconds: float = 600.0, answer_seconds: float = ANSWER_SECONDS,
                      progress: Callable[[str], None] | None = None) -> SymbolicResult:
     """The reachable set of a bounded net by saturation, and its properties (module docstring).
 
@@ -370,6 +472,11 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         max_bytes: byte budget of the decision diagram.
         seconds: time budget; liveness and witnesses are left undecided when it runs out after the
             reachable set was built.
+        answer_seconds: reversibility and liveness (beyond what the deadlocks and quasi-liveness
+            decide) are worked on only until this many seconds after the start (and within
+            ``seconds``), and left undecided after: the whole answer, the place bounds proven
+            before included, comes within a minute by default when the reachable set and its
+            counts are quick.
         progress: called with short phase descriptions.
 
     Returns:
@@ -393,28 +500,26 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
     try:
         mk.set_watch(None, None)
         states = store.count(reach)
+        _check_suspects(store, sn, enc, net, reach)
         say(f"symbolic: {states:,} markings, {store.nodes:,} nodes, {secs['reach']:.1f} s")
         t0 = time.monotonic()
-        free = np.array([not ps.size for ps in touched_places(sn)], dtype=bool)
+        free = enc.free(touched_places(sn))
         fireable = free.copy()
-        edges = int(free.sum()) * states
-        edges += _fireable(store, fwd, single, reach, fireable)
-        dead = reach if not free.any() else mk.EMPTY
-        for e in range(fwd.n_events):
-            if dead == mk.EMPTY:
-                break
-            dead = store.call(mk.MODE_RESTRICT, fwd, dead, 0, arg=e)
+        edges, counts = _fireable(store, single, reach, states, fireable)
+        edges += int(free.sum()) * states
+        dead = _dead(store, fwd, single, reach, counts, states) if not free.any() else mk.EMPTY
         n_dead = store.count(dead)
         present = store.presence(reach)
         place_bounds = np.zeros(len(net.places), dtype=np.int64)
         low = np.zeros(len(net.places), dtype=np.int64)
+        place_bounds[enc.fixed] = low[enc.fixed] = enc.fixed_values
         for k, ps in enumerate(enc.levels):
             vals = np.flatnonzero(present[store.dom_ptr[k]:store.dom_ptr[k + 1]])
             loc = enc.local[k][vals]
             place_bounds[ps] = loc.max(axis=0)
             low[ps] = loc.min(axis=0)
-        weight = np.concatenate(enc.weight).astype(np.int64)
-        max_total = store.max_weight(reach, weight)
+        weight = np.concatenate([np.zeros(0, np.int64), *enc.weight]).astype(np.int64)
+        max_total = store.max_weight(reach, weight) + enc.fixed_tokens
         secs["properties"] = time.monotonic() - t0
         result = SymbolicResult(
             states=states, edges=edges, deadlock=n_dead > 0, n_deadlocks=n_dead, deadlock_marking=None,
@@ -427,58 +532,74 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         if sn.n_resets == 0:
             back = events(sn, enc, inverse=True)
         mk.set_watch(deadline, None)
+        _witness(store, sn, enc, net, fwd, back, reach, dead, result, say, deadline)
+        mk.set_watch(min(deadline, start + answer_seconds), None)
         _liveness(store, single, back, reach, result, say)
-        _witness(store, sn, enc, net, fwd, back, reach, dead, result, say)
         result.nodes = store.nodes
         return result
     finally:
         mk.set_watch(None, None)
 
 
-def _level_functions(ev: Events, e: int) -> dict[int, np.ndarray]:
-    """Event e's local function on each level it reads or changes."""
-    top = int(ev.top[e])
-    out: dict[int, np.ndarray] = {}
-    for k in range(top, int(ev.bot[e]) + 1):
-        sl = int(ev.slot[ev.slot_ptr[e] + k - top])
-        if sl >= 0:
-            out[k] = ev.fn[ev.fn_ptr[sl]:ev.fn_ptr[sl + 1]]
-    return out
+def _check_suspects(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, reach: int) -> None:
+    """No reachable marking enables a transition that fixed places enable but that would change them
+    (:class:`~.mdd_order.Encoding`: such a transition never fires if the bounds are right, and the
+    first of them to fire on any firing sequence would be enabled in a marking of ``reach``).
+
+    Raises:
+        AnalysisError: one does: the bounds were wrong."""
+    suspect = np.flatnonzero(enc.suspect)
+    if not suspect.size:
+        return
+    ev = events(sn, enc, transitions=suspect)
+    wrong = sorted(set(suspect.tolist()) - {ms[0] for ms in ev.members})  # on fixed places only
+    if not wrong and ev.n_events:
+        wrong = [ev.members[e][0] for e, n in enumerate(store.enabled_counts(reach, ev)) if n > 0]
+    if wrong:
+        raise AnalysisError(f"transition {net.transitions[wrong[0]].id} would take a place beyond its proven "
+                            "bound: the place bounds given to the symbolic engine are wrong")
 
 
-def _fireable(store: _Store, fwd: Events, single: Events, reach: int, fireable: np.ndarray) -> int:
+def _fireable(store: _Store, single: Events, reach: int, states: int, fireable: np.ndarray) -> tuple[int, list[int]]:
     """Mark the transitions enabled in some reachable marking; return the number of edges (reachable
-    marking, enabled transition). One restriction per *merged* event: its members are enabled on
-    disjoint values of the levels where they differ, so each marking of the restriction enables
-    exactly one member (its count is the members' edges), and a member is enabled in some marking of
-    it iff one of the values the restriction takes on the level where the member differs enables it
-    (exact for one such level; a member that differs on more gets its own restriction)."""
-    own_event = {ms[0]: i for i, ms in enumerate(single.members)}
-    edges = 0
-    for e in range(fwd.n_events):
-        en = store.call(mk.MODE_RESTRICT, fwd, reach, 1, arg=e)
-        n = store.count(en)
-        edges += n
-        members = fwd.members[e]
-        if len(members) == 1 or n == 0:
-            fireable[list(members)] = n > 0
-            continue
-        merged = _level_functions(fwd, e)
-        present = store.presence(en)
-        for t in members:
-            own = _level_functions(single, own_event[t])
-            differ = [k for k in own if k not in merged or not np.array_equal(own[k], merged[k])]
-            ok = all((own[k][np.flatnonzero(present[store.dom_ptr[k]:store.dom_ptr[k + 1]])] >= 0).any()
-                     for k in differ)
-            if ok and len(differ) > 1:
-                ok = store.call(mk.MODE_RESTRICT, single, reach, 1, arg=own_event[t]) != mk.EMPTY
-            fireable[t] = ok
-    return edges
+    marking, enabled transition) and the number of reachable markings enabling each event of
+    ``single`` (one transition each). Counted per transition by :meth:`_Store.enabled_counts`: a
+    count restricted to the levels the transition reads, which builds no node."""
+    store.count(reach, at_most=float(states) * max(1, single.n_events))
+    counts = store.enabled_counts(reach, single)
+    for e, n in enumerate(counts):
+        fireable[list(single.members[e])] = n > 0
+    return sum(counts), counts
+
+
+def _dead(store: _Store, fwd: Events, single: Events, reach: int, counts: list[int], states: int) -> int:
+    """The reachable markings that enable no event of ``fwd``: the reachable set restricted event by
+    event, the events enabled in the most markings first (they cut the set fastest); empty at once
+    when one is enabled in every reachable marking."""
+    if states in counts:
+        return mk.EMPTY
+    by_t = {single.members[e][0]: n for e, n in enumerate(counts)}
+    order = sorted(range(fwd.n_events), key=lambda e: -sum(by_t.get(t, 0) for t in fwd.members[e]))
+    dead = reach
+    for e in order:
+        if dead == mk.EMPTY:
+            break
+        dead = store.call(mk.MODE_RESTRICT, fwd, dead, 0, arg=e)
+    return dead
 
 
 #: candidate variable orders raced against each other, and the first time slice of each (seconds)
 _CANDIDATES = 3
 _FIRST_SLICE = 2.0
+#: seeds of the order search tried for the candidates (a seed whose order is already a candidate's
+#: is passed over; fewer candidates race when no other order is found)
+_SEEDS = 5
+#: the first candidate's turns are this many times longer than the others' (module docstring of _race)
+_LEAD = 2.0
+
+
+def _same_order(a: Encoding, b: Encoding) -> bool:
+    return len(a.levels) == len(b.levels) and all(np.array_equal(x, y) for x, y in zip(a.levels, b.levels))
 
 
 def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes: int, deadline: float,
@@ -488,32 +609,61 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     is hard to predict from the order (on Railroad-PT-010, orders whose scores differ by 2 % take
     0.15 to 13 s), so a few candidates are raced; a candidate's store, computed table included, is
     kept between its turns, so a turn resumes where the last one stopped and the total stays within
-    about the number of candidates times the best one's time. Each store has an equal share of the
-    memory budget; when one outgrows its share, the others are dropped and it gets the whole."""
+    about the number of candidates times the best one's time. Candidates are distinct orders: the
+    order search from another seed often ends in the same order, which would only race itself (on
+    LamportFastMutEx-PT-5 all three seeds give one order); up to :data:`_SEEDS` seeds are tried.
+    The first candidate (seed 0, whose starts include the net's own place order and its reverse)
+    gets turns :data:`_LEAD` times as long as the others: when it is the fastest, the others cost
+    about half its time instead of as much (Railroad-PT-020: 39 s of CPU for the race instead of
+    55 s), and when another is, the race costs at most that much more. Each store has an equal share of the memory budget; when one outgrows its share, the others are
+    dropped and it gets the whole. When the net is components that meet only through shared levels
+    (:func:`.mdd_order.shared_levels`: resources that every component takes and gives back), the
+    first candidate is the order with those levels at the bottom, and the seeds' orders follow."""
     cands: list[tuple[Encoding, Events, _Store]] = []
     alive: list[bool] = []
+    n_cands = _CANDIDATES
+    seed = 0
     slice_s = _FIRST_SLICE
     turn = 0
     while True:
-        i = turn % _CANDIDATES
+        i = turn % n_cands
         turn += 1
         if i < len(alive) and not alive[i]:
             if not any(alive):
                 raise AnalysisError("the decision diagram outgrew the memory budget on every candidate "
                                     "variable order")
-            if turn % _CANDIDATES == 0:
+            if turn % n_cands == 0:
                 slice_s *= 2
             continue
         if i == len(cands):
-            seconds = min(10.0, max(1.0, (deadline - time.monotonic()) / 20))
-            enc = encode(sn, bounds, flows, seconds=seconds, seed=i)
+            found = None
+            if not cands:  # seed 0, with the shared levels sunk if the net has them
+                seconds = min(10.0, max(1.0, (deadline - time.monotonic()) / 20))
+                found = encode(sn, bounds, flows, seconds=seconds, seed=0, sink=True)
+                seed += 0 if found.sunk else 1
+            while found is None and seed < _SEEDS and (seed == 0 or time.monotonic() < deadline):
+                seconds = min(10.0, max(1.0, (deadline - time.monotonic()) / 20))
+                enc = encode(sn, bounds, flows, seconds=seconds, seed=seed)
+                seed += 1
+                if not any(_same_order(enc, c[0]) for c in cands):
+                    found = enc
+            if found is None:  # no other order: the candidates there are race on, with larger shares
+                n_cands = len(cands)
+                turn = 0
+                for _, _, st in cands:
+                    st.max_bytes = max(st.max_bytes, max_bytes // n_cands)
+                say(f"symbolic: {n_cands} distinct variable order{'s' if n_cands > 1 else ''} found")
+                continue
+            enc = found
             cands.append((enc, events(sn, enc, merge=True), _Store(enc, max_bytes // _CANDIDATES)))
             alive.append(True)
             if i == 0:
-                say(f"symbolic: {enc.n_levels} levels ({enc.groups} groups of places), {cands[0][1].n_events} "
-                    f"events for {sn.n_transitions} transitions")
+                say(f"symbolic: {enc.n_levels} levels ({enc.groups} groups of places"
+                    + (f", {enc.sunk} shared levels at the bottom of the first order" if enc.sunk else "")
+                    + f"), {cands[0][1].n_events} events for {sn.n_transitions} transitions")
         enc, fwd, store = cands[i]
-        mk.set_watch(min(deadline, time.monotonic() + slice_s), None)
+        mine = slice_s * (_LEAD if i == 0 else 1.0)
+        mk.set_watch(min(deadline, time.monotonic() + mine) if n_cands > 1 else deadline, None)
         try:
             reach = store.call(mk.MODE_SATURATE, fwd, store.m0, check_overflow=True)
             store.max_bytes = max_bytes  # the others are dropped: the winner has the whole budget
@@ -522,8 +672,8 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
             if time.monotonic() >= deadline:
                 raise AnalysisError(f"the symbolic reachable set was not complete within the time budget "
                                     f"({store.nodes:,} nodes on the last variable order tried)") from None
-            if sum(alive) > 1:
-                say(f"symbolic: order {i + 1} not done after its {slice_s:.0f} s turn ({store.nodes:,} nodes)")
+            if sum(alive) > 1 or n_cands > 1:
+                say(f"symbolic: order {i + 1} not done after its {mine:.0f} s turn ({store.nodes:,} nodes)")
         except AnalysisError as exc:
             if "memory budget" not in str(exc):
                 raise
@@ -538,7 +688,7 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
             alive[i] = False
         finally:
             mk.set_watch(None, None)
-        if turn % _CANDIDATES == 0:
+        if turn % n_cands == 0:
             slice_s *= 2
 
 
@@ -572,12 +722,13 @@ def _liveness(store: _Store, single: Events, back: Events | None, reach: int, re
             live_t[:] = True
         elif result.live is None:
             say("symbolic: liveness, transition by transition")
-            for e in range(single.n_events):
+            todo = [e for e in range(single.n_events) if live_t[single.members[e][0]] is None]
+            # every restriction first, then every backward saturation: the computed table is
+            # cleared when the events change, so alternating would start each saturation afresh
+            enabled = [store.call(mk.MODE_RESTRICT, single, reach, 1, arg=e) for e in todo]
+            for e, en in zip(todo, enabled):
                 t = single.members[e][0]
-                if live_t[t] is not None:
-                    continue
-                enabled = store.call(mk.MODE_RESTRICT, single, reach, 1, arg=e)
-                can = store.call(mk.MODE_SATURATE, back, enabled, c=reach)
+                can = store.call(mk.MODE_SATURATE, back, en, c=reach)
                 live_t[t] = can == reach
                 if not live_t[t]:
                     result.live = False
@@ -587,13 +738,18 @@ def _liveness(store: _Store, single: Events, back: Events | None, reach: int, re
                 live_t[free] = True
                 result.live = True
     except _OutOfTime:
-        result.notes.append("liveness and reversibility: not decided within the time budget")
+        result.notes.append("liveness and reversibility: not decided within the time budget (answer_seconds "
+                            "or seconds)")
     result.seconds["liveness"] = time.monotonic() - t0
 
 
 def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Events, back: Events | None,
-             reach: int, dead: int, result: SymbolicResult, say: Callable[[str], None]) -> None:
-    """One dead marking with a shortest firing sequence to it, within the deadline."""
+             reach: int, dead: int, result: SymbolicResult, say: Callable[[str], None], deadline: float) -> None:
+    """One dead marking with a firing sequence to it, within the deadline (``time.monotonic()``
+    seconds): a search over explicit markings guided towards the dead marking, first inside the
+    reachable set alone (briefly), then inside the markings that can reach a deadlock (backward
+    saturation), and breadth-first images (a shortest sequence) when that search has not found one
+    within its share of the time."""
     if dead == mk.EMPTY:
         return
     t0 = time.monotonic()
@@ -604,12 +760,20 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
         return
     try:
         say("symbolic: a firing sequence to a deadlock")
-        inside = store.call(mk.MODE_SATURATE, back, dead, c=reach)
+        explicit = sn.n_places * sn.n_transitions <= _DENSE_WITNESS and enc.n_levels > 0
         found = None
-        if sn.n_places * sn.n_transitions <= _DENSE_WITNESS:
-            found = _dfs_sequence(store, sn, enc, net, inside, dead, limit=100_000)
+        if explicit:  # first inside the reachable set alone: most often a deadlock is reachable from
+            now = time.monotonic()  # everywhere, and the backward saturation below costs more
+            stop = now + min(_QUICK_SECONDS, max(0.0, (deadline - now) / 10))
+            found = _guided_sequence(store, sn, enc, net, reach, dead, marking, limit=20_000, stop=stop)
         if found is None:
-            found = _bfs_sequence(store, sn, enc, net, fwd, inside, dead)
+            inside = store.call(mk.MODE_SATURATE, back, dead, c=reach)
+            if explicit:
+                now = time.monotonic()
+                stop = now + min(_GUIDED_SECONDS, max(0.0, (deadline - now) / 3))
+                found = _guided_sequence(store, sn, enc, net, inside, dead, marking, limit=100_000, stop=stop)
+            if found is None:
+                found = _bfs_sequence(store, sn, enc, net, fwd, inside, dead)
         if found is not None:
             seq, end = found
             result.deadlock_sequence = seq

@@ -160,3 +160,72 @@ def test_a_bound_below_the_truth_is_an_error_not_a_wrong_count() -> None:
         analyse_symbolic(net, np.array([1, 3], dtype=np.int64))
     r = analyse_symbolic(net, np.array([1, 5], dtype=np.int64))
     assert r.states == 6 and r.deadlock and r.deadlock_sequence == ["put"] * 5
+
+
+def test_a_place_wrongly_bounded_by_its_initial_count_is_an_error_and_a_never_marked_one_disables_for_good() -> None:
+    # c claimed bounded by 0 has a single local marking, so it is fixed, not a level: mark is left
+    # out of saturation and must be found enabled in a reachable marking; ghost (bound 0, truly)
+    # is fixed too, and haunt, which needs it, is never enabled
+    net = make_net("fixed", {"a": 1}, {"go": ({"a": 1}, {"b": 1}), "back": ({"b": 1}, {"a": 1}),
+                                       "mark": ({"b": 1}, {"b": 1, "c": 1}), "haunt": ({"ghost": 1}, {"a": 1})},
+                   places=("a", "b", "c", "ghost"), inhibitors={"mark": {"c": 1}})
+    with pytest.raises(AnalysisError, match="place bounds"):
+        analyse_symbolic(net, np.array([1, 1, 0, 0], dtype=np.int64))
+    r = analyse_symbolic(net, np.array([1, 1, 1, 0], dtype=np.int64))
+    assert r.states == 4 and r.edges == 5 and not r.deadlock
+    assert r.fireable.tolist() == [True, True, True, False]
+    assert r.place_bounds.tolist() == [1, 1, 1, 0] and r.stable.tolist() == [False, False, False, True]
+    assert r.max_token_per_marking == 2 and r.live is False
+
+
+def test_backward_saturation_inside_the_reachable_set_stays_inside_it() -> None:
+    # a one-shot start, then toggles: every toggle is live, the start is not. Backward saturation
+    # inside the reachable set once moved a node to another value of a level without cutting it to
+    # that value's part of the set below the event's bottom level, so it left the set and every
+    # toggle was reported not live
+    n = 3
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        transitions[f"on{i}"] = ({f"off{i}": 1, "run": 1}, {f"lit{i}": 1, "run": 1})
+        transitions[f"out{i}"] = ({f"lit{i}": 1, "run": 1}, {f"off{i}": 1, "run": 1})
+    transitions["start"] = ({"idle": 1}, {"run": 1})
+    net = make_net("one_shot", {**{f"off{i}": 1 for i in range(n)}, "idle": 1}, transitions)
+    bounds, flows = proven_bounds(net)
+    r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0)
+    assert r.states == 2**n + 1 and not r.deadlock and r.reversible is False and r.live is False
+    assert r.live_transitions.tolist() == [True] * (2 * n) + [False]
+
+
+def test_a_deadlock_deep_in_a_ring_of_thirty_philosophers_is_reached_by_a_straight_firing_sequence() -> None:
+    n = 30
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        right = f"fork{(i + 1) % n}"
+        transitions[f"left{i}"] = ({f"think{i}": 1, f"fork{i}": 1}, {f"hold{i}": 1})
+        transitions[f"right{i}"] = ({f"hold{i}": 1, right: 1}, {f"eat{i}": 1})
+        transitions[f"done{i}"] = ({f"eat{i}": 1}, {f"think{i}": 1, f"fork{i}": 1, right: 1})
+    net = make_net("philosophers", {**{f"think{i}": 1 for i in range(n)}, **{f"fork{i}": 1 for i in range(n)}},
+                   transitions)
+    bounds, flows = proven_bounds(net)
+    r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0)
+    assert r.deadlock and r.n_deadlocks == 1
+    assert r.deadlock_sequence is not None and r.deadlock_marking is not None
+    assert replays_to(net, r.deadlock_sequence, r.deadlock_marking)
+    assert sorted(r.deadlock_sequence) == sorted(f"left{i}" for i in range(n))  # n steps, no detour
+
+
+def test_level_values_of_many_markings_at_once_are_those_of_the_encoding() -> None:
+    from coordinator.analysis.mdd_order import encode
+    from coordinator.analysis.symbolic import _LevelValues, _values
+
+    net = load_pnml(MCC / "FMS-PT-00002" / "model.pnml")
+    bounds, flows = proven_bounds(net)
+    enc = encode(sparse_net(net), bounds, flows, seconds=5.0, seed=0)
+    rng = np.random.default_rng(3)
+    markings = rng.integers(0, 4, size=(500, len(net.places))).astype(np.int64)
+    markings[:5] = np.asarray(sparse_net(net).m0, dtype=np.int64)
+    got = _LevelValues(enc).of(markings)
+    for m, row in zip(markings, got):
+        want = _values(enc, m)
+        assert (row < 0).all() if want is None else row.tolist() == want.tolist()
+    assert (got[:5] >= 0).all()
