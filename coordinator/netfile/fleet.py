@@ -22,8 +22,10 @@ start takes), so that a run of the net ends: completed once every robot is parke
 the fleet deadlocks on the way. Without it the robots go round for ever, the net the analysis is
 about. ``services.toml`` places simulated actions for the primitive tasks (services/actions/fleet.py).
 
-The state space grows as about 5^N (each robot outside the corridor loads, charges, recovers or
-waits): explicit search up to N ≈ 8, the symbolic engine beyond (docs/analysis.md, section 9).
+The state space grows about fivefold a robot with the corridor token and tenfold without (each
+robot loads, charges, recovers or waits, and without the token several are in the corridor at
+once): the explicit search answers up to N = 5 unsafe and N = 6 safe, the symbolic engine to N = 20
+and beyond (docs/analysis.md, section 9).
 """
 
 from __future__ import annotations
