@@ -37,9 +37,15 @@ export function initRuns(app) {
     } catch (e) { return []; }
   }
 
+  // the net chosen may change while its control places are fetched (the dialog shows the first net's
+  // as it opens): only the latest choice's are shown, never two nets' fields at once
+  let markingShown = 0;
   async function showMarking() {
+    const mine = ++markingShown;
     markingBox.replaceChildren();
     const places = await controlPlaces(netSel.value);
+    if (mine !== markingShown) return;
+    markingBox.replaceChildren();
     if (!places.length) { markingBox.append(el("span", { class: "small" }, "no control place")); return; }
     for (const p of places) {
       const input = el("input", { type: "number", min: "0", value: String(p.tokens || 0), "data-place": p.id });
