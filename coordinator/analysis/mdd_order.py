@@ -309,10 +309,11 @@ def _fixed(sn: SparseNet, groups: list[tuple[np.ndarray, np.ndarray]]
     return keep, out, never, suspect & ~never
 
 
-def _score(pos: np.ndarray, hp: np.ndarray, hidx: np.ndarray) -> float:
+def _score(pos: np.ndarray, hp: np.ndarray, hidx: np.ndarray, hw: np.ndarray | None = None) -> float:
+    """Sum of the spans of the hyperedges (each ``hw`` times, default once) under positions ``pos``."""
     lo = np.minimum.reduceat(pos[hidx], hp[:-1]) if hidx.size else np.zeros(0)
     hi = np.maximum.reduceat(pos[hidx], hp[:-1]) if hidx.size else np.zeros(0)
-    return float((hi - lo).sum())
+    return float(((hi - lo) * (1 if hw is None else hw)).sum())
 
 
 @njit(cache=True)
@@ -327,10 +328,10 @@ def _span(h: int, pos: np.ndarray, hp: np.ndarray, hidx: np.ndarray) -> int:
 
 
 @njit(cache=True)
-def _swap(p: int, q: int, pos: np.ndarray, order: np.ndarray, hp: np.ndarray, hidx: np.ndarray,
+def _swap(p: int, q: int, pos: np.ndarray, order: np.ndarray, hp: np.ndarray, hidx: np.ndarray, hw: np.ndarray,
           vp: np.ndarray, vidx: np.ndarray, mark: np.ndarray) -> int:
     """Swap the neighbours p and q; return the change of the score (only hyperedges holding exactly
-    one of them change)."""
+    one of them change; hyperedge h counts ``hw[h]`` times)."""
     for x in range(vp[q], vp[q + 1]):
         mark[vidx[x]] += 1
     for x in range(vp[p], vp[p + 1]):
@@ -338,10 +339,10 @@ def _swap(p: int, q: int, pos: np.ndarray, order: np.ndarray, hp: np.ndarray, hi
     before = 0
     for x in range(vp[p], vp[p + 1]):
         if mark[vidx[x]] != 3:
-            before += _span(vidx[x], pos, hp, hidx)
+            before += hw[vidx[x]] * _span(vidx[x], pos, hp, hidx)
     for x in range(vp[q], vp[q + 1]):
         if mark[vidx[x]] != 3:
-            before += _span(vidx[x], pos, hp, hidx)
+            before += hw[vidx[x]] * _span(vidx[x], pos, hp, hidx)
     a = pos[p]
     b = pos[q]
     order[a] = q
@@ -351,10 +352,10 @@ def _swap(p: int, q: int, pos: np.ndarray, order: np.ndarray, hp: np.ndarray, hi
     after = 0
     for x in range(vp[p], vp[p + 1]):
         if mark[vidx[x]] != 3:
-            after += _span(vidx[x], pos, hp, hidx)
+            after += hw[vidx[x]] * _span(vidx[x], pos, hp, hidx)
     for x in range(vp[q], vp[q + 1]):
         if mark[vidx[x]] != 3:
-            after += _span(vidx[x], pos, hp, hidx)
+            after += hw[vidx[x]] * _span(vidx[x], pos, hp, hidx)
     for x in range(vp[q], vp[q + 1]):
         mark[vidx[x]] = 0
     for x in range(vp[p], vp[p + 1]):
@@ -363,7 +364,7 @@ def _swap(p: int, q: int, pos: np.ndarray, order: np.ndarray, hp: np.ndarray, hi
 
 
 @njit(cache=True)
-def _sift(order: np.ndarray, hp: np.ndarray, hidx: np.ndarray, vp: np.ndarray, vidx: np.ndarray,
+def _sift(order: np.ndarray, hp: np.ndarray, hidx: np.ndarray, hw: np.ndarray, vp: np.ndarray, vidx: np.ndarray,
           rounds: int) -> None:
     """Sifting, in place: move each level to the position of the lowest score, by neighbour swaps."""
     n = order.shape[0]
@@ -380,16 +381,16 @@ def _sift(order: np.ndarray, hp: np.ndarray, hidx: np.ndarray, vp: np.ndarray, v
             for direction in (-1, 1):
                 cur = 0
                 while 0 <= pos[p] + direction < n:
-                    cur += _swap(p, order[pos[p] + direction], pos, order, hp, hidx, vp, vidx, mark)
+                    cur += _swap(p, order[pos[p] + direction], pos, order, hp, hidx, hw, vp, vidx, mark)
                     if cur < best:
                         best = cur
                         best_pos = pos[p]
                 while pos[p] != start:
                     step = 1 if start > pos[p] else -1
-                    _swap(p, order[pos[p] + step], pos, order, hp, hidx, vp, vidx, mark)
+                    _swap(p, order[pos[p] + step], pos, order, hp, hidx, hw, vp, vidx, mark)
             while pos[p] != best_pos:
                 step = 1 if best_pos > pos[p] else -1
-                _swap(p, order[pos[p] + step], pos, order, hp, hidx, vp, vidx, mark)
+                _swap(p, order[pos[p] + step], pos, order, hp, hidx, hw, vp, vidx, mark)
             if best < 0:
                 improved = True
         if not improved:
@@ -400,14 +401,26 @@ def _order(n: int, hypers: list[np.ndarray], deadline: float, starts: int = 8, s
            ) -> tuple[np.ndarray, float]:
     """The best order of ``n`` levels found by FORCE and sifting from several starts (module
     docstring), and its score."""
-    hypers = [h for h in hypers if h.size > 1]
+    # equal hyperedges (the unfolded transitions of a coloured net touch the same levels) are one,
+    # counted as many times: the score is the same, sifting's work is per distinct hyperedge
+    weights: dict[bytes, int] = {}
+    distinct: list[np.ndarray] = []
+    for h in hypers:
+        if h.size > 1:
+            key = h.tobytes()
+            if key not in weights:
+                weights[key] = 0
+                distinct.append(h)
+            weights[key] += 1
+    hypers = distinct
     if n <= 1 or not hypers:
         return np.arange(n, dtype=np.int64), 0.0
+    hw = np.array([weights[h.tobytes()] for h in hypers], dtype=np.int64)
     sizes = np.array([h.size for h in hypers], dtype=np.int64)
     hp = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
     hidx = np.concatenate(hypers).astype(np.int64)
     rows = np.repeat(np.arange(len(hypers)), sizes)
-    mat = sp.csr_matrix((np.ones(hidx.size), (rows, hidx)), shape=(len(hypers), n))
+    mat = sp.csr_matrix((np.repeat(hw, sizes).astype(np.float64), (rows, hidx)), shape=(len(hypers), n))
     mat_t = sp.csr_matrix(mat.T)
     deg = np.asarray(mat_t.sum(axis=1)).ravel()
     by_v = mat_t.indices.astype(np.int64)
@@ -422,21 +435,21 @@ def _order(n: int, hypers: list[np.ndarray], deadline: float, starts: int = 8, s
         pos[start] = np.arange(n)
         cand: tuple[float, np.ndarray] | None = None
         for _ in range(30):  # FORCE: levels to the mean centre of gravity of their hyperedges
-            cog = (mat @ pos) / sizes
+            cog = (mat @ pos) / (sizes * hw)
             moved = np.where(deg > 0, (mat_t @ cog) / np.maximum(deg, 1), pos)
             order = np.lexsort((pos, moved))
             pos = np.empty(n)
             pos[order] = np.arange(n)
-            score = _score(pos.astype(np.int64), hp, hidx)
+            score = _score(pos.astype(np.int64), hp, hidx, hw)
             if cand is None or score < cand[0]:
                 cand = (score, order.astype(np.int64))
         assert cand is not None
         order = cand[1].copy()
         if n <= MAX_SIFTED:  # sifting is quadratic in the levels: FORCE alone beyond
-            _sift(order, hp, hidx, vp, by_v, 20)
+            _sift(order, hp, hidx, hw, vp, by_v, 20)
         pos_i = np.empty(n, dtype=np.int64)
         pos_i[order] = np.arange(n)
-        score = _score(pos_i, hp, hidx)
+        score = _score(pos_i, hp, hidx, hw)
         if best is None or score < best[0]:
             best = (score, order)
     assert best is not None
@@ -536,67 +549,177 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
                     sunk=int(shared.sum()))
 
 
-def _functions(sn: SparseNet, enc: Encoding, t: int, places: np.ndarray) -> dict[int, np.ndarray]:
-    """Transition t's local function on each level it reads or changes: value → value (-1:
-    disabled; a value beyond the level's local markings is ``dom``, an overflow)."""
-    out: dict[int, np.ndarray] = {}
-    reset = sn.reset if sn.reset is not None and sn.reset.nnz else None
-    for k in np.unique(enc.place_level[places]).tolist():
-        rows = enc.levels[k]
-        loc = enc.local[k]
-        pre = sn.pre[rows, t].toarray().ravel()
-        post = sn.post[rows, t].toarray().ravel()
-        inh = sn.inhibitor[rows, t].toarray().ravel()
+class _LocalFunctions:
+    """Every transition's local function on each level it reads or changes: value → value (-1:
+    disabled; a value beyond the level's local markings is ``dom``, an overflow).
+
+    Built from the arrays of the net's CSC matrices (no sparse indexing per transition), and
+    computed once per distinct local pattern (the level and the transition's pre, post, inhibitor
+    and reset weights on it): the unfolded transitions of a coloured net share a few patterns per
+    level (ARMCacheCoherence-PT-none: 33,676 transitions)."""
+
+    def __init__(self, sn: SparseNet, enc: Encoding) -> None:
+        self.enc = enc
+        mats = [sn.pre.tocsc(), sn.post.tocsc(), sn.inhibitor.tocsc()]
+        self.has_reset = sn.reset is not None and bool(sn.reset.nnz)
+        if self.has_reset:
+            assert sn.reset is not None
+            mats.append(sn.reset.tocsc())
+        for m in mats:
+            m.sort_indices()
+        self.mats = [(m.indptr, m.indices.astype(np.int64), m.data.astype(np.int64)) for m in mats]
+        self.cache: dict[tuple[int, bytes], np.ndarray] = {}
+        # per level: its local markings as mixed-radix numbers (a digit per place, radix its largest
+        # local value + 1), sorted, when they fit in 62 bits; else a dictionary of their bytes
+        self.radix: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None] = []
+        self.by_bytes: list[dict[bytes, int] | None] = []
+        for loc in enc.local:
+            top = loc.max(axis=0).astype(np.int64)
+            span = 1
+            mult = []
+            for r in top.tolist():
+                mult.append(span)
+                span *= int(r) + 1
+            if span < 1 << 62:
+                m = np.array(mult, dtype=np.int64)
+                keys = loc.astype(np.int64) @ m
+                rank = np.argsort(keys, kind="stable")
+                self.radix.append((m, top, keys[rank], rank.astype(np.int64)))
+                self.by_bytes.append(None)
+            else:
+                self.radix.append(None)
+                self.by_bytes.append({np.ascontiguousarray(row, dtype=np.int64).tobytes(): i
+                                      for i, row in enumerate(loc)})
+
+    def of(self, t: int, places: np.ndarray) -> dict[int, np.ndarray]:
+        """Transition t's function on each level of ``places`` (the places it touches on levels)."""
+        enc = self.enc
+        cols: list[tuple[np.ndarray, np.ndarray]] = []
+        for indptr, indices, data in self.mats:
+            lo, hi = int(indptr[t]), int(indptr[t + 1])
+            cols.append((indices[lo:hi], data[lo:hi]))
+        out: dict[int, np.ndarray] = {}
+        for k in np.unique(enc.place_level[places]).tolist():
+            n = enc.levels[k].size
+            vecs = []
+            for idx, val in cols:
+                v = np.zeros(n, dtype=np.int64)
+                on = enc.place_level[idx] == k
+                v[enc.place_col[idx[on]]] = val[on]
+                vecs.append(v)
+            key = (k, b"".join(v.tobytes() for v in vecs))
+            f = self.cache.get(key)
+            if f is None:
+                f = self._compute(k, *vecs)
+                self.cache[key] = f
+            out[k] = f
+        return out
+
+    def _compute(self, k: int, pre: np.ndarray, post: np.ndarray, inh: np.ndarray,
+                 reset: np.ndarray | None = None) -> np.ndarray:
+        loc = self.enc.local[k]
+        dom = int(self.enc.dom[k])
         ok = (loc >= pre).all(axis=1) & ((inh == 0) | (loc < inh)).all(axis=1)
         nxt = loc - pre + post
         if reset is not None:
-            rs = reset[rows, t].toarray().ravel() > 0
-            nxt = np.where(rs[None, :], post[None, :], nxt)
-        index = enc.index[k]
-        dom = int(enc.dom[k])
-        out[k] = np.array([index.get(tuple(int(v) for v in nxt[i]), dom) if ok[i] else -1
-                           for i in range(loc.shape[0])], dtype=np.int64)
-    return out
+            nxt = np.where((reset > 0)[None, :], post[None, :], nxt)
+        out = np.full(loc.shape[0], -1, dtype=np.int64)
+        rows = np.flatnonzero(ok)
+        if not rows.size:
+            return out
+        got = nxt[rows]
+        radix = self.radix[k]
+        if radix is not None:
+            mult, top, keys, rank = radix
+            inside = (got <= top).all(axis=1)
+            key = got @ mult
+            pos = np.minimum(np.searchsorted(keys, key), keys.size - 1)
+            found = inside & (keys[pos] == key)
+            out[rows] = np.where(found, rank[pos], dom)
+        else:
+            table = self.by_bytes[k]
+            assert table is not None
+            out[rows] = [table.get(np.ascontiguousarray(r).tobytes(), dom) for r in got]
+        return out
+
+
+#: most merged events a group of events equal but on one level is packed into per round (first fit)
+_MERGE_BINS = 64
 
 
 def _merge(funcs: list[dict[int, np.ndarray]], members: list[tuple[int, ...]]
            ) -> tuple[list[dict[int, np.ndarray]], list[tuple[int, ...]]]:
-    """Merge events equal on every level but one, enabled on disjoint values there (module docstring)."""
+    """Merge events equal on every level but one, enabled on disjoint values there (module docstring).
+
+    Each distinct local function is named by a number, so that an event's key on a level is a tuple
+    of small integers; a round merges what it can, and the next round looks again only while some
+    merge happened (a merge on one level can make two events equal on another)."""
+    ids: dict[bytes, int] = {}
+    tabs: list[np.ndarray] = []
+    masks: list[int] = []  # the values each function is enabled on, as the bits of an integer
+
+    def name(tab: np.ndarray) -> int:
+        b = tab.tobytes()
+        i = ids.get(b)
+        if i is None:
+            i = ids[b] = len(tabs)
+            tabs.append(tab)
+            masks.append(int.from_bytes(np.packbits(tab >= 0, bitorder="little").tobytes(), "little"))
+        return i
+
+    # identical events (equal functions on every level: duplicated transitions) are one event
+    same: dict[tuple[tuple[int, int], ...], list[int]] = {}
+    for idx, f in enumerate(funcs):
+        same.setdefault(tuple((k, name(f[k])) for k in sorted(f)), []).append(idx)
+    evs = list(same)
+    mem = [tuple(sorted(t for i in idxs for t in members[i])) for idxs in same.values()]
     changed = True
     while changed:
         changed = False
-        groups: dict[tuple[tuple[int, ...], int, tuple[bytes, ...]], list[int]] = {}
-        for idx, f in enumerate(funcs):
-            levels = tuple(sorted(f))
-            for a in levels:
-                key = (levels, a, tuple(f[k].tobytes() for k in levels if k != a))
+        groups: dict[tuple[object, ...], list[int]] = {}
+        for idx, ev in enumerate(evs):
+            levels = tuple(k for k, _ in ev)
+            for a in range(len(ev)):
+                key = (levels, a, ev[:a] + ev[a + 1:])
                 groups.setdefault(key, []).append(idx)
-        gone: set[int] = set()
-        new_f: list[dict[int, np.ndarray]] = []
+        gone = np.zeros(len(evs), dtype=bool)
+        new_e: list[tuple[tuple[int, int], ...]] = []
         new_m: list[tuple[int, ...]] = []
         for key, idxs in groups.items():
-            idxs = [i for i in idxs if i not in gone]
             if len(idxs) < 2:
                 continue
-            a = key[1]
-            merged = funcs[idxs[0]][a].copy()
-            used = [idxs[0]]
-            for i in idxs[1:]:
-                tab = funcs[i][a]
-                if ((merged >= 0) & (tab >= 0)).any():
-                    continue
-                merged = np.where(tab >= 0, tab, merged)
-                used.append(i)
-            if len(used) > 1:
-                f = dict(funcs[used[0]])
-                f[a] = merged
-                new_f.append(f)
-                new_m.append(tuple(sorted(t for i in used for t in members[i])))
-                gone.update(used)
-                changed = True
-        funcs = [f for i, f in enumerate(funcs) if i not in gone] + new_f
-        members = [m for i, m in enumerate(members) if i not in gone] + new_m
-    return funcs, members
+            idxs = [i for i in idxs if not gone[i]]
+            if len(idxs) < 2:
+                continue
+            a = int(key[1])  # type: ignore[call-overload]
+            # first fit: each event joins the first merged event it is disjoint from there, so a
+            # large group is merged in one round, not one merged event a round
+            bins: list[list[int]] = []  # each: its enabled values' bits, then its events
+            for i in idxs:
+                on = masks[evs[i][a][1]]
+                for b in bins:
+                    if not on & b[0]:
+                        b[0] |= on
+                        b.append(i)
+                        break
+                else:
+                    if len(bins) < _MERGE_BINS:
+                        bins.append([on, i])
+            for b in bins:
+                used = b[1:]
+                if len(used) > 1:
+                    merged = tabs[evs[used[0]][a][1]]
+                    for i in used[1:]:
+                        tab = tabs[evs[i][a][1]]
+                        merged = np.where(tab >= 0, tab, merged)
+                    ev = evs[used[0]]
+                    new_e.append(ev[:a] + ((ev[a][0], name(merged)),) + ev[a + 1:])
+                    new_m.append(tuple(sorted(t for i in used for t in mem[i])))
+                    gone[used] = True
+                    changed = True
+        evs = [e for i, e in enumerate(evs) if not gone[i]] + new_e
+        mem = [m for i, m in enumerate(mem) if not gone[i]] + new_m
+    return [{k: tabs[f] for k, f in ev} for ev in evs], mem
 
 
 def _inverse(f: dict[int, np.ndarray], dom: np.ndarray) -> dict[int, np.ndarray] | None:
@@ -632,11 +755,12 @@ def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool =
     ts = range(sn.n_transitions) if transitions is None else transitions.tolist()
     funcs: list[dict[int, np.ndarray]] = []
     members: list[tuple[int, ...]] = []
+    local = _LocalFunctions(sn, enc)
     for t in ts:
         on_levels = touched[t][enc.place_level[touched[t]] >= 0]
         if on_levels.size == 0 or (transitions is None and (enc.never[t] or enc.suspect[t])):
             continue  # enabled everywhere and changing no level (Encoding.free), or never enabled
-        f = _functions(sn, enc, t, on_levels)
+        f = local.of(t, on_levels)
         if inverse:
             g = _inverse(f, enc.dom)
             if g is None:
