@@ -73,7 +73,7 @@ def test_a_net_drawn_with_the_mouse_and_saved_passes_petrobot_check(page: Page, 
     page.click_node("t3")
     page.page.locator("#panel-inspect input[type=checkbox]").check()   # hidden: an error branch
     # checked as drawn, with the messages of petrobot check
-    page.wait("window.petrobot.validation && window.petrobot.validation.ok", what="the drawing to pass the checks")
+    page.wait("!window.petrobot.checkPending() && window.petrobot.validation && window.petrobot.validation.ok", what="the drawing to pass the checks")
     assert page.eval("document.getElementById('problem-count').textContent") == "0"
     page.screenshot("design-drawn")
     # save
@@ -108,11 +108,11 @@ def test_errors_are_shown_as_drawn_and_error_branches_can_be_hidden(page: Page, 
     # break the net: delete the normal exit of the return home
     page.click_node("at_home")
     page.page.keyboard.press("Delete")
-    page.wait("window.petrobot.validation && !window.petrobot.validation.ok", what="the problem to be found")
+    page.wait("!window.petrobot.checkPending() && window.petrobot.validation && !window.petrobot.validation.ok", what="the problem to be found")
     problems = page.eval("window.petrobot.validation.problems.map(p => p.problem)")
     assert any("has no normal exit" in p for p in problems)
     page.page.keyboard.press("Control+z")
-    page.wait("window.petrobot.validation && window.petrobot.validation.ok", what="undo to fix it")
+    page.wait("!window.petrobot.checkPending() && window.petrobot.validation && window.petrobot.validation.ok", what="undo to fix it")
 
 
 def finished_journal(path: Path) -> str:

@@ -210,12 +210,12 @@ def test_the_arc_tool_drag_draws_an_arc_and_reset_arcs_and_expressions_are_saved
     # a bad expression: the problem is the unsaved drawing's, pointing at its element
     rate.fill("min(#nowhere, 3)")
     rate.press("Enter")
-    page.wait("window.petrobot.validation && !window.petrobot.validation.ok", what="the bad expression found")
+    page.wait("!window.petrobot.checkPending() && window.petrobot.validation && !window.petrobot.validation.ok", what="the bad expression found")
     (problem,) = page.eval("window.petrobot.validation.problems")
     assert problem["text"].startswith("unsaved drawing: ") and "nowhere" in problem["text"] and problem["id"] == "t1"
     rate.fill("min(#p1, 3) * 2")
     rate.press("Enter")
-    page.wait("window.petrobot.validation && window.petrobot.validation.ok", what="fixed")
+    page.wait("!window.petrobot.checkPending() && window.petrobot.validation && window.petrobot.validation.ok", what="fixed")
     page.page.click("#save")
     page.page.fill("#save-path", "drawn.toml")
     page.page.click("#save-go")
@@ -249,6 +249,6 @@ def test_problems_point_to_the_real_file_then_to_the_unsaved_drawing(page: Page,
     # an edit: now the problems are the unsaved drawing's
     page.click_node("done")
     page.page.keyboard.press("Delete")
-    page.wait("window.petrobot.validation.problems.every(p => p.text.startsWith('unsaved drawing: '))",
+    page.wait("!window.petrobot.checkPending() && window.petrobot.validation.problems.every(p => p.text.startsWith('unsaved drawing: '))",
               what="the problems of the unsaved drawing")
     assert "drawing.toml" not in page.eval("document.getElementById('panel-problems').innerText")

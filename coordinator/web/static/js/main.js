@@ -182,7 +182,14 @@ app.updateButtons = updateButtons;
 let validateTimer = null;
 let validating = false;
 let again = false;
+// each change asked to be checked is counted; the Problems panel shows the checks of change
+// `checkedChange`, so that a slow check of an older drawing is never read as the current one's
+let changes = 0;
+let checkedChange = 0;
+app.checkPending = () => checkedChange !== changes;
+function checkedNow() { checkedChange = changes; }
 function validateSoon(delay = 250) {
+  changes += 1;
   clearTimeout(validateTimer);
   validateTimer = setTimeout(validate, delay);
 }
@@ -191,11 +198,13 @@ async function validate() {
   if (!draft || !app.link.open) return;
   if (validating) { again = true; return; }
   validating = true;
+  const asked = changes;
   // an edited drawing is no file yet: its problems say "unsaved drawing" and point to their elements
   const reply = await app.link.request("validate", { draft });
   validating = false;
   if (reply.ok) {
     app.validation = reply.validation;
+    checkedChange = asked;
     renderProblems(app);
     editor.renderTasks();
     document.body.dataset.checked = String(Date.now());
@@ -226,6 +235,7 @@ app.openNet = async (path, { confirm = true } = {}) => {
   catch (e) { app.message(String(e.message || e), "bad"); return; }
   app.design = { draft: net.draft, path: net.path, history: new History(), dirty: false, saved: null };
   app.validation = net.validation;
+  checkedNow();
   app.setMode("design");
   redraw({ fit: true });
   if (net.laid_out && app.graph.cy.nodes().length <= TIDY_MAX) {
@@ -290,6 +300,7 @@ app.save = async (path = null) => {
   if (!reply.ok) { app.message(`not saved: ${reply.reason}`, "bad"); return; }
   if (app.mode === "design") { app.design.path = reply.path; markSaved(); }
   app.validation = reply.validation;
+  if (app.mode === "design" && JSON.stringify(app.design.draft) === JSON.stringify(draft)) checkedNow();
   renderProblems(app);
   const n = reply.validation.problems.length;
   app.message(`saved ${reply.path}${n ? ` with ${n} problem${n === 1 ? "" : "s"}` : ": petrobot check finds no problem"}`, n ? "bad" : "ok");
@@ -464,6 +475,7 @@ function startLive(snapshot, net) {
     markSaved();
   }
   app.validation = net.validation;
+  checkedNow();
   liveView.load(snapshot);
   updateButtons();
   const was = app.mode;

@@ -13,6 +13,7 @@ export function renderProblems(app) {
   panel.append(el("p", { class: "small" }, "the same rules and messages as petrobot check: at the lines of the file while the drawing is "
     + "that file as it stands, in the \u201cunsaved drawing\u201d once it is edited (click a problem to see its element)"
     + (app.servicesKnown ? "; placement checked against services.toml" : "; placement not checked (no services.toml)")));
+  if (app.checkPending && app.checkPending()) panel.append(el("p", { class: "small" }, "checking the latest change\u2026"));
   count.textContent = String(v.problems.length);
   count.classList.toggle("zero", v.problems.length === 0);
   if (!v.problems.length) panel.append(el("div", { class: "okline" }, `OK ${v.summary}`));
