@@ -301,9 +301,12 @@ def test_catching_across_hosts_survives_cut_links_with_the_watchdogs_and_recover
     time.sleep(1.0)
     lab.restore("mot", "sim")
     out.wait("fire", 10)
-    assert co.wait(timeout=180) == 0, "\n".join(out.seen[-40:])
+    code = co.wait(timeout=180)
     out.drain()
     text = "\n".join(out.seen)
+    # the run's last lines first (what ended it), then the motion node's (the drives' recovery)
+    assert code == 0, (f"petrobot run exited {code}:\n" + "\n".join(out.seen[-25:]) + "\n--- motion.log (end):\n"
+                       + "\n".join(logs["motion"].read_text(errors="replace").splitlines()[-25:]))
     assert "completed after" in text and "home_retries_left': 3" in text, text[-3000:]
 
     catches = _results(journal, "catch")
