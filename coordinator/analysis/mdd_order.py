@@ -363,7 +363,7 @@ def _swap(p: int, q: int, pos: np.ndarray, order: np.ndarray, hp: np.ndarray, hi
     return after - before
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # while one thread saturates, another searches orders
 def _sift(order: np.ndarray, hp: np.ndarray, hidx: np.ndarray, hw: np.ndarray, vp: np.ndarray, vidx: np.ndarray,
           rounds: int) -> None:
     """Sifting, in place: move each level to the position of the lowest score, by neighbour swaps."""
@@ -676,12 +676,11 @@ def _merge(funcs: list[dict[int, np.ndarray]], members: list[tuple[int, ...]]
     changed = True
     while changed:
         changed = False
-        groups: dict[tuple[object, ...], list[int]] = {}
+        groups: dict[tuple[tuple[int, ...], int, tuple[tuple[int, int], ...]], list[int]] = {}
         for idx, ev in enumerate(evs):
             levels = tuple(k for k, _ in ev)
             for a in range(len(ev)):
-                key = (levels, a, ev[:a] + ev[a + 1:])
-                groups.setdefault(key, []).append(idx)
+                groups.setdefault((levels, a, ev[:a] + ev[a + 1:]), []).append(idx)
         gone = np.zeros(len(evs), dtype=bool)
         new_e: list[tuple[tuple[int, int], ...]] = []
         new_m: list[tuple[int, ...]] = []
@@ -691,7 +690,7 @@ def _merge(funcs: list[dict[int, np.ndarray]], members: list[tuple[int, ...]]
             idxs = [i for i in idxs if not gone[i]]
             if len(idxs) < 2:
                 continue
-            a = int(key[1])  # type: ignore[call-overload]
+            a = key[1]
             # first fit: each event joins the first merged event it is disjoint from there, so a
             # large group is merged in one round, not one merged event a round
             bins: list[list[int]] = []  # each: its enabled values' bits, then its events
