@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import threading
 import time
+import warnings
 from collections.abc import Callable
 
 import numpy as np
@@ -47,8 +48,12 @@ jit.configure()  # numba's cache in the user's cache directory: before numba is 
 
 from numba import njit, objmode  # noqa: E402
 
+# run's objmode block (the watch, every million steps) takes the GIL for a moment; the rest of run
+# runs without it, which is what nogil is asked for, so numba's compile-time warning says nothing new
+warnings.filterwarnings("ignore", message="Code running in object mode won't allow parallel execution")
+
 __all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "MEMORY", "MODE_APPLY", "MODE_IMAGE",
-           "MODE_RESTRICT", "MODE_SATURATE", "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "count",
+           "MODE_RESTRICT", "MODE_SATURATE", "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "add_path", "count",
            "enabled_counts", "max_weight", "new_store", "node_of_path", "presence", "run", "set_watch", "clear_cache"]
 
 EMPTY, TERMINAL = 0, 1
@@ -77,19 +82,25 @@ _GOLD = np.uint64(0x9E3779B97F4A7C15)
 _watch = threading.local()
 
 
-def set_watch(deadline: float | None, progress: Callable[[int], None] | None = None) -> None:
+def set_watch(deadline: float | None, progress: Callable[[int], None] | None = None,
+              cancel: threading.Event | None = None) -> None:
     """Stop this thread's :func:`run` calls at ``deadline`` (``time.monotonic()`` seconds; None: no
-    deadline) and report the store's node count to ``progress`` every million steps or so."""
+    deadline) or once ``cancel`` is set (another thread's decision), and report the store's node
+    count to ``progress`` every million steps or so."""
     _watch.deadline = deadline
     _watch.progress = progress
+    _watch.cancel = cancel
 
 
 def _tick(nodes: int) -> int:
-    """Called from :func:`run` in the interpreter: 1 to stop (past the deadline), else 0. Ctrl-C
-    raises here."""
+    """Called from :func:`run` in the interpreter: 1 to stop (past the deadline, or cancelled), else
+    0. Ctrl-C raises here (in the main thread)."""
     progress = getattr(_watch, "progress", None)
     if progress is not None:
         progress(int(nodes))
+    cancel = getattr(_watch, "cancel", None)
+    if cancel is not None and cancel.is_set():
+        return 1
     deadline = getattr(_watch, "deadline", None)
     return int(deadline is not None and time.monotonic() > deadline)
 
@@ -194,6 +205,46 @@ def _rehash(unique: np.ndarray, n_nodes: int, level: np.ndarray, offset: np.ndar
 
 
 @njit(cache=True)
+def add_path(values: np.ndarray, dom: np.ndarray, meta: np.ndarray, level: np.ndarray, offset: np.ndarray,
+             size: np.ndarray, kids: np.ndarray, unique: np.ndarray) -> tuple:  # type: ignore[type-arg]
+    """The node of the set holding the single path ``values`` ((K,) int64, a value per level: one
+    marking), added to the store, its buffers grown as needed (a few nodes: no byte budget).
+
+    Returns:
+        ``(node, level, offset, size, kids, unique)``, the buffers possibly new.
+    """
+    n_levels = values.shape[0]
+    if meta[META_NODES] + n_levels + 2 > level.shape[0]:
+        gn = max(2 * level.shape[0], meta[META_NODES] + n_levels + 2)
+        nl = np.zeros(gn, np.int32)
+        no = np.zeros(gn, np.int64)
+        ns = np.zeros(gn, np.int32)
+        nl[:level.shape[0]] = level
+        no[:offset.shape[0]] = offset
+        ns[:size.shape[0]] = size
+        level, offset, size = nl, no, ns
+    need = meta[META_KIDS] + dom.sum()
+    if need > kids.shape[0]:
+        nk = np.zeros(max(2 * kids.shape[0], need), np.int32)
+        nk[:kids.shape[0]] = kids
+        kids = nk
+    gu = unique.shape[0]
+    while 2 * (meta[META_UNIQUE] + n_levels + 1) > gu:
+        gu *= 2
+    if gu != unique.shape[0]:
+        unique = np.zeros(gu, np.int32)
+        _rehash(unique, meta[META_NODES], level, offset, size, kids)
+    buf = np.zeros(max(1, dom.max()), np.int32)
+    node = TERMINAL
+    for k in range(n_levels - 1, -1, -1):
+        for x in range(dom[k]):
+            buf[x] = EMPTY
+        buf[values[k]] = node
+        node = _checkin(k, buf, 0, dom[k], meta, level, offset, size, kids, unique)
+    return node, level, offset, size, kids, unique
+
+
+@njit(cache=True)
 def _kid(kids: np.ndarray, offset: np.ndarray, size: np.ndarray, node: int, i: int) -> int:
     """Child i of a node; for the constraint sentinel NO_CONSTRAINT, NO_CONSTRAINT."""
     if node == NO_CONSTRAINT:
@@ -246,7 +297,7 @@ def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, 
     return -1, a, b, (_OP_RESTRICT << 40) + a, (e << 2) + b
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # two variable orders race on two cores (symbolic._race)
 def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray,
         ev_slot: np.ndarray, slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray,
         meta: np.ndarray, level: np.ndarray, offset: np.ndarray, size: np.ndarray, kids: np.ndarray,

@@ -37,6 +37,8 @@ what is not decided in time is left undecided).
 
 from __future__ import annotations
 
+import os
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -50,12 +52,15 @@ from coordinator.analysis.mdd_order import Encoding, Events, encode, events, tou
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet
 
-__all__ = ["ANSWER_SECONDS", "SymbolicResult", "analyse_symbolic", "load_kernel"]
+__all__ = ["ANSWER_SECONDS", "PROBES", "SymbolicResult", "analyse_symbolic", "load_kernel"]
 
 _TWO61 = (1 << 61) - 1
 #: default time after which reversibility and liveness are left undecided (seconds from the start of
 #: the symbolic analysis; below a minute, to leave room for the bounds proven before it)
 ANSWER_SECONDS = 50.0
+#: markings drawn from the reachable set whose forward sets are searched for a transition that can
+#: never fire again and for M0, before the backward saturations (:func:`_probe`)
+PROBES = 3
 #: largest |P|·|T| for which a witness is searched over explicit markings on dense matrices
 _DENSE_WITNESS = 4_000_000
 #: longest that search may take before breadth-first images take over (seconds)
@@ -183,6 +188,29 @@ class _Store:
     def contains(self, node: int, values: np.ndarray) -> bool:
         offset, size, kids = self.arrays[2:5]
         return bool(mk.node_of_path(node, values.astype(np.int64), offset, size, kids) == mk.TERMINAL)
+
+    def path(self, values: np.ndarray) -> int:
+        """The node of the set of one path (a value per level: one marking)."""
+        meta = self.arrays[0]
+        node, *grown = mk.add_path(values.astype(np.int64), self.dom, meta, *self.arrays[1:6])
+        self.arrays = (meta, *grown, self.arrays[6])
+        return int(node)
+
+    def sample(self, node: int, rng: np.random.Generator) -> np.ndarray:
+        """A path of a non-empty set drawn about uniformly (each child in proportion to the float
+        estimate of its paths, :meth:`count` of ``node`` first): its value per level."""
+        self.count(node)
+        offset, size, kids = self.arrays[2:5]
+        out = np.zeros(self.enc.n_levels, dtype=np.int64)
+        for k in range(self.enc.n_levels):
+            ch = kids[int(offset[node]):int(offset[node]) + int(size[node])].astype(np.int64)
+            w = np.where(ch == mk.TERMINAL, 1.0, self._approx[ch]) * (ch != mk.EMPTY)
+            if not np.isfinite(w.sum()) or w.sum() <= 0:  # beyond a float: any non-empty child
+                w = (ch != mk.EMPTY).astype(np.float64)
+            i = int(rng.choice(ch.size, p=w / w.sum()))
+            out[k] = i
+            node = int(ch[i])
+        return out
 
     def pick(self, node: int) -> np.ndarray:
         """One path of a non-empty set: its value per level."""
@@ -462,7 +490,7 @@ def _bfs_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fw
 
 def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarray] | None = None,
                      max_bytes: int = 4 << 30, seconds: float = 600.0, answer_seconds: float = ANSWER_SECONDS,
-                     progress: Callable[[str], None] | None = None) -> SymbolicResult:
+                     progress: Callable[[str], None] | None = None, probes: int = PROBES) -> SymbolicResult:
     """The reachable set of a bounded net by saturation, and its properties (module docstring).
 
     Args:
@@ -478,6 +506,10 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             before included, comes within a minute by default when the reachable set and its
             counts are quick.
         progress: called with short phase descriptions.
+        probes: markings drawn from the reachable set for the forward test of liveness and
+            reversibility before the backward saturations (:func:`_probe`); 0: backward only,
+            which decides every transition's liveness when there is time (the probe stops at the
+            first transition it shows not live).
 
     Returns:
         A :class:`SymbolicResult`.
@@ -498,7 +530,6 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
     secs["encode"] = enc.seconds
     secs["reach"] = time.monotonic() - t0 - enc.seconds
     try:
-        mk.set_watch(None, None)
         states = store.count(reach)
         _check_suspects(store, sn, enc, net, reach)
         say(f"symbolic: {states:,} markings, {store.nodes:,} nodes, {secs['reach']:.1f} s")
@@ -533,8 +564,9 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             back = events(sn, enc, inverse=True)
         mk.set_watch(deadline, None)
         _witness(store, sn, enc, net, fwd, back, reach, dead, result, say, deadline)
-        mk.set_watch(min(deadline, start + answer_seconds), None)
-        _liveness(store, single, back, reach, result, say)
+        until = min(deadline, start + answer_seconds)
+        mk.set_watch(until, None)
+        _liveness(store, fwd, single, back, reach, counts, result, say, until, probes)
         result.nodes = store.nodes
         return result
     finally:
@@ -594,7 +626,8 @@ _FIRST_SLICE = 2.0
 #: seeds of the order search tried for the candidates (a seed whose order is already a candidate's
 #: is passed over; fewer candidates race when no other order is found)
 _SEEDS = 5
-#: the first candidate's turns are this many times longer than the others' (module docstring of _race)
+#: the first candidate's turns are this many times longer than the others' when it shares a lane
+#: with them (module docstring of _race)
 _LEAD = 2.0
 
 
@@ -602,99 +635,309 @@ def _same_order(a: Encoding, b: Encoding) -> bool:
     return len(a.levels) == len(b.levels) and all(np.array_equal(x, y) for x, y in zip(a.levels, b.levels))
 
 
-def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes: int, deadline: float,
-          say: Callable[[str], None]) -> tuple[Encoding, Events, _Store, int]:
-    """The reachable set, by saturation on candidate variable orders taking turns, each turn a time
-    slice that doubles after every round, until one finishes. How long saturation takes on an order
-    is hard to predict from the order (on Railroad-PT-010, orders whose scores differ by 2 % take
-    0.15 to 13 s), so a few candidates are raced; a candidate's store, computed table included, is
-    kept between its turns, so a turn resumes where the last one stopped and the total stays within
-    about the number of candidates times the best one's time. Candidates are distinct orders: the
-    order search from another seed often ends in the same order, which would only race itself (on
-    LamportFastMutEx-PT-5 all three seeds give one order); up to :data:`_SEEDS` seeds are tried.
-    The first candidate (seed 0, whose starts include the net's own place order and its reverse)
-    gets turns :data:`_LEAD` times as long as the others: when it is the fastest, the others cost
-    about half its time instead of as much (Railroad-PT-020: 39 s of CPU for the race instead of
-    55 s), and when another is, the race costs at most that much more. Each store has an equal share of the memory budget; when one outgrows its share, the others are
-    dropped and it gets the whole. When the net is components that meet only through shared levels
-    (:func:`.mdd_order.shared_levels`: resources that every component takes and gives back), the
-    first candidate is the order with those levels at the bottom, and the seeds' orders follow."""
-    cands: list[tuple[Encoding, Events, _Store]] = []
-    alive: list[bool] = []
-    n_cands = _CANDIDATES
-    seed = 0
-    slice_s = _FIRST_SLICE
-    turn = 0
-    while True:
-        i = turn % n_cands
-        turn += 1
-        if i < len(alive) and not alive[i]:
-            if not any(alive):
-                raise AnalysisError("the decision diagram outgrew the memory budget on every candidate "
-                                    "variable order")
-            if turn % n_cands == 0:
-                slice_s *= 2
-            continue
-        if i == len(cands):
-            found = None
-            if not cands:  # seed 0, with the shared levels sunk if the net has them
-                seconds = min(10.0, max(1.0, (deadline - time.monotonic()) / 20))
-                found = encode(sn, bounds, flows, seconds=seconds, seed=0, sink=True)
-                seed += 0 if found.sunk else 1
-            while found is None and seed < _SEEDS and (seed == 0 or time.monotonic() < deadline):
-                seconds = min(10.0, max(1.0, (deadline - time.monotonic()) / 20))
-                enc = encode(sn, bounds, flows, seconds=seconds, seed=seed)
-                seed += 1
-                if not any(_same_order(enc, c[0]) for c in cands):
-                    found = enc
-            if found is None:  # no other order: the candidates there are race on, with larger shares
-                n_cands = len(cands)
-                turn = 0
-                for _, _, st in cands:
-                    st.max_bytes = max(st.max_bytes, max_bytes // n_cands)
-                say(f"symbolic: {n_cands} distinct variable order{'s' if n_cands > 1 else ''} found")
-                continue
-            enc = found
-            cands.append((enc, events(sn, enc, merge=True), _Store(enc, max_bytes // _CANDIDATES)))
-            alive.append(True)
-            if i == 0:
-                say(f"symbolic: {enc.n_levels} levels ({enc.groups} groups of places"
-                    + (f", {enc.sunk} shared levels at the bottom of the first order" if enc.sunk else "")
-                    + f"), {cands[0][1].n_events} events for {sn.n_transitions} transitions")
-        enc, fwd, store = cands[i]
-        mine = slice_s * (_LEAD if i == 0 else 1.0)
-        mk.set_watch(min(deadline, time.monotonic() + mine) if n_cands > 1 else deadline, None)
+def _cpus() -> int:
+    """The CPUs this process may run on (its affinity), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+_Candidate = tuple[Encoding, Events, _Store]
+_Won = tuple[Encoding, Events, _Store, int]
+
+
+class _Race:
+    """What the lanes of one race share (:func:`_race`): the orders found so far, the seeds left,
+    the winner, and which lane, if any, has outgrown its share of the memory and taken the whole."""
+
+    def __init__(self, sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes: int,
+                 deadline: float, say: Callable[[str], None]) -> None:
+        self.sn, self.bounds, self.flows = sn, bounds, flows
+        self.max_bytes, self.deadline, self.say = max_bytes, deadline, say
+        self.lock = threading.Lock()
+        self.orders: list[Encoding] = []  # every candidate's encoding, the first one's first
+        self.first = threading.Event()  # the first candidate's encoding is known (or never will be)
+        # order searches still to run for candidates after the first: (seed, sink)
+        self.jobs: list[tuple[int, bool]] = []
+        self.next_seed = 1
+        self.plain_first = False  # the first order without its shared levels sunk was queued
+        self.winner: _Won | None = None
+        self.error: BaseException | None = None
+        self.lanes: list[_Lane] = []
+        self.exclusive: _Lane | None = None
+
+    def encode(self, seed: int, sink: bool = False) -> Encoding:
+        """The encoding of order search ``seed`` (``sink``: shared levels at the bottom), the search
+        given up to 10 s."""
+        seconds = min(10.0, max(1.0, (self.deadline - time.monotonic()) / 20))
+        enc = encode(self.sn, self.bounds, self.flows, seconds=seconds, seed=seed, sink=sink)
+        if sink and enc.sunk:
+            with self.lock:
+                if not self.plain_first:  # the same search with its shared levels left in place
+                    self.plain_first = True
+                    self.jobs.append((0, False))
+        return enc
+
+    def another_order(self) -> tuple[int, Encoding] | None:
+        """A candidate order none of the others has, with its number in the race (compared once the
+        first candidate's is known); None when the seeds are used up or the deadline passed."""
+        while time.monotonic() < self.deadline:
+            with self.lock:
+                if self.jobs:
+                    seed, sink = self.jobs.pop(0)
+                elif self.next_seed < _SEEDS:
+                    seed, sink = self.next_seed, False
+                    self.next_seed += 1
+                else:
+                    return None
+            enc = self.encode(seed, sink=sink)
+            self.first.wait()
+            with self.lock:
+                if not any(_same_order(enc, o) for o in self.orders):
+                    self.orders.append(enc)
+                    return len(self.orders), enc
+        return None
+
+    def won(self, lane: _Lane, found: _Won) -> None:
+        with self.lock:
+            if self.winner is None and self.error is None:
+                self.winner = found
+        self.cancel_all(but=lane)
+
+    def failed(self, exc: BaseException) -> None:
+        with self.lock:
+            if self.winner is None and self.error is None:
+                self.error = exc
+        self.cancel_all()
+
+    def cancel_all(self, but: _Lane | None = None) -> None:
+        self.first.set()  # nobody waits for an order that may never come
+        for other in self.lanes:
+            if other is not but:
+                other.cancel.set()
+
+    def take_whole(self, lane: _Lane) -> bool:
+        """``lane``'s store outgrew its share: the other lanes are stopped (and waited for, so that
+        their stores are gone) and it gets the whole budget; False if another lane took it first."""
+        with self.lock:
+            if self.exclusive is not None and self.exclusive is not lane:
+                return False
+            self.exclusive = lane
+        self.cancel_all(but=lane)
+        for other in self.lanes:
+            if other is not lane:
+                other.ended.wait()
+        return True
+
+
+class _Lane:
+    """One CPU's share of a race: candidate orders taking turns of doubling time slices, each resuming
+    where it stopped (its store, computed table included, kept between turns), until one is done.
+
+    Args:
+        race: the shared state.
+        first: this lane holds the race's first candidate (seed 0, shared levels sunk).
+        others: how many candidates besides the first it races (0: the first alone, to the deadline).
+        share: the bytes of all this lane's stores; each store has an equal part of it.
+    """
+
+    def __init__(self, race: _Race, first: bool, others: int, share: int) -> None:
+        self.race, self.has_first, self.others, self.share = race, first, others, share
+        self.cancel = threading.Event()
+        self.ended = threading.Event()
+        self.timed_out = False
+        self.nodes = 0
+
+    def run(self) -> None:
+        race = self.race
         try:
-            reach = store.call(mk.MODE_SATURATE, fwd, store.m0, check_overflow=True)
-            store.max_bytes = max_bytes  # the others are dropped: the winner has the whole budget
-            return enc, fwd, store, reach
-        except _OutOfTime:
-            if time.monotonic() >= deadline:
-                raise AnalysisError(f"the symbolic reachable set was not complete within the time budget "
-                                    f"({store.nodes:,} nodes on the last variable order tried)") from None
-            if sum(alive) > 1 or n_cands > 1:
-                say(f"symbolic: order {i + 1} not done after its {mine:.0f} s turn ({store.nodes:,} nodes)")
-        except AnalysisError as exc:
-            if "memory budget" not in str(exc):
-                raise
-            if store.max_bytes < max_bytes:  # drop the others, give this one the whole budget
-                for j in range(len(cands)):
-                    if j != i:
-                        alive[j] = False
-                        cands[j] = (cands[j][0], cands[j][1], _Store(cands[j][0], 0))
-                store.max_bytes = max_bytes
-                turn -= 1
-                continue
-            alive[i] = False
+            self._run()
+        except BaseException as exc:  # Ctrl-C in the main thread, or a failure: the race ends
+            race.failed(exc)
         finally:
             mk.set_watch(None, None)
-        if turn % n_cands == 0:
-            slice_s *= 2
+            if self.has_first:
+                race.first.set()
+            self.ended.set()
+
+    def _run(self) -> None:
+        race, say = self.race, self.race.say
+        want = int(self.has_first) + self.others
+        if want == 0:
+            return
+        cands: list[_Candidate] = []
+        names: list[int] = []
+        alive: list[bool] = []
+        n_cands = want
+        slice_s = _FIRST_SLICE
+        turn = 0
+        while not self.cancel.is_set():
+            i = turn % n_cands
+            turn += 1
+            if i < len(alive) and not alive[i]:
+                if not any(alive):
+                    return
+                if turn % n_cands == 0:
+                    slice_s *= 2
+                continue
+            if i == len(cands):
+                name_enc = None
+                if self.has_first and not cands:
+                    enc0 = race.encode(0, sink=True)
+                    with race.lock:
+                        race.orders.insert(0, enc0)
+                    race.first.set()
+                    name_enc = (1, enc0)
+                else:
+                    name_enc = race.another_order()
+                if name_enc is None or self.cancel.is_set():  # no other order: race those there are
+                    n_cands = len(cands)
+                    if n_cands == 0:
+                        return
+                    turn = 0
+                    for _, _, st in cands:
+                        st.max_bytes = max(st.max_bytes, self.share // n_cands)
+                    if self.others:
+                        say(f"symbolic: {len(race.orders)} distinct variable order{'s' if len(race.orders) > 1 else ''} found")
+                    continue
+                name, enc = name_enc
+                cands.append((enc, events(race.sn, enc, merge=True), _Store(enc, self.share // want)))
+                names.append(name)
+                alive.append(True)
+                if name == 1:
+                    say(f"symbolic: {enc.n_levels} levels ({enc.groups} groups of places"
+                        + (f", {enc.sunk} shared levels at the bottom of the first order" if enc.sunk else "")
+                        + f"), {cands[-1][1].n_events} events for {race.sn.n_transitions} transitions")
+            enc, fwd, store = cands[i]
+            mine = slice_s * (_LEAD if names[i] == 1 else 1.0)
+            mk.set_watch(min(race.deadline, time.monotonic() + mine) if n_cands > 1 else race.deadline, None,
+                         self.cancel)
+            try:
+                reach = store.call(mk.MODE_SATURATE, fwd, store.m0, check_overflow=True)
+                store.max_bytes = race.max_bytes  # the others are dropped: the winner has the whole budget
+                race.won(self, (enc, fwd, store, reach))
+                return
+            except _OutOfTime:
+                self.nodes = store.nodes
+                if self.cancel.is_set():
+                    return
+                if time.monotonic() >= race.deadline:
+                    self.timed_out = True
+                    return
+                if n_cands > 1:
+                    say(f"symbolic: order {names[i]} not done after its {mine:.0f} s turn ({store.nodes:,} nodes)")
+            except AnalysisError as exc:
+                if "memory budget" not in str(exc):
+                    raise
+                if store.max_bytes < race.max_bytes and race.take_whole(self):
+                    for j in range(len(cands)):  # this lane's others are dropped too
+                        if j != i:
+                            alive[j] = False
+                            cands[j] = (cands[j][0], cands[j][1], _Store(cands[j][0], 0))
+                    store.max_bytes = race.max_bytes
+                    turn -= 1
+                    continue
+                alive[i] = False
+            finally:
+                mk.set_watch(None, None)
+            if turn % n_cands == 0:
+                slice_s *= 2
 
 
-def _liveness(store: _Store, single: Events, back: Events | None, reach: int, result: SymbolicResult,
-              say: Callable[[str], None]) -> None:
-    """Reversibility and liveness (module docstring), within the watch's deadline."""
+def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes: int, deadline: float,
+          say: Callable[[str], None]) -> _Won:
+    """The reachable set, by saturation on candidate variable orders raced against each other, until
+    one finishes. How long saturation takes on an order is hard to predict from the order (on
+    Railroad-PT-010, orders whose scores differ by 2 % take 0.15 to 13 s), so a few candidates are
+    raced. Candidates are distinct orders: the order search from another seed often ends in the same
+    order, which would only race itself (on LamportFastMutEx-PT-5 all three seeds give one order);
+    up to :data:`_SEEDS` seeds are tried. When the net is components that meet only through shared
+    levels (:func:`.mdd_order.shared_levels`: resources that every component takes and gives back),
+    the first candidate is the order with those levels at the bottom (seed 0, whose starts include
+    the net's own place order and its reverse), and the seeds' orders follow.
+
+    On two CPUs or more the race has two lanes, threads that run at once (the kernel releases the
+    GIL): one saturates the first candidate without a pause, the other searches the other orders
+    while the first saturates and races them by turns. When the first order is the fastest, the
+    race costs it nothing. On one CPU a single lane runs them all by turns of doubling time slices, each
+    resuming where it stopped (its store, computed table included, is kept between turns), the first
+    candidate's turns :data:`_LEAD` times as long as the others' (when it is the fastest the others
+    cost about half its time; Railroad-PT-020: 39 s of CPU for the race instead of 55 s). Each store
+    has an equal share of the memory budget; when one outgrows its share, the others are stopped and
+    dropped and it gets the whole.
+
+    Raises:
+        AnalysisError: every candidate outgrew the memory budget, or none was done by the deadline.
+    """
+    race = _Race(sn, bounds, flows, max_bytes, deadline, say)
+    if _cpus() >= 2:
+        race.lanes = [_Lane(race, True, 0, max_bytes // 2), _Lane(race, False, _CANDIDATES - 1, max_bytes // 2)]
+    else:
+        race.lanes = [_Lane(race, True, _CANDIDATES - 1, max_bytes)]
+    helpers = [threading.Thread(target=lane.run, name="petrobot-saturation", daemon=True) for lane in race.lanes[:-1]]
+    try:
+        for thread in helpers:
+            thread.start()
+        race.lanes[-1].run()  # the main thread's lane: Ctrl-C reaches it
+        for thread in helpers:
+            while thread.is_alive():
+                thread.join(0.2)
+    finally:
+        race.cancel_all()
+        for thread in helpers:
+            thread.join()
+    if race.winner is not None:
+        return race.winner
+    if race.error is not None:
+        raise race.error
+    if any(lane.timed_out for lane in race.lanes):
+        nodes = max(lane.nodes for lane in race.lanes)
+        raise AnalysisError(f"the symbolic reachable set was not complete within the time budget "
+                            f"({nodes:,} nodes on the largest variable order tried)")
+    raise AnalysisError("the decision diagram outgrew the memory budget on every candidate variable order")
+
+
+#: markings drawn from the reachable set whose forward sets are searched for a transition that can
+#: never fire again and for M0 before the backward saturations (:func:`_liveness`), and the share of
+#: the time left they may take
+_PROBES = 3
+_PROBE_SHARE = 0.4
+
+
+def _probe(store: _Store, fwd: Events, single: Events, reach: int, result: SymbolicResult, until: float,
+           probes: int) -> None:
+    """Decide what a few markings drawn from the reachable set tell, forward: from a marking m, the
+    set R(m) of the markings it reaches is saturated (the reachable set's own events, its computed
+    table kept); a transition enabled in no marking of R(m) can never fire again after m, so it is
+    not live (L4), and M0 outside R(m) makes the net not reversible. Nets with a one-shot start
+    (an initialisation the net never returns to) are decided so in a forward saturation or two,
+    where the backward saturations below may not finish (UtahNoC-PT-none: 2 s against undecided
+    after 40 s). At most ``probes`` markings; stops at ``until`` or when both are decided."""
+    rng = np.random.default_rng(0x11FE)
+    live_t = result.live_transitions
+    mk.set_watch(until, None)
+    for _ in range(probes):
+        if result.reversible is not None and result.live is not None:
+            return
+        m = store.path(store.sample(reach, rng))
+        r = store.call(mk.MODE_SATURATE, fwd, m)
+        if not store.contains(r, store.enc.m0):
+            result.reversible = False
+        store.count(r, at_most=float(result.states) * max(1, single.n_events))
+        for e, n in enumerate(store.enabled_counts(r, single)):
+            if n == 0:
+                live_t[list(single.members[e])] = False
+                result.live = False
+
+
+def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, reach: int, counts: list[int],
+              result: SymbolicResult, say: Callable[[str], None], until: float, probes: int) -> None:
+    """Reversibility and liveness (module docstring), until ``until`` (``time.monotonic()``
+    seconds): what the drawn markings tell forward first (:func:`_probe`, within a share of the
+    time), then backward saturation from M0 (reversibility) and, for each transition not yet
+    decided, from the markings that enable it, the transitions enabled in the fewest reachable
+    markings (``counts``, per event of ``single``) first: they are the likeliest not to be live."""
     t0 = time.monotonic()
     n_t = result.fireable.shape[0]
     quasi = bool(result.fireable.all())
@@ -713,6 +956,16 @@ def _liveness(store: _Store, single: Events, back: Events | None, reach: int, re
         result.seconds["liveness"] = time.monotonic() - t0
         return
     try:
+        if probes and (result.reversible is None or result.live is None):
+            say("symbolic: liveness and reversibility, forward from drawn markings")
+            try:
+                # a drawn marking reaches a part of the reachable set, on the computed table of the
+                # whole: worth at most as long as the whole took, and a share of the time left
+                share = min(_PROBE_SHARE * max(0.0, until - t0), max(1.0, result.seconds.get("reach", 0.0)))
+                _probe(store, fwd, single, reach, result, min(until, t0 + share), probes)
+            except _OutOfTime:
+                pass
+            mk.set_watch(until, None)
         if result.reversible is None:
             say("symbolic: reversibility (backward from M0)")
             home = store.call(mk.MODE_SATURATE, back, store.m0, c=reach)
@@ -722,7 +975,8 @@ def _liveness(store: _Store, single: Events, back: Events | None, reach: int, re
             live_t[:] = True
         elif result.live is None:
             say("symbolic: liveness, transition by transition")
-            todo = [e for e in range(single.n_events) if live_t[single.members[e][0]] is None]
+            todo = sorted((e for e in range(single.n_events) if live_t[single.members[e][0]] is None),
+                          key=lambda e: counts[e])
             # every restriction first, then every backward saturation: the computed table is
             # cleared when the events change, so alternating would start each saturation afresh
             enabled = [store.call(mk.MODE_RESTRICT, single, reach, 1, arg=e) for e in todo]
@@ -732,8 +986,9 @@ def _liveness(store: _Store, single: Events, back: Events | None, reach: int, re
                 live_t[t] = can == reach
                 if not live_t[t]:
                     result.live = False
-                    break
-            else:
+                    if probes:  # the answer is known; without the probe every transition is decided
+                        break
+            if result.live is None:
                 free = [t for t in range(n_t) if live_t[t] is None]
                 live_t[free] = True
                 result.live = True

@@ -191,9 +191,13 @@ def test_backward_saturation_inside_the_reachable_set_stays_inside_it() -> None:
     transitions["start"] = ({"idle": 1}, {"run": 1})
     net = make_net("one_shot", {**{f"off{i}": 1 for i in range(n)}, "idle": 1}, transitions)
     bounds, flows = proven_bounds(net)
-    r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0)
+    r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0, probes=0)  # backward saturations only
     assert r.states == 2**n + 1 and not r.deadlock and r.reversible is False and r.live is False
     assert r.live_transitions.tolist() == [True] * (2 * n) + [False]
+    # forward from markings drawn after the start: the start can never fire again, and M0 is not
+    # reached again
+    r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0)
+    assert r.reversible is False and r.live is False and r.live_transitions[-1] is False
 
 
 def test_a_deadlock_deep_in_a_ring_of_thirty_philosophers_is_reached_by_a_straight_firing_sequence() -> None:
