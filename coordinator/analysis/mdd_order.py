@@ -38,6 +38,7 @@ Internal to :mod:`.symbolic`. Three decisions, each from the net's structure alo
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from math import comb
 
@@ -397,10 +398,11 @@ def _sift(order: np.ndarray, hp: np.ndarray, hidx: np.ndarray, hw: np.ndarray, v
             break
 
 
-def _order(n: int, hypers: list[np.ndarray], deadline: float, starts: int = 8, seed: int = 0
-           ) -> tuple[np.ndarray, float]:
+def _order(n: int, hypers: list[np.ndarray], deadline: float, starts: int = 8, seed: int = 0,
+           stop: Callable[[], bool] | None = None) -> tuple[np.ndarray, float]:
     """The best order of ``n`` levels found by FORCE and sifting from several starts (module
-    docstring), and its score."""
+    docstring), and its score; the starts end at ``deadline`` or when ``stop()`` says so (after
+    the first start)."""
     # equal hyperedges (the unfolded transitions of a coloured net touch the same levels) are one,
     # counted as many times: the score is the same, sifting's work is per distinct hyperedge
     weights: dict[bytes, int] = {}
@@ -428,7 +430,7 @@ def _order(n: int, hypers: list[np.ndarray], deadline: float, starts: int = 8, s
     rng = np.random.default_rng(0x5A7 + 7919 * seed)
     best: tuple[float, np.ndarray] | None = None
     for s in range(starts):
-        if best is not None and time.monotonic() > deadline:
+        if best is not None and (time.monotonic() > deadline or (stop is not None and stop())):
             break
         start = np.arange(n) if s == 0 else (np.arange(n)[::-1] if s == 1 else rng.permutation(n))
         pos = np.empty(n)
@@ -491,7 +493,7 @@ def shared_levels(n: int, hypers: list[np.ndarray]) -> np.ndarray:
 
 
 def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, seconds: float = 5.0,
-           seed: int = 0, sink: bool = False) -> Encoding:
+           seed: int = 0, sink: bool = False, stop: Callable[[], bool] | None = None) -> Encoding:
     """Levels, local markings and order of the diagram of a bounded net (module docstring).
 
     Args:
@@ -502,6 +504,8 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
         seed: the random starts of the order (another seed, another candidate order).
         sink: move the shared levels (:func:`shared_levels`) below all the others, each part in the
             order found; ``sunk`` says how many moved (0: the net has none, the order is unchanged).
+        stop: asked between the starts of the order search; True ends it early (another thread
+            needs no more orders).
 
     Raises:
         AnalysisError: a place has no bound, or a bound above :data:`MAX_DOMAIN`.
@@ -523,7 +527,7 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
     hypers = [np.unique(o[o >= 0]) for o in (owner[ps] for ps in touched)]
     shared = shared_levels(n_k, hypers) if sink else np.zeros(n_k, dtype=bool)
     hypers += [np.unique(o[o >= 0]) for o in (owner[np.flatnonzero(y)] for y in flows)]
-    order, score = _order(n_k, hypers, start + seconds, seed=seed)
+    order, score = _order(n_k, hypers, start + seconds, seed=seed, stop=stop)
     if shared.any():
         order = np.concatenate([order[~shared[order]], order[shared[order]]])
         pos = np.empty(n_k, dtype=np.int64)

@@ -667,11 +667,11 @@ class _Race:
         self.lanes: list[_Lane] = []
         self.exclusive: _Lane | None = None
 
-    def encode(self, seed: int, sink: bool = False) -> Encoding:
+    def encode(self, seed: int, sink: bool = False, stop: Callable[[], bool] | None = None) -> Encoding:
         """The encoding of order search ``seed`` (``sink``: shared levels at the bottom), the search
-        given up to 10 s."""
+        given up to 10 s, ended early when ``stop()`` says so (the race is decided)."""
         seconds = min(10.0, max(1.0, (self.deadline - time.monotonic()) / 20))
-        enc = encode(self.sn, self.bounds, self.flows, seconds=seconds, seed=seed, sink=sink)
+        enc = encode(self.sn, self.bounds, self.flows, seconds=seconds, seed=seed, sink=sink, stop=stop)
         if sink and enc.sunk:
             with self.lock:
                 if not self.plain_first:  # the same search with its shared levels left in place
@@ -679,10 +679,11 @@ class _Race:
                     self.jobs.append((0, False))
         return enc
 
-    def another_order(self) -> tuple[int, Encoding] | None:
-        """A candidate order none of the others has, with its number in the race (compared once the
-        first candidate's is known); None when the seeds are used up or the deadline passed."""
-        while time.monotonic() < self.deadline:
+    def another_order(self, lane: _Lane) -> tuple[int, Encoding] | None:
+        """A candidate order none of the others has, for ``lane``, with its number in the race
+        (compared once the first candidate's is known); None when the seeds are used up, the
+        deadline passed or the lane is cancelled."""
+        while time.monotonic() < self.deadline and not lane.cancel.is_set():
             with self.lock:
                 if self.jobs:
                     seed, sink = self.jobs.pop(0)
@@ -691,7 +692,7 @@ class _Race:
                     self.next_seed += 1
                 else:
                     return None
-            enc = self.encode(seed, sink=sink)
+            enc = self.encode(seed, sink=sink, stop=lane.cancel.is_set)
             self.first.wait()
             with self.lock:
                 if not any(_same_order(enc, o) for o in self.orders):
@@ -790,7 +791,7 @@ class _Lane:
                     race.first.set()
                     name_enc = (1, enc0)
                 else:
-                    name_enc = race.another_order()
+                    name_enc = race.another_order(self)
                 if name_enc is None or self.cancel.is_set():  # no other order: race those there are
                     n_cands = len(cands)
                     if n_cands == 0:
