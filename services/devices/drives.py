@@ -64,6 +64,7 @@ import functools
 import logging
 import math
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -256,6 +257,8 @@ class CanDrives:
             self._sync_thread.join(timeout=2.0)
             self._sync_thread = None
         self._network = None
+        if self._dead is not None:
+            _abort(network.bus)
         try:
             network.disconnect()
         except (can.CanError, OSError, RuntimeError):
@@ -887,6 +890,21 @@ def _layout(pdo_map: Any) -> PdoLayout:
                                  {(v.index, v.subindex): v.od.data_type for v in pdo_map.map})
     except PdoLayoutError as exc:
         raise BusError(f"{pdo_map.name}: {exc}") from exc
+
+
+def _abort(raw: can.BusABC | None) -> None:
+    """Make closing a lost socketcand connection a reset (SO_LINGER 0) instead of an orderly close.
+
+    Frames sent just before a link went down stay in the kernel's send queue, unacknowledged, and an
+    orderly close leaves them there to be retransmitted, up to seconds after the link is back: old
+    targets and controlwords of a motion that has ended would reach the drives after a new
+    connection has enabled them. A reset drops them. Other buses (SocketCAN) hold no such queue."""
+    sock = getattr(raw, "_SocketCanDaemonBus__socket", None)  # python-can's socketcand client
+    if isinstance(sock, socket.socket):
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+        except OSError:
+            pass
 
 
 def _connect(spec: BusSpec, host: str, port: int, timeout: float) -> can.BusABC:

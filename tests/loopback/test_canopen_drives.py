@@ -178,3 +178,43 @@ def test_a_drive_echoing_a_target_the_master_did_not_send_is_a_takeover(served):
             assert f"drive 4 reports target {foreign} (counts), which this master did not send" in trouble, trouble
             with pytest.raises(BusError, match="another master"):
                 drives.check()
+
+
+@pytest.mark.timeout(30)
+@pytest.mark.parametrize("lost", [False, True])
+def test_closing_a_lost_socketcand_connection_resets_it_so_frames_held_for_it_are_dropped(lost: bool):
+    # a socketcand daemon's side of the connection (the greeting, open, rawmode), on 127.0.0.1: an
+    # orderly close ends the stream (b""), which leaves the kernel retransmitting what a link that was
+    # down never acknowledged; a lost bus's connection is reset instead, those frames dropped
+    import socket
+    import threading
+
+    import can
+
+    from services.devices.drives import _abort
+
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+    seen: list[object] = []
+
+    def daemon() -> None:
+        conn, _ = server.accept()
+        conn.sendall(b"< hi >")
+        for reply in (b"< ok >", b"< ok >"):  # open can0, rawmode
+            conn.recv(256)
+            conn.sendall(reply)
+        try:
+            seen.append(conn.recv(256))
+        except ConnectionResetError as exc:
+            seen.append(exc)
+        conn.close()
+
+    thread = threading.Thread(target=daemon)
+    thread.start()
+    bus = can.Bus(interface="socketcand", host="127.0.0.1", port=port, channel="can0")
+    if lost:
+        _abort(bus)
+    bus.shutdown()
+    thread.join(10)
+    server.close()
+    assert isinstance(seen[0], ConnectionResetError) if lost else seen[0] == b"", seen
