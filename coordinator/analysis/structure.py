@@ -590,13 +590,14 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     """
     if engine not in ENGINES:
         raise AnalysisError(f"unknown analysis engine {engine!r}; choose one of {', '.join(ENGINES)}")
+    started = time.monotonic()
     net = ordinary_view(net)
     budget = default_max_bytes() if max_bytes is None else int(max_bytes)
     sn = sparse_net(net)
     st = _structure_phase(net, sn, budget, max_invariant_rows, invariant_seconds, lp_seconds)
     if engine == "symbolic":
         return _symbolic_phase(net, sn, st, budget, lp_seconds, symbolic_seconds, phase,
-                               "symbolic: asked for (--engine symbolic)")
+                               "symbolic: asked for (--engine symbolic)", started)
     limit = max_states
     if engine == "auto" and st.bounded:
         limit = min(max_states, AUTO_PROBE_STATES)
@@ -610,7 +611,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         reason = (f"symbolic: the explicit search stopped at {why} and every place has a proven bound, so the "
                   "symbolic engine takes over")
         try:
-            return _symbolic_phase(net, sn, st, budget, lp_seconds, symbolic_seconds, phase, reason)
+            return _symbolic_phase(net, sn, st, budget, lp_seconds, symbolic_seconds, phase, reason, started)
         except AnalysisError as exc:
             reason = f"explicit: the symbolic engine gave up ({exc})"
             st.notes.append(f"the symbolic engine gave up ({exc}); the explicit search goes on to its limits")
@@ -827,10 +828,12 @@ def _partial_from_projection(v: _Partial, net: PetriNet, sn: SparseNet, st: _Str
 
 
 def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, lp_seconds: float, seconds: float,
-                    phase: Callable[[str], None] | None, reason: str) -> Analysis:
+                    phase: Callable[[str], None] | None, reason: str, started: float) -> Analysis:
     """The analysis from the symbolic engine (:mod:`.symbolic`): the reachable set as a decision
     diagram over the proven place bounds, every count exact. Liveness levels (L1 vs L3), home
-    states and the effectiveness of conflicts need the graph and stay undecided.
+    states and the effectiveness of conflicts need the graph and stay undecided. Reversibility
+    and liveness are worked on until :data:`~.symbolic.ANSWER_SECONDS` after ``started`` (the
+    analysis's start, ``time.monotonic()``: the LPs and the explicit search before count too).
 
     Raises:
         AnalysisError: a place without a proven bound, or the engine's time or memory budget.
@@ -845,10 +848,11 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
     from coordinator.analysis import jit
 
     jit.configure()  # numba's cache directory, before the kernel (and numba) is imported
-    from coordinator.analysis.symbolic import analyse_symbolic
+    from coordinator.analysis.symbolic import ANSWER_SECONDS, analyse_symbolic
 
     flows = lp.semiflow_cover(sn, seconds=min(lp_seconds, 3.0))
-    r = analyse_symbolic(net, upper, flows=flows, max_bytes=budget, seconds=seconds, progress=phase)
+    r = analyse_symbolic(net, upper, flows=flows, max_bytes=budget, seconds=seconds, progress=phase,
+                         answer_seconds=max(1.0, ANSWER_SECONDS - (time.monotonic() - started)))
     ids = [p.id for p in net.places]
     tids = [t.id for t in net.transitions]
     notes = list(st.notes)

@@ -56,7 +56,8 @@ __all__ = ["ANSWER_SECONDS", "PROBES", "SymbolicResult", "analyse_symbolic", "lo
 
 _TWO61 = (1 << 61) - 1
 #: default time after which reversibility and liveness are left undecided (seconds from the start of
-#: the symbolic analysis; below a minute, to leave room for the bounds proven before it)
+#: the symbolic analysis; ``petrobot analyze`` counts them from its own start, the bounds' LPs and the
+#: explicit search included, so that its whole answer comes within a minute)
 ANSWER_SECONDS = 50.0
 #: markings drawn from the reachable set whose forward sets are searched for a transition that can
 #: never fire again and for M0, before the backward saturations (:func:`_probe`)
