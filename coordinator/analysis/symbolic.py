@@ -900,10 +900,7 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     raise AnalysisError("the decision diagram outgrew the memory budget on every candidate variable order")
 
 
-#: markings drawn from the reachable set whose forward sets are searched for a transition that can
-#: never fire again and for M0 before the backward saturations (:func:`_liveness`), and the share of
-#: the time left they may take
-_PROBES = 3
+#: the share of the time left to the liveness phase that the forward probe (:func:`_probe`) may take
 _PROBE_SHARE = 0.4
 
 
