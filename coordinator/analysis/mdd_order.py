@@ -229,6 +229,11 @@ def _groups(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], touched:
         cands.append((upper, -support.size, support))
     cands.sort(key=lambda c: (c[0] > MAX_LOCAL, c[1] if c[0] <= MAX_LOCAL else c[0], c[1]))
     found: dict[bytes, tuple[np.ndarray, np.ndarray] | None] = {}  # a support's group, None if not one
+    changed = np.zeros(n_p, dtype=bool)
+    changed[sp.csc_matrix(sn.incidence).indices] = True  # the places of a CSC matrix's entries
+    if sn.reset is not None and sn.reset.nnz:
+        changed[sp.csc_matrix(sn.reset).indices] = True
+    constant = ~changed
 
     def pack(order: list[tuple[float, int, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
         used = np.zeros(n_p, dtype=bool)
@@ -255,7 +260,10 @@ def _groups(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], touched:
                 used[support] = True
                 out.append(group)
         for p in np.flatnonzero(~used).tolist():
-            out.append((np.array([p], dtype=np.int64), np.arange(int(bounds[p]) + 1, dtype=np.int64)[:, None]))
+            # a place no firing changes (only read: pre = post, no reset) keeps its initial count, one
+            # local marking: :func:`_fixed` takes it off the levels (Eratosthenes' primes)
+            local = (sn.m0[p:p + 1, None] if constant[p] else np.arange(int(bounds[p]) + 1, dtype=np.int64)[:, None])
+            out.append((np.array([p], dtype=np.int64), local.astype(np.int64)))
         return out
 
     def inside(support: np.ndarray) -> int:

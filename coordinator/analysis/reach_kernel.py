@@ -221,7 +221,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             states: np.ndarray, table: np.ndarray, dst: np.ndarray, tr: np.ndarray, out_ptr: np.ndarray,
             parent: np.ndarray, trunc: np.ndarray, cursor: np.ndarray, wd: np.ndarray, sh: np.ndarray,
             msk: np.ndarray, succ: np.ndarray, cur: np.ndarray, enabled: np.ndarray, max_states: int,
-            budget: int, keep_edges: bool, resets: np.ndarray | None) -> int:
+            finish_level: bool, budget: int, keep_edges: bool, resets: np.ndarray | None) -> int:
     """Expand markings in breadth-first order, at most ``budget`` of them, from ``cursor[NEXT]``,
     in the given buffers (never reallocated here: ``ROOM`` says one is full, and ``cursor[NEED]``
     how many successors the state waiting to be expanded has).
@@ -240,7 +240,8 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             cursor: int64 (:data:`CURSOR_SIZE`,); succ (W,) uint64 successor scratch; cur (|P|,)
             int64 the marking being expanded, unpacked; enabled (|T|,) scratch.
         max_states: a new successor beyond this many states is dropped (its source goes to
-            ``trunc``) and the search stops at the end of the level.
+            ``trunc``) and the search stops at the end of the level (``finish_level``), or once the
+            marking being expanded is done.
         budget: most markings to expand in this call.
         keep_edges: store each edge's target and transition in ``dst`` and ``tr``; else they are
             only counted (``out_ptr``).
@@ -399,6 +400,8 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
         if dropped:
             trunc[n_trunc] = i
             n_trunc += 1
+            if not finish_level:  # the search ends with this marking: the rest are not expanded
+                level_end = i + 1
         out_ptr[i + 1] = e
         i += 1
         done += 1
@@ -469,8 +472,8 @@ def _target(cap: int, need: int, unit: int | np.int64, held: int | np.int64, max
 _RO2 = types.Array(types.int64, 2, "C", readonly=True)
 _RO1 = types.Array(types.int64, 1, "C", readonly=True)
 RUN_SIGNATURE = (_RO2, _RO2, _RO2, types.int64[::1], _RO1, types.int64[::1], _RO1, types.boolean, types.int64,
-                 types.int64, types.int64, types.boolean, types.none)
-RESET_SIGNATURE = (*RUN_SIGNATURE[:-1], types.int64[::1])
+                 types.int64, types.int64, types.boolean, types.none, types.boolean)
+RESET_SIGNATURE = (*RUN_SIGNATURE[:-2], types.int64[::1], types.boolean)
 
 
 def cached() -> bool | None:
@@ -509,7 +512,8 @@ def load_resets() -> None:
 @njit(cache=True)
 def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.ndarray, m0: np.ndarray,
         layout: np.ndarray, prio: np.ndarray, use_prio: bool, max_states: int, max_bytes: int,
-        report_every: int, keep_edges: bool, resets: np.ndarray | None) -> tuple:  # type: ignore[type-arg]
+        report_every: int, keep_edges: bool, resets: np.ndarray | None,
+        finish_level: bool) -> tuple:  # type: ignore[type-arg]
     """The whole breadth-first search of a net (see the module docstring).
 
     Args:
@@ -525,7 +529,8 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         prio, use_prio: (|T|,) int64 priority levels and whether to apply them (only the enabled
             transitions of the highest enabled level fire).
         max_states: a new marking beyond this many is dropped with its edge; the search then
-            finishes the level and stops.
+            finishes the level and stops, or (``finish_level`` False) stops once the marking being
+            expanded is done.
         max_bytes: byte budget of the search's buffers (see the module docstring).
         report_every: call the progress hook (:func:`set_progress`) every this many expanded
             markings and at the end; 0 for never.
@@ -533,6 +538,9 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
             back empty, ``out_ptr`` still gives each state's number of edges.
         resets: ``None`` for a net without reset arcs (the search is compiled without their code),
             else any array (``tab``): the reset lists of ``tab`` are applied.
+        finish_level: at the state limit, finish the level being expanded (True), or stop at once
+            (False: whoever asks only whether the graph fits the limit need not wait for a level
+            that may be most of the graph).
 
     Returns:
         ``(status, states, dst, tr, parent, expanded, out_ptr, complete, max_count, layout,
@@ -619,7 +627,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     next_report = report_every if report_every > 0 else 1 << 62  # in expanded markings
     while top <= _INT32_MAX:
         status = _search(arcs, trig_ptr, trig_t, prio, use_prio, states, table, dst, tr, out_ptr, parent,
-                         trunc, cursor, wd, sh, msk, succ, cur, enabled, max_states,
+                         trunc, cursor, wd, sh, msk, succ, cur, enabled, max_states, finish_level,
                          max(1, next_report - cursor[NEXT]), keep_edges, resets)
         if status == ROOM:
             n, e, k, ks = cursor[N], cursor[E], cursor[NEED], cursor[NEED_S]

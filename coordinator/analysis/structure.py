@@ -518,9 +518,12 @@ def search_bounds(net: PetriNet, *, max_bytes: int | None = None, invariant_seco
 
 
 def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,
-                  progress: Callable[[int, int], None] | None) -> tuple[StateSpace, CoveringWitness | None]:
+                  progress: Callable[[int, int], None] | None,
+                  finish_level: bool = True) -> tuple[StateSpace, CoveringWitness | None]:
     """The reachability graph within its limits, and a pumping witness of unboundedness when the
-    structure does not bound the net (a short probe first: unboundedness is often cheap to see)."""
+    structure does not bound the net (a short probe first: unboundedness is often cheap to see).
+    ``finish_level`` False: stop at once at ``max_states`` (:func:`.statespace.explore`), for the
+    automatic engine's question whether the graph fits its explicit share."""
     space: StateSpace | None = None
     witness: CoveringWitness | None = None
     bounds = _search_bounds(st)
@@ -533,7 +536,8 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
             if witness is not None:
                 space = probe
     if space is None:
-        space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds)
+        space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
+                        finish_level=finish_level)
         if not space.complete and not st.bounded and witness is None:
             witness = covering_witness(space)
     return space, witness
@@ -602,7 +606,11 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     if engine == "auto" and st.bounded:
         limit = min(max_states, AUTO_PROBE_STATES)
     reason = "explicit: asked for (--engine explicit)"
-    space, witness = _search_phase(net, sn, st, limit, budget // 2, progress)
+    # the automatic engine's share of the explicit search asks only whether the graph fits it: the
+    # search stops at its limit at once (a level being finished may be most of the graph); the
+    # search over the whole limit, when the symbolic engine gives up, finishes its level
+    space, witness = _search_phase(net, sn, st, limit, budget // 2, progress,
+                                   finish_level=not (engine == "auto" and limit < max_states))
     if engine == "auto" and space.complete:
         reason = f"explicit: the reachability graph is complete with {space.n_states:,} markings" + (
             f", within the explicit search's share of {limit:,}" if st.bounded else "")
