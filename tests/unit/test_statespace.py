@@ -117,6 +117,26 @@ def test_max_states_truncates_and_says_so() -> None:
     assert ss.deadlocks().size == 0
 
 
+@pytest.mark.parametrize("model", ["FMS-PT-00002", "Railroad-PT-005"])
+def test_a_search_that_stops_at_its_limit_at_once_expands_a_prefix_of_the_finished_level(model: str) -> None:
+    """``finish_level=False`` (the automatic engine's explicit share): the same markings in the same
+    order, fewer expanded, and what was expanded has the edges the finished search gives it."""
+    from coordinator.netfile.pnml import load_pnml
+
+    net = load_pnml(str(MCC / model / "model.pnml"))
+    limit = explore(net).n_states // 3
+    level = explore(net, max_states=limit)
+    now = explore(net, max_states=limit, finish_level=False)
+    assert not now.complete and not level.complete and now.n_states == level.n_states == limit
+    assert np.array_equal(now.words, level.words) and np.array_equal(now.parent, level.parent)
+    done = int(np.flatnonzero(now.expanded).max()) + 1
+    assert not now.expanded[done:].any() and now.n_edges < level.n_edges  # the level went on
+    assert np.array_equal(now.expanded[:done - 1], level.expanded[:done - 1])
+    assert np.array_equal(now.out_ptr[:done + 1], level.out_ptr[:done + 1])
+    assert np.array_equal(now.dst, level.dst[:now.n_edges])
+    assert set(now.deadlocks().tolist()) <= set(level.deadlocks().tolist())
+
+
 def test_index_of_and_firing_sequence_give_a_shortest_path() -> None:
     net = make_net("line", {"p0": 1}, {f"t{i}": ({f"p{i}": 1}, {f"p{i + 1}": 1}) for i in range(5)}
                    | {"skip": ({"p0": 1}, {"p4": 1})})

@@ -233,3 +233,19 @@ def test_level_values_of_many_markings_at_once_are_those_of_the_encoding() -> No
         want = _values(enc, m)
         assert (row < 0).all() if want is None else row.tolist() == want.tolist()
     assert (got[:5] >= 0).all()
+
+
+def test_a_place_that_is_only_read_is_fixed_at_its_initial_count_and_the_counts_stay_exact() -> None:
+    from coordinator.analysis.mdd_order import encode
+    from coordinator.analysis.statespace import explore
+
+    # Eratosthenes: a prime is read by the transitions that remove its multiples, never changed
+    net = load_pnml(MCC / "Eratosthenes-PT-010" / "model.pnml")
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    read_only = [p for p in range(len(net.places)) if not abs(sn.incidence[[p], :]).sum()]
+    assert read_only and set(read_only) <= set(enc.fixed.tolist())
+    assert enc.n_levels == len(net.places) - len(enc.fixed)
+    r = analyse_symbolic(net, bounds, flows=flows)
+    assert r.states == explore(net).n_states == 32  # the contest's answer
