@@ -62,6 +62,10 @@ MAX_LOCAL = 512
 MAX_SIFTED = 2000
 #: most values of a level (a place with a larger bound makes the symbolic engine refuse the net)
 MAX_DOMAIN = 1 << 16
+#: bytes an encoding holds per local marking beyond its counts (its entry in ``Encoding.index``), and
+#: per value of a level an event spans (its functions: forward, single, backward and their building)
+_INDEX_BYTES = 160
+_EVENT_BYTES = 32
 
 
 @dataclass(frozen=True)
@@ -501,7 +505,8 @@ def shared_levels(n: int, hypers: list[np.ndarray]) -> np.ndarray:
 
 
 def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, seconds: float = 5.0,
-           seed: int = 0, sink: bool = False, stop: Callable[[], bool] | None = None) -> Encoding:
+           seed: int = 0, sink: bool = False, stop: Callable[[], bool] | None = None,
+           max_bytes: int | None = None) -> Encoding:
     """Levels, local markings and order of the diagram of a bounded net (module docstring).
 
     Args:
@@ -514,9 +519,14 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
             order found; ``sunk`` says how many moved (0: the net has none, the order is unchanged).
         stop: asked between the starts of the order search; True ends it early (another thread
             needs no more orders).
+        max_bytes: the bytes the encoding and its events may take (estimated from the levels'
+            local markings and the levels each transition spans, before they are built); None: no
+            limit.
 
     Raises:
-        AnalysisError: a place has no bound, or a bound above :data:`MAX_DOMAIN`.
+        AnalysisError: a place has no bound, or a bound above :data:`MAX_DOMAIN`, or the encoding
+            would outgrow ``max_bytes`` (AirplaneLD-PT-1000: 4,017 levels of up to 3,009 values,
+            about 4 GiB before a single node).
     """
     start = time.monotonic()
     bounds = np.asarray(bounds, dtype=np.int64)
@@ -533,6 +543,13 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
     for k, (ps, _) in enumerate(groups):
         owner[ps] = k
     hypers = [np.unique(o[o >= 0]) for o in (owner[ps] for ps in touched)]
+    if max_bytes is not None:
+        dom = np.array([loc.shape[0] for _, loc in groups], dtype=np.int64)
+        need = sum(loc.shape[0] * (_INDEX_BYTES + 8 * loc.shape[1]) for _, loc in groups) + _EVENT_BYTES * sum(
+            int(dom[h].sum()) for h in hypers)
+        if need > max_bytes:
+            raise AnalysisError(f"the encoding ({n_k:,} levels, {int(dom.sum()):,} local markings) would take about "
+                                f"{need / 2**30:.1f} GiB, above the {max_bytes / 2**30:.1f} GiB it may use")
     shared = shared_levels(n_k, hypers) if sink else np.zeros(n_k, dtype=bool)
     hypers += [np.unique(o[o >= 0]) for o in (owner[np.flatnonzero(y)] for y in flows)]
     order, score = _order(n_k, hypers, start + seconds, seed=seed, stop=stop)

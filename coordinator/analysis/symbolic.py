@@ -672,7 +672,9 @@ class _Race:
         """The encoding of order search ``seed`` (``sink``: shared levels at the bottom), the search
         given up to 10 s, ended early when ``stop()`` says so (the race is decided)."""
         seconds = min(10.0, max(1.0, (self.deadline - time.monotonic()) / 20))
-        enc = encode(self.sn, self.bounds, self.flows, seconds=seconds, seed=seed, sink=sink, stop=stop)
+        # an encoding and its events may take a quarter of the budget (two lanes hold one each)
+        enc = encode(self.sn, self.bounds, self.flows, seconds=seconds, seed=seed, sink=sink, stop=stop,
+                     max_bytes=self.max_bytes // 4)
         if sink and enc.sunk:
             with self.lock:
                 if not self.plain_first:  # the same search with its shared levels left in place

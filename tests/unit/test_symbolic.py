@@ -249,3 +249,15 @@ def test_a_place_that_is_only_read_is_fixed_at_its_initial_count_and_the_counts_
     assert enc.n_levels == len(net.places) - len(enc.fixed)
     r = analyse_symbolic(net, bounds, flows=flows)
     assert r.states == explore(net).n_states == 32  # the contest's answer
+
+
+def test_an_encoding_beyond_its_memory_share_is_refused_before_it_is_built() -> None:
+    from coordinator.analysis.mdd_order import encode
+
+    net = load_pnml(MCC / "Kanban-PT-00005" / "model.pnml")
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0, max_bytes=64 << 20)
+    with pytest.raises(AnalysisError, match="would take about"):
+        encode(sn, bounds, flows, seconds=5.0, seed=0, max_bytes=1024)
+    assert enc.n_levels > 0
