@@ -120,14 +120,11 @@ def new_store(dom: np.ndarray, path: np.ndarray) -> tuple[tuple[np.ndarray, ...]
     kids = np.zeros(max(nodes * 2, 4 * int(dom.sum()) + 16), np.int32)
     unique = np.zeros(4 * nodes, np.int32)
     meta[META_NODES] = 2
-    node = TERMINAL
-    for k in range(n_levels - 1, -1, -1):
-        buf = np.zeros(int(dom[k]), np.int32)
-        buf[int(path[k])] = node
-        node = int(_checkin(k, buf, 0, buf.shape[0], meta, level, offset, size, kids, unique))
+    node, level, offset, size, kids, unique = add_path(np.asarray(path, dtype=np.int64), np.asarray(dom, np.int64),
+                                                       meta, level, offset, size, kids, unique)
     ct = np.zeros((1 << 12, 3), np.int64)
     ct[:, 0] = -1
-    return (meta, level, offset, size, kids, unique, ct), node
+    return (meta, level, offset, size, kids, unique, ct), int(node)
 
 
 def clear_cache(store: tuple[np.ndarray, ...]) -> None:
@@ -234,7 +231,10 @@ def add_path(values: np.ndarray, dom: np.ndarray, meta: np.ndarray, level: np.nd
     if gu != unique.shape[0]:
         unique = np.zeros(gu, np.int32)
         _rehash(unique, meta[META_NODES], level, offset, size, kids)
-    buf = np.zeros(max(1, dom.max()), np.int32)
+    width = 1
+    for k in range(n_levels):  # the widest level (a net of fixed places alone has none)
+        width = max(width, dom[k])
+    buf = np.zeros(width, np.int32)
     node = TERMINAL
     for k in range(n_levels - 1, -1, -1):
         for x in range(dom[k]):

@@ -266,8 +266,8 @@ def _groups(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], touched:
         for p in np.flatnonzero(~used).tolist():
             # a place no firing changes (only read: pre = post, no reset) keeps its initial count, one
             # local marking: :func:`_fixed` takes it off the levels (Eratosthenes' primes)
-            local = (sn.m0[p:p + 1, None] if constant[p] else np.arange(int(bounds[p]) + 1, dtype=np.int64)[:, None])
-            out.append((np.array([p], dtype=np.int64), local.astype(np.int64)))
+            values = sn.m0[p:p + 1] if constant[p] else np.arange(int(bounds[p]) + 1)
+            out.append((np.array([p], dtype=np.int64), values.astype(np.int64)[:, None]))
         return out
 
     def inside(support: np.ndarray) -> int:

@@ -37,6 +37,7 @@ what is not decided in time is left undecided).
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 import time
@@ -959,13 +960,12 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
     try:
         if probes and (result.reversible is None or result.live is None):
             say("symbolic: liveness and reversibility, forward from drawn markings")
-            try:
-                # a drawn marking reaches a part of the reachable set, on the computed table of the
-                # whole: worth at most as long as the whole took, and a share of the time left
-                share = min(_PROBE_SHARE * max(0.0, until - t0), max(1.0, result.seconds.get("reach", 0.0)))
+            # a drawn marking reaches a part of the reachable set, on the computed table of the
+            # whole: worth at most as long as the whole took, and a share of the time left; at its
+            # deadline what it decided stays and the backward saturations take the rest
+            share = min(_PROBE_SHARE * max(0.0, until - t0), max(1.0, result.seconds.get("reach", 0.0)))
+            with contextlib.suppress(_OutOfTime):
                 _probe(store, fwd, single, reach, result, min(until, t0 + share), probes)
-            except _OutOfTime:
-                pass
             mk.set_watch(until, None)
         if result.reversible is None:
             say("symbolic: reversibility (backward from M0)")

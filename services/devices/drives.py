@@ -60,6 +60,7 @@ from __future__ import annotations
 
 import collections
 import concurrent.futures
+import contextlib
 import functools
 import logging
 import math
@@ -901,10 +902,8 @@ def _abort(raw: can.BusABC | None) -> None:
     connection has enabled them. A reset drops them. Other buses (SocketCAN) hold no such queue."""
     sock = getattr(raw, "_SocketCanDaemonBus__socket", None)  # python-can's socketcand client
     if isinstance(sock, socket.socket):
-        try:
+        with contextlib.suppress(OSError):  # already closed by the lost link: nothing left to drop
             sock.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
-        except OSError:
-            pass
 
 
 def _connect(spec: BusSpec, host: str, port: int, timeout: float) -> can.BusABC:
