@@ -56,10 +56,12 @@ def expected(text: str) -> bool | int | None:
     return int(text) if text.isdigit() else None
 
 
-def run_one(model: Path, kill: float) -> dict[str, Any]:
-    """``petrobot analyze MODEL --json`` in a child process: its report (or why there is none), and
-    the child's own wall-clock seconds, CPU seconds and peak RSS (``wait4``)."""
-    cmd = [sys.executable, "-m", "coordinator.cli", "analyze", str(model / "model.pnml"), "--json"]
+def analyze_in_child(path: Path, kill: float | None = None, extra: tuple[str, ...] | list[str] = ()) -> dict[str, Any]:
+    """``petrobot analyze PATH --json [EXTRA...]`` in a child process, as a user runs it (from the
+    repository root, its own session), stopped after ``kill`` seconds if given: ``seconds`` (wall),
+    ``cpu_seconds`` and ``peak_rss_bytes`` of the child alone (``wait4``), ``killed``, ``exit``, and
+    its whole JSON ``report`` or an ``error`` (the last line it wrote to stderr)."""
+    cmd = [sys.executable, "-m", "coordinator.cli", "analyze", str(path), "--json", *extra]
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
         start = time.monotonic()
         proc = subprocess.Popen(cmd, cwd=ROOT, stdout=out, stderr=err, text=True, start_new_session=True)
@@ -68,7 +70,7 @@ def run_one(model: Path, kill: float) -> dict[str, Any]:
             pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
             if pid:
                 break
-            if time.monotonic() - start > kill:
+            if kill is not None and time.monotonic() - start > kill:
                 os.killpg(proc.pid, 9)
                 killed = True
                 pid, status, usage = os.wait4(proc.pid, 0)
@@ -79,20 +81,27 @@ def run_one(model: Path, kill: float) -> dict[str, Any]:
         out.seek(0)
         err.seek(0)
         text, errors = out.read(), err.read()
-    row: dict[str, Any] = {"model": model.name, "seconds": round(wall, 2),
-                           "cpu_seconds": round(usage.ru_utime + usage.ru_stime, 2),
+    row: dict[str, Any] = {"seconds": round(wall, 2), "cpu_seconds": round(usage.ru_utime + usage.ru_stime, 2),
                            "peak_rss_bytes": usage.ru_maxrss * 1024, "killed": killed, "exit": proc.returncode}
     if killed:
         row["error"] = f"killed after {kill:.0f} s"
         return row
     try:
-        report = json.loads(text)
+        row["report"] = json.loads(text)
     except json.JSONDecodeError:
-        row["error"] = (errors.strip().splitlines() or ["no report"])[-1][:300]
-        return row
-    row["report"] = {k: report.get(k) for k in (*COLUMNS, "complete")}
-    row["engine"] = (report.get("engine") or {}).get("used")
-    row["engine_reason"] = (report.get("engine") or {}).get("reason")
+        row["error"] = (errors.strip().splitlines() or [f"exit status {proc.returncode}, no report"])[-1][:300]
+    return row
+
+
+def run_one(model: Path, kill: float) -> dict[str, Any]:
+    """:func:`analyze_in_child` on a model folder's ``model.pnml``: the nine columns of its report,
+    the engine and why, and the child's costs."""
+    row = {"model": model.name, **analyze_in_child(model / "model.pnml", kill)}
+    report = row.pop("report", None)
+    if report is not None:
+        row["report"] = {k: report.get(k) for k in (*COLUMNS, "complete")}
+        row["engine"] = (report.get("engine") or {}).get("used")
+        row["engine_reason"] = (report.get("engine") or {}).get("reason")
     return row
 
 

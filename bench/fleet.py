@@ -25,7 +25,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -57,26 +56,19 @@ def robots(spec: str) -> list[int]:
 def run_one(n: int, safe: bool, folder: Path, extra: list[str]) -> dict[str, Any]:
     """``petrobot analyze`` on the fleet of ``n`` robots in a child process: its report and costs."""
     sys.path.insert(0, str(ROOT))
+    from bench.contest import analyze_in_child
     from coordinator.netfile.fleet import fleet_toml
 
     path = folder / f"fleet_{n}{'_safe' if safe else ''}.toml"
     path.write_text(fleet_toml(n, safe=safe), encoding="utf-8")
-    cmd = [sys.executable, "-m", "coordinator.cli", "analyze", str(path), "--json", *extra]
-    start = time.perf_counter()
-    with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
-        child = subprocess.Popen(cmd, stdout=out, stderr=err, cwd=ROOT)
-        _, status, usage = os.wait4(child.pid, 0)
-        child.returncode = os.waitstatus_to_exitcode(status)
-        wall = time.perf_counter() - start
-        out.seek(0)
-        err.seek(0)
-        text, problem = out.read().decode(), err.read().decode()
-    row: dict[str, Any] = {"robots": n, "safe": safe, "seconds": wall, "cpu_seconds": usage.ru_utime + usage.ru_stime,
-                           "peak_rss_bytes": usage.ru_maxrss * 1024, "load": os.getloadavg()[0]}
-    if child.returncode != 0:
-        row["error"] = (problem.strip().splitlines() or [f"exit status {child.returncode}"])[-1]
+    child = analyze_in_child(path, extra=extra)
+    row: dict[str, Any] = {"robots": n, "safe": safe, "seconds": child["seconds"],
+                           "cpu_seconds": child["cpu_seconds"], "peak_rss_bytes": child["peak_rss_bytes"],
+                           "load": os.getloadavg()[0]}
+    if "error" in child:
+        row["error"] = child["error"]
         return row
-    rep = json.loads(text)
+    rep = child["report"]
     first = (rep.get("deadlocks") or [None])[0]
     row.update({"markings": rep["states"], "complete": rep["complete"], "deadlock": rep["deadlock"],
                 "n_deadlocks": rep.get("n_deadlocks"), "engine": rep["engine"]["used"],

@@ -199,17 +199,12 @@ def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None 
 
 def _oracle_row(spec: str) -> dict[str, str] | None:
     """The contest's answers for a model folder's ``model.pnml``: the row of ``oracle.tsv`` beside it."""
-    path = Path(spec)
-    table = path.parent.parent / "oracle.tsv"
-    if path.name != "model.pnml" or not table.is_file():
-        return None
-    import csv
+    from bench.contest import oracle
 
-    with table.open(encoding="utf-8") as fh:
-        for row in csv.DictReader(fh, delimiter="\t"):
-            if row["model"] == path.parent.name:
-                return dict(row)
-    return None
+    path = Path(spec)
+    if path.name != "model.pnml" or not (path.parent.parent / "oracle.tsv").is_file():
+        return None
+    return oracle(path.parent.parent).get(path.parent.name)
 
 
 def child_symbolic(spec: str, max_bytes: int, seconds: float, mcc: str | None = None) -> dict[str, Any]:
@@ -259,8 +254,10 @@ def child_symbolic(spec: str, max_bytes: int, seconds: float, mcc: str | None = 
                 "peak_rss_bytes": _peak_rss(), "rss_before_bytes": before, "notes": r.notes})
     oracle = _oracle_row(spec)
     if oracle is not None:
-        want = {k: (v == "true" if v in ("true", "false") else int(v)) for k, v in oracle.items() if k != "model"}
-        out["oracle_disagrees"] = sorted(k for k in want if got.get(k) != want[k])
+        from bench.contest import COLUMNS, expected
+
+        want = {k: expected(oracle[k]) for k in COLUMNS}
+        out["oracle_disagrees"] = sorted(k for k in COLUMNS if want[k] is not None and got.get(k) != want[k])
     return out
 
 
