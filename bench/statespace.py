@@ -35,6 +35,13 @@ and CPU, bounds included, the kernel's load excluded: ``load_seconds``), ``phase
 edges=False)``, ``edges_kept`` false in the row): what a question that needs the markings, their
 number, the edge count and the deadlocks costs without the graph's 8 bytes an edge.
 
+``--liveness`` then computes, once, the liveness levels and strongly connected components of the
+graph found (:func:`coordinator.analysis.structure.liveness_levels`: scipy's components over the
+kept edges, or, with ``--count-edges``, the components from the markings alone, each marking's
+successors computed again): ``liveness_seconds``, ``liveness_cpu_seconds``, ``live``,
+``reversible``, ``components``, ``terminal_components``; ``search_peak_rss_bytes`` is the peak before
+this pass, ``peak_rss_bytes`` the peak after it.
+
 ``--structural`` adds, per model, the structural path that needs no state space: the two semiflow
 LPs (conservative, consistent) and the state-equation place bounds (:mod:`coordinator.analysis.lp`),
 with their times and whether they decide boundedness (``structural_bounded``, ``structural_max_bound``).
@@ -42,7 +49,8 @@ with their times and whether they decide boundedness (``structural_bounded``, ``
 Usage::
 
     python bench/statespace.py [--json] [--pm4py-timeout S] [--repeat-budget S] [--no-pm4py]
-                               [--max-memory GIB] [--count-edges] [--structural] [--mcc DIR] MODEL...
+                               [--max-memory GIB] [--count-edges] [--liveness] [--structural]
+                               [--mcc DIR] MODEL...
     python bench/statespace.py --symbolic [--json] [--seconds S] [--max-memory GIB] MODEL...
 """
 
@@ -157,7 +165,7 @@ def child_structural(spec: str, mcc: str | None) -> dict[str, Any]:
 
 
 def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None = None,
-               mcc: str | None = None, edges: bool = True) -> dict[str, Any]:
+               mcc: str | None = None, edges: bool = True, liveness: bool = False) -> dict[str, Any]:
     sys.path.insert(0, str(ROOT))
     from coordinator.analysis.statespace import explore, load_search
     from coordinator.analysis.structure import search_bounds
@@ -166,6 +174,8 @@ def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None 
     # numba's import and the compiled search's load from its cache, once per process: reported on
     # their own (load_seconds), outside the runs and below the RSS baseline of bytes_per_marking
     load = load_search()
+    if liveness and not edges:  # the pass over the markings loaded too (from numba's cache), outside the runs
+        explore(load_model("kanban:1", mcc), edges=False).implicit_liveness()
 
     matrices: list[float] = []
     bounds: list[Any] = []
@@ -187,7 +197,20 @@ def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None 
         build, lambda net: explore(net, max_states=max_states, max_bytes=max_bytes, bounds=bounds[0], edges=edges),
         budget)
     peak = _peak_rss()
-    return {"states": space.n_states, "edges": space.n_edges, "edges_kept": space.edges_kept,
+    found: dict[str, Any] = {}
+    if liveness and space.complete:
+        from coordinator.analysis.structure import liveness_levels
+
+        stats: dict[str, int] = {}
+        wall0, cpu0 = time.perf_counter(), time.process_time()
+        levels, labels, terminal = liveness_levels(space) if space.edges_kept else space.implicit_liveness(stats)
+        found = {**stats, "liveness_seconds": time.perf_counter() - wall0, "liveness_cpu_seconds": time.process_time() - cpu0,
+                 "live": bool((levels == 4).all()), "reversible": bool(terminal.shape[0] == 1),
+                 "components": int(terminal.shape[0]), "terminal_components": int(terminal.sum()),
+                 "search_peak_rss_bytes": peak}
+        del labels
+        peak = _peak_rss()
+    return {**found, "states": space.n_states, "edges": space.n_edges, "edges_kept": space.edges_kept,
             "complete": space.complete,
             "stopped_by": space.stopped_by, "graph_bytes": space.nbytes, "seconds": wall,
             "cpu_seconds": cpu, "first_seconds": first, "runs": runs, "load_seconds": load,
@@ -364,6 +387,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--count-edges", action="store_true",
                         help="our explorer counts the edges without keeping them (explore(..., edges=False)): "
                              "the markings, edge count and deadlocks of a question that needs no graph")
+    parser.add_argument("--liveness", action="store_true",
+                        help="then compute the liveness levels and components of the graph found, once (with "
+                             "--count-edges: from the markings alone, each marking's successors computed again)")
     parser.add_argument("--structural", action="store_true",
                         help="also time the structural path: semiflow LPs and state-equation place bounds")
     parser.add_argument("--mcc", metavar="DIR", help="folder of the MCC models (default: where the tests find them)")
@@ -375,11 +401,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--child", choices=["ours", "pm4py", "structural", "symbolic"], help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     extra = ["--max-memory", str(args.max_memory)] + (["--mcc", args.mcc] if args.mcc else []) + (
-        ["--count-edges"] if args.count_edges else [])
+        ["--count-edges"] if args.count_edges else []) + (["--liveness"] if args.liveness else [])
     if args.child:
         if args.child == "ours":
             result = child_ours(args.models[0], args.max_states, args.repeat_budget,
-                                int(args.max_memory * 2**30), args.mcc, not args.count_edges)
+                                int(args.max_memory * 2**30), args.mcc, not args.count_edges, args.liveness)
         elif args.child == "structural":
             result = child_structural(args.models[0], args.mcc)
         elif args.child == "symbolic":
@@ -431,6 +457,9 @@ def _print_row(row: dict[str, Any]) -> None:
                  f"{row['structural_bounds_seconds'] * 1e3:,.1f} ms, bounded={row['structural_bounded']} "
                  f"(max bound {row['structural_max_bound']}), conservative={row['conservative']}, "
                  f"consistent={row['consistent']}")
+    if "liveness_seconds" in row:
+        base += (f"  liveness {row['liveness_seconds']:.2f} s: live={row['live']} reversible={row['reversible']} "
+                 f"({row['components']:,} components, {row['terminal_components']:,} terminal)")
     stop = "" if row["complete"] else f" [stopped by {row['stopped_by']}]"
     kept = "" if row.get("edges_kept", True) else " (counted)"
     print(f"{row['model']:<26} {row['states']:>10,} states{stop} {row['edges']:>11,} edges{kept} "

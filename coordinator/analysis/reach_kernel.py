@@ -34,6 +34,10 @@ result. What they implement (the reasons and the measurements are in docs/analys
   per state, for questions that need the markings and the out-degrees alone; the breadth-first
   tree is the state each marking was first reached from (int32), whose edge the caller finds
   again when it needs it.
+* The edges need not be kept to be used: :func:`components` finds the strongly connected
+  components and liveness levels of a complete graph from its packed markings alone, firing each
+  marking's enabled transitions again and finding the successors through a hash table rebuilt
+  over the markings (the search's own :func:`_enabled_list`, :func:`_fire` and :func:`_find`).
 * A byte budget: every buffer is counted, a buffer grows only if the bytes held (old and new buffer
   together, during the copy) stay within ``max_bytes``, and growth near the budget takes only what
   fits. When nothing fits the search stops (status ``MEMORY``) with the states found so far; states
@@ -62,8 +66,8 @@ jit.configure()  # numba's cache in the user's cache directory: before numba is 
 
 from numba import njit, objmode, types  # noqa: E402
 
-__all__ = ["CURSOR_SIZE", "HEAD", "RESET_SIGNATURE", "RUN_SIGNATURE", "cached", "load", "load_resets", "run",
-           "set_progress", "tables", "unpack"]
+__all__ = ["CURSOR_SIZE", "HEAD", "RESET_SIGNATURE", "RUN_SIGNATURE", "cached", "components", "load", "load_resets",
+           "run", "set_progress", "tables", "unpack"]
 
 #: status codes: graph complete, or the state limit reached and its level finished; ``budget``
 #: markings expanded; a buffer is full; a token count would exceed 2**31 - 1, the largest a field
@@ -217,6 +221,147 @@ def _set(words: np.ndarray, base: int, p: int, v: np.int64, wd: np.ndarray, sh: 
 
 
 @njit(cache=True)
+def _triggers(tab: np.ndarray, n_p: int) -> tuple[np.ndarray, np.ndarray]:
+    """Transitions by trigger place (their first input place; slot |P| lists those without input
+    places): ``(trig_ptr, trig_t)``, (|P|+2,) and (|T|,) int64, a CSR list."""
+    n_t = tab[1] - tab[0] - 1
+    in_ptr, in_p = tab[tab[0]:tab[1]], tab[tab[1]:tab[2]]
+    trig_ptr = np.zeros(n_p + 2, np.int64)
+    trig_t = np.zeros(n_t, np.int64)
+    for t in range(n_t):
+        first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
+        trig_ptr[first + 1] += 1
+    for p in range(n_p + 1):
+        trig_ptr[p + 1] += trig_ptr[p]
+    slot = trig_ptr.copy()
+    for t in range(n_t):
+        first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
+        trig_t[slot[first]] = t
+        slot[first] += 1
+    return trig_ptr, trig_t
+
+
+@njit(cache=True, inline="always")
+def _enabled_list(cur: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, in_ptr: np.ndarray, in_p: np.ndarray,
+                  in_w: np.ndarray, ih_ptr: np.ndarray, ih_p: np.ndarray, ih_w: np.ndarray, prio: np.ndarray,
+                  use_prio: bool, enabled: np.ndarray) -> int:
+    """The transitions enabled in the unpacked marking ``cur`` (|P|,), ascending, in
+    ``enabled[:k]``; returns k. Only transitions whose trigger place is marked are tested, then
+    those without input places; with ``use_prio``, only those of the highest enabled level are kept."""
+    n_p = cur.shape[0]
+    k = 0
+    for p in range(n_p + 1):
+        if p < n_p and cur[p] == 0:
+            continue
+        for a in range(trig_ptr[p], trig_ptr[p + 1]):
+            t = trig_t[a]
+            ok = True
+            for b in range(in_ptr[t], in_ptr[t + 1]):
+                if cur[in_p[b]] < in_w[b]:
+                    ok = False
+                    break
+            if ok:
+                for b in range(ih_ptr[t], ih_ptr[t + 1]):
+                    if cur[ih_p[b]] >= ih_w[b]:
+                        ok = False
+                        break
+            if ok:
+                enabled[k] = t
+                k += 1
+    for a in range(1, k):  # insertion sort: few enabled transitions, often in order already
+        t = enabled[a]
+        b = a - 1
+        while b >= 0 and enabled[b] > t:
+            enabled[b + 1] = enabled[b]
+            b -= 1
+        enabled[b + 1] = t
+    if use_prio and k > 1:
+        best = prio[enabled[0]]
+        for a in range(1, k):
+            best = max(best, prio[enabled[a]])
+        kept = 0
+        for a in range(k):
+            if prio[enabled[a]] == best:
+                enabled[kept] = enabled[a]
+                kept += 1
+        k = kept
+    return k
+
+
+@njit(cache=True, inline="always")
+def _fits(q: int, v: int, msk: np.ndarray, cursor: np.ndarray) -> int:
+    """Whether the new count v of place q fits: DONE, OVERFLOW (above 2**31 - 1) or WIDEN (above
+    q's field; ``cursor[NEED]``, ``cursor[NEED_S]`` = q, v); ``cursor[MAX_COUNT]`` becomes at least v."""
+    if v > cursor[MAX_COUNT]:
+        cursor[MAX_COUNT] = v
+        if v > _INT32_MAX:
+            return OVERFLOW
+    if np.uint64(v) & ~msk[q]:
+        cursor[NEED], cursor[NEED_S] = q, v
+        return WIDEN
+    return DONE
+
+
+@njit(cache=True, inline="always")
+def _fire(states: np.ndarray, base: int, succ: np.ndarray, t: int, cur: np.ndarray, d_ptr: np.ndarray,
+          d_p: np.ndarray, d_v: np.ndarray, r_ptr: np.ndarray, r_p: np.ndarray, r_v: np.ndarray,
+          resets: np.ndarray | None, wd: np.ndarray, sh: np.ndarray, msk: np.ndarray, cursor: np.ndarray) -> int:
+    """The successor of the packed marking ``states[base:base + W]`` (unpacked: ``cur``) by the
+    enabled transition t, packed into ``succ`` (W,); every count written is checked against its
+    field, so it never wraps, and ``cursor[MAX_COUNT]`` is raised to the largest count written.
+
+    Returns:
+        DONE, OVERFLOW (a count above 2**31 - 1) or WIDEN (``cursor[NEED]``'s new count
+        ``cursor[NEED_S]`` outgrew its field; ``succ`` is then incomplete).
+    """
+    for w in range(succ.shape[0]):
+        succ[w] = states[base + w]
+    for b in range(d_ptr[t], d_ptr[t + 1]):
+        q = d_p[b]
+        v = cur[q] + d_v[b]
+        if d_v[b] > 0:
+            status = _fits(q, v, msk, cursor)
+            if status != DONE:
+                return status
+        # the new count fits its field, so adding the shifted change (modulo 2**64 when it is
+        # negative) rewrites that field alone
+        succ[wd[q]] += np.uint64(d_v[b]) << sh[q]
+    if resets is not None:
+        for b in range(r_ptr[t], r_ptr[t + 1]):  # reset places end with r_v tokens
+            q = r_p[b]
+            v = r_v[b]
+            status = _fits(q, v, msk, cursor)
+            if status != DONE:
+                return status
+            _set(succ, 0, q, v, wd, sh, msk)
+    return DONE
+
+
+@njit(cache=True, inline="always")
+def _find(states: np.ndarray, table: np.ndarray, succ: np.ndarray, key: np.uint64, bits: int) -> int:
+    """Look the packed marking ``succ`` (W,), of hash ``key`` (:func:`_hash`), up in the hash
+    table (:func:`_fill_table`) over the packed markings ``states`` (N·W,): its index, or -1 - s
+    when it is not there, s the empty slot it would take."""
+    n_w = succ.shape[0]
+    mask = table.shape[0] - 1
+    tag = (key >> _THIRTY_TWO) << _THIRTY_TWO
+    s = _slot(key, bits)
+    while table[s] != 0:
+        if (table[s] & ~_LOW32) == tag:
+            cand = np.int64(table[s] & _LOW32) - 1
+            same = True
+            cb = cand * n_w
+            for w in range(n_w):
+                if states[cb + w] != succ[w]:
+                    same = False
+                    break
+            if same:
+                return cand
+        s = (s + 1) & mask
+    return -1 - s
+
+
+@njit(cache=True)
 def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.ndarray, use_prio: bool,
             states: np.ndarray, table: np.ndarray, dst: np.ndarray, tr: np.ndarray, out_ptr: np.ndarray,
             parent: np.ndarray, trunc: np.ndarray, cursor: np.ndarray, wd: np.ndarray, sh: np.ndarray,
@@ -261,11 +406,9 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
     # and runs a specialisation of this function without their code
     n, e, i = cursor[N], cursor[E], cursor[NEXT]
     level_end, stopping, n_trunc = cursor[LEVEL_END], cursor[STOPPING], cursor[N_TRUNC]
-    top = cursor[MAX_COUNT]
     cap = parent.shape[0]
     size = table.shape[0]
     bits = _bit_length(size) - 1
-    mask = size - 1
     status = DONE
     done = 0
     n0, e0, stopping0 = n, e, stopping
@@ -281,26 +424,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
         n0, e0, stopping0 = n, e, stopping  # restored if a field overflows while i is expanded
         for p in range(n_p):  # the marking, unpacked once
             cur[p] = _get(states, base, p, wd, sh, msk)
-        # enabled transitions: those whose trigger place is marked, then the source transitions
-        k = 0
-        for p in range(n_p + 1):
-            if p < n_p and cur[p] == 0:
-                continue
-            for a in range(trig_ptr[p], trig_ptr[p + 1]):
-                t = trig_t[a]
-                ok = True
-                for b in range(in_ptr[t], in_ptr[t + 1]):
-                    if cur[in_p[b]] < in_w[b]:
-                        ok = False
-                        break
-                if ok:
-                    for b in range(ih_ptr[t], ih_ptr[t + 1]):
-                        if cur[ih_p[b]] >= ih_w[b]:
-                            ok = False
-                            break
-                if ok:
-                    enabled[k] = t
-                    k += 1
+        k = _enabled_list(cur, trig_ptr, trig_t, in_ptr, in_p, in_w, ih_ptr, ih_p, ih_w, prio, use_prio, enabled)
         # room for k edges and for as many new states as the state limit still allows
         room = min(k, max_states - n)
         if n + room > cap or (keep_edges and e + k > dst.shape[0]) or 4 * (n + room) > 3 * size or \
@@ -309,86 +433,24 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             cursor[NEED_S] = room
             status = ROOM
             break
-        for a in range(1, k):  # insertion sort: few enabled transitions, often in order already
-            t = enabled[a]
-            b = a - 1
-            while b >= 0 and enabled[b] > t:
-                enabled[b + 1] = enabled[b]
-                b -= 1
-            enabled[b + 1] = t
-        if use_prio and k > 1:
-            best = prio[enabled[0]]
-            for a in range(1, k):
-                best = max(best, prio[enabled[a]])
-            kept = 0
-            for a in range(k):
-                if prio[enabled[a]] == best:
-                    enabled[kept] = enabled[a]
-                    kept += 1
-            k = kept
         dropped = False
         for a in range(k):
             t = enabled[a]
-            # the successor, packed; every count written is checked against its field (never wraps)
-            for w in range(n_w):
-                succ[w] = states[base + w]
-            for b in range(d_ptr[t], d_ptr[t + 1]):
-                q = d_p[b]
-                v = cur[q] + d_v[b]
-                if d_v[b] > 0:
-                    top = max(top, v)
-                    if v > _INT32_MAX:
-                        status = OVERFLOW
-                        break
-                    if np.uint64(v) & ~msk[q]:
-                        cursor[NEED], cursor[NEED_S] = q, v
-                        status = WIDEN
-                        break
-                # the new count fits its field, so adding the shifted change (modulo 2**64 when it
-                # is negative) rewrites that field alone
-                succ[wd[q]] += np.uint64(d_v[b]) << sh[q]
-            if resets is not None and status == DONE:
-                for b in range(r_ptr[t], r_ptr[t + 1]):  # reset places end with r_v tokens
-                    q = r_p[b]
-                    v = r_v[b]
-                    top = max(top, v)
-                    if v > _INT32_MAX:
-                        status = OVERFLOW
-                        break
-                    if np.uint64(v) & ~msk[q]:
-                        cursor[NEED], cursor[NEED_S] = q, v
-                        status = WIDEN
-                        break
-                    _set(succ, 0, q, v, wd, sh, msk)
+            status = _fire(states, base, succ, t, cur, d_ptr, d_p, d_v, r_ptr, r_p, r_v, resets, wd, sh, msk, cursor)
             if status != DONE:
                 break
             key = _hash(succ, 0, n_w)
-            tag = (key >> _THIRTY_TWO) << _THIRTY_TWO
-            s = _slot(key, bits)
-            j = -1
-            while table[s] != 0:
-                if (table[s] & ~_LOW32) == tag:
-                    cand = int(table[s] & _LOW32) - 1
-                    same = True
-                    cb = cand * n_w
-                    for w in range(n_w):
-                        if states[cb + w] != succ[w]:
-                            same = False
-                            break
-                    if same:
-                        j = cand
-                        break
-                s = (s + 1) & mask
+            j = _find(states, table, succ, key, bits)
             if j < 0:
                 if n == max_states:
                     dropped = True
                     stopping = 1
                     continue
+                table[-1 - j] = ((key >> _THIRTY_TWO) << _THIRTY_TWO) | np.uint64(n + 1)  # its empty slot
                 j = n
                 jb = j * n_w
                 for w in range(n_w):
                     states[jb + w] = succ[w]
-                table[s] = tag | np.uint64(j + 1)
                 parent[j] = i
                 n += 1
             if keep_edges:
@@ -409,7 +471,6 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
         n, e, stopping = n0, e0, stopping0
     cursor[N], cursor[E], cursor[NEXT] = n, e, i
     cursor[LEVEL_END], cursor[STOPPING], cursor[N_TRUNC] = level_end, stopping, n_trunc
-    cursor[MAX_COUNT] = top
     return status
 
 
@@ -555,7 +616,6 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     arcs = tables(pre, inhibitor, incidence) if tab.shape[0] == 0 else tab
     n_p = m0.shape[0]
     n_t = arcs[1] - arcs[0] - 1
-    in_ptr, in_p = arcs[arcs[0]:arcs[1]], arcs[arcs[1]:arcs[2]]
     # the packed layout: per place its word, shift and mask; W words a marking
     lay = layout.copy()
     wd = lay[:n_p]
@@ -564,28 +624,11 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     n_w = _fields(lay, n_p, sh, msk)
     succ = np.zeros(n_w, np.uint64)
     cur = np.zeros(n_p, np.int64)
-    # one scratch allocation: the cursor, per transition an enabled slot, the trigger lists and
-    # their fill cursor
-    scratch = np.zeros(CURSOR_SIZE + n_t + 2 * (n_p + 2) + n_t, np.int64)
+    # one scratch allocation: the cursor and per transition an enabled slot
+    scratch = np.zeros(CURSOR_SIZE + n_t, np.int64)
     cursor = scratch[:CURSOR_SIZE]
-    base = CURSOR_SIZE
-    enabled = scratch[base:base + n_t]
-    base += n_t
-    trig_ptr = scratch[base:base + n_p + 2]
-    slot = scratch[base + n_p + 2:base + 2 * (n_p + 2)]
-    trig_t = scratch[base + 2 * (n_p + 2):base + 2 * (n_p + 2) + n_t]
-    # transitions by trigger place (their first input place; slot n_p: no input place)
-    for t in range(n_t):
-        first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
-        trig_ptr[first + 1] += 1
-    for p in range(n_p + 1):
-        trig_ptr[p + 1] += trig_ptr[p]
-    for p in range(n_p + 2):
-        slot[p] = trig_ptr[p]
-    for t in range(n_t):
-        first = in_p[in_ptr[t]] if in_ptr[t + 1] > in_ptr[t] else n_p
-        trig_t[slot[first]] = t
-        slot[first] += 1
+    enabled = scratch[CURSOR_SIZE:]
+    trig_ptr, trig_t = _triggers(arcs, n_p)
     # buffers; bytes per state: its packed marking (W uint64), a consumer's unpacked copy (one
     # byte a place in the common case; made only when asked for), the parent state, the
     # out-edge pointer and the expanded flag; per edge: int32 target and transition
@@ -731,3 +774,187 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         out_ptr = _grow(out_ptr, n + 1, n + 1)
     return (status, states[:n * n_w].reshape((n, n_w)), dst[:e], tr[:e], parent[:n], expanded, out_ptr[:n + 1],
             cursor[STOPPING] == 0, cursor[MAX_COUNT], lay, store)
+
+
+@njit(cache=True)
+def components(tab: np.ndarray, words: np.ndarray, layout: np.ndarray, prio: np.ndarray, use_prio: bool,
+               resets: np.ndarray | None) -> tuple:  # type: ignore[type-arg]
+    """Strongly connected components and liveness levels of a complete reachability graph whose
+    edges are not stored: each marking's successors are computed again from its packed form (the
+    search's enabling and firing rules, :func:`_enabled_list` and :func:`_fire`) and found by a
+    hash table over the markings (:func:`_fill_table`). Tarjan's algorithm (Tarjan 1972) in the
+    iterative, one-index-a-state form of Pearce 2016, with every edge classified as it is met: an
+    edge into a finished component leaves its source's component (which is then not terminal), any
+    other joins two markings of the same component. A finished component that no edge leaves is
+    terminal, and the transitions enabled in its markings are those fired inside it.
+
+    Args:
+        tab: packed arc lists (:func:`tables`; with reset lists when ``resets`` is not None).
+        words: (N, W) uint64 packed markings of a complete graph, in ``layout``.
+        layout: (3·|P|,) int64 per place its word, shift and width.
+        prio, use_prio: the priority levels the search applied.
+        resets: None for a net without reset arcs, else any array (``tab``).
+
+    Returns:
+        ``(status, levels, labels, terminal, deepest, tallest)``: status 0, or 1 + the index of a marking with a
+        successor that is not among ``words`` (the graph is not complete); levels (|T|,) int64 in
+        {0, 1, 3, 4} (never fired, fired, fired inside a component, fired inside every terminal
+        component); labels (N,) int32 the component of each marking, numbered in the order they
+        finish (a component's successors finish before it); terminal (number of components,) bool;
+        the longest depth-first path and the most markings the component stack held.
+        Memory: the hash table (8 bytes a slot, at most 3/4 full) and at most 9 bytes a marking
+        (its index, its flag, and one array shared by the depth-first path and the component
+        stack, which never hold the same marking), plus a flag a component.
+    """
+    n, n_w = words.shape
+    flat = words.reshape(n * n_w)
+    n_p = layout.shape[0] // 3
+    n_t = tab[1] - tab[0] - 1
+    in_ptr, in_p, in_w = tab[tab[0]:tab[1]], tab[tab[1]:tab[2]], tab[tab[2]:tab[3]]
+    ih_ptr, ih_p, ih_w = tab[tab[3]:tab[4]], tab[tab[4]:tab[5]], tab[tab[5]:tab[6]]
+    d_ptr, d_p, d_v = tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]]
+    r_ptr, r_p, r_v = tab[tab[9]:tab[10]], tab[tab[10]:tab[11]], tab[tab[11]:tab[12]]
+    trig_ptr, trig_t = _triggers(tab, n_p)
+    wd = layout[:n_p]
+    sh = np.empty(n_p, np.uint64)
+    msk = np.empty(n_p, np.uint64)
+    for p in range(n_p):
+        sh[p] = np.uint64(layout[n_p + p])
+        msk[p] = (np.uint64(1) << np.uint64(layout[2 * n_p + p])) - np.uint64(1)
+    size = 16
+    while 3 * size < 4 * n:
+        size *= 2
+    table = np.zeros(size, np.uint64)
+    _fill_table(table, flat, n, n_w)
+    bits = _bit_length(size) - 1
+    cur = np.zeros(n_p, np.int64)
+    succ = np.zeros(n_w, np.uint64)
+    enabled = np.zeros(n_t, np.int64)
+    cursor = np.zeros(CURSOR_SIZE, np.int64)
+    # rindex: 0 unvisited, then the visit index lowered to the smallest one reached (Pearce's
+    # rindex), then -1 - the component's number once it is finished (one array read tells an
+    # edge's target apart); leaves: an edge leaves the marking's component
+    rindex = np.zeros(n, np.int32)
+    leaves = np.zeros(n, np.bool_)
+    terminal = np.zeros(1024, np.bool_)
+    fired = np.zeros(n_t, np.bool_)
+    inside = np.zeros(n_t, np.bool_)
+    hits = np.zeros(n_t, np.int64)  # terminal components each transition fires in
+    seen = np.full(n_t, -1, np.int64)
+    # one array holds the depth-first path from its bottom (a marking, or -1 - the marking once it
+    # is known not to be its component's root) and, from its top, the component stack (markings
+    # whose search returned, not roots): no marking is on both, so together they hold at most N
+    # (np.empty: only the pages they reach are ever touched)
+    dq = np.empty(n, np.int32)
+    n_stack = 0
+    deepest = tallest = 1
+    index = 1
+    comp = 0
+    n_term = 0
+    for start in range(n):
+        if rindex[start] != 0:
+            continue
+        dq[0] = start
+        rindex[start] = index
+        index += 1
+        depth = 1
+        back = -1  # the marking whose search just returned to the top frame
+        while depth > 0:
+            v = dq[depth - 1]
+            if v < 0:
+                v = -1 - v
+            base = v * n_w
+            for p in range(n_p):
+                cur[p] = _get(flat, base, p, wd, sh, msk)
+            k = _enabled_list(cur, trig_ptr, trig_t, in_ptr, in_p, in_w, ih_ptr, ih_p, ih_w, prio, use_prio, enabled)
+            pos = 0
+            if back >= 0:
+                # the edge that led to ``back`` is the first whose successor is ``back`` (it was
+                # unvisited until then): found again by firing and comparing, no lookup
+                while pos < k:
+                    _fire(flat, base, succ, enabled[pos], cur, d_ptr, d_p, d_v, r_ptr, r_p, r_v, resets, wd, sh, msk,
+                          cursor)
+                    same = True
+                    for w in range(n_w):
+                        if succ[w] != flat[back * n_w + w]:
+                            same = False
+                            break
+                    if same:
+                        break
+                    pos += 1
+                if pos == k:  # pragma: no cover - the edge was found once, so it is found again
+                    return (1 + v, np.zeros(n_t, np.int64), rindex, terminal[:0].copy(), deepest, tallest)
+            descend = False
+            while pos < k:
+                t = enabled[pos]
+                if back >= 0:
+                    w = back
+                    back = -1
+                else:
+                    _fire(flat, base, succ, t, cur, d_ptr, d_p, d_v, r_ptr, r_p, r_v, resets, wd, sh, msk, cursor)
+                    w = _find(flat, table, succ, _hash(succ, 0, n_w), bits)
+                    if w < 0:
+                        return (1 + v, np.zeros(n_t, np.int64), rindex, terminal[:0].copy(), deepest, tallest)
+                    if rindex[w] == 0:
+                        dq[depth] = w
+                        rindex[w] = index
+                        index += 1
+                        depth += 1
+                        deepest = max(deepest, depth)
+                        descend = True
+                        break
+                fired[t] = True
+                r = rindex[w]
+                if r < 0:
+                    leaves[v] = True
+                else:
+                    inside[t] = True
+                    if r < rindex[v]:
+                        rindex[v] = r
+                        dq[depth - 1] = -1 - v
+                pos += 1
+            if descend:
+                continue
+            depth -= 1
+            back = v
+            if dq[depth] < 0:
+                n_stack += 1
+                dq[n - n_stack] = v  # stack position a (0 at the bottom) is dq[n - 1 - a]
+                tallest = max(tallest, n_stack)
+                continue
+            # v is the root of a finished component: v and the stacked markings visited after it
+            lo = n_stack
+            while lo > 0 and rindex[v] <= rindex[dq[n - lo]]:
+                lo -= 1
+            out = leaves[v]
+            for a in range(lo, n_stack):
+                out |= leaves[dq[n - 1 - a]]
+            if comp == terminal.shape[0]:
+                terminal = _grow(terminal, min(2 * comp, n), comp)
+            terminal[comp] = not out
+            if not out:
+                n_term += 1
+                for a in range(lo, n_stack + 1):
+                    m = v if a == n_stack else dq[n - 1 - a]
+                    for p in range(n_p):
+                        cur[p] = _get(flat, m * n_w, p, wd, sh, msk)
+                    k = _enabled_list(cur, trig_ptr, trig_t, in_ptr, in_p, in_w, ih_ptr, ih_p, ih_w, prio, use_prio,
+                                      enabled)
+                    for b in range(k):
+                        if seen[enabled[b]] != comp:
+                            seen[enabled[b]] = comp
+                            hits[enabled[b]] += 1
+            for a in range(lo, n_stack):
+                rindex[dq[n - 1 - a]] = -1 - comp
+            rindex[v] = -1 - comp
+            n_stack = lo
+            comp += 1
+    levels = np.zeros(n_t, np.int64)
+    for t in range(n_t):
+        if fired[t]:
+            levels[t] = 1
+        if inside[t]:
+            levels[t] = 4 if hits[t] == n_term else 3
+    for v in range(n):
+        rindex[v] = -1 - rindex[v]
+    return (0, levels, rindex, terminal[:comp].copy(), deepest, tallest)

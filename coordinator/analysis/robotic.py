@@ -621,7 +621,8 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
                      "undecided": a.undecided}
     elif not a.graph_work_done:
         truncated = {"by": "max_memory", "states_found": a.states, "edges_found": a.edges,
-                     "skipped": ["liveness", "reversibility", "error_recoverable", "controllable"],
+                     "skipped": (["liveness", "reversibility"] if a.liveness is None else [])
+                     + ["error_recoverable", "controllable"],
                      "undecided": a.undecided}
     return {
         "net": net.name,

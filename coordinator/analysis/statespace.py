@@ -32,8 +32,8 @@ from coordinator.analysis.matrices import DENSE_LIMIT, dense_is_cheap, sparse_ne
 from coordinator.errors import AnalysisError
 from coordinator.net import Arc, Marking, PetriNet, Place, Transition
 
-__all__ = ["StateSpace", "arc_table", "default_max_bytes", "enabled_mask", "explore", "load_search", "packed_layout",
-           "search_is_compiled"]
+__all__ = ["StateSpace", "arc_table", "default_max_bytes", "enabled_mask", "explore", "implicit_pass_bytes",
+           "load_search", "packed_layout", "search_is_compiled"]
 
 #: largest n·|P|·|T| for which enabling is computed by matrix products (see _enabled)
 _MAX_PRODUCT = 500_000
@@ -286,6 +286,45 @@ class StateSpace:
                 return int(t)
         raise AnalysisError(f"no transition leads from state {source} to state {target}")  # pragma: no cover
 
+    def implicit_liveness(self, stats: dict[str, int] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Liveness levels and strongly connected components of the complete graph, from the packed
+        markings alone: each marking's successors are computed again by the search's own enabling
+        and firing rules (under its priorities) and found through a hash table over ``words``, so
+        the edges need not be kept (``explore(..., edges=False)``). Compiled (:mod:`.reach_kernel`,
+        ``components``: Tarjan 1972 in the form of Pearce 2016); compiled on its first use on a
+        machine, then loaded from numba's cache.
+
+        Args:
+            stats: if given, receives ``deepest_path`` (the longest depth-first path, markings) and
+                ``largest_stack`` (the most markings the component stack held): what the pass's
+                shared path and stack array held at most.
+
+        Returns:
+            ``(levels, labels, terminal)`` as :func:`coordinator.analysis.structure.liveness_levels`:
+            levels (|T|,) int64 in {0, 1, 3, 4}; labels (N,) int32 the component of each state;
+            terminal (number of components,) bool.
+
+        Raises:
+            AnalysisError: if the graph is not complete.
+
+        Memory: :func:`implicit_pass_bytes` beyond the graph.
+        """
+        if not self.complete:
+            raise AnalysisError("liveness needs the complete reachability graph; this one stopped early "
+                                f"({self.stopped_by})")
+        rk = _kernel()
+        tab = arc_table(self.net)
+        prio = _NO_PRIORITY if self.priority is None else self.priority
+        resets = tab if self.net.has_resets else None
+        status, levels, labels, terminal, deepest, tallest = rk.components(
+            tab, self.words, self.layout, prio, self.priority is not None, resets)
+        if status:
+            raise AnalysisError(f"state {status - 1} has a successor that is not among the {self.n_states} states "
+                                "found")  # pragma: no cover - a complete graph holds every successor
+        if stats is not None:
+            stats.update(deepest_path=int(deepest), largest_stack=int(tallest))
+        return levels, labels, terminal
+
     def firing_sequence(self, index: int) -> list[str]:
         """Return a shortest firing sequence (transition ids) from M0 to state ``index``."""
         seq: list[str] = []
@@ -298,6 +337,17 @@ class StateSpace:
             node = source
         seq.reverse()
         return seq
+
+
+def implicit_pass_bytes(n_states: int) -> int:
+    """Bytes :meth:`StateSpace.implicit_liveness` needs beyond the graph for ``n_states`` markings
+    (at most): the hash table (8 bytes a slot, a power of two at least 4/3 of the markings) and 10
+    bytes a marking (its index and flag, the shared depth-first path and component stack, a flag a
+    component)."""
+    slots = 16
+    while 3 * slots < 4 * n_states:
+        slots *= 2
+    return 8 * slots + 10 * n_states
 
 
 def _fire(net: PetriNet, marking: np.ndarray, t: int) -> np.ndarray:

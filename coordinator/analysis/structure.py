@@ -74,7 +74,7 @@ from coordinator.analysis.invariants import (
 )
 from coordinator.analysis.lp import PlaceBounds, Support
 from coordinator.analysis.matrices import SparseNet, sparse_net
-from coordinator.analysis.statespace import StateSpace, default_max_bytes, explore
+from coordinator.analysis.statespace import StateSpace, default_max_bytes, explore, implicit_pass_bytes
 from coordinator.errors import AnalysisError
 from coordinator.net import Marking, PetriNet
 
@@ -233,8 +233,10 @@ class Analysis:
             left undecided are absent.
         structural: the LP results.
         exact_bounds: places whose bound in ``place_bounds`` is exact (all of them when complete).
-        graph_work_done: False when the graph is complete but the passes over it that need memory
-            beyond the budget (liveness, recovery) were skipped.
+        graph_work_done: False when the graph is complete but the passes over its edges that need
+            memory beyond the budget (scipy's components, the robotic recovery checks) were
+            skipped; liveness and reversibility may then still come from the markings
+            (:meth:`.statespace.StateSpace.implicit_liveness`, ``liveness`` not None).
         stopped_by: why the search stopped early: ``"max_states"``, ``"max_memory"``, or None.
         stable_marking_partial: on a truncated graph, False when every place varies among the
             markings found (then no place is stable); else None.
@@ -310,12 +312,16 @@ class Analysis:
 
 
 def liveness_levels(space: StateSpace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Liveness level of each transition on a complete reachability graph.
+    """Liveness level of each transition on a complete reachability graph: from its edges by
+    scipy's strongly connected components, or, when the edges were not kept, by
+    :meth:`.statespace.StateSpace.implicit_liveness` (the edges computed again from the markings).
 
     Returns:
         ``(levels, labels, terminal)``: levels (|T|,) int64 in {0, 1, 3, 4}; the strongly connected
         component of each state (N,) int32; a boolean (n_components,) marking terminal components.
     """
+    if not space.edges_kept:
+        return space.implicit_liveness()
     # edges are sorted by source, so the CSR matrix is built without sorting
     return graph_liveness(space.n_states, len(space.net.transitions), space.src, space.dst, space.transition,
                           out_ptr=space.out_ptr)
@@ -538,6 +544,16 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
     if space is None:
         space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
                         finish_level=finish_level)
+        if space.stopped_by == "max_memory" and st.bounded and finish_level:
+            # the edges (8 bytes each) filled the budget: the markings alone may fit, and liveness
+            # and reversibility come from them (StateSpace.implicit_liveness)
+            counted = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
+                              edges=False)
+            if counted.complete:
+                st.notes.append(f"the reachability graph with its edges did not fit the memory budget "
+                                f"({graph_bytes / 2**30:.2f} GiB); searched again counting the edges without "
+                                f"keeping them, it is complete with {counted.n_states:,} markings")
+                space = counted
         if not space.complete and not st.bounded and witness is None:
             witness = covering_witness(space)
     return space, witness
@@ -811,7 +827,7 @@ def _partial_from_projection(v: _Partial, net: PetriNet, sn: SparseNet, st: _Str
     growth_is_recorded = v.bounded is not False or (bool(v.unbounded) and set(v.unbounded) <= set(record))
     if record and len(record) < len(net.places) and growth_is_recorded:
         projection = analyse_small(without_places(net, record))
-        if projection.complete and projection.graph_work_done:
+        if projection.complete and projection.liveness is not None:
             # record-only places never change what is enabled: liveness and deadlocks carry over
             v.levels, v.quasi, v.live = projection.liveness, projection.quasi_live, projection.live
             v.deadlock = projection.deadlock
@@ -957,15 +973,18 @@ def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invari
                 "stable_marking"):
         sources[key] = "reachability graph"
     need = graph_pass_bytes(space.n_states, space.n_edges)
-    work = space.nbytes + need <= budget
+    work = space.edges_kept and space.nbytes + need <= budget
+    # edges not kept, or too many for scipy's passes: the components from the markings, each
+    # marking's successors computed again
+    implicit = not work and space.nbytes + implicit_pass_bytes(space.n_states) <= budget
     liveness: dict[str, int] | None = None
     quasi: bool | None = None
     live: bool | None = None
     reversible: bool | None = None
     home_count: int | None = None
     home_is_home: bool | None = None
-    if work:
-        levels, labels, terminal = liveness_levels(space)
+    if work or implicit:
+        levels, labels, terminal = space.implicit_liveness() if implicit else liveness_levels(space)
         n_terminal = int(terminal.sum())
         home_count = int(np.count_nonzero(terminal[labels])) if n_terminal == 1 else 0
         if net.home_marking is not None:
@@ -978,12 +997,19 @@ def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invari
         quasi, live = bool((levels >= 1).all()), bool((levels == 4).all())
         reversible = bool(np.unique(labels).size == 1)
         for key in ("quasi_live", "live", "reversible"):
-            sources[key] = "reachability graph"
+            sources[key] = "reachability graph" + (", its edges computed again from the markings" if implicit else "")
+        if implicit:
+            why = (f"the {space.n_edges:,} edges need about {need / 2**30:.1f} GiB in scipy's passes, over the "
+                   "memory budget" if space.edges_kept else "the edges were not kept")
+            notes.append(f"liveness and reversibility: {why}, so the strongly connected components were found from "
+                         "the markings, each marking's successors computed again; the robotic recovery check, "
+                         "which needs the edges, was skipped")
     else:
-        used = np.zeros(len(net.transitions), dtype=bool)
-        used[space.transition] = True
-        quasi = bool(used.all())
-        sources["quasi_live"] = "reachability graph"
+        if space.edges_kept:
+            used = np.zeros(len(net.transitions), dtype=bool)
+            used[space.transition] = True
+            quasi = bool(used.all())
+            sources["quasi_live"] = "reachability graph"
         notes.append(f"liveness, reversibility and the robotic recovery check were skipped: on a graph of "
                      f"{space.n_edges:,} edges they need about {need / 2**30:.1f} GiB beyond the graph's "
                      f"{space.nbytes / 2**30:.1f} GiB, over the memory budget of {budget / 2**30:.1f} GiB")

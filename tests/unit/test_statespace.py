@@ -471,3 +471,51 @@ def test_bytes_per_marking_stay_within_twice_the_packed_size_plus_the_hash_table
     ss = explore(load_pnml(str(MCC / model / "model.pnml")))
     packed = 8 * ss.words.shape[1]
     assert ss.memory_per_marking_bytes <= 2 * (packed + 8 / 0.75)
+
+
+def _same_components(space: StateSpace, kept: StateSpace) -> None:
+    """The components found from the markings alone equal scipy's on the kept edges: same levels,
+    same partition of the states, same terminal states."""
+    from coordinator.analysis.structure import liveness_levels
+
+    levels, labels, terminal = space.implicit_liveness()
+    ref_levels, ref_labels, ref_terminal = liveness_levels(kept)
+    assert levels.tolist() == ref_levels.tolist()
+    pairs = {(int(a), int(b)) for a, b in zip(labels, ref_labels)}
+    assert len(pairs) == len(set(labels.tolist())) == len(set(ref_labels.tolist()))
+    assert terminal[labels].tolist() == ref_terminal[ref_labels].tolist()
+
+
+@pytest.mark.parametrize("seed", range(16))
+def test_components_from_the_markings_alone_agree_with_the_kept_edges_on_random_nets(seed: int) -> None:
+    rng = np.random.default_rng(100 + seed)
+    net = random_net(rng, n_places=int(rng.integers(3, 7)), n_transitions=int(rng.integers(3, 9)))
+    levels = rng.integers(0, 3, size=len(net.transitions))
+    for priority in (None, levels):
+        kept = explore(net, max_states=5_000, priority=priority)
+        if not kept.complete:
+            continue
+        _same_components(explore(net, max_states=5_000, priority=priority, edges=False), kept)
+        _same_components(kept, kept)  # the edges kept or not, the markings give the same answer
+
+
+@pytest.mark.parametrize("model", MCC_MODELS)
+def test_components_from_the_markings_alone_agree_with_the_kept_edges_on_mcc_models(model: str) -> None:
+    from coordinator.netfile.pnml import load_pnml
+
+    net = load_pnml(str(MCC / model / "model.pnml"))
+    _same_components(explore(net, edges=False), explore(net))
+
+
+def test_components_from_the_markings_alone_follow_reset_arcs_and_need_a_complete_graph() -> None:
+    from coordinator.net import Arc
+
+    base = make_net("flush", {"go": 1}, {"fill": ({"go": 1}, {"go": 1, "buf": 1}),
+                                         "flush": ({"go": 1, "buf": 1}, {"go": 1}),
+                                         "stop": ({"go": 1}, {"done": 1})},
+                    inhibitors={"fill": {"buf": 3}})
+    net = PetriNet(name=base.name, places=base.places, transitions=base.transitions,
+                   arcs=(*base.arcs, Arc(source="buf", target="flush", reset=True)), initial_marking=base.initial_marking)
+    _same_components(explore(net, edges=False), explore(net))
+    with pytest.raises(AnalysisError, match="complete"):
+        explore(net, max_states=2, edges=False).implicit_liveness()

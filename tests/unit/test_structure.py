@@ -233,3 +233,39 @@ def test_growing_place_that_is_read_keeps_liveness_undecided() -> None:
     a = analyse(net, max_states=100)
     assert a.bounded is False and a.unbounded_places == ["p3"]
     assert a.projection is None and a.live is None and a.reversible is None
+
+
+def test_liveness_comes_from_the_markings_when_the_edges_do_not_fit_the_passes_over_them() -> None:
+    from coordinator.analysis.statespace import implicit_pass_bytes
+    from coordinator.analysis.structure import graph_pass_bytes
+
+    # ten independent two-state cycles: 1,024 markings, 10,240 edges, one terminal component
+    net = make_net("cycles", {f"a{i}": 1 for i in range(10)},
+                   {**{f"go{i}": ({f"a{i}": 1}, {f"b{i}": 1}) for i in range(10)},
+                    **{f"back{i}": ({f"b{i}": 1}, {f"a{i}": 1}) for i in range(10)}})
+    full = analyse(net)
+    space = full.space
+    assert space is not None and full.graph_work_done and full.live
+    # a budget that holds the graph and the pass over its markings, not scipy's passes over its edges
+    budget = 2 * (space.nbytes + implicit_pass_bytes(space.n_states)) + (1 << 16)
+    assert space.nbytes + graph_pass_bytes(space.n_states, space.n_edges) > budget
+    small = analyse(net, max_bytes=budget)
+    assert small.complete and not small.graph_work_done
+    assert small.liveness == full.liveness and small.live and small.reversible and small.home_states == 1024
+    assert "computed again from the markings" in small.sources["live"]
+    assert any("found from the markings" in n for n in small.notes)
+
+
+def test_a_graph_whose_edges_fill_the_budget_is_searched_again_without_them_and_still_gets_its_liveness() -> None:
+    # fourteen independent two-state cycles: 16,384 markings, 229,376 edges (1.8 MB of them)
+    net = make_net("cycles", {f"a{i}": 1 for i in range(14)},
+                   {**{f"go{i}": ({f"a{i}": 1}, {f"b{i}": 1}) for i in range(14)},
+                    **{f"back{i}": ({f"b{i}": 1}, {f"a{i}": 1}) for i in range(14)}})
+    budget = 5 * 2**20
+    assert explore(net, max_bytes=budget // 2).stopped_by == "max_memory"  # the edges do not fit
+    a = analyse(net, max_bytes=budget)
+    assert a.complete and a.states == 16_384 and a.edges == 229_376
+    assert a.space is not None and not a.space.edges_kept
+    assert a.live and a.reversible and a.quasi_live and a.deadlock is False and a.home_states == 16_384
+    assert any("searched again counting the edges" in n for n in a.notes)
+    assert any("the edges were not kept" in n for n in a.notes)
