@@ -45,7 +45,9 @@ result. What they implement (the reasons and the measurements are in docs/analys
 
 Code shape: flat 1-D buffers, plain loops and few numpy calls, because numba's compile time grows
 with the amount of typed code (the first use on a machine compiles this module; docs/analysis.md,
-section 2, gives the times).
+section 2, gives the times). The helpers the search and :func:`components` share are inlined
+into them by numba (``inline="always"``) and hand back scalars: as calls returning tuples they made
+the search 1.5–2× slower (numba's optimisation level 1, :mod:`.jit`).
 
 One call of :func:`run` does the whole search, buffers and growth included, and hands back the
 finished arrays: on small nets the cost of crossing from Python into compiled code, not the search,
@@ -514,13 +516,15 @@ def _grow(a: np.ndarray, size: int, used: int) -> np.ndarray:
 
 @njit(cache=True)
 def _target(cap: int, need: int, unit: int | np.int64, held: int | np.int64, max_bytes: int,
-            ceiling: int | np.int64) -> int:
-    """New capacity of a buffer of ``unit`` bytes per entry: the usual growth (×2 up to 2**20
-    entries, then ×1.5), cut to what the byte budget leaves while the old buffer is still held,
-    and to ``ceiling``; -1 if not even ``need`` entries fit."""
+            ceiling: int | np.int64, copy_unit: int | np.int64) -> int:
+    """New capacity of buffers of ``unit`` bytes per entry in all (grown one array at a time, the
+    largest ``copy_unit`` bytes an entry): the usual growth (×2 up to 2**20 entries, then ×1.5),
+    cut to ``ceiling`` and to what the byte budget holds at the last copy — every other array at
+    its new size, the last one both old and new — beside the other buffers (``held`` less these
+    at ``cap``); -1 if not even ``need`` entries fit."""
     want: int | np.int64 = 2 * cap if cap < (1 << 20) else cap + cap // 2
     want = min(max(want, need), max(ceiling, need))
-    want = min(want, (max_bytes - held) // unit)
+    want = min(want, (max_bytes - (held - cap * unit) - cap * copy_unit) // unit)
     return int(want) if want >= need else -1
 
 
@@ -675,7 +679,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         if status == ROOM:
             n, e, k, ks = cursor[N], cursor[E], cursor[NEED], cursor[NEED_S]
             if n + ks > cap:
-                new = _target(cap, n + ks, unit_s, held, max_bytes, max_states)
+                new = _target(cap, n + ks, unit_s, held, max_bytes, max_states, 8 * n_w)
                 if new < 0:
                     status = MEMORY
                 else:  # one buffer at a time: only one old copy is held at once
@@ -685,7 +689,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
                     held += (new - cap) * unit_s
                     cap = new
             if status == ROOM and keep_edges and e + k > dst.shape[0]:
-                new = _target(dst.shape[0], e + k, unit_e, held, max_bytes, no_ceiling)
+                new = _target(dst.shape[0], e + k, unit_e, held, max_bytes, no_ceiling, unit_e // 2)
                 if new < 0:
                     status = MEMORY
                 else:

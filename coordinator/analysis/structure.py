@@ -549,11 +549,13 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
             # and reversibility come from them (StateSpace.implicit_liveness)
             counted = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
                               edges=False)
+            again = (f"the reachability graph with its edges did not fit the memory budget ({graph_bytes / 2**30:.2f} "
+                     "GiB); searched again counting the edges without keeping them, it ")
             if counted.complete:
-                st.notes.append(f"the reachability graph with its edges did not fit the memory budget "
-                                f"({graph_bytes / 2**30:.2f} GiB); searched again counting the edges without "
-                                f"keeping them, it is complete with {counted.n_states:,} markings")
+                st.notes.append(again + f"is complete with {counted.n_states:,} markings")
                 space = counted
+            else:
+                st.notes.append(again + f"stopped too, after {counted.n_states:,} markings")
         if not space.complete and not st.bounded and witness is None:
             witness = covering_witness(space)
     return space, witness
