@@ -340,7 +340,7 @@ def _fire(states: np.ndarray, base: int, succ: np.ndarray, t: int, cur: np.ndarr
 
 
 @njit(cache=True, inline="always")
-def _find(states: np.ndarray, table: np.ndarray, succ: np.ndarray, key: np.uint64, bits: int) -> int:
+def _find(states: np.ndarray, table: np.ndarray, succ: np.ndarray, key: np.uint64, bits: int) -> np.int64:
     """Look the packed marking ``succ`` (W,), of hash ``key`` (:func:`_hash`), up in the hash
     table (:func:`_fill_table`) over the packed markings ``states`` (N·W,): its index, or -1 - s
     when it is not there, s the empty slot it would take."""
@@ -896,7 +896,7 @@ def components(tab: np.ndarray, words: np.ndarray, layout: np.ndarray, prio: np.
                     back = -1
                 else:
                     _fire(flat, base, succ, t, cur, d_ptr, d_p, d_v, r_ptr, r_p, r_v, resets, wd, sh, msk, cursor)
-                    w = _find(flat, table, succ, _hash(succ, 0, n_w), bits)
+                    w = int(_find(flat, table, succ, _hash(succ, 0, n_w), bits))
                     if w < 0:
                         return (1 + v, np.zeros(n_t, np.int64), rindex, terminal[:0].copy(), deepest, tallest)
                     if rindex[w] == 0:
