@@ -196,6 +196,16 @@ def _hash(words: np.ndarray, base: int, n_w: int) -> np.uint64:
 
 
 @njit(cache=True)
+def _table_slots(n: int) -> int:
+    """Slots of a hash table for n markings: the smallest power of two (at least 16) at most 3/4
+    full."""
+    size = 16
+    while 3 * size < 4 * n:
+        size *= 2
+    return size
+
+
+@njit(cache=True)
 def _fill_table(table: np.ndarray, states: np.ndarray, n: int, n_w: int) -> None:
     """(Re)build the hash table, (2**k,) uint64 slots of (tag << 32) | (index + 1), the tag the
     high 32 bits of the marking's hash, from states 0..n-1."""
@@ -220,6 +230,15 @@ def _get(states: np.ndarray, base: int, p: int, wd: np.ndarray, sh: np.ndarray, 
 def _set(words: np.ndarray, base: int, p: int, v: np.int64, wd: np.ndarray, sh: np.ndarray, msk: np.ndarray) -> None:
     k = base + wd[p]
     words[k] = (words[k] & ~(msk[p] << sh[p])) | (np.uint64(v) << sh[p])
+
+
+@njit(cache=True)
+def _arcs(tab: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The twelve lists of packed arc lists (:func:`tables`): input arcs (ptr, place, weight),
+    inhibitor arcs, incidence entries (ptr, place, value) and reset arcs (ptr, place, count after)."""
+    return (tab[tab[0]:tab[1]], tab[tab[1]:tab[2]], tab[tab[2]:tab[3]], tab[tab[3]:tab[4]], tab[tab[4]:tab[5]],
+            tab[tab[5]:tab[6]], tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]], tab[tab[9]:tab[10]],
+            tab[tab[10]:tab[11]], tab[tab[11]:tab[12]])
 
 
 @njit(cache=True)
@@ -400,10 +419,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
     """
     n_p = wd.shape[0]
     n_w = succ.shape[0]
-    in_ptr, in_p, in_w = tab[tab[0]:tab[1]], tab[tab[1]:tab[2]], tab[tab[2]:tab[3]]
-    ih_ptr, ih_p, ih_w = tab[tab[3]:tab[4]], tab[tab[4]:tab[5]], tab[tab[5]:tab[6]]
-    d_ptr, d_p, d_v = tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]]
-    r_ptr, r_p, r_v = tab[tab[9]:tab[10]], tab[tab[10]:tab[11]], tab[tab[11]:tab[12]]
+    in_ptr, in_p, in_w, ih_ptr, ih_p, ih_w, d_ptr, d_p, d_v, r_ptr, r_p, r_v = _arcs(tab)
     # ``resets is not None`` is decided when numba compiles: a net without reset arcs passes None
     # and runs a specialisation of this function without their code
     n, e, i = cursor[N], cursor[E], cursor[NEXT]
@@ -643,9 +659,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     # is used), within 1/8 of the budget and 16 MiB (a wide net's markings are large)
     cap = max(1, min(16, max_states, int(min(max_bytes // 8, 1 << 24) // unit_s)))
     ecap = 4 * cap if keep_edges else 0
-    size = 16
-    while 3 * size < 4 * cap:
-        size *= 2
+    size = _table_slots(cap)
     states = np.zeros(cap * n_w, np.uint64)
     parent = np.empty(cap, np.int32)
     out_ptr = np.empty(cap + 1, np.int64)
@@ -699,9 +713,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
             if status == ROOM and cursor[N_TRUNC] == trunc.shape[0]:
                 trunc = _grow(trunc, 2 * trunc.shape[0], cursor[N_TRUNC])
             if status == ROOM and 4 * (n + ks) > 3 * size:
-                new = size
-                while 4 * (n + ks) > 3 * new:
-                    new *= 2
+                new = max(size, _table_slots(n + ks))
                 if held + 8 * new > max_bytes:
                     status = MEMORY
                 else:
@@ -814,23 +826,16 @@ def components(tab: np.ndarray, words: np.ndarray, layout: np.ndarray, prio: np.
     flat = words.reshape(n * n_w)
     n_p = layout.shape[0] // 3
     n_t = tab[1] - tab[0] - 1
-    in_ptr, in_p, in_w = tab[tab[0]:tab[1]], tab[tab[1]:tab[2]], tab[tab[2]:tab[3]]
-    ih_ptr, ih_p, ih_w = tab[tab[3]:tab[4]], tab[tab[4]:tab[5]], tab[tab[5]:tab[6]]
-    d_ptr, d_p, d_v = tab[tab[6]:tab[7]], tab[tab[7]:tab[8]], tab[tab[8]:tab[9]]
-    r_ptr, r_p, r_v = tab[tab[9]:tab[10]], tab[tab[10]:tab[11]], tab[tab[11]:tab[12]]
+    in_ptr, in_p, in_w, ih_ptr, ih_p, ih_w, d_ptr, d_p, d_v, r_ptr, r_p, r_v = _arcs(tab)
     trig_ptr, trig_t = _triggers(tab, n_p)
-    wd = layout[:n_p]
+    lay = layout.copy()  # laid again from its widths, as the search laid it: the same words and shifts
     sh = np.empty(n_p, np.uint64)
     msk = np.empty(n_p, np.uint64)
-    for p in range(n_p):
-        sh[p] = np.uint64(layout[n_p + p])
-        msk[p] = (np.uint64(1) << np.uint64(layout[2 * n_p + p])) - np.uint64(1)
-    size = 16
-    while 3 * size < 4 * n:
-        size *= 2
-    table = np.zeros(size, np.uint64)
+    _fields(lay, n_p, sh, msk)
+    wd = lay[:n_p]
+    table = np.zeros(_table_slots(n), np.uint64)
     _fill_table(table, flat, n, n_w)
-    bits = _bit_length(size) - 1
+    bits = _bit_length(table.shape[0]) - 1
     cur = np.zeros(n_p, np.int64)
     succ = np.zeros(n_w, np.uint64)
     enabled = np.zeros(n_t, np.int64)
