@@ -70,7 +70,8 @@ def run_one(n: int, safe: bool, folder: Path, extra: list[str]) -> dict[str, Any
         return row
     rep = child["report"]
     first = (rep.get("deadlocks") or [None])[0]
-    row.update({"markings": rep["states"], "complete": rep["complete"], "deadlock": rep["deadlock"],
+    found = rep["states"] if rep["complete"] else (rep.get("truncated") or {}).get("states_found")
+    row.update({"markings": found, "complete": rep["complete"], "deadlock": rep["deadlock"],
                 "n_deadlocks": rep.get("n_deadlocks"), "engine": rep["engine"]["used"],
                 "reason": rep["engine"]["reason"],
                 "witness_length": None if first is None else len(first["firing_sequence"]),

@@ -569,7 +569,9 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
            phase: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Analyse a task net and return the JSON-ready report of ``petrobot analyze --json``.
 
-    Keys: ``net``, ``places``, ``transitions``, ``states``, ``edges``, ``complete``, ``truncated``
+    Keys: ``net``, ``places``, ``transitions``, ``states``, ``edges`` (the reachable markings and
+    edges; null unless ``complete``: the counts a stopped search found are ``truncated``'s
+    ``states_found`` and ``edges_found``, lower bounds), ``complete``, ``truncated``
     (null, or ``{"by": "max_states" | "max_memory", ...}``), ``budget`` (``max_states``,
     ``max_memory_bytes``), ``memory_per_marking_bytes`` and ``packed_bits_per_marking`` (the explicit
     search's marking store and hash table per marking found, and the bits of one packed marking:
@@ -628,8 +630,8 @@ def report(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | None
         "net": net.name,
         "places": len(net.places),
         "transitions": len(net.transitions),
-        "states": a.states,
-        "edges": a.edges,
+        "states": a.states if a.complete else None,  # a partial graph's counts are in "truncated"
+        "edges": a.edges if a.complete else None,
         "complete": a.complete,
         "truncated": truncated,
         "budget": {"max_states": max_states, "max_memory_bytes": budget},

@@ -194,6 +194,9 @@ def render(rep: dict[str, Any]) -> str:
     if engine.get("used") == "symbolic":
         lines.append(f"reachable set (symbolic): {rep['states']:,} markings, {rep['edges']:,} edges of the net as "
                      f"written, exact{kept}")
+    elif rep["states"] is None and trunc:
+        lines.append(f"reachability graph: {trunc['states_found']:,} markings, {trunc['edges_found']:,} edges of "
+                     f"the net as written found before the search stopped{full}{kept}")
     else:
         lines.append(f"reachability graph: {rep['states']:,} markings, {rep['edges']:,} edges of the net as "
                      f"written{full}{kept}")

@@ -98,7 +98,9 @@ export function initAnalysis(app) {
   function yes(v) { return v === true ? "yes" : v === false ? "no" : "undecided"; }
 
   function renderQualitative(q) {
-    panel.append(el("h4", {}, `petrobot analyze \u2014 ${q.states ?? "?"} markings`));
+    // a stopped search's count is a lower bound: "at least", never the net's count
+    const found = q.truncated ? `at least ${q.truncated.states_found}` : "?";
+    panel.append(el("h4", {}, `petrobot analyze \u2014 ${q.states ?? found} markings`));
     const facts = el("ul", { class: "small" },
       el("li", {}, link("bound", "bounded"), `: ${yes(q.bounded)}; the bound of each place is drawn on it`),
       el("li", {}, link("liveness", "live"), `: ${yes(q.live)}; `,
