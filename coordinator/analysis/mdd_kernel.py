@@ -37,8 +37,8 @@ from __future__ import annotations
 
 import threading
 import time
-import warnings
 from collections.abc import Callable
+from typing import Protocol
 
 import numpy as np
 
@@ -47,10 +47,6 @@ from coordinator.analysis import jit
 jit.configure()  # numba's cache in the user's cache directory: before numba is imported
 
 from numba import njit, objmode  # noqa: E402
-
-# run's objmode block (the watch, every million steps) takes the GIL for a moment; the rest of run
-# runs without it, which is what nogil is asked for, so numba's compile-time warning says nothing new
-warnings.filterwarnings("ignore", message="Code running in object mode won't allow parallel execution")
 
 __all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "MEMORY", "MODE_APPLY", "MODE_IMAGE",
            "MODE_RESTRICT", "MODE_SATURATE", "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "add_path", "count",
@@ -82,8 +78,15 @@ _GOLD = np.uint64(0x9E3779B97F4A7C15)
 _watch = threading.local()
 
 
+class Flag(Protocol):
+    """What :func:`set_watch` reads to cancel: a :class:`threading.Event`, or any object with its
+    ``is_set``."""
+
+    def is_set(self) -> bool: ...
+
+
 def set_watch(deadline: float | None, progress: Callable[[int], None] | None = None,
-              cancel: threading.Event | None = None) -> None:
+              cancel: Flag | None = None) -> None:
     """Stop this thread's :func:`run` calls at ``deadline`` (``time.monotonic()`` seconds; None: no
     deadline) or once ``cancel`` is set (another thread's decision), and report the store's node
     count to ``progress`` every million steps or so."""
@@ -351,9 +354,10 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
     f_buf = np.zeros(fcap, np.int64)
     f_k0 = np.zeros(fcap, np.int64)
     f_k1 = np.zeros(fcap, np.int64)
+    f_s = np.zeros(fcap, np.int64)  # a NODE frame's lowest value that may be dirty
     arena = np.zeros((fcap + 1) * max_dom, np.int32)
     atop = 0
-    fixed = fcap * 96 + arena.shape[0] * 4
+    fixed = fcap * 104 + arena.shape[0] * 4
     status = OK
     ret = EMPTY
     depth = 0
@@ -473,6 +477,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 atop += dom[k]
                 f_i[d] = -1
                 f_e[d] = hi
+                f_s[d] = 0
                 pc = 2
             if pc == 3:  # a firing is back
                 i = f_i[d]
@@ -498,19 +503,21 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 if ret != arena[b0 + j]:
                     arena[b0 + j] = ret
                     arena[fl + j] = 1
+                    f_s[d] = min(f_s[d], j)
                 f_e[d] += 1
                 pc = 2
             while pc == 2 and cty < 0:
                 ei = f_e[d]
-                if ei == hi:  # the next dirty value
-                    i = -1
-                    for x in range(dom[k]):
+                if ei == hi:  # the next dirty value: the lowest, searched from f_s (none below it), so
+                    i = -1  # a sweep upwards reads each value once, not once per value fired
+                    for x in range(f_s[d], dom[k]):
                         if arena[fl + x] != 0:
                             i = x
                             break
                     if i < 0:
                         pc = 5
                         break
+                    f_s[d] = i + 1
                     arena[fl + i] = 0
                     f_i[d] = i
                     f_e[d] = lo
