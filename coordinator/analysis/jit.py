@@ -13,12 +13,18 @@ search, level 1 compiles about 15 % faster than numba's default 3 and runs as fa
 :func:`coordinator.analysis.statespace.search_is_compiled` tells a command whether the next use will
 compile (so it can say so on stderr) or load the cache. Each compiled module calls :func:`configure`
 before it imports numba, so whoever imports it first, the cache lands in the user's directory.
+
+:func:`configure` also silences numba's notice that code in object mode "won't allow parallel
+execution despite nogil=True": both kernels release the GIL (``nogil``) and take it back only for
+a moment, in their object-mode hooks (the search's progress report every 65,536 markings, the
+saturation's watch every million steps), which is what nogil is asked for.
 """
 
 from __future__ import annotations
 
 import os
 import sys
+import warnings
 from pathlib import Path
 
 __all__ = ["cache_dir", "configure"]
@@ -38,6 +44,7 @@ def configure() -> str:
     optimisation level at 1 unless ``NUMBA_OPT`` is set); return the cache directory numba will use. Must run before the compiled functions are defined (before
     :mod:`.reach_kernel` is imported); if numba itself is already imported, its configuration is
     updated as well."""
+    warnings.filterwarnings("ignore", message="Code running in object mode won't allow parallel execution")
     if "NUMBA_OPT" not in os.environ and "numba" not in sys.modules:
         os.environ["NUMBA_OPT"] = "1"
     chosen = os.environ.get("NUMBA_CACHE_DIR", "")

@@ -52,7 +52,9 @@ the search 1.5–2× slower (numba's optimisation level 1, :mod:`.jit`).
 One call of :func:`run` does the whole search, buffers and growth included, and hands back the
 finished arrays: on small nets the cost of crossing from Python into compiled code, not the search,
 is what a caller waits for, so it is paid once. Progress reports go through a hook that :func:`run`
-calls back in the interpreter (numba's object mode), which is also where Ctrl-C is noticed.
+calls back in the interpreter (numba's object mode), which is also where Ctrl-C is noticed and a
+stop event set by another thread is read. Between reports :func:`run` holds no GIL, so a search
+in one thread and the symbolic engine's saturation in others run at once.
 """
 
 from __future__ import annotations
@@ -73,8 +75,9 @@ __all__ = ["CURSOR_SIZE", "HEAD", "RESET_SIGNATURE", "RUN_SIGNATURE", "cached", 
 
 #: status codes: graph complete, or the state limit reached and its level finished; ``budget``
 #: markings expanded; a buffer is full; a token count would exceed 2**31 - 1, the largest a field
-#: holds; the byte budget stopped the search; a count outgrew its place's field.
-DONE, BUDGET, ROOM, OVERFLOW, MEMORY, WIDEN = 0, 1, 2, 3, 4, 5
+#: holds; the byte budget stopped the search; a count outgrew its place's field; the caller's stop
+#: event was set (:func:`set_progress`).
+DONE, BUDGET, ROOM, OVERFLOW, MEMORY, WIDEN, STOPPED = 0, 1, 2, 3, 4, 5, 6
 #: layout of the cursor array
 N, E, NEXT, LEVEL_END, STOPPING, N_TRUNC, MAX_COUNT, NEED, NEED_S = range(9)
 CURSOR_SIZE = 9
@@ -91,15 +94,21 @@ _SEED = np.uint64(0x5EED0F9E7B)
 _hook = threading.local()
 
 
-def set_progress(callback: Callable[[int, int], None] | None) -> None:
-    """Install (or, with None, remove) the progress callback of this thread's :func:`run` calls."""
+def set_progress(callback: Callable[[int, int], None] | None, stop: threading.Event | None = None) -> None:
+    """Install (or, with None, remove) the progress callback of this thread's :func:`run` calls, and
+    the event that stops them (status :data:`STOPPED`, checked at each report: another thread's
+    decision, e.g. the symbolic engine answered first)."""
     _hook.callback = callback
+    _hook.stop = stop
 
 
-def _report(n_states: int, n_edges: int) -> None:
+def _report(n_states: int, n_edges: int) -> int:
+    """Called from :func:`run` in the interpreter: 1 to stop (the stop event is set), else 0."""
     callback = getattr(_hook, "callback", None)
     if callback is not None:
         callback(int(n_states), int(n_edges))
+    stop = getattr(_hook, "stop", None)
+    return int(stop is not None and stop.is_set())
 
 
 @njit(cache=True)
@@ -590,7 +599,7 @@ def load_resets() -> None:
             run.disable_compile()
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # threads may search beside other work (the symbolic engine's lanes)
 def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.ndarray, m0: np.ndarray,
         layout: np.ndarray, prio: np.ndarray, use_prio: bool, max_states: int, max_bytes: int,
         report_every: int, keep_edges: bool, resets: np.ndarray | None,
@@ -614,7 +623,8 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
             expanded is done.
         max_bytes: byte budget of the search's buffers (see the module docstring).
         report_every: call the progress hook (:func:`set_progress`) every this many expanded
-            markings and at the end; 0 for never.
+            markings and at the end, and stop (status ``STOPPED``) if its stop event is set; 0 for
+            never.
         keep_edges: keep the edges (``dst``, ``tr``); else only count them: ``dst`` and ``tr`` come
             back empty, ``out_ptr`` still gives each state's number of edges.
         resets: ``None`` for a net without reset arcs (the search is compiled without their code),
@@ -625,7 +635,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
 
     Returns:
         ``(status, states, dst, tr, parent, expanded, out_ptr, complete, max_count, layout,
-        store_bytes)``: DONE, OVERFLOW or MEMORY; states (N, W) uint64 packed markings in
+        store_bytes)``: DONE, OVERFLOW, MEMORY or STOPPED; states (N, W) uint64 packed markings in
         breadth-first order, in the final ``layout`` (fields widened during the search; :func:`unpack`);
         edges as CSR: dst (E,) int32 and tr (E,) int32 sorted by source then transition (empty
         unless ``keep_edges``), out_ptr (N+1,) int64; parent (N,) int32 the state of the previous
@@ -761,8 +771,12 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         if status == MEMORY:
             cursor[STOPPING] = 1
         if report_every > 0:
-            with objmode():
-                _report(cursor[N], cursor[E])
+            stop = 0
+            with objmode(stop="int64"):
+                stop = _report(cursor[N], cursor[E])
+            if stop != 0 and status == BUDGET:
+                status = STOPPED
+                cursor[STOPPING] = 1
         if status != BUDGET:
             break
         next_report = cursor[NEXT] + report_every

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -67,8 +68,8 @@ class StateSpace:
             Shape (N,), int32.
         expanded: which states had all their successors computed, shape (N,), bool.
         stopped_by: why an incomplete search stopped: ``"max_states"`` (the state limit; the level
-            in progress was finished) or ``"max_memory"`` (the byte budget; stopped at once);
-            None when complete.
+            in progress was finished), ``"max_memory"`` (the byte budget; stopped at once) or
+            ``"stopped"`` (the caller's stop event); None when complete.
         packed_bits: bits of one marking in the search's packed store (the sum of the places'
             field widths, :func:`packed_layout`).
         store_bytes: bytes of the search's marking store and hash table when it ended (capacity,
@@ -575,7 +576,8 @@ def _widths(bounds: np.ndarray | None, m0: np.ndarray) -> tuple[np.ndarray, np.n
 
 def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray | None = None,
             progress: Callable[[int, int], None] | None = None, max_bytes: int | None = None,
-            bounds: np.ndarray | None = None, edges: bool = True, finish_level: bool = True) -> StateSpace:
+            bounds: np.ndarray | None = None, edges: bool = True, finish_level: bool = True,
+            stop: threading.Event | None = None) -> StateSpace:
     """Build the reachability graph of ``net`` by a compiled breadth-first search.
 
     The ordinary firing rule of :mod:`coordinator.net` is used (inhibitor arcs honoured, reset arcs
@@ -611,6 +613,9 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
             expanded stay unexpanded), for a caller that asks only whether the graph fits: a level
             may be most of the graph (Eratosthenes-PT-200's 1,000,000th marking is found in 7 s,
             and its level took 54 s more to finish).
+        stop: an event another thread sets to stop the search (checked every 65,536 expanded
+            markings; ``stopped_by == "stopped"``): the automatic engine's search beside the
+            symbolic engine, when that one answers first.
 
     Returns:
         The :class:`StateSpace`.
@@ -641,11 +646,11 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         rk.load_resets()  # the search of nets with reset arcs is a second compiled specialisation
     start, target = _widths(bounds, np.asarray(m0))
     layout = np.concatenate([packed_layout(start)[0], target])
-    rk.set_progress(progress)
+    rk.set_progress(progress, stop)
     try:
         status, words, dst, tr, parent, expanded, out_ptr, complete, top, layout, store = rk.run(
             pre, inh, inc, tab, m0, layout, prio, use_prio, max_states, budget,
-            _PROGRESS_STATES if progress is not None else 0, bool(edges), tab if net.has_resets else None,
+            _PROGRESS_STATES if progress is not None or stop is not None else 0, bool(edges), tab if net.has_resets else None,
             bool(finish_level))
     finally:
         rk.set_progress(None)
@@ -653,7 +658,7 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         raise AnalysisError(f"a token count reached {top}, above 2**31 - 1 (the search stores counts in at most "
                             f"31 bits), after {words.shape[0]} markings; petrobot analyze decides boundedness "
                             "by coverability")
-    stopped = None if complete else ("max_memory" if status == rk.MEMORY else "max_states")
+    stopped = None if complete else {rk.MEMORY: "max_memory", rk.STOPPED: "stopped"}.get(status, "max_states")
     n_p = len(net.places)
     return StateSpace(net=net, words=words, layout=layout[:3 * n_p].copy(), out_ptr=out_ptr, dst=dst, transition=tr,
                       complete=bool(complete), parent=parent, expanded=expanded, stopped_by=stopped,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import threading
 from collections import deque
 
 import numpy as np
@@ -329,6 +330,35 @@ def test_progress_can_stop_a_long_search() -> None:
         explore(net, max_states=200_000, progress=stop)
     assert calls == [65_537]
     assert explore(net, max_states=10).n_states == 10  # the hook is cleared after an interrupted search
+
+
+def test_a_stop_event_ends_the_search_at_its_next_report_with_what_it_found() -> None:
+    net = make_net("producer", {"go": 1}, {"produce": ({"go": 1}, {"go": 1, "buf": 1})})
+    stop = threading.Event()
+    stop.set()  # set before the search: it ends at its first report, after 65,536 expanded markings
+    space = explore(net, max_states=200_000, stop=stop)
+    assert (space.complete, space.stopped_by, space.n_states) == (False, "stopped", 65_537)
+    assert int(space.expanded.sum()) == 65_536 and not space.expanded[-1]
+    assert explore(net, max_states=10).n_states == 10  # the event is cleared with the hook
+
+
+def test_a_search_in_another_thread_runs_beside_this_one_and_stops_when_asked() -> None:
+    net = make_net("producer", {"go": 1}, {"produce": ({"go": 1}, {"go": 1, "buf": 1})})
+    stop = threading.Event()
+    reports: list[int] = []
+    found: list[StateSpace] = []
+
+    def progress(states: int, edges: int) -> None:
+        reports.append(states)
+        if len(reports) == 3:
+            stop.set()
+
+    helper = threading.Thread(target=lambda: found.append(explore(net, max_states=2_000_000, progress=progress,
+                                                                    stop=stop)))
+    helper.start()
+    assert explore(net, max_states=1_000).n_states == 1_000  # this thread's search has no hook: not stopped
+    helper.join()
+    assert found[0].stopped_by == "stopped" and found[0].n_states == 3 * 65_536 + 1
 
 
 def test_a_count_beyond_its_narrow_field_widens_the_field_and_never_wraps() -> None:
