@@ -1,11 +1,12 @@
-"""The default memory budget of an analysis (cheap to import: the command line reads it for --help)."""
+"""The default memory budget of an analysis, and the CPUs it may use (cheap to import: the command
+line reads them for --help)."""
 
 from __future__ import annotations
 
 import functools
 import os
 
-__all__ = ["default_max_bytes"]
+__all__ = ["cpus", "default_max_bytes"]
 
 
 @functools.cache
@@ -17,3 +18,12 @@ def default_max_bytes() -> int:
     except (ValueError, OSError, AttributeError):
         return 4 << 30
     return int(min(total // 2, 4 << 30))
+
+
+def cpus() -> int:
+    """The CPUs this process may run on (its affinity), at least 1: the symbolic engine races two
+    variable orders, and the automatic engine runs the explicit search beside it, on two or more."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1

@@ -40,7 +40,7 @@ component, so it can fire infinitely often; L4 live — t labels an edge in ever
 reversible iff the graph is strongly connected; the home states are the states of the terminal
 component when there is exactly one.
 
-Length: about 770 lines because :func:`analyse` is one decision procedure (graph, then LP bounds,
+Length: about 1,100 lines because :func:`analyse` is one decision procedure (graph, then LP bounds,
 then invariants, then coverability, each step deciding what the previous one left open) and its
 result types and graph passes are read together with it; the LP, invariants, siphons and the
 search live in their own modules.
@@ -48,6 +48,7 @@ search live in their own modules.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -72,6 +73,7 @@ from coordinator.analysis.invariants import (
     structural_bounds,
     t_invariants,
 )
+from coordinator.analysis.budget import cpus
 from coordinator.analysis.lp import PlaceBounds, Support
 from coordinator.analysis.matrices import SparseNet, sparse_net
 from coordinator.analysis.statespace import StateSpace, default_max_bytes, explore, implicit_pass_bytes
@@ -437,6 +439,7 @@ def _conflicts(net: PetriNet, space: StateSpace | None, *, seconds: float = 10.0
 
 #: the explicit search's share in the automatic choice: it runs up to this many markings (a few
 #: seconds); a net whose graph is larger and whose places all have a proven bound goes symbolic
+#: (and, on two CPUs or more, the explicit search goes on beside the symbolic engine: _Beside)
 AUTO_PROBE_STATES = 1_000_000
 #: time budget of the symbolic engine inside :func:`analyse` (seconds)
 SYMBOLIC_SECONDS = 300.0
@@ -524,12 +527,13 @@ def search_bounds(net: PetriNet, *, max_bytes: int | None = None, invariant_seco
 
 
 def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,
-                  progress: Callable[[int, int], None] | None,
-                  finish_level: bool = True) -> tuple[StateSpace, CoveringWitness | None]:
+                  progress: Callable[[int, int], None] | None, finish_level: bool = True,
+                  stop: threading.Event | None = None) -> tuple[StateSpace, CoveringWitness | None]:
     """The reachability graph within its limits, and a pumping witness of unboundedness when the
     structure does not bound the net (a short probe first: unboundedness is often cheap to see).
     ``finish_level`` False: stop at once at ``max_states`` (:func:`.statespace.explore`), for the
-    automatic engine's question whether the graph fits its explicit share."""
+    automatic engine's question whether the graph fits its explicit share. ``stop``: another
+    thread's event that ends the search (:func:`.statespace.explore`)."""
     space: StateSpace | None = None
     witness: CoveringWitness | None = None
     bounds = _search_bounds(st)
@@ -543,12 +547,12 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
                 space = probe
     if space is None:
         space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
-                        finish_level=finish_level)
+                        finish_level=finish_level, stop=stop)
         if space.stopped_by == "max_memory" and st.bounded and finish_level:
             # the edges (8 bytes each) filled the budget: the markings alone may fit, and liveness
             # and reversibility come from them (StateSpace.implicit_liveness)
             counted = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
-                              edges=False)
+                              edges=False, stop=stop)
             again = (f"the reachability graph with its edges did not fit the memory budget ({graph_bytes / 2**30:.2f} "
                      "GiB); searched again counting the edges without keeping them, it ")
             if counted.complete:
@@ -589,7 +593,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
             reachability graph's search, up to a quarter (at most 512 MiB) to each invariant
             enumeration (before the search, freed after), and the passes over a complete graph
             (liveness, recovery) run only if their estimated need fits in the budget beside the graph;
-            the symbolic engine has the whole budget.
+            the symbolic engine has the whole budget (half while the explicit search runs beside it).
         max_coverability_nodes: limit of the Karp–Miller graph (lowered to what the budget holds).
         max_invariant_rows: size guard of the Farkas algorithm.
         invariant_seconds: time budget of each Farkas enumeration.
@@ -599,7 +603,9 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         engine: ``"explicit"`` (the reachability graph), ``"symbolic"`` (the reachable set as a
             decision diagram, :mod:`.symbolic`; needs a proven bound on every place) or ``"auto"``:
             explicit up to :data:`AUTO_PROBE_STATES` markings, symbolic beyond when every place has
-            a proven bound (:attr:`Analysis.engine_reason` says which and why).
+            a proven bound, with the explicit search going on beside it on two CPUs or more
+            (:class:`_Beside`: whichever completes first answers; :attr:`Analysis.engine_reason`
+            says which and why).
         symbolic_seconds: time budget of the symbolic engine.
         phase: called with a short line when a phase of the symbolic engine starts.
 
@@ -636,12 +642,37 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         why = "its memory budget" if space.stopped_by == "max_memory" else f"{space.n_states:,} markings"
         reason = (f"symbolic: the explicit search stopped at {why} and every place has a proven bound, so the "
                   "symbolic engine takes over")
+        beside: _Beside | None = None
+        if limit < max_states and cpus() >= 2:
+            del space  # the probe's graph is freed: the search beside builds its own, or one is built again
+            beside = _Beside(net, sn, st, max_states, budget // 2, progress, phase)
+        found: Analysis | None = None
         try:
-            return _symbolic_phase(net, sn, st, budget, lp_seconds, symbolic_seconds, phase, reason, started)
+            found = _symbolic_phase(net, sn, st, budget - (0 if beside is None else beside.graph_bytes), lp_seconds,
+                                    symbolic_seconds, phase, reason, started,
+                                    stop=None if beside is None else beside.finished,
+                                    borrow=None if beside is None else beside.lend)
         except AnalysisError as exc:
-            reason = f"explicit: the symbolic engine gave up ({exc})"
-            st.notes.append(f"the symbolic engine gave up ({exc}); the explicit search goes on to its limits")
-        if limit < max_states:
+            if beside is None or not beside.finished.is_set():
+                reason = f"explicit: the symbolic engine gave up ({exc})"
+                st.notes.append(f"the symbolic engine gave up ({exc}); the explicit search goes on to its limits")
+        except BaseException:
+            if beside is not None:
+                beside.end(stop=True)
+            raise
+        if beside is not None:
+            beside.end(stop=found is not None)  # the symbolic engine gave up: the search goes on to its limits
+        if found is not None and (beside is None or not beside.finished.is_set()):
+            return found
+        rerun = limit < max_states
+        if beside is not None and beside.found is not None:
+            space, witness = beside.found
+            st.notes.extend(beside.st.notes[len(st.notes):])
+            rerun = False  # the search beside had the explicit search's own share of the budget
+            if space.complete:
+                reason = (f"explicit: the reachability graph is complete with {space.n_states:,} markings, found by "
+                          "the explicit search that went on beside the symbolic engine (which it stopped)")
+        if rerun:
             space, witness = _search_phase(net, sn, st, max_states, budget // 2, progress)
     elif engine == "auto":
         reason = "explicit: not every place has a proven bound, so only the explicit search (and coverability) apply"
@@ -853,16 +884,81 @@ def _partial_from_projection(v: _Partial, net: PetriNet, sn: SparseNet, st: _Str
         notes.append("liveness and reversibility need the whole reachability graph and were not decided")
 
 
+class _Beside:
+    """The explicit search of the automatic engine, run on to ``max_states`` in a thread beside the
+    symbolic engine once the explicit share is passed (two CPUs or more: :func:`analyse`).
+
+    Whichever completes first answers. A complete graph sets :attr:`finished`, which stops the
+    symbolic engine. When the symbolic engine answers, :meth:`end` stops the search; when it gives
+    up, the search goes on to its limits and its graph, complete or not, is the explicit answer.
+    The search has ``graph_bytes`` of the budget (half, the explicit search's own share; the
+    symbolic engine has the other half meanwhile, and the whole when it outgrows its half:
+    :meth:`lend`), and searches again counting the edges when they do not fit (:func:`_search_phase`). It works on its own copy of the structure's notes
+    (:attr:`st`), taken over if its graph is used. Nets of a few million markings that decision
+    diagrams take long over are answered by the search (SafeBus-PT-06: 6,816,756 markings,
+    docs/BENCHMARKS.md)."""
+
+    def __init__(self, net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,
+                 progress: Callable[[int, int], None] | None, phase: Callable[[str], None] | None) -> None:
+        self.graph_bytes = graph_bytes
+        self.st = replace(st, notes=list(st.notes))
+        self.finished = threading.Event()  # the graph is complete: the symbolic engine stops
+        self.answered = threading.Event()  # the symbolic engine is done: the search stops
+        self.found: tuple[StateSpace, CoveringWitness | None] | None = None
+        self.error: BaseException | None = None
+        if phase is not None:
+            phase(f"explicit: the search goes on beside the symbolic engine, up to {max_states:,} markings "
+                  f"within {graph_bytes / 2**30:.2f} GiB")
+
+        def search() -> None:
+            try:
+                self.found = _search_phase(net, sn, self.st, max_states, graph_bytes, progress, stop=self.answered)
+                if self.found[0].complete:
+                    self.finished.set()
+            except BaseException as exc:  # kept for the record; the symbolic engine's answer stands
+                self.error = exc
+
+        self.thread = threading.Thread(target=search, name="petrobot-explicit", daemon=True)
+        self.thread.start()
+
+    def lend(self) -> int:
+        """The symbolic engine outgrew its half of the budget: the search is stopped (its graph
+        dropped) and its share handed over, bytes; 0 if its graph is complete (the symbolic engine
+        is being stopped then). A reachable set that outgrows half the budget is seldom one the
+        search completes (SmallOperatingSystem-PT-MT1024DC0512: 7.7e12 markings, 3.6 GiB)."""
+        if self.finished.is_set():
+            return 0
+        self.end(stop=True)
+        if self.finished.is_set():
+            return 0
+        self.found = None
+        return self.graph_bytes
+
+    def end(self, stop: bool) -> None:
+        """Wait for the search (Ctrl-C stays possible), stopped first if ``stop`` (the symbolic
+        engine answered); else it goes on to its limits."""
+        if stop:
+            self.answered.set()
+        while self.thread.is_alive():
+            self.thread.join(0.2)
+        if self.found is not None and self.found[0].stopped_by == "stopped":
+            self.found = None  # a search cut short says nothing the other searches do not
+
+
 def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, lp_seconds: float, seconds: float,
-                    phase: Callable[[str], None] | None, reason: str, started: float) -> Analysis:
+                    phase: Callable[[str], None] | None, reason: str, started: float,
+                    stop: threading.Event | None = None, borrow: Callable[[], int] | None = None) -> Analysis:
     """The analysis from the symbolic engine (:mod:`.symbolic`): the reachable set as a decision
     diagram over the proven place bounds, every count exact. Liveness levels (L1 vs L3), home
     states and the effectiveness of conflicts need the graph and stay undecided. Reversibility
     and liveness are worked on until :data:`~.symbolic.ANSWER_SECONDS` after ``started`` (the
     analysis's start, ``time.monotonic()``: the LPs and the explicit search before count too).
+    ``stop``: another thread's event that stops the engine; ``borrow``: what frees more memory
+    for it when it outgrows ``budget`` (:func:`.symbolic.analyse_symbolic`).
 
     Raises:
-        AnalysisError: a place without a proven bound, or the engine's time or memory budget.
+        AnalysisError: a place without a proven bound, the engine's time or memory budget, or
+            ``stop`` set before the reachable set was complete.
     """
     if not st.bounded:
         raise AnalysisError("the symbolic engine needs a bounded net: neither the state equation nor the "
@@ -878,7 +974,8 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
 
     flows = lp.semiflow_cover(sn, seconds=min(lp_seconds, 3.0))
     r = analyse_symbolic(net, upper, flows=flows, max_bytes=budget, seconds=seconds, progress=phase,
-                         answer_seconds=max(1.0, ANSWER_SECONDS - (time.monotonic() - started)))
+                         answer_seconds=max(1.0, ANSWER_SECONDS - (time.monotonic() - started)), stop=stop,
+                         borrow=borrow)
     ids = [p.id for p in net.places]
     tids = [t.id for t in net.transitions]
     notes = list(st.notes)

@@ -38,7 +38,6 @@ what is not decided in time is left undecided).
 from __future__ import annotations
 
 import contextlib
-import os
 import threading
 import time
 from collections.abc import Callable
@@ -48,6 +47,7 @@ from math import ceil, log2
 import numpy as np
 
 from coordinator.analysis import mdd_kernel as mk
+from coordinator.analysis.budget import cpus
 from coordinator.analysis.matrices import SparseNet, sparse_net
 from coordinator.analysis.mdd_order import Encoding, Events, encode, events, touched_places
 from coordinator.errors import AnalysisError
@@ -163,15 +163,23 @@ class _Store:
         self._done = np.zeros(0, np.uint8)
         self._approx = np.zeros(0, np.float64)
         self._residue = np.zeros((0, 1), np.int64)
+        #: what frees more bytes for this store when a call outgrows ``max_bytes`` (asked once)
+        self.borrow: Callable[[], int] | None = None
 
     def call(self, mode: int, ev: Events, a: int, b: int = 0, c: int = mk.NO_CONSTRAINT, arg: int = 0,
              check_overflow: bool = False) -> int:
         if ev is not self._events:  # cached results name events by their index in a set of events
             mk.clear_cache(self.arrays)
             self._events = ev
-        args = (mode, self.dom, *ev.tables(), *self.arrays, a, b, c, arg, check_overflow, self.max_bytes)
-        status, ret, *arrays = mk.run(*args)  # type: ignore[arg-type]
-        self.arrays = tuple(arrays)
+        while True:
+            args = (mode, self.dom, *ev.tables(), *self.arrays, a, b, c, arg, check_overflow, self.max_bytes)
+            status, ret, *arrays = mk.run(*args)  # type: ignore[arg-type]
+            self.arrays = tuple(arrays)
+            borrow, self.borrow = (self.borrow, None) if status == mk.MEMORY else (None, self.borrow)
+            extra = 0 if borrow is None else borrow()
+            if extra <= 0:
+                break
+            self.max_bytes += extra  # the call again, from the results its store kept
         if status == mk.MEMORY:
             raise AnalysisError(f"the decision diagram outgrew the memory budget of {self.max_bytes / 2**30:.2f} GiB "
                                 f"({self.nodes:,} nodes)")
@@ -492,7 +500,8 @@ def _bfs_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fw
 
 def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarray] | None = None,
                      max_bytes: int = 4 << 30, seconds: float = 600.0, answer_seconds: float = ANSWER_SECONDS,
-                     progress: Callable[[str], None] | None = None, probes: int = PROBES) -> SymbolicResult:
+                     progress: Callable[[str], None] | None = None, probes: int = PROBES,
+                     stop: threading.Event | None = None, borrow: Callable[[], int] | None = None) -> SymbolicResult:
     """The reachable set of a bounded net by saturation, and its properties (module docstring).
 
     Args:
@@ -512,13 +521,19 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             reversibility before the backward saturations (:func:`_probe`); 0: backward only,
             which decides every transition's liveness when there is time (the probe stops at the
             first transition it shows not live).
+        stop: an event another thread sets to stop the engine (the automatic engine's explicit
+            search finished first): the race for the reachable set ends with AnalysisError, and a
+            later phase stops as at its deadline, leaving what it had not decided undecided.
+        borrow: called (once, from any thread) when the decision diagram outgrows ``max_bytes``
+            while the reachable set is built: the bytes it frees for the engine (the automatic
+            engine's explicit search beside it stops and hands its share over), 0 for none.
 
     Returns:
         A :class:`SymbolicResult`.
 
     Raises:
-        AnalysisError: a place without a bound, the memory budget, or the time budget reached before
-            the reachable set was complete.
+        AnalysisError: a place without a bound, the memory budget, the time budget reached before
+            the reachable set was complete, or ``stop`` set before it was.
     """
     start = time.monotonic()
     deadline = start + seconds
@@ -527,7 +542,15 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
     secs: dict[str, float] = {}
     notes: list[str] = []
     t0 = time.monotonic()
-    enc, fwd, store, reach = _race(sn, bounds, list(flows or []), max_bytes, deadline, say)
+    def widen() -> int:
+        extra = 0 if borrow is None else borrow()
+        if extra > 0:
+            say(f"symbolic: {extra / 2**30:.2f} GiB more for the decision diagram (the explicit search beside it "
+                "stopped)")
+        return extra
+
+    enc, fwd, store, reach = _race(sn, bounds, list(flows or []), max_bytes, deadline, say, stop,
+                                   None if borrow is None else widen)
     single = events(sn, enc)
     secs["encode"] = enc.seconds
     secs["reach"] = time.monotonic() - t0 - enc.seconds
@@ -564,11 +587,11 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         back: Events | None = None
         if sn.n_resets == 0:
             back = events(sn, enc, inverse=True)
-        mk.set_watch(deadline, None)
+        mk.set_watch(deadline, None, stop)
         _witness(store, sn, enc, net, fwd, back, reach, dead, result, say, deadline)
         until = min(deadline, start + answer_seconds)
-        mk.set_watch(until, None)
-        _liveness(store, fwd, single, back, reach, counts, result, say, until, probes)
+        mk.set_watch(until, None, stop)
+        _liveness(store, fwd, single, back, reach, counts, result, say, until, probes, stop)
         result.nodes = store.nodes
         return result
     finally:
@@ -637,16 +660,23 @@ def _same_order(a: Encoding, b: Encoding) -> bool:
     return len(a.levels) == len(b.levels) and all(np.array_equal(x, y) for x, y in zip(a.levels, b.levels))
 
 
-def _cpus() -> int:
-    """The CPUs this process may run on (its affinity), at least 1."""
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except (AttributeError, OSError):
-        return os.cpu_count() or 1
-
-
 _Candidate = tuple[Encoding, Events, _Store]
 _Won = tuple[Encoding, Events, _Store, int]
+
+
+class _Cancel:
+    """A lane's cancel flag: set by the race (:meth:`set`), or by whoever stops the whole engine
+    (``outer``, another thread's event)."""
+
+    def __init__(self, outer: threading.Event | None) -> None:
+        self.own = threading.Event()
+        self.outer = outer
+
+    def set(self) -> None:
+        self.own.set()
+
+    def is_set(self) -> bool:
+        return self.own.is_set() or (self.outer is not None and self.outer.is_set())
 
 
 class _Race:
@@ -654,8 +684,10 @@ class _Race:
     the winner, and which lane, if any, has outgrown its share of the memory and taken the whole."""
 
     def __init__(self, sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes: int,
-                 deadline: float, say: Callable[[str], None]) -> None:
+                 deadline: float, say: Callable[[str], None], stop: threading.Event | None = None,
+                 borrow: Callable[[], int] | None = None) -> None:
         self.sn, self.bounds, self.flows = sn, bounds, flows
+        self.stop, self.borrow = stop, borrow
         self.max_bytes, self.deadline, self.say = max_bytes, deadline, say
         self.lock = threading.Lock()
         self.orders: list[Encoding] = []  # every candidate's encoding, the first one's first
@@ -722,6 +754,23 @@ class _Race:
             if other is not but:
                 other.cancel.set()
 
+    def take_borrow(self) -> Callable[[], int] | None:
+        """``borrow``, for the first who asks (None after)."""
+        with self.lock:
+            borrow, self.borrow = self.borrow, None
+        return borrow
+
+    def widen(self) -> bool:
+        """The whole budget is outgrown: add what ``borrow`` frees (asked once, by the first lane
+        that outgrows the whole); False if nothing was freed."""
+        borrow = self.take_borrow()
+        extra = 0 if borrow is None else borrow()
+        if extra <= 0:
+            return False
+        with self.lock:
+            self.max_bytes += extra
+        return True
+
     def take_whole(self, lane: _Lane) -> bool:
         """``lane``'s store outgrew its share: the other lanes are stopped (and waited for, so that
         their stores are gone) and it gets the whole budget; False if another lane took it first."""
@@ -749,7 +798,7 @@ class _Lane:
 
     def __init__(self, race: _Race, first: bool, others: int, share: int) -> None:
         self.race, self.has_first, self.others, self.share = race, first, others, share
-        self.cancel = threading.Event()
+        self.cancel = _Cancel(race.stop)
         self.ended = threading.Event()
         self.timed_out = False
         self.nodes = 0
@@ -843,6 +892,10 @@ class _Lane:
                     store.max_bytes = race.max_bytes
                     turn -= 1
                     continue
+                if store.max_bytes >= race.max_bytes and race.widen():
+                    store.max_bytes = race.max_bytes  # the call resumes from its store
+                    turn -= 1
+                    continue
                 alive[i] = False
             finally:
                 mk.set_watch(None, None)
@@ -851,7 +904,8 @@ class _Lane:
 
 
 def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes: int, deadline: float,
-          say: Callable[[str], None]) -> _Won:
+          say: Callable[[str], None], stop: threading.Event | None = None,
+          borrow: Callable[[], int] | None = None) -> _Won:
     """The reachable set, by saturation on candidate variable orders raced against each other, until
     one finishes. How long saturation takes on an order is hard to predict from the order (on
     Railroad-PT-010, orders whose scores differ by 2 % take 0.15 to 13 s), so a few candidates are
@@ -870,13 +924,15 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     candidate's turns :data:`_LEAD` times as long as the others' (when it is the fastest the others
     cost about half its time; Railroad-PT-020: 39 s of CPU for the race instead of 55 s). Each store
     has an equal share of the memory budget; when one outgrows its share, the others are stopped and
-    dropped and it gets the whole.
+    dropped and it gets the whole; when it outgrows the whole, ``borrow`` may add to it once
+    (:meth:`_Race.widen`). ``stop`` set (by another thread) ends every lane.
 
     Raises:
-        AnalysisError: every candidate outgrew the memory budget, or none was done by the deadline.
+        AnalysisError: every candidate outgrew the memory budget, none was done by the deadline, or
+            ``stop`` was set first.
     """
-    race = _Race(sn, bounds, flows, max_bytes, deadline, say)
-    if _cpus() >= 2:
+    race = _Race(sn, bounds, flows, max_bytes, deadline, say, stop, borrow)
+    if cpus() >= 2:
         race.lanes = [_Lane(race, True, 0, max_bytes // 2), _Lane(race, False, _CANDIDATES - 1, max_bytes // 2)]
     else:
         race.lanes = [_Lane(race, True, _CANDIDATES - 1, max_bytes)]
@@ -893,9 +949,12 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
         for thread in helpers:
             thread.join()
     if race.winner is not None:
+        race.winner[2].borrow = race.take_borrow()  # the later phases may outgrow the budget too
         return race.winner
     if race.error is not None:
         raise race.error
+    if stop is not None and stop.is_set():
+        raise AnalysisError("the symbolic engine was stopped before its reachable set was complete")
     if any(lane.timed_out for lane in race.lanes):
         nodes = max(lane.nodes for lane in race.lanes)
         raise AnalysisError(f"the symbolic reachable set was not complete within the time budget "
@@ -908,17 +967,17 @@ _PROBE_SHARE = 0.4
 
 
 def _probe(store: _Store, fwd: Events, single: Events, reach: int, result: SymbolicResult, until: float,
-           probes: int) -> None:
+           probes: int, stop: threading.Event | None = None) -> None:
     """Decide what a few markings drawn from the reachable set tell, forward: from a marking m, the
     set R(m) of the markings it reaches is saturated (the reachable set's own events, its computed
     table kept); a transition enabled in no marking of R(m) can never fire again after m, so it is
     not live (L4), and M0 outside R(m) makes the net not reversible. Nets with a one-shot start
     (an initialisation the net never returns to) are decided so in a forward saturation or two,
     where the backward saturations below may not finish (UtahNoC-PT-none: 2 s against undecided
-    after 40 s). At most ``probes`` markings; stops at ``until`` or when both are decided."""
+    after 40 s). At most ``probes`` markings; stops at ``until`` (or ``stop``) or when both are decided."""
     rng = np.random.default_rng(0x11FE)
     live_t = result.live_transitions
-    mk.set_watch(until, None)
+    mk.set_watch(until, None, stop)
     for _ in range(probes):
         if result.reversible is not None and result.live is not None:
             return
@@ -934,7 +993,8 @@ def _probe(store: _Store, fwd: Events, single: Events, reach: int, result: Symbo
 
 
 def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, reach: int, counts: list[int],
-              result: SymbolicResult, say: Callable[[str], None], until: float, probes: int) -> None:
+              result: SymbolicResult, say: Callable[[str], None], until: float, probes: int,
+              stop: threading.Event | None = None) -> None:
     """Reversibility and liveness (module docstring), until ``until`` (``time.monotonic()``
     seconds): what the drawn markings tell forward first (:func:`_probe`, within a share of the
     time), then backward saturation from M0 (reversibility) and, for each transition not yet
@@ -965,8 +1025,8 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
             # deadline what it decided stays and the backward saturations take the rest
             share = min(_PROBE_SHARE * max(0.0, until - t0), max(1.0, result.seconds.get("reach", 0.0)))
             with contextlib.suppress(_OutOfTime):
-                _probe(store, fwd, single, reach, result, min(until, t0 + share), probes)
-            mk.set_watch(until, None)
+                _probe(store, fwd, single, reach, result, min(until, t0 + share), probes, stop)
+            mk.set_watch(until, None, stop)
         if result.reversible is None:
             say("symbolic: reversibility (backward from M0)")
             home = store.call(mk.MODE_SATURATE, back, store.m0, c=reach)

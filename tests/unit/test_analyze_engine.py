@@ -5,12 +5,18 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import threading
 from pathlib import Path
 
 import pytest
 
+from coordinator.analysis import structure
+from coordinator.analysis.budget import cpus
 from coordinator.cli import main
+from coordinator.netfile.pnml import load_pnml
 from tests.unit.mcc_models import MCC, ROOT
+
+SCALE = ROOT / "tests" / "data" / "mcc-scale"
 
 SHARED_MEMORY = str(MCC / "SharedMemory-PT-000005" / "model.pnml")
 
@@ -49,6 +55,33 @@ def test_a_small_net_stays_explicit_and_says_so(capsys: pytest.CaptureFixture[st
     rep = run_json([SHARED_MEMORY], capsys)
     assert rep["engine"]["used"] == "explicit"  # type: ignore[index]
     assert "complete with 1,863 markings" in rep["engine"]["reason"]  # type: ignore[index]
+
+
+def no_search_left_running() -> bool:
+    return not any(t.name == "petrobot-explicit" for t in threading.enumerate())
+
+
+def test_beside_the_symbolic_engine_the_search_goes_on_and_whichever_completes_first_answers(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(structure, "AUTO_PROBE_STATES", 100)  # the explicit share: 100 markings
+    phases: list[str] = []
+    a = structure.analyse(load_pnml(SHARED_MEMORY), engine="auto", phase=phases.append)
+    assert (a.complete, a.states, a.edges, a.deadlock) == (True, 1_863, 10_395, False)
+    assert no_search_left_running()
+    if cpus() >= 2:
+        assert any(p.startswith("explicit: the search goes on beside the symbolic engine") for p in phases)
+        # the graph of 1,863 markings is complete long before the decision diagram (the LPs for the
+        # symbolic engine's bounds come first); whichever answered, the report says which
+        assert a.engine == "symbolic" or "beside the symbolic engine" in a.engine_reason
+
+
+def test_when_the_symbolic_engine_answers_first_the_search_beside_it_is_stopped(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(structure, "AUTO_PROBE_STATES", 1_000)
+    net = load_pnml(SCALE / "Eratosthenes-PT-050" / "model.pnml")  # 17,179,869,184 markings: 2 s symbolic
+    a = structure.analyse(net, engine="auto", max_states=100_000_000)
+    assert a.engine == "symbolic" and a.states == 17_179_869_184
+    assert no_search_left_running()
 
 
 def test_forcing_the_symbolic_engine_gives_a_deadlock_with_its_firing_sequence(

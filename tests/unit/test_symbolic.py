@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -152,6 +153,17 @@ def test_a_count_beyond_two_to_the_64_is_exact() -> None:
     assert r.states == 2**n
     assert r.edges == n * 2**n
     assert r.live is True and r.reversible is True and r.deadlock is False
+
+
+def test_a_stop_event_set_by_another_thread_ends_the_engine_with_a_clear_error() -> None:
+    net = load_pnml(SCALE / "Railroad-PT-020" / "model.pnml")  # its reachable set takes tens of seconds
+    bounds, flows = proven_bounds(net)
+    stop = threading.Event()
+    timer = threading.Timer(0.5, stop.set)
+    timer.start()
+    with pytest.raises(AnalysisError, match="stopped before its reachable set was complete"):
+        analyse_symbolic(net, bounds, flows=flows, seconds=600.0, stop=stop)
+    timer.join()
 
 
 def test_a_bound_below_the_truth_is_an_error_not_a_wrong_count() -> None:
