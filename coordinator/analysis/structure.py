@@ -76,7 +76,13 @@ from coordinator.analysis.invariants import (
 from coordinator.analysis.budget import cpus
 from coordinator.analysis.lp import PlaceBounds, Support
 from coordinator.analysis.matrices import SparseNet, sparse_net
-from coordinator.analysis.statespace import StateSpace, default_max_bytes, explore, implicit_pass_bytes
+from coordinator.analysis.statespace import (
+    StateSpace,
+    default_max_bytes,
+    enabled_mask,
+    explore,
+    implicit_pass_bytes,
+)
 from coordinator.errors import AnalysisError
 from coordinator.net import Marking, PetriNet
 
@@ -550,16 +556,18 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
                         finish_level=finish_level, stop=stop)
         if space.stopped_by == "max_memory" and st.bounded and finish_level:
             # the edges (8 bytes each) filled the budget: the markings alone may fit, and liveness
-            # and reversibility come from them (StateSpace.implicit_liveness)
-            counted = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
-                              edges=False, stop=stop)
+            # and reversibility come from them (StateSpace.implicit_liveness); the first graph is
+            # dropped first, so that one graph at a time is held within the budget
+            kept = space.n_states
+            del space
+            space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
+                            edges=False, stop=stop)
             again = (f"the reachability graph with its edges did not fit the memory budget ({graph_bytes / 2**30:.2f} "
-                     "GiB); searched again counting the edges without keeping them, it ")
-            if counted.complete:
-                st.notes.append(again + f"is complete with {counted.n_states:,} markings")
-                space = counted
+                     f"GiB, {kept:,} markings); searched again counting the edges without keeping them, it ")
+            if space.complete:
+                st.notes.append(again + f"is complete with {space.n_states:,} markings")
             else:
-                st.notes.append(again + f"stopped too, after {counted.n_states:,} markings")
+                st.notes.append(again + f"stopped too, after {space.n_states:,} markings")
         if not space.complete and not st.bounded and witness is None:
             witness = covering_witness(space)
     return space, witness
@@ -840,7 +848,7 @@ def _partial_from_explored(v: _Partial, net: PetriNet, st: _Structure, space: St
         if not v.deadlocks:
             v.deadlocks = [Deadlock(marking=space.marking(int(i)).to_dict(),
                                     firing_sequence=space.firing_sequence(int(i))) for i in dead_seen[:MAX_WITNESSES]]
-    if v.quasi is None and space.n_edges and np.unique(space.transition).size == len(net.transitions):
+    if v.quasi is None and space.n_edges and _fired_seen(net, space).all():
         v.quasi = True
         sources["quasi_live"] = "reachability graph (explored part)"
     if v.one_safe is None and int(seen_max.max(initial=0)) > 1:
@@ -849,6 +857,23 @@ def _partial_from_explored(v: _Partial, net: PetriNet, st: _Structure, space: St
     if space.n_states and (space.states.min(axis=0) != space.states.max(axis=0)).all():
         v.stable_known = False
         sources["stable_marking"] = "reachability graph (explored part): every place varies"
+
+
+def _fired_seen(net: PetriNet, space: StateSpace, block_bytes: int = 1 << 26) -> np.ndarray:
+    """(|T|,) bool: the transitions that label an edge of the explored part; when its edges were
+    counted, not kept, those enabled in one of its markings (each is reachable, so they can fire),
+    found in blocks of markings (temporaries below about ``block_bytes``)."""
+    n_t = len(net.transitions)
+    seen = np.zeros(n_t, dtype=bool)
+    if space.edges_kept:
+        seen[np.unique(space.transition)] = True
+        return seen
+    block = max(1, block_bytes // max(8 * (len(net.places) + n_t), 1))
+    for lo in range(0, space.n_states, block):
+        seen |= enabled_mask(net, space.states[lo:lo + block]).any(axis=0)
+        if seen.all():
+            break
+    return seen
 
 
 def _partial_from_projection(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structure,
@@ -893,10 +918,10 @@ class _Beside:
     up, the search goes on to its limits and its graph, complete or not, is the explicit answer.
     The search has ``graph_bytes`` of the budget (half, the explicit search's own share; the
     symbolic engine has the other half meanwhile, and the whole when it outgrows its half:
-    :meth:`lend`), and searches again counting the edges when they do not fit (:func:`_search_phase`). It works on its own copy of the structure's notes
-    (:attr:`st`), taken over if its graph is used. Nets of a few million markings that decision
-    diagrams take long over are answered by the search (SafeBus-PT-06: 6,816,756 markings,
-    docs/BENCHMARKS.md)."""
+    :meth:`lend`), and searches again counting the edges when they do not fit
+    (:func:`_search_phase`). It works on its own copy of the structure's notes (:attr:`st`), taken
+    over if its graph is used. Nets of a few million markings that decision diagrams take long
+    over are answered by the search (SafeBus-PT-06: 6,816,756 markings, docs/BENCHMARKS.md)."""
 
     def __init__(self, net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,
                  progress: Callable[[int, int], None] | None, phase: Callable[[str], None] | None) -> None:
@@ -905,7 +930,6 @@ class _Beside:
         self.finished = threading.Event()  # the graph is complete: the symbolic engine stops
         self.answered = threading.Event()  # the symbolic engine is done: the search stops
         self.found: tuple[StateSpace, CoveringWitness | None] | None = None
-        self.error: BaseException | None = None
         if phase is not None:
             phase(f"explicit: the search goes on beside the symbolic engine, up to {max_states:,} markings "
                   f"within {graph_bytes / 2**30:.2f} GiB")
@@ -915,8 +939,10 @@ class _Beside:
                 self.found = _search_phase(net, sn, self.st, max_states, graph_bytes, progress, stop=self.answered)
                 if self.found[0].complete:
                     self.finished.set()
-            except BaseException as exc:  # kept for the record; the symbolic engine's answer stands
-                self.error = exc
+            except Exception:
+                # e.g. a count beyond 31 bits: nothing found here; if the symbolic engine gives up,
+                # analyse runs the search again, which meets the same error and reports it
+                self.found = None
 
         self.thread = threading.Thread(target=search, name="petrobot-explicit", daemon=True)
         self.thread.start()

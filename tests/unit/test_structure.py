@@ -269,3 +269,17 @@ def test_a_graph_whose_edges_fill_the_budget_is_searched_again_without_them_and_
     assert a.live and a.reversible and a.quasi_live and a.deadlock is False and a.home_states == 16_384
     assert any("searched again counting the edges" in n for n in a.notes)
     assert any("the edges were not kept" in n for n in a.notes)
+
+
+def test_when_the_search_without_edges_stops_too_its_markings_still_show_every_transition_fires() -> None:
+    # sixteen cycles: 65,536 markings, 2,097,152 edges; half of 5 MiB holds neither the graph nor
+    # its markings alone, and the first graph is dropped before the second search
+    net = make_net("cycles", {f"a{i}": 1 for i in range(16)},
+                   {**{f"go{i}": ({f"a{i}": 1}, {f"b{i}": 1}) for i in range(16)},
+                    **{f"back{i}": ({f"b{i}": 1}, {f"a{i}": 1}) for i in range(16)}})
+    a = analyse(net, max_bytes=5 * 2**20, engine="explicit")
+    assert not a.complete and a.stopped_by == "max_memory"
+    assert a.space is not None and not a.space.edges_kept and a.space.n_states < 65_536
+    assert any("stopped too, after" in n for n in a.notes)
+    assert a.quasi_live is True and a.sources["quasi_live"] == "reachability graph (explored part)"
+    assert a.deadlock is None and a.live is None
