@@ -534,12 +534,13 @@ def search_bounds(net: PetriNet, *, max_bytes: int | None = None, invariant_seco
 
 def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,
                   progress: Callable[[int, int], None] | None, finish_level: bool = True,
-                  stop: threading.Event | None = None) -> tuple[StateSpace, CoveringWitness | None]:
+                  stop: threading.Event | None = None, recount: bool = True) -> tuple[StateSpace, CoveringWitness | None]:
     """The reachability graph within its limits, and a pumping witness of unboundedness when the
     structure does not bound the net (a short probe first: unboundedness is often cheap to see).
     ``finish_level`` False: stop at once at ``max_states`` (:func:`.statespace.explore`), for the
     automatic engine's question whether the graph fits its explicit share. ``stop``: another
-    thread's event that ends the search (:func:`.statespace.explore`)."""
+    thread's event that ends the search (:func:`.statespace.explore`). ``recount`` False: no second
+    search without the edges when they fill the budget."""
     space: StateSpace | None = None
     witness: CoveringWitness | None = None
     bounds = _search_bounds(st)
@@ -554,7 +555,7 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
     if space is None:
         space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
                         finish_level=finish_level, stop=stop)
-        if space.stopped_by == "max_memory" and st.bounded and finish_level:
+        if space.stopped_by == "max_memory" and st.bounded and finish_level and recount:
             # the edges (8 bytes each) filled the budget: the markings alone may fit, and liveness
             # and reversibility come from them (StateSpace.implicit_liveness); the first graph is
             # dropped first, so that one graph at a time is held within the budget
@@ -676,7 +677,9 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         if beside is not None and beside.found is not None:
             space, witness = beside.found
             st.notes.extend(beside.st.notes[len(st.notes):])
-            rerun = False  # the search beside had the explicit search's own share of the budget
+            # the search beside had the explicit search's own share; searched again without its
+            # edges if they filled it (the search beside does not)
+            rerun = space.stopped_by == "max_memory"
             if space.complete:
                 reason = (f"explicit: the reachability graph is complete with {space.n_states:,} markings, found by "
                           "the explicit search that went on beside the symbolic engine (which it stopped)")
@@ -918,10 +921,13 @@ class _Beside:
     up, the search goes on to its limits and its graph, complete or not, is the explicit answer.
     The search has ``graph_bytes`` of the budget (half, the explicit search's own share; the
     symbolic engine has the other half meanwhile, and the whole when it outgrows its half:
-    :meth:`lend`), and searches again counting the edges when they do not fit
-    (:func:`_search_phase`). It works on its own copy of the structure's notes (:attr:`st`), taken
-    over if its graph is used. Nets of a few million markings that decision diagrams take long
-    over are answered by the search (SafeBus-PT-06: 6,816,756 markings, docs/BENCHMARKS.md)."""
+    :meth:`lend`). It keeps its edges and does not search again without them when they fill its
+    share (a graph that large is seldom one the search completes before the symbolic engine; the
+    search after the symbolic engine gives up does, :func:`_search_phase`), so that beside a
+    symbolic engine that answers it costs at most one search. It works on its own copy of the
+    structure's notes (:attr:`st`), taken over if its graph is used. Nets of a few million markings
+    that decision diagrams take long over are answered by the search (SafeBus-PT-06: 6,816,756
+    markings, docs/BENCHMARKS.md)."""
 
     def __init__(self, net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,
                  progress: Callable[[int, int], None] | None, phase: Callable[[str], None] | None) -> None:
@@ -936,7 +942,8 @@ class _Beside:
 
         def search() -> None:
             try:
-                self.found = _search_phase(net, sn, self.st, max_states, graph_bytes, progress, stop=self.answered)
+                self.found = _search_phase(net, sn, self.st, max_states, graph_bytes, progress, stop=self.answered,
+                                           recount=False)
                 if self.found[0].complete:
                     self.finished.set()
             except Exception:
