@@ -534,13 +534,14 @@ def search_bounds(net: PetriNet, *, max_bytes: int | None = None, invariant_seco
 
 def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,
                   progress: Callable[[int, int], None] | None, finish_level: bool = True,
-                  stop: threading.Event | None = None, recount: bool = True) -> tuple[StateSpace, CoveringWitness | None]:
+                  stop: threading.Event | None = None) -> tuple[StateSpace, CoveringWitness | None]:
     """The reachability graph within its limits, and a pumping witness of unboundedness when the
     structure does not bound the net (a short probe first: unboundedness is often cheap to see).
     ``finish_level`` False: stop at once at ``max_states`` (:func:`.statespace.explore`), for the
     automatic engine's question whether the graph fits its explicit share. ``stop``: another
-    thread's event that ends the search (:func:`.statespace.explore`). ``recount`` False: no second
-    search without the edges when they fill the budget."""
+    thread's event that ends the search (:func:`.statespace.explore`). A search that keeps its
+    edges and fills the budget with them is run again without them (:func:`_recount`) when the
+    level is finished."""
     space: StateSpace | None = None
     witness: CoveringWitness | None = None
     bounds = _search_bounds(st)
@@ -555,23 +556,30 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
     if space is None:
         space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
                         finish_level=finish_level, stop=stop)
-        if space.stopped_by == "max_memory" and st.bounded and finish_level and recount:
-            # the edges (8 bytes each) filled the budget: the markings alone may fit, and liveness
-            # and reversibility come from them (StateSpace.implicit_liveness); the first graph is
-            # dropped first, so that one graph at a time is held within the budget
+        if space.stopped_by == "max_memory" and st.bounded and finish_level:
             kept = space.n_states
-            del space
-            space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
-                            edges=False, stop=stop)
-            again = (f"the reachability graph with its edges did not fit the memory budget ({graph_bytes / 2**30:.2f} "
-                     f"GiB, {kept:,} markings); searched again counting the edges without keeping them, it ")
-            if space.complete:
-                st.notes.append(again + f"is complete with {space.n_states:,} markings")
-            else:
-                st.notes.append(again + f"stopped too, after {space.n_states:,} markings")
+            del space  # one graph at a time within the budget
+            space = _recount(net, st, max_states, graph_bytes, progress, kept, stop)
         if not space.complete and not st.bounded and witness is None:
             witness = covering_witness(space)
     return space, witness
+
+
+def _recount(net: PetriNet, st: _Structure, max_states: int, graph_bytes: int,
+             progress: Callable[[int, int], None] | None, kept: int, stop: threading.Event | None = None) -> StateSpace:
+    """The search again, counting the edges without keeping them, after a search that kept them
+    filled ``graph_bytes`` at ``kept`` markings (and was dropped: one graph at a time within the
+    budget): the markings alone may fit, and liveness and reversibility come from them
+    (:meth:`.StateSpace.implicit_liveness`). A note says what it found."""
+    space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=_search_bounds(st),
+                    edges=False, stop=stop)
+    again = (f"the reachability graph with its edges did not fit the memory budget ({graph_bytes / 2**30:.2f} "
+             f"GiB, {kept:,} markings); searched again counting the edges without keeping them, it ")
+    if space.complete:
+        st.notes.append(again + f"is complete with {space.n_states:,} markings")
+    else:
+        st.notes.append(again + f"stopped too, after {space.n_states:,} markings")
+    return space
 
 
 def _upper_bounds(sn: SparseNet, st: _Structure, lp_seconds: float, seen: np.ndarray) -> tuple[PlaceBounds, np.ndarray]:
@@ -676,10 +684,13 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         rerun = limit < max_states
         if beside is not None and beside.found is not None:
             space, witness = beside.found
+            beside.found = None
             st.notes.extend(beside.st.notes[len(st.notes):])
-            # the search beside had the explicit search's own share; searched again without its
-            # edges if they filled it (the search beside does not)
-            rerun = space.stopped_by == "max_memory"
+            rerun = False  # the search beside had the explicit search's own share of the budget
+            if space.stopped_by == "max_memory" and space.edges_kept:  # its edges filled it
+                kept = space.n_states
+                del space  # one graph at a time within the budget
+                space = _recount(net, st, max_states, budget // 2, progress, kept)
             if space.complete:
                 reason = (f"explicit: the reachability graph is complete with {space.n_states:,} markings, found by "
                           "the explicit search that went on beside the symbolic engine (which it stopped)")
@@ -921,10 +932,11 @@ class _Beside:
     up, the search goes on to its limits and its graph, complete or not, is the explicit answer.
     The search has ``graph_bytes`` of the budget (half, the explicit search's own share; the
     symbolic engine has the other half meanwhile, and the whole when it outgrows its half:
-    :meth:`lend`). It keeps its edges and does not search again without them when they fill its
-    share (a graph that large is seldom one the search completes before the symbolic engine; the
-    search after the symbolic engine gives up does, :func:`_search_phase`), so that beside a
-    symbolic engine that answers it costs at most one search. It works on its own copy of the
+    :meth:`lend`). It keeps its edges, stops at ``max_states`` at once (the level it is in left
+    unfinished: a partial graph is only the fallback) and is not run again without its edges when
+    they fill its share: beside a symbolic engine that answers it costs at most one search. When
+    the symbolic engine gives up, a graph whose edges filled the share is searched again without
+    them (:func:`_recount`), as :func:`_search_phase` does. It works on its own copy of the
     structure's notes (:attr:`st`), taken over if its graph is used. Nets of a few million markings
     that decision diagrams take long over are answered by the search (SafeBus-PT-06: 6,816,756
     markings, docs/BENCHMARKS.md)."""
@@ -942,8 +954,8 @@ class _Beside:
 
         def search() -> None:
             try:
-                self.found = _search_phase(net, sn, self.st, max_states, graph_bytes, progress, stop=self.answered,
-                                           recount=False)
+                self.found = _search_phase(net, sn, self.st, max_states, graph_bytes, progress,
+                                           finish_level=False, stop=self.answered)
                 if self.found[0].complete:
                     self.finished.set()
             except Exception:
