@@ -723,8 +723,9 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                      "equation does not bound it: boundedness is undecidable in general and was not decided "
                      "(Karp-Miller coverability is unsound for such nets and was not run)")
     _partial_from_explored(v, net, st, space, witness, seen_max)
+    # the net without its record-only places has the budget the partial graph (held meanwhile) leaves
     _partial_from_projection(v, net, sn, st, lambda small: analyse(
-        small, max_states=max_states, max_bytes=budget, max_coverability_nodes=max_coverability_nodes,
+        small, max_states=max_states, max_bytes=budget - graph_bytes, max_coverability_nodes=max_coverability_nodes,
         max_invariant_rows=max_invariant_rows, invariant_seconds=invariant_seconds, lp_seconds=lp_seconds,
         coverability_seconds=coverability_seconds, progress=progress))
     conflicts, _ = _conflicts(net, None)
@@ -873,19 +874,28 @@ def _partial_from_explored(v: _Partial, net: PetriNet, st: _Structure, space: St
         sources["stable_marking"] = "reachability graph (explored part): every place varies"
 
 
-def _fired_seen(net: PetriNet, space: StateSpace, block_bytes: int = 1 << 26) -> np.ndarray:
+def _fired_seen(net: PetriNet, space: StateSpace, seconds: float = 5.0, block_bytes: int = 1 << 26) -> np.ndarray:
     """(|T|,) bool: the transitions that label an edge of the explored part; when its edges were
-    counted, not kept, those enabled in one of its markings (each is reachable, so they can fire),
-    found in blocks of markings (temporaries below about ``block_bytes``)."""
+    counted, not kept, those enabled in one of its markings (each is reachable, so they can fire):
+    found in blocks of markings (temporaries below about ``block_bytes``), each block asked only
+    about the transitions not seen yet, within ``seconds`` (the rest stay False: not seen)."""
     n_t = len(net.transitions)
     seen = np.zeros(n_t, dtype=bool)
     if space.edges_kept:
         seen[np.unique(space.transition)] = True
         return seen
+    sn = sparse_net(net)
+    start = time.monotonic()
     block = max(1, block_bytes // max(8 * (len(net.places) + n_t), 1))
     for lo in range(0, space.n_states, block):
-        seen |= enabled_mask(net, space.states[lo:lo + block]).any(axis=0)
-        if seen.all():
+        rows = space.states[lo:lo + block]
+        left = np.flatnonzero(~seen)
+        if lo == 0 or left.size > 64:
+            seen |= enabled_mask(net, rows).any(axis=0)
+        else:
+            for t in left.tolist():
+                seen[t] = bool(_enabled_one(sn, rows, t).any())
+        if seen.all() or time.monotonic() - start > seconds:
             break
     return seen
 
