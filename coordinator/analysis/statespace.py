@@ -647,11 +647,11 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     start, target = _widths(bounds, np.asarray(m0))
     layout = np.concatenate([packed_layout(start)[0], target])
     rk.set_progress(progress, stop)
+    report_every = _PROGRESS_STATES if progress is not None or stop is not None else 0
     try:
         status, words, dst, tr, parent, expanded, out_ptr, complete, top, layout, store = rk.run(
-            pre, inh, inc, tab, m0, layout, prio, use_prio, max_states, budget,
-            _PROGRESS_STATES if progress is not None or stop is not None else 0, bool(edges), tab if net.has_resets else None,
-            bool(finish_level))
+            pre, inh, inc, tab, m0, layout, prio, use_prio, max_states, budget, report_every, bool(edges),
+            tab if net.has_resets else None, bool(finish_level))
     finally:
         rk.set_progress(None)
     if status == rk.OVERFLOW:

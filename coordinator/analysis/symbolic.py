@@ -175,8 +175,10 @@ class _Store:
             args = (mode, self.dom, *ev.tables(), *self.arrays, a, b, c, arg, check_overflow, self.max_bytes)
             status, ret, *arrays = mk.run(*args)  # type: ignore[arg-type]
             self.arrays = tuple(arrays)
-            borrow, self.borrow = (self.borrow, None) if status == mk.MEMORY else (None, self.borrow)
-            extra = 0 if borrow is None else borrow()
+            if status != mk.MEMORY or self.borrow is None:
+                break
+            borrow, self.borrow = self.borrow, None
+            extra = borrow()
             if extra <= 0:
                 break
             self.max_bytes += extra  # the call again, from the results its store kept
@@ -524,9 +526,10 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         stop: an event another thread sets to stop the engine (the automatic engine's explicit
             search finished first): the race for the reachable set ends with AnalysisError, and a
             later phase stops as at its deadline, leaving what it had not decided undecided.
-        borrow: called (once, from any thread) when the decision diagram outgrows ``max_bytes``
-            while the reachable set is built: the bytes it frees for the engine (the automatic
-            engine's explicit search beside it stops and hands its share over), 0 for none.
+        borrow: called (once, from any thread) when the decision diagram outgrows ``max_bytes``,
+            while the reachable set is built or after: the bytes it frees for the engine (the
+            automatic engine's explicit search beside it stops and hands its share over), 0 for
+            none; the call that outgrew the budget goes on from its store.
 
     Returns:
         A :class:`SymbolicResult`.
@@ -542,6 +545,7 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
     secs: dict[str, float] = {}
     notes: list[str] = []
     t0 = time.monotonic()
+
     def widen() -> int:
         extra = 0 if borrow is None else borrow()
         if extra > 0:
