@@ -166,6 +166,22 @@ def test_a_stop_event_set_by_another_thread_ends_the_engine_with_a_clear_error()
     timer.join()
 
 
+@pytest.mark.parametrize("budget", [1 << 20, 2 << 20])  # outgrown in the race, and after it
+def test_a_diagram_that_outgrows_its_budget_borrows_once_and_goes_on(budget: int) -> None:
+    net = load_pnml(MCC / "Railroad-PT-005" / "model.pnml")
+    bounds, flows = proven_bounds(net)
+    with pytest.raises(AnalysisError, match="outgrew the memory budget"):
+        analyse_symbolic(net, bounds, flows=flows, max_bytes=budget)
+    lent: list[int] = []
+
+    def borrow() -> int:
+        lent.append(8 << 20)
+        return lent[-1]
+
+    r = analyse_symbolic(net, bounds, flows=flows, max_bytes=budget, borrow=borrow)
+    assert lent == [8 << 20] and r.states == 1_838
+
+
 def test_a_bound_below_the_truth_is_an_error_not_a_wrong_count() -> None:
     net = make_net("pile", {"go": 1}, {"put": ({"go": 1}, {"go": 1, "pile": 1})}, inhibitors={"put": {"pile": 5}})
     with pytest.raises(AnalysisError, match="place bounds"):
