@@ -48,7 +48,7 @@ jit.configure()  # numba's cache in the user's cache directory: before numba is 
 
 from numba import njit, objmode  # noqa: E402
 
-__all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "MEMORY", "MODE_APPLY", "MODE_IMAGE",
+__all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "MEMORY", "MODE_APPLY", "MODE_IMAGE", "Flag",
            "MODE_RESTRICT", "MODE_SATURATE", "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "add_path", "count",
            "enabled_counts", "max_weight", "new_store", "node_of_path", "presence", "run", "set_watch", "clear_cache"]
 
