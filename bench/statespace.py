@@ -205,7 +205,8 @@ def child_ours(path: str, max_states: int, budget: float, max_bytes: int | None 
         wall0, cpu0 = time.perf_counter(), time.process_time()
         levels, labels, terminal = liveness_levels(space) if space.edges_kept else space.implicit_liveness(stats)
         found = {**stats, "liveness_seconds": time.perf_counter() - wall0,
-                 "liveness_cpu_seconds": time.process_time() - cpu0, "live": bool((levels == 4).all()), "reversible": bool(terminal.shape[0] == 1),
+                 "liveness_cpu_seconds": time.process_time() - cpu0, "live": bool((levels == 4).all()),
+                 "reversible": bool(terminal.shape[0] == 1),
                  "components": int(terminal.shape[0]), "terminal_components": int(terminal.sum()),
                  "search_peak_rss_bytes": peak}
         del labels

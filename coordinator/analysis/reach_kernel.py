@@ -40,8 +40,9 @@ result. What they implement (the reasons and the measurements are in docs/analys
   over the markings (the search's own :func:`_enabled_list`, :func:`_fire` and :func:`_find`).
 * A byte budget: every buffer is counted, a buffer grows only if the bytes held during the copy
   (its arrays grow one at a time: every other array at its new size, the one being copied old and
-  new) stay within ``max_bytes``, and growth near the budget takes only what fits. When nothing fits the search stops (status ``MEMORY``) with the states found so far; states
-  not expanded are flagged, as with the state limit.
+  new) stay within ``max_bytes``, and growth near the budget takes only what fits. When nothing
+  fits the search stops (status ``MEMORY``) with the states found so far; states not expanded are
+  flagged, as with the state limit.
 
 Code shape: flat 1-D buffers, plain loops and few numpy calls, because numba's compile time grows
 with the amount of typed code (the first use on a machine compiles this module; docs/analysis.md,

@@ -722,7 +722,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         notes.append(f"the net has {arcs} arcs, its reachability graph exceeds the limit and the state "
                      "equation does not bound it: boundedness is undecidable in general and was not decided "
                      "(Karp-Miller coverability is unsound for such nets and was not run)")
-    _partial_from_explored(v, net, st, space, witness, seen_max)
+    _partial_from_explored(v, net, sn, st, space, witness, seen_max)
     # the net without its record-only places has the budget the partial graph (held meanwhile) leaves
     _partial_from_projection(v, net, sn, st, lambda small: analyse(
         small, max_states=max_states, max_bytes=budget - graph_bytes, max_coverability_nodes=max_coverability_nodes,
@@ -838,7 +838,7 @@ def _partial_from_coverability(v: _Partial, net: PetriNet, st: _Structure, witne
                      "net: boundedness is not decided")
 
 
-def _partial_from_explored(v: _Partial, net: PetriNet, st: _Structure, space: StateSpace,
+def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structure, space: StateSpace,
                            witness: CoveringWitness | None, seen_max: np.ndarray) -> None:
     """What a pumping witness and the explored part prove on their own: its dead markings are
     reachable deadlocks, a transition that fired there is not dead, a count above 1 breaks safeness,
@@ -863,7 +863,7 @@ def _partial_from_explored(v: _Partial, net: PetriNet, st: _Structure, space: St
         if not v.deadlocks:
             v.deadlocks = [Deadlock(marking=space.marking(int(i)).to_dict(),
                                     firing_sequence=space.firing_sequence(int(i))) for i in dead_seen[:MAX_WITNESSES]]
-    if v.quasi is None and space.n_edges and _fired_seen(net, space).all():
+    if v.quasi is None and space.n_edges and _fired_seen(net, sn, space).all():
         v.quasi = True
         sources["quasi_live"] = "reachability graph (explored part)"
     if v.one_safe is None and int(seen_max.max(initial=0)) > 1:
@@ -874,7 +874,8 @@ def _partial_from_explored(v: _Partial, net: PetriNet, st: _Structure, space: St
         sources["stable_marking"] = "reachability graph (explored part): every place varies"
 
 
-def _fired_seen(net: PetriNet, space: StateSpace, seconds: float = 5.0, block_bytes: int = 1 << 26) -> np.ndarray:
+def _fired_seen(net: PetriNet, sn: SparseNet, space: StateSpace, seconds: float = 5.0,
+                block_bytes: int = 1 << 26) -> np.ndarray:
     """(|T|,) bool: the transitions that label an edge of the explored part; when its edges were
     counted, not kept, those enabled in one of its markings (each is reachable, so they can fire):
     found in blocks of markings (temporaries below about ``block_bytes``), each block asked only
@@ -884,7 +885,6 @@ def _fired_seen(net: PetriNet, space: StateSpace, seconds: float = 5.0, block_by
     if space.edges_kept:
         seen[np.unique(space.transition)] = True
         return seen
-    sn = sparse_net(net)
     start = time.monotonic()
     block = max(1, block_bytes // max(8 * (len(net.places) + n_t), 1))
     for lo in range(0, space.n_states, block):
