@@ -635,12 +635,16 @@ def _fireable(store: _Store, single: Events, reach: int, states: int, fireable: 
 
 def _dead(store: _Store, fwd: Events, single: Events, reach: int, counts: list[int], states: int) -> int:
     """The reachable markings that enable no event of ``fwd``: the reachable set restricted event by
-    event, the events enabled in the most markings first (they cut the set fastest); empty at once
-    when one is enabled in every reachable marking."""
+    event, from the top level down (the events of one level, those enabled in the most markings
+    first); empty at once when one is enabled in every reachable marking. Restricting level by level
+    builds fewer intermediate nodes than the most-enabled events first across levels
+    (Sudoku-PT-AN04: 4.3 million new nodes in 17 s against 7.8 million in 26 s; ASLink-PT-02a:
+    2.4 million in 4.6 s against 6.0 million in 9.6 s)."""
     if states in counts:
         return mk.EMPTY
     by_t = {single.members[e][0]: n for e, n in enumerate(counts)}
-    order = sorted(range(fwd.n_events), key=lambda e: -sum(by_t.get(t, 0) for t in fwd.members[e]))
+    order = sorted(range(fwd.n_events),
+                   key=lambda e: (int(fwd.top[e]), -sum(by_t.get(t, 0) for t in fwd.members[e])))
     dead = reach
     for e in order:
         if dead == mk.EMPTY:
