@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import threading
@@ -73,6 +74,22 @@ def test_beside_the_symbolic_engine_the_search_goes_on_and_whichever_completes_f
         # the graph of 1,863 markings is complete long before the decision diagram (the LPs for the
         # symbolic engine's bounds come first); whichever answered, the report says which
         assert a.engine == "symbolic" or "beside the symbolic engine" in a.engine_reason
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="a thread's own priority is Linux's")
+def test_the_search_beside_the_symbolic_engine_lowers_its_own_thread_priority_only() -> None:
+    seen: dict[str, int] = {}
+
+    def beside() -> None:
+        structure._yield_cpus()
+        seen["thread"] = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+
+    before = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    thread = threading.Thread(target=beside)
+    thread.start()
+    thread.join()
+    assert seen["thread"] == min(19, before + structure._BESIDE_NICE)
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == before  # the caller's is its own
 
 
 def test_when_the_symbolic_engine_answers_first_the_search_beside_it_is_stopped(
