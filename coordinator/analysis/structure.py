@@ -942,9 +942,10 @@ def _partial_from_projection(v: _Partial, net: PetriNet, sn: SparseNet, st: _Str
 def _yield_cpus() -> None:
     """Lower the calling thread's scheduling priority by :data:`_BESIDE_NICE` (Linux, where a
     thread's id is a scheduling entity of its own; elsewhere, or when refused, nothing changes).
-    Beside a race that keeps both CPUs busy the search at the same priority slowed the race by a
-    third (Sudoku-PT-AN04: 57.5 s before the search ran beside it, 68.3 s after; Angiogenesis-PT-10:
-    15.7 s, 22.9 s), and at this increment it costs little of that (docs/BENCHMARKS.md)."""
+    Beside a race that keeps both CPUs busy, the search at the same priority slowed the symbolic
+    engine by a fifth to a half (Sudoku-PT-AN04: 57.5 s before the search ran beside it, 68.3 s
+    after; Angiogenesis-PT-10: 15.7 s, 22.9 s); at this increment, 57.3 s and 17.3 s
+    (docs/BENCHMARKS.md)."""
     if not sys.platform.startswith("linux"):
         return
     tid = threading.get_native_id()

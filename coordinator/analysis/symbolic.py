@@ -915,7 +915,6 @@ class _Lane:
             if turn % n_cands == 0:
                 slice_s *= 2
 
-
     @staticmethod
     def _drop_others(cands: list[_Candidate], alive: list[bool], keep: int) -> None:
         """Drop this lane's candidates but ``keep`` (their stores freed); no other is added after."""
