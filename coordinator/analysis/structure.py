@@ -944,8 +944,8 @@ def _yield_cpus() -> None:
     thread's id is a scheduling entity of its own; elsewhere, or when refused, nothing changes).
     Beside a race that keeps both CPUs busy, the search at the same priority slowed the symbolic
     engine by a fifth to a half (Sudoku-PT-AN04: 57.5 s before the search ran beside it, 68.3 s
-    after; Angiogenesis-PT-10: 15.7 s, 22.9 s); at this increment, 57.3 s and 17.3 s
-    (docs/BENCHMARKS.md)."""
+    after; Angiogenesis-PT-10: 15.7 s, 22.9 s); at this increment, 63.3 s and 17.3 s, and the
+    search still answers first where it did (docs/BENCHMARKS.md)."""
     if not sys.platform.startswith("linux"):
         return
     tid = threading.get_native_id()
