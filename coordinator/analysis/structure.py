@@ -646,6 +646,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     budget = default_max_bytes() if max_bytes is None else int(max_bytes)
     sn = sparse_net(net)
     st = _structure_phase(net, sn, budget, max_invariant_rows, invariant_seconds, lp_seconds)
+    graph_bytes = budget // 2  # the explicit search's share
     if engine == "symbolic":
         return _symbolic_phase(net, sn, st, budget, lp_seconds, symbolic_seconds, phase,
                                "symbolic: asked for (--engine symbolic)", started)
@@ -656,7 +657,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     # the automatic engine's share of the explicit search asks only whether the graph fits it: the
     # search stops at its limit at once (a level being finished may be most of the graph); the
     # search over the whole limit, when the symbolic engine gives up, finishes its level
-    space, witness = _search_phase(net, sn, st, limit, budget // 2, progress,
+    space, witness = _search_phase(net, sn, st, limit, graph_bytes, progress,
                                    finish_level=not (engine == "auto" and limit < max_states))
     if engine == "auto" and space.complete:
         reason = f"explicit: the reachability graph is complete with {space.n_states:,} markings" + (
@@ -668,7 +669,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         beside: _Beside | None = None
         if limit < max_states and cpus() >= 2:
             del space  # the probe's graph is freed: the search beside builds its own, or one is built again
-            beside = _Beside(net, sn, st, max_states, budget // 2, progress, phase)
+            beside = _Beside(net, sn, st, max_states, graph_bytes, progress, phase)
         found: Analysis | None = None
         try:
             found = _symbolic_phase(net, sn, st, budget - (0 if beside is None else beside.graph_bytes), lp_seconds,
@@ -696,18 +697,17 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
             if space.stopped_by == "max_memory" and space.edges_kept:  # its edges filled it
                 kept = space.n_states
                 del space  # one graph at a time within the budget
-                space = _recount(net, st, max_states, budget // 2, progress, kept)
+                space = _recount(net, st, max_states, graph_bytes, progress, kept)
             if space.complete:
                 reason = (f"explicit: the reachability graph is complete with {space.n_states:,} markings, found by "
                           "the explicit search that went on beside the symbolic engine (which it stopped)")
         if rerun:
-            space, witness = _search_phase(net, sn, st, max_states, budget // 2, progress)
+            space, witness = _search_phase(net, sn, st, max_states, graph_bytes, progress)
     elif engine == "auto":
         reason = "explicit: not every place has a proven bound, so only the explicit search (and coverability) apply"
     pinv, tinv, psup, tsup, structural = st.pinv, st.tinv, st.psup, st.tsup, st.structural
     notes, sources = st.notes, st.sources
     has_inhibitors = bool(sn.inhibitor.nnz)
-    graph_bytes = budget // 2
     if space.complete:
         return replace(_from_graph(net, space, pinv, tinv, psup, tsup, structural, notes, sources, budget),
                        engine="explicit", engine_reason=reason)

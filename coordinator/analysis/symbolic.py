@@ -892,18 +892,15 @@ class _Lane:
             except AnalysisError as exc:
                 if "memory budget" not in str(exc):
                     raise
-                if store.max_bytes < self.share:  # first this lane's share: the other lane goes on
-                    if sum(alive) > 1:
+                # first this lane's share (the other lane goes on), then the whole (the others stopped)
+                whole = store.max_bytes >= self.share
+                if not whole or (store.max_bytes < race.max_bytes and race.take_whole(self)):
+                    if not whole and sum(alive) > 1:
                         say(f"symbolic: order {names[i]} outgrew its part of the memory, the orders it took "
                             "turns with are dropped")
                     self._drop_others(cands, alive, i)
                     n_cands, turn = len(cands), i
-                    store.max_bytes = self.share
-                    continue
-                if store.max_bytes < race.max_bytes and race.take_whole(self):
-                    self._drop_others(cands, alive, i)
-                    n_cands, turn = len(cands), i
-                    store.max_bytes = race.max_bytes
+                    store.max_bytes = race.max_bytes if whole else self.share
                     continue
                 if store.max_bytes >= race.max_bytes and race.widen():
                     store.max_bytes = race.max_bytes  # the call resumes from its store

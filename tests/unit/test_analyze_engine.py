@@ -76,7 +76,8 @@ def test_beside_the_symbolic_engine_the_search_goes_on_and_whichever_completes_f
         assert a.engine == "symbolic" or "beside the symbolic engine" in a.engine_reason
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="a thread's own priority is Linux's")
+@pytest.mark.skipif(not sys.platform.startswith("linux"),
+                    reason="only Linux gives a thread a scheduling priority of its own; elsewhere _yield_cpus does nothing")
 def test_the_search_beside_the_symbolic_engine_lowers_its_own_thread_priority_only() -> None:
     seen: dict[str, int] = {}
 
