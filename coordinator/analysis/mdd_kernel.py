@@ -50,7 +50,7 @@ from numba import njit, objmode  # noqa: E402
 
 __all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "MEMORY", "MODE_APPLY", "MODE_IMAGE", "Flag",
            "MODE_RESTRICT", "MODE_SATURATE", "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "add_path", "count",
-           "enabled_counts", "max_weight", "new_store", "node_of_path", "presence", "run", "set_watch", "clear_cache"]
+           "enabled_counts", "enabling_values", "max_weight", "new_store", "node_of_path", "presence", "run", "set_watch", "clear_cache"]
 
 EMPTY, TERMINAL = 0, 1
 NO_CONSTRAINT = -1
@@ -894,6 +894,22 @@ def node_of_path(root: int, values: np.ndarray, offset: np.ndarray, size: np.nda
     return n
 
 
+def enabling_values(slot_ptr: np.ndarray, nxt: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The values on which each local function is defined, for :func:`enabled_counts`.
+
+    Args:
+        slot_ptr, nxt: the local functions, as :func:`run` takes them (S functions).
+
+    Returns:
+        ``(on_ptr, on_val)``: (S + 1,) and (n,) int64; function s is defined (``nxt >= 0``) on the
+        values ``on_val[on_ptr[s]:on_ptr[s + 1]]``, increasing."""
+    slot_ptr = np.asarray(slot_ptr, dtype=np.int64)
+    at = np.flatnonzero(np.asarray(nxt) >= 0)
+    owner = np.searchsorted(slot_ptr, at, side="right") - 1
+    on_ptr = np.searchsorted(owner, np.arange(slot_ptr.shape[0]), side="left").astype(np.int64)
+    return on_ptr, (at - slot_ptr[owner]).astype(np.int64)
+
+
 @njit(cache=True)
 def _mulmod(a: int, b: int, p: int) -> int:
     """a·b mod p for 0 ≤ a, b < p < 2**61 in int64 arithmetic (two bits of b at a time)."""
@@ -907,8 +923,74 @@ def _mulmod(a: int, b: int, p: int) -> int:
 
 
 @njit(cache=True)
+def _enabled_below(y: int, e: int, t: int, b: int, ev_slot_ptr: np.ndarray, ev_slot: np.ndarray,
+                   on_ptr: np.ndarray, on_val: np.ndarray, ids: np.ndarray, comp: np.ndarray, offset: np.ndarray,
+                   size: np.ndarray, kids: np.ndarray, level: np.ndarray, residue: np.ndarray, approx: np.ndarray,
+                   primes: np.ndarray, stamp: np.ndarray, memo_r: np.ndarray, memo_f: np.ndarray, st: np.ndarray,
+                   ch: np.ndarray) -> None:
+    """For :func:`enabled_counts`: the paths below compacted node ``y`` (a level in ``t + 1 .. b``)
+    on which event ``e`` (top ``t``, bottom ``b``) takes an enabling value on every level, into
+    ``memo_r[y]``, ``memo_f[y]``; depth-first, post-order, each node once per event (``stamp``)."""
+    n_pr = primes.shape[0]
+    stamp[y] = e
+    for r in range(n_pr):
+        memo_r[y, r] = 0
+    memo_f[y] = 0.0
+    st[0] = y
+    ch[0] = 0
+    depth = 1
+    while depth > 0:
+        x = st[depth - 1]
+        nd = ids[x]
+        k = level[nd]
+        pos = ch[depth - 1]
+        sl = ev_slot[ev_slot_ptr[e] + k - t]
+        if sl >= 0:  # the next enabling value, or past the node's last child
+            i = on_val[on_ptr[sl] + pos] if pos < on_ptr[sl + 1] - on_ptr[sl] else size[nd]
+            if i > size[nd]:
+                i = size[nd]
+        else:
+            i = pos
+        if i == size[nd]:
+            depth -= 1
+            if depth > 0:
+                p = st[depth - 1]
+                for r in range(n_pr):
+                    memo_r[p, r] = (memo_r[p, r] + memo_r[x, r]) % primes[r]
+                memo_f[p] += memo_f[x]
+            continue
+        ch[depth - 1] = pos + 1
+        c = kids[offset[nd] + i]
+        if c == EMPTY:
+            continue
+        if k == b:
+            if c == TERMINAL:
+                for r in range(n_pr):
+                    memo_r[x, r] = (memo_r[x, r] + 1) % primes[r]
+                memo_f[x] += 1.0
+            else:
+                for r in range(n_pr):
+                    memo_r[x, r] = (memo_r[x, r] + residue[c, r]) % primes[r]
+                memo_f[x] += approx[c]
+            continue
+        z = comp[c]
+        if stamp[z] == e:
+            for r in range(n_pr):
+                memo_r[x, r] = (memo_r[x, r] + memo_r[z, r]) % primes[r]
+            memo_f[x] += memo_f[z]
+            continue
+        stamp[z] = e
+        for r in range(n_pr):
+            memo_r[z, r] = 0
+        memo_f[z] = 0.0
+        st[depth] = z
+        ch[depth] = 0
+        depth += 1
+
+
+@njit(cache=True)
 def enabled_counts(root: int, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray,
-                   ev_slot: np.ndarray, slot_ptr: np.ndarray, nxt: np.ndarray, offset: np.ndarray,
+                   ev_slot: np.ndarray, on_ptr: np.ndarray, on_val: np.ndarray, offset: np.ndarray,
                    size: np.ndarray, kids: np.ndarray, level: np.ndarray, n_levels: int, n_nodes: int,
                    residue: np.ndarray, approx: np.ndarray, primes: np.ndarray, out_res: np.ndarray,
                    out_approx: np.ndarray) -> None:
@@ -916,16 +998,21 @@ def enabled_counts(root: int, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_pt
     into ``out_res[e]`` (modulo each prime of ``primes``, all below 2**61) and ``out_approx[e]``
     (float64), building no node.
 
-    A count restricted on the levels ``top[e] .. bot[e]`` only: the paths from the root down to a
-    node n at level ``top[e]`` (``above(n)``, one top-down pass over the set's nodes, shared by all
-    events) times the paths below n that take an enabling value on every level where e has a local
-    function, down to ``bot[e]``, below which the plain count of the node (``residue``, ``approx``:
-    :func:`count` of ``root``, done before) is used. So an event costs the nodes between its top and
-    bottom levels, not the whole set. Nodes are numbered children first (a node is checked in after
-    its children), so decreasing numbers are a top-down order."""
+    A count restricted to the levels ``top[e] .. bot[e]``: the paths from the root down to the arcs
+    (n, v, c) leaving level ``top[e]`` (node n there, value v, child c), times the paths below c that
+    take an enabling value on every level where e has a local function, down to ``bot[e]``, below
+    which the plain count of the node (``residue``, ``approx``: :func:`count` of ``root``, done
+    before) is used. The paths above an arc are summed per (v, c) once per top level, for all the
+    events of that level (``above(n)``: one top-down pass over the set's nodes; nodes are numbered
+    children first, so decreasing numbers are a top-down order): an event then costs its enabling
+    values' distinct children at its top level and the nodes below them down to its bottom level,
+    not every node of its top level. On a level where e has a local function s, only its enabling
+    values are walked: ``on_val[on_ptr[s]:on_ptr[s + 1]]``, increasing (:func:`enabling_values`).
+    """
     n_pr = primes.shape[0]
+    n_ev = ev_top.shape[0]
     if root <= 1:
-        for e in range(ev_top.shape[0]):
+        for e in range(n_ev):
             for r in range(n_pr):
                 out_res[e, r] = root
             out_approx[e] = float(root)
@@ -968,66 +1055,86 @@ def enabled_counts(root: int, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_pt
     memo_f = np.zeros(m, np.float64)
     st = np.zeros(n_levels + 2, np.int64)
     ch = np.zeros(n_levels + 2, np.int64)
-    for e in range(ev_top.shape[0]):
+    order = np.argsort(ev_top, kind="mergesort")
+    cur = -1
+    w_ptr = np.zeros(1, np.int64)
+    w_kid = np.zeros(0, np.int64)
+    w_r = np.zeros((0, n_pr), np.int64)
+    w_f = np.zeros(0, np.float64)
+    width = 0
+    for q in range(n_ev):
+        e = order[q]
         t = ev_top[e]
         b = ev_bot[e]
+        if t != cur:
+            # the arcs leaving level t, summed per (value, child): w_kid[j] is the child (a store
+            # node) and w_r[j], w_f[j] the paths above its arcs, for j in w_ptr[v] .. w_ptr[v + 1]
+            cur = t
+            width = 0
+            n_arcs = 0
+            for z in range(lp[t], lp[t + 1]):
+                nd = ids[by_level[z]]
+                width = max(width, size[nd])
+                for i in range(size[nd]):
+                    if kids[offset[nd] + i] != EMPTY:
+                        n_arcs += 1
+            span = m + 1  # a child's key: its compacted number, or m for the terminal
+            keys = np.empty(n_arcs, np.int64)
+            src = np.empty(n_arcs, np.int64)
+            a = 0
+            for z in range(lp[t], lp[t + 1]):
+                x = by_level[z]
+                nd = ids[x]
+                for i in range(size[nd]):
+                    c = kids[offset[nd] + i]
+                    if c != EMPTY:
+                        keys[a] = i * span + (comp[c] if c > 1 else m)
+                        src[a] = x
+                        a += 1
+            srt = np.argsort(keys, kind="mergesort")
+            n_w = 0
+            for a in range(n_arcs):
+                if a == 0 or keys[srt[a]] != keys[srt[a - 1]]:
+                    n_w += 1
+            w_ptr = np.zeros(width + 1, np.int64)
+            w_kid = np.empty(n_w, np.int64)
+            w_r = np.zeros((n_w, n_pr), np.int64)
+            w_f = np.zeros(n_w, np.float64)
+            j = -1
+            for a in range(n_arcs):
+                key = keys[srt[a]]
+                if a == 0 or key != keys[srt[a - 1]]:
+                    j += 1
+                    cc = key % span
+                    w_kid[j] = ids[cc] if cc < m else TERMINAL
+                    w_ptr[key // span + 1] += 1
+                x = src[srt[a]]
+                for r in range(n_pr):
+                    w_r[j, r] = (w_r[j, r] + above_r[x, r]) % primes[r]
+                w_f[j] += above_f[x]
+            for v in range(width):
+                w_ptr[v + 1] += w_ptr[v]
         for r in range(n_pr):
             out_res[e, r] = 0
         out_approx[e] = 0.0
-        for z in range(lp[t], lp[t + 1]):
-            x0 = by_level[z]
-            if stamp[x0] != e:
-                # depth-first, post-order: a node's enabled paths once its children's are known
-                stamp[x0] = e
-                for r in range(n_pr):
-                    memo_r[x0, r] = 0
-                memo_f[x0] = 0.0
-                st[0] = x0
-                ch[0] = 0
-                depth = 1
-                while depth > 0:
-                    x = st[depth - 1]
-                    nd = ids[x]
-                    k = level[nd]
-                    i = ch[depth - 1]
-                    if i == size[nd]:
-                        depth -= 1
-                        if depth > 0:
-                            p = st[depth - 1]
-                            for r in range(n_pr):
-                                memo_r[p, r] = (memo_r[p, r] + memo_r[x, r]) % primes[r]
-                            memo_f[p] += memo_f[x]
-                        continue
-                    ch[depth - 1] = i + 1
-                    c = kids[offset[nd] + i]
-                    if c == EMPTY:
-                        continue
-                    sl = ev_slot[ev_slot_ptr[e] + k - t]
-                    if sl >= 0 and nxt[slot_ptr[sl] + i] < 0:
-                        continue
-                    if k == b:
-                        if c == TERMINAL:
-                            for r in range(n_pr):
-                                memo_r[x, r] = (memo_r[x, r] + 1) % primes[r]
-                            memo_f[x] += 1.0
-                        else:
-                            for r in range(n_pr):
-                                memo_r[x, r] = (memo_r[x, r] + residue[c, r]) % primes[r]
-                            memo_f[x] += approx[c]
-                        continue
-                    y = comp[c]
-                    if stamp[y] == e:
-                        for r in range(n_pr):
-                            memo_r[x, r] = (memo_r[x, r] + memo_r[y, r]) % primes[r]
-                        memo_f[x] += memo_f[y]
-                        continue
-                    stamp[y] = e
+        sl = ev_slot[ev_slot_ptr[e]]
+        n_on = width if sl < 0 else on_ptr[sl + 1] - on_ptr[sl]
+        for u in range(n_on):
+            v = u if sl < 0 else on_val[on_ptr[sl] + u]
+            if v >= width:
+                break
+            for j in range(w_ptr[v], w_ptr[v + 1]):
+                c = w_kid[j]
+                if t == b:  # the event reads level t alone: every path below the arc counts
                     for r in range(n_pr):
-                        memo_r[y, r] = 0
-                    memo_f[y] = 0.0
-                    st[depth] = y
-                    ch[depth] = 0
-                    depth += 1
-            for r in range(n_pr):
-                out_res[e, r] = (out_res[e, r] + _mulmod(above_r[x0, r], memo_r[x0, r], primes[r])) % primes[r]
-            out_approx[e] += above_f[x0] * memo_f[x0]
+                        below = 1 if c == TERMINAL else residue[c, r]
+                        out_res[e, r] = (out_res[e, r] + _mulmod(w_r[j, r], below, primes[r])) % primes[r]
+                    out_approx[e] += w_f[j] * (1.0 if c == TERMINAL else approx[c])
+                    continue
+                y = comp[c]
+                if stamp[y] != e:
+                    _enabled_below(y, e, t, b, ev_slot_ptr, ev_slot, on_ptr, on_val, ids, comp, offset, size, kids,
+                                   level, residue, approx, primes, stamp, memo_r, memo_f, st, ch)
+                for r in range(n_pr):
+                    out_res[e, r] = (out_res[e, r] + _mulmod(w_r[j, r], memo_r[y, r], primes[r])) % primes[r]
+                out_approx[e] += w_f[j] * memo_f[y]

@@ -63,8 +63,6 @@ ANSWER_SECONDS = 50.0
 #: markings drawn from the reachable set whose forward sets are searched for a transition that can
 #: never fire again and for M0, before the backward saturations (:func:`_probe`)
 PROBES = 3
-#: largest |P|·|T| for which a witness is searched over explicit markings on dense matrices
-_DENSE_WITNESS = 4_000_000
 #: longest that search may take before breadth-first images take over (seconds)
 _GUIDED_SECONDS = 10.0
 #: longest that search may take inside the reachable set alone, before the markings that can reach a
@@ -280,7 +278,8 @@ class _Store:
         primes = np.array(self._primes, dtype=np.int64)
         res = np.zeros((ev.n_events, len(self._primes)), np.int64)
         approx = np.zeros(ev.n_events, np.float64)
-        mk.enabled_counts(node, ev.top, ev.bot, ev.slot_ptr, ev.slot, ev.fn_ptr, ev.fn, offset, size, kids, level,
+        on_ptr, on_val = mk.enabling_values(ev.fn_ptr, ev.fn)
+        mk.enabled_counts(node, ev.top, ev.bot, ev.slot_ptr, ev.slot, on_ptr, on_val, offset, size, kids, level,
                           self.enc.n_levels, int(meta[mk.META_NODES]), self._residue, self._approx, primes, res,
                           approx)
         if approx.size and float(approx.max()) >= 2.0 ** (60 * len(self._primes) - 3):
@@ -409,13 +408,18 @@ def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet,
     that never leaves ``inside`` (every marking of which can reach a target), always going on from
     the marking nearest (in tokens) to the dead marking ``goal``, the deepest first among equals; so
     it mostly walks straight to a target. None when it has seen ``limit`` markings, or at ``stop``
-    (``time.monotonic()`` seconds), first."""
+    (``time.monotonic()`` seconds), first. A marking costs the net's arcs (sparse Pre, inhibitor
+    and incidence), not |P|·|T|."""
     import heapq
 
-    pre = sn.pre.toarray()
-    inh = sn.inhibitor.toarray()
-    inc = sn.incidence.toarray()
-    has_inh = bool((inh > 0).any())
+    n_t = sn.n_transitions
+    pre = sn.pre.tocsc()
+    inh = sn.inhibitor.tocsc()
+    inc = sn.incidence.tocsc()
+    pre.sort_indices()
+    inh.sort_indices()
+    pre_t = np.repeat(np.arange(n_t), np.diff(pre.indptr))
+    inh_t = np.repeat(np.arange(n_t), np.diff(inh.indptr))
     lookup = _LevelValues(enc)
     m0 = np.asarray(sn.m0, dtype=np.int64)
     vals0 = lookup.of(m0[None, :])[0]
@@ -432,11 +436,13 @@ def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet,
             return None
         _, _, i = heapq.heappop(heap)
         m = marks[i]
-        ok = (m[:, None] >= pre).all(axis=0)
-        if has_inh:
-            ok &= ((inh == 0) | (m[:, None] < inh)).all(axis=0)
-        ts = np.flatnonzero(ok)
-        succ = m[None, :] + inc[:, ts].T
+        off = np.zeros(n_t, dtype=bool)
+        off[pre_t[m[pre.indices] < pre.data]] = True
+        off[inh_t[(inh.data > 0) & (m[inh.indices] >= inh.data)]] = True
+        ts = np.flatnonzero(~off)
+        if not ts.size:
+            continue
+        succ = m[None, :] + inc[:, ts].T.toarray()
         vals = lookup.of(succ)
         for j, t in enumerate(ts):
             key = succ[j].tobytes()
@@ -479,20 +485,29 @@ def _bfs_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fw
         hit = store.call(mk.MODE_APPLY, fwd, new, targets, arg=mk.APPLY_INTER)
     cur = _marking(enc, store.pick(hit), net)
     end = cur.copy()
+    if len(layers) == 1:  # M0 is a target
+        return [], end
     seq: list[str] = []
+    n_t = sn.n_transitions
     inc = sn.incidence.tocsc()
+    post = sn.post.tocsc()
+    inh = sn.inhibitor.tocsc()
+    post_t = np.repeat(np.arange(n_t), np.diff(post.indptr))
+    lookup = _LevelValues(enc)
     for layer in reversed(layers[:-1]):
-        for t in range(sn.n_transitions):
-            prev = cur - inc[:, t].toarray().ravel()
-            if (prev < 0).any() or (prev < sn.pre[:, t].toarray().ravel()).any():
-                continue
-            inh = sn.inhibitor[:, t].toarray().ravel()
-            if ((inh > 0) & (prev >= inh)).any():
-                continue
-            vals = _values(enc, prev)
-            if vals is not None and store.contains(layer, vals):
-                seq.append(net.transitions[t].id)
-                cur = prev
+        # t can have led to cur iff cur holds t's output tokens (then the predecessor cur − C[:, t]
+        # holds t's input tokens), and the predecessor satisfies t's inhibitor arcs
+        off = np.zeros(n_t, dtype=bool)
+        off[post_t[cur[post.indices] < post.data]] = True
+        ts = np.flatnonzero(~off)
+        prev = cur[None, :] - inc[:, ts].T.toarray()
+        lim = inh[:, ts].T.toarray()
+        ok = ~((lim > 0) & (prev >= lim)).any(axis=1)
+        vals = lookup.of(prev)
+        for j in np.flatnonzero(ok & (vals[:, 0] >= 0)):
+            if store.contains(layer, vals[j]):
+                seq.append(net.transitions[int(ts[j])].id)
+                cur = prev[j]
                 break
         else:
             raise AnalysisError("internal: no predecessor found while tracing a firing sequence back")
@@ -590,7 +605,7 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             notes=notes)
         back: Events | None = None
         if sn.n_resets == 0:
-            back = events(sn, enc, inverse=True)
+            back = events(sn, enc, inverse=True, merge=True)
         mk.set_watch(deadline, None, stop)
         _witness(store, sn, enc, net, fwd, back, reach, dead, result, say, deadline)
         until = min(deadline, start + answer_seconds)
@@ -1099,7 +1114,7 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
         return
     try:
         say("symbolic: a firing sequence to a deadlock")
-        explicit = sn.n_places * sn.n_transitions <= _DENSE_WITNESS and enc.n_levels > 0
+        explicit = enc.n_levels > 0
         found = None
         if explicit:  # first inside the reachable set alone: most often a deadlock is reachable from
             now = time.monotonic()  # everywhere, and the backward saturation below costs more

@@ -143,6 +143,53 @@ def test_generated_nets_agree_with_the_explicit_search_on_every_property(seed: i
         assert replays_to(net, r.deadlock_sequence, r.deadlock_marking)
 
 
+def shortest_to_a_deadlock(net: PetriNet) -> int:
+    """Length of a shortest firing sequence from M0 to a dead marking (plain breadth-first search)."""
+    layer, seen, depth = [net.initial_marking], {net.initial_marking}, 0
+    while layer:
+        if any(not net.enabled_transitions(m) for m in layer):
+            return depth
+        nxt = []
+        for m in layer:
+            for t in net.enabled_transitions(m):
+                m2 = net.fire(m, t)
+                if m2 not in seen:
+                    seen.add(m2)
+                    nxt.append(m2)
+        layer, depth = nxt, depth + 1
+    raise AssertionError("no dead marking")
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_the_breadth_first_trace_to_a_deadlock_is_a_shortest_firing_sequence(seed: int) -> None:
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events, touched_places
+    from coordinator.analysis.symbolic import _bfs_sequence, _dead, _fireable, _Store
+
+    net = generated_net(seed)  # the odd seeds with inhibitor arcs
+    a = analyse(net, max_states=200_000)
+    bounds, flows = proven_bounds(net)
+    per_place = np.array([a.place_bounds[p.id] for p in net.places], dtype=np.int64)
+    bounds = np.where((bounds >= per_place) & (bounds < 40), bounds, per_place)  # the LP's, else the true one
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    fwd, single = events(sn, enc, merge=True), events(sn, enc)
+    store = _Store(enc, 64 << 20)
+    reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
+    states = store.count(reach)
+    _, counts = _fireable(store, single, reach, states, np.zeros(len(net.transitions), dtype=bool))
+    free = enc.free(touched_places(sn)).any()  # a transition enabled everywhere: no dead marking
+    dead = mk.EMPTY if free else _dead(store, fwd, single, reach, counts, states)
+    assert store.count(dead) == a.n_deadlocks
+    if not a.deadlock:
+        return
+    found = _bfs_sequence(store, sn, enc, net, fwd, reach, dead)
+    assert found is not None
+    seq, end = found
+    assert replays_to(net, seq, {p.id: int(end[i]) for i, p in enumerate(net.places) if end[i]})
+    assert len(seq) == shortest_to_a_deadlock(net)
+
+
 def test_a_count_beyond_two_to_the_64_is_exact() -> None:
     n = 70
     net = make_net("toggles", {f"off{i}": 1 for i in range(n)},
