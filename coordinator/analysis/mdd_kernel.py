@@ -24,7 +24,12 @@ driven by :mod:`coordinator.analysis.symbolic`, which documents the results. Wha
   which it is enabled (:func:`enabled_counts`), exact modulo primes.
 
 numba cannot load a recursive function from its cache (it crashes: checked on numba 0.68), so the
-recursion runs on an explicit stack of frames, each with a program counter; a frame's node under
+recursion runs on an explicit stack of frames, each with a program counter. The loop over the
+frames (``_steps``) never reassigns an array and hands none to a helper in its inner steps (the
+helpers it inlines take numbers, or run once per new node): numba counts the references of an
+array variable at each such place, with an atomic instruction, and on Peterson-PT-4 that counting
+took three quarters of the saturation (39 s; 7.5 s without it). The buffers are grown between two
+calls of ``_steps``, in :func:`run`; a frame's node under
 construction lives in an arena of child buffers with stack discipline. Results of operations go
 to a lossy computed table (a direct-mapped cache, as in CUDD; an entry's two keys and its value
 side by side, so a look-up reads one cache line), which never changes a result, only what is
@@ -61,6 +66,8 @@ _WATCH_STEPS = 1 << 20
 #: what :func:`run` computes
 MODE_SATURATE, MODE_IMAGE, MODE_APPLY, MODE_RESTRICT = 0, 1, 2, 3
 APPLY_UNION, APPLY_INTER, APPLY_DIFF = 0, 1, 2
+#: why :func:`_steps` returned: a buffer of the store is full; done (or a status is set)
+_FULL, _DONE = 0, 1
 #: frame kinds
 _SAT, _FIRE, _NODE, _APPLY, _RESTRICT, _IMAGE = 0, 1, 2, 3, 4, 5
 #: operation tags in the computed table
@@ -136,14 +143,14 @@ def clear_cache(store: tuple[np.ndarray, ...]) -> None:
     store[6][:, 0] = -1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _mix(x: np.uint64) -> np.uint64:
     x = (x ^ (x >> np.uint64(30))) * _M1
     x = (x ^ (x >> np.uint64(27))) * _M2
     return x ^ (x >> np.uint64(31))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _node_hash(k: int, buf: np.ndarray, off: int, n: int) -> np.uint64:
     h = _mix(np.uint64(k + 1) * _GOLD)
     for i in range(n):
@@ -151,12 +158,12 @@ def _node_hash(k: int, buf: np.ndarray, off: int, n: int) -> np.uint64:
     return h
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _slot(k0: int, k1: int, mask: int) -> int:
     return np.int64(_mix(_mix(np.uint64(k0) * _GOLD) ^ np.uint64(k1)) & np.uint64(mask))  # type: ignore[return-value]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _checkin(k: int, arena: np.ndarray, b0: int, n: int, meta: np.ndarray, level: np.ndarray,
              offset: np.ndarray, size: np.ndarray, kids: np.ndarray, unique: np.ndarray) -> int:
     """The unique node at level k with children ``arena[b0:b0 + n]`` (trailing empties trimmed):
@@ -247,21 +254,12 @@ def add_path(values: np.ndarray, dom: np.ndarray, meta: np.ndarray, level: np.nd
     return node, level, offset, size, kids, unique
 
 
-@njit(cache=True)
-def _kid(kids: np.ndarray, offset: np.ndarray, size: np.ndarray, node: int, i: int) -> int:
-    """Child i of a node; for the constraint sentinel NO_CONSTRAINT, NO_CONSTRAINT."""
-    if node == NO_CONSTRAINT:
-        return NO_CONSTRAINT
-    if i < size[node]:
-        return kids[offset[node] + i]  # type: ignore[no-any-return]
-    return EMPTY
-
-
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, n_levels: int,
-             ev_bot: np.ndarray) -> tuple[int, int, int, int, int]:
+             bot: int) -> tuple[int, int, int, int, int]:
     """For a call of kind ``ty``: its result when it is immediate (else -1), its operands in canonical
-    order, and its two computed-table key words."""
+    order, and its two computed-table key words. ``bot``: event e's bottom level (FIRE, RESTRICT); a
+    number, not the table, so that the inlined call keeps no reference count."""
     if ty == _SAT:
         if a == EMPTY or k == n_levels:
             return a, a, b, 0, 0
@@ -270,7 +268,7 @@ def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, 
         # below the event's bottom a firing changes nothing, but under a constraint the node is
         # moved to another value, whose constraint it must be cut to (and saturated within): the
         # frame then walks down with the identity; a node that is its constraint stays as it is
-        if a == EMPTY or k == n_levels or (k > ev_bot[e] and (c == NO_CONSTRAINT or c == a)):
+        if a == EMPTY or k == n_levels or (k > bot and (c == NO_CONSTRAINT or c == a)):
             return a, a, b, 0, 0
         return -1, a, b, ((_OP_FIRE if saturating else _OP_IMAGE) << 40) + a, (c << 24) + e
     if ty == _APPLY:
@@ -295,94 +293,31 @@ def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, 
     # _RESTRICT: b is 1 to keep the markings where event e is enabled, 0 where it is disabled
     if a == EMPTY:
         return EMPTY, a, b, 0, 0
-    if k > ev_bot[e]:
+    if k > bot:
         return (a if b == 1 else EMPTY), a, b, 0, 0
     return -1, a, b, (_OP_RESTRICT << 40) + a, (e << 2) + b
 
 
-@njit(cache=True, nogil=True)  # two variable orders race on two cores (symbolic._race)
-def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray,
-        ev_slot: np.ndarray, slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray,
-        meta: np.ndarray, level: np.ndarray, offset: np.ndarray, size: np.ndarray, kids: np.ndarray,
-        unique: np.ndarray, ct: np.ndarray, a_in: int, b_in: int,
-        c_in: int, arg: int, check_overflow: bool, max_bytes: int) -> tuple:  # type: ignore[type-arg]
-    """One operation on the store (see the module docstring).
-
-    Args:
-        mode: MODE_SATURATE (the saturated closure of ``a_in`` under every event, inside ``c_in``),
-            MODE_IMAGE (one step of every event from ``a_in``, inside ``c_in``, not saturated),
-            MODE_APPLY (``arg`` in APPLY_UNION/INTER/DIFF of ``a_in`` and ``b_in``) or MODE_RESTRICT
-            (the markings of ``a_in`` in which event ``arg`` is enabled if ``b_in`` is 1, disabled if 0).
-        dom: (K,) int64 local domain sizes, level 0 at the root.
-        ev_top, ev_bot: (E,) int64 top and bottom level of each event.
-        ev_slot_ptr, ev_slot: for event e and level k in [top, bot], ``ev_slot[ev_slot_ptr[e] + k -
-            top]`` is the index of its local function, or -1 where the event leaves the level alone.
-        slot_ptr, nxt: local function s maps value i to ``nxt[slot_ptr[s] + i]`` (-1: disabled).
-        evtop_ptr, evtop: the events whose top is level k: ``evtop[evtop_ptr[k]:evtop_ptr[k + 1]]``.
-        meta, level, offset, size, kids, unique, ct: the store (:func:`new_store`, or
-            a previous result).
-        a_in, b_in, c_in: operand nodes (c_in: a constraint node at the root level, or NO_CONSTRAINT).
-        arg: the APPLY operation or the RESTRICT event.
-        check_overflow: a firing that leaves a level's domain is an error (status OVERFLOW, with the
-            level in meta) instead of being dropped.
-        max_bytes: byte budget of the store, computed table, frames and buffers (status MEMORY
-            beyond it; the store is then still consistent).
+@njit(cache=True, nogil=True)
+def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray, ev_slot: np.ndarray,
+           slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray, meta: np.ndarray,
+           level: np.ndarray, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, unique: np.ndarray,
+           ct: np.ndarray, check_overflow: bool, saturating: bool, max_dom: int, f_ty: np.ndarray,
+           f_pc: np.ndarray, f_k: np.ndarray, f_a: np.ndarray, f_b: np.ndarray, f_c: np.ndarray, f_e: np.ndarray,
+           f_i: np.ndarray, f_j: np.ndarray, f_buf: np.ndarray, f_k0: np.ndarray, f_k1: np.ndarray,
+           f_s: np.ndarray, arena: np.ndarray, depth: int, atop: int, ret: int, ct_used: int,
+           steps: int) -> tuple:  # type: ignore[type-arg]
+    """The steps of :func:`run` on its stack of frames, until the stack is empty, a status is set,
+    or a buffer of the store is full (``_FULL``: :func:`run` grows it and calls again). No array is
+    reassigned here: numba then keeps no reference count in the loop (with the buffers grown in
+    the loop itself, counting references took three quarters of the time of a saturation).
 
     Returns:
-        ``(status, result node, meta, level, offset, size, kids, unique, ct)``.
-    """
+        ``(why, depth, atop, ret, status, ct_used, steps)``: why is ``_FULL`` or ``_DONE``."""
     n_levels = dom.shape[0]
-    max_dom = 1
-    for k in range(n_levels):
-        max_dom = max(max_dom, dom[k])
-    saturating = mode == MODE_SATURATE
-    # computed table: direct mapped (key words and value), grown (and refilled) as it fills up
-    ccap = ct.shape[0]
-    ct_used = meta[META_CT_USED]
-    # frames: along the stack the level grows by one per frame, but for NODE frames (at the level of
-    # the SAT or FIRE frame below them) and the IMAGE frame, so the depth stays below 2K + 4
-    fcap = 2 * n_levels + 8
-    f_ty = np.zeros(fcap, np.int64)
-    f_pc = np.zeros(fcap, np.int64)
-    f_k = np.zeros(fcap, np.int64)
-    f_a = np.zeros(fcap, np.int64)
-    f_b = np.zeros(fcap, np.int64)
-    f_c = np.zeros(fcap, np.int64)
-    f_e = np.zeros(fcap, np.int64)
-    f_i = np.zeros(fcap, np.int64)
-    f_j = np.zeros(fcap, np.int64)
-    f_buf = np.zeros(fcap, np.int64)
-    f_k0 = np.zeros(fcap, np.int64)
-    f_k1 = np.zeros(fcap, np.int64)
-    f_s = np.zeros(fcap, np.int64)  # a NODE frame's lowest value that may be dirty
-    arena = np.zeros((fcap + 1) * max_dom, np.int32)
-    atop = 0
-    fixed = fcap * 104 + arena.shape[0] * 4
     status = OK
-    ret = EMPTY
-    depth = 0
-    if mode == MODE_IMAGE:
-        f_ty[0] = _IMAGE
-        f_a[0] = a_in
-        f_c[0] = c_in
-        depth = 1
-    else:
-        ty0 = _SAT if mode == MODE_SATURATE else (_APPLY if mode == MODE_APPLY else _RESTRICT)
-        quick, a0, b0_, key0, key1 = _prepare(ty0, 0, a_in, b_in, c_in, arg, saturating, n_levels, ev_bot)
-        if quick >= 0:
-            ret = quick
-        else:
-            f_ty[0] = ty0
-            f_a[0] = a0
-            f_b[0] = b0_
-            f_c[0] = c_in
-            f_e[0] = arg
-            f_k0[0] = key0
-            f_k1[0] = key1
-            depth = 1
-    # a call: the caller sets (cty, ck, ca, cb, cc, ce) and its own continuation pc, then jumps to
-    # ``call``; an immediate or cached result comes back in ret at once, else a frame is pushed
-    steps = 0
+    ccap = ct.shape[0]
+    cmask = ccap - 1
     while depth > 0:
         steps += 1
         if steps == _WATCH_STEPS:
@@ -396,61 +331,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
         n_nodes = meta[META_NODES]
         if (n_nodes + 2 > level.shape[0] or meta[META_KIDS] + max_dom > kids.shape[0]
                 or 2 * (meta[META_UNIQUE] + 1) > unique.shape[0] or (4 * ct_used > ccap and ccap < _CT_MAX)):
-            # grow what is full; the old and the new buffer are both held during the copy
-            gn = level.shape[0] * 2 if n_nodes + 2 > level.shape[0] else level.shape[0]
-            gk = kids.shape[0]
-            if meta[META_KIDS] + max_dom > gk:
-                gk = max(2 * gk, meta[META_KIDS] + 2 * max_dom)
-            gu = unique.shape[0]
-            while 2 * (meta[META_UNIQUE] + 1) > gu:
-                gu *= 2
-            gc = ccap
-            while 4 * ct_used > gc and gc < _CT_MAX:
-                gc *= 2
-            held = level.shape[0] * 16 + kids.shape[0] * 4 + unique.shape[0] * 4 + ccap * 24 + fixed
-            extra = 0
-            if gn != level.shape[0]:
-                extra += gn * 16
-            if gk != kids.shape[0]:
-                extra += gk * 4
-            if gu != unique.shape[0]:
-                extra += gu * 4
-            if gc != ccap:
-                extra += gc * 24
-            if held + extra > max_bytes:
-                status = MEMORY
-                break
-            if gn != level.shape[0]:
-                nl = np.zeros(gn, np.int32)
-                no = np.zeros(gn, np.int64)
-                ns = np.zeros(gn, np.int32)
-                nl[:n_nodes] = level[:n_nodes]
-                no[:n_nodes] = offset[:n_nodes]
-                ns[:n_nodes] = size[:n_nodes]
-                level, offset, size = nl, no, ns
-            if gk != kids.shape[0]:
-                nk = np.zeros(gk, np.int32)
-                nk[:meta[META_KIDS]] = kids[:meta[META_KIDS]]
-                kids = nk
-            if gu != unique.shape[0]:
-                unique = np.zeros(gu, np.int32)
-                _rehash(unique, n_nodes, level, offset, size, kids)
-            if gc != ccap:
-                # a larger table, refilled with the entries of the old one
-                nct = np.zeros((gc, 3), np.int64)
-                nct[:, 0] = -1
-                ct_used = 0
-                for x in range(ccap):
-                    if ct[x, 0] != -1:
-                        y = _slot(ct[x, 0], ct[x, 1], gc - 1)
-                        if nct[y, 0] == -1:
-                            ct_used += 1
-                        nct[y, 0] = ct[x, 0]
-                        nct[y, 1] = ct[x, 1]
-                        nct[y, 2] = ct[x, 2]
-                ccap = gc
-                ct = nct
-        cmask = ccap - 1
+            return _FULL, depth, atop, ret, status, ct_used, steps
         d = depth - 1
         ty = f_ty[d]
         pc = f_pc[d]
@@ -529,9 +410,9 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 if v == EMPTY or j < 0 or (j >= dom[k] and not check_overflow):
                     f_e[d] = ei + 1
                     continue
-                cons = NO_CONSTRAINT
-                if f_c[d] != NO_CONSTRAINT:
-                    cons = _kid(kids, offset, size, f_c[d], j)
+                cons = f_c[d]  # child j of the constraint (no array passed to a helper: module docstring)
+                if cons != NO_CONSTRAINT:
+                    cons = kids[offset[cons] + j] if j < size[cons] else EMPTY
                     if cons == EMPTY:
                         f_e[d] = ei + 1
                         continue
@@ -625,8 +506,8 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                         break
                     cty = _APPLY
                     ck = k + 1
-                    ca = _kid(kids, offset, size, x, i)
-                    cb = _kid(kids, offset, size, y, i)
+                    ca = kids[offset[x] + i] if i < size[x] else EMPTY
+                    cb = kids[offset[y] + i] if i < size[y] else EMPTY
                     ce = op
                     f_pc[d] = 2
                     break
@@ -644,7 +525,9 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                     cty = _SAT
                     ck = k + 1
                     ca = ch
-                    cc = _kid(kids, offset, size, f_c[d], i)
+                    cc = f_c[d]
+                    if cc != NO_CONSTRAINT:
+                        cc = kids[offset[cc] + i] if i < size[cc] else EMPTY
                     f_pc[d] = 2
                 elif ty == _FIRE:
                     e = f_e[d]
@@ -656,9 +539,9 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                     if j < 0 or (j >= dom[k] and not check_overflow):
                         f_i[d] = i + 1
                         continue
-                    cons = NO_CONSTRAINT
-                    if f_c[d] != NO_CONSTRAINT:
-                        cons = _kid(kids, offset, size, f_c[d], j)
+                    cons = f_c[d]
+                    if cons != NO_CONSTRAINT:
+                        cons = kids[offset[cons] + j] if j < size[cons] else EMPTY
                         if cons == EMPTY:
                             f_i[d] = i + 1
                             continue
@@ -719,7 +602,8 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
             f_pc[d] = pc
             continue
         # the call: immediate, cached, or a new frame
-        quick, ca, cb, key0, key1 = _prepare(cty, ck, ca, cb, cc, ce, saturating, n_levels, ev_bot)
+        quick, ca, cb, key0, key1 = _prepare(cty, ck, ca, cb, cc, ce, saturating, n_levels,
+                                              ev_bot[ce] if cty == _FIRE or cty == _RESTRICT else 0)
         if quick < 0:
             s = _slot(key0, key1, cmask)
             if ct[s, 0] == key0 and ct[s, 1] == key1:
@@ -737,6 +621,157 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
         f_k0[depth] = key0
         f_k1[depth] = key1
         depth += 1
+    return _DONE, depth, atop, ret, status, ct_used, steps
+
+
+@njit(cache=True, nogil=True)  # two variable orders race on two cores (symbolic._race)
+def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray,
+        ev_slot: np.ndarray, slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray,
+        meta: np.ndarray, level: np.ndarray, offset: np.ndarray, size: np.ndarray, kids: np.ndarray,
+        unique: np.ndarray, ct: np.ndarray, a_in: int, b_in: int,
+        c_in: int, arg: int, check_overflow: bool, max_bytes: int) -> tuple:  # type: ignore[type-arg]
+    """One operation on the store (see the module docstring).
+
+    Args:
+        mode: MODE_SATURATE (the saturated closure of ``a_in`` under every event, inside ``c_in``),
+            MODE_IMAGE (one step of every event from ``a_in``, inside ``c_in``, not saturated),
+            MODE_APPLY (``arg`` in APPLY_UNION/INTER/DIFF of ``a_in`` and ``b_in``) or MODE_RESTRICT
+            (the markings of ``a_in`` in which event ``arg`` is enabled if ``b_in`` is 1, disabled if 0).
+        dom: (K,) int64 local domain sizes, level 0 at the root.
+        ev_top, ev_bot: (E,) int64 top and bottom level of each event.
+        ev_slot_ptr, ev_slot: for event e and level k in [top, bot], ``ev_slot[ev_slot_ptr[e] + k -
+            top]`` is the index of its local function, or -1 where the event leaves the level alone.
+        slot_ptr, nxt: local function s maps value i to ``nxt[slot_ptr[s] + i]`` (-1: disabled).
+        evtop_ptr, evtop: the events whose top is level k: ``evtop[evtop_ptr[k]:evtop_ptr[k + 1]]``.
+        meta, level, offset, size, kids, unique, ct: the store (:func:`new_store`, or
+            a previous result).
+        a_in, b_in, c_in: operand nodes (c_in: a constraint node at the root level, or NO_CONSTRAINT).
+        arg: the APPLY operation or the RESTRICT event.
+        check_overflow: a firing that leaves a level's domain is an error (status OVERFLOW, with the
+            level in meta) instead of being dropped.
+        max_bytes: byte budget of the store, computed table, frames and buffers (status MEMORY
+            beyond it; the store is then still consistent).
+
+    Returns:
+        ``(status, result node, meta, level, offset, size, kids, unique, ct)``.
+    """
+    n_levels = dom.shape[0]
+    max_dom = 1
+    for k in range(n_levels):
+        max_dom = max(max_dom, dom[k])
+    saturating = mode == MODE_SATURATE
+    # computed table: direct mapped (key words and value), grown (and refilled) as it fills up
+    ccap = ct.shape[0]
+    ct_used = meta[META_CT_USED]
+    # frames: along the stack the level grows by one per frame, but for NODE frames (at the level of
+    # the SAT or FIRE frame below them) and the IMAGE frame, so the depth stays below 2K + 4
+    fcap = 2 * n_levels + 8
+    f_ty = np.zeros(fcap, np.int64)
+    f_pc = np.zeros(fcap, np.int64)
+    f_k = np.zeros(fcap, np.int64)
+    f_a = np.zeros(fcap, np.int64)
+    f_b = np.zeros(fcap, np.int64)
+    f_c = np.zeros(fcap, np.int64)
+    f_e = np.zeros(fcap, np.int64)
+    f_i = np.zeros(fcap, np.int64)
+    f_j = np.zeros(fcap, np.int64)
+    f_buf = np.zeros(fcap, np.int64)
+    f_k0 = np.zeros(fcap, np.int64)
+    f_k1 = np.zeros(fcap, np.int64)
+    f_s = np.zeros(fcap, np.int64)  # a NODE frame's lowest value that may be dirty
+    arena = np.zeros((fcap + 1) * max_dom, np.int32)
+    atop = 0
+    fixed = fcap * 104 + arena.shape[0] * 4
+    status = OK
+    ret = EMPTY
+    depth = 0
+    if mode == MODE_IMAGE:
+        f_ty[0] = _IMAGE
+        f_a[0] = a_in
+        f_c[0] = c_in
+        depth = 1
+    else:
+        ty0 = _SAT if mode == MODE_SATURATE else (_APPLY if mode == MODE_APPLY else _RESTRICT)
+        quick, a0, b0_, key0, key1 = _prepare(ty0, 0, a_in, b_in, c_in, arg, saturating, n_levels,
+                                                ev_bot[arg] if ty0 == _RESTRICT else 0)
+        if quick >= 0:
+            ret = quick
+        else:
+            f_ty[0] = ty0
+            f_a[0] = a0
+            f_b[0] = b0_
+            f_c[0] = c_in
+            f_e[0] = arg
+            f_k0[0] = key0
+            f_k1[0] = key1
+            depth = 1
+    # a call: the caller sets (cty, ck, ca, cb, cc, ce) and its own continuation pc, then jumps to
+    # ``call``; an immediate or cached result comes back in ret at once, else a frame is pushed
+    steps = 0
+    while depth > 0:
+        n_nodes = meta[META_NODES]
+        if (n_nodes + 2 > level.shape[0] or meta[META_KIDS] + max_dom > kids.shape[0]
+                or 2 * (meta[META_UNIQUE] + 1) > unique.shape[0] or (4 * ct_used > ccap and ccap < _CT_MAX)):
+            # grow what is full; the old and the new buffer are both held during the copy
+            gn = level.shape[0] * 2 if n_nodes + 2 > level.shape[0] else level.shape[0]
+            gk = kids.shape[0]
+            if meta[META_KIDS] + max_dom > gk:
+                gk = max(2 * gk, meta[META_KIDS] + 2 * max_dom)
+            gu = unique.shape[0]
+            while 2 * (meta[META_UNIQUE] + 1) > gu:
+                gu *= 2
+            gc = ccap
+            while 4 * ct_used > gc and gc < _CT_MAX:
+                gc *= 2
+            held = level.shape[0] * 16 + kids.shape[0] * 4 + unique.shape[0] * 4 + ccap * 24 + fixed
+            extra = 0
+            if gn != level.shape[0]:
+                extra += gn * 16
+            if gk != kids.shape[0]:
+                extra += gk * 4
+            if gu != unique.shape[0]:
+                extra += gu * 4
+            if gc != ccap:
+                extra += gc * 24
+            if held + extra > max_bytes:
+                status = MEMORY
+                break
+            if gn != level.shape[0]:
+                nl = np.zeros(gn, np.int32)
+                no = np.zeros(gn, np.int64)
+                ns = np.zeros(gn, np.int32)
+                nl[:n_nodes] = level[:n_nodes]
+                no[:n_nodes] = offset[:n_nodes]
+                ns[:n_nodes] = size[:n_nodes]
+                level, offset, size = nl, no, ns
+            if gk != kids.shape[0]:
+                nk = np.zeros(gk, np.int32)
+                nk[:meta[META_KIDS]] = kids[:meta[META_KIDS]]
+                kids = nk
+            if gu != unique.shape[0]:
+                unique = np.zeros(gu, np.int32)
+                _rehash(unique, n_nodes, level, offset, size, kids)
+            if gc != ccap:
+                # a larger table, refilled with the entries of the old one
+                nct = np.zeros((gc, 3), np.int64)
+                nct[:, 0] = -1
+                ct_used = 0
+                for x in range(ccap):
+                    if ct[x, 0] != -1:
+                        y = _slot(ct[x, 0], ct[x, 1], gc - 1)
+                        if nct[y, 0] == -1:
+                            ct_used += 1
+                        nct[y, 0] = ct[x, 0]
+                        nct[y, 1] = ct[x, 1]
+                        nct[y, 2] = ct[x, 2]
+                ccap = gc
+                ct = nct
+        why, depth, atop, ret, status, ct_used, steps = _steps(
+            dom, ev_top, ev_bot, ev_slot_ptr, ev_slot, slot_ptr, nxt, evtop_ptr, evtop, meta, level, offset,
+            size, kids, unique, ct, check_overflow, saturating, max_dom, f_ty, f_pc, f_k, f_a, f_b, f_c, f_e,
+            f_i, f_j, f_buf, f_k0, f_k1, f_s, arena, depth, atop, ret, ct_used, steps)
+        if why != _FULL:
+            break
     meta[META_CT_USED] = ct_used
     if status != OK:
         ret = EMPTY
@@ -910,7 +945,7 @@ def enabling_values(slot_ptr: np.ndarray, nxt: np.ndarray) -> tuple[np.ndarray, 
     return on_ptr, (at - slot_ptr[owner]).astype(np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _mulmod(a: int, b: int, p: int) -> int:
     """a·b mod p for 0 ≤ a, b < p < 2**61 in int64 arithmetic (two bits of b at a time)."""
     r = 0
@@ -922,7 +957,7 @@ def _mulmod(a: int, b: int, p: int) -> int:
     return r
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _enabled_below(y: int, e: int, t: int, b: int, ev_slot_ptr: np.ndarray, ev_slot: np.ndarray,
                    on_ptr: np.ndarray, on_val: np.ndarray, ids: np.ndarray, comp: np.ndarray, offset: np.ndarray,
                    size: np.ndarray, kids: np.ndarray, level: np.ndarray, residue: np.ndarray, approx: np.ndarray,
