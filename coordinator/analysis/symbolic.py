@@ -181,7 +181,7 @@ class _Store:
                 break
             self.max_bytes += extra  # the call again, from the results its store kept
         if status == mk.MEMORY:
-            raise AnalysisError(f"the decision diagram outgrew the memory budget of {self.max_bytes / 2**30:.2f} GiB "
+            raise _OutOfMemory(f"the decision diagram outgrew the memory budget of {self.max_bytes / 2**30:.2f} GiB "
                                 f"({self.nodes:,} nodes)")
         if status == mk.STOPPED:
             raise _OutOfTime()
@@ -303,6 +303,12 @@ class _Store:
 
 class _OutOfTime(Exception):
     """The deadline of the symbolic analysis passed inside a kernel call."""
+
+
+class _OutOfMemory(AnalysisError):
+    """The decision diagram outgrew its byte budget inside a kernel call (the store stays
+    consistent): fatal while the reachable set and its deadlocks are built, an undecided answer
+    after (liveness, reversibility, the witness's firing sequence)."""
 
 
 def _crt(residues: list[int], primes: list[int]) -> int:
@@ -1094,6 +1100,8 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
     except _OutOfTime:
         result.notes.append("liveness and reversibility: not decided within the time budget (answer_seconds "
                             "or seconds)")
+    except _OutOfMemory as exc:
+        result.notes.append(f"liveness and reversibility: not decided, {exc}")
     result.seconds["liveness"] = time.monotonic() - t0
 
 
@@ -1135,4 +1143,7 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
     except _OutOfTime:
         result.notes.append("deadlock: the firing sequence to the dead marking was not traced within the time "
                             "budget; the marking is shown without it")
+    except _OutOfMemory as exc:
+        result.notes.append(f"deadlock: the firing sequence to the dead marking was not traced ({exc}); the "
+                            "marking is shown without it")
     result.seconds["witness"] = time.monotonic() - t0

@@ -217,8 +217,13 @@ def test_a_stop_event_set_by_another_thread_ends_the_engine_with_a_clear_error()
 def test_a_diagram_that_outgrows_its_budget_borrows_once_and_goes_on(budget: int) -> None:
     net = load_pnml(MCC / "Railroad-PT-005" / "model.pnml")
     bounds, flows = proven_bounds(net)
-    with pytest.raises(AnalysisError, match="outgrew the memory budget"):
-        analyse_symbolic(net, bounds, flows=flows, max_bytes=budget)
+    if budget == 1 << 20:  # the reachable set does not fit: no answer
+        with pytest.raises(AnalysisError, match="outgrew the memory budget"):
+            analyse_symbolic(net, bounds, flows=flows, max_bytes=budget)
+    else:  # it fits, reversibility does not: the answer, that one undecided
+        alone = analyse_symbolic(net, bounds, flows=flows, max_bytes=budget)
+        assert alone.states == 1_838 and not alone.deadlock and alone.live is False and alone.reversible is None
+        assert any("outgrew the memory budget" in note for note in alone.notes)
     lent: list[int] = []
 
     def borrow() -> int:
@@ -226,7 +231,7 @@ def test_a_diagram_that_outgrows_its_budget_borrows_once_and_goes_on(budget: int
         return lent[-1]
 
     r = analyse_symbolic(net, bounds, flows=flows, max_bytes=budget, borrow=borrow)
-    assert lent == [8 << 20] and r.states == 1_838
+    assert lent == [8 << 20] and r.states == 1_838 and r.reversible is not None
 
 
 def test_a_bound_below_the_truth_is_an_error_not_a_wrong_count() -> None:
@@ -273,6 +278,41 @@ def test_backward_saturation_inside_the_reachable_set_stays_inside_it() -> None:
     # reached again
     r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0)
     assert r.reversible is False and r.live is False and r.live_transitions[-1] is False
+
+
+def test_liveness_beyond_the_memory_budget_is_undecided_and_the_rest_of_the_answer_stays() -> None:
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import SymbolicResult, _liveness, _Store
+
+    n = 40  # a one-shot start, then toggles: liveness needs the backward saturations
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        transitions[f"on{i}"] = ({f"off{i}": 1, "run": 1}, {f"lit{i}": 1, "run": 1})
+        transitions[f"out{i}"] = ({f"lit{i}": 1, "run": 1}, {f"off{i}": 1, "run": 1})
+    transitions["start"] = ({"idle": 1}, {"run": 1})
+    net = make_net("one_shot", {**{f"off{i}": 1 for i in range(n)}, "idle": 1}, transitions)
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    fwd, single, back = events(sn, enc, merge=True), events(sn, enc), events(sn, enc, inverse=True, merge=True)
+    store = _Store(enc, 64 << 20)
+    reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
+    store.count(reach, at_most=float(2**n + 1) * single.n_events)  # primes enough for the enabled counts
+    counts = store.enabled_counts(reach, single)
+    result = SymbolicResult(
+        states=store.count(reach), edges=0, deadlock=False, n_deadlocks=0, deadlock_marking=None,
+        deadlock_sequence=None, fireable=np.ones(len(net.transitions), dtype=bool),
+        place_bounds=np.ones(len(net.places), dtype=np.int64), stable=np.zeros(len(net.places), dtype=bool),
+        max_token_per_marking=n + 1, live=None, live_transitions=np.full(len(net.transitions), None, dtype=object),
+        reversible=None, levels=enc.n_levels, groups=enc.groups, nodes=store.nodes, order_score=enc.score,
+        seconds={}, notes=[])
+    store.max_bytes = 0  # every buffer is full from here on
+    _liveness(store, fwd, single, back, reach, counts, result, lambda _text: None, float("inf"), 0, None)
+    assert result.live is None  # undecided, never a guess
+    assert result.reversible is False  # decided before the budget was reached: M0 is left for ever
+    assert any("not decided" in note and "outgrew the memory budget" in note for note in result.notes)
+    assert result.states == 2**n + 1
 
 
 def test_a_deadlock_deep_in_a_ring_of_thirty_philosophers_is_reached_by_a_straight_firing_sequence() -> None:
