@@ -258,18 +258,24 @@ def test_a_place_wrongly_bounded_by_its_initial_count_is_an_error_and_a_never_ma
     assert r.max_token_per_marking == 2 and r.live is False
 
 
+def one_shot_net(n: int) -> PetriNet:
+    """A one-shot start, then n toggles that need it: 2**n + 1 markings, every toggle live, the
+    start not, the net not reversible."""
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        transitions[f"on{i}"] = ({f"off{i}": 1, "run": 1}, {f"lit{i}": 1, "run": 1})
+        transitions[f"out{i}"] = ({f"lit{i}": 1, "run": 1}, {f"off{i}": 1, "run": 1})
+    transitions["start"] = ({"idle": 1}, {"run": 1})
+    return make_net("one_shot", {**{f"off{i}": 1 for i in range(n)}, "idle": 1}, transitions)
+
+
 def test_backward_saturation_inside_the_reachable_set_stays_inside_it() -> None:
     # a one-shot start, then toggles: every toggle is live, the start is not. Backward saturation
     # inside the reachable set once moved a node to another value of a level without cutting it to
     # that value's part of the set below the event's bottom level, so it left the set and every
     # toggle was reported not live
     n = 3
-    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
-    for i in range(n):
-        transitions[f"on{i}"] = ({f"off{i}": 1, "run": 1}, {f"lit{i}": 1, "run": 1})
-        transitions[f"out{i}"] = ({f"lit{i}": 1, "run": 1}, {f"off{i}": 1, "run": 1})
-    transitions["start"] = ({"idle": 1}, {"run": 1})
-    net = make_net("one_shot", {**{f"off{i}": 1 for i in range(n)}, "idle": 1}, transitions)
+    net = one_shot_net(n)
     bounds, flows = proven_bounds(net)
     r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0, probes=0)  # backward saturations only
     assert r.states == 2**n + 1 and not r.deadlock and r.reversible is False and r.live is False
@@ -285,13 +291,8 @@ def test_liveness_beyond_the_memory_budget_is_undecided_and_the_rest_of_the_answ
     from coordinator.analysis.mdd_order import encode, events
     from coordinator.analysis.symbolic import SymbolicResult, _liveness, _Store
 
-    n = 40  # a one-shot start, then toggles: liveness needs the backward saturations
-    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
-    for i in range(n):
-        transitions[f"on{i}"] = ({f"off{i}": 1, "run": 1}, {f"lit{i}": 1, "run": 1})
-        transitions[f"out{i}"] = ({f"lit{i}": 1, "run": 1}, {f"off{i}": 1, "run": 1})
-    transitions["start"] = ({"idle": 1}, {"run": 1})
-    net = make_net("one_shot", {**{f"off{i}": 1 for i in range(n)}, "idle": 1}, transitions)
+    n = 40  # liveness needs the backward saturations
+    net = one_shot_net(n)
     bounds, flows = proven_bounds(net)
     sn = sparse_net(net)
     enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
