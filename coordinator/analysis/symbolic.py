@@ -63,6 +63,9 @@ ANSWER_SECONDS = 50.0
 #: markings drawn from the reachable set whose forward sets are searched for a transition that can
 #: never fire again and for M0, before the backward saturations (:func:`_probe`)
 PROBES = 3
+#: most entries of the dense (transitions, places) block of successor or predecessor markings the
+#: witness searches build at once (int64: 32 MB)
+_DENSE_BLOCK = 4_000_000
 #: longest that search may take before breadth-first images take over (seconds)
 _GUIDED_SECONDS = 10.0
 #: longest that search may take inside the reachable set alone, before the markings that can reach a
@@ -408,6 +411,13 @@ class _LevelValues:
         return out
 
 
+def _blocks(ts: np.ndarray, n_places: int) -> list[np.ndarray]:
+    """``ts`` in consecutive parts of at most ``_DENSE_BLOCK`` / ``n_places`` transitions (at least
+    one), so that a part's markings, dense, stay within ``_DENSE_BLOCK`` entries."""
+    step = max(1, _DENSE_BLOCK // max(1, n_places))
+    return [ts[i:i + step] for i in range(0, ts.size, step)]
+
+
 def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, inside: int, targets: int,
                      goal: np.ndarray, limit: int, stop: float) -> tuple[list[str], np.ndarray] | None:
     """A firing sequence from M0 to one of ``targets`` by a best-first search over explicit markings
@@ -445,30 +455,28 @@ def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet,
         off = np.zeros(n_t, dtype=bool)
         off[pre_t[m[pre.indices] < pre.data]] = True
         off[inh_t[(inh.data > 0) & (m[inh.indices] >= inh.data)]] = True
-        ts = np.flatnonzero(~off)
-        if not ts.size:
-            continue
-        succ = m[None, :] + inc[:, ts].T.toarray()
-        vals = lookup.of(succ)
-        for j, t in enumerate(ts):
-            key = succ[j].tobytes()
-            if key in seen:
-                continue
-            seen.add(key)
-            if vals[j, 0] < 0 or not store.contains(inside, vals[j]):
-                continue
-            marks.append(succ[j])
-            parent.append(i)
-            via.append(int(t))
-            depth.append(depth[i] + 1)
-            node = len(marks) - 1
-            if store.contains(targets, vals[j]):
-                path: list[str] = []
-                while node > 0:
-                    path.append(net.transitions[via[node]].id)
-                    node = parent[node]
-                return path[::-1], succ[j]
-            heapq.heappush(heap, (int(np.abs(succ[j] - goal).sum()), -depth[-1], len(marks) - 1))
+        for ts in _blocks(np.flatnonzero(~off), sn.n_places):
+            succ = m[None, :] + inc[:, ts].T.toarray()
+            vals = lookup.of(succ)
+            for j, t in enumerate(ts):
+                key = succ[j].tobytes()
+                if key in seen:
+                    continue
+                seen.add(key)
+                if vals[j, 0] < 0 or not store.contains(inside, vals[j]):
+                    continue
+                marks.append(succ[j])
+                parent.append(i)
+                via.append(int(t))
+                depth.append(depth[i] + 1)
+                node = len(marks) - 1
+                if store.contains(targets, vals[j]):
+                    path: list[str] = []
+                    while node > 0:
+                        path.append(net.transitions[via[node]].id)
+                        node = parent[node]
+                    return path[::-1], succ[j]
+                heapq.heappush(heap, (int(np.abs(succ[j] - goal).sum()), -depth[-1], len(marks) - 1))
     return None
 
 
@@ -499,24 +507,29 @@ def _bfs_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fw
     post = sn.post.tocsc()
     inh = sn.inhibitor.tocsc()
     post_t = np.repeat(np.arange(n_t), np.diff(post.indptr))
+    inh_t = np.repeat(np.arange(n_t), np.diff(inh.indptr))
+    inh_c = np.asarray(inc[inh.indices, inh_t]).ravel() if inh.nnz else np.zeros(0, np.int64)  # C on those arcs
     lookup = _LevelValues(enc)
     for layer in reversed(layers[:-1]):
         # t can have led to cur iff cur holds t's output tokens (then the predecessor cur − C[:, t]
         # holds t's input tokens), and the predecessor satisfies t's inhibitor arcs
         off = np.zeros(n_t, dtype=bool)
         off[post_t[cur[post.indices] < post.data]] = True
-        ts = np.flatnonzero(~off)
-        prev = cur[None, :] - inc[:, ts].T.toarray()
-        lim = inh[:, ts].T.toarray()
-        ok = ~((lim > 0) & (prev >= lim)).any(axis=1)
-        vals = lookup.of(prev)
-        for j in np.flatnonzero(ok & (vals[:, 0] >= 0)):
-            if store.contains(layer, vals[j]):
-                seq.append(net.transitions[int(ts[j])].id)
-                cur = prev[j]
+        off[inh_t[(inh.data > 0) & (cur[inh.indices] - inh_c >= inh.data)]] = True
+        before = None
+        for ts in _blocks(np.flatnonzero(~off), sn.n_places):
+            prev = cur[None, :] - inc[:, ts].T.toarray()
+            vals = lookup.of(prev)
+            for j in np.flatnonzero(vals[:, 0] >= 0):
+                if store.contains(layer, vals[j]):
+                    seq.append(net.transitions[int(ts[j])].id)
+                    before = prev[j]
+                    break
+            if before is not None:
                 break
-        else:
+        if before is None:
             raise AnalysisError("internal: no predecessor found while tracing a firing sequence back")
+        cur = before
     seq.reverse()
     return seq, end
 
