@@ -298,6 +298,16 @@ def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, 
     return -1, a, b, (_OP_RESTRICT << 40) + a, (e << 2) + b
 
 
+@njit(cache=True, inline="always")
+def _full(n_nodes: int, n_kids: int, n_unique: int, ct_used: int, node_cap: int, kid_cap: int, unique_cap: int,
+          ct_cap: int, max_dom: int) -> bool:
+    """Whether a buffer of the store must grow before the next step (room for one more node of
+    ``max_dom`` children, the unique table at most half full, the computed table at most a quarter
+    full below its largest size); numbers only, so that the loop keeps no reference count."""
+    return (n_nodes + 2 > node_cap or n_kids + max_dom > kid_cap or 2 * (n_unique + 1) > unique_cap
+            or (4 * ct_used > ct_cap and ct_cap < _CT_MAX))
+
+
 @njit(cache=True, nogil=True)
 def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray, ev_slot: np.ndarray,
            slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray, meta: np.ndarray,
@@ -318,6 +328,8 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
     status = OK
     ccap = ct.shape[0]
     cmask = ccap - 1
+    # a call: the caller sets (cty, ck, ca, cb, cc, ce) and its own continuation pc, then jumps to
+    # ``call``; an immediate or cached result comes back in ret at once, else a frame is pushed
     while depth > 0:
         steps += 1
         if steps == _WATCH_STEPS:
@@ -329,8 +341,8 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
                 status = STOPPED
                 break
         n_nodes = meta[META_NODES]
-        if (n_nodes + 2 > level.shape[0] or meta[META_KIDS] + max_dom > kids.shape[0]
-                or 2 * (meta[META_UNIQUE] + 1) > unique.shape[0] or (4 * ct_used > ccap and ccap < _CT_MAX)):
+        if _full(n_nodes, meta[META_KIDS], meta[META_UNIQUE], ct_used, level.shape[0], kids.shape[0],
+                 unique.shape[0], ccap, max_dom):
             return _FULL, depth, atop, ret, status, ct_used, steps
         d = depth - 1
         ty = f_ty[d]
@@ -705,13 +717,11 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
             f_k0[0] = key0
             f_k1[0] = key1
             depth = 1
-    # a call: the caller sets (cty, ck, ca, cb, cc, ce) and its own continuation pc, then jumps to
-    # ``call``; an immediate or cached result comes back in ret at once, else a frame is pushed
     steps = 0
     while depth > 0:
         n_nodes = meta[META_NODES]
-        if (n_nodes + 2 > level.shape[0] or meta[META_KIDS] + max_dom > kids.shape[0]
-                or 2 * (meta[META_UNIQUE] + 1) > unique.shape[0] or (4 * ct_used > ccap and ccap < _CT_MAX)):
+        if _full(n_nodes, meta[META_KIDS], meta[META_UNIQUE], ct_used, level.shape[0], kids.shape[0],
+                 unique.shape[0], ccap, max_dom):
             # grow what is full; the old and the new buffer are both held during the copy
             gn = level.shape[0] * 2 if n_nodes + 2 > level.shape[0] else level.shape[0]
             gk = kids.shape[0]
