@@ -425,7 +425,7 @@ def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet,
     the marking nearest (in tokens) to the dead marking ``goal``, the deepest first among equals; so
     it mostly walks straight to a target. None when it has seen ``limit`` markings, or at ``stop``
     (``time.monotonic()`` seconds), first. A marking costs the net's arcs (sparse Pre, inhibitor
-    and incidence), not |P|·|T|."""
+    and incidence) and its successors, built in blocks (:func:`_blocks`), not |P|·|T|."""
     import heapq
 
     n_t = sn.n_transitions
