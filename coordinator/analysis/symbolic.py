@@ -31,8 +31,8 @@ counts to come: markings times transitions for the edges) asks for.
 
 Budgets: ``max_bytes`` bounds the store, its tables and stacks (:class:`~coordinator.errors.
 AnalysisError` when it is reached), ``seconds`` the whole computation (the reachable set first;
-the witness gets what is left, reversibility and liveness what is left of ``answer_seconds``, and
-what is not decided in time is left undecided).
+the witness's firing sequence, then reversibility and liveness, get what is left of
+``answer_seconds``, and what is not decided in time is left undecided).
 """
 
 from __future__ import annotations
@@ -547,7 +547,8 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         max_bytes: byte budget of the decision diagram.
         seconds: time budget; liveness and witnesses are left undecided when it runs out after the
             reachable set was built.
-        answer_seconds: reversibility and liveness (beyond what the deadlocks and quasi-liveness
+        answer_seconds: the firing sequence to a dead marking (its quick search at least),
+            reversibility and liveness (beyond what the deadlocks and quasi-liveness
             decide) are worked on only until this many seconds after the start (and within
             ``seconds``), and left undecided after: the whole answer, the place bounds proven
             before included, comes within a minute by default when the reachable set and its
@@ -625,9 +626,12 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         back: Events | None = None
         if sn.n_resets == 0:
             back = events(sn, enc, inverse=True, merge=True)
-        mk.set_watch(deadline, None, stop)
-        _witness(store, sn, enc, net, fwd, back, reach, dead, result, say, deadline)
+        # the firing sequence to a dead marking is traced within the answer's time too (its quick
+        # search at least): the verdict and the dead marking are already known
         until = min(deadline, start + answer_seconds)
+        traced = min(deadline, max(until, time.monotonic() + _QUICK_SECONDS))
+        mk.set_watch(traced, None, stop)
+        _witness(store, sn, enc, net, fwd, back, reach, dead, result, say, traced)
         mk.set_watch(until, None, stop)
         _liveness(store, fwd, single, back, reach, counts, result, say, until, probes, stop)
         result.nodes = store.nodes
@@ -1139,7 +1143,7 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
         found = None
         if explicit:  # first inside the reachable set alone: most often a deadlock is reachable from
             now = time.monotonic()  # everywhere, and the backward saturation below costs more
-            stop = now + min(_QUICK_SECONDS, max(0.0, (deadline - now) / 10))
+            stop = now + min(_QUICK_SECONDS, max(0.0, deadline - now))
             found = _guided_sequence(store, sn, enc, net, reach, dead, marking, limit=20_000, stop=stop)
         if found is None:
             inside = store.call(mk.MODE_SATURATE, back, dead, c=reach)
