@@ -122,7 +122,10 @@ def new_store(dom: np.ndarray, path: np.ndarray) -> tuple[tuple[np.ndarray, ...]
     stopped at its deadline resumes from the results it had (:func:`clear_cache` when the events
     change)."""
     n_levels = dom.shape[0]
-    nodes = max(1 << 12, 4 * n_levels + 16)
+    # a power of two: a slot of the unique table is a hash masked by the table's size less one, and
+    # every buffer grows by doubling (with 4 * n_levels + 16 nodes, a net of over 1,020 levels had a
+    # table whose mask reached 4,096 of its slots, and the search for a free slot never ended)
+    nodes = 1 << max(12, (4 * n_levels + 16 - 1).bit_length())
     meta = np.zeros(META_SIZE, np.int64)
     level = np.zeros(nodes, np.int32)
     offset = np.zeros(nodes, np.int64)

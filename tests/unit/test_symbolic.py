@@ -202,6 +202,18 @@ def test_a_count_beyond_two_to_the_64_is_exact() -> None:
     assert r.live is True and r.reversible is True and r.deadlock is False
 
 
+@pytest.mark.timeout(120)
+def test_a_net_of_over_a_thousand_levels_is_saturated() -> None:
+    # a token going round a ring of 1,100 places: its semiflow has too many local markings to be a
+    # group, so every place is a level of its own (the unique table's first size hung past 1,020)
+    n = 1_100
+    net = make_net("ring", {"p0": 1}, {f"t{i}": ({f"p{i}": 1}, {f"p{(i + 1) % n}": 1}) for i in range(n)})
+    bounds, flows = proven_bounds(net)
+    r = analyse_symbolic(net, bounds, flows=flows)
+    assert r.levels == n and r.states == n and r.edges == n
+    assert r.live is True and r.reversible is True and not r.deadlock
+
+
 def test_a_stop_event_set_by_another_thread_ends_the_engine_with_a_clear_error() -> None:
     net = load_pnml(SCALE / "Railroad-PT-020" / "model.pnml")  # its reachable set takes tens of seconds
     bounds, flows = proven_bounds(net)
