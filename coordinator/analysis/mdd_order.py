@@ -54,7 +54,8 @@ from numba import njit  # noqa: E402
 from coordinator.analysis.matrices import SparseNet
 from coordinator.errors import AnalysisError
 
-__all__ = ["MAX_LOCAL", "SHARED_DEGREE", "Encoding", "Events", "encode", "events", "shared_levels", "touched_places"]
+__all__ = ["MAX_LOCAL", "SHARED_DEGREE", "Encoding", "EncodingTooLarge", "Events", "encode", "events", "shared_levels",
+           "touched_places"]
 
 #: most local markings of a group of places on one level
 MAX_LOCAL = 512
@@ -66,6 +67,11 @@ MAX_DOMAIN = 1 << 16
 #: per value of a level an event spans (its functions: forward, single, backward and their building)
 _INDEX_BYTES = 160
 _EVENT_BYTES = 32
+
+
+class EncodingTooLarge(AnalysisError):
+    """The bounds given make levels too wide: a bound above :data:`MAX_DOMAIN`, or an encoding and
+    events beyond their share of the memory (:func:`encode`)."""
 
 
 @dataclass(frozen=True)
@@ -524,16 +530,17 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
             limit.
 
     Raises:
-        AnalysisError: a place has no bound, or a bound above :data:`MAX_DOMAIN`, or the encoding
-            would outgrow ``max_bytes`` (AirplaneLD-PT-1000: 4,017 levels of up to 3,009 values,
-            about 4 GiB before a single node).
+        AnalysisError: a place has no bound.
+        EncodingTooLarge: a bound above :data:`MAX_DOMAIN`, or the encoding would outgrow
+            ``max_bytes`` (AirplaneLD-PT-1000 on its proven bounds: 4,017 levels of up to 3,009
+            values, about 4 GiB before a single node).
     """
     start = time.monotonic()
     bounds = np.asarray(bounds, dtype=np.int64)
     if (bounds < 0).any():
         raise AnalysisError("the symbolic engine needs a proven bound for every place")
     if bounds.size and int(bounds.max()) >= MAX_DOMAIN:
-        raise AnalysisError(f"a place is bounded by {int(bounds.max()):,} tokens only: the symbolic engine "
+        raise EncodingTooLarge(f"a place is bounded by {int(bounds.max()):,} tokens only: the symbolic engine "
                             f"takes places of at most {MAX_DOMAIN - 1:,}")
     touched = touched_places(sn)
     groups = _groups(sn, bounds, flows, touched, start + seconds / 2)
@@ -548,7 +555,7 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
         need = sum(loc.shape[0] * (_INDEX_BYTES + 8 * loc.shape[1]) for _, loc in groups) + _EVENT_BYTES * sum(
             int(dom[h].sum()) for h in hypers)
         if need > max_bytes:
-            raise AnalysisError(f"the encoding ({n_k:,} levels, {int(dom.sum()):,} local markings) would take about "
+            raise EncodingTooLarge(f"the encoding ({n_k:,} levels, {int(dom.sum()):,} local markings) would take about "
                                 f"{need / 2**30:.1f} GiB, above the {max_bytes / 2**30:.1f} GiB it may use")
     shared = shared_levels(n_k, hypers) if sink else np.zeros(n_k, dtype=bool)
     hypers += [np.unique(o[o >= 0]) for o in (owner[np.flatnonzero(y)] for y in flows)]

@@ -120,6 +120,23 @@ class StateSpace:
             _kernel().unpack(np.ascontiguousarray(block), self.layout, out)
         return out
 
+    def seen_counts(self, max_values: int = 50_000_000) -> np.ndarray:
+        """The largest count of each place in the markings found, or in every k-th of them (k as
+        small as keeps the unpacked counts within ``max_values``; M0, row 0, always in), shape
+        (|P|,), int64: a lower bound of each place's bound, for the symbolic engine's guessed
+        levels (:func:`.symbolic.analyse_symbolic`)."""
+        n_places = len(self.net.places)
+        out = np.zeros(n_places, np.int64)
+        step = max(1, -(-self.n_states * n_places // max(1, max_values)))
+        rows = self.words[::step]
+        block = max(1, (1 << 22) // max(1, n_places))  # 32 MiB of int64 counts at a time
+        for lo in range(0, rows.shape[0], block):
+            part = np.ascontiguousarray(rows[lo:lo + block])
+            counts = np.empty((part.shape[0], n_places), np.int64)
+            _kernel().unpack(part, self.layout, counts)
+            np.maximum(out, counts.max(axis=0, initial=0), out=out)
+        return out
+
     @property
     def memory_per_marking_bytes(self) -> float:
         """Bytes per marking of the search's marking store and hash table (``store_bytes / N``)."""

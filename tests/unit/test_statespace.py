@@ -549,3 +549,14 @@ def test_components_from_the_markings_alone_follow_reset_arcs_and_need_a_complet
     _same_components(explore(net, edges=False), explore(net))
     with pytest.raises(AnalysisError, match="complete"):
         explore(net, max_states=2, edges=False).implicit_liveness()
+
+
+def test_the_counts_seen_are_each_places_largest_and_a_sample_of_them_keeps_m0() -> None:
+    net = make_net("pile", {"go": 1}, {"put": ({"go": 1}, {"go": 1, "pile": 1}), "stop": ({"go": 1}, {"done": 1})},
+                   inhibitors={"put": {"pile": 9}})
+    space = explore(net)
+    assert space.seen_counts().tolist() == space.states.max(axis=0).tolist() == [1, 9, 1]
+    assert space.n_states == 20
+    sampled = space.seen_counts(max_values=6)  # 20 markings of 3 places: every 10th, rows 0 and 10
+    assert (sampled <= space.states.max(axis=0)).all() and (sampled >= space.states[0]).all()
+    assert sampled.tolist() == space.states[[0, 10]].max(axis=0).tolist()
