@@ -450,6 +450,9 @@ def _conflicts(net: PetriNet, space: StateSpace | None, *, seconds: float = 10.0
 #: seconds); a net whose graph is larger and whose places all have a proven bound goes symbolic
 #: (and, on two CPUs or more, the explicit search goes on beside the symbolic engine: _Beside)
 AUTO_PROBE_STATES = 1_000_000
+#: markings of the explicit search run for the symbolic engine's guessed levels when it was asked
+#: for alone (``--engine symbolic``) and the proven bounds make its levels too wide
+SEEN_STATES = 100_000
 #: time budget of the symbolic engine inside :func:`analyse` (seconds)
 SYMBOLIC_SECONDS = 300.0
 #: how much lower the search beside the symbolic engine runs (a nice increment, Linux): the symbolic
@@ -667,6 +670,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         reason = (f"symbolic: the explicit search stopped at {why} and every place has a proven bound, so the "
                   "symbolic engine takes over")
         beside: _Beside | None = None
+        seen = space.seen_counts()  # for levels guessed from them, if the proven bounds make them too wide
         if limit < max_states and cpus() >= 2:
             del space  # the probe's graph is freed: the search beside builds its own, or one is built again
             beside = _Beside(net, sn, st, max_states, graph_bytes, progress, phase)
@@ -675,7 +679,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
             found = _symbolic_phase(net, sn, st, budget - (0 if beside is None else beside.graph_bytes), lp_seconds,
                                     symbolic_seconds, phase, reason, started,
                                     stop=None if beside is None else beside.finished,
-                                    borrow=None if beside is None else beside.lend)
+                                    borrow=None if beside is None else beside.lend, seen=seen)
         except AnalysisError as exc:
             if beside is None or not beside.finished.is_set():
                 reason = f"explicit: the symbolic engine gave up ({exc})"
@@ -1023,14 +1027,17 @@ class _Beside:
 
 def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, lp_seconds: float, seconds: float,
                     phase: Callable[[str], None] | None, reason: str, started: float,
-                    stop: threading.Event | None = None, borrow: Callable[[], int] | None = None) -> Analysis:
+                    stop: threading.Event | None = None, borrow: Callable[[], int] | None = None,
+                    seen: np.ndarray | None = None) -> Analysis:
     """The analysis from the symbolic engine (:mod:`.symbolic`): the reachable set as a decision
     diagram over the proven place bounds, every count exact. Liveness levels (L1 vs L3), home
     states and the effectiveness of conflicts need the graph and stay undecided. Reversibility
     and liveness are worked on until :data:`~.symbolic.ANSWER_SECONDS` after ``started`` (the
     analysis's start, ``time.monotonic()``: the LPs and the explicit search before count too).
     ``stop``: another thread's event that stops the engine; ``borrow``: what frees more memory
-    for it when it outgrows ``budget`` (:func:`.symbolic.analyse_symbolic`).
+    for it when it outgrows ``budget`` (:func:`.symbolic.analyse_symbolic`); ``seen``: (|P|,) the
+    largest count of each place the explicit search saw, for levels guessed from them when the proven
+    bounds make them too wide (none: an explicit search of :data:`SEEN_STATES` markings is run then).
 
     Raises:
         AnalysisError: a place without a proven bound, the engine's time or memory budget, or
@@ -1049,9 +1056,17 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
     from coordinator.analysis.symbolic import ANSWER_SECONDS, analyse_symbolic
 
     flows = lp.semiflow_cover(sn, seconds=min(lp_seconds, 3.0))
+
+    def counts() -> np.ndarray:
+        if seen is not None:
+            return seen
+        probe = explore(net, max_states=SEEN_STATES, max_bytes=budget // 4, bounds=_search_bounds(st),
+                        finish_level=False, edges=False)
+        return probe.seen_counts()
+
     r = analyse_symbolic(net, upper, flows=flows, max_bytes=budget, seconds=seconds, progress=phase,
                          answer_seconds=max(1.0, ANSWER_SECONDS - (time.monotonic() - started)), stop=stop,
-                         borrow=borrow)
+                         borrow=borrow, seen=counts)
     ids = [p.id for p in net.places]
     tids = [t.id for t in net.transitions]
     notes = list(st.notes)

@@ -6,7 +6,9 @@ them. Here the reachable set is a multi-valued decision diagram (MDD, :mod:`.mdd
 of the lower levels are fired to a fixed point on each node before the node is used above, so no
 breadth-first frontier of the whole state space is ever built. The encoding (levels, their local
 markings, their order, the merged events) comes from the net's structure and its proven place
-bounds (:mod:`.mdd_order`). From the set, with exact integers of any size:
+bounds (:mod:`.mdd_order`), or, where those make the levels too wide, from the counts an explicit
+search saw, checked on every firing and raised where one leaves them (:func:`_reachable`). From
+the set, with exact integers of any size:
 
 * the number of markings and of edges (one per reachable marking and transition enabled in it:
   the Model Checking Contest's count), the edges counted per transition on the levels it reads
@@ -49,7 +51,7 @@ import numpy as np
 from coordinator.analysis import mdd_kernel as mk
 from coordinator.analysis.budget import cpus
 from coordinator.analysis.matrices import SparseNet, sparse_net
-from coordinator.analysis.mdd_order import Encoding, Events, encode, events, touched_places
+from coordinator.analysis.mdd_order import Encoding, EncodingTooLarge, Events, encode, events, touched_places
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet
 
@@ -190,8 +192,8 @@ class _Store:
             raise _OutOfTime()
         if status == mk.OVERFLOW:
             k = int(self.arrays[0][mk.META_OVERFLOW_LEVEL])
-            raise AnalysisError(f"a firing took level {k} beyond its proven local markings: the place bounds "
-                                "given to the symbolic engine are wrong")
+            raise BeyondBounds(f"a firing took level {k} beyond its proven local markings: the place bounds "
+                               "given to the symbolic engine are wrong", self.enc.levels[k])
         return int(ret)
 
     @property
@@ -306,6 +308,20 @@ class _Store:
 
 class _OutOfTime(Exception):
     """The deadline of the symbolic analysis passed inside a kernel call."""
+
+
+class BeyondBounds(AnalysisError):
+    """A reachable marking fires beyond the values the levels were given: the bounds given to the
+    engine were wrong (proven bounds: a fault) or too low (bounds guessed from markings seen).
+
+    Attributes:
+        places: (n,) int64 indices of the places of the level the firing left (or of the fixed
+            places it would change).
+    """
+
+    def __init__(self, message: str, places: np.ndarray) -> None:
+        super().__init__(message)
+        self.places = places
 
 
 class _OutOfMemory(AnalysisError):
@@ -537,7 +553,8 @@ def _bfs_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fw
 def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarray] | None = None,
                      max_bytes: int = 4 << 30, seconds: float = 600.0, answer_seconds: float = ANSWER_SECONDS,
                      progress: Callable[[str], None] | None = None, probes: int = PROBES,
-                     stop: threading.Event | None = None, borrow: Callable[[], int] | None = None) -> SymbolicResult:
+                     stop: threading.Event | None = None, borrow: Callable[[], int] | None = None,
+                     seen: Callable[[], np.ndarray | None] | None = None) -> SymbolicResult:
     """The reachable set of a bounded net by saturation, and its properties (module docstring).
 
     Args:
@@ -565,6 +582,9 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             while the reachable set is built or after: the bytes it frees for the engine (the
             automatic engine's explicit search beside it stops and hands its share over), 0 for
             none; the call that outgrew the budget goes on from its store.
+        seen: called once, when the proven bounds make levels too wide (:func:`_reachable`): (|P|,)
+            int64, the largest count of each place in some reachable markings (those of an explicit
+            search stopped early), or None for none.
 
     Returns:
         A :class:`SymbolicResult`.
@@ -588,14 +608,12 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
                 "stopped)")
         return extra
 
-    enc, fwd, store, reach = _race(sn, bounds, list(flows or []), max_bytes, deadline, say, stop,
-                                   None if borrow is None else widen)
-    single = events(sn, enc)
-    secs["encode"] = enc.seconds
-    secs["reach"] = time.monotonic() - t0 - enc.seconds
     try:
-        states = store.count(reach)
-        _check_suspects(store, sn, enc, net, reach)
+        (enc, fwd, store, reach), states = _reachable(sn, net, bounds, seen, list(flows or []), max_bytes, deadline,
+                                                      say, stop, None if borrow is None else widen, notes)
+        single = events(sn, enc)
+        secs["encode"] = enc.seconds
+        secs["reach"] = time.monotonic() - t0 - enc.seconds
         say(f"symbolic: {states:,} markings, {store.nodes:,} nodes, {secs['reach']:.1f} s")
         t0 = time.monotonic()
         free = enc.free(touched_places(sn))
@@ -640,6 +658,65 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         mk.set_watch(None, None)
 
 
+#: most times the guessed values of levels are raised after a firing left them (:func:`_reachable`)
+_RAISES = 6
+
+
+def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[[], np.ndarray | None] | None,
+               flows: list[np.ndarray], max_bytes: int, deadline: float, say: Callable[[str], None],
+               stop: threading.Event | None, borrow: Callable[[], int] | None, notes: list[str]) -> tuple[_Won, int]:
+    """The reachable set (:func:`_race`) and its number of markings. On the proven bounds first;
+    when they make levels too wide (:class:`~.mdd_order.EncodingTooLarge`: AirplaneLD-PT-1000's
+    state equation bounds its 1-safe places by 3,004 and 3,008, and its 4,017 levels would take
+    3.7 GiB) and ``seen()`` gives counts, each place gets min(bound, 2·seen + 1) values instead.
+    Saturation checks every firing against the levels' values (``check_overflow``) and
+    :func:`_check_suspects` the fixed places, so when neither finds a firing that leaves them, the
+    set is the reachable set, exactly; when one does, the places of that level are raised to
+    min(bound, 4·value + 3) and the race runs again, at most :data:`_RAISES` times (a note says
+    so). AirplaneLD-PT-1000: every place seen at 1 in a million markings, 3 values a place, its
+    34,087,074,023 markings in 23 s.
+
+    Raises:
+        AnalysisError: as :func:`_race`; EncodingTooLarge when no counts are seen; BeyondBounds on
+            proven bounds (a fault), or when the guessed values are left after their last raise.
+    """
+    domains, raises, why = bounds, 0, ""
+    while True:
+        try:
+            won = _race(sn, domains, flows, max_bytes, deadline, say, stop, borrow)
+            _, _, store, reach = won
+            states = store.count(reach)
+            _check_suspects(store, sn, won[0], net, reach)
+        except EncodingTooLarge as exc:
+            counts = None if seen is None or why else seen()
+            if counts is None:
+                raise
+            why = str(exc)
+            domains = np.minimum(bounds, 2 * np.asarray(counts, dtype=np.int64) + 1)
+            say(f"symbolic: on the proven bounds {why}; the levels take each place's count seen by the explicit "
+                f"search, doubled, plus one (at most {int(domains.max(initial=0)):,} tokens a place)")
+            continue
+        except BeyondBounds as exc:
+            if not why or (domains[exc.places] >= bounds[exc.places]).all():
+                raise
+            if raises == _RAISES or time.monotonic() >= deadline:
+                raise AnalysisError(f"on the proven bounds {why}, and a firing still left the values guessed from "
+                                    f"the counts the explicit search saw after {raises} raises") from exc
+            raises += 1
+            domains = domains.copy()
+            domains[exc.places] = np.minimum(bounds[exc.places], 4 * domains[exc.places] + 3)
+            say(f"symbolic: a firing left the values guessed for {exc.places.size} places; raised to at most "
+                f"{int(domains[exc.places].max()):,} tokens, the reachable set again ({raises} of {_RAISES})")
+            continue
+        if why:
+            raised = "" if not raises else (", raised once where a firing left them" if raises == 1 else
+                                            f", raised {raises} times where firings left them")
+            notes.append(f"on the proven bounds {why}: the levels took each place's count seen by the explicit "
+                         f"search, doubled, plus one{raised}; saturation checked every firing against them, so every "
+                         "count is exact")
+        return won, states
+
+
 def _check_suspects(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, reach: int) -> None:
     """No reachable marking enables a transition that fixed places enable but that would change them
     (:class:`~.mdd_order.Encoding`: such a transition never fires if the bounds are right, and the
@@ -655,8 +732,10 @@ def _check_suspects(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, 
     if not wrong and ev.n_events:
         wrong = [ev.members[e][0] for e, n in enumerate(store.enabled_counts(reach, ev)) if n > 0]
     if wrong:
-        raise AnalysisError(f"transition {net.transitions[wrong[0]].id} would take a place beyond its proven "
-                            "bound: the place bounds given to the symbolic engine are wrong")
+        t = wrong[0]
+        raise BeyondBounds(f"transition {net.transitions[t].id} would take a place beyond its proven "
+                           "bound: the place bounds given to the symbolic engine are wrong",
+                           np.intersect1d(touched_places(sn)[t], enc.fixed).astype(np.int64))
 
 
 def _fireable(store: _Store, single: Events, reach: int, states: int, fireable: np.ndarray) -> tuple[int, list[int]]:

@@ -254,6 +254,57 @@ def test_a_bound_below_the_truth_is_an_error_not_a_wrong_count() -> None:
     assert r.states == 6 and r.deadlock and r.deadlock_sequence == ["put"] * 5
 
 
+def test_levels_too_wide_on_the_proven_bounds_take_the_counts_seen_and_are_raised_where_a_firing_leaves_them() -> None:
+    # a bound above what a level may hold (65,535): refused on it, taken on what was seen
+    net = make_net("pile", {"go": 1}, {"put": ({"go": 1}, {"go": 1, "pile": 1})}, inhibitors={"put": {"pile": 5}})
+    loose = np.array([1, 100_000], dtype=np.int64)
+    with pytest.raises(AnalysisError, match="100,000 tokens"):
+        analyse_symbolic(net, loose)
+    asked: list[int] = []
+    lines: list[str] = []
+
+    def seen() -> np.ndarray:  # the pile seen empty: one value guessed, left by the first put
+        asked.append(1)
+        return np.array([1, 0], dtype=np.int64)
+
+    r = analyse_symbolic(net, loose, seen=seen, progress=lines.append)
+    assert asked == [1]
+    assert r.states == 6 and r.deadlock and r.deadlock_sequence == ["put"] * 5 and int(r.place_bounds[1]) == 5
+    assert any("raised to at most 7 tokens" in line for line in lines)
+    assert any("raised once where a firing left them" in note for note in r.notes)
+
+
+def test_a_station_never_given_its_key_leaves_a_bound_too_wide_and_the_explicit_search_gives_the_levels() -> None:
+    # three stations share a pool of 5 tokens; the fourth's key is never handed out, so it never
+    # holds the 70,000 tokens a take would give it, but the state equation bounds it by 350,000
+    tr = {f"take{i}": ({f"key{i}": 1, "pool": 1}, {f"key{i}": 1, f"held{i}": 1}) for i in range(3)}
+    tr |= {f"give{i}": ({f"held{i}": 1}, {"pool": 1}) for i in range(3)}
+    tr |= {"take9": ({"key9": 1, "pool": 1}, {"key9": 1, "locked": 70_000}), "give9": ({"locked": 70_000}, {"pool": 1})}
+    net = make_net("stations", {"pool": 5, "key0": 1, "key1": 1, "key2": 1}, tr, places=("key9",))
+    lines: list[str] = []
+    a = analyse(net, engine="symbolic", phase=lines.append)
+    assert any("350,000 tokens" in line and "count seen by the explicit search" in line for line in lines)
+    assert any("so every count is exact" in note for note in a.notes)
+    b = analyse(net, engine="explicit")
+    assert (a.states, a.edges, a.deadlock, a.live, a.reversible, a.place_bounds) == (
+        b.states, b.edges, b.deadlock, b.live, b.reversible, b.place_bounds) == (56, 210, False, False, True, {
+            "key9": 0, "pool": 5, "key0": 1, "key1": 1, "key2": 1, "held0": 5, "held1": 5, "held2": 5, "locked": 0})
+
+
+def test_guessed_levels_give_what_the_explicit_search_gives_on_a_ring_with_loose_bounds() -> None:
+    # 200 places each bounded by 5,000 (true, but loose): too wide for a 64 MiB budget; on the
+    # counts seen (1 each) the ring is exact
+    n = 200
+    net = make_net("ring", {"p0": 1}, {f"t{i}": ({f"p{i}": 1}, {f"p{(i + 1) % n}": 1}) for i in range(n)})
+    loose = np.full(n, 5_000, dtype=np.int64)
+    with pytest.raises(AnalysisError, match="would take about"):
+        analyse_symbolic(net, loose, max_bytes=64 << 20)
+    r = analyse_symbolic(net, loose, max_bytes=64 << 20, seen=lambda: np.ones(n, dtype=np.int64))
+    space = analyse(net, engine="explicit")
+    assert (r.states, r.edges, r.live, r.reversible) == (space.states, space.edges, True, True) == (n, n, True, True)
+    assert int(r.place_bounds.max()) == 1 and r.levels == n
+
+
 def test_a_place_wrongly_bounded_by_its_initial_count_is_an_error_and_a_never_marked_one_disables_for_good() -> None:
     # c claimed bounded by 0 has a single local marking, so it is fixed, not a level: mark is left
     # out of saturation and must be found enabled in a reachable marking; ghost (bound 0, truly)
