@@ -688,7 +688,9 @@ def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[
             states = store.count(reach)
             _check_suspects(store, sn, won[0], net, reach)
         except EncodingTooLarge as exc:
-            counts = None if seen is None or why else seen()
+            if why:
+                raise EncodingTooLarge(f"on the proven bounds {why}; on the counts seen, {exc}") from exc
+            counts = None if seen is None else seen()
             if counts is None:
                 raise
             why = str(exc)
