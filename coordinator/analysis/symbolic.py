@@ -55,7 +55,7 @@ from coordinator.analysis.mdd_order import Encoding, EncodingTooLarge, Events, e
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet
 
-__all__ = ["ANSWER_SECONDS", "PROBES", "SymbolicResult", "analyse_symbolic", "load_kernel"]
+__all__ = ["ANSWER_SECONDS", "PROBES", "BeyondBounds", "SymbolicResult", "analyse_symbolic", "load_kernel"]
 
 _TWO61 = (1 << 61) - 1
 #: default time after which reversibility and liveness are left undecided (seconds from the start of
