@@ -45,7 +45,9 @@ class DriveDriver(Driver):
     second master (its RPDOs on the bus) puts ``fault: <cause>`` in the odometry's state at once,
     which ends the running primitive action of the perception node with ``error``; the cause is
     logged. Faulted or stopped drives are reset, started and enabled again in the background
-    (every 0.5 s), drives another master commands only once its RPDOs stopped for a second.
+    (every 0.5 s), drives another master commands only once its RPDOs stopped for a second; never
+    before the fault was published (the perception node counts the fault messages, so one cleared
+    before an action read the latest odometry still ends it).
     """
 
     def __init__(self, name: str, params: dict[str, Any]) -> None:
@@ -121,7 +123,13 @@ class DriveDriver(Driver):
 
     async def _connect_forever(self) -> None:
         while True:
-            if self.drives is None or self.fault is not None or (self.drives.lost() is not None):
+            faulted = self.fault is not None or (self.drives is not None and bool(
+                self.drives.faults() or self.drives.trouble()) and not self.drives.taken_over())
+            if faulted and self._reported is None:
+                # the fault is published before the drives are restarted, so that the running action
+                # ends in error: a stopped SYNC or a busy node may have published nothing since
+                self._publish_odometry(self.pose.t, self.speeds)
+            elif self.drives is None or self.fault is not None or (self.drives.lost() is not None):
                 try:
                     await asyncio.to_thread(self._shutdown)
                     await asyncio.to_thread(self._start)

@@ -82,6 +82,11 @@ class PerceptionDriver(Driver):
         self.odometry: OdometryMessage | None = None
         self.odometry_wall = -math.inf
         self.odometry_bad = 0
+        self.faults = 0
+        """Odometry messages that said ``fault: ...`` so far: an action compares it with its value at
+        its start, so that a fault the drive node cleared (it restarts the drives) before an action
+        read the latest odometry still ends the action."""
+        self.last_fault: str | None = None
         self._scan_seq = -1
         self._scans: list[list[BeaconObservation]] = []
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -189,6 +194,9 @@ class PerceptionDriver(Driver):
         except MalformedSetPoint:
             self.odometry_bad += 1
             return
+        if self.odometry.state.startswith("fault"):
+            self.faults += 1
+            self.last_fault = self.odometry.state
         self.odometry_wall = time.monotonic()
         self._new_odometry.set()
 
@@ -314,6 +322,7 @@ class _Streaming(PrimitiveAction):
         sent = 0
         first_seq: int | None = None
         stops_base: int | None = None
+        faults_base = drv.faults
         seq = drv.frame.seq if drv.frame is not None else -1
         t0: float | None = None
         t_last: float | None = None
@@ -348,8 +357,9 @@ class _Streaming(PrimitiveAction):
                     elif odo.stops > stops_base:
                         return ActionResult.error("drive watchdog stopped the wheels: set points stopped reaching "
                                                   "the drive node", value=result_value("watchdog"), cost=cpu)
-                if odo.state.startswith("fault"):
-                    return ActionResult.error(f"drive {odo.state}", value=result_value("drive fault"), cost=cpu)
+                if odo.state.startswith("fault") or drv.faults > faults_base:
+                    state = odo.state if odo.state.startswith("fault") else drv.last_fault
+                    return ActionResult.error(f"drive {state}", value=result_value("drive fault"), cost=cpu)
                 if frame.t - t0 > timeout:
                     ctx.publish(topic, setpoint_to_dict(memory.stop(frame.t), time.time()))
                     return ActionResult.error(f"timeout: {timeout} s of camera time", value=result_value("timeout"),
