@@ -684,9 +684,9 @@ def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[
     while True:
         try:
             won = _race(sn, domains, flows, max_bytes, deadline, say, stop, borrow)
-            _, _, store, reach = won
+            enc, _, store, reach = won
             states = store.count(reach)
-            _check_suspects(store, sn, won[0], net, reach)
+            _check_suspects(store, sn, enc, net, reach)
         except EncodingTooLarge as exc:
             if why:
                 raise EncodingTooLarge(f"on the proven bounds {why}; on the counts seen, {exc}") from exc

@@ -123,9 +123,9 @@ class DriveDriver(Driver):
 
     async def _connect_forever(self) -> None:
         while True:
-            faulted = self.fault is not None or (self.drives is not None and bool(
-                self.drives.faults() or self.drives.trouble()) and not self.drives.taken_over())
-            if faulted and self._reported is None:
+            troubled = self.drives is not None and bool(self.drives.faults() or self.drives.trouble()) and (
+                not self.drives.taken_over())
+            if (self.fault is not None or troubled) and self._reported is None:
                 # the fault is published before the drives are restarted, so that the running action
                 # ends in error: a stopped SYNC or a busy node may have published nothing since
                 self._publish_odometry(self.pose.t, self.speeds)
@@ -136,7 +136,7 @@ class DriveDriver(Driver):
                     log.info("wheel drives enabled")
                 except BusError as exc:
                     log.warning("wheel drives not ready (%s); retrying", exc)
-            elif (self.drives.faults() or self.drives.trouble()) and not self.drives.taken_over():
+            elif troubled:
                 why = "; ".join(f"drive {k}: {c}" for k, c in self.drives.faults().items()) or self.drives.trouble()
                 try:
                     await asyncio.to_thread(self.drives.enable, self.connect_timeout)

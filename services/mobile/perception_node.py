@@ -357,9 +357,10 @@ class _Streaming(PrimitiveAction):
                     elif odo.stops > stops_base:
                         return ActionResult.error("drive watchdog stopped the wheels: set points stopped reaching "
                                                   "the drive node", value=result_value("watchdog"), cost=cpu)
-                if odo.state.startswith("fault") or drv.faults > faults_base:
-                    state = odo.state if odo.state.startswith("fault") else drv.last_fault
-                    return ActionResult.error(f"drive {state}", value=result_value("drive fault"), cost=cpu)
+                fault = odo.state if odo.state.startswith("fault") else (
+                    drv.last_fault if drv.faults > faults_base else None)
+                if fault is not None:
+                    return ActionResult.error(f"drive {fault}", value=result_value("drive fault"), cost=cpu)
                 if frame.t - t0 > timeout:
                     ctx.publish(topic, setpoint_to_dict(memory.stop(frame.t), time.time()))
                     return ActionResult.error(f"timeout: {timeout} s of camera time", value=result_value("timeout"),
