@@ -305,12 +305,13 @@ class StateSpace:
         raise AnalysisError(f"no transition leads from state {source} to state {target}")  # pragma: no cover
 
     def implicit_liveness(self, stats: dict[str, int] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Liveness levels and strongly connected components of the complete graph, from the packed
-        markings alone: each marking's successors are computed again by the search's own enabling
-        and firing rules (under its priorities) and found through a hash table over ``words``, so
-        the edges need not be kept (``explore(..., edges=False)``). Compiled (:mod:`.reach_kernel`,
-        ``components``: Tarjan 1972 in the form of Pearce 2016); compiled on its first use on a
-        machine, then loaded from numba's cache.
+        """Liveness levels and strongly connected components of the complete graph by a compiled
+        pass (:mod:`.reach_kernel`; Tarjan 1972 in the form of Pearce 2016; compiled on its first
+        use on a machine, then loaded from numba's cache) that needs no copy of the edges. When
+        the edges were kept, each marking's successors are read from them
+        (``edge_components``); else (``explore(..., edges=False)``) they are computed again from
+        the packed markings by the search's own enabling and firing rules (under its priorities)
+        and found through a hash table over ``words`` (``components``).
 
         Args:
             stats: if given, receives ``deepest_path`` (the longest depth-first path, markings) and
@@ -331,11 +332,16 @@ class StateSpace:
             raise AnalysisError("liveness needs the complete reachability graph; this one stopped early "
                                 f"({self.stopped_by})")
         rk = _kernel()
-        tab = arc_table(self.net)
-        prio = _NO_PRIORITY if self.priority is None else self.priority
-        resets = tab if self.net.has_resets else None
-        status, levels, labels, terminal, deepest, tallest = rk.components(
-            tab, self.words, self.layout, prio, self.priority is not None, resets)
+        if self.edges_kept:
+            levels, labels, terminal, deepest, tallest = rk.edge_components(
+                self.out_ptr, self.dst, self.transition, len(self.net.transitions))
+            status = 0
+        else:
+            tab = arc_table(self.net)
+            prio = _NO_PRIORITY if self.priority is None else self.priority
+            resets = tab if self.net.has_resets else None
+            status, levels, labels, terminal, deepest, tallest = rk.components(
+                tab, self.words, self.layout, prio, self.priority is not None, resets)
         if status:
             raise AnalysisError(f"state {status - 1} has a successor that is not among the {self.n_states} states "
                                 "found")  # pragma: no cover - a complete graph holds every successor
@@ -359,9 +365,10 @@ class StateSpace:
 
 def implicit_pass_bytes(n_states: int) -> int:
     """Bytes :meth:`StateSpace.implicit_liveness` needs beyond the graph for ``n_states`` markings
-    (at most): the hash table (8 bytes a slot, a power of two at least 4/3 of the markings) and 10
-    bytes a marking (its index and flag, the shared depth-first path and component stack, a flag a
-    component)."""
+    (at most): without the edges, the hash table (8 bytes a slot, a power of two at least 4/3 of
+    the markings) and 10 bytes a marking (its index and flag, the shared depth-first path and
+    component stack, a flag a component); with them, 18 bytes a marking (the path's edge positions
+    instead of the hash table), which is less."""
     slots = 16
     while 3 * slots < 4 * n_states:
         slots *= 2

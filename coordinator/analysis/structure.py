@@ -1164,8 +1164,8 @@ def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invari
         sources[key] = "reachability graph"
     need = graph_pass_bytes(space.n_states, space.n_edges)
     work = space.edges_kept and space.nbytes + need <= budget
-    # edges not kept, or too many for scipy's passes: the components from the markings, each
-    # marking's successors computed again
+    # edges too many for scipy's passes: a compiled pass over them; not kept: the components from
+    # the markings, each marking's successors computed again
     implicit = not work and space.nbytes + implicit_pass_bytes(space.n_states) <= budget
     liveness: dict[str, int] | None = None
     quasi: bool | None = None
@@ -1186,14 +1186,19 @@ def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invari
         liveness = {t.id: int(lv) for t, lv in zip(net.transitions, levels)}
         quasi, live = bool((levels >= 1).all()), bool((levels == 4).all())
         reversible = bool(np.unique(labels).size == 1)
+        how = "" if not implicit else (", a compiled pass over its edges" if space.edges_kept
+                                        else ", its edges computed again from the markings")
         for key in ("quasi_live", "live", "reversible"):
-            sources[key] = "reachability graph" + (", its edges computed again from the markings" if implicit else "")
-        if implicit:
-            why = (f"the {space.n_edges:,} edges need about {need / 2**30:.1f} GiB in scipy's passes, over the "
-                   "memory budget" if space.edges_kept else "the edges were not kept")
-            notes.append(f"liveness and reversibility: {why}, so the strongly connected components were found from "
-                         "the markings, each marking's successors computed again; the robotic recovery check, "
-                         "which needs the edges, was skipped")
+            sources[key] = "reachability graph" + how
+        if implicit and space.edges_kept:
+            notes.append(f"liveness and reversibility: the {space.n_edges:,} edges need about {need / 2**30:.1f} GiB "
+                         "in scipy's passes, over the memory budget, so the strongly connected components were found "
+                         "by a compiled pass over the edges; the robotic recovery check, which needs those passes, "
+                         "was skipped")
+        elif implicit:
+            notes.append("liveness and reversibility: the edges were not kept, so the strongly connected components "
+                         "were found from the markings, each marking's successors computed again; the robotic "
+                         "recovery check, which needs the edges, was skipped")
     else:
         if space.edges_kept:
             used = np.zeros(len(net.transitions), dtype=bool)

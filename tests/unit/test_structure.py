@@ -235,7 +235,7 @@ def test_growing_place_that_is_read_keeps_liveness_undecided() -> None:
     assert a.projection is None and a.live is None and a.reversible is None
 
 
-def test_liveness_comes_from_the_markings_when_the_edges_do_not_fit_the_passes_over_them() -> None:
+def test_liveness_comes_from_a_compiled_pass_over_the_edges_when_they_do_not_fit_scipys_passes() -> None:
     from coordinator.analysis.statespace import implicit_pass_bytes
     from coordinator.analysis.structure import graph_pass_bytes
 
@@ -246,14 +246,14 @@ def test_liveness_comes_from_the_markings_when_the_edges_do_not_fit_the_passes_o
     full = analyse(net)
     space = full.space
     assert space is not None and full.graph_work_done and full.live
-    # a budget that holds the graph and the pass over its markings, not scipy's passes over its edges
+    # a budget that holds the graph and the compiled pass, not scipy's passes over its edges
     budget = 2 * (space.nbytes + implicit_pass_bytes(space.n_states)) + (1 << 16)
     assert space.nbytes + graph_pass_bytes(space.n_states, space.n_edges) > budget
     small = analyse(net, max_bytes=budget)
     assert small.complete and not small.graph_work_done
     assert small.liveness == full.liveness and small.live and small.reversible and small.home_states == 1024
-    assert "computed again from the markings" in small.sources["live"]
-    assert any("found from the markings" in n for n in small.notes)
+    assert small.sources["live"] == "reachability graph, a compiled pass over its edges"
+    assert any("by a compiled pass over the edges" in n for n in small.notes)
 
 
 def test_a_graph_whose_edges_fill_the_budget_is_searched_again_without_them_and_still_gets_its_liveness() -> None:
