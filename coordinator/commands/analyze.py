@@ -24,7 +24,7 @@ from services.errors import PetrobotError
 
 __all__ = ["add_parser", "parse_size", "render", "run"]
 
-DEFAULT_MAX_STATES = 10_000_000
+DEFAULT_MAX_STATES = 25_000_000
 _UNITS = {"": 1, "B": 1, "K": 1 << 10, "KB": 1 << 10, "KIB": 1 << 10, "M": 1 << 20, "MB": 1 << 20,
           "MIB": 1 << 20, "G": 1 << 30, "GB": 1 << 30, "GIB": 1 << 30, "T": 1 << 40, "TB": 1 << 40, "TIB": 1 << 40}
 
