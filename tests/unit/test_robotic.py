@@ -386,3 +386,23 @@ def test_the_mobile_nets_out_of_service_ends_wait_for_the_operators_reset_and_no
     assert all(e["operator"] == ["+ reset_request 1 would enable operator_reset"] for e in ends["examples"]["operator"])
     assert doc["robotic"]["error_recoverable"]["holds"] is True and doc["robotic"]["controllable"]["holds"] is True
     assert "deadlock:           no [" in analyze.render(doc)
+
+
+def test_home_states_compared_in_row_blocks_match_a_column_by_column_comparison() -> None:
+    import numpy as np
+    from analysis_nets import make_net
+
+    from coordinator.analysis.robotic import _home_states
+    from coordinator.analysis.statespace import explore
+
+    # five independent one-way moves and a counter: 32 markings with 2 tokens on "c" at most
+    net = make_net("moves", {**{f"a{i}": 1 for i in range(5)}, "c": 0},
+                   {f"go{i}": ({f"a{i}": 1}, {f"b{i}": 1, **({"c": 1} if i < 2 else {})}) for i in range(5)})
+    space = explore(net)
+    states = space.states
+    for expected in ({"a0": 1, "a1": 1}, {"b3": 1, "c": 2}, {"c": 1}, {"c": 3}, {}):
+        want = np.ones(space.n_states, dtype=bool)
+        for p, v in expected.items():
+            want &= states[:, net.place_index[p]] == v
+        for block_bytes in (1, 7, 1 << 24):  # one row a block, blocks that do not divide the rows, one block
+            assert _home_states(space, expected, block_bytes=block_bytes).tolist() == want.tolist()
