@@ -41,8 +41,8 @@ kept edges, or, with ``--count-edges``, the components from the markings alone, 
 successors computed again): ``liveness_seconds``, ``liveness_cpu_seconds``, ``live``,
 ``reversible``, ``components``, ``terminal_components``; with the edges kept, the compiled pass
 over them (:meth:`~coordinator.analysis.statespace.StateSpace.implicit_liveness`) is timed too,
-scipy's as its baseline: ``edge_pass_seconds``, ``edge_pass_agrees`` (the same liveness levels); ``search_peak_rss_bytes`` is the peak before
-this pass, ``peak_rss_bytes`` the peak after it.
+scipy's as its baseline: ``edge_pass_seconds``, ``edge_pass_agrees`` (the same liveness levels);
+``search_peak_rss_bytes`` is the peak before this pass, ``peak_rss_bytes`` the peak after it.
 
 ``--structural`` adds, per model, the structural path that needs no state space: the two semiflow
 LPs (conservative, consistent) and the state-equation place bounds (:mod:`coordinator.analysis.lp`),

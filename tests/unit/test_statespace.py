@@ -518,7 +518,7 @@ def _same_components(space: StateSpace, kept: StateSpace) -> None:
 
 
 @pytest.mark.parametrize("seed", range(16))
-def test_components_from_the_markings_alone_agree_with_the_kept_edges_on_random_nets(seed: int) -> None:
+def test_both_compiled_component_passes_agree_with_scipys_on_random_nets(seed: int) -> None:
     rng = np.random.default_rng(100 + seed)
     net = random_net(rng, n_places=int(rng.integers(3, 7)), n_transitions=int(rng.integers(3, 9)))
     levels = rng.integers(0, 3, size=len(net.transitions))
@@ -531,13 +531,30 @@ def test_components_from_the_markings_alone_agree_with_the_kept_edges_on_random_
 
 
 @pytest.mark.parametrize("model", MCC_MODELS)
-def test_components_from_the_markings_alone_agree_with_the_kept_edges_on_mcc_models(model: str) -> None:
+def test_both_compiled_component_passes_agree_with_scipys_on_mcc_models(model: str) -> None:
     from coordinator.netfile.pnml import load_pnml
 
     net = load_pnml(str(MCC / model / "model.pnml"))
     kept = explore(net)
     _same_components(explore(net, edges=False), kept)
     _same_components(kept, kept)
+
+
+def test_the_pass_over_the_edges_follows_a_depth_first_path_as_long_as_the_graph() -> None:
+    # a pile of up to 200,000 tokens, put and taken one at a time: one component whose depth-first
+    # path holds every marking, and a stop that leaves it for a dead marking
+    net = make_net("pile", {"go": 1}, {"put": ({"go": 1}, {"go": 1, "pile": 1}),
+                                       "take": ({"go": 1, "pile": 1}, {"go": 1}),
+                                       "stop": ({"go": 1}, {"done": 1})},
+                   inhibitors={"put": {"pile": 200_000}})
+    kept = explore(net)
+    assert kept.n_states == 2 * 200_001
+    stats: dict[str, int] = {}
+    levels, labels, terminal = kept.implicit_liveness(stats)
+    assert stats["deepest_path"] >= 200_001
+    assert levels.tolist() == [3, 3, 1] and terminal.sum() == 200_001 and len(set(labels.tolist())) == 200_002
+    _same_components(kept, kept)
+    _same_components(explore(net, edges=False), kept)
 
 
 def test_components_from_the_markings_alone_follow_reset_arcs_and_need_a_complete_graph() -> None:
