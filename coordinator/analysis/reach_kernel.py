@@ -909,7 +909,7 @@ def components(tab: np.ndarray, words: np.ndarray, layout: np.ndarray, prio: np.
     # edge's target apart); leaves: an edge leaves the marking's component
     rindex = np.zeros(n, np.int32)
     leaves = np.zeros(n, np.bool_)
-    terminal = np.zeros(1024, np.bool_)
+    terminal = np.zeros(n, np.bool_)  # a flag a component, at most one a marking (pages touched as used)
     fired = np.zeros(n_t, np.bool_)
     inside = np.zeros(n_t, np.bool_)
     hits = np.zeros(n_t, np.int64)  # terminal components each transition fires in
@@ -998,8 +998,6 @@ def components(tab: np.ndarray, words: np.ndarray, layout: np.ndarray, prio: np.
             # v is the root of a finished component: v and the stacked markings visited after it
             lo = _component_base(v, n_stack, dq, rindex)
             out = _component_left(v, lo, n_stack, dq, leaves)
-            if comp == terminal.shape[0]:
-                terminal = _grow(terminal, min(2 * comp, n), comp)
             terminal[comp] = not out
             if not out:
                 n_term += 1
@@ -1043,7 +1041,7 @@ def edge_components(out_ptr: np.ndarray, dst: np.ndarray, tr: np.ndarray, n_t: i
     n = out_ptr.shape[0] - 1
     rindex = np.zeros(n, np.int32)
     leaves = np.zeros(n, np.bool_)
-    terminal = np.zeros(1024, np.bool_)
+    terminal = np.zeros(n, np.bool_)  # a flag a component, at most one a marking (pages touched as used)
     fired = np.zeros(n_t, np.bool_)
     inside = np.zeros(n_t, np.bool_)
     hits = np.zeros(n_t, np.int64)
@@ -1102,8 +1100,6 @@ def edge_components(out_ptr: np.ndarray, dst: np.ndarray, tr: np.ndarray, n_t: i
                 continue
             lo = _component_base(v, n_stack, dq, rindex)
             out = _component_left(v, lo, n_stack, dq, leaves)
-            if comp == terminal.shape[0]:
-                terminal = _grow(terminal, min(2 * comp, n), comp)
             terminal[comp] = not out
             if not out:
                 n_term += 1
