@@ -154,3 +154,15 @@ def test_kanban_bounds_are_decided_by_structure_when_the_graph_is_cut_short() ->
     assert a.max_token_in_place == 5  # the oracle's value: explored markings reach the LP bound
     assert all(b == 5 for b in a.place_bounds.values())
     assert a.live is None and "live" in a.undecided
+
+
+def test_a_net_without_any_semiflow_gets_an_empty_cover_from_one_lp() -> None:
+    # a producer feeding a chain: no y ≥ 0 with yᵀC = 0 but 0, so the per-place LPs would all be
+    # infeasible; the cover is empty, and a net with semiflows still gets them
+    n = 300
+    trans = {"produce": ({}, {"p0": 1})} | {f"t{i}": ({f"p{i}": 1}, {f"p{i + 1}": 1}) for i in range(n - 1)}
+    chain = make_net("chain", {}, trans)
+    assert lp.semiflow_cover(sparse_net(chain), seconds=3.0) == []
+    ring = make_net("ring", {"p0": 1}, {f"t{i}": ({f"p{i}": 1}, {f"p{(i + 1) % n}": 1}) for i in range(n)})
+    cover = lp.semiflow_cover(sparse_net(ring), seconds=3.0)
+    assert len(cover) == 1 and (cover[0] == 1).all()
