@@ -379,16 +379,21 @@ def test_liveness_beyond_the_memory_budget_is_undecided_and_the_rest_of_the_answ
     assert result.states == 2**n + 1
 
 
-def test_a_deadlock_deep_in_a_ring_of_thirty_philosophers_is_reached_by_a_straight_firing_sequence() -> None:
-    n = 30
+def philosophers(n: int) -> PetriNet:
+    """``n`` philosophers round a table, each taking the left fork, then the right: one deadlock."""
     transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
     for i in range(n):
         right = f"fork{(i + 1) % n}"
         transitions[f"left{i}"] = ({f"think{i}": 1, f"fork{i}": 1}, {f"hold{i}": 1})
         transitions[f"right{i}"] = ({f"hold{i}": 1, right: 1}, {f"eat{i}": 1})
         transitions[f"done{i}"] = ({f"eat{i}": 1}, {f"think{i}": 1, f"fork{i}": 1, right: 1})
-    net = make_net("philosophers", {**{f"think{i}": 1 for i in range(n)}, **{f"fork{i}": 1 for i in range(n)}},
-                   transitions)
+    return make_net("philosophers", {**{f"think{i}": 1 for i in range(n)}, **{f"fork{i}": 1 for i in range(n)}},
+                    transitions)
+
+
+def test_a_deadlock_deep_in_a_ring_of_thirty_philosophers_is_reached_by_a_straight_firing_sequence() -> None:
+    n = 30
+    net = philosophers(n)
     bounds, flows = proven_bounds(net)
     r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0)
     assert r.deadlock and r.n_deadlocks == 1
@@ -499,3 +504,31 @@ def test_beyond_the_sifted_levels_each_seed_makes_one_start_of_its_own_and_the_c
     assert all(e.n_levels == small.n_levels for e in encs)
     r = analyse_symbolic(net, bounds, flows=flows)
     assert r.states == explore(net).n_states
+
+
+@pytest.mark.parametrize("n", [2, 8])
+def test_random_walks_fall_into_a_deadlock_and_give_a_firing_sequence_that_replays_to_it(n: int) -> None:
+    import time
+
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis import symbolic
+    from coordinator.analysis.mdd_order import encode, events, touched_places
+
+    net = philosophers(n)
+    sn = sparse_net(net)
+    bounds, flows = proven_bounds(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    fwd = events(sn, enc, merge=True)
+    store = symbolic._Store(enc, 1 << 30)
+    reach = store.call(mk.MODE_SATURATE, fwd, store.m0, check_overflow=True)
+    single = events(sn, enc)
+    states = store.count(reach)
+    _, counts = symbolic._fireable(store, single, reach, states, enc.free(touched_places(sn)).copy())
+    dead = symbolic._dead(store, fwd, single, reach, counts, states)
+    found = symbolic._walk_sequence(store, sn, enc, net, dead, time.monotonic() + 60.0)
+    assert found is not None
+    seq, end = found
+    assert replays_to(net, seq, {p.id: int(end[i]) for i, p in enumerate(net.places) if end[i]})
+    assert len(seq) >= n  # every philosopher took a fork
+    # a walk that ends in a dead marking outside the targets gives nothing: M0 is not dead
+    assert symbolic._walk_sequence(store, sn, enc, net, store.m0, time.monotonic() + 60.0) is None
