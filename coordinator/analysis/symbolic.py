@@ -437,6 +437,29 @@ def _blocks(ts: np.ndarray, n_places: int) -> list[np.ndarray]:
     return [ts[i:i + step] for i in range(0, ts.size, step)]
 
 
+class _Arcs:
+    """The net's arcs by transition (Pre, inhibitor and incidence as sparse columns), for the
+    searches over explicit markings of the witness: the transitions a marking enables cost the
+    arcs, not |P|·|T|."""
+
+    def __init__(self, sn: SparseNet) -> None:
+        self.n_t = sn.n_transitions
+        self.pre = sn.pre.tocsc()
+        self.inh = sn.inhibitor.tocsc()
+        self.inc = sn.incidence.tocsc()
+        self.pre.sort_indices()
+        self.inh.sort_indices()
+        self.pre_t = np.repeat(np.arange(self.n_t), np.diff(self.pre.indptr))
+        self.inh_t = np.repeat(np.arange(self.n_t), np.diff(self.inh.indptr))
+
+    def enabled(self, m: np.ndarray) -> np.ndarray:
+        """(k,) int64: the transitions that the (|P|,) marking ``m`` enables, in index order."""
+        off = np.zeros(self.n_t, dtype=bool)
+        off[self.pre_t[m[self.pre.indices] < self.pre.data]] = True
+        off[self.inh_t[(self.inh.data > 0) & (m[self.inh.indices] >= self.inh.data)]] = True
+        return np.flatnonzero(~off)
+
+
 def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, inside: int, targets: int,
                      goal: np.ndarray, limit: int, stop: float) -> tuple[list[str], np.ndarray] | None:
     """A firing sequence from M0 to one of ``targets`` by a best-first search over explicit markings
@@ -447,14 +470,8 @@ def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet,
     and incidence) and its successors, built in blocks (:func:`_blocks`), not |P|·|T|."""
     import heapq
 
-    n_t = sn.n_transitions
-    pre = sn.pre.tocsc()
-    inh = sn.inhibitor.tocsc()
-    inc = sn.incidence.tocsc()
-    pre.sort_indices()
-    inh.sort_indices()
-    pre_t = np.repeat(np.arange(n_t), np.diff(pre.indptr))
-    inh_t = np.repeat(np.arange(n_t), np.diff(inh.indptr))
+    arcs = _Arcs(sn)
+    inc = arcs.inc
     lookup = _LevelValues(enc)
     m0 = np.asarray(sn.m0, dtype=np.int64)
     vals0 = lookup.of(m0[None, :])[0]
@@ -471,10 +488,7 @@ def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet,
             return None
         _, _, i = heapq.heappop(heap)
         m = marks[i]
-        off = np.zeros(n_t, dtype=bool)
-        off[pre_t[m[pre.indices] < pre.data]] = True
-        off[inh_t[(inh.data > 0) & (m[inh.indices] >= inh.data)]] = True
-        for ts in _blocks(np.flatnonzero(~off), sn.n_places):
+        for ts in _blocks(arcs.enabled(m), sn.n_places):
             succ = m[None, :] + inc[:, ts].T.toarray()
             vals = lookup.of(succ)
             for j, t in enumerate(ts):
@@ -510,12 +524,8 @@ def _walk_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, t
     is the empty one, has walks of 51 to 172 steps, milliseconds each, where the guided search
     found none among 100,000 markings and breadth-first images took 174 s. None if no walk ends
     in a target. A step costs the net's arcs, not |P|·|T|."""
-    n_t = sn.n_transitions
-    pre = sn.pre.tocsc()
-    inh = sn.inhibitor.tocsc()
-    inc = sn.incidence.tocsc()
-    pre_t = np.repeat(np.arange(n_t), np.diff(pre.indptr))
-    inh_t = np.repeat(np.arange(n_t), np.diff(inh.indptr))
+    arcs = _Arcs(sn)
+    inc = arcs.inc
     inc_data = inc.data.astype(np.int64)
     lookup = _LevelValues(enc)
     rng = np.random.default_rng(0xDEAD)
@@ -524,10 +534,7 @@ def _walk_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, t
         m = m0.copy()
         seq: list[int] = []
         while len(seq) < _WALK_STEPS:
-            off = np.zeros(n_t, dtype=bool)
-            off[pre_t[m[pre.indices] < pre.data]] = True
-            off[inh_t[(inh.data > 0) & (m[inh.indices] >= inh.data)]] = True
-            on = np.flatnonzero(~off)
+            on = arcs.enabled(m)
             if on.size == 0:
                 vals = lookup.of(m[None, :])[0]
                 if vals[0] >= 0 and store.contains(targets, vals):
