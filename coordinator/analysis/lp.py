@@ -397,7 +397,7 @@ def semiflow_cover(sn: SparseNet, *, seconds: float = 3.0, covered: np.ndarray |
     if c_t.shape[0] and not done.all():
         # one LP first, max Σ y over yᵀC = 0, 0 ≤ y ≤ 1: 0 when the net has no semiflow at all,
         # and the LPs place by place would only be infeasible (CloudReconfiguration-PT-303's 2,584
-        # places: 3 s of them, against 0.1 s for this one)
+        # places: 3 s of them, against 0.01 s for this one)
         res = _solve(-np.ones(n), None, None, c_t, zeros, [(0.0, 1.0)] * n, seconds)
         if res.status == 0 and -float(res.fun) < 0.5:
             return out
