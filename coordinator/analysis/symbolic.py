@@ -40,6 +40,7 @@ the witness's firing sequence, then reversibility and liveness, get what is left
 from __future__ import annotations
 
 import contextlib
+import functools
 import threading
 import time
 from collections.abc import Callable
@@ -437,20 +438,34 @@ def _blocks(ts: np.ndarray, n_places: int) -> list[np.ndarray]:
     return [ts[i:i + step] for i in range(0, ts.size, step)]
 
 
-class _Arcs:
-    """The net's arcs by transition (Pre, inhibitor and incidence as sparse columns), for the
-    searches over explicit markings of the witness: the transitions a marking enables cost the
-    arcs, not |P|·|T|."""
+class _Explicit:
+    """What the witness's searches over explicit markings share, built once a witness: the net's
+    arcs by transition (Pre, Post, inhibitor and incidence as sparse columns), so that the
+    transitions a marking enables, or may have been reached by, cost the arcs and not |P|·|T|;
+    and the level values of the encoding's markings (:class:`_LevelValues`, built when first asked:
+    an encoding without levels has none, and its only marking needs no search)."""
 
-    def __init__(self, sn: SparseNet) -> None:
+    def __init__(self, sn: SparseNet, enc: Encoding) -> None:
+        self.enc = enc
+        self.m0 = np.asarray(sn.m0, dtype=np.int64)
+        self.n_places = sn.n_places
         self.n_t = sn.n_transitions
         self.pre = sn.pre.tocsc()
+        self.post = sn.post.tocsc()
         self.inh = sn.inhibitor.tocsc()
         self.inc = sn.incidence.tocsc()
         self.pre.sort_indices()
         self.inh.sort_indices()
         self.pre_t = np.repeat(np.arange(self.n_t), np.diff(self.pre.indptr))
+        self.post_t = np.repeat(np.arange(self.n_t), np.diff(self.post.indptr))
         self.inh_t = np.repeat(np.arange(self.n_t), np.diff(self.inh.indptr))
+        # the incidence on the inhibitor arcs: a predecessor's count there is the marking's minus it
+        self.inh_c = (np.asarray(self.inc[self.inh.indices, self.inh_t]).ravel() if self.inh.nnz
+                      else np.zeros(0, np.int64))
+
+    @functools.cached_property
+    def lookup(self) -> _LevelValues:
+        return _LevelValues(self.enc)
 
     def enabled(self, m: np.ndarray) -> np.ndarray:
         """(k,) int64: the transitions that the (|P|,) marking ``m`` enables, in index order."""
@@ -459,9 +474,18 @@ class _Arcs:
         off[self.inh_t[(self.inh.data > 0) & (m[self.inh.indices] >= self.inh.data)]] = True
         return np.flatnonzero(~off)
 
+    def reached_by(self, m: np.ndarray) -> np.ndarray:
+        """(k,) int64: the transitions that can have led to the (|P|,) marking ``m``: ``m`` holds
+        their output tokens (so the predecessor m − C[:, t] holds their input tokens) and the
+        predecessor satisfies their inhibitor arcs."""
+        off = np.zeros(self.n_t, dtype=bool)
+        off[self.post_t[m[self.post.indices] < self.post.data]] = True
+        off[self.inh_t[(self.inh.data > 0) & (m[self.inh.indices] - self.inh_c >= self.inh.data)]] = True
+        return np.flatnonzero(~off)
 
-def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, inside: int, targets: int,
-                     goal: np.ndarray, limit: int, stop: float) -> tuple[list[str], np.ndarray] | None:
+
+def _guided_sequence(store: _Store, ex: _Explicit, net: PetriNet, inside: int, targets: int, goal: np.ndarray,
+                     limit: int, stop: float) -> tuple[list[str], np.ndarray] | None:
     """A firing sequence from M0 to one of ``targets`` by a best-first search over explicit markings
     that never leaves ``inside`` (every marking of which can reach a target), always going on from
     the marking nearest (in tokens) to the dead marking ``goal``, the deepest first among equals; so
@@ -470,10 +494,7 @@ def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet,
     and incidence) and its successors, built in blocks (:func:`_blocks`), not |P|·|T|."""
     import heapq
 
-    arcs = _Arcs(sn)
-    inc = arcs.inc
-    lookup = _LevelValues(enc)
-    m0 = np.asarray(sn.m0, dtype=np.int64)
+    inc, lookup, m0 = ex.inc, ex.lookup, ex.m0
     vals0 = lookup.of(m0[None, :])[0]
     if vals0[0] >= 0 and store.contains(targets, vals0):
         return [], m0
@@ -488,7 +509,7 @@ def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet,
             return None
         _, _, i = heapq.heappop(heap)
         m = marks[i]
-        for ts in _blocks(arcs.enabled(m), sn.n_places):
+        for ts in _blocks(ex.enabled(m), ex.n_places):
             succ = m[None, :] + inc[:, ts].T.toarray()
             vals = lookup.of(succ)
             for j, t in enumerate(ts):
@@ -513,7 +534,7 @@ def _guided_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet,
     return None
 
 
-def _walk_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, targets: int,
+def _walk_sequence(store: _Store, ex: _Explicit, net: PetriNet, targets: int,
                    stop: float) -> tuple[list[str], np.ndarray] | None:
     """A firing sequence from M0 to one of ``targets`` by random walks: from M0, a transition drawn
     among the enabled ones fires, again and again, until none is enabled (the walk ends in a dead
@@ -524,19 +545,16 @@ def _walk_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, t
     is the empty one, has walks of 51 to 172 steps, milliseconds each, where the guided search
     found none among 100,000 markings and breadth-first images took 174 s. None if no walk ends
     in a target. A step costs the net's arcs, not |P|·|T|."""
-    arcs = _Arcs(sn)
-    inc = arcs.inc
+    inc = ex.inc
     inc_data = inc.data.astype(np.int64)
-    lookup = _LevelValues(enc)
     rng = np.random.default_rng(0xDEAD)
-    m0 = np.asarray(sn.m0, dtype=np.int64)
     for _ in range(_WALKS):
-        m = m0.copy()
+        m = ex.m0.copy()
         seq: list[int] = []
         while len(seq) < _WALK_STEPS:
-            on = arcs.enabled(m)
+            on = ex.enabled(m)
             if on.size == 0:
-                vals = lookup.of(m[None, :])[0]
+                vals = ex.lookup.of(m[None, :])[0]
                 if vals[0] >= 0 and store.contains(targets, vals):
                     return [net.transitions[t].id for t in seq], m
                 break
@@ -550,7 +568,7 @@ def _walk_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, t
     return None
 
 
-def _bfs_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Events, inside: int,
+def _bfs_sequence(store: _Store, ex: _Explicit, net: PetriNet, fwd: Events, inside: int,
                   targets: int) -> tuple[list[str], np.ndarray] | None:
     """A shortest firing sequence from M0 to one of ``targets`` and that marking: breadth-first
     images of M0 inside ``inside`` until a layer meets the targets, then back from that marking,
@@ -567,29 +585,16 @@ def _bfs_sequence(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fw
         seen = store.call(mk.MODE_APPLY, fwd, seen, new, arg=mk.APPLY_UNION)
         layers.append(new)
         hit = store.call(mk.MODE_APPLY, fwd, new, targets, arg=mk.APPLY_INTER)
-    cur = _marking(enc, store.pick(hit), net)
+    cur = _marking(ex.enc, store.pick(hit), net)
     end = cur.copy()
     if len(layers) == 1:  # M0 is a target
         return [], end
     seq: list[str] = []
-    n_t = sn.n_transitions
-    inc = sn.incidence.tocsc()
-    post = sn.post.tocsc()
-    inh = sn.inhibitor.tocsc()
-    post_t = np.repeat(np.arange(n_t), np.diff(post.indptr))
-    inh_t = np.repeat(np.arange(n_t), np.diff(inh.indptr))
-    inh_c = np.asarray(inc[inh.indices, inh_t]).ravel() if inh.nnz else np.zeros(0, np.int64)  # C on those arcs
-    lookup = _LevelValues(enc)
     for layer in reversed(layers[:-1]):
-        # t can have led to cur iff cur holds t's output tokens (then the predecessor cur − C[:, t]
-        # holds t's input tokens), and the predecessor satisfies t's inhibitor arcs
-        off = np.zeros(n_t, dtype=bool)
-        off[post_t[cur[post.indices] < post.data]] = True
-        off[inh_t[(inh.data > 0) & (cur[inh.indices] - inh_c >= inh.data)]] = True
         before = None
-        for ts in _blocks(np.flatnonzero(~off), sn.n_places):
-            prev = cur[None, :] - inc[:, ts].T.toarray()
-            vals = lookup.of(prev)
+        for ts in _blocks(ex.reached_by(cur), ex.n_places):
+            prev = cur[None, :] - ex.inc[:, ts].T.toarray()
+            vals = ex.lookup.of(prev)
             for j in np.flatnonzero(vals[:, 0] >= 0):
                 if store.contains(layer, vals[j]):
                     seq.append(net.transitions[int(ts[j])].id)
@@ -1034,7 +1039,8 @@ class _Lane:
                     for _, _, st in cands:
                         st.max_bytes = max(st.max_bytes, self.share // n_cands)
                     if self.others:
-                        say(f"symbolic: {len(race.orders)} distinct variable order{'s' if len(race.orders) > 1 else ''} found")
+                        plural = "s" if len(race.orders) > 1 else ""
+                        say(f"symbolic: {len(race.orders)} distinct variable order{plural} found")
                     continue
                 name, enc = name_enc
                 cands.append((enc, events(race.sn, enc, merge=True), _Store(enc, self.share // want)))
@@ -1276,22 +1282,23 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
     try:
         say("symbolic: a firing sequence to a deadlock")
         explicit = enc.n_levels > 0
+        ex = _Explicit(sn, enc)
         found = None
         if explicit:  # first inside the reachable set alone: most often a deadlock is reachable from
             now = time.monotonic()  # everywhere, and the backward saturation below costs more
             stop = now + min(_QUICK_SECONDS, max(0.0, deadline - now))
-            found = _guided_sequence(store, sn, enc, net, reach, dead, marking, limit=20_000, stop=stop)
+            found = _guided_sequence(store, ex, net, reach, dead, marking, limit=20_000, stop=stop)
             if found is None:  # then random walks, as briefly
                 now = time.monotonic()
-                found = _walk_sequence(store, sn, enc, net, dead, now + min(_QUICK_SECONDS, max(0.0, deadline - now)))
+                found = _walk_sequence(store, ex, net, dead, now + min(_QUICK_SECONDS, max(0.0, deadline - now)))
         if found is None:
             inside = store.call(mk.MODE_SATURATE, back, dead, c=reach)
             if explicit:
                 now = time.monotonic()
                 stop = now + min(_GUIDED_SECONDS, max(0.0, (deadline - now) / 3))
-                found = _guided_sequence(store, sn, enc, net, inside, dead, marking, limit=100_000, stop=stop)
+                found = _guided_sequence(store, ex, net, inside, dead, marking, limit=100_000, stop=stop)
             if found is None:
-                found = _bfs_sequence(store, sn, enc, net, fwd, inside, dead)
+                found = _bfs_sequence(store, ex, net, fwd, inside, dead)
         if found is not None:
             seq, end = found
             result.deadlock_sequence = seq

@@ -164,7 +164,7 @@ def shortest_to_a_deadlock(net: PetriNet) -> int:
 def test_the_breadth_first_trace_to_a_deadlock_is_a_shortest_firing_sequence(seed: int) -> None:
     from coordinator.analysis import mdd_kernel as mk
     from coordinator.analysis.mdd_order import encode, events, touched_places
-    from coordinator.analysis.symbolic import _bfs_sequence, _dead, _fireable, _Store
+    from coordinator.analysis.symbolic import _bfs_sequence, _dead, _Explicit, _fireable, _Store
 
     net = generated_net(seed)  # the odd seeds with inhibitor arcs
     a = analyse(net, max_states=200_000)
@@ -183,7 +183,7 @@ def test_the_breadth_first_trace_to_a_deadlock_is_a_shortest_firing_sequence(see
     assert store.count(dead) == a.n_deadlocks
     if not a.deadlock:
         return
-    found = _bfs_sequence(store, sn, enc, net, fwd, reach, dead)
+    found = _bfs_sequence(store, _Explicit(sn, enc), net, fwd, reach, dead)
     assert found is not None
     seq, end = found
     assert replays_to(net, seq, {p.id: int(end[i]) for i, p in enumerate(net.places) if end[i]})
@@ -525,10 +525,11 @@ def test_random_walks_fall_into_a_deadlock_and_give_a_firing_sequence_that_repla
     states = store.count(reach)
     _, counts = symbolic._fireable(store, single, reach, states, enc.free(touched_places(sn)).copy())
     dead = symbolic._dead(store, fwd, single, reach, counts, states)
-    found = symbolic._walk_sequence(store, sn, enc, net, dead, time.monotonic() + 60.0)
+    ex = symbolic._Explicit(sn, enc)
+    found = symbolic._walk_sequence(store, ex, net, dead, time.monotonic() + 60.0)
     assert found is not None
     seq, end = found
     assert replays_to(net, seq, {p.id: int(end[i]) for i, p in enumerate(net.places) if end[i]})
     assert len(seq) >= n  # every philosopher took a fork
     # a walk that ends in a dead marking outside the targets gives nothing: M0 is not dead
-    assert symbolic._walk_sequence(store, sn, enc, net, store.m0, time.monotonic() + 60.0) is None
+    assert symbolic._walk_sequence(store, ex, net, store.m0, time.monotonic() + 60.0) is None
