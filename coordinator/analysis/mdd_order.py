@@ -345,57 +345,54 @@ def _score(pos: np.ndarray, hp: np.ndarray, hidx: np.ndarray, hw: np.ndarray | N
 
 
 @njit(cache=True)
-def _span(h: int, pos: np.ndarray, hp: np.ndarray, hidx: np.ndarray) -> int:
-    lo = 1 << 62
-    hi = -1
-    for y in range(hp[h], hp[h + 1]):
-        v = pos[hidx[y]]
-        lo = min(lo, v)
-        hi = max(hi, v)
-    return hi - lo
-
-
-@njit(cache=True)
-def _swap(p: int, q: int, pos: np.ndarray, order: np.ndarray, hp: np.ndarray, hidx: np.ndarray, hw: np.ndarray,
+def _swap(p: int, q: int, pos: np.ndarray, order: np.ndarray, hw: np.ndarray, lo: np.ndarray, hi: np.ndarray,
           vp: np.ndarray, vidx: np.ndarray, mark: np.ndarray) -> int:
-    """Swap the neighbours p and q; return the change of the score (only hyperedges holding exactly
-    one of them change; hyperedge h counts ``hw[h]`` times)."""
+    """Swap the neighbours p and q; return the change of the score. Only a hyperedge holding exactly
+    one of them changes, and only when that one is its top or bottom (``lo``, ``hi``: each
+    hyperedge's highest and lowest position, kept up to date): the end moves with it, one position,
+    so a swap costs the hyperedges of p and q, not their sizes (RwMutex-PT-r0500w0010's transitions
+    read 500 levels). Hyperedge h counts ``hw[h]`` times."""
+    a = pos[p]
+    b = pos[q]
     for x in range(vp[q], vp[q + 1]):
         mark[vidx[x]] += 1
     for x in range(vp[p], vp[p + 1]):
         mark[vidx[x]] += 2
-    before = 0
-    for x in range(vp[p], vp[p + 1]):
-        if mark[vidx[x]] != 3:
-            before += hw[vidx[x]] * _span(vidx[x], pos, hp, hidx)
-    for x in range(vp[q], vp[q + 1]):
-        if mark[vidx[x]] != 3:
-            before += hw[vidx[x]] * _span(vidx[x], pos, hp, hidx)
-    a = pos[p]
-    b = pos[q]
+    delta = 0
+    for x in range(vp[p], vp[p + 1]):  # p goes from a to b
+        h = vidx[x]
+        if mark[h] == 2:
+            if lo[h] == a:
+                lo[h] = b
+                delta += hw[h] * (a - b)
+            if hi[h] == a:
+                hi[h] = b
+                delta += hw[h] * (b - a)
+    for x in range(vp[q], vp[q + 1]):  # q goes from b to a
+        h = vidx[x]
+        if mark[h] == 1:
+            if lo[h] == b:
+                lo[h] = a
+                delta += hw[h] * (b - a)
+            if hi[h] == b:
+                hi[h] = a
+                delta += hw[h] * (a - b)
     order[a] = q
     order[b] = p
     pos[p] = b
     pos[q] = a
-    after = 0
-    for x in range(vp[p], vp[p + 1]):
-        if mark[vidx[x]] != 3:
-            after += hw[vidx[x]] * _span(vidx[x], pos, hp, hidx)
-    for x in range(vp[q], vp[q + 1]):
-        if mark[vidx[x]] != 3:
-            after += hw[vidx[x]] * _span(vidx[x], pos, hp, hidx)
     for x in range(vp[q], vp[q + 1]):
         mark[vidx[x]] = 0
     for x in range(vp[p], vp[p + 1]):
         mark[vidx[x]] = 0
-    return after - before
+    return delta
 
 
 @njit(cache=True, nogil=True)  # while one thread saturates, another searches orders
-def _sift_levels(order: np.ndarray, pos: np.ndarray, hp: np.ndarray, hidx: np.ndarray, hw: np.ndarray,
+def _sift_levels(order: np.ndarray, pos: np.ndarray, hw: np.ndarray, lo: np.ndarray, hi: np.ndarray,
                  vp: np.ndarray, vidx: np.ndarray, mark: np.ndarray, first: int, last: int) -> bool:
     """Sifting of the levels ``first`` .. ``last`` - 1, in place: move each to the position of the
-    lowest score, by neighbour swaps; True when one moved (the score went down)."""
+    lowest score, by neighbour swaps (:func:`_swap`); True when one moved (the score went down)."""
     n = order.shape[0]
     improved = False
     for p in range(first, last):
@@ -405,16 +402,16 @@ def _sift_levels(order: np.ndarray, pos: np.ndarray, hp: np.ndarray, hidx: np.nd
         for direction in (-1, 1):
             cur = 0
             while 0 <= pos[p] + direction < n:
-                cur += _swap(p, order[pos[p] + direction], pos, order, hp, hidx, hw, vp, vidx, mark)
+                cur += _swap(p, order[pos[p] + direction], pos, order, hw, lo, hi, vp, vidx, mark)
                 if cur < best:
                     best = cur
                     best_pos = pos[p]
             while pos[p] != start:
                 step = 1 if start > pos[p] else -1
-                _swap(p, order[pos[p] + step], pos, order, hp, hidx, hw, vp, vidx, mark)
+                _swap(p, order[pos[p] + step], pos, order, hw, lo, hi, vp, vidx, mark)
         while pos[p] != best_pos:
             step = 1 if best_pos > pos[p] else -1
-            _swap(p, order[pos[p] + step], pos, order, hp, hidx, hw, vp, vidx, mark)
+            _swap(p, order[pos[p] + step], pos, order, hw, lo, hi, vp, vidx, mark)
         if best < 0:
             improved = True
     return improved
@@ -430,6 +427,9 @@ def _sift(order: np.ndarray, hp: np.ndarray, hidx: np.ndarray, hw: np.ndarray, v
     pos = np.empty(n, np.int64)
     pos[order] = np.arange(n)
     mark = np.zeros(hp.shape[0], np.int64)
+    at = pos[hidx]
+    lo = np.minimum.reduceat(at, hp[:-1]) if hidx.size else np.zeros(0, np.int64)
+    hi = np.maximum.reduceat(at, hp[:-1]) if hidx.size else np.zeros(0, np.int64)
     timed = deadline is not None or stop is not None
     chunk = max(1, _SIFT_SWAPS // max(1, n)) if timed else n
     for _ in range(rounds):
@@ -437,7 +437,7 @@ def _sift(order: np.ndarray, hp: np.ndarray, hidx: np.ndarray, hw: np.ndarray, v
         for first in range(0, n, chunk):
             if (deadline is not None and time.monotonic() > deadline) or (stop is not None and stop()):
                 return
-            improved |= _sift_levels(order, pos, hp, hidx, hw, vp, vidx, mark, first, min(n, first + chunk))
+            improved |= _sift_levels(order, pos, hw, lo, hi, vp, vidx, mark, first, min(n, first + chunk))
         if not improved:
             break
 
