@@ -462,6 +462,41 @@ def _hypergraph(n: int, seed: int) -> tuple[np.ndarray, ...]:
     return hp, hidx, hw, mat_t.indptr.astype(np.int64), mat_t.indices.astype(np.int64)
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_a_neighbour_swap_changes_the_score_by_what_it_returns_and_keeps_each_hyperedge_s_ends(seed: int) -> None:
+    # the swap reads only the ends of the hyperedges of the two levels (not their members): its
+    # returned change is the change of the whole score, with weights, for hyperedges up to 40 levels
+    import scipy.sparse as sp
+
+    from coordinator.analysis import mdd_order
+
+    n = 60
+    rng = np.random.default_rng(seed)
+    hypers = [np.unique(rng.choice(n, size=int(rng.integers(2, 40)), replace=False)) for _ in range(2 * n)]
+    sizes = np.array([h.size for h in hypers])
+    hp = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+    hidx = np.concatenate(hypers).astype(np.int64)
+    hw = rng.integers(1, 4, len(hypers)).astype(np.int64)
+    mat_t = sp.csr_matrix((np.ones(hidx.size), (hidx, np.repeat(np.arange(len(hypers)), sizes))),
+                          shape=(n, len(hypers)))
+    vp, vidx = mat_t.indptr.astype(np.int64), mat_t.indices.astype(np.int64)
+    order = rng.permutation(n).astype(np.int64)
+    pos = np.empty(n, dtype=np.int64)
+    pos[order] = np.arange(n)
+    lo = np.minimum.reduceat(pos[hidx], hp[:-1])
+    hi = np.maximum.reduceat(pos[hidx], hp[:-1])
+    mark = np.zeros(len(hypers), dtype=np.int64)
+    score = mdd_order._score(pos, hp, hidx, hw)
+    for _ in range(500):
+        a = int(rng.integers(0, n - 1))
+        p, q = (int(order[a]), int(order[a + 1])) if rng.random() < 0.5 else (int(order[a + 1]), int(order[a]))
+        score += mdd_order._swap(p, q, pos, order, hw, lo, hi, vp, vidx, mark)
+        assert score == mdd_order._score(pos, hp, hidx, hw)
+        assert np.array_equal(lo, np.minimum.reduceat(pos[hidx], hp[:-1]))
+        assert np.array_equal(hi, np.maximum.reduceat(pos[hidx], hp[:-1]))
+        assert not mark.any() and np.array_equal(order[pos], np.arange(n))
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_sifting_by_chunks_moves_the_levels_as_sifting_at_once_and_a_deadline_or_stop_only_ends_it(seed: int) -> None:
     from coordinator.analysis import mdd_order
