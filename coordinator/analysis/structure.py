@@ -1025,6 +1025,20 @@ class _Beside:
             self.found = None  # a search cut short says nothing the other searches do not
 
 
+def _semiflow_bounds(upper: np.ndarray, flows: list[np.ndarray], m0: np.ndarray) -> np.ndarray:
+    """``upper`` ((|P|,) int64, -1 where unbounded) lowered by the P-semiflows ``flows`` (each (|P|,)
+    int64, y ≥ 0, yᵀC = 0): M(p) ≤ ⌊y·M0 / y_p⌋ in every reachable marking, reset arcs included
+    (a reset only takes tokens away, so y·M never rises above y·M0)."""
+    out = upper.copy()
+    for y in flows:
+        support = np.flatnonzero(y)
+        total = int(np.dot(y[support].astype(object), np.asarray(m0)[support].astype(object)))
+        for p, b in zip(support.tolist(), (total // int(y[p]) for p in support.tolist())):
+            if out[p] < 0 or b < out[p]:
+                out[p] = b
+    return out
+
+
 def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, lp_seconds: float, seconds: float,
                     phase: Callable[[str], None] | None, reason: str, started: float,
                     stop: threading.Event | None = None, borrow: Callable[[], int] | None = None,
@@ -1047,6 +1061,13 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
         raise AnalysisError("the symbolic engine needs a bounded net: neither the state equation nor the "
                             "P-invariants bound every place")
     _, upper = _upper_bounds(sn, st, lp_seconds, np.asarray(sn.m0, dtype=np.int64))
+    # small semiflows for the diagram's groups and order, skipping the places no semiflow covers;
+    # each also bounds its places (y·M = y·M0, so M(p) ≤ ⌊y·M0 / y_p⌋), which is what bounds them
+    # when the state equation's LP a place did not fit in its time (Philosophers-PT-000500: the
+    # total token count's 1,000 for every place, where each place's bound is 1)
+    flows = lp.semiflow_cover(sn, seconds=min(lp_seconds, 3.0),
+                              covered=None if st.psup.covered is None else ~st.psup.covered)
+    upper = _semiflow_bounds(upper, flows, sn.m0)
     if (upper < 0).any():
         raise AnalysisError("the symbolic engine needs a proven bound on every place; "
                             f"{int((upper < 0).sum())} places have none")
@@ -1055,7 +1076,6 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
     jit.configure()  # numba's cache directory, before the kernel (and numba) is imported
     from coordinator.analysis.symbolic import ANSWER_SECONDS, analyse_symbolic
 
-    flows = lp.semiflow_cover(sn, seconds=min(lp_seconds, 3.0))
 
     def counts() -> np.ndarray:
         if seen is not None:

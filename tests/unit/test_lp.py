@@ -166,3 +166,40 @@ def test_a_net_without_any_semiflow_gets_an_empty_cover_from_one_lp() -> None:
     ring = make_net("ring", {"p0": 1}, {f"t{i}": ({f"p{i}": 1}, {f"p{(i + 1) % n}": 1}) for i in range(n)})
     cover = lp.semiflow_cover(sparse_net(ring), seconds=3.0)
     assert len(cover) == 1 and (cover[0] == 1).all()
+
+
+def _philosophers(n: int) -> tuple[dict[str, int], dict[str, tuple[dict[str, int], dict[str, int]]]]:
+    """The initial marking and transitions of ``n`` philosophers round a table."""
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        right = f"fork{(i + 1) % n}"
+        transitions[f"left{i}"] = ({f"think{i}": 1, f"fork{i}": 1}, {f"hold{i}": 1})
+        transitions[f"right{i}"] = ({f"hold{i}": 1, right: 1}, {f"eat{i}": 1})
+        transitions[f"done{i}"] = ({f"eat{i}": 1}, {f"think{i}": 1, f"fork{i}": 1, right: 1})
+    return {**{f"think{i}": 1 for i in range(n)}, **{f"fork{i}": 1 for i in range(n)}}, transitions
+
+
+@pytest.mark.parametrize("near", [True, False])
+def test_the_cover_by_neighbourhood_lps_finds_the_small_semiflows_of_the_whole_net(near: bool) -> None:
+    # a ring of philosophers beside a producer feeding a chain (no semiflow there): over
+    # neighbourhoods every LP is small, a place of the chain gets none once its part stops growing,
+    # and every y returned is a semiflow of the whole net, as with the LPs over the whole net
+    n = 40
+    marking, trans = _philosophers(n)
+    trans |= {"produce": ({}, {"c0": 1})} | {f"move{i}": ({f"c{i}": 1}, {f"c{i + 1}": 1}) for i in range(5)}
+    net = make_net("both", marking, trans)
+    sn = sparse_net(net)
+    cover = lp.semiflow_cover(sn, seconds=60.0, near=near)
+    c = sn.incidence.toarray()
+    assert all((y >= 0).all() and not (y @ c).any() for y in cover)
+    covered = np.zeros(sn.n_places, dtype=bool)
+    for y in cover:
+        covered |= y > 0
+    ids = [p.id for p in net.places]
+    assert covered.tolist() == [not i.startswith("c") for i in ids]
+    # each place bounded by 1, the bound its semiflows give (structure._semiflow_bounds)
+    from coordinator.analysis.structure import _semiflow_bounds
+
+    upper = _semiflow_bounds(np.full(sn.n_places, -1, dtype=np.int64), cover, sn.m0)
+    assert upper.tolist() == [1 if not i.startswith("c") else -1 for i in ids]
+    assert _semiflow_bounds(np.full(sn.n_places, 0, dtype=np.int64), cover, sn.m0).tolist() == [0] * sn.n_places
