@@ -349,7 +349,7 @@ def _swap(p: int, q: int, pos: np.ndarray, order: np.ndarray, hw: np.ndarray, lo
           vp: np.ndarray, vidx: np.ndarray, mark: np.ndarray) -> int:
     """Swap the neighbours p and q; return the change of the score. Only a hyperedge holding exactly
     one of them changes, and only when that one is its top or bottom (``lo``, ``hi``: each
-    hyperedge's highest and lowest position, kept up to date): the end moves with it, one position,
+    hyperedge's smallest and largest position, kept up to date): the end moves with it, one position,
     so a swap costs the hyperedges of p and q, not their sizes (RwMutex-PT-r0500w0010's transitions
     read 500 levels). Hyperedge h counts ``hw[h]`` times."""
     a = pos[p]
