@@ -46,3 +46,15 @@ def make_net(
         arcs=tuple(arcs),
         initial_marking=Marking(marking),
     )
+
+
+def philosophers_arcs(n: int) -> tuple[dict[str, int], dict[str, tuple[dict[str, int], dict[str, int]]]]:
+    """The initial marking and transitions (as :func:`make_net` takes them) of ``n`` philosophers
+    round a table, each taking the left fork, then the right: one deadlock."""
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        right = f"fork{(i + 1) % n}"
+        transitions[f"left{i}"] = ({f"think{i}": 1, f"fork{i}": 1}, {f"hold{i}": 1})
+        transitions[f"right{i}"] = ({f"hold{i}": 1, right: 1}, {f"eat{i}": 1})
+        transitions[f"done{i}"] = ({f"eat{i}": 1}, {f"think{i}": 1, f"fork{i}": 1, right: 1})
+    return {**{f"think{i}": 1 for i in range(n)}, **{f"fork{i}": 1 for i in range(n)}}, transitions

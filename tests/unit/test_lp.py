@@ -10,7 +10,7 @@ from types import ModuleType
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from analysis_nets import make_net
+from analysis_nets import make_net, philosophers_arcs
 
 from coordinator.analysis import lp
 from coordinator.analysis.invariants import farkas_estimate, semiflows
@@ -168,24 +168,13 @@ def test_a_net_without_any_semiflow_gets_an_empty_cover_from_one_lp() -> None:
     assert len(cover) == 1 and (cover[0] == 1).all()
 
 
-def _philosophers(n: int) -> tuple[dict[str, int], dict[str, tuple[dict[str, int], dict[str, int]]]]:
-    """The initial marking and transitions of ``n`` philosophers round a table."""
-    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
-    for i in range(n):
-        right = f"fork{(i + 1) % n}"
-        transitions[f"left{i}"] = ({f"think{i}": 1, f"fork{i}": 1}, {f"hold{i}": 1})
-        transitions[f"right{i}"] = ({f"hold{i}": 1, right: 1}, {f"eat{i}": 1})
-        transitions[f"done{i}"] = ({f"eat{i}": 1}, {f"think{i}": 1, f"fork{i}": 1, right: 1})
-    return {**{f"think{i}": 1 for i in range(n)}, **{f"fork{i}": 1 for i in range(n)}}, transitions
-
-
 @pytest.mark.parametrize("near", [True, False])
 def test_the_cover_by_neighbourhood_lps_finds_the_small_semiflows_of_the_whole_net(near: bool) -> None:
     # a ring of philosophers beside a producer feeding a chain (no semiflow there): over
     # neighbourhoods every LP is small, a place of the chain gets none once its part stops growing,
     # and every y returned is a semiflow of the whole net, as with the LPs over the whole net
     n = 40
-    marking, trans = _philosophers(n)
+    marking, trans = philosophers_arcs(n)
     trans |= {"produce": ({}, {"c0": 1})} | {f"move{i}": ({f"c{i}": 1}, {f"c{i + 1}": 1}) for i in range(5)}
     net = make_net("both", marking, trans)
     sn = sparse_net(net)

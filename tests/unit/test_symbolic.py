@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from analysis_nets import make_net
+from analysis_nets import make_net, philosophers_arcs
 
 from coordinator.analysis import lp
 from coordinator.analysis.matrices import sparse_net
@@ -381,14 +381,7 @@ def test_liveness_beyond_the_memory_budget_is_undecided_and_the_rest_of_the_answ
 
 def philosophers(n: int) -> PetriNet:
     """``n`` philosophers round a table, each taking the left fork, then the right: one deadlock."""
-    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
-    for i in range(n):
-        right = f"fork{(i + 1) % n}"
-        transitions[f"left{i}"] = ({f"think{i}": 1, f"fork{i}": 1}, {f"hold{i}": 1})
-        transitions[f"right{i}"] = ({f"hold{i}": 1, right: 1}, {f"eat{i}": 1})
-        transitions[f"done{i}"] = ({f"eat{i}": 1}, {f"think{i}": 1, f"fork{i}": 1, right: 1})
-    return make_net("philosophers", {**{f"think{i}": 1 for i in range(n)}, **{f"fork{i}": 1 for i in range(n)}},
-                    transitions)
+    return make_net("philosophers", *philosophers_arcs(n))
 
 
 def test_a_deadlock_deep_in_a_ring_of_thirty_philosophers_is_reached_by_a_straight_firing_sequence() -> None:
