@@ -359,6 +359,8 @@ def _swap(p: int, q: int, pos: np.ndarray, order: np.ndarray, hw: np.ndarray, lo
     for x in range(vp[p], vp[p + 1]):
         mark[vidx[x]] += 2
     delta = 0
+    # the two loops are mirror images, written out: as a helper taking the arrays, numba counted
+    # their references at each call, and sifting 600 levels took 14-18 s instead of 3.7-5.3 s
     for x in range(vp[p], vp[p + 1]):  # p goes from a to b
         h = vidx[x]
         if mark[h] == 2:
