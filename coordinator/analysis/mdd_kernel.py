@@ -17,7 +17,10 @@ driven by :mod:`coordinator.analysis.symbolic`, which documents the results. Wha
   fires the events of level k on the node in place until nothing changes (``NODE``); ``FIRE``
   applies one event to a saturated node below its top and saturates the result. A constraint node
   (same level) keeps every intermediate set inside it (backward reachability inside the reachable
-  set). With saturation off, ``FIRE`` is a plain image (breadth-first layers for witnesses).
+  set). With saturation off, ``FIRE`` is a plain image: ``IMAGE`` unites every event's image of a
+  set (breadth-first layers for witnesses), or **chains** them (Roig, Cortadella, Pastor 1995):
+  each event fires on the set so far, the result added before the next fires, the events of the
+  deepest tops first or the root's first, so one call can go many steps deep.
 * **Set operations** (``APPLY``: union, intersection, difference) and ``RESTRICT`` (the markings of a
   set in which an event is enabled, or disabled).
 * **Counts** that build no node: the paths of a set (:func:`count`), and per event the paths on
@@ -53,9 +56,10 @@ jit.configure()  # numba's cache in the user's cache directory: before numba is 
 
 from numba import njit, objmode  # noqa: E402
 
-__all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "MEMORY", "MODE_APPLY", "MODE_IMAGE", "Flag",
-           "MODE_RESTRICT", "MODE_SATURATE", "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "add_path", "count",
-           "enabled_counts", "enabling_values", "max_weight", "new_store", "node_of_path", "presence", "run", "set_watch", "clear_cache"]
+__all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "Flag", "IMAGE_CHAIN_DEEP", "IMAGE_CHAIN_ROOT",
+           "IMAGE_EACH", "MEMORY", "MODE_APPLY", "MODE_IMAGE", "MODE_RESTRICT", "MODE_SATURATE", "NO_CONSTRAINT", "OK",
+           "OVERFLOW", "STOPPED", "TERMINAL", "add_path", "clear_cache", "count", "enabled_counts", "enabling_values",
+           "max_weight", "new_store", "node_of_path", "presence", "run", "set_watch"]
 
 EMPTY, TERMINAL = 0, 1
 NO_CONSTRAINT = -1
@@ -66,6 +70,9 @@ _WATCH_STEPS = 1 << 20
 #: what :func:`run` computes
 MODE_SATURATE, MODE_IMAGE, MODE_APPLY, MODE_RESTRICT = 0, 1, 2, 3
 APPLY_UNION, APPLY_INTER, APPLY_DIFF = 0, 1, 2
+#: what MODE_IMAGE computes: the union of every event's image of the set; the set and its chained
+#: images, the events of the deepest tops first, or of the root's first
+IMAGE_EACH, IMAGE_CHAIN_DEEP, IMAGE_CHAIN_ROOT = 0, 1, 2
 #: why :func:`_steps` returned: a buffer of the store is full; done (or a status is set)
 _FULL, _DONE = 0, 1
 #: frame kinds
@@ -444,7 +451,7 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
         elif ty == _IMAGE:
             if pc == 0:
                 f_i[d] = 0
-                f_j[d] = EMPTY
+                f_j[d] = EMPTY if f_e[d] == IMAGE_EACH else f_a[d]
                 pc = 1
             elif pc == 2:  # an event's image is back: add it
                 cty = _APPLY
@@ -463,9 +470,13 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
                     ret = f_j[d]
                     depth -= 1
                     continue
+                if f_e[d] == IMAGE_CHAIN_DEEP:  # evtop is sorted by top
+                    e = evtop[ev_top.shape[0] - 1 - e]
+                elif f_e[d] == IMAGE_CHAIN_ROOT:
+                    e = evtop[e]
                 cty = _FIRE
                 ck = 0
-                ca = f_a[d]
+                ca = f_a[d] if f_e[d] == IMAGE_EACH else f_j[d]
                 cc = f_c[d]
                 ce = e
                 f_pc[d] = 2
@@ -649,7 +660,9 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
 
     Args:
         mode: MODE_SATURATE (the saturated closure of ``a_in`` under every event, inside ``c_in``),
-            MODE_IMAGE (one step of every event from ``a_in``, inside ``c_in``, not saturated),
+            MODE_IMAGE (``arg`` IMAGE_EACH: one step of every event from ``a_in``; IMAGE_CHAIN_DEEP or
+            _ROOT: ``a_in`` and its chained images, each event fired on the set so far, the events of
+            the deepest tops first or of the root's first; inside ``c_in``, not saturated),
             MODE_APPLY (``arg`` in APPLY_UNION/INTER/DIFF of ``a_in`` and ``b_in``) or MODE_RESTRICT
             (the markings of ``a_in`` in which event ``arg`` is enabled if ``b_in`` is 1, disabled if 0).
         dom: (K,) int64 local domain sizes, level 0 at the root.
@@ -661,7 +674,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
         meta, level, offset, size, kids, unique, ct: the store (:func:`new_store`, or
             a previous result).
         a_in, b_in, c_in: operand nodes (c_in: a constraint node at the root level, or NO_CONSTRAINT).
-        arg: the APPLY operation or the RESTRICT event.
+        arg: the APPLY operation, the IMAGE kind or the RESTRICT event.
         check_overflow: a firing that leaves a level's domain is an error (status OVERFLOW, with the
             level in meta) instead of being dropped.
         max_bytes: byte budget of the store, computed table, frames and buffers (status MEMORY
@@ -704,6 +717,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
         f_ty[0] = _IMAGE
         f_a[0] = a_in
         f_c[0] = c_in
+        f_e[0] = arg
         depth = 1
     else:
         ty0 = _SAT if mode == MODE_SATURATE else (_APPLY if mode == MODE_APPLY else _RESTRICT)
