@@ -281,6 +281,7 @@ def child_symbolic(spec: str, max_bytes: int, seconds: float, mcc: str | None = 
     out.update(got)
     out.update({"complete": True, "seconds": wall, "cpu_seconds": time.process_time() - cpu,
                 "phase_seconds": r.seconds, "levels": r.levels, "groups": r.groups, "nodes": r.nodes,
+                "method": r.method,
                 "n_deadlocks": r.n_deadlocks, "reversible": r.reversible,
                 "deadlock_sequence_length": None if r.deadlock_sequence is None else len(r.deadlock_sequence),
                 "peak_rss_bytes": _peak_rss(), "rss_before_bytes": before, "notes": r.notes})

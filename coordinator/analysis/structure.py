@@ -1091,7 +1091,7 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
     tids = [t.id for t in net.transitions]
     notes = list(st.notes)
     sources = dict(st.sources)
-    how = f"symbolic reachable set ({r.levels} levels, {r.nodes:,} decision-diagram nodes)"
+    how = f"symbolic reachable set ({r.levels} levels, {r.nodes:,} decision-diagram nodes, by {r.method})"
     for key in ("bounded", "place_bounds", "max_token_in_place", "max_token_per_marking", "one_safe", "deadlock",
                 "quasi_live", "stable_marking"):
         sources[key] = how

@@ -130,6 +130,8 @@ class SymbolicResult:
         reversible: M0 is reachable from every reachable marking.
         levels, groups, nodes, order_score: the diagram: levels, levels holding several places,
             nodes of the reachable set, score of the variable order.
+        method: how the reachable set was built, ``"saturation"`` or ``"chaining"`` (:func:`_race`);
+            the backward and forward closures of the later phases are built the same way.
         seconds: time per phase ("encode", "reach", "properties", "liveness", "witness").
         notes: what was left undecided and why.
     """
@@ -151,6 +153,7 @@ class SymbolicResult:
     groups: int
     nodes: int
     order_score: float
+    method: str = "saturation"
     seconds: dict[str, float] = field(default_factory=dict)
     notes: list[str] = field(default_factory=list)
 
@@ -172,6 +175,8 @@ class _Store:
         self._residue = np.zeros((0, 1), np.int64)
         #: what frees more bytes for this store when a call outgrows ``max_bytes`` (asked once)
         self.borrow: Callable[[], int] | None = None
+        #: closures by chained images instead of saturation (:meth:`closure`)
+        self.chain = False
 
     def call(self, mode: int, ev: Events, a: int, b: int = 0, c: int = mk.NO_CONSTRAINT, arg: int = 0,
              check_overflow: bool = False) -> int:
@@ -199,6 +204,27 @@ class _Store:
             raise BeyondBounds(f"a firing took level {k} beyond its proven local markings: the place bounds "
                                "given to the symbolic engine are wrong", self.enc.levels[k])
         return int(ret)
+
+    def closure(self, ev: Events, a: int, c: int = mk.NO_CONSTRAINT, check_overflow: bool = False,
+                keep: Callable[[int], None] | None = None) -> int:
+        """The markings reachable from the set ``a`` by the events ``ev`` (inside the constraint
+        ``c``): by saturation, or when :attr:`chain` is set by chained images to a fixed point
+        (:func:`.mdd_kernel.run`), the events of the deepest tops first and of the root's first by
+        turns (the first order is the better one forward on some nets, the second backward: inside
+        SharedMemory-PT-000020's reachable set, backward from M0, 2.3 s and 0.6 s, by turns 0.8 s),
+        each set on the way handed to ``keep`` (a call stopped by the watch can go on from the last
+        one)."""
+        if not self.chain:
+            return self.call(mk.MODE_SATURATE, ev, a, c=c, check_overflow=check_overflow)
+        turn = 0
+        while True:
+            how = mk.IMAGE_CHAIN_ROOT if turn % 2 else mk.IMAGE_CHAIN_DEEP
+            more = self.call(mk.MODE_IMAGE, ev, a, c=c, arg=how, check_overflow=check_overflow)
+            if more == a:  # each event's image of a is inside a
+                return a
+            a, turn = more, turn + 1
+            if keep is not None:
+                keep(a)
 
     @property
     def nodes(self) -> int:
@@ -698,8 +724,8 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             deadlock_sequence=None, fireable=fireable, place_bounds=place_bounds, stable=place_bounds == low,
             max_token_per_marking=max_total, live=None,
             live_transitions=np.full(len(net.transitions), None, dtype=object), reversible=None,
-            levels=enc.n_levels, groups=enc.groups, nodes=store.nodes, order_score=enc.score, seconds=secs,
-            notes=notes)
+            levels=enc.n_levels, groups=enc.groups, nodes=store.nodes, order_score=enc.score,
+            method="chaining" if store.chain else "saturation", seconds=secs, notes=notes)
         back: Events | None = None
         if sn.n_resets == 0:
             back = events(sn, enc, inverse=True, merge=True)
@@ -831,7 +857,8 @@ def _dead(store: _Store, fwd: Events, single: Events, reach: int, counts: list[i
     return dead
 
 
-#: candidate variable orders raced against each other, and the first time slice of each (seconds)
+#: candidate variable orders raced against each other (the first one twice: by saturation and by
+#: chaining), and the first time slice of each candidate (seconds)
 _CANDIDATES = 3
 _FIRST_SLICE = 2.0
 #: seeds of the order search tried for the candidates (a seed whose order is already a candidate's
@@ -846,8 +873,35 @@ def _same_order(a: Encoding, b: Encoding) -> bool:
     return len(a.levels) == len(b.levels) and all(np.array_equal(x, y) for x, y in zip(a.levels, b.levels))
 
 
-_Candidate = tuple[Encoding, Events, _Store]
 _Won = tuple[Encoding, Events, _Store, int]
+
+
+class _Candidate:
+    """One way to the reachable set raced in a lane: an order (its encoding, events and store) and
+    the method, saturation or chaining (:func:`_race`). ``name`` is the order's number in the race."""
+
+    def __init__(self, name: int, enc: Encoding, fwd: Events, store: _Store, chain: bool) -> None:
+        self.name, self.enc, self.fwd, self.store, self.chain = name, enc, fwd, store, chain
+        store.chain = chain
+        self.at = store.m0  # chaining: the markings reached so far (a fixed point ends it)
+
+    @property
+    def label(self) -> str:
+        return f"order {self.name}" + (" by chaining" if self.chain else "")
+
+    def reach(self) -> int:
+        """The reachable set; raises _OutOfTime at the watch's deadline, and the next call goes on
+        from the store (and, chaining, from the markings reached so far)."""
+        def keep(at: int) -> None:
+            self.at = at
+
+        return self.store.closure(self.fwd, self.at, check_overflow=True, keep=keep)
+
+    def drop(self) -> None:
+        """Free the store (the candidate is out of the race)."""
+        self.store = _Store(self.enc, 0)
+        self.store.chain = self.chain
+        self.at = self.store.m0
 
 
 class _Cancel:
@@ -882,6 +936,7 @@ class _Race:
         self.jobs: list[tuple[int, bool]] = []
         self.next_seed = 1
         self.plain_first = False  # the first order without its shared levels sunk was queued
+        self.chained = False  # the first order by chaining was handed to a lane
         self.winner: _Won | None = None
         self.error: BaseException | None = None
         self.lanes: list[_Lane] = []
@@ -901,10 +956,18 @@ class _Race:
                     self.jobs.append((0, False))
         return enc
 
-    def another_order(self, lane: _Lane) -> tuple[int, Encoding] | None:
-        """A candidate order none of the others has, for ``lane``, with its number in the race
-        (compared once the first candidate's is known); None when the seeds are used up, the
-        deadline passed or the lane is cancelled."""
+    def another_order(self, lane: _Lane) -> tuple[int, Encoding, bool] | None:
+        """A candidate none of the others is, for ``lane``: the first order by chaining, then orders
+        none of the others has (compared once the first candidate's is known); with its number in
+        the race and whether it chains. None when the seeds are used up, the deadline passed or the
+        lane is cancelled."""
+        with self.lock:
+            chain, self.chained = not self.chained, True
+        if chain:
+            self.first.wait()
+            with self.lock:
+                if self.orders:
+                    return 1, self.orders[0], True
         while time.monotonic() < self.deadline and not lane.cancel.is_set():
             with self.lock:
                 if self.jobs:
@@ -919,7 +982,7 @@ class _Race:
             with self.lock:
                 if not any(_same_order(enc, o) for o in self.orders):
                     self.orders.append(enc)
-                    return len(self.orders), enc
+                    return len(self.orders), enc, False
         return None
 
     def won(self, lane: _Lane, found: _Won) -> None:
@@ -1007,7 +1070,6 @@ class _Lane:
         if want == 0:
             return
         cands: list[_Candidate] = []
-        names: list[int] = []
         alive: list[bool] = []
         n_cands = want
         slice_s = _FIRST_SLICE
@@ -1022,42 +1084,45 @@ class _Lane:
                     slice_s *= 2
                 continue
             if i == len(cands):
-                name_enc = None
+                found: tuple[int, Encoding, bool] | None = None
                 if self.has_first and not cands:
                     enc0 = race.encode(0, sink=True)
                     with race.lock:
                         race.orders.insert(0, enc0)
                     race.first.set()
-                    name_enc = (1, enc0)
+                    found = (1, enc0, False)
                 else:
-                    name_enc = race.another_order(self)
-                if name_enc is None or self.cancel.is_set():  # no other order: race those there are
+                    found = race.another_order(self)
+                if found is None or self.cancel.is_set():  # no other order: race those there are
                     n_cands = len(cands)
                     if n_cands == 0:
                         return
                     turn = 0
-                    for _, _, st in cands:
-                        st.max_bytes = max(st.max_bytes, self.share // n_cands)
+                    for cand in cands:
+                        cand.store.max_bytes = max(cand.store.max_bytes, self.share // n_cands)
                     if self.others:
                         plural = "s" if len(race.orders) > 1 else ""
                         say(f"symbolic: {len(race.orders)} distinct variable order{plural} found")
                     continue
-                name, enc = name_enc
-                cands.append((enc, events(race.sn, enc, merge=True), _Store(enc, self.share // want)))
-                names.append(name)
+                name, enc, chain = found
+                fwd = events(race.sn, enc, merge=True)
+                cands.append(_Candidate(name, enc, fwd, _Store(enc, self.share // want), chain))
                 alive.append(True)
-                if name == 1:
+                if name == 1 and not chain:
                     say(f"symbolic: {enc.n_levels} levels ({enc.groups} groups of places"
                         + (f", {enc.sunk} shared levels at the bottom of the first order" if enc.sunk else "")
-                        + f"), {cands[-1][1].n_events} events for {race.sn.n_transitions} transitions")
-            enc, fwd, store = cands[i]
-            mine = slice_s * (_LEAD if names[i] == 1 else 1.0)
+                        + f"), {fwd.n_events} events for {race.sn.n_transitions} transitions")
+            cand = cands[i]
+            store = cand.store
+            mine = slice_s * (_LEAD if cand.name == 1 and not cand.chain else 1.0)
             mk.set_watch(min(race.deadline, time.monotonic() + mine) if n_cands > 1 else race.deadline, None,
                          self.cancel)
             try:
-                reach = store.call(mk.MODE_SATURATE, fwd, store.m0, check_overflow=True)
+                reach = cand.reach()
                 store.max_bytes = race.max_bytes  # the others are dropped: the winner has the whole budget
-                race.won(self, (enc, fwd, store, reach))
+                if cand.chain:
+                    say(f"symbolic: {cand.label} was the first done")
+                race.won(self, (cand.enc, cand.fwd, store, reach))
                 return
             except _OutOfTime:
                 self.nodes = store.nodes
@@ -1067,7 +1132,7 @@ class _Lane:
                     self.timed_out = True
                     return
                 if n_cands > 1:
-                    say(f"symbolic: order {names[i]} not done after its {mine:.0f} s turn ({store.nodes:,} nodes)")
+                    say(f"symbolic: {cand.label} not done after its {mine:.0f} s turn ({store.nodes:,} nodes)")
             except AnalysisError as exc:
                 if "memory budget" not in str(exc):
                     raise
@@ -1075,9 +1140,12 @@ class _Lane:
                 whole = store.max_bytes >= self.share
                 if not whole or (store.max_bytes < race.max_bytes and race.take_whole(self)):
                     if not whole and sum(alive) > 1:
-                        say(f"symbolic: order {names[i]} outgrew its part of the memory, the orders it took "
+                        say(f"symbolic: {cand.label} outgrew its part of the memory, the candidates it took "
                             "turns with are dropped")
-                    self._drop_others(cands, alive, i)
+                    for j, other in enumerate(cands):
+                        if j != i:  # no other is added after
+                            alive[j] = False
+                            other.drop()
                     n_cands, turn = len(cands), i
                     store.max_bytes = race.max_bytes if whole else self.share
                     continue
@@ -1090,14 +1158,6 @@ class _Lane:
                 mk.set_watch(None, None)
             if turn % n_cands == 0:
                 slice_s *= 2
-
-    @staticmethod
-    def _drop_others(cands: list[_Candidate], alive: list[bool], keep: int) -> None:
-        """Drop this lane's candidates but ``keep`` (their stores freed); no other is added after."""
-        for j in range(len(cands)):
-            if j != keep:
-                alive[j] = False
-                cands[j] = (cands[j][0], cands[j][1], _Store(cands[j][0], 0))
 
 
 def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes: int, deadline: float,
@@ -1135,9 +1195,9 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     """
     race = _Race(sn, bounds, flows, max_bytes, deadline, say, stop, borrow)
     if cpus() >= 2:
-        race.lanes = [_Lane(race, True, 0, max_bytes // 2), _Lane(race, False, _CANDIDATES - 1, max_bytes // 2)]
+        race.lanes = [_Lane(race, True, 0, max_bytes // 2), _Lane(race, False, _CANDIDATES, max_bytes // 2)]
     else:
-        race.lanes = [_Lane(race, True, _CANDIDATES - 1, max_bytes)]
+        race.lanes = [_Lane(race, True, _CANDIDATES, max_bytes)]
     helpers = [threading.Thread(target=lane.run, name="petrobot-saturation", daemon=True) for lane in race.lanes[:-1]]
     try:
         for thread in helpers:
@@ -1184,7 +1244,7 @@ def _probe(store: _Store, fwd: Events, single: Events, reach: int, result: Symbo
         if result.reversible is not None and result.live is not None:
             return
         m = store.path(store.sample(reach, rng))
-        r = store.call(mk.MODE_SATURATE, fwd, m)
+        r = store.closure(fwd, m)
         if not store.contains(r, store.enc.m0):
             result.reversible = False
         store.count(r, at_most=float(result.states) * max(1, single.n_events))
@@ -1231,7 +1291,7 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
             mk.set_watch(until, None, stop)
         if result.reversible is None:
             say("symbolic: reversibility (backward from M0)")
-            home = store.call(mk.MODE_SATURATE, back, store.m0, c=reach)
+            home = store.closure(back, store.m0, c=reach)
             result.reversible = home == reach
         if result.live is None and result.reversible:
             result.live = quasi
@@ -1245,7 +1305,7 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
             enabled = [store.call(mk.MODE_RESTRICT, single, reach, 1, arg=e) for e in todo]
             for e, en in zip(todo, enabled):
                 t = single.members[e][0]
-                can = store.call(mk.MODE_SATURATE, back, en, c=reach)
+                can = store.closure(back, en, c=reach)
                 live_t[t] = can == reach
                 if not live_t[t]:
                     result.live = False
@@ -1292,7 +1352,7 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
                 now = time.monotonic()
                 found = _walk_sequence(store, ex, net, dead, now + min(_QUICK_SECONDS, max(0.0, deadline - now)))
         if found is None:
-            inside = store.call(mk.MODE_SATURATE, back, dead, c=reach)
+            inside = store.closure(back, dead, c=reach)
             if explicit:
                 now = time.monotonic()
                 stop = now + min(_GUIDED_SECONDS, max(0.0, (deadline - now) / 3))

@@ -58,3 +58,22 @@ def philosophers_arcs(n: int) -> tuple[dict[str, int], dict[str, tuple[dict[str,
         transitions[f"right{i}"] = ({f"hold{i}": 1, right: 1}, {f"eat{i}": 1})
         transitions[f"done{i}"] = ({f"eat{i}": 1}, {f"think{i}": 1, f"fork{i}": 1, right: 1})
     return {**{f"think{i}": 1 for i in range(n)}, **{f"fork{i}": 1 for i in range(n)}}, transitions
+
+
+def dekker(n: int) -> PetriNet:
+    """Dekker's mutual exclusion generalised to ``n`` processes (the Model Checking Contest's Dekker
+    family): process i raises its flag (``try``), enters its critical section when every other
+    flag is down (``enter`` reads them all), or lowers its flag and withdraws when it sees another
+    one up; it leaves (``exit``) with its flag down. 2**(n - 1) * (n + 2) markings, live."""
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        transitions[f"try_{i}"] = ({f"p0_{i}": 1, f"flag_0_{i}": 1}, {f"p1_{i}": 1, f"flag_1_{i}": 1})
+        others = {f"flag_0_{j}": 1 for j in range(n) if j != i}
+        transitions[f"enter_{i}"] = ({f"p1_{i}": 1, **others}, {f"p3_{i}": 1, **others})
+        transitions[f"exit_{i}"] = ({f"p3_{i}": 1, f"flag_1_{i}": 1}, {f"p0_{i}": 1, f"flag_0_{i}": 1})
+        for j in range(n):
+            if j != i:
+                transitions[f"withdraw_{i}_{j}"] = ({f"p1_{i}": 1, f"flag_1_{i}": 1, f"flag_1_{j}": 1},
+                                                    {f"p0_{i}": 1, f"flag_0_{i}": 1, f"flag_1_{j}": 1})
+    marking = {**{f"flag_0_{i}": 1 for i in range(n)}, **{f"p0_{i}": 1 for i in range(n)}}
+    return make_net(f"dekker{n}", marking, transitions)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from analysis_nets import make_net, philosophers_arcs
+from analysis_nets import dekker, make_net, philosophers_arcs
 
 from coordinator.analysis import lp
 from coordinator.analysis.matrices import sparse_net
@@ -188,6 +188,49 @@ def test_the_breadth_first_trace_to_a_deadlock_is_a_shortest_firing_sequence(see
     seq, end = found
     assert replays_to(net, seq, {p.id: int(end[i]) for i, p in enumerate(net.places) if end[i]})
     assert len(seq) == shortest_to_a_deadlock(net)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_chained_images_reach_the_sets_saturation_reaches_forward_and_backward_inside_a_constraint(seed: int) -> None:
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _Store
+
+    net = generated_net(seed)  # the odd seeds with inhibitor arcs
+    a = analyse(net, max_states=200_000)
+    bounds, flows = proven_bounds(net)
+    per_place = np.array([a.place_bounds[p.id] for p in net.places], dtype=np.int64)
+    bounds = np.where((bounds >= per_place) & (bounds < 40), bounds, per_place)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    fwd, back = events(sn, enc, merge=True), events(sn, enc, inverse=True, merge=True)
+    store = _Store(enc, 64 << 20)  # one store: equal sets are the same node
+    reach = store.closure(fwd, store.m0)
+    home = store.closure(back, store.m0, c=reach)
+    for how in (mk.IMAGE_CHAIN_DEEP, mk.IMAGE_CHAIN_ROOT):  # one pass reaches a superset of one image
+        step = store.call(mk.MODE_IMAGE, fwd, store.m0, arg=mk.IMAGE_EACH)
+        chained = store.call(mk.MODE_IMAGE, fwd, store.m0, arg=how)
+        assert store.call(mk.MODE_APPLY, fwd, step, chained, arg=mk.APPLY_DIFF) == mk.EMPTY
+    store.chain = True
+    sets: list[int] = []
+    assert store.closure(fwd, store.m0, keep=sets.append) == reach
+    assert store.count(reach) == a.states and (not sets or sets[-1] == reach)
+    assert store.closure(back, store.m0, c=reach) == home
+
+
+def test_dekker_s_flags_read_by_every_enter_are_chained_where_saturation_grows_exponentially() -> None:
+    # every process's enter reads the other 29 flags: saturation builds the partial unions of the
+    # processes that may be in their critical sections (66,827 nodes at 20 processes, 745 at 10),
+    # chained images about a node per level and value of the final set; the race picks them
+    n = 30
+    net = dekker(n)
+    bounds, flows = proven_bounds(net)
+    said: list[str] = []
+    r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0, progress=said.append)
+    assert r.method == "chaining" and any("by chaining was the first done" in line for line in said)
+    assert r.states == 2 ** (n - 1) * (n + 2) and not r.deadlock and bool(r.fireable.all())
+    assert r.place_bounds.max() == 1 and r.max_token_per_marking == 2 * n
+    assert r.reversible is True and r.live is True  # backward closures by chaining too
 
 
 def test_a_count_beyond_two_to_the_64_is_exact() -> None:
