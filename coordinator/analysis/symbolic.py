@@ -4,10 +4,12 @@ The explicit search (:mod:`.statespace`) stores every marking; a net of twenty r
 them. Here the reachable set is a multi-valued decision diagram (MDD, :mod:`.mdd_kernel`; Bryant
 1986 for the binary case), built by **saturation** (Ciardo, Lüttgen, Siminiceanu 2001): the events
 of the lower levels are fired to a fixed point on each node before the node is used above, so no
-breadth-first frontier of the whole state space is ever built. The encoding (levels, their local
-markings, their order, the merged events) comes from the net's structure and its proven place
-bounds (:mod:`.mdd_order`), or, where those make the levels too wide, from the counts an explicit
-search saw, checked on every firing and raised where one leaves them (:func:`_reachable`). From
+breadth-first frontier of the whole state space is ever built; or, where saturation's intermediate
+sets grow too large, by chained images (Roig, Cortadella, Pastor 1995), raced against it
+(:func:`_race`). The encoding (levels, their local markings, their order, the merged events) comes
+from the net's structure and its proven place bounds (:mod:`.mdd_order`), or, where those make the
+levels too wide, from the counts an explicit search saw, checked on every firing and raised where
+one leaves them (:func:`_reachable`). From
 the set, with exact integers of any size:
 
 * the number of markings and of edges (one per reachable marking and transition enabled in it:
@@ -867,6 +869,10 @@ _SEEDS = 5
 #: the first candidate's turns are this many times longer than the others' when it shares a lane
 #: with them (module docstring of _race)
 _LEAD = 2.0
+#: seconds the first order's saturation runs alone before its chaining starts in the other lane: a
+#: net that both finish is most often saturated first, and the later phases' closures by saturation
+#: mostly take less memory (Railroad-PT-005: inside 9 MiB, where those by chaining outgrow it)
+_HEAD_START = 2.0
 
 
 def _same_order(a: Encoding, b: Encoding) -> bool:
@@ -884,6 +890,7 @@ class _Candidate:
         self.name, self.enc, self.fwd, self.store, self.chain = name, enc, fwd, store, chain
         store.chain = chain
         self.at = store.m0  # chaining: the markings reached so far (a fixed point ends it)
+        self.turns = 0
 
     @property
     def label(self) -> str:
@@ -917,6 +924,11 @@ class _Cancel:
 
     def is_set(self) -> bool:
         return self.own.is_set() or (self.outer is not None and self.outer.is_set())
+
+    def wait(self, seconds: float) -> bool:
+        """Wait until the race sets the flag, at most ``seconds``; whether it is set."""
+        self.own.wait(seconds)
+        return self.is_set()
 
 
 class _Race:
@@ -1114,6 +1126,9 @@ class _Lane:
                         + f"), {fwd.n_events} events for {race.sn.n_transitions} transitions")
             cand = cands[i]
             store = cand.store
+            if cand.chain and not cand.turns and not self.has_first and self.cancel.wait(_HEAD_START):
+                return  # the first order's saturation was done within its head start
+            cand.turns += 1
             mine = slice_s * (_LEAD if cand.name == 1 and not cand.chain else 1.0)
             mk.set_watch(min(race.deadline, time.monotonic() + mine) if n_cands > 1 else race.deadline, None,
                          self.cancel)
@@ -1173,10 +1188,21 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     the first candidate is the order with those levels at the bottom (seed 0, whose starts include
     the net's own place order and its reverse), and the seeds' orders follow.
 
+    The first order is raced a second time, by **chaining** (:meth:`_Store.closure`): saturation
+    fires an event on the nodes of its top level, and when many events read levels far below their
+    top, the sets it builds on the way can be exponentially larger than the reachable set. Dekker's
+    'enter' transitions read every other process's flag: saturation builds the partial unions of
+    which processes may be in their critical sections (66,827 nodes at 20 processes, 745 at 10)
+    where the reachable set has 115, and chained images reach Dekker-PT-050's 2.9·10^16 markings in
+    0.6 s, three passes, 320,725 nodes. Chaining is no better in general (Railroad-PT-020: not done
+    in 80 s, saturation 14 s), hence the race; chaining starts after the first order's saturation
+    has run alone for :data:`_HEAD_START` seconds. The winner's way also builds the later phases'
+    closures (liveness, reversibility, the witness).
+
     On two CPUs or more the race has two lanes, threads that run at once (the kernel releases the
-    GIL): one saturates the first candidate without a pause, the other searches the other orders
-    while the first saturates and races them by turns. When the first order is the fastest, the
-    race costs it nothing. On one CPU a single lane runs them all by turns of doubling time slices, each
+    GIL): one saturates the first candidate without a pause, the other races the first order by
+    chaining and the other orders by turns, searching them as it goes. When the first order is the
+    fastest, the race costs it nothing. On one CPU a single lane runs them all by turns of doubling time slices, each
     resuming where it stopped (its store, computed table included, is kept between turns), the first
     candidate's turns :data:`_LEAD` times as long as the others' (when it is the fastest the others
     cost about half its time; Railroad-PT-020: 39 s of CPU for the race instead of 55 s). Each lane
