@@ -207,15 +207,12 @@ class _Store:
                                "given to the symbolic engine are wrong", self.enc.levels[k])
         return int(ret)
 
-    def closure(self, ev: Events, a: int, c: int = mk.NO_CONSTRAINT, check_overflow: bool = False,
-                keep: Callable[[int], None] | None = None) -> int:
+    def closure(self, ev: Events, a: int, c: int = mk.NO_CONSTRAINT, check_overflow: bool = False) -> int:
         """The markings reachable from the set ``a`` by the events ``ev`` (inside the constraint
         ``c``): by saturation, or when :attr:`chain` is set by chained images to a fixed point
         (:func:`.mdd_kernel.run`), the events of the deepest tops first and of the root's first by
         turns (the first order is the better one forward on some nets, the second backward: inside
-        SharedMemory-PT-000020's reachable set, backward from M0, 2.3 s and 0.6 s, by turns 0.8 s),
-        each set on the way handed to ``keep`` (a call stopped by the watch can go on from the last
-        one)."""
+        SharedMemory-PT-000020's reachable set, backward from M0, 2.3 s and 0.6 s, by turns 0.8 s)."""
         if not self.chain:
             return self.call(mk.MODE_SATURATE, ev, a, c=c, check_overflow=check_overflow)
         turn = 0
@@ -225,8 +222,6 @@ class _Store:
             if more == a:  # each event's image of a is inside a
                 return a
             a, turn = more, turn + 1
-            if keep is not None:
-                keep(a)
 
     @property
     def nodes(self) -> int:
@@ -859,8 +854,7 @@ def _dead(store: _Store, fwd: Events, single: Events, reach: int, counts: list[i
     return dead
 
 
-#: candidate variable orders raced against each other (the first one twice: by saturation and by
-#: chaining), and the first time slice of each candidate (seconds)
+#: candidate variable orders raced against each other, and the first time slice of each (seconds)
 _CANDIDATES = 3
 _FIRST_SLICE = 2.0
 #: seeds of the order search tried for the candidates (a seed whose order is already a candidate's
@@ -869,10 +863,12 @@ _SEEDS = 5
 #: the first candidate's turns are this many times longer than the others' when it shares a lane
 #: with them (module docstring of _race)
 _LEAD = 2.0
-#: seconds the first order's saturation runs alone before its chaining starts in the other lane: a
+#: seconds from the start of the race before the first order's chaining starts in the second lane: a
 #: net that both finish is most often saturated first, and the later phases' closures by saturation
 #: mostly take less memory (Railroad-PT-005: inside 9 MiB, where those by chaining outgrow it)
 _HEAD_START = 2.0
+#: most seconds the first order's chaining runs before the second lane's other orders (:func:`_race`)
+_CHAIN_SECONDS = 10.0
 
 
 def _same_order(a: Encoding, b: Encoding) -> bool:
@@ -883,32 +879,14 @@ _Won = tuple[Encoding, Events, _Store, int]
 
 
 class _Candidate:
-    """One way to the reachable set raced in a lane: an order (its encoding, events and store) and
-    the method, saturation or chaining (:func:`_race`). ``name`` is the order's number in the race."""
+    """An order raced in a lane (:func:`_race`): its number in the race, encoding, events and store."""
 
-    def __init__(self, name: int, enc: Encoding, fwd: Events, store: _Store, chain: bool) -> None:
-        self.name, self.enc, self.fwd, self.store, self.chain = name, enc, fwd, store, chain
-        store.chain = chain
-        self.at = store.m0  # chaining: the markings reached so far (a fixed point ends it)
-        self.turns = 0
-
-    @property
-    def label(self) -> str:
-        return f"order {self.name}" + (" by chaining" if self.chain else "")
-
-    def reach(self) -> int:
-        """The reachable set; raises _OutOfTime at the watch's deadline, and the next call goes on
-        from the store (and, chaining, from the markings reached so far)."""
-        def keep(at: int) -> None:
-            self.at = at
-
-        return self.store.closure(self.fwd, self.at, check_overflow=True, keep=keep)
+    def __init__(self, name: int, enc: Encoding, fwd: Events, store: _Store) -> None:
+        self.name, self.enc, self.fwd, self.store = name, enc, fwd, store
 
     def drop(self) -> None:
         """Free the store (the candidate is out of the race)."""
         self.store = _Store(self.enc, 0)
-        self.store.chain = self.chain
-        self.at = self.store.m0
 
 
 class _Cancel:
@@ -927,7 +905,7 @@ class _Cancel:
 
     def wait(self, seconds: float) -> bool:
         """Wait until the race sets the flag, at most ``seconds``; whether it is set."""
-        self.own.wait(seconds)
+        self.own.wait(max(0.0, seconds))
         return self.is_set()
 
 
@@ -948,7 +926,7 @@ class _Race:
         self.jobs: list[tuple[int, bool]] = []
         self.next_seed = 1
         self.plain_first = False  # the first order without its shared levels sunk was queued
-        self.chained = False  # the first order by chaining was handed to a lane
+        self.start = time.monotonic()
         self.winner: _Won | None = None
         self.error: BaseException | None = None
         self.lanes: list[_Lane] = []
@@ -968,18 +946,10 @@ class _Race:
                     self.jobs.append((0, False))
         return enc
 
-    def another_order(self, lane: _Lane) -> tuple[int, Encoding, bool] | None:
-        """A candidate none of the others is, for ``lane``: the first order by chaining, then orders
-        none of the others has (compared once the first candidate's is known); with its number in
-        the race and whether it chains. None when the seeds are used up, the deadline passed or the
-        lane is cancelled."""
-        with self.lock:
-            chain, self.chained = not self.chained, True
-        if chain:
-            self.first.wait()
-            with self.lock:
-                if self.orders:
-                    return 1, self.orders[0], True
+    def another_order(self, lane: _Lane) -> tuple[int, Encoding] | None:
+        """A candidate order none of the others has, for ``lane``, with its number in the race
+        (compared once the first candidate's is known); None when the seeds are used up, the
+        deadline passed or the lane is cancelled."""
         while time.monotonic() < self.deadline and not lane.cancel.is_set():
             with self.lock:
                 if self.jobs:
@@ -994,7 +964,7 @@ class _Race:
             with self.lock:
                 if not any(_same_order(enc, o) for o in self.orders):
                     self.orders.append(enc)
-                    return len(self.orders), enc, False
+                    return len(self.orders), enc
         return None
 
     def won(self, lane: _Lane, found: _Won) -> None:
@@ -1076,10 +1046,46 @@ class _Lane:
                 race.first.set()
             self.ended.set()
 
+    def _chained(self, max_bytes: int) -> bool:
+        """The first order by chaining (:meth:`_Store.closure`), once its saturation has run alone
+        for :data:`_HEAD_START` seconds, within ``max_bytes``, for at most :data:`_CHAIN_SECONDS`;
+        then its store is dropped. The second lane's first work, or on one CPU the single lane's
+        after the first candidate's first turn. True when the race is decided (by it or another
+        lane)."""
+        race = self.race
+        if self.cancel.wait(race.start + _HEAD_START - time.monotonic()):
+            return True
+        race.first.wait()
+        with race.lock:
+            enc = race.orders[0] if race.orders else None
+        if enc is None or self.cancel.is_set():
+            return self.cancel.is_set()
+        fwd = events(race.sn, enc, merge=True)
+        store = _Store(enc, max_bytes)
+        store.chain = True
+        mk.set_watch(min(race.deadline, time.monotonic() + _CHAIN_SECONDS), None, self.cancel)
+        try:
+            reach = store.closure(fwd, store.m0, check_overflow=True)
+        except _OutOfTime:
+            if not self.cancel.is_set():
+                race.say(f"symbolic: order 1 by chaining not done within {_CHAIN_SECONDS:.0f} s ({store.nodes:,} "
+                         "nodes), dropped")
+            return self.cancel.is_set()
+        except _OutOfMemory:
+            race.say(f"symbolic: order 1 by chaining outgrew this lane's share of the memory ({store.nodes:,} "
+                     "nodes), dropped")
+            return self.cancel.is_set()
+        finally:
+            mk.set_watch(None, None)
+        store.max_bytes = race.max_bytes
+        race.say("symbolic: order 1 by chaining was the first done")
+        race.won(self, (enc, fwd, store, reach))
+        return True
+
     def _run(self) -> None:
         race, say = self.race, self.race.say
         want = int(self.has_first) + self.others
-        if want == 0:
+        if want == 0 or (not self.has_first and self._chained(self.share)):
             return
         cands: list[_Candidate] = []
         alive: list[bool] = []
@@ -1096,14 +1102,16 @@ class _Lane:
                     slice_s *= 2
                 continue
             if i == len(cands):
-                found: tuple[int, Encoding, bool] | None = None
+                found: tuple[int, Encoding] | None = None
                 if self.has_first and not cands:
                     enc0 = race.encode(0, sink=True)
                     with race.lock:
                         race.orders.insert(0, enc0)
                     race.first.set()
-                    found = (1, enc0, False)
+                    found = (1, enc0)
                 else:
+                    if self.has_first and len(cands) == 1 and self._chained(self.share - cands[0].store.max_bytes):
+                        return  # one CPU: the first order by chaining, beside its saturated part
                     found = race.another_order(self)
                 if found is None or self.cancel.is_set():  # no other order: race those there are
                     n_cands = len(cands)
@@ -1116,27 +1124,22 @@ class _Lane:
                         plural = "s" if len(race.orders) > 1 else ""
                         say(f"symbolic: {len(race.orders)} distinct variable order{plural} found")
                     continue
-                name, enc, chain = found
+                name, enc = found
                 fwd = events(race.sn, enc, merge=True)
-                cands.append(_Candidate(name, enc, fwd, _Store(enc, self.share // want), chain))
+                cands.append(_Candidate(name, enc, fwd, _Store(enc, self.share // want)))
                 alive.append(True)
-                if name == 1 and not chain:
+                if name == 1:
                     say(f"symbolic: {enc.n_levels} levels ({enc.groups} groups of places"
                         + (f", {enc.sunk} shared levels at the bottom of the first order" if enc.sunk else "")
                         + f"), {fwd.n_events} events for {race.sn.n_transitions} transitions")
             cand = cands[i]
             store = cand.store
-            if cand.chain and not cand.turns and not self.has_first and self.cancel.wait(_HEAD_START):
-                return  # the first order's saturation was done within its head start
-            cand.turns += 1
-            mine = slice_s * (_LEAD if cand.name == 1 and not cand.chain else 1.0)
+            mine = slice_s * (_LEAD if cand.name == 1 else 1.0)
             mk.set_watch(min(race.deadline, time.monotonic() + mine) if n_cands > 1 else race.deadline, None,
                          self.cancel)
             try:
-                reach = cand.reach()
+                reach = store.call(mk.MODE_SATURATE, cand.fwd, store.m0, check_overflow=True)
                 store.max_bytes = race.max_bytes  # the others are dropped: the winner has the whole budget
-                if cand.chain:
-                    say(f"symbolic: {cand.label} was the first done")
                 race.won(self, (cand.enc, cand.fwd, store, reach))
                 return
             except _OutOfTime:
@@ -1147,7 +1150,7 @@ class _Lane:
                     self.timed_out = True
                     return
                 if n_cands > 1:
-                    say(f"symbolic: {cand.label} not done after its {mine:.0f} s turn ({store.nodes:,} nodes)")
+                    say(f"symbolic: order {cand.name} not done after its {mine:.0f} s turn ({store.nodes:,} nodes)")
             except AnalysisError as exc:
                 if "memory budget" not in str(exc):
                     raise
@@ -1155,7 +1158,7 @@ class _Lane:
                 whole = store.max_bytes >= self.share
                 if not whole or (store.max_bytes < race.max_bytes and race.take_whole(self)):
                     if not whole and sum(alive) > 1:
-                        say(f"symbolic: {cand.label} outgrew its part of the memory, the candidates it took "
+                        say(f"symbolic: order {cand.name} outgrew its part of the memory, the orders it took "
                             "turns with are dropped")
                     for j, other in enumerate(cands):
                         if j != i:  # no other is added after
@@ -1195,14 +1198,19 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     which processes may be in their critical sections (66,827 nodes at 20 processes, 745 at 10)
     where the reachable set has 115, and chained images reach Dekker-PT-050's 2.9·10^16 markings in
     0.6 s, three passes, 320,725 nodes. Chaining is no better in general (Railroad-PT-020: not done
-    in 80 s, saturation 14 s), hence the race; chaining starts after the first order's saturation
-    has run alone for :data:`_HEAD_START` seconds. The winner's way also builds the later phases'
-    closures (liveness, reversibility, the witness).
+    in 80 s, saturation 14 s), hence the race: on two CPUs or more the second lane starts with it
+    (:meth:`_Lane._chained`), with its whole share of the memory, for at most
+    :data:`_CHAIN_SECONDS` (it mostly grows fast where it does not win: Referendum-PT-0050 took 5
+    million nodes in 5 s, where its reachable set has 396), after the first lane has saturated
+    alone for :data:`_HEAD_START` seconds; then the lane goes on with the other orders. The
+    winner's way also builds the later phases' closures (liveness, reversibility, the witness). On
+    one CPU the single lane tries it after the first candidate's first turn, with the memory the
+    others would have had.
 
     On two CPUs or more the race has two lanes, threads that run at once (the kernel releases the
-    GIL): one saturates the first candidate without a pause, the other races the first order by
-    chaining and the other orders by turns, searching them as it goes. When the first order is the
-    fastest, the race costs it nothing. On one CPU a single lane runs them all by turns of doubling time slices, each
+    GIL): one saturates the first candidate without a pause, the other searches the other orders
+    while the first saturates and races them by turns. When the first order is the fastest, the
+    race costs it nothing. On one CPU a single lane runs them all by turns of doubling time slices, each
     resuming where it stopped (its store, computed table included, is kept between turns), the first
     candidate's turns :data:`_LEAD` times as long as the others' (when it is the fastest the others
     cost about half its time; Railroad-PT-020: 39 s of CPU for the race instead of 55 s). Each lane
@@ -1221,9 +1229,9 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     """
     race = _Race(sn, bounds, flows, max_bytes, deadline, say, stop, borrow)
     if cpus() >= 2:
-        race.lanes = [_Lane(race, True, 0, max_bytes // 2), _Lane(race, False, _CANDIDATES, max_bytes // 2)]
+        race.lanes = [_Lane(race, True, 0, max_bytes // 2), _Lane(race, False, _CANDIDATES - 1, max_bytes // 2)]
     else:
-        race.lanes = [_Lane(race, True, _CANDIDATES, max_bytes)]
+        race.lanes = [_Lane(race, True, _CANDIDATES - 1, max_bytes)]
     helpers = [threading.Thread(target=lane.run, name="petrobot-saturation", daemon=True) for lane in race.lanes[:-1]]
     try:
         for thread in helpers:
