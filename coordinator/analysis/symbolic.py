@@ -1201,11 +1201,11 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     where the reachable set has 115, and chained images reach Dekker-PT-050's 2.9·10^16 markings in
     0.6 s, three passes, 320,725 nodes. Chaining is no better in general (Railroad-PT-020: not done
     in 80 s, saturation 14 s), hence the race: on two CPUs or more the second lane starts with it
-    (:meth:`_Lane._chained`), with its whole share of the memory, for at most
-    :data:`_CHAIN_SECONDS` (it mostly grows fast where it does not win: Referendum-PT-0050 took 5
-    million nodes in 5 s, where its reachable set has 396), after the first lane has saturated
-    alone for :data:`_HEAD_START` seconds; then the lane goes on with the other orders. The
-    winner's way also builds the later phases' closures (liveness, reversibility, the witness). On
+    (:meth:`_Lane._chained`; not when the first order has shared levels sunk), with its whole share
+    of the memory, for at most :data:`_CHAIN_SECONDS` (it mostly grows fast where it does not win:
+    Referendum-PT-0050 took 5 million nodes in 5 s, where its reachable set has 396), after the
+    first lane has saturated alone for :data:`_HEAD_START` seconds; then the lane goes on with the
+    other orders. The winner's way also builds the later phases' closures (liveness, reversibility, the witness). On
     one CPU the single lane tries it after the first candidate's first turn, with the memory the
     others would have had.
 
