@@ -11,8 +11,9 @@ import pytest
 from analysis_nets import dekker, make_net, philosophers_arcs
 
 from coordinator.analysis import lp
-from coordinator.analysis.matrices import sparse_net
-from coordinator.analysis.structure import analyse
+from coordinator.analysis.matrices import SparseNet, sparse_net
+from coordinator.analysis.mdd_order import Encoding
+from coordinator.analysis.structure import Analysis, analyse
 from coordinator.analysis.symbolic import SymbolicResult, analyse_symbolic
 from coordinator.errors import AnalysisError
 from coordinator.net import Marking, PetriNet
@@ -160,19 +161,27 @@ def shortest_to_a_deadlock(net: PetriNet) -> int:
     raise AssertionError("no dead marking")
 
 
-@pytest.mark.parametrize("seed", range(40))
-def test_the_breadth_first_trace_to_a_deadlock_is_a_shortest_firing_sequence(seed: int) -> None:
-    from coordinator.analysis import mdd_kernel as mk
-    from coordinator.analysis.mdd_order import encode, events, touched_places
-    from coordinator.analysis.symbolic import _bfs_sequence, _dead, _Explicit, _fireable, _Store
+def generated_encoding(seed: int) -> tuple[PetriNet, Analysis, SparseNet, Encoding]:
+    """A generated net (the odd seeds with inhibitor arcs), its explicit analysis, sparse form and
+    encoding, on the LP's bounds where they hold and are small, else the true ones."""
+    from coordinator.analysis.mdd_order import encode
 
-    net = generated_net(seed)  # the odd seeds with inhibitor arcs
+    net = generated_net(seed)
     a = analyse(net, max_states=200_000)
     bounds, flows = proven_bounds(net)
     per_place = np.array([a.place_bounds[p.id] for p in net.places], dtype=np.int64)
-    bounds = np.where((bounds >= per_place) & (bounds < 40), bounds, per_place)  # the LP's, else the true one
+    bounds = np.where((bounds >= per_place) & (bounds < 40), bounds, per_place)
     sn = sparse_net(net)
-    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    return net, a, sn, encode(sn, bounds, flows, seconds=5.0, seed=0)
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_the_breadth_first_trace_to_a_deadlock_is_a_shortest_firing_sequence(seed: int) -> None:
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import events, touched_places
+    from coordinator.analysis.symbolic import _bfs_sequence, _dead, _Explicit, _fireable, _Store
+
+    net, a, sn, enc = generated_encoding(seed)
     fwd, single = events(sn, enc, merge=True), events(sn, enc)
     store = _Store(enc, 64 << 20)
     reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
@@ -193,16 +202,10 @@ def test_the_breadth_first_trace_to_a_deadlock_is_a_shortest_firing_sequence(see
 @pytest.mark.parametrize("seed", range(40))
 def test_chained_images_reach_the_sets_saturation_reaches_forward_and_backward_inside_a_constraint(seed: int) -> None:
     from coordinator.analysis import mdd_kernel as mk
-    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.mdd_order import events
     from coordinator.analysis.symbolic import _Store
 
-    net = generated_net(seed)  # the odd seeds with inhibitor arcs
-    a = analyse(net, max_states=200_000)
-    bounds, flows = proven_bounds(net)
-    per_place = np.array([a.place_bounds[p.id] for p in net.places], dtype=np.int64)
-    bounds = np.where((bounds >= per_place) & (bounds < 40), bounds, per_place)
-    sn = sparse_net(net)
-    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    net, a, sn, enc = generated_encoding(seed)
     fwd, back = events(sn, enc, merge=True), events(sn, enc, inverse=True, merge=True)
     store = _Store(enc, 64 << 20)  # one store: equal sets are the same node
     reach = store.closure(fwd, store.m0)
