@@ -1046,14 +1046,14 @@ class _Lane:
                 race.first.set()
             self.ended.set()
 
-    def _chained(self, max_bytes: int) -> bool:
+    def _chained(self, max_bytes: int, fwd: Events | None = None) -> bool:
         """The first order by chaining (:meth:`_Store.closure`), once its saturation has run alone
         for :data:`_HEAD_START` seconds, within ``max_bytes``, for at most :data:`_CHAIN_SECONDS`;
         then its store is dropped. The second lane's first work, or on one CPU the single lane's
-        after the first candidate's first turn; not when the first order has shared levels sunk
-        (the lane's first candidate is then that order with them in place, which chaining would
-        delay: Referendum-PT-0050's answer in 3.2 s, 16.3 s with chaining first). True when the
-        race is decided (by it or another lane)."""
+        after the first candidate's first turn (``fwd``: its events, when this lane has them); not
+        when the first order has shared levels sunk (the lane's first candidate is then that order
+        with them in place, which chaining would delay: Referendum-PT-0050's answer in 3.2 s, 16.3 s
+        with chaining first). True when the race is decided (by it or another lane)."""
         race = self.race
         race.first.wait()
         with race.lock:
@@ -1062,7 +1062,7 @@ class _Lane:
             return self.cancel.is_set()
         if self.cancel.wait(race.start + _HEAD_START - time.monotonic()):
             return True
-        fwd = events(race.sn, enc, merge=True)
+        fwd = fwd if fwd is not None else events(race.sn, enc, merge=True)
         store = _Store(enc, max_bytes)
         store.chain = True
         mk.set_watch(min(race.deadline, time.monotonic() + _CHAIN_SECONDS), None, self.cancel)
@@ -1112,7 +1112,8 @@ class _Lane:
                     race.first.set()
                     found = (1, enc0)
                 else:
-                    if self.has_first and len(cands) == 1 and self._chained(self.share - cands[0].store.max_bytes):
+                    first = cands[0] if self.has_first and len(cands) == 1 else None
+                    if first is not None and self._chained(self.share - first.store.max_bytes, first.fwd):
                         return  # one CPU: the first order by chaining, beside its saturated part
                     found = race.another_order(self)
                 if found is None or self.cancel.is_set():  # no other order: race those there are
