@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from math import comb
 
 import numpy as np
@@ -142,6 +142,17 @@ class Encoding:
         """The value of level k in a full marking (|P|,), or -1 if that local marking is not a value."""
         key = tuple(int(marking[p]) for p in self.levels[k])
         return self.index[k].get(key, -1)
+
+    def reversed(self) -> Encoding:
+        """The same levels in the opposite order (level K − 1 at the root). Its score is the same
+        (a span does not depend on the direction), but saturation fires an event at its top level,
+        so the two directions can differ by orders of magnitude: Kanban-PT-00100, 1.9 s and 113,617
+        nodes on the order found, 0.01 s and 1,924 nodes on its reverse. Shared levels sunk at the
+        bottom come to the top (``sunk`` is 0)."""
+        place_level = np.where(self.place_level >= 0, self.n_levels - 1 - self.place_level, -1)
+        return replace(self, levels=self.levels[::-1], local=self.local[::-1], dom=self.dom[::-1].copy(),
+                       place_level=place_level, m0=self.m0[::-1].copy(), weight=self.weight[::-1],
+                       index=self.index[::-1], sunk=0)
 
 
 @dataclass(frozen=True)

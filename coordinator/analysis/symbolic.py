@@ -860,6 +860,8 @@ _FIRST_SLICE = 2.0
 #: seeds of the order search tried for the candidates (a seed whose order is already a candidate's
 #: is passed over; fewer candidates race when no other order is found)
 _SEEDS = 5
+#: the job of the candidate that is the first order reversed (:meth:`.mdd_order.Encoding.reversed`)
+_REVERSE = -1
 #: the first candidate's turns are this many times longer than the others' when it shares a lane
 #: with them (module docstring of _race)
 _LEAD = 2.0
@@ -922,10 +924,12 @@ class _Race:
         self.lock = threading.Lock()
         self.orders: list[Encoding] = []  # every candidate's encoding, the first one's first
         self.first = threading.Event()  # the first candidate's encoding is known (or never will be)
-        # order searches still to run for candidates after the first: (seed, sink)
-        self.jobs: list[tuple[int, bool]] = []
+        # order searches still to run for candidates after the first: (seed, sink); seed _REVERSE:
+        # no search, the first order reversed
+        self.jobs: list[tuple[int, bool]] = [(_REVERSE, False)]
         self.next_seed = 1
         self.plain_first = False  # the first order without its shared levels sunk was queued
+        self.reverse = 0  # the number of the candidate that is the first order reversed (0: none yet)
         self.start = time.monotonic()
         self.winner: _Won | None = None
         self.error: BaseException | None = None
@@ -941,9 +945,9 @@ class _Race:
                      max_bytes=self.max_bytes // 4)
         if sink and enc.sunk:
             with self.lock:
-                if not self.plain_first:  # the same search with its shared levels left in place
+                if not self.plain_first:  # the same search with its shared levels left in place, next
                     self.plain_first = True
-                    self.jobs.append((0, False))
+                    self.jobs.insert(0, (0, False))
         return enc
 
     def another_order(self, lane: _Lane) -> tuple[int, Encoding] | None:
@@ -959,13 +963,27 @@ class _Race:
                     self.next_seed += 1
                 else:
                     return None
-            enc = self.encode(seed, sink=sink, stop=lane.cancel.is_set)
+            if seed == _REVERSE:
+                self.first.wait()
+                with self.lock:
+                    first = self.orders[0] if self.orders else None
+                if first is None:
+                    continue
+                enc = first.reversed()
+            else:
+                enc = self.encode(seed, sink=sink, stop=lane.cancel.is_set)
             self.first.wait()
             with self.lock:
                 if not any(_same_order(enc, o) for o in self.orders):
                     self.orders.append(enc)
+                    if seed == _REVERSE:
+                        self.reverse = len(self.orders)
                     return len(self.orders), enc
         return None
+
+    def name(self, number: int) -> str:
+        """How the progress names candidate ``number``."""
+        return f"order {number}" + (" (order 1 reversed)" if number == self.reverse else "")
 
     def won(self, lane: _Lane, found: _Won) -> None:
         with self.lock:
@@ -1143,6 +1161,8 @@ class _Lane:
             try:
                 reach = store.call(mk.MODE_SATURATE, cand.fwd, store.m0, check_overflow=True)
                 store.max_bytes = race.max_bytes  # the others are dropped: the winner has the whole budget
+                if cand.name != 1:
+                    say(f"symbolic: {race.name(cand.name)} was the first done")
                 race.won(self, (cand.enc, cand.fwd, store, reach))
                 return
             except _OutOfTime:
@@ -1153,7 +1173,8 @@ class _Lane:
                     self.timed_out = True
                     return
                 if n_cands > 1:
-                    say(f"symbolic: order {cand.name} not done after its {mine:.0f} s turn ({store.nodes:,} nodes)")
+                    say(f"symbolic: {race.name(cand.name)} not done after its {mine:.0f} s turn ({store.nodes:,} "
+                        "nodes)")
             except AnalysisError as exc:
                 if "memory budget" not in str(exc):
                     raise
@@ -1161,7 +1182,7 @@ class _Lane:
                 whole = store.max_bytes >= self.share
                 if not whole or (store.max_bytes < race.max_bytes and race.take_whole(self)):
                     if not whole and sum(alive) > 1:
-                        say(f"symbolic: order {cand.name} outgrew its part of the memory, the orders it took "
+                        say(f"symbolic: {race.name(cand.name)} outgrew its part of the memory, the orders it took "
                             "turns with are dropped")
                     for j, other in enumerate(cands):
                         if j != i:  # no other is added after
