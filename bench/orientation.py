@@ -86,7 +86,9 @@ def _cell(r: dict[str, Any], key: str) -> str:
         return "error"
     if key in r:
         return f"{r[key]:.2f} s"
-    return f"stopped ({r.get('stopped', '-')})" if key == "forward_seconds" or "forward_seconds" in r else "-"
+    if key == "backward_seconds" and "forward_seconds" not in r:
+        return "-"  # no reachable set to go backward in
+    return f"stopped ({r.get('stopped', '-')})"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -108,8 +110,8 @@ def main(argv: list[str] | None = None) -> int:
         ratio = "-"
         if "forward_seconds" in found and "forward_seconds" in rev:
             ratio = f"{found['forward_seconds'] / max(rev['forward_seconds'], 1e-3):.2f}"
-        print(f"{found['model'][:30]:30s} forward {_cell(found, 'forward_seconds'):>15s} {found.get('nodes', 0):>10,} nodes"
-              f" | reversed {_cell(rev, 'forward_seconds'):>15s} {rev.get('nodes', 0):>10,} nodes | found/reversed "
+        print(f"{found['model'][:30]:30s} forward {_cell(found, 'forward_seconds'):>15s} "
+              f"{found.get('nodes', 0):>10,} nodes | reversed {_cell(rev, 'forward_seconds'):>15s} {rev.get('nodes', 0):>10,} nodes | found/reversed "
               f"{ratio:>7s} | backward {_cell(found, 'backward_seconds'):>10s} / {_cell(rev, 'backward_seconds'):>10s}",
               flush=True)
     return 0

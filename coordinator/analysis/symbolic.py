@@ -963,17 +963,14 @@ class _Race:
                     self.next_seed += 1
                 else:
                     return None
-            if seed == _REVERSE:
-                self.first.wait()
-                with self.lock:
-                    first = self.orders[0] if self.orders else None
-                if first is None:
-                    continue
-                enc = first.reversed()
-            else:
-                enc = self.encode(seed, sink=sink, stop=lane.cancel.is_set)
+            # the searches run while the first order is still being found; its reverse waits for it
+            enc = None if seed == _REVERSE else self.encode(seed, sink=sink, stop=lane.cancel.is_set)
             self.first.wait()
             with self.lock:
+                if enc is None:
+                    if not self.orders:
+                        continue
+                    enc = self.orders[0].reversed()
                 if not any(_same_order(enc, o) for o in self.orders):
                     self.orders.append(enc)
                     if seed == _REVERSE:
@@ -1234,9 +1231,9 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     of the memory, for at most :data:`_CHAIN_SECONDS` (it mostly grows fast where it does not win:
     Referendum-PT-0050 took 5 million nodes in 5 s, where its reachable set has 396), after the
     first lane has saturated alone for :data:`_HEAD_START` seconds; then the lane goes on with the
-    other orders. The winner's way also builds the later phases' closures (liveness, reversibility, the witness). On
-    one CPU the single lane tries it after the first candidate's first turn, with the memory the
-    others would have had.
+    other orders. The winner's way also builds the later phases' closures (liveness, reversibility,
+    the witness). On one CPU the single lane tries it after the first candidate's first turn, with
+    the memory the others would have had.
 
     On two CPUs or more the race has two lanes, threads that run at once (the kernel releases the
     GIL): one saturates the first candidate without a pause, the other searches the other orders
