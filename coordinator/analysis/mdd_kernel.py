@@ -36,8 +36,9 @@ calls of ``_steps``, in :func:`run`; a frame's node under
 construction lives in an arena of child buffers with stack discipline. Results of operations go
 to a lossy computed table (a direct-mapped cache, as in CUDD; an entry's two keys and its value
 side by side, so a look-up reads one cache line), which never changes a result, only what is
-recomputed. Buffers grow inside the one compiled call, within a byte budget (status
-``MEMORY`` when it is reached). The store is handed back to the caller, who passes it to the next
+recomputed. Buffers grow inside the one compiled call, within a byte budget: the computed table
+stops growing where it would pass it, and status ``MEMORY`` comes when the nodes' own buffers
+would. The store is handed back to the caller, who passes it to the next
 call; nothing is ever freed (the store lives as long as one analysis).
 """
 
@@ -310,12 +311,12 @@ def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, 
 
 @njit(cache=True, inline="always")
 def _full(n_nodes: int, n_kids: int, n_unique: int, ct_used: int, node_cap: int, kid_cap: int, unique_cap: int,
-          ct_cap: int, max_dom: int) -> bool:
+          ct_cap: int, max_dom: int, ct_max: int) -> bool:
     """Whether a buffer of the store must grow before the next step (room for one more node of
     ``max_dom`` children, the unique table at most half full, the computed table at most a quarter
-    full below its largest size); numbers only, so that the loop keeps no reference count."""
+    full below ``ct_max`` entries); numbers only, so that the loop keeps no reference count."""
     return (n_nodes + 2 > node_cap or n_kids + max_dom > kid_cap or 2 * (n_unique + 1) > unique_cap
-            or (4 * ct_used > ct_cap and ct_cap < _CT_MAX))
+            or (4 * ct_used > ct_cap and ct_cap < ct_max))
 
 
 @njit(cache=True, nogil=True)
@@ -326,7 +327,7 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
            f_pc: np.ndarray, f_k: np.ndarray, f_a: np.ndarray, f_b: np.ndarray, f_c: np.ndarray, f_e: np.ndarray,
            f_i: np.ndarray, f_j: np.ndarray, f_buf: np.ndarray, f_k0: np.ndarray, f_k1: np.ndarray,
            f_s: np.ndarray, arena: np.ndarray, depth: int, atop: int, ret: int, ct_used: int,
-           steps: int) -> tuple:  # type: ignore[type-arg]
+           steps: int, ct_max: int) -> tuple:  # type: ignore[type-arg]
     """The steps of :func:`run` on its stack of frames, until the stack is empty, a status is set,
     or a buffer of the store is full (``_FULL``: :func:`run` grows it and calls again). No array is
     reassigned here: numba then keeps no reference count in the loop (with the buffers grown in
@@ -352,7 +353,7 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
                 break
         n_nodes = meta[META_NODES]
         if _full(n_nodes, meta[META_KIDS], meta[META_UNIQUE], ct_used, level.shape[0], kids.shape[0],
-                 unique.shape[0], ccap, max_dom):
+                 unique.shape[0], ccap, max_dom, ct_max):
             return _FULL, depth, atop, ret, status, ct_used, steps
         d = depth - 1
         ty = f_ty[d]
@@ -691,6 +692,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
     # computed table: direct mapped (key words and value), grown (and refilled) as it fills up
     ccap = ct.shape[0]
     ct_used = meta[META_CT_USED]
+    ct_max = _CT_MAX  # lowered to the table's size when the budget leaves it no room to grow
     # frames: along the stack the level grows by one per frame, but for NODE frames (at the level of
     # the SAT or FIRE frame below them) and the IMAGE frame, so the depth stays below 2K + 4
     fcap = 2 * n_levels + 8
@@ -738,7 +740,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
     while depth > 0:
         n_nodes = meta[META_NODES]
         if _full(n_nodes, meta[META_KIDS], meta[META_UNIQUE], ct_used, level.shape[0], kids.shape[0],
-                 unique.shape[0], ccap, max_dom):
+                 unique.shape[0], ccap, max_dom, ct_max):
             # grow what is full; the old and the new buffer are both held during the copy
             gn = level.shape[0] * 2 if n_nodes + 2 > level.shape[0] else level.shape[0]
             gk = kids.shape[0]
@@ -748,7 +750,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
             while 2 * (meta[META_UNIQUE] + 1) > gu:
                 gu *= 2
             gc = ccap
-            while 4 * ct_used > gc and gc < _CT_MAX:
+            while 4 * ct_used > gc and gc < ct_max:
                 gc *= 2
             held = level.shape[0] * 16 + kids.shape[0] * 4 + unique.shape[0] * 4 + ccap * 24 + fixed
             extra = 0
@@ -758,8 +760,12 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 extra += gk * 4
             if gu != unique.shape[0]:
                 extra += gu * 4
-            if gc != ccap:
-                extra += gc * 24
+            if held + extra + (gc * 24 if gc != ccap else 0) > max_bytes:
+                # the computed table is a cache: past the budget it stops growing, and only the
+                # nodes' own buffers run out of memory (a store of 0.5 GiB whose table of 2^23
+                # entries doubled would hold 0.6 GiB during the copy, whatever its nodes)
+                gc = ccap
+                ct_max = ccap
             if held + extra > max_bytes:
                 status = MEMORY
                 break
@@ -796,7 +802,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
         why, depth, atop, ret, status, ct_used, steps = _steps(
             dom, ev_top, ev_bot, ev_slot_ptr, ev_slot, slot_ptr, nxt, evtop_ptr, evtop, meta, level, offset,
             size, kids, unique, ct, check_overflow, saturating, max_dom, f_ty, f_pc, f_k, f_a, f_b, f_c, f_e,
-            f_i, f_j, f_buf, f_k0, f_k1, f_s, arena, depth, atop, ret, ct_used, steps)
+            f_i, f_j, f_buf, f_k0, f_k1, f_s, arena, depth, atop, ret, ct_used, steps, ct_max)
         if why != _FULL:
             break
     meta[META_CT_USED] = ct_used
