@@ -760,7 +760,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 extra += gk * 4
             if gu != unique.shape[0]:
                 extra += gu * 4
-            if held + extra + (gc * 24 if gc != ccap else 0) > max_bytes:
+            if gc != ccap and held + extra + gc * 24 > max_bytes:
                 # the computed table is a cache: past the budget it stops growing, and only the
                 # nodes' own buffers run out of memory (a store of 0.5 GiB whose table of 2^23
                 # entries doubled would hold 0.6 GiB during the copy, whatever its nodes)

@@ -303,8 +303,8 @@ def test_the_computed_table_stops_growing_at_the_budget_and_only_the_nodes_can_o
     tight = _Store(enc, nodes + table // 4)
     assert tight.count(tight.call(mk.MODE_SATURATE, fwd, tight.m0)) == states
     assert table_and_nodes(tight)[0] * 3 <= table
+    starved = _Store(enc, nodes // 8)
     with pytest.raises(_OutOfMemory):  # the nodes' own buffers do outgrow it
-        starved = _Store(enc, nodes // 8)
         starved.call(mk.MODE_SATURATE, fwd, starved.m0)
 
 
