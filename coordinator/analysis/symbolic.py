@@ -227,6 +227,10 @@ class _Store:
     def nodes(self) -> int:
         return int(self.arrays[0][mk.META_NODES])
 
+    def held(self) -> int:
+        """The bytes its arrays hold now."""
+        return sum(a.nbytes for a in self.arrays)
+
     def contains(self, node: int, values: np.ndarray) -> bool:
         offset, size, kids = self.arrays[2:5]
         return bool(mk.node_of_path(node, values.astype(np.int64), offset, size, kids) == mk.TERMINAL)
@@ -691,8 +695,9 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         return extra
 
     try:
-        (enc, fwd, store, reach), states = _reachable(sn, net, bounds, seen, list(flows or []), max_bytes, deadline,
-                                                      say, stop, None if borrow is None else widen, notes)
+        (enc, fwd, store, reach), kept, states = _reachable(sn, net, bounds, seen, list(flows or []), max_bytes,
+                                                            deadline, say, stop, None if borrow is None else widen,
+                                                            notes)
         single = events(sn, enc)
         secs["encode"] = enc.seconds
         secs["reach"] = time.monotonic() - t0 - enc.seconds
@@ -733,7 +738,22 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         mk.set_watch(traced, None, stop)
         _witness(store, sn, enc, net, fwd, back, reach, dead, result, say, traced)
         mk.set_watch(until, None, stop)
-        _liveness(store, fwd, single, back, reach, counts, result, say, until, probes, stop)
+        upside: _Upside | None = None
+        held = 0 if kept is None else kept.store.held()  # already taken from the store's budget
+        spare = max(0, store.max_bytes - store.held()) // 2
+        if kept is not None and back is not None and cpus() >= 2 and states > 1 and not result.deadlock:
+            store.max_bytes -= spare
+            upside = _Upside(sn, kept, held + spare, until, stop, say)
+        else:  # its store is freed: the bytes go back
+            store.max_bytes += held
+            held = spare = 0
+        kept = None  # the thread has it, or it is freed
+        try:
+            _liveness(store, fwd, single, back, reach, counts, result, say, until, probes, stop, upside)
+        finally:
+            if upside is not None:
+                upside.end()
+            store.max_bytes += held + spare
         result.nodes = store.nodes
         return result
     finally:
@@ -746,8 +766,10 @@ _RAISES = 6
 
 def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[[], np.ndarray | None] | None,
                flows: list[np.ndarray], max_bytes: int, deadline: float, say: Callable[[str], None],
-               stop: threading.Event | None, borrow: Callable[[], int] | None, notes: list[str]) -> tuple[_Won, int]:
-    """The reachable set (:func:`_race`) and its number of markings. On the proven bounds first;
+               stop: threading.Event | None, borrow: Callable[[], int] | None,
+               notes: list[str]) -> tuple[_Won, _Candidate | None, int]:
+    """The reachable set (:func:`_race`), the race's order upside down if its store was kept, and
+    the number of markings. On the proven bounds first;
     when they make levels too wide (:class:`~.mdd_order.EncodingTooLarge`: AirplaneLD-PT-1000's
     state equation bounds its 1-safe places by 3,004 and 3,008, and its 4,017 levels would take
     3.7 GiB) and ``seen()`` gives counts, each place gets min(bound, 2·seen + 1) values instead.
@@ -765,7 +787,7 @@ def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[
     domains, raises, why = bounds, 0, ""
     while True:
         try:
-            won = _race(sn, domains, flows, max_bytes, deadline, say, stop, borrow)
+            won, kept = _race(sn, domains, flows, max_bytes, deadline, say, stop, borrow)
             enc, _, store, reach = won
             states = store.count(reach)
             _check_suspects(store, sn, enc, net, reach)
@@ -798,7 +820,7 @@ def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[
             notes.append(f"on the proven bounds {why}: the levels took each place's count seen by the explicit "
                          f"search, doubled, plus one{raised}; saturation checked every firing against them, so every "
                          "count is exact")
-        return won, states
+        return won, kept, states
 
 
 def _check_suspects(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, reach: int) -> None:
@@ -885,10 +907,12 @@ class _Candidate:
 
     def __init__(self, name: int, enc: Encoding, fwd: Events, store: _Store) -> None:
         self.name, self.enc, self.fwd, self.store = name, enc, fwd, store
+        self.dropped = False
 
     def drop(self) -> None:
         """Free the store (the candidate is out of the race)."""
         self.store = _Store(self.enc, 0)
+        self.dropped = True
 
 
 class _Cancel:
@@ -935,6 +959,26 @@ class _Race:
         self.error: BaseException | None = None
         self.lanes: list[_Lane] = []
         self.exclusive: _Lane | None = None
+        self.candidates: list[_Candidate] = []  # every lane's, in the order they joined
+
+    def upside_down(self) -> _Candidate | None:
+        """Once the race is decided, when the winner is the first order reversed: the first order's
+        candidate, its store not dropped (its saturation stopped where the winner's end stopped it),
+        if it is there; its bytes are taken from the winner's budget (:class:`_Upside` resumes it).
+        Not the other way round: backward, the first order was the faster on five of the six nets
+        where both directions were measured (MAPK-PT-00040: 0.02 s against 0.01 s; docs/BENCHMARKS.md,
+        "The first order reversed, raced"), and a thread beside a backward closure the winner's
+        order decides takes a CPU and memory bandwidth from it (SwimmingPool-PT-10, the first order
+        winning: 37.7 s with the thread, 31.8 s without)."""
+        if self.winner is None:
+            return None
+        enc, _, store, _ = self.winner
+        rev = enc.reversed()
+        for cand in self.candidates:
+            if cand.name == 1 and not cand.dropped and cand.store is not store and _same_order(cand.enc, rev):
+                store.max_bytes -= cand.store.held()
+                return cand
+        return None
 
     def encode(self, seed: int, sink: bool = False, stop: Callable[[], bool] | None = None) -> Encoding:
         """The encoding of order search ``seed`` (``sink``: shared levels at the bottom), the search
@@ -1048,6 +1092,7 @@ class _Lane:
         self.ended = threading.Event()
         self.timed_out = False
         self.nodes = 0
+        self.cands: list[_Candidate] = []  # its candidates, in the order they joined
 
     def run(self) -> None:
         race = self.race
@@ -1057,6 +1102,11 @@ class _Lane:
             race.failed(exc)
         finally:
             mk.set_watch(None, None)
+            with race.lock:
+                decided = race.winner is not None
+            if not decided:  # stopped for a lane that took the whole, or failed: its stores are freed now
+                for cand in self.cands:
+                    cand.drop()
             if self.has_first:
                 race.first.set()
             self.ended.set()
@@ -1104,7 +1154,7 @@ class _Lane:
         want = int(self.has_first) + self.others
         if want == 0 or (not self.has_first and self._chained(self.share)):
             return
-        cands: list[_Candidate] = []
+        cands = self.cands
         alive: list[bool] = []
         n_cands = want
         slice_s = _FIRST_SLICE
@@ -1146,6 +1196,8 @@ class _Lane:
                 fwd = events(race.sn, enc, merge=True)
                 cands.append(_Candidate(name, enc, fwd, _Store(enc, self.share // want)))
                 alive.append(True)
+                with race.lock:
+                    race.candidates.append(cands[-1])
                 if name == 1:
                     say(f"symbolic: {enc.n_levels} levels ({enc.groups} groups of places"
                         + (f", {enc.sunk} shared levels at the bottom of the first order" if enc.sunk else "")
@@ -1193,6 +1245,7 @@ class _Lane:
                     turn -= 1
                     continue
                 alive[i] = False
+                cand.drop()
             finally:
                 mk.set_watch(None, None)
             if turn % n_cands == 0:
@@ -1201,7 +1254,7 @@ class _Lane:
 
 def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes: int, deadline: float,
           say: Callable[[str], None], stop: threading.Event | None = None,
-          borrow: Callable[[], int] | None = None) -> _Won:
+          borrow: Callable[[], int] | None = None) -> tuple[_Won, _Candidate | None]:
     """The reachable set, by saturation on candidate variable orders raced against each other, until
     one finishes. How long saturation takes on an order is hard to predict from the order (on
     Railroad-PT-010, orders whose scores differ by 2 % take 0.15 to 13 s), so a few candidates are
@@ -1251,6 +1304,10 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     ``borrow`` may add to it once (:meth:`_Race.widen`). ``stop`` set (by another thread) ends
     every lane.
 
+    Returns:
+        The winner, and the candidate whose order is the winner's upside down if the race kept its
+        store (:meth:`_Race.upside_down`, for :class:`_Upside`).
+
     Raises:
         AnalysisError: every candidate outgrew the memory budget, none was done by the deadline, or
             ``stop`` was set first.
@@ -1274,7 +1331,11 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
             thread.join()
     if race.winner is not None:
         race.winner[2].borrow = race.take_borrow()  # the later phases may outgrow the budget too
-        return race.winner
+        kept = race.upside_down()
+        for cand in race.candidates:  # the others' stores are freed now (lanes and race refer to each other)
+            if cand is not kept and cand.store is not race.winner[2]:
+                cand.drop()
+        return race.winner, kept
     if race.error is not None:
         raise race.error
     if stop is not None and stop.is_set():
@@ -1316,14 +1377,64 @@ def _probe(store: _Store, fwd: Events, single: Events, reach: int, result: Symbo
                 result.live = False
 
 
+class _Upside:
+    """Reversibility on the reachable set's order upside down (:meth:`.mdd_order.Encoding.reversed`),
+    in a thread beside the later phases (two CPUs or more, :func:`analyse_symbolic`), when the race
+    left that order's candidate with its store (``kept``, :meth:`_Race.upside_down`): its
+    saturation forward resumes where the race stopped it, then the markings that reach M0 by
+    saturation backward inside its reachable set. Saturation fires an event at its top level, so an
+    order that is fast one way is often slow the other: the race's winner on Kanban-PT-00200 is the
+    first order reversed (0.32 s forward), whose backward saturation is not done in 40 s, where the
+    first order takes 20.9 s forward and 0.05 s backward (docs/BENCHMARKS.md). Whichever thread
+    decides first answers: :attr:`decided` is set when this one has, which stops the main thread's
+    closure (it watches that flag, which ``stop`` sets too); :meth:`end` stops this one. Its store
+    has ``max_bytes``, which the caller takes from the main store's budget while it runs. Not
+    started from M0 on an order the race did not keep: it would take a CPU and memory bandwidth
+    from the main thread's closures for a whole saturation forward first."""
+
+    def __init__(self, sn: SparseNet, kept: _Candidate, max_bytes: int, until: float, stop: threading.Event | None,
+                 say: Callable[[str], None]) -> None:
+        self.say = say
+        self.reversible: bool | None = None
+        self.decided = _Cancel(stop)
+        self.cancel = _Cancel(stop)
+        self.thread = threading.Thread(target=self._run, args=(sn, kept, max_bytes, until),
+                                       name="petrobot-upside-down", daemon=True)
+        self.thread.start()
+
+    def _run(self, sn: SparseNet, kept: _Candidate, max_bytes: int, until: float) -> None:
+        mk.set_watch(until, None, self.cancel)
+        try:
+            store = kept.store
+            store.max_bytes = max_bytes
+            t0 = time.monotonic()
+            reach = store.call(mk.MODE_SATURATE, kept.fwd, store.m0, check_overflow=True)
+            self.say(f"symbolic: order {kept.name}, the winner's upside down: its reachable set resumed from the race "
+                     f"in {time.monotonic() - t0:.1f} s ({store.nodes:,} nodes), backward from M0 next")
+            home = store.call(mk.MODE_SATURATE, events(sn, kept.enc, inverse=True, merge=True), store.m0, c=reach)
+            self.reversible = home == reach
+            self.decided.set()
+        except (_OutOfTime, AnalysisError):  # its time, its memory or a stop: the main thread's answer stands
+            pass
+        finally:
+            mk.set_watch(None, None)
+
+    def end(self) -> None:
+        """Stop the thread and wait for it (its store is freed with it)."""
+        self.cancel.set()
+        self.thread.join()
+
+
 def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, reach: int, counts: list[int],
               result: SymbolicResult, say: Callable[[str], None], until: float, probes: int,
-              stop: threading.Event | None = None) -> None:
+              stop: threading.Event | None = None, upside: _Upside | None = None) -> None:
     """Reversibility and liveness (module docstring), until ``until`` (``time.monotonic()``
     seconds): what the drawn markings tell forward first (:func:`_probe`, within a share of the
     time), then backward saturation from M0 (reversibility) and, for each transition not yet
     decided, from the markings that enable it, the transitions enabled in the fewest reachable
-    markings (``counts``, per event of ``single``) first: they are the likeliest not to be live."""
+    markings (``counts``, per event of ``single``) first: they are the likeliest not to be live.
+    ``upside``: reversibility decided beside on the order upside down; whichever is done first
+    answers."""
     t0 = time.monotonic()
     n_t = result.fireable.shape[0]
     quasi = bool(result.fireable.all())
@@ -1350,6 +1461,23 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
             share = min(_PROBE_SHARE * max(0.0, until - t0), max(1.0, result.seconds.get("reach", 0.0)))
             with contextlib.suppress(_OutOfTime):
                 _probe(store, fwd, single, reach, result, min(until, t0 + share), probes, stop)
+            mk.set_watch(until, None, stop)
+        if upside is not None and result.reversible is not None:
+            upside.cancel.set()  # decided forward: the thread's work is not needed
+        if result.reversible is None and upside is not None:
+            say("symbolic: reversibility (backward from M0, and on the order upside down beside it)")
+            mk.set_watch(until, None, upside.decided)
+            try:
+                home = store.closure(back, store.m0, c=reach)
+                result.reversible = home == reach
+                upside.cancel.set()
+            except (_OutOfTime, _OutOfMemory):  # its answer, the deadline or a stop; or this store's budget
+                while upside.thread.is_alive():  # it ends by the same deadline and stop
+                    upside.thread.join(0.2)
+                if upside.reversible is None:
+                    raise
+                result.reversible = upside.reversible
+                say("symbolic: reversibility decided on the order upside down")
             mk.set_watch(until, None, stop)
         if result.reversible is None:
             say("symbolic: reversibility (backward from M0)")

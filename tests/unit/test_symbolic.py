@@ -219,6 +219,57 @@ def test_chained_images_reach_the_sets_saturation_reaches_forward_and_backward_i
     assert store.closure(back, store.m0, c=reach) == home
 
 
+@pytest.mark.parametrize("seed", range(24))
+def test_reversibility_on_the_order_upside_down_beside_the_later_phases_agrees_with_the_graph(seed: int) -> None:
+    # the candidate the race kept, its saturation stopped part way by a deadline, or not begun
+    import time
+
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import events
+    from coordinator.analysis.symbolic import _Candidate, _OutOfTime, _Store, _Upside
+
+    net, a, sn, enc = generated_encoding(seed)
+    assert a.complete and a.reversible is not None
+    rev = enc.reversed()
+    for begun in (False, True):
+        kept = _Candidate(2, rev, events(sn, rev, merge=True), _Store(rev, 64 << 20))
+        if begun:
+            mk.set_watch(time.monotonic() - 1.0, None)  # stopped at its first check, if it gets that far
+            try:
+                kept.store.call(mk.MODE_SATURATE, kept.fwd, kept.store.m0, check_overflow=True)
+            except _OutOfTime:
+                pass
+            finally:
+                mk.set_watch(None, None)
+        said: list[str] = []
+        upside = _Upside(sn, kept, 64 << 20, time.monotonic() + 60.0, None, said.append)
+        upside.thread.join()
+        assert upside.decided.is_set() and upside.reversible == a.reversible
+        assert len(said) == 1 and said[0].startswith("symbolic: order 2, the winner's upside down: its reachable set")
+    upside = _Upside(sn, kept, 64 << 20, time.monotonic() + 60.0, None, lambda _text: None)
+    upside.end()  # stopped (or done) and waited for
+    assert not upside.thread.is_alive()
+
+
+@pytest.mark.timeout(180)
+def test_kanban_s_reversibility_is_decided_on_the_first_order_kept_when_its_reverse_wins_the_race() -> None:
+    # Kanban-PT-00005's net with 200 tokens in each of its four stages (the contest's Kanban-PT-00200):
+    # the first order reversed saturates forward in a fraction of a second and is not done backward
+    # in 40 s; the first order takes about 20 s forward and a twentieth of a second backward
+    from dataclasses import replace
+
+    small = load_pnml(ROOT / "tests" / "data" / "mcc" / "Kanban-PT-00005" / "model.pnml")
+    net = replace(small, initial_marking=Marking({p: 200 for p in small.initial_marking}))
+    bounds, flows = proven_bounds(net)
+    said: list[str] = []
+    r = analyse_symbolic(net, bounds, flows=flows, progress=said.append)
+    assert r.states == 31_731_714_717_364_931_267_341 and not r.deadlock
+    if any("order 2 (order 1 reversed) was the first done" in line for line in said):
+        assert any("order 1, the winner's upside down: its reachable set resumed from the race" in line
+                   for line in said)
+    assert r.reversible is True and r.live is True
+
+
 @pytest.mark.parametrize("seed", range(40))
 def test_the_reversed_order_holds_the_same_markings_level_for_level_upside_down(seed: int) -> None:
     from coordinator.analysis.mdd_order import events
