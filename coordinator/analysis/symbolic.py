@@ -744,10 +744,11 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         if kept is not None and back is not None and cpus() >= 2 and states > 1 and not result.deadlock:
             store.max_bytes -= spare
             upside = _Upside(sn, kept, held + spare, until, stop, say)
-        else:  # its store is freed: the bytes go back
+        else:  # the kept store, if any, is freed (the race and its lanes refer to it) and its bytes go back
+            if kept is not None:
+                kept.drop()
             store.max_bytes += held
             held = spare = 0
-        kept = None  # the thread has it, or it is freed
         try:
             _liveness(store, fwd, single, back, reach, counts, result, say, until, probes, stop, upside)
         finally:
@@ -1394,7 +1395,7 @@ class _Upside:
 
     def __init__(self, sn: SparseNet, kept: _Candidate, max_bytes: int, until: float, stop: threading.Event | None,
                  say: Callable[[str], None]) -> None:
-        self.say = say
+        self.say, self.kept = say, kept
         self.reversible: bool | None = None
         self.decided = _Cancel(stop)
         self.cancel = _Cancel(stop)
@@ -1420,9 +1421,10 @@ class _Upside:
             mk.set_watch(None, None)
 
     def end(self) -> None:
-        """Stop the thread and wait for it (its store is freed with it)."""
+        """Stop the thread, wait for it and free the kept candidate's store."""
         self.cancel.set()
         self.thread.join()
+        self.kept.drop()
 
 
 def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, reach: int, counts: list[int],
