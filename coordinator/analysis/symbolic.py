@@ -908,12 +908,15 @@ class _Candidate:
 
     def __init__(self, name: int, enc: Encoding, fwd: Events, store: _Store) -> None:
         self.name, self.enc, self.fwd, self.store = name, enc, fwd, store
-        self.dropped = False
 
     def drop(self) -> None:
         """Free the store (the candidate is out of the race)."""
         self.store = _Store(self.enc, 0)
-        self.dropped = True
+
+    @property
+    def dropped(self) -> bool:
+        """Its store was freed (:meth:`drop`: the only store of no bytes)."""
+        return self.store.max_bytes == 0
 
 
 class _Cancel:
@@ -1406,17 +1409,17 @@ class _Upside:
     def _run(self, sn: SparseNet, kept: _Candidate, max_bytes: int, until: float) -> None:
         mk.set_watch(until, None, self.cancel)
         try:
-            store = kept.store
-            store.max_bytes = max_bytes
-            t0 = time.monotonic()
-            reach = store.call(mk.MODE_SATURATE, kept.fwd, store.m0, check_overflow=True)
-            self.say(f"symbolic: order {kept.name}, the winner's upside down: its reachable set resumed from the race "
-                     f"in {time.monotonic() - t0:.1f} s ({store.nodes:,} nodes), backward from M0 next")
-            home = store.call(mk.MODE_SATURATE, events(sn, kept.enc, inverse=True, merge=True), store.m0, c=reach)
-            self.reversible = home == reach
-            self.decided.set()
-        except (_OutOfTime, AnalysisError):  # its time, its memory or a stop: the main thread's answer stands
-            pass
+            # its time, its memory or a stop ends it undecided: the main thread's answer stands
+            with contextlib.suppress(_OutOfTime, AnalysisError):
+                store = kept.store
+                store.max_bytes = max_bytes
+                t0 = time.monotonic()
+                reach = store.call(mk.MODE_SATURATE, kept.fwd, store.m0, check_overflow=True)
+                self.say(f"symbolic: order {kept.name}, the winner's upside down: its reachable set resumed from the "
+                         f"race in {time.monotonic() - t0:.1f} s ({store.nodes:,} nodes), backward from M0 next")
+                back = events(sn, kept.enc, inverse=True, merge=True)
+                self.reversible = store.call(mk.MODE_SATURATE, back, store.m0, c=reach) == reach
+                self.decided.set()
         finally:
             mk.set_watch(None, None)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import threading
 from pathlib import Path
@@ -236,9 +237,8 @@ def test_reversibility_on_the_order_upside_down_beside_the_later_phases_agrees_w
         if begun:
             mk.set_watch(time.monotonic() - 1.0, None)  # stopped at its first check, if it gets that far
             try:
-                kept.store.call(mk.MODE_SATURATE, kept.fwd, kept.store.m0, check_overflow=True)
-            except _OutOfTime:
-                pass
+                with contextlib.suppress(_OutOfTime):
+                    kept.store.call(mk.MODE_SATURATE, kept.fwd, kept.store.m0, check_overflow=True)
             finally:
                 mk.set_watch(None, None)
         said: list[str] = []
