@@ -42,6 +42,7 @@ Internal to :mod:`.symbolic`. Three decisions, each from the net's structure alo
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from math import comb
@@ -521,6 +522,45 @@ def _order(n: int, hypers: list[np.ndarray], deadline: float, starts: int = 8, s
     return best[1], best[0]
 
 
+def _flow_order(sn: SparseNet, owner: np.ndarray, n: int) -> np.ndarray:
+    """The ``n`` levels in the order a token flows from the initial marking: breadth first over
+    places, from the marked ones (by index) through each place's output transitions to their output
+    places, a level taking its position when the first of its places is reached; when the search
+    runs dry it starts again from the first place not reached. ``owner``: (|P|,) level of each
+    place, -1 for a fixed one (passed through, on no level). No score is lowered: on
+    IBMB2S565S3960-PT-none (a business process, one token at the start) this order scores 24,023
+    against FORCE's 18,553, but saturation takes 4.2 s on it and is not done in 20 s on FORCE's."""
+    outputs = sp.csr_matrix(sn.pre)  # row p: the transitions p feeds
+    post = sn.post  # column t: the places t marks
+    reached = np.zeros(sn.n_places, dtype=bool)
+    placed = np.zeros(n, dtype=bool)
+    order: list[int] = []
+    queue: deque[int] = deque()
+
+    def reach(p: int) -> None:
+        reached[p] = True
+        queue.append(p)
+        k = int(owner[p])
+        if k >= 0 and not placed[k]:
+            placed[k] = True
+            order.append(k)
+
+    for marked in np.flatnonzero(np.asarray(sn.m0) > 0):
+        reach(int(marked))
+    nxt = 0
+    while len(order) < n:
+        if not queue:
+            while reached[nxt]:
+                nxt += 1
+            reach(nxt)
+        p = queue.popleft()
+        for t in outputs.indices[outputs.indptr[p]:outputs.indptr[p + 1]]:
+            for q in post.indices[post.indptr[t]:post.indptr[t + 1]]:
+                if not reached[q]:
+                    reach(int(q))
+    return np.array(order, dtype=np.int64)
+
+
 #: a shared level meets at least this many other levels through transitions (and twice the median)
 SHARED_DEGREE = 8
 
@@ -556,7 +596,7 @@ def shared_levels(n: int, hypers: list[np.ndarray]) -> np.ndarray:
 
 
 def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, seconds: float = 5.0,
-           seed: int = 0, sink: bool = False, stop: Callable[[], bool] | None = None,
+           seed: int = 0, sink: bool = False, flow: bool = False, stop: Callable[[], bool] | None = None,
            max_bytes: int | None = None) -> Encoding:
     """Levels, local markings and order of the diagram of a bounded net (module docstring).
 
@@ -568,6 +608,8 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
         seed: the random starts of the order (another seed, another candidate order).
         sink: move the shared levels (:func:`shared_levels`) below all the others, each part in the
             order found; ``sunk`` says how many moved (0: the net has none, the order is unchanged).
+        flow: order the levels as tokens flow from the initial marking (:func:`_flow_order`)
+            instead of searching (``seed`` and ``sink`` are then not used).
         stop: asked between the starts of the order search; True ends it early (another thread
             needs no more orders).
         max_bytes: the bytes the encoding and its events may take (estimated from the levels'
@@ -602,16 +644,20 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
         if need > max_bytes:
             raise EncodingTooLarge(f"the encoding ({n_k:,} levels, {int(dom.sum()):,} local markings) would take about "
                                 f"{need / 2**30:.1f} GiB, above the {max_bytes / 2**30:.1f} GiB it may use")
-    shared = shared_levels(n_k, hypers) if sink else np.zeros(n_k, dtype=bool)
+    shared = shared_levels(n_k, hypers) if sink and not flow else np.zeros(n_k, dtype=bool)
     hypers += [np.unique(o[o >= 0]) for o in (owner[np.flatnonzero(y)] for y in flows)]
-    order, score = _order(n_k, hypers, start + seconds, seed=seed, stop=stop)
+    if flow:
+        order = _flow_order(sn, owner, n_k)
+    else:
+        order, score = _order(n_k, hypers, start + seconds, seed=seed, stop=stop)
     if shared.any():
         order = np.concatenate([order[~shared[order]], order[shared[order]]])
+    if flow or shared.any():
         pos = np.empty(n_k, dtype=np.int64)
         pos[order] = np.arange(n_k)
         kept = [h for h in hypers if h.size > 1]
         score = _score(pos, np.concatenate([[0], np.cumsum([h.size for h in kept])]).astype(np.int64),
-                       np.concatenate(kept).astype(np.int64))
+                       np.concatenate(kept).astype(np.int64)) if kept else 0.0
     groups = [groups[int(i)] for i in order]
     levels = tuple(ps for ps, _ in groups)
     local = tuple(loc for _, loc in groups)
