@@ -270,6 +270,50 @@ def test_kanban_s_reversibility_is_decided_on_the_first_order_kept_when_its_reve
     assert r.reversible is True and r.live is True
 
 
+def test_the_token_flow_s_order_places_the_levels_as_tokens_flow_from_the_initial_marking() -> None:
+    from coordinator.analysis.mdd_order import encode
+
+    # a → t0 → b → t1 → {c, d}; e is reached by no token: it comes last, from a second start
+    net = make_net("flow", {"a": 1}, {"t0": ({"a": 1}, {"b": 1}), "t1": ({"b": 1}, {"c": 1, "d": 1}),
+                                      "t2": ({"e": 1}, {"a": 1})}, places=("e", "d", "c", "b", "a"))
+    sn = sparse_net(net)
+    enc = encode(sn, np.ones(sn.n_places, dtype=np.int64), [], flow=True)
+    names = [net.places[int(ps[0])].id for ps in enc.levels]
+    assert names == ["a", "b", "d", "c", "e"] and enc.sunk == 0
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_the_token_flow_s_order_holds_the_markings_of_the_explicit_graph(seed: int) -> None:
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _Store
+
+    net, a, sn, _ = generated_encoding(seed)
+    bounds = np.array([a.place_bounds[p.id] for p in net.places], dtype=np.int64)
+    flow, plain = (encode(sn, bounds, [], flow=f) for f in (True, False))  # the same levels, another order
+    assert sorted(int(p) for ps in flow.levels for p in ps) == sorted(int(p) for ps in plain.levels for p in ps)
+    store = _Store(flow, 64 << 20)
+    assert store.count(store.closure(events(sn, flow, merge=True), store.m0)) == a.states
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_ibmb2s565s3960_s_markings_are_counted_on_the_token_flow_s_order() -> None:
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _Store
+
+    net = load_pnml(ROOT / "tests" / "data" / "mcc-large" / "IBMB2S565S3960-PT-none" / "model.pnml")
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, flow=True)
+    store = _Store(enc, 2 << 30)
+    assert store.count(store.closure(events(sn, enc, merge=True), store.m0)) == 15_510_635_947_410_534
+    said: list[str] = []
+    r = analyse_symbolic(net, bounds, flows=flows, progress=said.append)
+    assert r.states == 15_510_635_947_410_534 and int(r.place_bounds.max()) == 7
+    assert r.deadlock and r.deadlock_sequence is not None and r.deadlock_marking is not None
+    assert replays_to(net, r.deadlock_sequence, r.deadlock_marking)
+
+
 @pytest.mark.parametrize("seed", range(40))
 def test_the_reversed_order_holds_the_same_markings_level_for_level_upside_down(seed: int) -> None:
     from coordinator.analysis.mdd_order import events
