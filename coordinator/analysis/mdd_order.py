@@ -30,7 +30,9 @@ Internal to :mod:`.symbolic`. Three decisions, each from the net's structure alo
    and semiflows. On CloudReconfiguration-PT-303 (2,584 levels) FORCE alone scores 170,332 and
    saturation takes 20 s; a round of sifting (2 s) brings it to 130,163 and 5 s, two rounds to
    121,145 and 3.5 s. Resources shared by components that meet only through them
-   (:func:`shared_levels`) can be put below all the components instead.
+   (:func:`shared_levels`) can be put below all the components instead. With ``flow`` there is no
+   search: the levels come in the order a token flows from the initial marking (:func:`_flow_order`),
+   an order a low score can miss (a business process's, its forks and joins one after the other).
 3. **Events.** A transition becomes an event: its top and bottom levels and a local function per
    level it reads or changes (local value → local value, -1 where it is disabled). Events that are
    equal on every level but one, where they are enabled on disjoint values, are merged into one (the
