@@ -51,6 +51,7 @@ from coordinator.analysis.structure import (
     Analysis,
     analyse,
     graph_liveness,
+    liveness_levels,
     record_only_places,
     without_places,
 )
@@ -386,8 +387,8 @@ def controllability(a: Analysis, original: PetriNet) -> Verdict:
         dst = np.concatenate([dst, np.zeros(finished.size, dtype=dst.dtype)])
         tr = np.concatenate([tr, np.full(finished.size, n_t, dtype=tr.dtype)])
         levels, labels, terminal = graph_liveness(space.n_states, n_t + 1, src, dst, tr)
-    else:
-        levels, labels, terminal = graph_liveness(space.n_states, n_t + 1, src, dst, tr, out_ptr=space.out_ptr)
+    else:  # the graph's own components and levels, found once (the analysis has them already)
+        levels, labels, terminal = liveness_levels(space)
     levels = levels[:n_t]
     # only the task's own transitions are judged, not the operator's (see environment.py)
     own = [j for j in range(n_t) if ids[j] in original.transition_index]

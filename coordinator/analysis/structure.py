@@ -53,6 +53,7 @@ import os
 import sys
 import threading
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -322,20 +323,34 @@ class Analysis:
         return [k for k, v in values.items() if v is None]
 
 
+#: liveness_levels of the graphs still held (a graph's passes read them again: the robotic reading's
+#: controllability, beside the analysis; SafeBus-PT-06, 6,816,756 markings: 5.9 s a pass)
+_LIVENESS: weakref.WeakKeyDictionary[StateSpace, tuple[np.ndarray, np.ndarray, np.ndarray]] = (
+    weakref.WeakKeyDictionary())
+
+
 def liveness_levels(space: StateSpace) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Liveness level of each transition on a complete reachability graph: from its edges by
     scipy's strongly connected components, or, when the edges were not kept, by
     :meth:`.statespace.StateSpace.implicit_liveness` (the edges computed again from the markings).
+    Found once per graph: a second call on the same graph, while it is held, returns the same
+    arrays (read-only), the components not computed again.
 
     Returns:
         ``(levels, labels, terminal)``: levels (|T|,) int64 in {0, 1, 3, 4}; the strongly connected
         component of each state (N,) int32; a boolean (n_components,) marking terminal components.
     """
-    if not space.edges_kept:
-        return space.implicit_liveness()
-    # edges are sorted by source, so the CSR matrix is built without sorting
-    return graph_liveness(space.n_states, len(space.net.transitions), space.src, space.dst, space.transition,
-                          out_ptr=space.out_ptr)
+    found = _LIVENESS.get(space)
+    if found is None:
+        if not space.edges_kept:
+            found = space.implicit_liveness()
+        else:  # edges are sorted by source, so the CSR matrix is built without sorting
+            found = graph_liveness(space.n_states, len(space.net.transitions), space.src, space.dst,
+                                   space.transition, out_ptr=space.out_ptr)
+        for array in found:
+            array.flags.writeable = False
+        _LIVENESS[space] = found
+    return found
 
 
 def graph_liveness(n: int, n_t: int, src: np.ndarray, dst: np.ndarray, transition: np.ndarray,

@@ -162,6 +162,19 @@ outputs = { done = 1 }
 """
 
 
+def test_the_report_finds_the_graph_s_strongly_connected_components_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    # the analysis's liveness levels and the controllable verdict read the same components
+    from coordinator.analysis import robotic, structure
+
+    calls: list[int] = []
+    components = structure.graph_liveness
+    for module in (structure, robotic):
+        monkeypatch.setattr(module, "graph_liveness", lambda *a, **k: calls.append(a[0]) or components(*a, **k))
+    rep = report(loads_net(task(RECOVERS)))
+    assert rep["robotic"]["controllable"]["holds"] is True and rep["live"] is True
+    assert calls == [rep["states"]]
+
+
 def test_terminating_task_ending_in_its_home_marking_is_controllable_with_the_end_restarted() -> None:
     rep = report(loads_net(TERMINATES))
     assert rep["deadlock"] is True and rep["live"] is False
