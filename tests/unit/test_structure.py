@@ -283,3 +283,43 @@ def test_when_the_search_without_edges_stops_too_its_markings_still_show_every_t
     assert any("stopped too, after" in n for n in a.notes)
     assert a.quasi_live is True and a.sources["quasi_live"] == "reachability graph (explored part)"
     assert a.deadlock is None and a.live is None
+
+
+def conflict_flags(net: PetriNet, **how: object) -> tuple[list[tuple[str, bool | None]], bool]:
+    from coordinator.analysis.structure import _conflicts
+
+    conflicts, finished = _conflicts(net, explore(net, max_states=5_000), **how)  # type: ignore[arg-type]
+    return [(c.place, c.effective) for c in conflicts], finished
+
+
+def test_the_edges_decide_the_conflicts_as_the_markings_do_on_random_nets_with_inhibitor_arcs() -> None:
+    from test_statespace import random_net
+
+    compared = 0
+    for seed in range(200):
+        rng = np.random.default_rng(seed)
+        net = random_net(rng, n_places=int(rng.integers(3, 7)), n_transitions=int(rng.integers(4, 10)))
+        if not explore(net, max_states=5_000).complete:
+            continue
+        blocks, done = conflict_flags(net)
+        edges, finished = conflict_flags(net, seconds=-1.0, on_edges=True)  # the blocks get no time at all
+        assert done and finished and edges == blocks, seed
+        compared += any(flag is not None for _, flag in blocks)
+    assert compared >= 30
+
+
+def test_a_conflict_of_more_than_64_transitions_is_decided_pair_by_pair_on_the_edges() -> None:
+    n = 70
+    bites = make_net("bites", {"p": 1}, {f"t{i}": ({"p": 1}, {f"q{i}": 1}) for i in range(n)})
+    loops = make_net("loops", {"p": 1, **{f"r{i}": 1 for i in range(n)}},
+                     {f"t{i}": ({"p": 1, f"r{i}": 1}, {"p": 1, f"r{i}": 1}) for i in range(n)})
+    for net, effective in ((bites, True), (loops, False)):
+        flags, finished = conflict_flags(net, seconds=-1.0, on_edges=True)
+        assert finished and flags[0] == ("p", effective)
+        assert conflict_flags(net) == (flags, True)
+
+
+def test_without_their_edges_the_conflicts_left_when_time_runs_out_are_undecided() -> None:
+    net = mutex()
+    assert conflict_flags(net, seconds=-1.0) == ([("free", None)], False)
+    assert conflict_flags(net, seconds=-1.0, on_edges=True) == ([("free", True)], True)
