@@ -381,8 +381,8 @@ def controllability(a: Analysis, original: PetriNet) -> Verdict:
     src, dst, tr = space.src, space.dst, space.transition
     # a finished task: a dead marking in the home condition; restart it (pseudo transition n_t)
     expected, _ = home_condition(original)
-    dead = space.deadlocks()
-    finished = dead[_home_states(space, expected, dead)]
+    dead_markings = space.deadlocks()
+    finished = dead_markings[_home_states(space, expected, dead_markings)]
     finished = finished[finished != 0]
     restarted = bool(finished.size)
     if restarted:
