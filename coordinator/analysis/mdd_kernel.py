@@ -38,10 +38,10 @@ to a lossy computed table (a cache of two-entry buckets; an entry's two keys and
 by side, so a look-up reads one or two cache lines; a new key goes first in its bucket and moves
 the older entry to second, dropping the one that was there), which never changes a result, only
 what is recomputed. (A direct-mapped table, as CUDD's, drops an entry at every collision: on
-FMS-PT-00200, 239 million steps of saturation instead of 75 million.) Buffers grow inside the one compiled call, within a byte budget: the computed table
-stops growing where it would pass it, and status ``MEMORY`` comes when the nodes' own buffers
-would. The store is handed back to the caller, who passes it to the next
-call; nothing is ever freed (the store lives as long as one analysis).
+FMS-PT-00200, 239 million steps of saturation instead of 75 million.) Buffers grow inside the one
+compiled call, within a byte budget: the computed table stops growing where it would pass it, and
+status ``MEMORY`` comes when the nodes' own buffers would. The store is handed back to the caller,
+who passes it to the next call; nothing is ever freed (the store lives as long as one analysis).
 """
 
 from __future__ import annotations
