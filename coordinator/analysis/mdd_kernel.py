@@ -799,6 +799,8 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 nct = np.zeros((gc, 3), np.int64)
                 nct[:, 0] = -1
                 ct_used = 0
+                # the insertion of _steps at a node's check-in, written again here: _steps hands no
+                # array to a helper (module docstring), and this runs once per growth
                 for x in range(ccap):  # each bucket's older entry first, so its newer stays first
                     x ^= 1
                     if ct[x, 0] != -1:
