@@ -60,18 +60,20 @@ jit.configure()  # numba's cache in the user's cache directory: before numba is 
 from numba import njit, objmode  # noqa: E402
 
 __all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "Flag", "IMAGE_CHAIN_DEEP", "IMAGE_CHAIN_ROOT",
-           "IMAGE_EACH", "MEMORY", "MODE_APPLY", "MODE_IMAGE", "MODE_RESTRICT", "MODE_SATURATE", "NO_CONSTRAINT", "OK",
-           "OVERFLOW", "STOPPED", "TERMINAL", "add_path", "clear_cache", "count", "enabled_counts", "enabling_values",
-           "max_weight", "new_store", "node_of_path", "presence", "run", "set_watch"]
+           "IMAGE_EACH", "MEMORY", "MODE_APPLY", "MODE_DEAD", "MODE_IMAGE", "MODE_RESTRICT", "MODE_SATURATE",
+           "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "WIDE", "add_path", "clear_cache", "count",
+           "dead_tables", "enabled_counts", "enabling_values", "max_weight", "new_store", "node_of_path", "presence",
+           "run", "set_watch"]
 
 EMPTY, TERMINAL = 0, 1
 NO_CONSTRAINT = -1
-#: run statuses: done; a firing left a level's values; the byte budget; the deadline (or the watch)
-OK, OVERFLOW, MEMORY, STOPPED = 0, 1, 2, 3
+#: run statuses: done; a firing left a level's values; the byte budget; the deadline (or the watch);
+#: MODE_DEAD's table of pending conditions is full
+OK, OVERFLOW, MEMORY, STOPPED, WIDE = 0, 1, 2, 3, 4
 #: loop steps between two calls of the watch (in the interpreter)
 _WATCH_STEPS = 1 << 20
 #: what :func:`run` computes
-MODE_SATURATE, MODE_IMAGE, MODE_APPLY, MODE_RESTRICT = 0, 1, 2, 3
+MODE_SATURATE, MODE_IMAGE, MODE_APPLY, MODE_RESTRICT, MODE_DEAD = 0, 1, 2, 3, 4
 APPLY_UNION, APPLY_INTER, APPLY_DIFF = 0, 1, 2
 #: what MODE_IMAGE computes: the union of every event's image of the set; the set and its chained
 #: images, the events of the deepest tops first, or of the root's first
@@ -79,9 +81,9 @@ IMAGE_EACH, IMAGE_CHAIN_DEEP, IMAGE_CHAIN_ROOT = 0, 1, 2
 #: why :func:`_steps` returned: a buffer of the store is full; done (or a status is set)
 _FULL, _DONE = 0, 1
 #: frame kinds
-_SAT, _FIRE, _NODE, _APPLY, _RESTRICT, _IMAGE = 0, 1, 2, 3, 4, 5
+_SAT, _FIRE, _NODE, _APPLY, _RESTRICT, _IMAGE, _DEAD = 0, 1, 2, 3, 4, 5, 6
 #: operation tags in the computed table
-_OP_SAT, _OP_FIRE, _OP_APPLY, _OP_RESTRICT, _OP_IMAGE = 1, 2, 3, 4, 5
+_OP_SAT, _OP_FIRE, _OP_APPLY, _OP_RESTRICT, _OP_IMAGE, _OP_DEAD = 1, 2, 3, 4, 5, 6
 #: meta array layout: nodes used, kid slots used, entries of the unique table, level of an overflow
 META_NODES, META_KIDS, META_UNIQUE, META_OVERFLOW_LEVEL, META_CT_USED = 0, 1, 2, 3, 4
 META_SIZE = 5
@@ -154,6 +156,70 @@ def clear_cache(store: tuple[np.ndarray, ...]) -> None:
     """Forget the computed table of a store (its results depend on the events of the calls)."""
     store[0][META_CT_USED] = 0
     store[6][:, 0] = -1
+
+
+def dead_tables(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray,
+                ev_slot: np.ndarray, slot_ptr: np.ndarray, nxt: np.ndarray, max_sets: int = 1 << 19,
+                max_items: int = 1 << 22) -> tuple[np.ndarray, ...] | None:
+    """The tables of MODE_DEAD for a set of events (arrays as :func:`run` takes them).
+
+    An event is enabled in a marking when each of its *literals* holds: at each level where its
+    local function disables some value, the marking's local value is one it maps. Its literals from
+    one on, in level order, are a *residual*, numbered once for every event with the same ones (the
+    events of one shared place below, on many nets). MODE_DEAD walks a set from the root with the
+    set of residuals pending on the path (their events enabled by the levels above); a residual
+    whose last literal holds ends the path, the marking enabling its event. The sets met are numbered
+    as the call goes, at most ``max_sets`` of ``max_items`` residuals in all (status WIDE beyond).
+
+    Returns:
+        ``dz`` for :func:`run`: (residual's level, residual after it (0: none left), offset of its
+        mask, masks (1: the value holds), first residual of the events whose first literal is at
+        each level (pointers, shape (K + 1,), and residuals), the sets' pointers, items and hash
+        table, and ``[sets, items]`` used), all int64; None when an event has no literal (it is
+        enabled in every marking: no marking is dead).
+    """
+    n_levels = dom.shape[0]
+    res: dict[tuple[int, int, int], int] = {}
+    masks: dict[tuple[int, bytes], int] = {}
+    r_level, r_next, r_mask_ptr = [-1], [0], [0]  # residual 0: nothing left to hold
+    flat: list[np.ndarray] = []
+    used = 0
+    starts: list[set[int]] = [set() for _ in range(n_levels)]
+    for e in range(ev_top.shape[0]):
+        top = int(ev_top[e])
+        slots = ev_slot[ev_slot_ptr[e]:ev_slot_ptr[e] + int(ev_bot[e]) - top + 1]
+        lits: list[tuple[int, np.ndarray]] = []
+        for off in np.flatnonzero(slots >= 0):
+            k = top + int(off)
+            holds = nxt[slot_ptr[slots[off]]:slot_ptr[slots[off]] + dom[k]] >= 0
+            if not holds.all():
+                lits.append((k, holds))
+        if not lits:
+            return None
+        r = 0
+        for k, holds in reversed(lits):
+            m = masks.get((k, holds.tobytes()))
+            if m is None:
+                m = masks[(k, holds.tobytes())] = used
+                flat.append(holds.astype(np.int64))
+                used += holds.shape[0]
+            rid = res.get((k, m, r))
+            if rid is None:
+                rid = res[(k, m, r)] = len(r_level)
+                r_level.append(k)
+                r_next.append(r)
+                r_mask_ptr.append(m)
+            r = rid
+        starts[lits[0][0]].add(r)
+    start_ptr = np.zeros(n_levels + 1, np.int64)
+    start_ptr[1:] = np.cumsum([len(x) for x in starts])
+    start = np.array([r for x in starts for r in sorted(x)], np.int64)
+    s_ptr = np.zeros(max_sets + 1, np.int64)  # set 0: the empty set
+    s_hash = np.full(2 * max_sets, -1, np.int64)
+    s_meta = np.array([1, 0], np.int64)
+    return (np.array(r_level, np.int64), np.array(r_next, np.int64), np.array(r_mask_ptr, np.int64),
+            np.concatenate(flat) if flat else np.zeros(1, np.int64), start_ptr, start, s_ptr,
+            np.zeros(max_items, np.int64), s_hash, s_meta)
 
 
 @njit(cache=True, inline="always")
@@ -271,8 +337,9 @@ def add_path(values: np.ndarray, dom: np.ndarray, meta: np.ndarray, level: np.nd
 def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, n_levels: int,
              bot: int) -> tuple[int, int, int, int, int]:
     """For a call of kind ``ty``: its result when it is immediate (else -1), its operands in canonical
-    order, and its two computed-table key words. ``bot``: event e's bottom level (FIRE, RESTRICT); a
-    number, not the table, so that the inlined call keeps no reference count."""
+    order, and its two computed-table key words. ``bot``: event e's bottom level (FIRE, RESTRICT), or
+    the number of events whose first literal is at level k or below (DEAD); a number, not the table, so
+    that the inlined call keeps no reference count."""
     if ty == _SAT:
         if a == EMPTY or k == n_levels:
             return a, a, b, 0, 0
@@ -303,6 +370,11 @@ def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, 
         if e != APPLY_DIFF and a > b:
             a, b = b, a
         return -1, a, b, (_OP_APPLY << 40) + (e << 36) + a, b
+    if ty == _DEAD:
+        # b: the set of pending residuals; bot: the events whose first literal is at level k or below
+        if a == EMPTY or k == n_levels or (b == 0 and bot == 0):
+            return a, a, b, 0, 0
+        return -1, a, b, (_OP_DEAD << 40) + a, b
     # _RESTRICT: b is 1 to keep the markings where event e is enabled, 0 where it is disabled
     if a == EMPTY:
         return EMPTY, a, b, 0, 0
@@ -323,9 +395,10 @@ def _full(n_nodes: int, n_kids: int, n_unique: int, ct_used: int, node_cap: int,
 
 @njit(cache=True, nogil=True)
 def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray, ev_slot: np.ndarray,
-           slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray, meta: np.ndarray,
-           level: np.ndarray, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, unique: np.ndarray,
-           ct: np.ndarray, check_overflow: bool, saturating: bool, max_dom: int, f_ty: np.ndarray,
+           slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray,
+           dz: tuple[np.ndarray, ...], meta: np.ndarray, level: np.ndarray, offset: np.ndarray, size: np.ndarray,
+           kids: np.ndarray, unique: np.ndarray, ct: np.ndarray, check_overflow: bool, saturating: bool,
+           max_dom: int, f_ty: np.ndarray,
            f_pc: np.ndarray, f_k: np.ndarray, f_a: np.ndarray, f_b: np.ndarray, f_c: np.ndarray, f_e: np.ndarray,
            f_i: np.ndarray, f_j: np.ndarray, f_buf: np.ndarray, f_k0: np.ndarray, f_k1: np.ndarray,
            f_s: np.ndarray, arena: np.ndarray, depth: int, atop: int, ret: int, ct_used: int,
@@ -341,6 +414,7 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
     status = OK
     ccap = ct.shape[0]
     cmask = ccap - 1
+    r_level, r_next, r_mask_ptr, r_mask, st_ptr, st, s_ptr, s_items, s_hash, s_meta = dz
     # a call: the caller sets (cty, ck, ca, cb, cc, ce) and its own continuation pc, then jumps to
     # ``call``; an immediate or cached result comes back in ret at once, else a frame is pushed
     while depth > 0:
@@ -581,7 +655,7 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
                     cc = cons
                     ce = e
                     f_pc[d] = 2
-                else:  # _RESTRICT
+                elif ty == _RESTRICT:
                     e = f_e[d]
                     if k >= ev_top[e]:
                         sl = ev_slot[ev_slot_ptr[e] + k - ev_top[e]]
@@ -595,6 +669,81 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
                     cb = f_b[d]
                     ce = e
                     f_pc[d] = 2
+                else:  # _DEAD: the residuals pending below value i, sorted and once each, after the free end
+                    s = f_b[d]  # of the sets' items; the set is then found, or added, in the sets' hash table
+                    base = s_meta[1]
+                    n = 0
+                    killed = False
+                    q = s_ptr[s]
+                    qs = st_ptr[k]
+                    while True:
+                        if q < s_ptr[s + 1]:
+                            r = s_items[q]
+                            q += 1
+                        elif qs < st_ptr[k + 1]:
+                            r = st[qs]
+                            qs += 1
+                        else:
+                            break
+                        if r_level[r] == k:
+                            if r_mask[r_mask_ptr[r] + i] == 0:
+                                continue  # its event is disabled in these markings
+                            r = r_next[r]
+                            if r == 0:  # its event is enabled: no marking below is dead
+                                killed = True
+                                break
+                        if base + n >= s_items.shape[0]:
+                            status = WIDE
+                            break
+                        x = base + n
+                        while x > base and s_items[x - 1] > r:
+                            x -= 1
+                        if x > base and s_items[x - 1] == r:
+                            continue
+                        for y in range(base + n, x, -1):
+                            s_items[y] = s_items[y - 1]
+                        s_items[x] = r
+                        n += 1
+                    if status != OK:
+                        break
+                    if killed:
+                        arena[b0 + i] = EMPTY
+                        f_i[d] = i + 1
+                        continue
+                    sid = 0
+                    if n > 0:
+                        hm = s_hash.shape[0] - 1
+                        hs = np.int64(_node_hash(0, s_items, base, n) & np.uint64(hm))
+                        sid = -1
+                        while s_hash[hs] >= 0:
+                            c2 = s_hash[hs]
+                            if s_ptr[c2 + 1] - s_ptr[c2] == n:
+                                same = True
+                                for y in range(n):
+                                    if s_items[s_ptr[c2] + y] != s_items[base + y]:
+                                        same = False
+                                        break
+                                if same:
+                                    sid = c2
+                                    break
+                            hs = (hs + 1) & hm
+                        if sid < 0:
+                            ns = s_meta[0]
+                            if ns + 2 > s_ptr.shape[0] or 2 * (ns + 1) > s_hash.shape[0]:
+                                status = WIDE
+                                break
+                            sid = ns
+                            s_ptr[ns + 1] = base + n
+                            s_hash[hs] = ns
+                            s_meta[0] = ns + 1
+                            s_meta[1] = base + n
+                    cty = _DEAD
+                    ck = k + 1
+                    ca = ch
+                    cb = sid
+                    f_pc[d] = 2
+            if status != OK:
+                break
             if pc == 8:
                 f_pc[d] = 9
                 f_ty[depth] = _NODE
@@ -638,7 +787,8 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
             continue
         # the call: immediate, cached, or a new frame
         quick, ca, cb, key0, key1 = _prepare(cty, ck, ca, cb, cc, ce, saturating, n_levels,
-                                              ev_bot[ce] if cty == _FIRE or cty == _RESTRICT else 0)
+                                              ev_bot[ce] if cty == _FIRE or cty == _RESTRICT else (
+                                                  st_ptr[n_levels] - st_ptr[ck] if cty == _DEAD else 0))
         if quick < 0:
             s = _slot(key0, key1, cmask - 1)
             if ct[s, 0] == key0 and ct[s, 1] == key1:
@@ -664,9 +814,9 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
 @njit(cache=True, nogil=True)  # two variable orders race on two cores (symbolic._race)
 def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray,
         ev_slot: np.ndarray, slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray,
-        meta: np.ndarray, level: np.ndarray, offset: np.ndarray, size: np.ndarray, kids: np.ndarray,
-        unique: np.ndarray, ct: np.ndarray, a_in: int, b_in: int,
-        c_in: int, arg: int, check_overflow: bool, max_bytes: int) -> tuple:  # type: ignore[type-arg]
+        dz: tuple[np.ndarray, ...], meta: np.ndarray, level: np.ndarray, offset: np.ndarray, size: np.ndarray,
+        kids: np.ndarray, unique: np.ndarray, ct: np.ndarray, a_in: int, b_in: int, c_in: int, arg: int,
+        check_overflow: bool, max_bytes: int) -> tuple:  # type: ignore[type-arg]
     """One operation on the store (see the module docstring).
 
     Args:
@@ -674,14 +824,18 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
             MODE_IMAGE (``arg`` IMAGE_EACH: one step of every event from ``a_in``; IMAGE_CHAIN_DEEP or
             _ROOT: ``a_in`` and its chained images, each event fired on the set so far, the events of
             the deepest tops first or of the root's first; inside ``c_in``, not saturated),
-            MODE_APPLY (``arg`` in APPLY_UNION/INTER/DIFF of ``a_in`` and ``b_in``) or MODE_RESTRICT
-            (the markings of ``a_in`` in which event ``arg`` is enabled if ``b_in`` is 1, disabled if 0).
+            MODE_APPLY (``arg`` in APPLY_UNION/INTER/DIFF of ``a_in`` and ``b_in``), MODE_RESTRICT
+            (the markings of ``a_in`` in which event ``arg`` is enabled if ``b_in`` is 1, disabled if 0)
+            or MODE_DEAD (the markings of ``a_in`` in which no event of ``dz`` is enabled).
         dom: (K,) int64 local domain sizes, level 0 at the root.
         ev_top, ev_bot: (E,) int64 top and bottom level of each event.
         ev_slot_ptr, ev_slot: for event e and level k in [top, bot], ``ev_slot[ev_slot_ptr[e] + k -
             top]`` is the index of its local function, or -1 where the event leaves the level alone.
         slot_ptr, nxt: local function s maps value i to ``nxt[slot_ptr[s] + i]`` (-1: disabled).
         evtop_ptr, evtop: the events whose top is level k: ``evtop[evtop_ptr[k]:evtop_ptr[k + 1]]``.
+        dz: MODE_DEAD's tables (:func:`dead_tables`; for the other modes any, as :func:`dead_tables`
+            of no event). Its sets are filled by the call: a computed result of MODE_DEAD names a set by
+            its number, so a new ``dz`` needs the computed table cleared (:func:`clear_cache`).
         meta, level, offset, size, kids, unique, ct: the store (:func:`new_store`, or
             a previous result).
         a_in, b_in, c_in: operand nodes (c_in: a constraint node at the root level, or NO_CONSTRAINT).
@@ -732,9 +886,13 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
         f_e[0] = arg
         depth = 1
     else:
-        ty0 = _SAT if mode == MODE_SATURATE else (_APPLY if mode == MODE_APPLY else _RESTRICT)
+        ty0 = _SAT if mode == MODE_SATURATE else (_APPLY if mode == MODE_APPLY else (
+            _RESTRICT if mode == MODE_RESTRICT else _DEAD))
+        if ty0 == _DEAD:
+            b_in = 0  # no residual pending at the root
         quick, a0, b0_, key0, key1 = _prepare(ty0, 0, a_in, b_in, c_in, arg, saturating, n_levels,
-                                                ev_bot[arg] if ty0 == _RESTRICT else 0)
+                                                ev_bot[arg] if ty0 == _RESTRICT else (
+                                                    int(dz[4][n_levels]) if ty0 == _DEAD else 0))
         if quick >= 0:
             ret = quick
         else:
@@ -819,7 +977,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 ccap = gc
                 ct = nct
         why, depth, atop, ret, status, ct_used, steps = _steps(
-            dom, ev_top, ev_bot, ev_slot_ptr, ev_slot, slot_ptr, nxt, evtop_ptr, evtop, meta, level, offset,
+            dom, ev_top, ev_bot, ev_slot_ptr, ev_slot, slot_ptr, nxt, evtop_ptr, evtop, dz, meta, level, offset,
             size, kids, unique, ct, check_overflow, saturating, max_dom, f_ty, f_pc, f_k, f_a, f_b, f_c, f_e,
             f_i, f_j, f_buf, f_k0, f_k1, f_s, arena, depth, atop, ret, ct_used, steps, ct_max)
         if why != _FULL:
