@@ -23,6 +23,9 @@ driven by :mod:`coordinator.analysis.symbolic`, which documents the results. Wha
   deepest tops first or the root's first, so one call can go many steps deep.
 * **Set operations** (``APPLY``: union, intersection, difference) and ``RESTRICT`` (the markings of a
   set in which an event is enabled, or disabled).
+* **The dead markings of a set in one pass** (``DEAD``): down each path, the set of the events'
+  residual conditions still pending (:func:`dead_tables`), numbered as met; a node's result is
+  cached on the node and that set's number.
 * **Counts** that build no node: the paths of a set (:func:`count`), and per event the paths on
   which it is enabled (:func:`enabled_counts`), exact modulo primes.
 
