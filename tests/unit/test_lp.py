@@ -168,17 +168,17 @@ def test_a_net_without_any_semiflow_gets_an_empty_cover_from_one_lp() -> None:
     assert len(cover) == 1 and (cover[0] == 1).all()
 
 
-@pytest.mark.parametrize("near", [True, False])
-def test_the_cover_by_neighbourhood_lps_finds_the_small_semiflows_of_the_whole_net(near: bool) -> None:
-    # a ring of philosophers beside a producer feeding a chain (no semiflow there): over
-    # neighbourhoods every LP is small, a place of the chain gets none once its part stops growing,
-    # and every y returned is a semiflow of the whole net, as with the LPs over the whole net
+@pytest.mark.parametrize("warm", [True, False])
+def test_the_cover_finds_the_small_semiflows_from_scratch_and_from_one_basis_to_the_next(warm: bool) -> None:
+    # a ring of philosophers beside a producer feeding a chain (no semiflow there): the LPs of
+    # successive places share one HiGHS instance, a place of the chain gets none (its LP is
+    # infeasible, and the next one starts from there when warm), and every y returned is a semiflow
     n = 40
     marking, trans = philosophers_arcs(n)
     trans |= {"produce": ({}, {"c0": 1})} | {f"move{i}": ({f"c{i}": 1}, {f"c{i + 1}": 1}) for i in range(5)}
     net = make_net("both", marking, trans)
     sn = sparse_net(net)
-    cover = lp.semiflow_cover(sn, seconds=60.0, near=near)
+    cover = lp.semiflow_cover(sn, seconds=60.0, warm=warm)
     c = sn.incidence.toarray()
     assert all((y >= 0).all() and not (y @ c).any() for y in cover)
     covered = np.zeros(sn.n_places, dtype=bool)
