@@ -440,8 +440,8 @@ def semiflow_cover(sn: SparseNet, *, seconds: float = 3.0, covered: np.ndarray |
     (:class:`_Through`), each from scratch while the first one's time says that all of them fit in
     ``seconds`` (its vertex then does not depend on the order of the places), else each from the
     last one's basis: Philosophers-PT-000500's 1,000 semiflows over 2,500 places in 1.5 s,
-    RwMutex-PT-r0500w0010's 1,010 over 1,520 places in 1.0 s (7.2 s and 4.6 s from scratch; 12.0 s
-    and 8.2 s with an LP built for each place, over the place's neighbourhood or the whole net).
+    RwMutex-PT-r0500w0010's 1,010 over 1,520 places in 1.0 s (7.2 s and 4.6 s from scratch; 11.8 s
+    and 8.4 s with an LP built for each place over the whole net).
 
     Args:
         sn: the net's sparse matrices.
