@@ -399,6 +399,7 @@ def _full(n_nodes: int, n_kids: int, n_unique: int, ct_used: int, node_cap: int,
 @njit(cache=True, nogil=True)
 def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray, ev_slot: np.ndarray,
            slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray,
+           dom_ptr: np.ndarray, byval_ptr: np.ndarray, byval: np.ndarray,
            dz: tuple[np.ndarray, ...], meta: np.ndarray, level: np.ndarray, offset: np.ndarray, size: np.ndarray,
            kids: np.ndarray, unique: np.ndarray, ct: np.ndarray, check_overflow: bool, saturating: bool,
            max_dom: int, f_ty: np.ndarray,
@@ -447,9 +448,9 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
         ce = 0
         if ty == _NODE:
             # Ciardo's loop: the dirty values of the node (its own flags, after the node's buffer in
-            # the arena) are fired by every event of the level until none is left
-            lo = evtop_ptr[k]
-            hi = evtop_ptr[k + 1]
+            # the arena) are fired by every event of the level enabled on them until none is left;
+            # the events of level k enabled on value i: byval[byval_ptr[dom_ptr[k] + i]:...[... + 1]]
+            vk = dom_ptr[k]
             b0 = f_buf[d]
             fl = f_j[d]
             if pc == 0:
@@ -459,12 +460,12 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
                     arena[atop + x] = 1 if arena[b0 + x] != EMPTY else 0
                 atop += dom[k]
                 f_i[d] = -1
-                f_e[d] = hi
+                f_e[d] = 0
                 f_s[d] = 0
                 pc = 2
             if pc == 3:  # a firing is back
                 i = f_i[d]
-                e = evtop[f_e[d]]
+                e = byval[f_e[d]]
                 j = nxt[slot_ptr[ev_slot[ev_slot_ptr[e]]] + i]
                 if ret != EMPTY:
                     if j >= dom[k]:
@@ -491,8 +492,9 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
                 pc = 2
             while pc == 2 and cty < 0:
                 ei = f_e[d]
-                if ei == hi:  # the next dirty value: the lowest, searched from f_s (none below it), so
-                    i = -1  # a sweep upwards reads each value once, not once per value fired
+                i = f_i[d]
+                if i < 0 or ei == byval_ptr[vk + i + 1]:  # the next dirty value: the lowest, searched
+                    i = -1  # from f_s (none below it), so a sweep upwards reads each value once
                     for x in range(f_s[d], dom[k]):
                         if arena[fl + x] != 0:
                             i = x
@@ -503,11 +505,10 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
                     f_s[d] = i + 1
                     arena[fl + i] = 0
                     f_i[d] = i
-                    f_e[d] = lo
+                    f_e[d] = byval_ptr[vk + i]
                     continue
-                i = f_i[d]
                 v = arena[b0 + i]
-                e = evtop[ei]
+                e = byval[ei]
                 j = nxt[slot_ptr[ev_slot[ev_slot_ptr[e]]] + i]  # the top level always has a function
                 if v == EMPTY or j < 0 or (j >= dom[k] and not check_overflow):
                     f_e[d] = ei + 1
@@ -814,6 +815,43 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
     return _DONE, depth, atop, ret, status, ct_used, steps
 
 
+@njit(cache=True, nogil=True)
+def _by_value(dom: np.ndarray, ev_slot_ptr: np.ndarray, ev_slot: np.ndarray, slot_ptr: np.ndarray, nxt: np.ndarray,
+              evtop_ptr: np.ndarray, evtop: np.ndarray, saturating: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The events of each level that are enabled on each of its values, for saturation's loop over a
+    node's values (``NODE``): ``(dom_ptr, byval_ptr, byval)``, the events of level k enabled on value
+    i being ``byval[byval_ptr[dom_ptr[k] + i]:byval_ptr[dom_ptr[k] + i + 1]]``, in the order of
+    ``evtop``. Enabled: the event's function at its top level maps i to a value, in
+    the level's domain or not (an overflow is the loop's to report). Empty tables but ``dom_ptr``
+    when not ``saturating``. On Peterson-PT-4 the loop over every event of the level for each dirty
+    value read 210 million (value, event) pairs to fire 12 million."""
+    n_levels = dom.shape[0]
+    dom_ptr = np.zeros(n_levels + 1, np.int64)
+    for k in range(n_levels):
+        dom_ptr[k + 1] = dom_ptr[k] + dom[k]
+    if not saturating:
+        return dom_ptr, np.zeros(1, np.int64), np.zeros(0, np.int64)
+    byval_ptr = np.zeros(dom_ptr[n_levels] + 1, np.int64)
+    for k in range(n_levels):
+        for ei in range(evtop_ptr[k], evtop_ptr[k + 1]):
+            f = slot_ptr[ev_slot[ev_slot_ptr[evtop[ei]]]]
+            for i in range(dom[k]):
+                if nxt[f + i] >= 0:
+                    byval_ptr[dom_ptr[k] + i + 1] += 1
+    for x in range(dom_ptr[n_levels]):
+        byval_ptr[x + 1] += byval_ptr[x]
+    byval = np.zeros(byval_ptr[dom_ptr[n_levels]], np.int64)
+    fill = byval_ptr[:-1].copy()
+    for k in range(n_levels):
+        for ei in range(evtop_ptr[k], evtop_ptr[k + 1]):
+            f = slot_ptr[ev_slot[ev_slot_ptr[evtop[ei]]]]
+            for i in range(dom[k]):
+                if nxt[f + i] >= 0:
+                    byval[fill[dom_ptr[k] + i]] = evtop[ei]
+                    fill[dom_ptr[k] + i] += 1
+    return dom_ptr, byval_ptr, byval
+
+
 @njit(cache=True, nogil=True)  # two variable orders race on two cores (symbolic._race)
 def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray,
         ev_slot: np.ndarray, slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray,
@@ -856,6 +894,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
     for k in range(n_levels):
         max_dom = max(max_dom, dom[k])
     saturating = mode == MODE_SATURATE
+    dom_ptr, byval_ptr, byval = _by_value(dom, ev_slot_ptr, ev_slot, slot_ptr, nxt, evtop_ptr, evtop, saturating)
     # computed table: buckets of two entries (key words and value), grown (and refilled) as it fills up
     ccap = ct.shape[0]
     ct_used = meta[META_CT_USED]
@@ -980,7 +1019,8 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 ccap = gc
                 ct = nct
         why, depth, atop, ret, status, ct_used, steps = _steps(
-            dom, ev_top, ev_bot, ev_slot_ptr, ev_slot, slot_ptr, nxt, evtop_ptr, evtop, dz, meta, level, offset,
+            dom, ev_top, ev_bot, ev_slot_ptr, ev_slot, slot_ptr, nxt, evtop_ptr, evtop, dom_ptr, byval_ptr, byval,
+            dz, meta, level, offset,
             size, kids, unique, ct, check_overflow, saturating, max_dom, f_ty, f_pc, f_k, f_a, f_b, f_c, f_e,
             f_i, f_j, f_buf, f_k0, f_k1, f_s, arena, depth, atop, ret, ct_used, steps, ct_max)
         if why != _FULL:
