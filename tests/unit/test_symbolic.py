@@ -200,6 +200,25 @@ def test_the_breadth_first_trace_to_a_deadlock_is_a_shortest_firing_sequence(see
     assert len(seq) == shortest_to_a_deadlock(net)
 
 
+@pytest.mark.parametrize("seed", range(10))
+def test_saturation_s_loop_lists_per_value_the_events_of_the_level_enabled_on_it(seed: int) -> None:
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import events
+
+    _, _, sn, enc = generated_encoding(seed)
+    ev = events(sn, enc, merge=True)
+    top, _, slot_ptr, slot, fn_ptr, fn, by_top_ptr, by_top = ev.tables()
+    dom_ptr, byval_ptr, byval = mk._by_value(enc.dom, slot_ptr, slot, fn_ptr, fn, by_top_ptr, by_top, True)
+    for k in range(enc.n_levels):
+        assert dom_ptr[k + 1] - dom_ptr[k] == enc.dom[k]
+        for i in range(int(enc.dom[k])):
+            x = int(dom_ptr[k] + i)
+            want = [int(e) for e in by_top[by_top_ptr[k]:by_top_ptr[k + 1]]
+                    if fn[fn_ptr[slot[slot_ptr[e]]] + i] >= 0]
+            assert byval[byval_ptr[x]:byval_ptr[x + 1]].tolist() == want
+    assert mk._by_value(enc.dom, slot_ptr, slot, fn_ptr, fn, by_top_ptr, by_top, False)[2].size == 0
+
+
 @pytest.mark.parametrize("seed", range(40))
 def test_the_dead_markings_in_one_pass_are_those_restricted_event_by_event_and_too_many_conditions_fall_back(
         seed: int) -> None:
