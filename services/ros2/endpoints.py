@@ -137,7 +137,7 @@ class ServiceClient:
             raise CallFailed(f"{self.name}: malformed response: {exc}") from None
 
     async def call_raw(self, payload: bytes, *, timeout_s: float | None = None, watch: bool = True,
-                       action: bool = False) -> bytes:
+                       action: bool = False, served: bool = False) -> bytes:
         """Send one request and return the response's CDR bytes.
 
         Args:
@@ -145,6 +145,9 @@ class ServiceClient:
             timeout_s: give up after this long (``None``: :data:`LONG_WAIT_S`).
             watch: end the call as soon as the server's token leaves the graph.
             action: the service is part of an action (the bridge announces the action instead).
+            served: the server answered an earlier part of this exchange (an action's goal it
+                accepted): a query no one answers means it went away, even when its token had
+                already left the graph before this request was sent.
 
         Raises:
             CallFailed: no server answered, the server left, it replied with an error, the
@@ -199,7 +202,7 @@ class ServiceClient:
                 await asyncio.sleep(0.02)
             if not session.connected():
                 why = "the Zenoh session reaches no router or peer (the router is down or the network cut)"
-            elif server is not None and server.present:
+            elif served or (server is not None and server.present):
                 why = "the server went away before answering (its process ended or its Zenoh session was lost)"
             else:
                 why = "no service server answered (none in the ROS 2 graph, or its type hash differs)"
@@ -260,7 +263,7 @@ class ServiceClient:
                 task.cancel()
 
     async def call(self, request: Mapping[str, Any], *, timeout_s: float | None = None, fill: bool = False,
-                   action: bool = False) -> dict[str, Any]:
+                   action: bool = False, served: bool = False) -> dict[str, Any]:
         """Call the service with ``request`` (checked first) and return the response's fields.
 
         Raises:
@@ -268,7 +271,7 @@ class ServiceClient:
             CallFailed: as :meth:`call_raw`, or a malformed response.
         """
         payload = self.encode(request, fill=fill)
-        return self.decode(await self.call_raw(payload, timeout_s=timeout_s, action=action))
+        return self.decode(await self.call_raw(payload, timeout_s=timeout_s, action=action, served=served))
 
     def close(self) -> None:
         """Withdraw the client's token."""
@@ -474,7 +477,8 @@ class ActionClient:
                          self.name)
             if on_accepted is not None:
                 on_accepted()
-            result = await self.get_result.call({"goal_id": {"uuid": goal_id}}, action=True)
+            # the server accepted the goal: if it is gone by the time this query goes out, say so
+            result = await self.get_result.call({"goal_id": {"uuid": goal_id}}, action=True, served=True)
             return int(result["status"]), result["result"]
         finally:
             self._feedback_to.pop(goal_id, None)

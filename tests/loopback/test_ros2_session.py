@@ -186,6 +186,16 @@ async def test_no_server_at_all_is_said_at_once(peer: Peer):
     await session.close()
 
 
+async def test_a_query_no_one_answers_after_the_server_took_part_says_it_went_away(peer: Peer):
+    # an action server that accepted a goal and was killed before the get_result query went out:
+    # its token left the graph before the query did, yet "no server" would misname what happened
+    session = await _session(peer)
+    client = ServiceClient(session, "/add_two_ints", ADD)
+    with pytest.raises(CallFailed, match="the server went away before answering"):
+        await client.call({"a": 1, "b": 1}, timeout_s=30, served=True)
+    await session.close()
+
+
 async def test_a_server_whose_token_leaves_the_graph_ends_the_call_it_never_answers(peer: Peer):
     session = await _session(peer)
     client = ServiceClient(session, "/add_two_ints", ADD)
