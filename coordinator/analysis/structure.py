@@ -54,7 +54,7 @@ import sys
 import threading
 import time
 import weakref
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -676,12 +676,14 @@ def _recount(net: PetriNet, st: _Structure, max_states: int, graph_bytes: int,
     return space
 
 
-def _upper_bounds(sn: SparseNet, st: _Structure, lp_seconds: float, seen: np.ndarray) -> tuple[PlaceBounds, np.ndarray]:
+def _upper_bounds(sn: SparseNet, st: _Structure, lp_seconds: float, seen: np.ndarray,
+                  more: Sequence[np.ndarray] = (), lp_above: int = 0) -> tuple[PlaceBounds, np.ndarray]:
     """Per-place upper bounds of a bounded net: the state equation's (one LP per place not yet
-    reached by ``seen``) and the P-invariants', the smaller of the two; -1 where neither bounds."""
+    reached by ``seen``, :func:`.lp.place_bounds` with ``lp_above``) and the P-invariants' and
+    ``more`` semiflows', the smallest; -1 where none bounds."""
     flows = tuple(v for v in st.bounding_pinv.vectors) + (
-        (st.psup.semiflow,) if st.psup.semiflow is not None else ())
-    pb = lp.place_bounds(sn, seconds=lp_seconds, seen=seen, semiflows=flows)
+        (st.psup.semiflow,) if st.psup.semiflow is not None else ()) + tuple(more)
+    pb = lp.place_bounds(sn, seconds=lp_seconds, seen=seen, semiflows=flows, lp_above=lp_above)
     upper = pb.bounds.copy()
     if st.bounding_pinv.complete:
         both = (st.sbounds >= 0) & ((upper < 0) | (st.sbounds < upper))
@@ -1110,20 +1112,6 @@ class _Beside:
             self.found = None  # a search cut short says nothing the other searches do not
 
 
-def _semiflow_bounds(upper: np.ndarray, flows: list[np.ndarray], m0: np.ndarray) -> np.ndarray:
-    """``upper`` ((|P|,) int64, -1 where unbounded) lowered by the P-semiflows ``flows`` (each (|P|,)
-    int64, y ≥ 0, yᵀC = 0): M(p) ≤ ⌊y·M0 / y_p⌋ in every reachable marking, reset arcs included
-    (a reset only takes tokens away, so y·M never rises above y·M0)."""
-    out = upper.copy()
-    for y in flows:
-        support = np.flatnonzero(y)
-        total = int(np.dot(y[support].astype(object), np.asarray(m0)[support].astype(object)))
-        for p, b in zip(support.tolist(), (total // int(y[p]) for p in support.tolist())):
-            if out[p] < 0 or b < out[p]:
-                out[p] = b
-    return out
-
-
 def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, lp_seconds: float, seconds: float,
                     phase: Callable[[str], None] | None, reason: str, started: float,
                     stop: threading.Event | None = None, borrow: Callable[[], int] | None = None,
@@ -1145,14 +1133,14 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
     if not st.bounded:
         raise AnalysisError("the symbolic engine needs a bounded net: neither the state equation nor the "
                             "P-invariants bound every place")
-    _, upper = _upper_bounds(sn, st, lp_seconds, np.asarray(sn.m0, dtype=np.int64))
     # small semiflows for the diagram's groups and order, skipping the places no semiflow covers;
-    # each also bounds its places (y·M = y·M0, so M(p) ≤ ⌊y·M0 / y_p⌋), which is what bounds them
-    # when the state equation's LP a place did not fit in its time (Philosophers-PT-000500: the
-    # total token count's 1,000 for every place, where each place's bound is 1)
+    # each also bounds its places (y·M = y·M0, so M(p) ≤ ⌊y·M0 / y_p⌋): then only the places they
+    # leave above one token get the state equation's LP of their own (Philosophers-PT-000500: the
+    # cover bounds its 2,500 places by 1, which 2,500 LPs would take 5 s to say again; where they
+    # do not, as NeoElection-PT-4's 483 places, the LPs lower them)
     flows = lp.semiflow_cover(sn, seconds=min(lp_seconds, 3.0),
                               covered=None if st.psup.covered is None else ~st.psup.covered)
-    upper = _semiflow_bounds(upper, flows, sn.m0)
+    _, upper = _upper_bounds(sn, st, lp_seconds, np.asarray(sn.m0, dtype=np.int64), more=flows, lp_above=1)
     if (upper < 0).any():
         raise AnalysisError("the symbolic engine needs a proven bound on every place; "
                             f"{int((upper < 0).sum())} places have none")

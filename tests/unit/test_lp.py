@@ -10,6 +10,7 @@ from types import ModuleType
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from scipy.optimize import linprog
 from analysis_nets import make_net, philosophers_arcs
 
 from coordinator.analysis import lp
@@ -147,6 +148,32 @@ def test_bounds_hold_on_nets_with_inhibitor_arcs() -> None:
     assert pb.bounds.tolist() == [3, 3]  # the relaxation ignores the inhibitor: b <= 2 in fact, 3 is sound
 
 
+@pytest.mark.parametrize("seed", range(20))
+def test_the_bounds_from_one_basis_to_the_next_are_each_place_s_own_lp_solved_alone(seed: int) -> None:
+    # the LPs of place_bounds share one HiGHS instance (only the objective changes): each optimum
+    # is the one scipy's linprog finds for that place alone (their certificates, where the duals
+    # round to small denominators, are checked exactly inside)
+    rng = np.random.default_rng(seed)
+    n_p, n_t = int(rng.integers(3, 12)), int(rng.integers(2, 14))
+    pre = rng.integers(0, 3, (n_p, n_t)) * (rng.random((n_p, n_t)) < 0.4)
+    post = rng.integers(0, 3, (n_p, n_t)) * (rng.random((n_p, n_t)) < 0.4)
+    marking = {f"p{i}": int(v) for i, v in enumerate(rng.integers(0, 4, n_p)) if v}
+    trans = {f"t{j}": ({f"p{i}": int(pre[i, j]) for i in range(n_p) if pre[i, j]},
+                       {f"p{i}": int(post[i, j]) for i in range(n_p) if post[i, j]}) for j in range(n_t)}
+    sn = sparse_net(make_net(f"random{seed}", marking, trans))
+    pb = lp.place_bounds(sn, seconds=60.0)
+    c = sn.incidence.toarray().astype(float)
+    m0 = np.asarray(sn.m0, dtype=float)
+    total = linprog(-np.ones(sn.n_places) @ c, A_ub=-c, b_ub=m0, method="highs")
+    for p in range(sn.n_places):
+        alone = linprog(-c[p], A_ub=-c, b_ub=m0, method="highs")
+        if alone.status == 3:  # unbounded alone: at most what the total's certificate says, if any
+            assert pb.bounds[p] == -1 or total.status == 0
+            continue
+        assert pb.own[p] and pb.bounds[p] == int(np.floor(m0[p] - alone.fun + 1e-7)), (p, alone.fun)
+    assert pb.complete
+
+
 def test_kanban_bounds_are_decided_by_structure_when_the_graph_is_cut_short() -> None:
     a = analyse(load_pnml(MCC / "Kanban-PT-00005" / "model.pnml"), max_states=20_000)
     assert not a.complete and a.stopped_by == "max_states"
@@ -186,9 +213,9 @@ def test_the_cover_finds_the_small_semiflows_from_scratch_and_from_one_basis_to_
         covered |= y > 0
     ids = [p.id for p in net.places]
     assert covered.tolist() == [not i.startswith("c") for i in ids]
-    # each place bounded by 1, the bound its semiflows give (structure._semiflow_bounds)
-    from coordinator.analysis.structure import _semiflow_bounds
-
-    upper = _semiflow_bounds(np.full(sn.n_places, -1, dtype=np.int64), cover, sn.m0)
-    assert upper.tolist() == [1 if not i.startswith("c") else -1 for i in ids]
-    assert _semiflow_bounds(np.full(sn.n_places, 0, dtype=np.int64), cover, sn.m0).tolist() == [0] * sn.n_places
+    # each place bounded by 1, the bound its semiflows give (M(p) <= y.M0 / y_p), a lower one kept
+    for start, want in ((-1, [1 if not i.startswith("c") else -1 for i in ids]), (0, [0] * sn.n_places)):
+        upper = np.full(sn.n_places, start, dtype=np.int64)
+        for y in cover:
+            lp._apply(upper, np.zeros(sn.n_places, dtype=bool), y, sn.m0, True)
+        assert upper.tolist() == want
