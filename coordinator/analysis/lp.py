@@ -428,8 +428,8 @@ def place_bounds(sn: SparseNet, *, seconds: float = 5.0, seen: np.ndarray | None
             if b.value is not None and (bounds[p] < 0 or b.value < bounds[p] or (b.value == bounds[p] and b.certified)):
                 bounds[p] = b.value
                 cert[p] = b.certified
-        took = (time.monotonic() - t0) * (todo.size - 1)
-        if done == 1 and took > 2 * (seconds - (time.monotonic() - start)):
+        took = (time.monotonic() - t0) * (todo.size - 1) if done == 1 else 0.0
+        if took > 2 * (seconds - (time.monotonic() - start)):
             # the first place's LP (from the total's basis) says the others do not nearly fit: they
             # are not begun, and keep the bounds they have
             notes.append(f"state-equation LP bounds: {todo.size - 1:,} of the places whose bound is not reached by "

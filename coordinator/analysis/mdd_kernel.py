@@ -398,7 +398,7 @@ def _full(n_nodes: int, n_kids: int, n_unique: int, ct_used: int, node_cap: int,
 
 @njit(cache=True, nogil=True)
 def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray, ev_slot: np.ndarray,
-           slot_ptr: np.ndarray, nxt: np.ndarray, evtop_ptr: np.ndarray, evtop: np.ndarray,
+           slot_ptr: np.ndarray, nxt: np.ndarray, evtop: np.ndarray,
            dom_ptr: np.ndarray, byval_ptr: np.ndarray, byval: np.ndarray,
            dz: tuple[np.ndarray, ...], meta: np.ndarray, level: np.ndarray, offset: np.ndarray, size: np.ndarray,
            kids: np.ndarray, unique: np.ndarray, ct: np.ndarray, check_overflow: bool, saturating: bool,
@@ -1019,7 +1019,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 ccap = gc
                 ct = nct
         why, depth, atop, ret, status, ct_used, steps = _steps(
-            dom, ev_top, ev_bot, ev_slot_ptr, ev_slot, slot_ptr, nxt, evtop_ptr, evtop, dom_ptr, byval_ptr, byval,
+            dom, ev_top, ev_bot, ev_slot_ptr, ev_slot, slot_ptr, nxt, evtop, dom_ptr, byval_ptr, byval,
             dz, meta, level, offset,
             size, kids, unique, ct, check_overflow, saturating, max_dom, f_ty, f_pc, f_k, f_a, f_b, f_c, f_e,
             f_i, f_j, f_buf, f_k0, f_k1, f_s, arena, depth, atop, ret, ct_used, steps, ct_max)
