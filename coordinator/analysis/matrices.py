@@ -80,6 +80,44 @@ class SparseNet:
             return np.zeros(0, dtype=np.int64)
         return np.unique(self.reset.indices).astype(np.int64)
 
+    def markable(self) -> tuple[np.ndarray, np.ndarray]:
+        """The places some reachable marking may mark and the transitions that may fire, found
+        without a search: a place is markable when initially marked or the output of a transition
+        that may fire, and a transition may fire when each of its input places is markable (token
+        counts, inhibitor and reset arcs left out, so both sets are over-approximations).
+
+        What is outside them is exact: the unmarkable places form the largest siphon that is
+        unmarked at M0, and an unmarked siphon stays unmarked (Murata 1989, section VI-B), so they
+        hold no token in any reachable marking and a transition that consumes from one never fires.
+        Linear in the number of arcs.
+
+        Returns:
+            ``(places, transitions)``: (|P|,) bool, True where the place may be marked; (|T|,)
+            bool, True where the transition may fire.
+        """
+        pre_rows = self.pre.tocsr()
+        missing = np.diff(self.pre.indptr).astype(np.int64)  # unmarked input places per transition
+        places = np.zeros(self.n_places, dtype=bool)
+        fires = np.zeros(self.n_transitions, dtype=bool)
+        todo = [int(p) for p in np.flatnonzero(self.m0 > 0)]
+        places[todo] = True
+        ready = [int(t) for t in np.flatnonzero(missing == 0)]
+        while todo or ready:
+            while todo:
+                p = todo.pop()
+                for t in pre_rows.indices[pre_rows.indptr[p]:pre_rows.indptr[p + 1]].tolist():
+                    missing[t] -= 1
+                    if missing[t] == 0:
+                        ready.append(t)
+            while ready:
+                t = ready.pop()
+                fires[t] = True
+                for p in self.post.indices[self.post.indptr[t]:self.post.indptr[t + 1]].tolist():
+                    if not places[p]:
+                        places[p] = True
+                        todo.append(p)
+        return places, fires
+
     def firing_rows(self, rows: np.ndarray, t: int) -> np.ndarray:
         """Successors of markings ``rows`` (k, |P|) by transition t (assumed enabled), (k, |P|) int64:
         ``M + C[:, t]``, with the places of t's reset arcs set to ``Post[p, t]``."""

@@ -251,7 +251,8 @@ class Analysis:
             (:meth:`.statespace.StateSpace.implicit_liveness`, ``liveness`` not None).
         stopped_by: why the search stopped early: ``"max_states"``, ``"max_memory"``, or None.
         stable_marking_partial: on a truncated graph, False when every place varies among the
-            markings found (then no place is stable); else None.
+            markings found (then no place is stable), True when no transition that may fire
+            changes some place (:meth:`.SparseNet.markable`); else None.
         engine: ``"explicit"`` (reachability graph) or ``"symbolic"`` (decision diagram: ``space`` is
             None, every count is exact); engine_reason: which engine and why, one sentence.
     """
@@ -298,7 +299,8 @@ class Analysis:
     @property
     def stable_marking(self) -> bool | None:
         """Some place keeps the same count in every reachable marking (MCC StableMarking); on a
-        truncated graph only "no" can be known (every place varies among the markings found)."""
+        truncated graph, "no" when every place varies among the markings found, "yes" when the
+        structure shows a place no transition that may fire changes."""
         if self.stable_places is None:
             return self.stable_marking_partial
         return bool(self.stable_places)
@@ -805,6 +807,9 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     if space.stopped_by == "max_memory":
         notes.append(f"the reachability graph was stopped by the memory budget ({graph_bytes / 2**30:.2f} GiB of "
                      f"{budget / 2**30:.2f} GiB) after {space.n_states:,} markings")
+    elif space.n_states < max_states and witness is not None:
+        notes.append(f"the reachability graph was stopped after a first {space.n_states:,} markings, which hold a "
+                     "pumping witness: the net is unbounded")
     else:
         notes.append(f"the reachability graph was stopped at the state limit ({max_states:,} markings)")
     v = _Partial(place_bounds={p.id: None for p in net.places})
@@ -820,6 +825,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                      "equation does not bound it: boundedness is undecidable in general and was not decided "
                      "(Karp-Miller coverability is unsound for such nets and was not run)")
     _partial_from_explored(v, net, sn, st, space, witness, seen_max)
+    _partial_from_siphon(v, net, sn, st)
     # the net without its record-only places has the budget the partial graph (held meanwhile) leaves
     _partial_from_projection(v, net, sn, st, lambda small: analyse(
         small, max_states=max_states, max_bytes=budget - graph_bytes, max_coverability_nodes=max_coverability_nodes,
@@ -971,6 +977,38 @@ def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Struc
         sources["stable_marking"] = "reachability graph (explored part): every place varies"
 
 
+def _partial_from_siphon(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structure) -> None:
+    """What the largest initially unmarked siphon proves (:meth:`.SparseNet.markable`): a
+    transition that consumes from it is dead, so the net is neither quasi-live nor live; a place in
+    it holds no token ever, and a place that no transition that may fire changes keeps its count, so
+    the net has a stable place. A reachable deadlock alone also rules out liveness."""
+    sources, notes = st.sources, st.notes
+    _, fires = sn.markable()
+    if not fires.all():
+        dead = [t.id for t, f in zip(net.transitions, fires) if not f]
+        v.quasi = v.live = False
+        sources["quasi_live"] = sources["live"] = ("structure: the largest siphon unmarked at M0 stays unmarked, "
+                                                   "and the transitions that consume from it are dead")
+        notes.append(f"dead transitions (they consume from the largest siphon unmarked at M0): {_some(dead)}")
+    touched = np.zeros(sn.n_places, dtype=bool)  # changed by a transition that may fire
+    touched[sp.csc_matrix(sn.incidence[:, fires]).indices] = True
+    if sn.reset is not None and sn.reset.nnz:
+        touched[sp.csc_matrix(sn.reset[:, fires]).indices] = True
+    if not touched.all():
+        v.stable_known = True
+        sources["stable_marking"] = ("structure: no transition that may fire changes the places "
+                                     + _some([p.id for p, k in zip(net.places, touched) if not k]))
+    if v.live is None and v.deadlock and net.transitions:
+        v.live = False
+        sources["live"] = "a reachable deadlock: no transition can fire from it"
+
+
+def _some(ids: list[str]) -> str:
+    """The first :data:`MAX_WITNESSES` of ``ids``, and how many more."""
+    more = len(ids) - MAX_WITNESSES
+    return ", ".join(ids[:MAX_WITNESSES]) + (f" and {more:,} more" if more > 0 else "")
+
+
 def _fired_seen(net: PetriNet, sn: SparseNet, space: StateSpace, seconds: float = 5.0,
                 block_bytes: int = 1 << 26) -> np.ndarray:
     """(|T|,) bool: the transitions that label an edge of the explored part; when its edges were
@@ -1027,7 +1065,8 @@ def _partial_from_projection(v: _Partial, net: PetriNet, sn: SparseNet, st: _Str
         v.reversible = False  # a record-only place never loses tokens: once it has grown, M0 is out of reach
         sources["reversible"] = "a record-only place grows for ever"
     if v.projection is None and v.levels is None:
-        notes.append("liveness and reversibility need the whole reachability graph and were not decided")
+        notes.append("liveness and reversibility need the whole reachability graph and were not decided" if v.live is None
+                     else "reversibility needs the whole reachability graph and was not decided")
 
 
 def _yield_cpus() -> None:

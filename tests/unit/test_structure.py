@@ -232,7 +232,55 @@ def test_growing_place_that_is_read_keeps_liveness_undecided() -> None:
     assert [p.id for p in net.places] == [p.id for p in base.places]
     a = analyse(net, max_states=100)
     assert a.bounded is False and a.unbounded_places == ["p3"]
-    assert a.projection is None and a.live is None and a.reversible is None
+    assert a.projection is None and a.reversible is None
+    # t3 leads to a dead end: a reachable deadlock alone rules out liveness
+    assert a.deadlock is True and a.live is False and "deadlock" in a.sources["live"]
+
+
+def test_markable_places_and_transitions_hold_every_reachable_one_on_random_nets() -> None:
+    from test_statespace import random_net
+
+    from coordinator.analysis.matrices import sparse_net
+
+    dead_seen = 0
+    for seed in range(40):
+        rng = np.random.default_rng(seed)
+        net = random_net(rng, n_places=int(rng.integers(3, 8)), n_transitions=int(rng.integers(3, 10)))
+        marking = {p.id: int(rng.integers(0, 3)) if rng.random() < 0.4 else 0 for p in net.places}
+        net = PetriNet(name=net.name, places=net.places, transitions=net.transitions, arcs=net.arcs,
+                       initial_marking=Marking(marking))
+        space = explore(net, max_states=20_000)
+        if not space.complete:
+            continue
+        places, fires = sparse_net(net).markable()
+        fired = np.zeros(len(net.transitions), dtype=bool)
+        fired[np.unique(space.transition)] = True
+        assert not (fired & ~fires).any(), seed  # a transition outside the set never fires
+        assert not ((space.states.max(axis=0) > 0) & ~places).any(), seed  # a place outside it stays empty
+        dead_seen += int((~fires).sum())
+    assert dead_seen > 0  # the property was put to the test
+
+
+def test_an_unbounded_net_too_large_for_coverability_gets_its_dead_transitions_from_the_unmarked_siphon() -> None:
+    net = make_net("producer_dead", {"go": 1, "r": 1}, {
+        "produce": ({"go": 1, "r": 1}, {"go": 1, "r": 1, "buf": 1}),
+        "drain": ({"buf": 2}, {"buf": 1}),  # buf is read: no projection decides liveness
+        "never": ({"z": 1}, {"go": 1}),
+    })
+    a = analyse(net, max_states=100, max_coverability_nodes=1)
+    assert a.bounded is False and a.coverability is not None and not a.coverability.complete
+    assert a.quasi_live is False and a.live is False
+    assert a.sources["quasi_live"].startswith("structure") and a.sources["live"].startswith("structure")
+    assert any("never" in n and "siphon" in n for n in a.notes)
+    # z is never marked and produce only reads r: both keep their counts
+    assert a.stable_marking is True and "r, z" in a.sources["stable_marking"]
+    assert a.reversible is None
+
+
+def test_a_place_only_read_is_stable_on_a_truncated_graph_though_every_transition_may_fire() -> None:
+    a = analyse(producer(), max_states=100, max_coverability_nodes=1)
+    assert a.quasi_live is True and not any("siphon" in n for n in a.notes)
+    assert a.stable_marking is True and a.sources["stable_marking"].endswith("the places go")
 
 
 def test_liveness_comes_from_a_compiled_pass_over_the_edges_when_they_do_not_fit_scipys_passes() -> None:
