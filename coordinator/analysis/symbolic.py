@@ -47,7 +47,7 @@ import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from math import ceil, log2
+from math import ceil, inf, log2
 
 import numpy as np
 
@@ -103,6 +103,17 @@ def _is_prime(n: int) -> bool:
         else:
             return False
     return True
+
+
+def _as_float(n: int) -> float:
+    """``n`` as a float, infinite past a float's range instead of an OverflowError."""
+    return float(n) if n.bit_length() <= 1000 else inf
+
+
+def _beyond(estimate: float, k: int) -> bool:
+    """A count estimated at ``estimate`` (a float, infinite past its range) may not fit below the
+    product of ``k`` primes of :func:`_primes` (each above 2^60; 3 bits kept for the estimate's error)."""
+    return estimate > 0 and (estimate == inf or log2(estimate) >= 60 * k - 3)
 
 
 def _primes(k: int) -> list[int]:
@@ -262,7 +273,9 @@ class _Store:
         for k in range(self.enc.n_levels):
             ch = kids[int(offset[node]):int(offset[node]) + int(size[node])].astype(np.int64)
             w = np.where(ch == mk.TERMINAL, 1.0, self._approx[ch]) * (ch != mk.EMPTY)
-            if not np.isfinite(w.sum()) or w.sum() <= 0:  # beyond a float: any non-empty child
+            with np.errstate(over="ignore", invalid="ignore"):
+                total = float(w.sum())
+            if not np.isfinite(total) or total <= 0:  # beyond a float: any non-empty child
                 w = (ch != mk.EMPTY).astype(np.float64)
             i = int(rng.choice(ch.size, p=w / w.sum()))
             out[k] = i
@@ -288,7 +301,7 @@ class _Store:
         more)."""
         if node <= mk.TERMINAL:
             return node
-        want = ceil((log2(max(at_most, 2.0)) + 3) / 60)
+        want = ceil((min(log2(max(at_most, 2.0)), self._domain_bits()) + 3) / 60)
         if len(self._primes) < want:
             self._primes = _primes(want)
             self._count_cap = 0
@@ -309,11 +322,22 @@ class _Store:
         primes = np.array(self._primes, dtype=np.int64)
         mk.count(node, offset, size, kids, self.enc.n_levels, level, self._done, self._approx, self._residue, primes)
         estimate = float(self._approx[node])
-        if estimate >= 2.0 ** (60 * len(self._primes) - 3):  # more primes than the first estimate asked for
-            self._primes = _primes(ceil((log2(estimate) + 3) / 60))
+        if _beyond(estimate, len(self._primes)) and not self._primes_cover_domain():
+            # more primes than the first estimate asked for; past a float's range (about 2^1024
+            # markings) the estimate is infinite and the product of the level domains bounds every count
+            bits = log2(estimate) if estimate < inf else self._domain_bits()
+            self._primes = _primes(ceil((bits + 3) / 60))
             self._count_cap = 0
             return self.count(node)
         return _crt([int(r) for r in self._residue[node]], self._primes)
+
+    def _domain_bits(self) -> float:
+        """log2 of the product of the level domains: a bound of every set's count."""
+        return float(np.log2(np.asarray(self.enc.dom, dtype=np.float64)).sum())
+
+    def _primes_cover_domain(self) -> bool:
+        """The primes' product exceeds every set's count (:meth:`_domain_bits`)."""
+        return 60 * len(self._primes) - 3 > self._domain_bits()
 
     def enabled_counts(self, node: int, ev: Events) -> list[int]:
         """Per event of ``ev``: the exact number of markings of the set ``node`` in which it is
@@ -329,7 +353,7 @@ class _Store:
         mk.enabled_counts(node, ev.top, ev.bot, ev.slot_ptr, ev.slot, on_ptr, on_val, offset, size, kids, level,
                           self.enc.n_levels, int(meta[mk.META_NODES]), self._residue, self._approx, primes, res,
                           approx)
-        if approx.size and float(approx.max()) >= 2.0 ** (60 * len(self._primes) - 3):
+        if approx.size and _beyond(float(approx.max()), len(self._primes)) and not self._primes_cover_domain():
             raise AnalysisError("internal: an enabled count beyond the primes of the set's count")
         return [_crt([int(r) for r in row], self._primes) for row in res]
 
@@ -865,7 +889,7 @@ def _fireable(store: _Store, single: Events, reach: int, states: int, fireable: 
     marking, enabled transition) and the number of reachable markings enabling each event of
     ``single`` (one transition each). Counted per transition by :meth:`_Store.enabled_counts`: a
     count restricted to the levels the transition reads, which builds no node."""
-    store.count(reach, at_most=float(states) * max(1, single.n_events))
+    store.count(reach, at_most=_as_float(states) * max(1, single.n_events))
     counts = store.enabled_counts(reach, single)
     for e, n in enumerate(counts):
         fireable[list(single.members[e])] = n > 0
@@ -1417,7 +1441,7 @@ def _probe(store: _Store, fwd: Events, single: Events, reach: int, result: Symbo
         r = store.closure(fwd, m)
         if not store.contains(r, store.enc.m0):
             result.reversible = False
-        store.count(r, at_most=float(result.states) * max(1, single.n_events))
+        store.count(r, at_most=_as_float(result.states) * max(1, single.n_events))
         for e, n in enumerate(store.enabled_counts(r, single)):
             if n == 0:
                 live_t[list(single.members[e])] = False

@@ -13,10 +13,11 @@ analysis unless ``--engine`` forces one; the report says which ran and why. Prog
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any, TextIO
 
 from coordinator.analysis.budget import default_max_bytes
@@ -324,17 +325,31 @@ def run(args: argparse.Namespace) -> int:
         sys.stderr.flush()
         sys.stderr.write(f" {load_search():.1f} s\n")
     progress = _progress(sys.stderr) if show else None
-    try:
-        rep = report(net, max_states=args.max_states, max_bytes=args.max_memory, progress=progress,
-                     engine=args.engine, phase=_phase(sys.stderr) if show else None)
-    except PetrobotError as exc:
-        print(f"petrobot analyze: {exc}", file=sys.stderr)
-        return 1
-    finally:
-        if show:
-            sys.stderr.write("\n")
-    if args.json:
-        print(json.dumps(rep, indent=2))
-    else:
-        print(render(rep))
+    with _long_counts():
+        try:
+            rep = report(net, max_states=args.max_states, max_bytes=args.max_memory, progress=progress,
+                         engine=args.engine, phase=_phase(sys.stderr) if show else None)
+        except PetrobotError as exc:
+            print(f"petrobot analyze: {exc}", file=sys.stderr)
+            return 1
+        finally:
+            if show:
+                sys.stderr.write("\n")
+        if args.json:
+            print(json.dumps(rep, indent=2))
+        else:
+            print(render(rep))
     return 0
+
+
+@contextlib.contextmanager
+def _long_counts() -> Iterator[None]:
+    """Lift Python's limit on the digits of an integer turned into text (4,300 by default, a guard
+    against parsing long numbers) while the report is made: the symbolic engine counts 2^15000
+    markings exactly, and the count is written whole. The net was read before, under the limit."""
+    old = sys.get_int_max_str_digits()
+    sys.set_int_max_str_digits(0)
+    try:
+        yield
+    finally:
+        sys.set_int_max_str_digits(old)

@@ -867,3 +867,17 @@ def test_random_walks_fall_into_a_deadlock_and_give_a_firing_sequence_that_repla
     assert len(seq) >= n  # every philosopher took a fork
     # a walk that ends in a dead marking outside the targets gives nothing: M0 is not dead
     assert symbolic._walk_sequence(store, ex, net, store.m0, time.monotonic() + 60.0) is None
+
+
+def test_a_count_beyond_a_float_s_range_is_exact() -> None:
+    """2^1100 markings: the float estimate of the count is infinite, and the primes of the exact
+    count come from the product of the level domains."""
+    n = 1100
+    transitions = {}
+    for i in range(n):
+        transitions[f"t{i}"] = ({f"a{i}": 1}, {f"b{i}": 1})
+        transitions[f"u{i}"] = ({f"b{i}": 1}, {f"a{i}": 1})
+    net = make_net("toggles", {f"a{i}": 1 for i in range(n)}, transitions)
+    r = analyse_symbolic(net, np.ones(2 * n, dtype=np.int64), flows=[], seconds=120.0)
+    assert r.states == 2**n and r.edges == n * 2**n
+    assert r.deadlock is False and r.max_token_per_marking == n
