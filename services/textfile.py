@@ -89,8 +89,9 @@ def _line_col(data: bytes | str, offset: int) -> tuple[int, int]:
     return line, offset - start + 1
 
 
-def decode_utf8(data: bytes) -> str:
-    """Decode an input file as UTF-8 (a leading UTF-8 byte-order mark is dropped) and screen it.
+def decode_utf8(data: bytes, limit: int = MAX_FILE_BYTES) -> str:
+    """Decode an input file as UTF-8 (a leading UTF-8 byte-order mark is dropped) and screen it
+    (:func:`screen_text`, at most ``limit`` characters).
 
     Raises:
         TextProblem: a UTF-16/UTF-32 byte-order mark, bytes that are not UTF-8, NUL bytes, with
@@ -107,7 +108,7 @@ def decode_utf8(data: bytes) -> str:
         line, col = _line_col(data, exc.start)
         raise TextProblem(f"not UTF-8 text: byte 0x{data[exc.start]:02x} at column {col} "
                           "(a binary file, or another encoding?)", line) from None
-    screen_text(text)
+    screen_text(text, limit)
     return text
 
 

@@ -1,4 +1,4 @@
-"""``petrobot analyze NET [--json] [--max-states N] [--max-memory SIZE] [--engine E] [--progress]``:
+"""``petrobot analyze NET [--json] [--max-states N] [--max-memory SIZE] [--max-file-size SIZE] [--engine E] [--progress]``:
 qualitative analysis of a task net.
 
 Thin shell over :func:`coordinator.analysis.robotic.report` (paper section 2, "Qualitative
@@ -28,6 +28,11 @@ __all__ = ["add_parser", "parse_size", "render", "run"]
 DEFAULT_MAX_STATES = 25_000_000
 _UNITS = {"": 1, "B": 1, "K": 1 << 10, "KB": 1 << 10, "KIB": 1 << 10, "M": 1 << 20, "MB": 1 << 20,
           "MIB": 1 << 20, "G": 1 << 30, "GB": 1 << 30, "GIB": 1 << 30, "T": 1 << 40, "TB": 1 << 40, "TIB": 1 << 40}
+
+
+#: The largest PNML file ``analyze`` reads by default: a model of the user's own, analysed within the
+#: memory budget (reading a 42 MiB contest model, 387,200 arcs, takes about 14 s and 0.7 GiB).
+DEFAULT_MAX_FILE_BYTES = 256 * 2**20
 
 
 def parse_size(text: str) -> int:
@@ -84,6 +89,9 @@ def add_parser(subparsers: Any) -> None:
                         help="memory budget of the analysis, e.g. 512M or 8G (default: half the physical "
                              f"memory or 4 GiB, whichever is smaller; here {default_max_bytes() / 2**30:.1f} GiB); "
                              "a search that reaches it stops with a partial, labelled report")
+    parser.add_argument("--max-file-size", type=parse_size, default=DEFAULT_MAX_FILE_BYTES, metavar="SIZE",
+                        help=f"largest PNML file read, e.g. 64M (default: {DEFAULT_MAX_FILE_BYTES // 2**20} MiB; "
+                             "Model Checking Contest models reach 42 MiB; other commands read at most 16 MiB)")
     parser.add_argument("--engine", choices=("auto", "explicit", "symbolic"), default="auto",
                         help="explicit: the reachability graph, marking by marking (every property, up to the "
                              "state limit); symbolic: the reachable set as a decision diagram (exact counts, "
@@ -312,7 +320,7 @@ def run(args: argparse.Namespace) -> int:
     from coordinator.netfile import load_any
 
     try:
-        net = load_any(args.net, interpreted=False)
+        net = load_any(args.net, interpreted=False, max_pnml_bytes=args.max_file_size)
     except PetrobotError as exc:
         print(f"petrobot analyze: {exc}", file=sys.stderr)
         return 2

@@ -19,8 +19,9 @@ __all__ = ["SUFFIXES", "load_any"]
 SUFFIXES = (".toml", ".pnml", ".xml")
 
 
-def load_any(path: str | Path, *, interpreted: bool = True) -> PetriNet:
+def load_any(path: str | Path, *, interpreted: bool = True, max_pnml_bytes: int | None = None) -> PetriNet:
     """Load a net file of any supported format, chosen by suffix: ``.toml``, ``.pnml`` or ``.xml``.
+    ``max_pnml_bytes``: the largest PNML file read (default 16 MiB, :func:`.load_pnml`).
 
     Raises:
         NetFileError: unknown suffix, unreadable file, syntax error.
@@ -30,5 +31,7 @@ def load_any(path: str | Path, *, interpreted: bool = True) -> PetriNet:
     if suffix == ".toml":
         return load_net(path, interpreted=interpreted)
     if suffix in (".pnml", ".xml"):
-        return load_pnml(path, interpreted=interpreted)
+        if max_pnml_bytes is None:
+            return load_pnml(path, interpreted=interpreted)
+        return load_pnml(path, interpreted=interpreted, max_bytes=max_pnml_bytes)
     raise NetFileError(f"unknown net file type {suffix or '(no suffix)'!r}: use .toml, .pnml or .xml", path=str(path))

@@ -523,7 +523,7 @@ class _Reader:
 
 
 def loads_pnml(text: str | bytes, path: str = "<string>", *, net_id: str | None = None,
-               interpreted: bool = False) -> PetriNet:
+               interpreted: bool = False, max_bytes: int = MAX_FILE_BYTES) -> PetriNet:
     """Read a PNML document.
 
     Args:
@@ -532,12 +532,14 @@ def loads_pnml(text: str | bytes, path: str = "<string>", *, net_id: str | None 
         net_id: id of the ``<net>`` to read when the document holds several.
         interpreted: also apply :meth:`PetriNet.interpretation_problems` (a net with primitive
             tasks), reporting the first at the line of its element.
+        max_bytes: the largest document read, bytes (16 MiB: what a file from elsewhere may
+            cost; ``petrobot analyze`` raises it for a model file of the user's own).
 
     Returns:
         The net. Without petrobot tool-specific data, places are plain and transitions immediate.
 
     Raises:
-        NetFileError: on text that is not UTF-8 or holds NUL, more than 16 MiB, malformed XML, a
+        NetFileError: on text that is not UTF-8 or holds NUL, more than ``max_bytes``, malformed XML, a
             document type declaration, elements nested deeper than 256, a document with no or
             several nets, a non-P/T net type.
         NetError: on a structural problem (unknown arc end, arc between two places, bad marking or
@@ -546,12 +548,12 @@ def loads_pnml(text: str | bytes, path: str = "<string>", *, net_id: str | None 
     """
     try:
         if isinstance(text, str):
-            screen_text(text)
+            screen_text(text, max_bytes)
             data = text.encode("utf-8")
         else:
-            if len(text) > MAX_FILE_BYTES:
-                raise TextProblem(f"net file too large: {len(text)} bytes (the limit is 16 MiB)", 1)
-            decode_utf8(text)
+            if len(text) > max_bytes:
+                raise TextProblem(f"net file too large: {len(text)} bytes (the limit is {max_bytes // 2**20} MiB)", 1)
+            decode_utf8(text, max_bytes)
             data = text
     except TextProblem as exc:
         raise NetFileError(exc.problem, path=path, line=exc.line) from None
@@ -561,18 +563,19 @@ def loads_pnml(text: str | bytes, path: str = "<string>", *, net_id: str | None 
     return reader.interpreted(net) if interpreted else net
 
 
-def load_pnml(path: str | Path, *, net_id: str | None = None, interpreted: bool = False) -> PetriNet:
-    """Read a PNML file (a regular file of at most 16 MiB); see :func:`loads_pnml`.
+def load_pnml(path: str | Path, *, net_id: str | None = None, interpreted: bool = False,
+              max_bytes: int = MAX_FILE_BYTES) -> PetriNet:
+    """Read a PNML file (a regular file of at most ``max_bytes``, 16 MiB by default); see :func:`loads_pnml`.
 
     Raises:
         NetFileError: if the file cannot be read, or as :func:`loads_pnml`.
         NetError: as :func:`loads_pnml`.
     """
     try:
-        data = read_capped(path, what="net file")
+        data = read_capped(path, what="net file", limit=max_bytes)
     except TextProblem as exc:
         raise NetFileError(exc.problem, path=str(path), line=exc.line) from None
-    return loads_pnml(data, str(path), net_id=net_id, interpreted=interpreted)
+    return loads_pnml(data, str(path), net_id=net_id, interpreted=interpreted, max_bytes=max_bytes)
 
 
 # ---------------------------------------------------------------------------------------- writing
