@@ -804,14 +804,6 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     if space.complete:
         return replace(_from_graph(net, space, pinv, tinv, psup, tsup, structural, notes, sources, budget),
                        engine="explicit", engine_reason=reason)
-    if space.stopped_by == "max_memory":
-        notes.append(f"the reachability graph was stopped by the memory budget ({graph_bytes / 2**30:.2f} GiB of "
-                     f"{budget / 2**30:.2f} GiB) after {space.n_states:,} markings")
-    elif space.n_states < max_states and witness is not None:
-        notes.append(f"the reachability graph was stopped after a first {space.n_states:,} markings, which hold a "
-                     "pumping witness: the net is unbounded")
-    else:
-        notes.append(f"the reachability graph was stopped at the state limit ({max_states:,} markings)")
     v = _Partial(place_bounds={p.id: None for p in net.places})
     seen_max = space.states.max(axis=0).astype(np.int64) if space.n_states else np.zeros(len(net.places), np.int64)
     if st.bounded:
@@ -824,8 +816,22 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         notes.append(f"the net has {arcs} arcs, its reachability graph exceeds the limit and the state "
                      "equation does not bound it: boundedness is undecidable in general and was not decided "
                      "(Karp-Miller coverability is unsound for such nets and was not run)")
-    _partial_from_explored(v, net, sn, st, space, witness, seen_max)
     _partial_from_siphon(v, net, sn, st)
+    longer = min(max_states, AUTO_PROBE_STATES)
+    if witness is not None and v.quasi is None and not space.complete and space.n_states < longer:
+        # the probe's pumping witness ended the search; a longer one may still show every transition fire
+        space = explore(net, max_states=longer, progress=progress, max_bytes=graph_bytes, bounds=_search_bounds(st),
+                        finish_level=False)
+        seen_max = space.states.max(axis=0).astype(np.int64) if space.n_states else seen_max
+    if space.stopped_by == "max_memory":
+        notes.append(f"the reachability graph was stopped by the memory budget ({graph_bytes / 2**30:.2f} GiB of "
+                     f"{budget / 2**30:.2f} GiB) after {space.n_states:,} markings")
+    elif space.n_states < max_states and witness is not None:
+        notes.append(f"the reachability graph was stopped after {space.n_states:,} markings: a pumping witness "
+                     "shows the net is unbounded")
+    else:
+        notes.append(f"the reachability graph was stopped at the state limit ({max_states:,} markings)")
+    _partial_from_explored(v, net, sn, st, space, witness, seen_max)
     # the net without its record-only places has the budget the partial graph (held meanwhile) leaves
     _partial_from_projection(v, net, sn, st, lambda small: analyse(
         small, max_states=max_states, max_bytes=budget - graph_bytes, max_coverability_nodes=max_coverability_nodes,
@@ -944,8 +950,8 @@ def _partial_from_coverability(v: _Partial, net: PetriNet, st: _Structure, witne
 def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structure, space: StateSpace,
                            witness: CoveringWitness | None, seen_max: np.ndarray) -> None:
     """What a pumping witness and the explored part prove on their own: its dead markings are
-    reachable deadlocks, a transition that fired there is not dead, a count above 1 breaks safeness,
-    a place that varies is not stable."""
+    reachable deadlocks (and then no transition is live), a transition that fired there is not dead,
+    a count above 1 breaks safeness, a place that varies is not stable."""
     sources = st.sources
     if witness is not None:
         v.bounded = False
@@ -975,13 +981,16 @@ def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Struc
     if space.n_states and (space.states.min(axis=0) != space.states.max(axis=0)).all():
         v.stable_known = False
         sources["stable_marking"] = "reachability graph (explored part): every place varies"
+    if v.live is None and v.deadlock and net.transitions:
+        v.live = False
+        sources["live"] = "a reachable deadlock: no transition can fire from it"
 
 
 def _partial_from_siphon(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structure) -> None:
     """What the largest initially unmarked siphon proves (:meth:`.SparseNet.markable`): a
     transition that consumes from it is dead, so the net is neither quasi-live nor live; a place in
     it holds no token ever, and a place that no transition that may fire changes keeps its count, so
-    the net has a stable place. A reachable deadlock alone also rules out liveness."""
+    the net has a stable place."""
     sources, notes = st.sources, st.notes
     _, fires = sn.markable()
     if not fires.all():
@@ -998,9 +1007,6 @@ def _partial_from_siphon(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structu
         v.stable_known = True
         sources["stable_marking"] = ("structure: no transition that may fire changes the places "
                                      + _some([p.id for p, k in zip(net.places, touched) if not k]))
-    if v.live is None and v.deadlock and net.transitions:
-        v.live = False
-        sources["live"] = "a reachable deadlock: no transition can fire from it"
 
 
 def _some(ids: list[str]) -> str:

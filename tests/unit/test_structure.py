@@ -371,3 +371,15 @@ def test_without_their_edges_the_conflicts_left_when_time_runs_out_are_undecided
     net = mutex()
     assert conflict_flags(net, seconds=-1.0) == ([("free", None)], False)
     assert conflict_flags(net, seconds=-1.0, on_edges=True) == ([("free", True)], True)
+
+
+def test_an_unbounded_net_whose_probe_misses_a_transition_is_searched_on_to_see_it_fire() -> None:
+    net = make_net("late", {"go": 1}, {
+        "produce": ({"go": 1}, {"go": 1, "buf": 1}),
+        "late": ({"buf": 2500}, {"buf": 2500, "done": 1}),  # needs 2,500 firings of produce first
+    })
+    a = analyse(net, max_states=5000, max_coverability_nodes=1)
+    assert a.bounded is False and a.covering is not None
+    assert a.quasi_live is True and a.sources["quasi_live"] == "reachability graph (explored part)"
+    assert 2500 < a.states <= 5000  # past the probe's 2,000, up to the state limit
+    assert any("state limit (5,000 markings)" in n for n in a.notes)
