@@ -170,6 +170,17 @@ def test_a_file_over_the_size_cap_is_refused_before_it_is_read(tmp_path: Path) -
         loads_net(" " * (MAX_FILE_BYTES + 1))
 
 
+def test_analyze_reads_a_pnml_file_over_16_mib_and_refuses_one_over_its_own_cap(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "big.pnml"
+    with open(path, "wb") as fh:
+        fh.truncate(MAX_FILE_BYTES + 1)  # sparse: nothing of it is on disk
+    with pytest.raises(NetFileError, match="not UTF-8 text: NUL bytes throughout"):
+        load_any(path, max_pnml_bytes=32 * 2**20)  # read (then refused for what it holds, not its size)
+    assert petrobot(["analyze", str(path), "--max-file-size", "16M"]) == 2
+    assert "net file too large: 16777217 bytes (the limit is 16 MiB)" in capsys.readouterr().err
+
+
 def test_a_fifo_a_device_or_a_directory_is_refused_without_reading(tmp_path: Path) -> None:
     fifo = tmp_path / "net.toml"
     os.mkfifo(fifo)  # opening it for reading would block until a writer comes
