@@ -143,6 +143,9 @@ def karp_miller(net: PetriNet, *, max_nodes: int = 200_000, seconds: float = 60.
     trs: list[int] = []
     todo = deque([0])
     complete = True
+    # a transition consuming from the largest siphon unmarked at M0 is enabled at no node: those
+    # places stay 0 in every node (never ω: no firing raises them), so it is never tried
+    may_fire = np.flatnonzero(sn.markable()[1]).tolist()
     while todo:
         if len(nodes) & 255 == 0 and time.monotonic() > deadline:
             complete = False
@@ -150,7 +153,7 @@ def karp_miller(net: PetriNet, *, max_nodes: int = 200_000, seconds: float = 60.
             break
         i = todo.popleft()
         m = nodes[i]
-        for t in range(n_t):
+        for t in may_fire:
             if any(m[p] < w for p, w in inputs[t]):
                 continue
             new = list(m)

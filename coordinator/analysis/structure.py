@@ -806,8 +806,12 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                        engine="explicit", engine_reason=reason)
     v = _Partial(place_bounds={p.id: None for p in net.places})
     seen_max = space.states.max(axis=0).astype(np.int64) if space.n_states else np.zeros(len(net.places), np.int64)
+    _partial_from_siphon(v, net, sn, st)
     if st.bounded:
         structural = _partial_from_bounds(v, sn, st, space, seen_max, lp_seconds)
+    elif witness is not None and v.quasi is False:
+        notes.append("the Karp-Miller coverability graph was not built: a pumping witness shows the net is unbounded "
+                     "and the unmarked siphon that it is not quasi-live")
     elif not has_inhibitors and not sn.n_resets:
         _partial_from_coverability(v, net, st, witness, min(max_coverability_nodes, (budget // 4) // (
             96 * max(len(net.places), 1) + 256)), coverability_seconds)
@@ -816,7 +820,6 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         notes.append(f"the net has {arcs} arcs, its reachability graph exceeds the limit and the state "
                      "equation does not bound it: boundedness is undecidable in general and was not decided "
                      "(Karp-Miller coverability is unsound for such nets and was not run)")
-    _partial_from_siphon(v, net, sn, st)
     longer = min(max_states, AUTO_PROBE_STATES)
     if witness is not None and v.quasi is None and not space.complete and space.n_states < longer:
         # the probe's pumping witness ended the search; a longer one may still show every transition fire
