@@ -18,7 +18,8 @@ from pathlib import Path
 
 from services.errors import PetrobotError
 
-__all__ = ["MAX_FILE_BYTES", "TextProblem", "decode_utf8", "read_capped", "screen_text", "write_atomically"]
+__all__ = ["MAX_FILE_BYTES", "TextProblem", "decode_utf8", "read_capped", "screen_text", "size_text",
+           "write_atomically"]
 
 #: Largest input file read, bytes (16 MiB). Net files of a thousand places are tens of kilobytes;
 #: the cap is far above any real file and below what the parsers handle in seconds.
@@ -68,17 +69,18 @@ def read_capped(path: str | os.PathLike[str], *, what: str = "file", limit: int 
             kind = "a directory" if stat.S_ISDIR(info.st_mode) else "not a regular file"
             raise TextProblem(f"cannot read {what}: {kind}")
         if info.st_size > limit:
-            raise TextProblem(f"{what} too large: {info.st_size} bytes (the limit is {_mib(limit)})", 1)
+            raise TextProblem(f"{what} too large: {info.st_size} bytes (the limit is {size_text(limit)})", 1)
         with open(path, "rb") as fh:
             data = fh.read(limit + 1)
     except OSError as exc:
         raise TextProblem(f"cannot read {what}: {exc.strerror or exc}") from None
     if len(data) > limit:  # grew while we read it
-        raise TextProblem(f"{what} too large: more than {_mib(limit)}", 1)
+        raise TextProblem(f"{what} too large: more than {size_text(limit)}", 1)
     return data
 
 
-def _mib(n: int) -> str:
+def size_text(n: int) -> str:
+    """A size limit in words: ``16 MiB``, or bytes when not a whole number of MiB."""
     return f"{n // 2**20} MiB" if n % 2**20 == 0 else f"{n} bytes"
 
 
@@ -119,7 +121,7 @@ def screen_text(text: str, limit: int = MAX_FILE_BYTES) -> None:
         TextProblem: with the line of the first offending character.
     """
     if len(text) > limit:
-        raise TextProblem(f"text too large: {len(text)} characters (the limit is {_mib(limit)})", 1)
+        raise TextProblem(f"text too large: {len(text)} characters (the limit is {size_text(limit)})", 1)
     nul = text.find("\0")
     if nul >= 0:
         head = text[:4096]

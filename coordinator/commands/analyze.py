@@ -353,8 +353,9 @@ def run(args: argparse.Namespace) -> int:
 @contextlib.contextmanager
 def _long_counts() -> Iterator[None]:
     """Lift Python's limit on the digits of an integer turned into text (4,300 by default, a guard
-    against parsing long numbers) while the report is made: the symbolic engine counts 2^15000
-    markings exactly, and the count is written whole. The net was read before, under the limit."""
+    against parsing long numbers) while the report is made: the symbolic engine's exact counts can
+    be longer (2^15000 markings have 4,516 digits) and are written whole. The net was read before,
+    under the limit."""
     old = sys.get_int_max_str_digits()
     sys.set_int_max_str_digits(0)
     try:

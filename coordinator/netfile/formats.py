@@ -12,6 +12,7 @@ from coordinator.errors import NetFileError
 from coordinator.net import PetriNet
 from coordinator.netfile.loader import load_net
 from coordinator.netfile.pnml import load_pnml
+from services.textfile import MAX_FILE_BYTES
 
 __all__ = ["SUFFIXES", "load_any"]
 
@@ -31,7 +32,6 @@ def load_any(path: str | Path, *, interpreted: bool = True, max_pnml_bytes: int 
     if suffix == ".toml":
         return load_net(path, interpreted=interpreted)
     if suffix in (".pnml", ".xml"):
-        if max_pnml_bytes is None:
-            return load_pnml(path, interpreted=interpreted)
-        return load_pnml(path, interpreted=interpreted, max_bytes=max_pnml_bytes)
+        return load_pnml(path, interpreted=interpreted,
+                         max_bytes=MAX_FILE_BYTES if max_pnml_bytes is None else max_pnml_bytes)
     raise NetFileError(f"unknown net file type {suffix or '(no suffix)'!r}: use .toml, .pnml or .xml", path=str(path))

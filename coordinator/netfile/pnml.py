@@ -70,6 +70,7 @@ from services.textfile import (
     decode_utf8,
     read_capped,
     screen_text,
+    size_text,
     write_atomically,
 )
 from services.tomllines import parse_toml
@@ -552,7 +553,7 @@ def loads_pnml(text: str | bytes, path: str = "<string>", *, net_id: str | None 
             data = text.encode("utf-8")
         else:
             if len(text) > max_bytes:
-                raise TextProblem(f"net file too large: {len(text)} bytes (the limit is {max_bytes // 2**20} MiB)", 1)
+                raise TextProblem(f"net file too large: {len(text)} bytes (the limit is {size_text(max_bytes)})", 1)
             decode_utf8(text, max_bytes)
             data = text
     except TextProblem as exc:
