@@ -184,6 +184,8 @@ class _Store:
         assert no_dead is not None  # of no event
         self._no_dead = no_dead  # MODE_DEAD's tables in calls of another mode
         self.dom_ptr = np.concatenate([[0], np.cumsum(enc.dom)]).astype(np.int64)
+        #: log2 of the product of the level domains: a bound of every set's count
+        self.domain_bits = float(np.log2(np.asarray(enc.dom, dtype=np.float64)).sum())
         self._count_cap = 0
         self._primes: list[int] = []
         self._done = np.zeros(0, np.uint8)
@@ -301,7 +303,7 @@ class _Store:
         more)."""
         if node <= mk.TERMINAL:
             return node
-        want = ceil((min(log2(max(at_most, 2.0)), self._domain_bits()) + 3) / 60)
+        want = ceil((min(log2(max(at_most, 2.0)), self.domain_bits) + 3) / 60)
         if len(self._primes) < want:
             self._primes = _primes(want)
             self._count_cap = 0
@@ -325,19 +327,15 @@ class _Store:
         if _beyond(estimate, len(self._primes)) and not self._primes_cover_domain():
             # more primes than the first estimate asked for; past a float's range (about 2^1024
             # markings) the estimate is infinite and the product of the level domains bounds every count
-            bits = log2(estimate) if estimate < inf else self._domain_bits()
+            bits = log2(estimate) if estimate < inf else self.domain_bits
             self._primes = _primes(ceil((bits + 3) / 60))
             self._count_cap = 0
             return self.count(node)
         return _crt([int(r) for r in self._residue[node]], self._primes)
 
-    def _domain_bits(self) -> float:
-        """log2 of the product of the level domains: a bound of every set's count."""
-        return float(np.log2(np.asarray(self.enc.dom, dtype=np.float64)).sum())
-
     def _primes_cover_domain(self) -> bool:
-        """The primes' product exceeds every set's count (:meth:`_domain_bits`)."""
-        return 60 * len(self._primes) - 3 > self._domain_bits()
+        """The primes' product exceeds every set's count (:attr:`domain_bits`)."""
+        return 60 * len(self._primes) - 3 > self.domain_bits
 
     def enabled_counts(self, node: int, ev: Events) -> list[int]:
         """Per event of ``ev``: the exact number of markings of the set ``node`` in which it is
