@@ -104,13 +104,16 @@ class Coverability:
         return out
 
 
-def karp_miller(net: PetriNet, *, max_nodes: int = 200_000, seconds: float = 60.0) -> Coverability:
+def karp_miller(net: PetriNet, *, max_nodes: int = 200_000, seconds: float = 60.0,
+                may_fire: np.ndarray | None = None) -> Coverability:
     """Build the Karp–Miller coverability graph of ``net``.
 
     Args:
         net: a net without inhibitor arcs.
         max_nodes: stop after this many nodes (``complete`` is then False).
         seconds: stop after this much wall-clock time (``complete`` is then False).
+        may_fire: (|T|,) bool, the transitions of :meth:`.SparseNet.markable` when the caller has
+            them (computed here otherwise); the others are never tried.
 
     Returns:
         The :class:`Coverability` graph.
@@ -145,7 +148,7 @@ def karp_miller(net: PetriNet, *, max_nodes: int = 200_000, seconds: float = 60.
     complete = True
     # a transition consuming from the largest siphon unmarked at M0 is enabled at no node: those
     # places stay 0 in every node (never ω: no firing raises them), so it is never tried
-    may_fire = np.flatnonzero(sn.markable()[1]).tolist()
+    tried = np.flatnonzero(sn.markable()[1] if may_fire is None else may_fire).tolist()
     while todo:
         if len(nodes) & 255 == 0 and time.monotonic() > deadline:
             complete = False
@@ -153,7 +156,7 @@ def karp_miller(net: PetriNet, *, max_nodes: int = 200_000, seconds: float = 60.
             break
         i = todo.popleft()
         m = nodes[i]
-        for t in may_fire:
+        for t in tried:
             if any(m[p] < w for p, w in inputs[t]):
                 continue
             new = list(m)

@@ -806,7 +806,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                        engine="explicit", engine_reason=reason)
     v = _Partial(place_bounds={p.id: None for p in net.places})
     seen_max = space.states.max(axis=0).astype(np.int64) if space.n_states else np.zeros(len(net.places), np.int64)
-    _partial_from_siphon(v, net, sn, st)
+    fires = _partial_from_siphon(v, net, sn, st)
     if st.bounded:
         structural = _partial_from_bounds(v, sn, st, space, seen_max, lp_seconds)
     elif witness is not None and v.quasi is False:
@@ -814,7 +814,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                      "and the unmarked siphon that it is not quasi-live")
     elif not has_inhibitors and not sn.n_resets:
         _partial_from_coverability(v, net, st, witness, min(max_coverability_nodes, (budget // 4) // (
-            96 * max(len(net.places), 1) + 256)), coverability_seconds)
+            96 * max(len(net.places), 1) + 256)), coverability_seconds, fires)
     elif witness is None:
         arcs = "inhibitor and reset" if has_inhibitors and sn.n_resets else ("inhibitor" if has_inhibitors else "reset")
         notes.append(f"the net has {arcs} arcs, its reachability graph exceeds the limit and the state "
@@ -912,10 +912,11 @@ def _partial_from_bounds(v: _Partial, sn: SparseNet, st: _Structure, space: Stat
 
 
 def _partial_from_coverability(v: _Partial, net: PetriNet, st: _Structure, witness: CoveringWitness | None,
-                               max_nodes: int, seconds: float) -> None:
-    """A net the structure does not bound, without inhibitor or reset arcs: the Karp–Miller graph."""
+                               max_nodes: int, seconds: float, may_fire: np.ndarray) -> None:
+    """A net the structure does not bound, without inhibitor or reset arcs: the Karp–Miller graph
+    (``may_fire``: :meth:`.SparseNet.markable`'s transitions, the only ones it tries)."""
     sources, notes = st.sources, st.notes
-    cover = v.cover = karp_miller(net, max_nodes=max(1, max_nodes), seconds=seconds)
+    cover = v.cover = karp_miller(net, max_nodes=max(1, max_nodes), seconds=seconds, may_fire=may_fire)
     if cover.complete:
         v.bounded = cover.bounded
         v.place_bounds = dict(zip(v.place_bounds, cover.place_bounds()))
@@ -989,11 +990,11 @@ def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Struc
         sources["live"] = "a reachable deadlock: no transition can fire from it"
 
 
-def _partial_from_siphon(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structure) -> None:
+def _partial_from_siphon(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structure) -> np.ndarray:
     """What the largest initially unmarked siphon proves (:meth:`.SparseNet.markable`): a
     transition that consumes from it is dead, so the net is neither quasi-live nor live; a place in
     it holds no token ever, and a place that no transition that may fire changes keeps its count, so
-    the net has a stable place."""
+    the net has a stable place. Returns the (|T|,) bool transitions that may fire."""
     sources, notes = st.sources, st.notes
     _, fires = sn.markable()
     if not fires.all():
@@ -1010,6 +1011,7 @@ def _partial_from_siphon(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structu
         v.stable_known = True
         sources["stable_marking"] = ("structure: no transition that may fire changes the places "
                                      + _some([p.id for p, k in zip(net.places, touched) if not k]))
+    return fires
 
 
 def _some(ids: list[str]) -> str:
