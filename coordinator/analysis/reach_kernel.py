@@ -31,7 +31,9 @@ result. What they implement (the reasons and the measurements are in docs/analys
   32 bits of the marking's hash beside its index + 1, so a probe compares words only when those
   bits agree, a lookup usually touches one cache line, and a marking costs 11–21 bytes of table.
 * Edges kept (``keep_edges``: int32 target and transition, sorted by source) or only counted
-  per state, for questions that need the markings and the out-degrees alone; the breadth-first
+  per state, for questions that need the markings and the out-degrees alone; with
+  ``shed_edges``, kept while they fit the budget and then dropped, the search going on counting
+  them (a graph whose edges fill the budget is not searched twice); the breadth-first
   tree is the state each marking was first reached from (int32), whose edge the caller finds
   again when it needs it.
 * The edges need not be kept to be used: :func:`components` finds the strongly connected
@@ -397,8 +399,8 @@ def _find(states: np.ndarray, table: np.ndarray, succ: np.ndarray, key: np.uint6
 def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.ndarray, use_prio: bool,
             states: np.ndarray, table: np.ndarray, dst: np.ndarray, tr: np.ndarray, out_ptr: np.ndarray,
             parent: np.ndarray, trunc: np.ndarray, cursor: np.ndarray, wd: np.ndarray, sh: np.ndarray,
-            msk: np.ndarray, succ: np.ndarray, cur: np.ndarray, enabled: np.ndarray, max_states: int,
-            finish_level: bool, budget: int, keep_edges: bool, resets: np.ndarray | None) -> int:
+            msk: np.ndarray, succ: np.ndarray, cur: np.ndarray, enabled: np.ndarray, fired: np.ndarray,
+            max_states: int, finish_level: bool, budget: int, keep_edges: bool, resets: np.ndarray | None) -> int:
     """Expand markings in breadth-first order, at most ``budget`` of them, from ``cursor[NEXT]``,
     in the given buffers (never reallocated here: ``ROOM`` says one is full, and ``cursor[NEED]``
     how many successors the state waiting to be expanded has).
@@ -415,7 +417,8 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             ``out_ptr[i]:out_ptr[i+1]`` (counted whether kept or not); parent: (cap,) int32 the
             state each state was first reached from; trunc: int64 sources that lost an edge to the state limit;
             cursor: int64 (:data:`CURSOR_SIZE`,); succ (W,) uint64 successor scratch; cur (|P|,)
-            int64 the marking being expanded, unpacked; enabled (|T|,) scratch.
+            int64 the marking being expanded, unpacked; enabled (|T|,) scratch; fired (|T|,) int64
+            set to 1 for each transition fired from an expanded marking.
         max_states: a new successor beyond this many states is dropped (its source goes to
             ``trunc``) and the search stops at the end of the level (``finish_level``), or once the
             marking being expanded is done.
@@ -485,6 +488,7 @@ def _search(tab: np.ndarray, trig_ptr: np.ndarray, trig_t: np.ndarray, prio: np.
             if keep_edges:
                 dst[e] = j
                 tr[e] = t
+            fired[t] = 1
             e += 1
         if status != DONE:
             break
@@ -564,7 +568,7 @@ def _target(cap: int, need: int, unit: int | np.int64, held: int | np.int64, max
 _RO2 = types.Array(types.int64, 2, "C", readonly=True)
 _RO1 = types.Array(types.int64, 1, "C", readonly=True)
 RUN_SIGNATURE = (_RO2, _RO2, _RO2, types.int64[::1], _RO1, types.int64[::1], _RO1, types.boolean, types.int64,
-                 types.int64, types.int64, types.boolean, types.none, types.boolean)
+                 types.int64, types.int64, types.boolean, types.boolean, types.none, types.boolean)
 RESET_SIGNATURE = (*RUN_SIGNATURE[:-2], types.int64[::1], types.boolean)
 
 
@@ -604,7 +608,7 @@ def load_resets() -> None:
 @njit(cache=True, nogil=True)  # threads may search beside other work (the symbolic engine's lanes)
 def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.ndarray, m0: np.ndarray,
         layout: np.ndarray, prio: np.ndarray, use_prio: bool, max_states: int, max_bytes: int,
-        report_every: int, keep_edges: bool, resets: np.ndarray | None,
+        report_every: int, keep_edges: bool, shed_edges: bool, resets: np.ndarray | None,
         finish_level: bool) -> tuple:  # type: ignore[type-arg]
     """The whole breadth-first search of a net (see the module docstring).
 
@@ -629,6 +633,9 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
             never.
         keep_edges: keep the edges (``dst``, ``tr``); else only count them: ``dst`` and ``tr`` come
             back empty, ``out_ptr`` still gives each state's number of edges.
+        shed_edges: when kept edges leave no room in ``max_bytes`` for a buffer to grow, drop them
+            (freeing their bytes) and go on counting them only, as if ``keep_edges`` were False,
+            instead of stopping.
         resets: ``None`` for a net without reset arcs (the search is compiled without their code),
             else any array (``tab``): the reset lists of ``tab`` are applied.
         finish_level: at the state limit, finish the level being expanded (True), or stop at once
@@ -637,13 +644,15 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
 
     Returns:
         ``(status, states, dst, tr, parent, expanded, out_ptr, complete, max_count, layout,
-        store_bytes)``: DONE, OVERFLOW, MEMORY or STOPPED; states (N, W) uint64 packed markings in
+        store_bytes, shed_at, fired)``: DONE, OVERFLOW, MEMORY or STOPPED; states (N, W) uint64 packed markings in
         breadth-first order, in the final ``layout`` (fields widened during the search; :func:`unpack`);
         edges as CSR: dst (E,) int32 and tr (E,) int32 sorted by source then transition (empty
         unless ``keep_edges``), out_ptr (N+1,) int64; parent (N,) int32 the state of the previous
         level each state was first reached from (-1 for M0); expanded (N,) bool;
         whether the graph is complete; the largest token count seen; the bytes of the marking store
-        and the hash table when the search ended.
+        and the hash table when the search ended; the number of markings found when the edges
+        were dropped (``shed_edges``), -1 if they were not; (|T|,) bool, the transitions fired
+        from a marking expanded (each labels an edge found, kept or not).
     """
     arcs = tables(pre, inhibitor, incidence) if tab.shape[0] == 0 else tab
     n_p = m0.shape[0]
@@ -656,10 +665,11 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     n_w = _fields(lay, n_p, sh, msk)
     succ = np.zeros(n_w, np.uint64)
     cur = np.zeros(n_p, np.int64)
-    # one scratch allocation: the cursor and per transition an enabled slot
-    scratch = np.zeros(CURSOR_SIZE + n_t, np.int64)
+    # one scratch allocation: the cursor and per transition an enabled slot and a fired flag
+    scratch = np.zeros(CURSOR_SIZE + 2 * n_t, np.int64)
     cursor = scratch[:CURSOR_SIZE]
-    enabled = scratch[CURSOR_SIZE:]
+    enabled = scratch[CURSOR_SIZE:CURSOR_SIZE + n_t]
+    fired = scratch[CURSOR_SIZE + n_t:]
     trig_ptr, trig_t = _triggers(arcs, n_p)
     # buffers; bytes per state: its packed marking (W uint64), a consumer's unpacked copy (one
     # byte a place in the common case; made only when asked for), the parent state, the
@@ -689,7 +699,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         if np.uint64(m0[p]) & ~msk[p]:
             cursor[NEED], cursor[NEED_S] = p, m0[p]
             return (OVERFLOW, states[:0].reshape((0, n_w)), dst[:0], tr[:0], parent[:0], np.zeros(0, np.bool_),
-                    out_ptr[:1], False, top, lay, np.int64(0))
+                    out_ptr[:1], False, top, lay, np.int64(0), np.int64(-1), fired != 0)
         _set(states, 0, p, m0[p], wd, sh, msk)
     cursor[N] = 1
     cursor[LEVEL_END] = 1
@@ -697,10 +707,11 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
     out_ptr[0] = 0
     _fill_table(table, states, 1, n_w)
     status = OVERFLOW
+    shed_at = np.int64(-1)
     next_report = report_every if report_every > 0 else 1 << 62  # in expanded markings
     while top <= _INT32_MAX:
         status = _search(arcs, trig_ptr, trig_t, prio, use_prio, states, table, dst, tr, out_ptr, parent,
-                         trunc, cursor, wd, sh, msk, succ, cur, enabled, max_states, finish_level,
+                         trunc, cursor, wd, sh, msk, succ, cur, enabled, fired, max_states, finish_level,
                          max(1, next_report - cursor[NEXT]), keep_edges, resets)
         if status == ROOM:
             n, e, k, ks = cursor[N], cursor[E], cursor[NEED], cursor[NEED_S]
@@ -770,6 +781,14 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
                 continue
         if status == OVERFLOW:
             break
+        if status == MEMORY and keep_edges and shed_edges:
+            # the edges leave no room: drop them and go on counting them (the search asks again)
+            held -= dst.shape[0] * unit_e
+            dst = np.empty(0, np.int32)
+            tr = np.empty(0, np.int32)
+            keep_edges = False
+            shed_at = cursor[N]
+            continue
         if status == MEMORY:
             cursor[STOPPING] = 1
         if report_every > 0:
@@ -805,7 +824,7 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
         parent = _grow(parent, n, n)
         out_ptr = _grow(out_ptr, n + 1, n + 1)
     return (status, states[:n * n_w].reshape((n, n_w)), dst[:e], tr[:e], parent[:n], expanded, out_ptr[:n + 1],
-            cursor[STOPPING] == 0, cursor[MAX_COUNT], lay, store)
+            cursor[STOPPING] == 0, cursor[MAX_COUNT], lay, store, shed_at, fired != 0)
 
 
 @njit(cache=True, inline="always")

@@ -75,10 +75,16 @@ class StateSpace:
         store_bytes: bytes of the search's marking store and hash table when it ended (capacity,
             not just the markings found).
         max_count: the largest token count of any marking found (sizes ``states``' dtype).
-        edges_kept: False if the search only counted the edges (``explore(..., edges=False)``):
-            then ``dst``, ``transition``, ``src``, ``parent_edge`` and the matrices are not
-            available, while counts, deadlocks, markings and firing sequences are.
+        edges_kept: False if the search only counted the edges (``explore(..., edges=False)``,
+            or edges dropped on the way: ``edges_shed_at``): then ``dst``, ``transition``,
+            ``src``, ``parent_edge`` and the matrices are not available, while counts, deadlocks,
+            markings and firing sequences are.
         priority: the priority levels the search applied, (|T|,) int64, or None.
+        edges_shed_at: the number of markings found when the search dropped the edges it kept, to
+            go on within its budget counting them only (``explore(..., shed_edges=True)``); None
+            if it did not.
+        fired: (|T|,) bool, the transitions that label an edge found (kept or only counted): in a
+            complete graph, the quasi-live ones (Murata's L1); None if the caller did not say.
 
     ``src`` (edge sources, (E,) int32, non-decreasing) is derived from ``out_ptr`` on first use.
     """
@@ -98,6 +104,8 @@ class StateSpace:
     max_count: int
     edges_kept: bool = True
     priority: np.ndarray | None = None
+    edges_shed_at: int | None = None
+    fired: np.ndarray | None = None
 
     @property
     def states(self) -> np.ndarray:
@@ -601,7 +609,7 @@ def _widths(bounds: np.ndarray | None, m0: np.ndarray) -> tuple[np.ndarray, np.n
 def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray | None = None,
             progress: Callable[[int, int], None] | None = None, max_bytes: int | None = None,
             bounds: np.ndarray | None = None, edges: bool = True, finish_level: bool = True,
-            stop: threading.Event | None = None) -> StateSpace:
+            stop: threading.Event | None = None, shed_edges: bool = False) -> StateSpace:
     """Build the reachability graph of ``net`` by a compiled breadth-first search.
 
     The ordinary firing rule of :mod:`coordinator.net` is used (inhibitor arcs honoured, reset arcs
@@ -640,6 +648,10 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         stop: an event another thread sets to stop the search (checked every 65,536 expanded
             markings; ``stopped_by == "stopped"``): the automatic engine's search beside the
             symbolic engine, when that one answers first.
+        shed_edges: with ``edges``, when the kept edges leave the markings no room within
+            ``max_bytes``, drop them and go on counting them only (``edges_kept`` False and
+            ``edges_shed_at`` the number of markings found then), instead of stopping: a graph
+            whose edges do not fit is searched once, not again without them.
 
     Returns:
         The :class:`StateSpace`.
@@ -673,9 +685,9 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     rk.set_progress(progress, stop)
     report_every = _PROGRESS_STATES if progress is not None or stop is not None else 0
     try:
-        status, words, dst, tr, parent, expanded, out_ptr, complete, top, layout, store = rk.run(
+        status, words, dst, tr, parent, expanded, out_ptr, complete, top, layout, store, shed_at, fired = rk.run(
             pre, inh, inc, tab, m0, layout, prio, use_prio, max_states, budget, report_every, bool(edges),
-            tab if net.has_resets else None, bool(finish_level))
+            bool(shed_edges), tab if net.has_resets else None, bool(finish_level))
     finally:
         rk.set_progress(None)
     if status == rk.OVERFLOW:
@@ -687,7 +699,8 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     return StateSpace(net=net, words=words, layout=layout[:3 * n_p].copy(), out_ptr=out_ptr, dst=dst, transition=tr,
                       complete=bool(complete), parent=parent, expanded=expanded, stopped_by=stopped,
                       packed_bits=int(layout[2 * n_p:3 * n_p].sum()), store_bytes=int(store), max_count=int(top),
-                      edges_kept=bool(edges), priority=None if priority is None else prio)
+                      edges_kept=bool(edges) and shed_at < 0, priority=None if priority is None else prio,
+                      edges_shed_at=None if shed_at < 0 else int(shed_at), fired=fired)
 
 
 def load_search() -> float:

@@ -420,6 +420,40 @@ def test_widening_fields_mid_search_keeps_the_graph_exact_also_when_truncated(mo
 
 
 @pytest.mark.parametrize("model", ["ERK-PT-000001", "FMS-PT-00002", "Railroad-PT-005", "TokenRing-PT-005"])
+def test_the_transitions_the_search_says_fired_are_those_labelling_an_edge_kept_or_counted(model: str) -> None:
+    from coordinator.netfile.pnml import load_pnml
+
+    net = load_pnml(str(MCC / model / "model.pnml"))
+    full = explore(net)
+    for limit in (1, full.n_states // 3, full.n_states):
+        kept = explore(net, max_states=limit)
+        labels = np.zeros(len(net.transitions), dtype=bool)
+        labels[kept.transition] = True
+        assert kept.fired is not None and kept.fired.tolist() == labels.tolist()
+        counted = explore(net, max_states=limit, edges=False)
+        assert counted.fired is not None and counted.fired.tolist() == labels.tolist()
+
+
+@pytest.mark.parametrize("model", ["FMS-PT-00002", "ResAllocation-PT-R003C005", "SharedMemory-PT-000005"])
+def test_a_search_that_drops_its_edges_when_they_fill_the_budget_goes_on_to_the_graph_a_counting_search_finds(
+        model: str) -> None:
+    from coordinator.netfile.pnml import load_pnml
+
+    net = load_pnml(str(MCC / model / "model.pnml"))
+    counted = explore(net, edges=False)
+    budget = 1 << 16  # the smallest budget (in steps of a tenth) the search that drops its edges completes in
+    while not (shed := explore(net, max_bytes=budget, shed_edges=True)).complete:
+        budget = budget * 11 // 10
+    assert explore(net, max_bytes=budget).stopped_by == "max_memory"  # keeping its edges, it stops there
+    assert shed.edges_shed_at is not None and 0 < shed.edges_shed_at < shed.n_states
+    assert not shed.edges_kept and shed.dst.size == shed.transition.size == 0
+    assert shed.n_edges == counted.n_edges
+    for name in ("words", "out_ptr", "parent", "expanded"):
+        assert np.array_equal(getattr(shed, name), getattr(counted, name)), name
+    assert explore(net, shed_edges=True).edges_shed_at is None  # within the default budget nothing is dropped
+
+
+@pytest.mark.parametrize("model", ["ERK-PT-000001", "FMS-PT-00002", "Railroad-PT-005", "TokenRing-PT-005"])
 def test_a_search_that_only_counts_edges_finds_the_same_markings_edge_count_deadlocks_and_firing_sequences(
         model: str) -> None:
     from coordinator.netfile.pnml import load_pnml
