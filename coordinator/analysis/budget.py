@@ -3,10 +3,12 @@ line reads them for --help)."""
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
+import sys
 
-__all__ = ["cpus", "default_max_bytes"]
+__all__ = ["cpus", "default_max_bytes", "lower_priority"]
 
 
 @functools.cache
@@ -27,3 +29,14 @@ def cpus() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except (AttributeError, OSError):
         return os.cpu_count() or 1
+
+
+def lower_priority(tid: int, by: int) -> None:
+    """Lower the scheduling priority of thread ``tid`` (a native thread id of this process,
+    ``threading.get_native_id()``) by ``by`` nice steps, to at most 19. Linux only, where a thread
+    is a scheduling entity of its own; elsewhere, or when refused, nothing changes. A priority
+    once lowered is not raised again: an unprivileged process may not."""
+    if not sys.platform.startswith("linux"):
+        return
+    with contextlib.suppress(OSError):
+        os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + by))

@@ -48,14 +48,12 @@ search live in their own modules.
 
 from __future__ import annotations
 
-import contextlib
-import os
-import sys
 import threading
 import time
 import weakref
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
@@ -77,7 +75,7 @@ from coordinator.analysis.invariants import (
     structural_bounds,
     t_invariants,
 )
-from coordinator.analysis.budget import cpus
+from coordinator.analysis.budget import cpus, lower_priority
 from coordinator.analysis.lp import PlaceBounds, Support
 from coordinator.analysis.matrices import SparseNet, sparse_net
 from coordinator.analysis.statespace import (
@@ -89,6 +87,9 @@ from coordinator.analysis.statespace import (
 )
 from coordinator.errors import AnalysisError
 from coordinator.net import Marking, PetriNet
+
+if TYPE_CHECKING:  # the symbolic engine is imported when it runs: analyze's cold start
+    from coordinator.analysis.symbolic import Rival
 
 __all__ = [
     "PROBE_STATES",
@@ -635,9 +636,10 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
     structure does not bound the net (a short probe first: unboundedness is often cheap to see).
     ``finish_level`` False: stop at once at ``max_states`` (:func:`.statespace.explore`), for the
     automatic engine's question whether the graph fits its explicit share. ``stop``: another
-    thread's event that ends the search (:func:`.statespace.explore`). A search that keeps its
-    edges and fills the budget with them is run again without them (:func:`_recount`) when the
-    level is finished."""
+    thread's event that ends the search (:func:`.statespace.explore`). The search of a bounded
+    net keeps its edges while they fit ``graph_bytes`` and then drops them, going on counting
+    them (``shed_edges``): the markings alone may fit, and liveness and reversibility come from
+    them (:meth:`.StateSpace.implicit_liveness`). A note says so."""
     space: StateSpace | None = None
     witness: CoveringWitness | None = None
     bounds = _search_bounds(st)
@@ -651,31 +653,19 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
                 space = probe
     if space is None:
         space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
-                        finish_level=finish_level, stop=stop)
-        if space.stopped_by == "max_memory" and st.bounded and finish_level:
-            kept = space.n_states
-            del space  # one graph at a time within the budget
-            space = _recount(net, st, max_states, graph_bytes, progress, kept, stop)
+                        finish_level=finish_level, stop=stop, shed_edges=st.bounded)
+        if space.edges_shed_at is not None:
+            shed = (f"the edges of the reachability graph filled its memory budget ({graph_bytes / 2**30:.2f} GiB) "
+                    f"at {space.edges_shed_at:,} markings; the search went on counting them without keeping them")
+            if space.complete:
+                st.notes.append(shed + f", and the graph is complete with {space.n_states:,} markings")
+            elif space.stopped_by == "max_memory":
+                st.notes.append(shed + f", and stopped too, after {space.n_states:,} markings")
+            else:
+                st.notes.append(shed + f", to {space.n_states:,} markings")
         if not space.complete and not st.bounded and witness is None:
             witness = covering_witness(space)
     return space, witness
-
-
-def _recount(net: PetriNet, st: _Structure, max_states: int, graph_bytes: int,
-             progress: Callable[[int, int], None] | None, kept: int, stop: threading.Event | None = None) -> StateSpace:
-    """The search again, counting the edges without keeping them, after a search that kept them
-    filled ``graph_bytes`` at ``kept`` markings (and was dropped: one graph at a time within the
-    budget): the markings alone may fit, and liveness and reversibility come from them
-    (:meth:`.StateSpace.implicit_liveness`). A note says what it found."""
-    space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=_search_bounds(st),
-                    edges=False, stop=stop)
-    again = (f"the reachability graph with its edges did not fit the memory budget ({graph_bytes / 2**30:.2f} "
-             f"GiB, {kept:,} markings); searched again counting the edges without keeping them, it ")
-    if space.complete:
-        st.notes.append(again + f"is complete with {space.n_states:,} markings")
-    else:
-        st.notes.append(again + f"stopped too, after {space.n_states:,} markings")
-    return space
 
 
 def _upper_bounds(sn: SparseNet, st: _Structure, lp_seconds: float, seen: np.ndarray,
@@ -768,7 +758,8 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
             found = _symbolic_phase(net, sn, st, budget - (0 if beside is None else beside.graph_bytes), lp_seconds,
                                     symbolic_seconds, phase, reason, started,
                                     stop=None if beside is None else beside.finished,
-                                    borrow=None if beside is None else beside.lend, seen=seen)
+                                    borrow=None if beside is None else beside.lend, seen=seen,
+                                    rival=None if beside is None else beside.rival)
         except AnalysisError as exc:
             if beside is None or not beside.finished.is_set():
                 reason = f"explicit: the symbolic engine gave up ({exc})"
@@ -787,10 +778,6 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
             beside.found = None
             st.notes.extend(beside.st.notes[len(st.notes):])
             rerun = False  # the search beside had the explicit search's own share of the budget
-            if space.stopped_by == "max_memory" and space.edges_kept:  # its edges filled it
-                kept = space.n_states
-                del space  # one graph at a time within the budget
-                space = _recount(net, st, max_states, graph_bytes, progress, kept)
             if space.complete:
                 reason = (f"explicit: the reachability graph is complete with {space.n_states:,} markings, found by "
                           "the explicit search that went on beside the symbolic engine (which it stopped)")
@@ -1027,6 +1014,8 @@ def _fired_seen(net: PetriNet, sn: SparseNet, space: StateSpace, seconds: float 
     found in blocks of markings (temporaries below about ``block_bytes``), each block asked only
     about the transitions not seen yet, within ``seconds`` (the rest stay False: not seen)."""
     n_t = len(net.transitions)
+    if space.fired is not None:
+        return space.fired.copy()
     seen = np.zeros(n_t, dtype=bool)
     if space.edges_kept:
         seen[np.unique(space.transition)] = True
@@ -1087,11 +1076,7 @@ def _yield_cpus() -> None:
     engine by a fifth to a half (Sudoku-PT-AN04: 57.5 s before the search ran beside it, 68.3 s
     after; Angiogenesis-PT-10: 15.7 s, 22.9 s); at this increment, 63.3 s and 17.3 s, and the
     search still answers first where it did (docs/BENCHMARKS.md)."""
-    if not sys.platform.startswith("linux"):
-        return
-    tid = threading.get_native_id()
-    with contextlib.suppress(OSError):
-        os.setpriority(os.PRIO_PROCESS, tid, min(19, os.getpriority(os.PRIO_PROCESS, tid) + _BESIDE_NICE))
+    lower_priority(threading.get_native_id(), _BESIDE_NICE)
 
 
 class _Beside:
@@ -1103,11 +1088,9 @@ class _Beside:
     up, the search goes on to its limits and its graph, complete or not, is the explicit answer.
     The search has ``graph_bytes`` of the budget (half, the explicit search's own share; the
     symbolic engine has the other half meanwhile, and the whole when it outgrows its half:
-    :meth:`lend`). It keeps its edges, stops at ``max_states`` at once (the level it is in left
-    unfinished: a partial graph is only the fallback) and is not run again without its edges when
-    they fill its share: beside a symbolic engine that answers it costs at most one search. When
-    the symbolic engine gives up, a graph whose edges filled the share is searched again without
-    them (:func:`_recount`), as :func:`_search_phase` does. It works on its own copy of the
+    :meth:`lend`). It keeps its edges while they fit that share and then goes on counting them
+    (:func:`_search_phase`), and stops at ``max_states`` at once (the level it is in left
+    unfinished: a partial graph is only the fallback). It works on its own copy of the
     structure's notes (:attr:`st`), taken over if its graph is used. Nets of a few million markings
     that decision diagrams take long over are answered by the search (SafeBus-PT-06: 6,816,756
     markings, docs/BENCHMARKS.md)."""
@@ -1119,6 +1102,15 @@ class _Beside:
         self.finished = threading.Event()  # the graph is complete: the symbolic engine stops
         self.answered = threading.Event()  # the symbolic engine is done: the search stops
         self.found: tuple[StateSpace, CoveringWitness | None] | None = None
+        from coordinator.analysis.symbolic import Rival  # the symbolic engine runs next: loaded anyway
+
+        self.rival = Rival(_BESIDE_NICE, phase)  # its lanes whose diagrams outgrow the graph yield to the search
+
+        def report(states: int, edges: int) -> None:
+            if progress is not None:
+                progress(states, edges)
+            self.rival.found(states)
+
         if phase is not None:
             phase(f"explicit: the search goes on beside the symbolic engine, up to {max_states:,} markings "
                   f"within {graph_bytes / 2**30:.2f} GiB")
@@ -1126,7 +1118,7 @@ class _Beside:
         def search() -> None:
             _yield_cpus()
             try:
-                self.found = _search_phase(net, sn, self.st, max_states, graph_bytes, progress,
+                self.found = _search_phase(net, sn, self.st, max_states, graph_bytes, report,
                                            finish_level=False, stop=self.answered)
                 if self.found[0].complete:
                     self.finished.set()
@@ -1165,7 +1157,7 @@ class _Beside:
 def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, lp_seconds: float, seconds: float,
                     phase: Callable[[str], None] | None, reason: str, started: float,
                     stop: threading.Event | None = None, borrow: Callable[[], int] | None = None,
-                    seen: np.ndarray | None = None) -> Analysis:
+                    seen: np.ndarray | None = None, rival: Rival | None = None) -> Analysis:
     """The analysis from the symbolic engine (:mod:`.symbolic`): the reachable set as a decision
     diagram over the proven place bounds, every count exact. Liveness levels (L1 vs L3), home
     states and the effectiveness of conflicts need the graph and stay undecided. Reversibility
@@ -1174,7 +1166,8 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
     ``stop``: another thread's event that stops the engine; ``borrow``: what frees more memory
     for it when it outgrows ``budget`` (:func:`.symbolic.analyse_symbolic`); ``seen``: (|P|,) the
     largest count of each place the explicit search saw, for levels guessed from them when the proven
-    bounds make them too wide (none: an explicit search of :data:`SEEN_STATES` markings is run then).
+    bounds make them too wide (none: an explicit search of :data:`SEEN_STATES` markings is run then);
+    ``rival``: the explicit search beside the engine, to which its lanes may yield (:class:`.symbolic.Rival`).
 
     Raises:
         AnalysisError: a place without a proven bound, the engine's time or memory budget, or
@@ -1209,7 +1202,7 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
 
     r = analyse_symbolic(net, upper, flows=flows, max_bytes=budget, seconds=seconds, progress=phase,
                          answer_seconds=max(1.0, ANSWER_SECONDS - (time.monotonic() - started)), stop=stop,
-                         borrow=borrow, seen=counts)
+                         borrow=borrow, seen=counts, rival=rival)
     ids = [p.id for p in net.places]
     tids = [t.id for t in net.transitions]
     notes = list(st.notes)
@@ -1293,6 +1286,15 @@ def _omega_marking(net: PetriNet, row: np.ndarray) -> dict[str, int]:
     return {net.places[p].id: int(row[p]) for p in np.flatnonzero(row)}
 
 
+def _acyclic(tsup: Support) -> bool:
+    """Whether the reachability graph has no cycle, by the state equation: a firing sequence from a
+    marking back to itself fires a count vector x ≥ 0, x ≠ 0 with C·x = 0, a T-semiflow; the LP
+    (:func:`.lp.consistent`) found no transition in the support of one, with its certificate checked
+    exactly. Inhibitor arcs only restrict which sequences fire, so the argument stands; a net with
+    reset arcs has no such support (:func:`_without_reset_results`). Murata 1989, section IV-B."""
+    return tsup.covered is not None and tsup.certified and not tsup.covered.any()
+
+
 def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invariants, psup: Support,
                 tsup: Support, structural: Structural, notes: list[str], sources: dict[str, str],
                 budget: int) -> Analysis:
@@ -1307,17 +1309,24 @@ def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invari
         sources[key] = "reachability graph"
     need = graph_pass_bytes(space.n_states, space.n_edges)
     work = space.edges_kept and space.nbytes + need <= budget
+    acyclic = not work and _acyclic(tsup) and space.fired is not None
     # edges too many for scipy's passes: a compiled pass over them; not kept: the components from
-    # the markings, each marking's successors computed again
-    implicit = not work and space.nbytes + implicit_pass_bytes(space.n_states) <= budget
+    # the markings, each marking's successors computed again (none on a graph without cycles)
+    implicit = not work and not acyclic and space.nbytes + implicit_pass_bytes(space.n_states) <= budget
     liveness: dict[str, int] | None = None
     quasi: bool | None = None
     live: bool | None = None
     reversible: bool | None = None
     home_count: int | None = None
     home_is_home: bool | None = None
-    if work or implicit:
-        levels, labels, terminal = space.implicit_liveness() if implicit else liveness_levels(space)
+    if work or implicit or acyclic:
+        if acyclic:  # every component one marking; the terminal ones the deadlocks
+            assert space.fired is not None
+            levels, labels = space.fired.astype(np.int64), np.arange(space.n_states, dtype=np.int32)
+            terminal = np.zeros(space.n_states, dtype=bool)
+            terminal[dead] = True
+        else:
+            levels, labels, terminal = space.implicit_liveness() if implicit else liveness_levels(space)
         n_terminal = int(terminal.sum())
         home_count = int(np.count_nonzero(terminal[labels])) if n_terminal == 1 else 0
         if net.home_marking is not None:
@@ -1331,6 +1340,8 @@ def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invari
         reversible = bool(np.unique(labels).size == 1)
         how = "" if not implicit else (", a compiled pass over its edges" if space.edges_kept
                                         else ", its edges computed again from the markings")
+        if acyclic:
+            how = ", without cycles since no T-semiflow exists (state equation)"
         for key in ("quasi_live", "live", "reversible"):
             sources[key] = "reachability graph" + how
         if implicit and space.edges_kept:
@@ -1342,6 +1353,11 @@ def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invari
             notes.append("liveness and reversibility: the edges were not kept, so the strongly connected components "
                          "were found from the markings, each marking's successors computed again; the robotic "
                          "recovery check, which needs the edges, was skipped")
+        elif acyclic:
+            notes.append("liveness and reversibility: the net has no T-semiflow (certified by the state equation), "
+                         "so no firing sequence returns to a marking and every strongly connected component of the "
+                         "graph is one marking; no pass over the graph was needed, and the robotic recovery check, "
+                         "which needs its edges, was skipped")
     else:
         if space.edges_kept:
             used = np.zeros(len(net.transitions), dtype=bool)

@@ -52,13 +52,13 @@ from math import ceil, inf, log2
 import numpy as np
 
 from coordinator.analysis import mdd_kernel as mk
-from coordinator.analysis.budget import cpus
+from coordinator.analysis.budget import cpus, lower_priority
 from coordinator.analysis.matrices import SparseNet, sparse_net
 from coordinator.analysis.mdd_order import Encoding, EncodingTooLarge, Events, encode, events, touched_places
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet
 
-__all__ = ["ANSWER_SECONDS", "PROBES", "BeyondBounds", "SymbolicResult", "analyse_symbolic", "load_kernel"]
+__all__ = ["ANSWER_SECONDS", "PROBES", "BeyondBounds", "Rival", "SymbolicResult", "analyse_symbolic", "load_kernel"]
 
 _TWO61 = (1 << 61) - 1
 #: default time after which reversibility and liveness are left undecided (seconds from the start of
@@ -677,7 +677,7 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
                      max_bytes: int = 4 << 30, seconds: float = 600.0, answer_seconds: float = ANSWER_SECONDS,
                      progress: Callable[[str], None] | None = None, probes: int = PROBES,
                      stop: threading.Event | None = None, borrow: Callable[[], int] | None = None,
-                     seen: Callable[[], np.ndarray | None] | None = None) -> SymbolicResult:
+                     seen: Callable[[], np.ndarray | None] | None = None, rival: Rival | None = None) -> SymbolicResult:
     """The reachable set of a bounded net by saturation, and its properties (module docstring).
 
     Args:
@@ -708,6 +708,8 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         seen: called once, when the proven bounds make levels too wide (:func:`_reachable`): (|P|,)
             int64, the largest count of each place in some reachable markings (those of an explicit
             search stopped early), or None for none.
+        rival: another search racing the engine for the reachable set (:class:`Rival`), whose
+            markings found so far decide which of the race's lanes yield the CPUs to it.
 
     Returns:
         A :class:`SymbolicResult`.
@@ -734,6 +736,7 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
     try:
         (enc, fwd, store, reach), kept, states = _reachable(sn, net, bounds, seen, list(flows or []), max_bytes,
                                                             deadline, say, stop, None if borrow is None else widen,
+                                                            rival,
                                                             notes)
         single = events(sn, enc)
         secs["encode"] = enc.seconds
@@ -804,7 +807,7 @@ _RAISES = 6
 
 def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[[], np.ndarray | None] | None,
                flows: list[np.ndarray], max_bytes: int, deadline: float, say: Callable[[str], None],
-               stop: threading.Event | None, borrow: Callable[[], int] | None,
+               stop: threading.Event | None, borrow: Callable[[], int] | None, rival: Rival | None,
                notes: list[str]) -> tuple[_Won, _Candidate | None, int]:
     """The reachable set (:func:`_race`), the race's order upside down if its store was kept, and
     the number of markings. On the proven bounds first;
@@ -825,7 +828,7 @@ def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[
     domains, raises, why = bounds, 0, ""
     while True:
         try:
-            won, kept = _race(sn, domains, flows, max_bytes, deadline, say, stop, borrow)
+            won, kept = _race(sn, domains, flows, max_bytes, deadline, say, stop, borrow, rival)
             enc, _, store, reach = won
             states = store.count(reach)
             _check_suspects(store, sn, enc, net, reach)
@@ -1159,9 +1162,19 @@ class _Lane:
         self.timed_out = False
         self.nodes = 0
         self.cands: list[_Candidate] = []  # its candidates, in the order they joined
+        self.tid: int | None = None  # its thread's native id, once it runs
+        self.working: _Store | None = None  # the store of the call it is in, if any
+        self.yielded = False  # its thread's priority was lowered for a rival (:class:`Rival`)
+
+    def nodes_now(self) -> int:
+        """The nodes of the store this lane's call is working on now (0 between calls); read from
+        another thread, the count may be a moment old."""
+        store = self.working
+        return 0 if store is None else store.nodes
 
     def run(self) -> None:
         race = self.race
+        self.tid = threading.get_native_id()
         try:
             self._run()
         except BaseException as exc:  # Ctrl-C in the main thread, or a failure: the race ends
@@ -1197,6 +1210,7 @@ class _Lane:
         store = _Store(enc, max_bytes)
         store.chain = True
         mk.set_watch(min(race.deadline, time.monotonic() + _CHAIN_SECONDS), None, self.cancel)
+        self.working = store
         try:
             reach = store.closure(fwd, store.m0, check_overflow=True)
         except _OutOfTime:
@@ -1210,6 +1224,7 @@ class _Lane:
             return self.cancel.is_set()
         finally:
             mk.set_watch(None, None)
+            self.working = None
         store.max_bytes = race.max_bytes
         race.say("symbolic: order 1 by chaining was the first done")
         race.won(self, (enc, fwd, store, reach))
@@ -1273,6 +1288,7 @@ class _Lane:
             mine = slice_s * (_LEAD if cand.name == 1 else 1.0)
             mk.set_watch(min(race.deadline, time.monotonic() + mine) if n_cands > 1 else race.deadline, None,
                          self.cancel)
+            self.working = store
             try:
                 reach = store.call(mk.MODE_SATURATE, cand.fwd, store.m0, check_overflow=True)
                 store.max_bytes = race.max_bytes  # the others are dropped: the winner has the whole budget
@@ -1314,13 +1330,60 @@ class _Lane:
                 cand.drop()
             finally:
                 mk.set_watch(None, None)
+                self.working = None
             if turn % n_cands == 0:
                 slice_s *= 2
 
 
+class Rival:
+    """Another search racing the symbolic engine for the same answer: the automatic engine's
+    explicit search beside it (:mod:`.structure`). The search reports how many markings it has
+    found (:meth:`found`, from its own thread, every few ten thousand); a lane of the engine's
+    race for the reachable set (:func:`_race`) whose decision diagram has more nodes than that
+    yields the CPUs to the search: its thread's scheduling priority is lowered by ``nice`` steps
+    (:func:`.budget.lower_priority`), the same as the search's own, so the two share what the
+    other lane leaves. A diagram larger than the explicit graph found so far is not compressing
+    the set, and the search is then the better bet: NQueens-PT-10's first order held 4.2 million
+    nodes when the search had 2.5 million of its 7,535,369 markings, and the race was undecided
+    after 110 s, where the search alone completes in 23 s. Where the decision diagrams win, they
+    stay far smaller than the markings found (Angiogenesis-PT-10: 8.2·10^11 markings). A lane
+    that yielded stays so until the race ends (an unprivileged process may not raise a priority
+    again); with the search over, nothing competes with it."""
+
+    def __init__(self, nice: int, say: Callable[[str], None] | None = None) -> None:
+        self.nice = nice
+        self.say = say or (lambda _text: None)
+        self._lock = threading.Lock()
+        self._race: _Race | None = None
+
+    def _enter(self, race: _Race) -> None:
+        with self._lock:
+            self._race = race
+
+    def _leave(self) -> None:
+        with self._lock:
+            self._race = None
+
+    def found(self, markings: int) -> None:
+        """The search has found ``markings`` markings: the lanes whose diagrams have more nodes
+        yield to it (each once)."""
+        with self._lock:
+            race = self._race
+        if race is None:
+            return
+        for i, lane in enumerate(race.lanes):
+            nodes = lane.nodes_now()
+            if lane.tid is None or lane.yielded or nodes <= markings:
+                continue
+            lane.yielded = True
+            lower_priority(lane.tid, self.nice)
+            self.say(f"symbolic: lane {i + 1} of the race yields to the explicit search: its decision diagram has "
+                     f"{nodes:,} nodes, the search {markings:,} markings")
+
+
 def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes: int, deadline: float,
           say: Callable[[str], None], stop: threading.Event | None = None,
-          borrow: Callable[[], int] | None = None) -> tuple[_Won, _Candidate | None]:
+          borrow: Callable[[], int] | None = None, rival: Rival | None = None) -> tuple[_Won, _Candidate | None]:
     """The reachable set, by saturation on candidate variable orders raced against each other, until
     one finishes. How long saturation takes on an order is hard to predict from the order (on
     Railroad-PT-010, orders whose scores differ by 2 % take 0.15 to 13 s), so a few candidates are
@@ -1371,7 +1434,8 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     and finished at 38 s, where the first finishes alone in 14 s); when it outgrows that, the
     other lanes are stopped and dropped and it gets the whole; when it outgrows the whole,
     ``borrow`` may add to it once (:meth:`_Race.widen`). ``stop`` set (by another thread) ends
-    every lane.
+    every lane. A lane whose decision diagram has more nodes than ``rival``'s search has markings
+    yields the CPUs to it (:class:`Rival`).
 
     Returns:
         The winner, and the candidate whose order is the winner's upside down if the race kept its
@@ -1386,15 +1450,23 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
         race.lanes = [_Lane(race, True, 0, max_bytes // 2), _Lane(race, False, _CANDIDATES - 1, max_bytes // 2)]
     else:
         race.lanes = [_Lane(race, True, _CANDIDATES - 1, max_bytes)]
-    helpers = [threading.Thread(target=lane.run, name="petrobot-saturation", daemon=True) for lane in race.lanes[:-1]]
+    # with a rival every lane has a thread of its own, whose priority may be lowered (the caller's stays
+    # its own); without, the last lane runs in the caller's thread
+    own = race.lanes if rival is not None else race.lanes[:-1]
+    helpers = [threading.Thread(target=lane.run, name="petrobot-saturation", daemon=True) for lane in own]
     try:
         for thread in helpers:
             thread.start()
-        race.lanes[-1].run()  # the main thread's lane: Ctrl-C reaches it
+        if rival is not None:
+            rival._enter(race)
+        else:
+            race.lanes[-1].run()  # the caller's lane: Ctrl-C reaches it
         for thread in helpers:
             while thread.is_alive():
-                thread.join(0.2)
+                thread.join(0.2)  # Ctrl-C reaches the caller here: the race is cancelled below
     finally:
+        if rival is not None:
+            rival._leave()
         race.cancel_all()
         for thread in helpers:
             thread.join()

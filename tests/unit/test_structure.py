@@ -306,7 +306,7 @@ def test_liveness_comes_from_a_compiled_pass_over_the_edges_when_they_do_not_fit
     assert any("by a compiled pass over the edges" in n for n in small.notes)
 
 
-def test_a_graph_whose_edges_fill_the_budget_is_searched_again_without_them_and_still_gets_its_liveness() -> None:
+def test_a_graph_whose_edges_fill_the_budget_is_searched_on_without_them_and_still_gets_its_liveness() -> None:
     # fourteen independent two-state cycles: 16,384 markings, 229,376 edges (1.8 MB of them)
     net = make_net("cycles", {f"a{i}": 1 for i in range(14)},
                    {**{f"go{i}": ({f"a{i}": 1}, {f"b{i}": 1}) for i in range(14)},
@@ -317,20 +317,43 @@ def test_a_graph_whose_edges_fill_the_budget_is_searched_again_without_them_and_
     assert a.complete and a.states == 16_384 and a.edges == 229_376
     assert a.space is not None and not a.space.edges_kept
     assert a.live and a.reversible and a.quasi_live and a.deadlock is False and a.home_states == 16_384
-    assert any("searched again counting the edges" in n for n in a.notes)
+    assert a.space.edges_shed_at is not None and 0 < a.space.edges_shed_at < 16_384
+    assert any("the search went on counting them without keeping them, and the graph is complete" in n
+               for n in a.notes)
     assert any("the edges were not kept" in n for n in a.notes)
+
+
+def test_a_graph_without_cycles_by_the_state_equation_gets_its_liveness_without_a_pass_over_it() -> None:
+    # ten tokens each moving a -> b -> c, or a -> c at once: 3^10 = 59,049 markings, no T-semiflow
+    # (tokens only move on), so every component is one marking and the one deadlock is the home state
+    net = make_net("onward", {f"a{i}": 1 for i in range(10)},
+                   {**{f"ab{i}": ({f"a{i}": 1}, {f"b{i}": 1}) for i in range(10)},
+                    **{f"bc{i}": ({f"b{i}": 1}, {f"c{i}": 1}) for i in range(10)},
+                    **{f"ac{i}": ({f"a{i}": 1}, {f"c{i}": 1}) for i in range(10)}})
+    full = analyse(net)
+    assert full.complete and full.states == 59_049 and full.space is not None and full.space.edges_kept
+    budget = 16 * 2**20  # the edges (4.7 MB) do not fit half of it beside the markings, the markings do
+    small = analyse(net, max_bytes=budget, engine="explicit")
+    assert small.complete and small.space is not None and not small.space.edges_kept
+    assert small.space.edges_shed_at is not None
+    assert (small.liveness, small.quasi_live, small.live, small.reversible, small.home_states) == (
+        full.liveness, full.quasi_live, full.live, full.reversible, full.home_states)
+    assert set(small.liveness.values()) == {1} and small.home_states == 1 and small.reversible is False
+    assert small.sources["live"].endswith("without cycles since no T-semiflow exists (state equation)")
+    assert any("every strongly connected component of the graph is one marking" in n for n in small.notes)
 
 
 def test_when_the_search_without_edges_stops_too_its_markings_still_show_every_transition_fires() -> None:
     # sixteen cycles: 65,536 markings, 2,097,152 edges; half of 5 MiB holds neither the graph nor
-    # its markings alone, and the first graph is dropped before the second search
+    # its markings alone, once the edges are dropped
     net = make_net("cycles", {f"a{i}": 1 for i in range(16)},
                    {**{f"go{i}": ({f"a{i}": 1}, {f"b{i}": 1}) for i in range(16)},
                     **{f"back{i}": ({f"b{i}": 1}, {f"a{i}": 1}) for i in range(16)}})
     a = analyse(net, max_bytes=5 * 2**20, engine="explicit")
     assert not a.complete and a.stopped_by == "max_memory"
     assert a.space is not None and not a.space.edges_kept and a.space.n_states < 65_536
-    assert any("stopped too, after" in n for n in a.notes)
+    assert a.space.edges_shed_at is not None and a.space.edges_shed_at < a.space.n_states
+    assert any("without keeping them, and stopped too, after" in n for n in a.notes)
     assert a.quasi_live is True and a.sources["quasi_live"] == "reachability graph (explored part)"
     assert a.deadlock is None and a.live is None
 

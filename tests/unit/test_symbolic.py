@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import os
 import threading
 from pathlib import Path
 
@@ -881,3 +882,31 @@ def test_a_count_beyond_a_float_s_range_is_exact() -> None:
     r = analyse_symbolic(net, np.ones(2 * n, dtype=np.int64), flows=[], seconds=120.0)
     assert r.states == 2**n and r.edges == n * 2**n
     assert r.deadlock is False and r.max_token_per_marking == n
+
+
+def test_a_lane_whose_diagram_outgrows_the_rival_search_s_markings_yields_and_the_answer_stands() -> None:
+    from coordinator.analysis.symbolic import Rival
+
+    net = load_pnml(SCALE / "Eratosthenes-PT-050" / "model.pnml")  # 17,179,869,184 markings in about 2 s
+    bounds, flows = proven_bounds(net)
+    said: list[str] = []
+    rival = Rival(3, said.append)
+    done = threading.Event()
+
+    def search() -> None:  # a rival that never gets past one marking: every lane at work outgrows it
+        while not done.wait(0.005):
+            rival.found(1)
+
+    before = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    thread = threading.Thread(target=search)
+    thread.start()
+    try:
+        r = analyse_symbolic(net, bounds, flows=flows, seconds=120.0, answer_seconds=0.0, progress=said.append,
+                             rival=rival)
+    finally:
+        done.set()
+        thread.join()
+    assert r.states == 17_179_869_184
+    assert any(line.startswith("symbolic: lane ") and "yields to the explicit search" in line for line in said), said
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == before  # the lanes had threads of their own
+    rival.found(1)  # after the race: nothing to yield
