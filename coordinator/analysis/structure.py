@@ -1009,23 +1009,24 @@ def _some(ids: list[str]) -> str:
 
 def _fired_seen(net: PetriNet, sn: SparseNet, space: StateSpace, seconds: float = 5.0,
                 block_bytes: int = 1 << 26) -> np.ndarray:
-    """(|T|,) bool: the transitions that label an edge of the explored part; when its edges were
-    counted, not kept, those enabled in one of its markings (each is reachable, so they can fire):
-    found in blocks of markings (temporaries below about ``block_bytes``), each block asked only
-    about the transitions not seen yet, within ``seconds`` (the rest stay False: not seen)."""
+    """(|T|,) bool: the transitions that label an edge of the explored part (``space.fired``, or
+    its kept edges); when its edges were counted, not kept, also those enabled in one of its
+    markings, the ones not expanded included (each is reachable, so they can fire): found in blocks
+    of markings (temporaries below about ``block_bytes``), each block asked only about the
+    transitions not seen yet, within ``seconds`` (the rest stay False: not seen)."""
     n_t = len(net.transitions)
-    if space.fired is not None:
-        return space.fired.copy()
-    seen = np.zeros(n_t, dtype=bool)
+    seen = np.zeros(n_t, dtype=bool) if space.fired is None else space.fired.copy()
     if space.edges_kept:
         seen[np.unique(space.transition)] = True
         return seen
     start = time.monotonic()
     block = max(1, block_bytes // max(8 * (len(net.places) + n_t), 1))
     for lo in range(0, space.n_states, block):
+        if seen.all():
+            break
         rows = space.states[lo:lo + block]
         left = np.flatnonzero(~seen)
-        if lo == 0 or left.size > 64:
+        if left.size > 64:
             seen |= enabled_mask(net, rows).any(axis=0)
         else:
             for t in left.tolist():
