@@ -74,7 +74,8 @@ jit.configure()  # numba's cache in the user's cache directory: before numba is 
 
 from numba import njit, objmode, types  # noqa: E402
 
-__all__ = ["CURSOR_SIZE", "HEAD", "RESET_SIGNATURE", "RUN_SIGNATURE", "cached", "components", "edge_components", "load",
+__all__ = ["CURSOR_SIZE", "HEAD", "RESET_SIGNATURE", "RUN_SIGNATURE", "cached", "components", "edge_components", "extremes",
+           "load",
            "load_resets", "run", "set_progress", "tables", "unpack"]
 
 #: status codes: graph complete, or the state limit reached and its level finished; ``budget``
@@ -523,6 +524,31 @@ def _fields(lay: np.ndarray, n_p: int, sh: np.ndarray, msk: np.ndarray) -> int:
         msk[p] = (np.uint64(1) << np.uint64(w)) - np.uint64(1)
         used += w
     return word + 1
+
+
+@njit(cache=True)
+def extremes(words: np.ndarray, layout: np.ndarray, hi: np.ndarray, lo: np.ndarray) -> int:
+    """Per place the largest (``hi``) and smallest (``lo``) count, both (|P|,) int64 filled here,
+    over the markings ``words`` (N ≥ 1, W) uint64 packed by ``layout`` (see :func:`run`), read
+    without unpacking them; returns the largest token count of one marking."""
+    n_p = hi.shape[0]
+    top = 0
+    for p in range(n_p):
+        hi[p] = 0
+        lo[p] = 1 << 62
+    for i in range(words.shape[0]):
+        total = 0
+        for p in range(n_p):
+            v = np.int64((words[i, layout[p]] >> np.uint64(layout[n_p + p])) & (
+                (np.uint64(1) << np.uint64(layout[2 * n_p + p])) - np.uint64(1)))
+            total += v
+            if v > hi[p]:
+                hi[p] = v
+            if v < lo[p]:
+                lo[p] = v
+        if total > top:
+            top = total
+    return top
 
 
 @njit(cache=True)

@@ -119,6 +119,23 @@ class StateSpace:
             object.__setattr__(self, "_states", cached)
         return cached
 
+    def extremes(self) -> tuple[np.ndarray, np.ndarray, int]:
+        """``(largest, smallest, top)``: each place's largest and smallest count over the markings
+        found, (|P|,) int64 each (zeros when there are none), and the largest token count of one
+        marking; read from the packed markings without unpacking them (``states`` for 7.5 million
+        markings of 160 places is 1.2 GB), computed once."""
+        found = self.__dict__.get("_extremes")
+        if found is None:
+            n_p = len(self.net.places)
+            hi, lo, top = np.zeros(n_p, np.int64), np.zeros(n_p, np.int64), 0
+            if self.n_states:
+                top = int(_kernel().extremes(self.words, self.layout, hi, lo))
+            for a in (hi, lo):
+                a.flags.writeable = False
+            found = (hi, lo, top)
+            object.__setattr__(self, "_extremes", found)
+        return found
+
     def rows(self, lo: int, hi: int) -> np.ndarray:
         """Markings ``lo:hi``, shape (hi - lo, |P|), int64, unpacked from ``words`` (a block at a
         time, without unpacking the whole state space)."""

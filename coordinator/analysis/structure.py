@@ -1299,9 +1299,7 @@ def _acyclic(tsup: Support) -> bool:
 def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invariants, psup: Support,
                 tsup: Support, structural: Structural, notes: list[str], sources: dict[str, str],
                 budget: int) -> Analysis:
-    states = space.states
-    per_place = states.max(axis=0).astype(np.int64) if space.n_states else np.zeros(len(net.places), np.int64)
-    totals_max = int(states.sum(axis=1, dtype=np.int64).max(initial=0)) if space.n_states else 0
+    per_place, least, totals_max = space.extremes()
     dead = space.deadlocks()
     deadlocks = [Deadlock(marking=space.marking(int(i)).to_dict(), firing_sequence=space.firing_sequence(int(i)))
                  for i in dead[:MAX_WITNESSES]]
@@ -1338,7 +1336,7 @@ def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invari
                 home_is_home = False
         liveness = {t.id: int(lv) for t, lv in zip(net.transitions, levels)}
         quasi, live = bool((levels >= 1).all()), bool((levels == 4).all())
-        reversible = bool(np.unique(labels).size == 1)
+        reversible = bool(labels.size == 0 or (labels == labels[0]).all())  # one component: M0 reached from all
         how = "" if not implicit else (", a compiled pass over its edges" if space.edges_kept
                                         else ", its edges computed again from the markings")
         if acyclic:
@@ -1368,7 +1366,7 @@ def _from_graph(net: PetriNet, space: StateSpace, pinv: Invariants, tinv: Invari
         notes.append(f"liveness, reversibility and the robotic recovery check were skipped: on a graph of "
                      f"{space.n_edges:,} edges they need about {need / 2**30:.1f} GiB beyond the graph's "
                      f"{space.nbytes / 2**30:.1f} GiB, over the memory budget of {budget / 2**30:.1f} GiB")
-    stable = np.flatnonzero(states.min(axis=0) == states.max(axis=0))
+    stable = np.flatnonzero(least == per_place) if space.n_states else np.arange(len(net.places))
     conflicts, finished = _conflicts(net, space, on_edges=work)
     if not finished:
         notes.append("structural conflicts: the effectiveness check ran out of time; some are left undecided")

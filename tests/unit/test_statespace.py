@@ -419,6 +419,19 @@ def test_widening_fields_mid_search_keeps_the_graph_exact_also_when_truncated(mo
             assert np.array_equal(getattr(ss, name), getattr(ref, name)), name
 
 
+@pytest.mark.parametrize("model", ["ERK-PT-000001", "FMS-PT-00002", "Kanban-PT-00005", "Railroad-PT-005"])
+def test_the_extremes_read_from_the_packed_markings_are_those_of_the_unpacked_ones(model: str) -> None:
+    from coordinator.netfile.pnml import load_pnml
+
+    net = load_pnml(str(MCC / model / "model.pnml"))
+    for limit in (1, 500, 10_000_000):
+        space = explore(net, max_states=limit)
+        hi, lo, top = space.extremes()
+        states = space.states.astype(np.int64)
+        assert hi.tolist() == states.max(axis=0).tolist() and lo.tolist() == states.min(axis=0).tolist()
+        assert top == int(states.sum(axis=1).max())
+
+
 @pytest.mark.parametrize("model", ["ERK-PT-000001", "FMS-PT-00002", "Railroad-PT-005", "TokenRing-PT-005"])
 def test_the_transitions_the_search_says_fired_are_those_labelling_an_edge_kept_or_counted(model: str) -> None:
     from coordinator.netfile.pnml import load_pnml
