@@ -1343,10 +1343,12 @@ class Rival:
     yields the CPUs to the search: its thread's scheduling priority is lowered by ``nice`` steps
     (:func:`.budget.lower_priority`), the same as the search's own, so the two share what the
     other lane leaves. A diagram larger than the explicit graph found so far is not compressing
-    the set, and the search is then the better bet: NQueens-PT-10's first order held 4.2 million
-    nodes when the search had 2.5 million of its 7,535,369 markings, and the race was undecided
-    after 110 s, where the search alone completes in 23 s. Where the decision diagrams win, they
-    stay far smaller than the markings found (Angiogenesis-PT-10: 8.2·10^11 markings). A lane
+    the set, and the search is then the better bet: on NQueens-PT-10 the first order by chaining
+    held 4.2 million nodes when the search had 2.5 million of its 7,535,369 markings, and the race
+    was undecided after 110 s, where the search alone completes in 23 s. Where the decision
+    diagrams win, their nodes seldom pass the markings found, and then by little (over eight
+    contest models they won, at most 1.29 times, on Railroad-PT-020's second lane, which then
+    yields; the answer still comes in about 40 s; docs/BENCHMARKS.md). A lane
     that yielded stays so until the race ends (an unprivileged process may not raise a priority
     again); with the search over, nothing competes with it."""
 
