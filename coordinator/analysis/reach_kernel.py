@@ -527,17 +527,17 @@ def _fields(lay: np.ndarray, n_p: int, sh: np.ndarray, msk: np.ndarray) -> int:
 
 
 @njit(cache=True)
-def extremes(words: np.ndarray, layout: np.ndarray, hi: np.ndarray, lo: np.ndarray) -> int:
+def extremes(words: np.ndarray, layout: np.ndarray, hi: np.ndarray, lo: np.ndarray) -> np.int64:
     """Per place the largest (``hi``) and smallest (``lo``) count, both (|P|,) int64 filled here,
     over the markings ``words`` (N ≥ 1, W) uint64 packed by ``layout`` (see :func:`run`), read
     without unpacking them; returns the largest token count of one marking."""
     n_p = hi.shape[0]
-    top = 0
+    top = np.int64(0)
     for p in range(n_p):
         hi[p] = 0
         lo[p] = 1 << 62
     for i in range(words.shape[0]):
-        total = 0
+        total = np.int64(0)
         for p in range(n_p):
             v = np.int64((words[i, layout[p]] >> np.uint64(layout[n_p + p])) & (
                 (np.uint64(1) << np.uint64(layout[2 * n_p + p])) - np.uint64(1)))
