@@ -792,7 +792,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         return replace(_from_graph(net, space, pinv, tinv, psup, tsup, structural, notes, sources, budget),
                        engine="explicit", engine_reason=reason)
     v = _Partial(place_bounds={p.id: None for p in net.places})
-    seen_max = space.states.max(axis=0).astype(np.int64) if space.n_states else np.zeros(len(net.places), np.int64)
+    seen_max = space.extremes()[0]
     fires = _partial_from_siphon(v, net, sn, st)
     if st.bounded:
         structural = _partial_from_bounds(v, sn, st, space, seen_max, lp_seconds)
@@ -812,7 +812,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         # the probe's pumping witness ended the search; a longer one may still show every transition fire
         space = explore(net, max_states=longer, progress=progress, max_bytes=graph_bytes, bounds=_search_bounds(st),
                         finish_level=False)
-        seen_max = space.states.max(axis=0).astype(np.int64) if space.n_states else seen_max
+        seen_max = space.extremes()[0] if space.n_states else seen_max
     if space.stopped_by == "max_memory":
         notes.append(f"the reachability graph was stopped by the memory budget ({graph_bytes / 2**30:.2f} GiB of "
                      f"{budget / 2**30:.2f} GiB) after {space.n_states:,} markings")
@@ -969,7 +969,7 @@ def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Struc
     if v.one_safe is None and int(seen_max.max(initial=0)) > 1:
         v.one_safe = False
         sources["one_safe"] = "reachability graph (explored part)"
-    if space.n_states and (space.states.min(axis=0) != space.states.max(axis=0)).all():
+    if space.n_states and (space.extremes()[1] != space.extremes()[0]).all():
         v.stable_known = False
         sources["stable_marking"] = "reachability graph (explored part): every place varies"
     if v.live is None and v.deadlock and net.transitions:
@@ -1017,7 +1017,8 @@ def _fired_seen(net: PetriNet, sn: SparseNet, space: StateSpace, seconds: float 
     n_t = len(net.transitions)
     seen = np.zeros(n_t, dtype=bool) if space.fired is None else space.fired.copy()
     if space.edges_kept:
-        seen[np.unique(space.transition)] = True
+        if space.fired is None:
+            seen[np.unique(space.transition)] = True
         return seen
     start = time.monotonic()
     block = max(1, block_bytes // max(8 * (len(net.places) + n_t), 1))
