@@ -38,8 +38,8 @@ __all__ = ["StateSpace", "arc_table", "default_max_bytes", "enabled_mask", "expl
 
 #: largest n·|P|·|T| for which enabling is computed by matrix products (see _enabled)
 _MAX_PRODUCT = 500_000
-#: markings expanded between two progress reports
-_PROGRESS_STATES = 1 << 16
+#: markings expanded between two progress reports (and checks of a stop event), by default
+PROGRESS_STATES = 1 << 16
 
 
 @dataclass(frozen=True, eq=False)
@@ -626,7 +626,8 @@ def _widths(bounds: np.ndarray | None, m0: np.ndarray) -> tuple[np.ndarray, np.n
 def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray | None = None,
             progress: Callable[[int, int], None] | None = None, max_bytes: int | None = None,
             bounds: np.ndarray | None = None, edges: bool = True, finish_level: bool = True,
-            stop: threading.Event | None = None, shed_edges: bool = False) -> StateSpace:
+            stop: threading.Event | None = None, shed_edges: bool = False,
+            report_every: int = PROGRESS_STATES) -> StateSpace:
     """Build the reachability graph of ``net`` by a compiled breadth-first search.
 
     The ordinary firing rule of :mod:`coordinator.net` is used (inhibitor arcs honoured, reset arcs
@@ -648,8 +649,8 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         priority: optional (|T|,) integer levels; in each marking only the enabled transitions of the
             highest enabled level fire (the GSPN helper passes 0 for timed transitions and
             1 + priority for immediate ones).
-        progress: called as ``progress(states_found, edges_found)`` every 65,536 expanded markings
-            and at the end.
+        progress: called as ``progress(states_found, edges_found)`` every ``report_every``
+            expanded markings and at the end.
         max_bytes: byte budget of the search's buffers (markings, edges, hash table, and room for
             the unpacked ``states`` a consumer may ask for); when growing a buffer would exceed it, the search stops at once with
             what it has (``stopped_by == "max_memory"``). Default :func:`default_max_bytes`.
@@ -662,13 +663,16 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
             expanded stay unexpanded), for a caller that asks only whether the graph fits: a level
             may be most of the graph (Eratosthenes-PT-200's 1,000,000th marking is found in 7 s,
             and its level took 54 s more to finish).
-        stop: an event another thread sets to stop the search (checked every 65,536 expanded
-            markings; ``stopped_by == "stopped"``): the automatic engine's search beside the
+        stop: an event another thread sets to stop the search (checked every ``report_every``
+            expanded markings; ``stopped_by == "stopped"``): the automatic engine's search beside the
             symbolic engine, when that one answers first.
         shed_edges: with ``edges``, when the kept edges leave the markings no room within
             ``max_bytes``, drop them and go on counting them only (``edges_kept`` False and
             ``edges_shed_at`` the number of markings found then), instead of stopping: a graph
             whose edges do not fit is searched once, not again without them.
+        report_every: expanded markings between two calls of ``progress`` (and checks of
+            ``stop``), default 65,536; a caller that waits for the search to pass a count smaller
+            than that passes the count.
 
     Returns:
         The :class:`StateSpace`.
@@ -700,7 +704,7 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     start, target = _widths(bounds, np.asarray(m0))
     layout = np.concatenate([packed_layout(start)[0], target])
     rk.set_progress(progress, stop)
-    report_every = _PROGRESS_STATES if progress is not None or stop is not None else 0
+    report_every = max(1, int(report_every)) if progress is not None or stop is not None else 0
     try:
         status, words, dst, tr, parent, expanded, out_ptr, complete, top, layout, store, shed_at, fired = rk.run(
             pre, inh, inc, tab, m0, layout, prio, use_prio, max_states, budget, report_every, bool(edges),

@@ -79,6 +79,7 @@ from coordinator.analysis.budget import cpus, lower_priority
 from coordinator.analysis.lp import PlaceBounds, Support
 from coordinator.analysis.matrices import SparseNet, sparse_net
 from coordinator.analysis.statespace import (
+    PROGRESS_STATES,
     StateSpace,
     default_max_bytes,
     enabled_mask,
@@ -536,13 +537,18 @@ def _conflicts(net: PetriNet, space: StateSpace | None, *, seconds: float = 10.0
 
 #: the explicit search's share in the automatic choice: it runs up to this many markings (a few
 #: seconds); a net whose graph is larger and whose places all have a proven bound goes symbolic
-#: (and, on two CPUs or more, the explicit search goes on beside the symbolic engine: _Beside)
+#: (and, on two CPUs or more, the explicit search, started in a thread of its own, goes on beside
+#: the symbolic engine: _Beside)
 AUTO_PROBE_STATES = 1_000_000
 #: markings of the explicit search run for the symbolic engine's guessed levels when it was asked
 #: for alone (``--engine symbolic``) and the proven bounds make its levels too wide
 SEEN_STATES = 100_000
 #: time budget of the symbolic engine inside :func:`analyse` (seconds)
 SYMBOLIC_SECONDS = 300.0
+#: the symbolic engine's time budget on a net some of whose places have no proven bound (levels
+#: guessed from the counts seen; the net may be unbounded, and the explicit search and
+#: coverability run after it when it gives up), seconds
+UNPROVEN_SECONDS = 60.0
 #: how much lower the search beside the symbolic engine runs (a nice increment, Linux): the symbolic
 #: engine's race of variable orders has the CPUs first, the search takes what they leave
 _BESIDE_NICE = 6
@@ -631,12 +637,14 @@ def search_bounds(net: PetriNet, *, max_bytes: int | None = None, invariant_seco
 
 def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,
                   progress: Callable[[int, int], None] | None, finish_level: bool = True,
-                  stop: threading.Event | None = None) -> tuple[StateSpace, CoveringWitness | None]:
+                  stop: threading.Event | None = None,
+                  report_every: int = PROGRESS_STATES) -> tuple[StateSpace, CoveringWitness | None]:
     """The reachability graph within its limits, and a pumping witness of unboundedness when the
     structure does not bound the net (a short probe first: unboundedness is often cheap to see).
     ``finish_level`` False: stop at once at ``max_states`` (:func:`.statespace.explore`), for the
     automatic engine's question whether the graph fits its explicit share. ``stop``: another
-    thread's event that ends the search (:func:`.statespace.explore`). The search of a bounded
+    thread's event that ends the search, ``report_every`` how often ``progress`` is called and
+    ``stop`` checked (:func:`.statespace.explore`). The search of a bounded
     net keeps its edges while they fit ``graph_bytes`` and then drops them, going on counting
     them (``shed_edges``): the markings alone may fit, and liveness and reversibility come from
     them (:meth:`.StateSpace.implicit_liveness`). A note says so."""
@@ -653,7 +661,7 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
                 space = probe
     if space is None:
         space = explore(net, max_states=max_states, progress=progress, max_bytes=graph_bytes, bounds=bounds,
-                        finish_level=finish_level, stop=stop, shed_edges=st.bounded)
+                        finish_level=finish_level, stop=stop, shed_edges=st.bounded, report_every=report_every)
         if space.edges_shed_at is not None:
             shed = (f"the edges of the reachability graph filled its memory budget ({graph_bytes / 2**30:.2f} GiB) "
                     f"at {space.edges_shed_at:,} markings; the search went on counting them without keeping them")
@@ -733,37 +741,77 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         return _symbolic_phase(net, sn, st, budget, lp_seconds, symbolic_seconds, phase,
                                "symbolic: asked for (--engine symbolic)", started)
     limit = max_states
-    if engine == "auto" and st.bounded:
+    if engine == "auto":
         limit = min(max_states, AUTO_PROBE_STATES)
     reason = "explicit: asked for (--engine explicit)"
-    # the automatic engine's share of the explicit search asks only whether the graph fits it: the
-    # search stops at its limit at once (a level being finished may be most of the graph); the
-    # search over the whole limit, when the symbolic engine gives up, finishes its level
-    space, witness = _search_phase(net, sn, st, limit, graph_bytes, progress,
-                                   finish_level=not (engine == "auto" and limit < max_states))
-    if engine == "auto" and space.complete:
+    beside: _Beside | None = None
+    searched = False  # the graph below is that of the search over the whole limit
+    if engine == "auto" and st.bounded and limit < max_states and cpus() >= 2:
+        # two CPUs and a bounded net: the search over the whole limit starts at once, in a thread, and the symbolic
+        # engine starts beside it when it passes the explicit share (the share is searched once)
+        beside = _Beside(net, sn, st, max_states, graph_bytes, limit, progress, phase)
+        try:
+            going = beside.wait_share()
+        except BaseException:
+            beside.end(stop=True)
+            raise
+        if not going:
+            if beside.found is not None:  # complete, or stopped by its memory: the search's own answer
+                space, witness = beside.found
+                st.notes.extend(beside.st.notes[len(st.notes):])
+                searched = True
+            beside = None
+    if beside is None and not searched:
+        # the automatic engine's share of the explicit search asks only whether the graph fits it: the
+        # search stops at its limit at once (a level being finished may be most of the graph); the
+        # search over the whole limit, when the symbolic engine gives up, finishes its level
+        space, witness = _search_phase(net, sn, st, limit, graph_bytes, progress,
+                                       finish_level=not (engine == "auto" and limit < max_states))
+    if engine == "auto" and beside is None and space.complete:
         reason = f"explicit: the reachability graph is complete with {space.n_states:,} markings" + (
-            f", within the explicit search's share of {limit:,}" if st.bounded else "")
-    elif engine == "auto" and st.bounded:
-        why = "its memory budget" if space.stopped_by == "max_memory" else f"{space.n_states:,} markings"
-        reason = (f"symbolic: the explicit search stopped at {why} and every place has a proven bound, so the "
-                  "symbolic engine takes over")
-        beside: _Beside | None = None
-        seen = space.seen_counts()  # for levels guessed from them, if the proven bounds make them too wide
-        if limit < max_states and cpus() >= 2:
-            del space  # the probe's graph is freed: the search beside builds its own, or one is built again
-            beside = _Beside(net, sn, st, max_states, graph_bytes, progress, phase)
+            f", within the explicit search's share of {limit:,}" if st.bounded and space.n_states <= limit else "")
+    elif engine == "auto" and (st.bounded or (witness is None and limit < max_states
+                                               and space.stopped_by == "max_states")):
+        # every place has a proven bound; or some have none but the search passed its share with no
+        # pumping witness: the symbolic engine tries levels guessed from the counts seen (a set no
+        # firing leaves shows the net bounded), within UNPROVEN_SECONDS as the net may be unbounded
+        # (a search its memory stopped first keeps its graph: FunctionPointer-PT-c128, unbounded,
+        # whose 1,123 places without a bound fill the search's 2 GiB at 262,138 markings)
+        proven = ("every place has a proven bound" if st.bounded else
+                  "not every place has a proven bound but no pumping witness was found")
+        guessed = "" if st.bounded else (" on levels guessed from the counts seen, and no firing left them: the net "
+                                         "is bounded")
+        seen: np.ndarray | None = None  # counts for levels guessed from them
+        if beside is not None:
+            reason = (f"symbolic: the explicit search passed its share of {limit:,} markings and {proven}, so the "
+                      f"symbolic engine takes over (the search goes on beside it){guessed}")
+        else:
+            why = "its memory budget" if space.stopped_by == "max_memory" else f"{space.n_states:,} markings"
+            reason = f"symbolic: the explicit search stopped at {why} and {proven}, so the symbolic engine takes over"
+            reason += guessed
+            seen = space.seen_counts()
+            if not st.bounded and cpus() >= 2:
+                # its share told whether a pumping witness shows in it: the search over the whole
+                # limit goes on beside the symbolic engine, from the start
+                del space
+                beside = _Beside(net, sn, st, max_states, graph_bytes, 0, progress, phase)
+                beside.wait_share()
         found: Analysis | None = None
         try:
             found = _symbolic_phase(net, sn, st, budget - (0 if beside is None else beside.graph_bytes), lp_seconds,
-                                    symbolic_seconds, phase, reason, started,
+                                    symbolic_seconds if st.bounded else min(symbolic_seconds, UNPROVEN_SECONDS),
+                                    phase, reason, started,
                                     stop=None if beside is None else beside.finished,
-                                    borrow=None if beside is None else beside.lend, seen=seen,
+                                    borrow=None if beside is None else beside.lend, seen=seen, seen_states=limit,
                                     rival=None if beside is None else beside.rival)
         except AnalysisError as exc:
             if beside is None or not beside.finished.is_set():
-                reason = f"explicit: the symbolic engine gave up ({exc})"
-                st.notes.append(f"the symbolic engine gave up ({exc}); the explicit search goes on to its limits")
+                what = "the symbolic engine" if st.bounded else (
+                    "not every place has a proven bound, and the symbolic engine on levels guessed from the counts "
+                    "seen")
+                reason = f"explicit: {what} gave up ({exc})"
+                st.notes.append(f"{what[0].upper()}{what[1:]} gave up ({exc}); the explicit search goes on to its "
+                                "limits")
         except BaseException:
             if beside is not None:
                 beside.end(stop=True)
@@ -772,7 +820,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
             beside.end(stop=found is not None)  # the symbolic engine gave up: the search goes on to its limits
         if found is not None and (beside is None or not beside.finished.is_set()):
             return found
-        rerun = limit < max_states
+        rerun = limit < max_states and not searched
         if beside is not None and beside.found is not None:
             space, witness = beside.found
             beside.found = None
@@ -785,6 +833,10 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
             space, witness = _search_phase(net, sn, st, max_states, graph_bytes, progress)
     elif engine == "auto":
         reason = "explicit: not every place has a proven bound, so only the explicit search (and coverability) apply"
+        if limit < max_states and space.stopped_by == "max_states" and space.n_states >= limit:
+            # the pumping witness came after the probe: the partial graph goes on to the whole limit
+            # (a search its memory stopped first would stop there again)
+            space, witness = _search_phase(net, sn, st, max_states, graph_bytes, progress)
     pinv, tinv, psup, tsup, structural = st.pinv, st.tinv, st.psup, st.tsup, st.structural
     notes, sources = st.notes, st.sources
     has_inhibitors = bool(sn.inhibitor.nnz)
@@ -1082,55 +1134,84 @@ def _yield_cpus() -> None:
 
 
 class _Beside:
-    """The explicit search of the automatic engine, run on to ``max_states`` in a thread beside the
-    symbolic engine once the explicit share is passed (two CPUs or more: :func:`analyse`).
+    """The explicit search of the automatic engine, run on to ``max_states`` in a thread, beside the
+    symbolic engine once it has passed the explicit share (two CPUs or more: :func:`analyse`).
 
-    Whichever completes first answers. A complete graph sets :attr:`finished`, which stops the
-    symbolic engine. When the symbolic engine answers, :meth:`end` stops the search; when it gives
-    up, the search goes on to its limits and its graph, complete or not, is the explicit answer.
-    The search has ``graph_bytes`` of the budget (half, the explicit search's own share; the
-    symbolic engine has the other half meanwhile, and the whole when it outgrows its half:
-    :meth:`lend`). It keeps its edges while they fit that share and then goes on counting them
-    (:func:`_search_phase`), and stops at ``max_states`` at once (the level it is in left
-    unfinished: a partial graph is only the fallback). It works on its own copy of the
+    It starts before the symbolic engine: :meth:`wait_share` returns when it has found ``share``
+    markings (checked every ``min(share, 65,536)`` expanded markings), or when it has ended
+    (complete, or stopped by its memory), so the share's markings are searched once, not by a probe
+    and again by the search beside (``share`` 0: at once, for a net not every proven bound covers,
+    whose share was searched first for a pumping witness). Then whichever completes first answers:
+    the search when its graph is complete, the symbolic engine when it has the reachable set (the
+    search stops then, :attr:`.symbolic.Rival.settled`). A complete graph sets
+    :attr:`finished`, which stops the symbolic engine. When the symbolic engine answers, :meth:`end`
+    stops the search; when it gives up, the search goes on to its limits and its graph, complete or
+    not, is the explicit answer. The search has ``graph_bytes`` of the budget (half, the explicit
+    search's own share; the symbolic engine has the other half meanwhile, and the whole when it
+    outgrows its half: :meth:`lend`). It keeps its edges while they fit that share and then goes on
+    counting them (:func:`_search_phase`), and stops at ``max_states`` at once (the level it is in
+    left unfinished: a partial graph is only the fallback). It works on its own copy of the
     structure's notes (:attr:`st`), taken over if its graph is used. Nets of a few million markings
     that decision diagrams take long over are answered by the search (SafeBus-PT-06: 6,816,756
     markings, docs/BENCHMARKS.md)."""
 
     def __init__(self, net: PetriNet, sn: SparseNet, st: _Structure, max_states: int, graph_bytes: int,
-                 progress: Callable[[int, int], None] | None, phase: Callable[[str], None] | None) -> None:
+                 share: int, progress: Callable[[int, int], None] | None,
+                 phase: Callable[[str], None] | None) -> None:
         self.graph_bytes = graph_bytes
+        self.max_states = max_states
+        self.phase = phase
         self.st = replace(st, notes=list(st.notes))
-        self.finished = threading.Event()  # the graph is complete: the symbolic engine stops
-        self.answered = threading.Event()  # the symbolic engine is done: the search stops
-        self.found: tuple[StateSpace, CoveringWitness | None] | None = None
         from coordinator.analysis.symbolic import Rival  # the symbolic engine runs next: loaded anyway
 
         self.rival = Rival(_BESIDE_NICE, phase)  # its lanes whose diagrams outgrow the graph yield to the search
+        self.finished = threading.Event()  # the graph is complete: the symbolic engine stops
+        # the symbolic engine has the reachable set, or is done: the search stops
+        self.answered = self.rival.settled
+        self.passed = threading.Event()  # the search found ``share`` markings, or it ended
+        if share <= 0:
+            self.passed.set()
+        self.found: tuple[StateSpace, CoveringWitness | None] | None = None
 
         def report(states: int, edges: int) -> None:
             if progress is not None:
                 progress(states, edges)
             self.rival.found(states)
-
-        if phase is not None:
-            phase(f"explicit: the search goes on beside the symbolic engine, up to {max_states:,} markings "
-                  f"within {graph_bytes / 2**30:.2f} GiB")
+            if states >= share:
+                self.passed.set()
 
         def search() -> None:
             _yield_cpus()
             try:
                 self.found = _search_phase(net, sn, self.st, max_states, graph_bytes, report,
-                                           finish_level=False, stop=self.answered)
+                                           finish_level=False, stop=self.answered,
+                                           report_every=min(share or PROGRESS_STATES, PROGRESS_STATES))
                 if self.found[0].complete:
                     self.finished.set()
             except Exception:
-                # e.g. a count beyond 31 bits: nothing found here; if the symbolic engine gives up,
-                # analyse runs the search again, which meets the same error and reports it
+                # e.g. a count beyond 31 bits: nothing found here; analyse runs the search again
+                # (as the probe or, if the symbolic engine gives up, over its whole limit), which
+                # meets the same error and reports it
                 self.found = None
+            finally:
+                self.passed.set()
 
         self.thread = threading.Thread(target=search, name="petrobot-explicit", daemon=True)
         self.thread.start()
+
+    def wait_share(self) -> bool:
+        """Wait (Ctrl-C stays possible) until the search has found its share of markings or ended;
+        True if it goes on (the symbolic engine starts beside it: a phase line says so), False if it
+        ended (:attr:`found`: its graph, complete or stopped by its memory; None if it failed)."""
+        while not self.passed.wait(0.2):
+            pass
+        if not self.thread.is_alive() or self.finished.is_set():
+            self.end(stop=False)
+            return False
+        if self.phase is not None:
+            self.phase(f"explicit: the search goes on beside the symbolic engine, up to {self.max_states:,} markings "
+                       f"within {self.graph_bytes / 2**30:.2f} GiB")
+        return True
 
     def lend(self) -> int:
         """The symbolic engine outgrew its half of the budget: the search is stopped (its graph
@@ -1159,7 +1240,8 @@ class _Beside:
 def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, lp_seconds: float, seconds: float,
                     phase: Callable[[str], None] | None, reason: str, started: float,
                     stop: threading.Event | None = None, borrow: Callable[[], int] | None = None,
-                    seen: np.ndarray | None = None, rival: Rival | None = None) -> Analysis:
+                    seen: np.ndarray | None = None, seen_states: int = SEEN_STATES,
+                    rival: Rival | None = None) -> Analysis:
     """The analysis from the symbolic engine (:mod:`.symbolic`): the reachable set as a decision
     diagram over the proven place bounds, every count exact. Liveness levels (L1 vs L3), home
     states and the effectiveness of conflicts need the graph and stay undecided. Reversibility
@@ -1168,16 +1250,15 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
     ``stop``: another thread's event that stops the engine; ``borrow``: what frees more memory
     for it when it outgrows ``budget`` (:func:`.symbolic.analyse_symbolic`); ``seen``: (|P|,) the
     largest count of each place the explicit search saw, for levels guessed from them when the proven
-    bounds make them too wide (none: an explicit search of :data:`SEEN_STATES` markings is run then);
+    bounds make them too wide or some place has none (none: an explicit search of ``seen_states``
+    markings is run then);
     ``rival``: the explicit search beside the engine, to which its lanes may yield (:class:`.symbolic.Rival`).
 
     Raises:
-        AnalysisError: a place without a proven bound, the engine's time or memory budget, or
-            ``stop`` set before the reachable set was complete.
+        AnalysisError: a place without a proven bound whose levels guessed from the counts seen a
+            firing still leaves (the net may be unbounded: :func:`.symbolic.analyse_symbolic`), the
+            engine's time or memory budget, or ``stop`` set before the reachable set was complete.
     """
-    if not st.bounded:
-        raise AnalysisError("the symbolic engine needs a bounded net: neither the state equation nor the "
-                            "P-invariants bound every place")
     # small semiflows for the diagram's groups and order, skipping the places no semiflow covers;
     # each also bounds its places (y·M = y·M0, so M(p) ≤ ⌊y·M0 / y_p⌋): then only the places they
     # leave above one token get the state equation's LP of their own (Philosophers-PT-000500: the
@@ -1186,9 +1267,6 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
     flows = lp.semiflow_cover(sn, seconds=min(lp_seconds, 3.0),
                               covered=None if st.psup.covered is None else ~st.psup.covered)
     _, upper = _upper_bounds(sn, st, lp_seconds, np.asarray(sn.m0, dtype=np.int64), more=flows, lp_above=1)
-    if (upper < 0).any():
-        raise AnalysisError("the symbolic engine needs a proven bound on every place; "
-                            f"{int((upper < 0).sum())} places have none")
     from coordinator.analysis import jit
 
     jit.configure()  # numba's cache directory, before the kernel (and numba) is imported
@@ -1198,7 +1276,7 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
     def counts() -> np.ndarray:
         if seen is not None:
             return seen
-        probe = explore(net, max_states=SEEN_STATES, max_bytes=budget // 4, bounds=_search_bounds(st),
+        probe = explore(net, max_states=seen_states, max_bytes=budget // 4, bounds=_search_bounds(st),
                         finish_level=False, edges=False)
         return probe.seen_counts()
 

@@ -8,8 +8,9 @@ breadth-first frontier of the whole state space is ever built; or, where saturat
 sets grow too large, by chained images (Roig, Cortadella, Pastor 1995), raced against it
 (:func:`_race`). The encoding (levels, their local markings, their order, the merged events) comes
 from the net's structure and its proven place bounds (:mod:`.mdd_order`), or, where those make the
-levels too wide, from the counts an explicit search saw, checked on every firing and raised where
-one leaves them (:func:`_reachable`). From
+levels too wide or where a place has none, from the counts an explicit search saw, checked on
+every firing and raised where one leaves them (:func:`_reachable`; a set no firing leaves is the
+reachable set, so a net no proof bounds is shown bounded by it). From
 the set, with exact integers of any size:
 
 * the number of markings and of edges (one per reachable marking and transition enabled in it:
@@ -682,7 +683,9 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
 
     Args:
         net: the ordinary net (events dropped; no priorities).
-        bounds: (|P|,) proven upper bound of every place (state equation, P-invariants).
+        bounds: (|P|,) proven upper bound of every place (state equation, P-invariants), -1 where
+            none is proven (the levels are then guessed from ``seen``, and the net is shown bounded
+            when the reachable set on them is closed under firing: :func:`_reachable`).
         flows: P-semiflows of the net (groups and order, :mod:`.mdd_order`); none: only places.
         max_bytes: byte budget of the decision diagram.
         seconds: time budget; liveness and witnesses are left undecided when it runs out after the
@@ -705,17 +708,19 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             while the reachable set is built or after: the bytes it frees for the engine (the
             automatic engine's explicit search beside it stops and hands its share over), 0 for
             none; the call that outgrew the budget goes on from its store.
-        seen: called once, when the proven bounds make levels too wide (:func:`_reachable`): (|P|,)
+        seen: called once, when the proven bounds make levels too wide or some place has none (:func:`_reachable`): (|P|,)
             int64, the largest count of each place in some reachable markings (those of an explicit
             search stopped early), or None for none.
         rival: another search racing the engine for the reachable set (:class:`Rival`), whose
-            markings found so far decide which of the race's lanes yield the CPUs to it.
+            markings found so far decide which of the race's lanes yield the CPUs to it, and which
+            stops when the set is built (:attr:`Rival.settled`).
 
     Returns:
         A :class:`SymbolicResult`.
 
     Raises:
-        AnalysisError: a place without a bound, the memory budget, the time budget reached before
+        AnalysisError: a place without a proven bound and no counts seen, or whose guessed values a
+            firing still leaves after their last raise, the memory budget, the time budget reached before
             the reachable set was complete, or ``stop`` set before it was.
     """
     start = time.monotonic()
@@ -738,6 +743,8 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
                                                             deadline, say, stop, None if borrow is None else widen,
                                                             rival,
                                                             notes)
+        if rival is not None:
+            rival.settled.set()  # the search racing for the same set stops
         single = events(sn, enc)
         secs["encode"] = enc.seconds
         secs["reach"] = time.monotonic() - t0 - enc.seconds
@@ -819,13 +826,39 @@ def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[
     set is the reachable set, exactly; when one does, the places of that level are raised to
     min(bound, 4·value + 3) and the race runs again, at most :data:`_RAISES` times (a note says
     so). AirplaneLD-PT-1000: every place seen at 1 in a million markings, 3 values a place, its
-    34,087,074,023 markings in 23 s.
+    34,087,074,023 markings in 23 s. A place without a proven bound (-1 in ``bounds``) starts
+    from its count seen and is raised without a cap: a set that no firing leaves contains every
+    reachable marking, so it is the reachable set and the net is bounded (Murphy-PT-D2N050, whose
+    state equation bounds none of its nine places p3_1 … p5_3: 41,538,421,296 markings in 4 s).
+    Those places then start from their counts seen, the others from their proven bounds (all are
+    guessed if those are too wide), and when a firing leaves one of them all of them are raised.
 
     Raises:
         AnalysisError: as :func:`_race`; EncodingTooLarge when no counts are seen; BeyondBounds on
             proven bounds (a fault), or when the guessed values are left after their last raise.
     """
+    known = bounds >= 0  # a place without a proven bound (-1) is bounded only by a closed set
     domains, raises, why = bounds, 0, ""
+
+    counts: np.ndarray | None = None
+
+    def guessed(reason: str, proven_too: bool) -> np.ndarray:
+        assert counts is not None
+        g = 2 * np.asarray(counts, dtype=np.int64) + 1
+        out = np.where(known, np.minimum(bounds, g) if proven_too else bounds, g)
+        which = "each place's count" if proven_too else "the count of each place without one"
+        top = int((out if proven_too else out[~known]).max(initial=0))
+        say(f"symbolic: {reason}; the levels take {which} seen by the explicit search, doubled, plus one (at most "
+            f"{top:,} tokens a place)")
+        return out
+
+    if not known.all():
+        why = (f"{int((~known).sum()):,} places have no proven bound (the symbolic engine needs a bounded net: "
+               "its reachable set on levels guessed from counts seen must be closed under firing)")
+        counts = None if seen is None else seen()
+        if counts is None:
+            raise AnalysisError(f"{why}, and no counts were seen")
+        domains = guessed(why, False)  # the proven bounds where there are some
     while True:
         try:
             won, kept = _race(sn, domains, flows, max_bytes, deadline, say, stop, borrow, rival)
@@ -833,34 +866,38 @@ def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[
             states = store.count(reach)
             _check_suspects(store, sn, enc, net, reach)
         except EncodingTooLarge as exc:
-            if why:
-                raise EncodingTooLarge(f"on the proven bounds {why}; on the counts seen, {exc}") from exc
-            counts = None if seen is None else seen()
+            if why and (counts is None or (domains[known] <= 2 * counts[known] + 1).all()):
+                raise EncodingTooLarge(f"{why}; on the counts seen, {exc}") from exc
+            if counts is None:
+                counts = None if seen is None else seen()
             if counts is None:
                 raise
-            why = str(exc)
-            domains = np.minimum(bounds, 2 * np.asarray(counts, dtype=np.int64) + 1)
-            say(f"symbolic: on the proven bounds {why}; the levels take each place's count seen by the explicit "
-                f"search, doubled, plus one (at most {int(domains.max(initial=0)):,} tokens a place)")
+            why = why or f"on the proven bounds {exc}"
+            domains = guessed(why, True)
             continue
         except BeyondBounds as exc:
-            if not why or (domains[exc.places] >= bounds[exc.places]).all():
+            pl = exc.places
+            if not why or (known[pl] & (domains[pl] >= bounds[pl])).all():
                 raise
+            if not known[pl].all():
+                pl = np.flatnonzero(~known)  # the places no bound is proven for grow together
             if raises == _RAISES or time.monotonic() >= deadline:
-                raise AnalysisError(f"on the proven bounds {why}, and a firing still left the values guessed from "
+                raise AnalysisError(f"{why}, and a firing still left the values guessed from "
                                     f"the counts the explicit search saw after {raises} raises") from exc
             raises += 1
             domains = domains.copy()
-            domains[exc.places] = np.minimum(bounds[exc.places], 4 * domains[exc.places] + 3)
-            say(f"symbolic: a firing left the values guessed for {exc.places.size} places; raised to at most "
-                f"{int(domains[exc.places].max()):,} tokens, the reachable set again ({raises} of {_RAISES})")
+            up = 4 * domains[pl] + 3
+            domains[pl] = np.where(known[pl], np.minimum(bounds[pl], up), up)
+            say(f"symbolic: a firing left the values guessed for {pl.size} places; raised to at most "
+                f"{int(domains[pl].max()):,} tokens, the reachable set again ({raises} of {_RAISES})")
             continue
         if why:
             raised = "" if not raises else (", raised once where a firing left them" if raises == 1 else
                                             f", raised {raises} times where firings left them")
-            notes.append(f"on the proven bounds {why}: the levels took each place's count seen by the explicit "
-                         f"search, doubled, plus one{raised}; saturation checked every firing against them, so every "
-                         "count is exact")
+            closed = ("so every count is exact" if known.all() else
+                      "so the reachable set is closed under firing: the net is bounded and every count is exact")
+            notes.append(f"{why}: the levels took each place's count seen by the explicit search, doubled, plus "
+                         f"one{raised}; saturation checked every firing against them, {closed}")
         return won, kept, states
 
 
@@ -1350,11 +1387,18 @@ class Rival:
     contest models they won, at most 1.29 times, on Railroad-PT-020's second lane, which then
     yields; the answer still comes in about 40 s; docs/BENCHMARKS.md). A lane
     that yielded stays so until the race ends (an unprivileged process may not raise a priority
-    again); with the search over, nothing competes with it."""
+    again); with the search over, nothing competes with it.
+
+    :attr:`settled` is set when the engine has the reachable set: the search stops then (its
+    answer would come after this one's), and the phases that follow have the CPUs. SafeBus-PT-06:
+    the set at 51 s, its liveness and reversibility in 2 s more; the search, left going, completed
+    its 6,816,756 markings during them, stopped them, and its graph's passes gave the answer at
+    75 s."""
 
     def __init__(self, nice: int, say: Callable[[str], None] | None = None) -> None:
         self.nice = nice
         self.say = say or (lambda _text: None)
+        self.settled = threading.Event()
         self._lock = threading.Lock()
         self._race: _Race | None = None
 

@@ -95,9 +95,11 @@ def add_parser(subparsers: Any) -> None:
     parser.add_argument("--engine", choices=("auto", "explicit", "symbolic"), default="auto",
                         help="explicit: the reachability graph, marking by marking (every property, up to the "
                              "state limit); symbolic: the reachable set as a decision diagram (exact counts, "
-                             "deadlocks, bounds, liveness, reversibility of nets of 10^12 markings and more; needs "
-                             "a proven bound on every place); auto (default): explicit up to 1,000,000 markings, "
-                             "symbolic beyond when every place has a proven bound. The report says which ran and why")
+                             "deadlocks, bounds, liveness, reversibility of nets of 10^12 markings and more; a "
+                             "bounded net: a place without a proven bound gets levels guessed from the counts seen, "
+                             "and the net is shown bounded when no firing leaves them); auto (default): explicit up "
+                             "to 1,000,000 markings, symbolic beyond (when not every place has a proven bound, only "
+                             "if no pumping witness shows the net unbounded). The report says which ran and why")
     parser.add_argument("--progress", action="store_true",
                         help="report state-space progress on stderr even when stderr is not a terminal")
 

@@ -93,6 +93,25 @@ def test_the_search_beside_the_symbolic_engine_lowers_its_own_thread_priority_on
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == before  # the caller's is its own
 
 
+def test_the_search_beside_starts_first_and_waits_only_for_its_share_of_markings() -> None:
+    net = structure.ordinary_view(load_pnml(SHARED_MEMORY))
+    sn = structure.sparse_net(net)
+    st = structure._structure_phase(net, sn, 1 << 30, 20_000, 5.0, 10.0)
+    reports: list[int] = []
+    # a share of 100 markings: the search is still going when it has passed them (its graph has 1,863)
+    b = structure._Beside(net, sn, st, 1_000_000, 1 << 29, 100, lambda n, _e: reports.append(n), None)
+    assert b.wait_share() is True
+    assert reports and reports[-1] >= 100
+    b.end(stop=False)  # the symbolic engine gave up: the search goes on to its limits
+    assert b.found is not None and b.found[0].complete and b.found[0].n_states == 1_863
+    assert reports == sorted(reports)  # one search: its count never starts again
+    # a share the graph fits in: the search has ended when the wait returns, its graph complete
+    small = structure._Beside(net, sn, st, 1_000_000, 1 << 29, 10_000, None, None)
+    assert small.wait_share() is False
+    assert small.found is not None and small.found[0].complete and small.finished.is_set()
+    assert no_search_left_running()
+
+
 def test_when_the_symbolic_engine_answers_first_the_search_beside_it_is_stopped(
         monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(structure, "AUTO_PROBE_STATES", 1_000)
@@ -111,6 +130,26 @@ def test_forcing_the_symbolic_engine_gives_a_deadlock_with_its_firing_sequence(
     assert main(["analyze", str(MCC / "Philosophers-PT-000005" / "model.pnml"), "--engine", "symbolic"]) == 0
     text = capsys.readouterr().out
     assert "reachable set (symbolic): 243 markings" in text and "engine: symbolic" in text
+
+
+def test_a_net_the_state_equation_does_not_bound_goes_symbolic_and_a_closed_reachable_set_shows_it_bounded(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    net = load_pnml(MCC / "Murphy-PT-D1N010" / "model.pnml")  # p3_1 ... p5_3: no proven bound
+    explicit = structure.analyse(net)
+    symbolic = structure.analyse(net, engine="symbolic")
+    assert symbolic.engine == "symbolic"
+    assert any("closed under firing: the net is bounded" in n for n in symbolic.notes)
+    assert (symbolic.states, symbolic.edges, symbolic.bounded, symbolic.place_bounds) == (
+        39_780, 267_984, True, explicit.place_bounds)
+    for key in ("max_token_in_place", "max_token_per_marking", "deadlock", "quasi_live", "live", "one_safe",
+                "stable_marking", "reversible"):
+        assert getattr(symbolic, key) == getattr(explicit, key), key
+    monkeypatch.setattr(structure, "AUTO_PROBE_STATES", 1_000)  # the explicit share: 1,000 markings
+    auto = structure.analyse(net, engine="auto")
+    assert (auto.states, auto.complete, auto.bounded) == (39_780, True, True)
+    # on two CPUs the search goes on beside the symbolic engine, and whichever completes first answers
+    assert "no pumping witness" in auto.engine_reason or "beside the symbolic engine" in auto.engine_reason
+    assert no_search_left_running()
 
 
 def test_forcing_the_symbolic_engine_on_an_unbounded_net_is_a_clear_error(
