@@ -747,8 +747,8 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     beside: _Beside | None = None
     searched = False  # the graph below is that of the search over the whole limit
     if engine == "auto" and st.bounded and limit < max_states and cpus() >= 2:
-        # two CPUs and a bounded net: the search over the whole limit starts at once, in a thread, and the symbolic
-        # engine starts beside it when it passes the explicit share (the share is searched once)
+        # two CPUs and a bounded net: the search over the whole limit starts at once, in a thread,
+        # and the symbolic engine starts beside it when it passes the explicit share (searched once)
         beside = _Beside(net, sn, st, max_states, graph_bytes, limit, progress, phase)
         try:
             going = beside.wait_share()

@@ -708,9 +708,9 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             while the reachable set is built or after: the bytes it frees for the engine (the
             automatic engine's explicit search beside it stops and hands its share over), 0 for
             none; the call that outgrew the budget goes on from its store.
-        seen: called once, when the proven bounds make levels too wide or some place has none (:func:`_reachable`): (|P|,)
-            int64, the largest count of each place in some reachable markings (those of an explicit
-            search stopped early), or None for none.
+        seen: called once, when the proven bounds make levels too wide or some place has none
+            (:func:`_reachable`): (|P|,) int64, the largest count of each place in some reachable
+            markings (those of an explicit search stopped early), or None for none.
         rival: another search racing the engine for the reachable set (:class:`Rival`), whose
             markings found so far decide which of the race's lanes yield the CPUs to it, and which
             stops when the set is built (:attr:`Rival.settled`).
@@ -866,7 +866,7 @@ def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[
             states = store.count(reach)
             _check_suspects(store, sn, enc, net, reach)
         except EncodingTooLarge as exc:
-            if why and (counts is None or (domains[known] <= 2 * counts[known] + 1).all()):
+            if why and (counts is None or (domains[known] <= 2 * np.asarray(counts)[known] + 1).all()):
                 raise EncodingTooLarge(f"{why}; on the counts seen, {exc}") from exc
             if counts is None:
                 counts = None if seen is None else seen()
@@ -879,8 +879,8 @@ def _reachable(sn: SparseNet, net: PetriNet, bounds: np.ndarray, seen: Callable[
             pl = exc.places
             if not why or (known[pl] & (domains[pl] >= bounds[pl])).all():
                 raise
-            if not known[pl].all():
-                pl = np.flatnonzero(~known)  # the places no bound is proven for grow together
+            if not known[pl].all():  # the places no bound is proven for grow together
+                pl = np.union1d(pl, np.flatnonzero(~known)).astype(np.int64)
             if raises == _RAISES or time.monotonic() >= deadline:
                 raise AnalysisError(f"{why}, and a firing still left the values guessed from "
                                     f"the counts the explicit search saw after {raises} raises") from exc
