@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import os
+import signal
 import sys
 
-__all__ = ["COMMANDS", "build_parser", "main"]
+__all__ = ["COMMANDS", "EXIT_READER_GONE", "build_parser", "main"]
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = (
@@ -65,7 +67,27 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
-    return int(args.func(args) or 0)
+    try:
+        code = int(args.func(args) or 0)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        return _reader_gone()
+    return code
+
+
+#: Exit code when the reader of stdout went away, as a shell reports a command SIGPIPE ended.
+EXIT_READER_GONE = 128 + signal.SIGPIPE
+
+
+def _reader_gone() -> int:
+    """The reader of stdout closed its end (``petrobot analyze --json | head``): stop quietly, as
+    a Unix filter does, with no traceback. Python ignores SIGPIPE, so a write raised
+    ``BrokenPipeError`` instead; stdout is pointed at ``/dev/null`` so that the interpreter's own
+    flush at exit does not raise again. Returns :data:`EXIT_READER_GONE` (141)."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+    return EXIT_READER_GONE
 
 
 if __name__ == "__main__":
