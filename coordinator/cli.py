@@ -34,7 +34,9 @@ DESCRIPTION = """\
 petrobot models, analyses, executes and improves robotic tasks as interpreted Petri nets
 (Lima et al., "Petri Nets for Modeling and Coordination of Robotic Tasks"). Nodes host primitive
 actions (services.toml says which node hosts which); the coordinator runs the net and calls them
-over TCP. Run `petrobot COMMAND --help` for each command."""
+over TCP. Run `petrobot COMMAND --help` for each command. A command whose output goes to a reader
+that stops early (`petrobot analyze --json NET | head`) ends quietly with exit status 141, as a
+filter ended by SIGPIPE does."""
 
 
 def build_parser() -> argparse.ArgumentParser:
