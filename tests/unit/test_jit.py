@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -72,3 +73,38 @@ def test_the_compiled_kernels_cache_in_the_users_directory_whoever_imports_them_
     paths = out.stdout.split()
     assert len(paths) > 10
     assert all(p.startswith(str(tmp_path / "petrobot" / "numba")) for p in paths), paths
+
+
+def test_a_second_checkout_of_the_same_source_loads_the_kernels_the_first_compiled(tmp_path: Path) -> None:
+    # numba would name the cache folder after the checkout's absolute path and compile everything
+    # again in a fresh clone; jit_locator names it after the module, and numba checks the content
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NUMBA_CACHE_LOCATOR_CLASSES")}
+    env["XDG_CACHE_HOME"] = str(tmp_path / "cache")
+    subprocess.run([sys.executable, "-c", "from coordinator.analysis.statespace import load_search; load_search()"],
+                   cwd=ROOT, env=env, check=True, capture_output=True)
+    other = tmp_path / "other"
+    shutil.copytree(ROOT / "coordinator", other / "coordinator", ignore=shutil.ignore_patterns("__pycache__"))
+    for source in (other / "coordinator").rglob("*.py"):
+        os.utime(source, (1_000_000_000, 1_000_000_000))  # another time stamp, the same content
+    code = ("import coordinator\nfrom coordinator.analysis.statespace import search_is_compiled\n"
+            "print(coordinator.__file__, search_is_compiled())")
+    out = subprocess.run([sys.executable, "-c", code], cwd=other, env=env, check=True, capture_output=True, text=True)
+    where, compiled = out.stdout.split()
+    assert Path(where).is_relative_to(other)
+    assert compiled == "True"
+    assert [p.name for p in (tmp_path / "cache" / "petrobot" / "numba").iterdir()] == ["petrobot-coordinator.analysis"]
+
+
+def test_functions_outside_petrobot_keep_numbas_own_cache_folders(tmp_path: Path) -> None:
+    (tmp_path / "theirs.py").write_text("from numba import njit\n\n\n@njit(cache=True)\ndef one(x):\n"
+                                        "    return x + 1\n", encoding="utf-8")
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NUMBA_CACHE_LOCATOR_CLASSES")}
+    env["XDG_CACHE_HOME"] = str(tmp_path / "cache")
+    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path), str(ROOT)])
+    code = ("from coordinator.analysis import jit; jit.configure()\nimport theirs\n"
+            "assert theirs.one(1) == 2\nprint(theirs.one._cache._cache_path)")
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, check=True, capture_output=True,
+                         text=True)
+    folder = Path(out.stdout.strip())
+    assert folder.parent == tmp_path / "cache" / "petrobot" / "numba"
+    assert not folder.name.startswith("petrobot-")

@@ -1,0 +1,71 @@
+"""Where in numba's cache directory petrobot's compiled kernels go: one place per source module,
+whatever directory the checkout or install is in (imports numba; no I/O of its own).
+
+numba names a function's cache folder after the absolute path of its source directory
+(``analysis_<sha1 of /path/to/coordinator/analysis>``), so a second checkout of the same commit
+(a fresh clone, a CI workspace, a copy) compiles every kernel again: about 55 s on two cores before
+the first answer of ``petrobot analyze`` on a net the symbolic engine takes. numba (0.68) checks that
+a cached function is still valid by a hash of its source file's content, not by its modification
+time, so the path adds nothing to that check. :class:`CheckoutLocator` names the
+folder after the module's package instead (``petrobot-coordinator.analysis``): every checkout with
+the same source shares one compile; a checkout with other source finds the cache stale and compiles
+(and a function at another line is another entry). :func:`~coordinator.analysis.jit.configure`
+names this class in ``NUMBA_CACHE_LOCATOR_CLASSES`` before numba is imported (unless the user set
+it). Functions outside the ``coordinator`` package get numba's own locators, in numba's order.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from numba.core import caching
+
+__all__ = ["CheckoutLocator", "subpath"]
+
+#: the directory that holds the ``coordinator`` package (a checkout's root, or site-packages)
+_ROOT = Path(__file__).resolve().parents[2]
+_PACKAGE = _ROOT / "coordinator"
+
+# numba's locator for NUMBA_CACHE_DIR: public in numba 0.68, private in older releases
+_Base: Any = getattr(caching, "UserProvidedCacheLocator", None) or getattr(caching, "_UserProvidedCacheLocator")
+# what holds numba's own locators, in the order it tries them
+_Impl: Any = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+# source stamps are content hashes (the folder may then be shared); older numba stamps mtime and size
+_CONTENT_STAMPS = hasattr(caching, "_hash_source_file")
+
+
+def subpath(py_file: str) -> str | None:
+    """The cache folder's name for a source file of the ``coordinator`` package
+    (``coordinator/analysis/mdd_kernel.py`` → ``petrobot-coordinator.analysis``); None for a
+    file outside it."""
+    folder = Path(py_file).resolve().parent
+    try:
+        rel = folder.relative_to(_ROOT)
+    except ValueError:
+        return None
+    if not rel.parts or rel.parts[0] != _PACKAGE.name:
+        return None
+    return "petrobot-" + ".".join(rel.parts)
+
+
+class CheckoutLocator(_Base):  # type: ignore[misc]
+    """numba's locator for ``NUMBA_CACHE_DIR`` with a folder named by :func:`subpath` instead of
+    by the source directory's absolute path (module docstring)."""
+
+    @classmethod
+    def get_suitable_cache_subpath(cls, py_file: str) -> str:
+        name = subpath(py_file)
+        return name if name is not None else str(_Base.get_suitable_cache_subpath(py_file))
+
+    @classmethod
+    def from_function(cls, py_func: Any, py_file: str) -> Any:
+        if _CONTENT_STAMPS and subpath(py_file) is not None:
+            found = super().from_function(py_func, py_file)
+            if found is not None:
+                return found
+        for other in getattr(_Impl, "_locator_classes", ()):  # numba's own, in its order
+            found = other.from_function(py_func, py_file)
+            if found is not None:
+                return found
+        return None
