@@ -13,9 +13,8 @@ search, level 1 compiles about 15 % faster than numba's default 3 and runs as fa
 :func:`coordinator.analysis.statespace.search_is_compiled` tells a command whether the next use will
 compile (so it can say so on stderr) or load the cache. Each compiled module calls :func:`configure`
 before it imports numba, so whoever imports it first, the cache lands in the user's directory.
-There a module's kernels have one folder whatever the checkout's path (:mod:`.jit_locator`, named in
-``NUMBA_CACHE_LOCATOR_CLASSES`` unless the user set that): a fresh clone of the same source loads
-what another one compiled.
+There a module's kernels have one folder whatever the checkout's path (:mod:`.jit_locator`): a
+fresh clone of the same source loads what another one compiled.
 
 :func:`configure` also silences numba's notice that code in object mode "won't allow parallel
 execution despite nogil=True": both kernels release the GIL (``nogil``) and take it back only for
@@ -30,11 +29,7 @@ import sys
 import warnings
 from pathlib import Path
 
-__all__ = ["LOCATOR", "cache_dir", "configure"]
-
-#: numba's cache locator for petrobot's kernels (``NUMBA_CACHE_LOCATOR_CLASSES``): a folder per
-#: module, not per checkout path (:mod:`.jit_locator`)
-LOCATOR = "coordinator.analysis.jit_locator.CheckoutLocator"
+__all__ = ["cache_dir", "configure"]
 
 
 def cache_dir(environ: dict[str, str] | None = None) -> Path:
@@ -48,18 +43,14 @@ def cache_dir(environ: dict[str, str] | None = None) -> Path:
 
 def configure() -> str:
     """Point numba's cache at :func:`cache_dir` unless ``NUMBA_CACHE_DIR`` is set (and its
-    optimisation level at 1 unless ``NUMBA_OPT`` is set, and its cache locator at :data:`LOCATOR`
-    unless ``NUMBA_CACHE_LOCATOR_CLASSES`` is set); return the cache directory numba will use. Must run before the compiled functions are defined (before
+    optimisation level at 1 unless ``NUMBA_OPT`` is set), then import numba and put
+    :class:`.jit_locator.CheckoutLocator` first among its cache locators; return the cache
+    directory numba will use. Must run before the compiled functions are defined (before
     :mod:`.reach_kernel` is imported); if numba itself is already imported, its configuration is
     updated as well."""
     warnings.filterwarnings("ignore", message="Code running in object mode won't allow parallel execution")
     if "NUMBA_OPT" not in os.environ and "numba" not in sys.modules:
         os.environ["NUMBA_OPT"] = "1"
-    if "NUMBA_CACHE_LOCATOR_CLASSES" not in os.environ:  # one cache for every checkout (.jit_locator)
-        os.environ["NUMBA_CACHE_LOCATOR_CLASSES"] = LOCATOR
-        config = sys.modules.get("numba.core.config")
-        if config is not None and not getattr(config, "CACHE_LOCATOR_CLASSES", ""):
-            config.CACHE_LOCATOR_CLASSES = LOCATOR  # type: ignore[attr-defined]
     chosen = os.environ.get("NUMBA_CACHE_DIR", "")
     if not chosen:
         chosen = str(cache_dir())
@@ -67,5 +58,8 @@ def configure() -> str:
         config = sys.modules.get("numba.core.config")
         if config is not None and not getattr(config, "CACHE_DIR", ""):
             config.CACHE_DIR = chosen  # type: ignore[attr-defined]
+    from coordinator.analysis import jit_locator  # imports numba, configured above
+
+    jit_locator.install()
     return chosen
 

@@ -9,9 +9,12 @@ a cached function is still valid by a hash of its source file's content, not by 
 time, so the path adds nothing to that check. :class:`CheckoutLocator` names the
 folder after the module's package instead (``petrobot-coordinator.analysis``): every checkout with
 the same source shares one compile; a checkout with other source finds the cache stale and compiles
-(and a function at another line is another entry). :func:`~coordinator.analysis.jit.configure`
-names this class in ``NUMBA_CACHE_LOCATOR_CLASSES`` before numba is imported (unless the user set
-it). Functions outside the ``coordinator`` package get numba's own locators, in numba's order.
+(and a function at another line is another entry). :func:`install` puts the class first among
+numba's locators, called by :func:`~coordinator.analysis.jit.configure` (a user's
+``NUMBA_CACHE_LOCATOR_CLASSES`` replaces numba's list, this class included). It is not named
+in that environment variable, which child processes would inherit, and in which numba would then
+fail on every cached function of a Python that cannot import petrobot. Functions outside the
+``coordinator`` package keep numba's own locators.
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from typing import Any
 
 from numba.core import caching
 
-__all__ = ["CheckoutLocator", "subpath"]
+__all__ = ["CheckoutLocator", "install", "subpath"]
 
 #: the directory that holds the ``coordinator`` package (a checkout's root, or site-packages)
 _ROOT = Path(__file__).resolve().parents[2]
@@ -60,12 +63,20 @@ class CheckoutLocator(_Base):  # type: ignore[misc]
 
     @classmethod
     def from_function(cls, py_func: Any, py_file: str) -> Any:
-        if _CONTENT_STAMPS and subpath(py_file) is not None:
-            found = super().from_function(py_func, py_file)
-            if found is not None:
-                return found
-        for other in getattr(_Impl, "_locator_classes", ()):  # numba's own, in its order
-            found = other.from_function(py_func, py_file)
-            if found is not None:
-                return found
-        return None
+        """A locator for a function of the ``coordinator`` package (numba's checks: the file
+        exists, the folder is writable); None for any other, which numba's next locator takes."""
+        if subpath(py_file) is None:
+            return None
+        return super().from_function(py_func, py_file)
+
+
+def install() -> bool:
+    """Put :class:`CheckoutLocator` first in numba's list of locators (once); False, and numba's
+    own folders per checkout path stay, when this numba has no such list or checks cached functions
+    by their file's time stamp rather than its content (the folder could then not be shared)."""
+    classes = getattr(_Impl, "_locator_classes", None)
+    if not _CONTENT_STAMPS or not isinstance(classes, list):
+        return False
+    if CheckoutLocator not in classes:
+        classes.insert(0, CheckoutLocator)
+    return True

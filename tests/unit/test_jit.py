@@ -101,8 +101,10 @@ def test_functions_outside_petrobot_keep_numbas_own_cache_folders(tmp_path: Path
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NUMBA_CACHE_LOCATOR_CLASSES")}
     env["XDG_CACHE_HOME"] = str(tmp_path / "cache")
     env["PYTHONPATH"] = os.pathsep.join([str(tmp_path), str(ROOT)])
-    code = ("from coordinator.analysis import jit; jit.configure()\nimport theirs\n"
-            "assert theirs.one(1) == 2\nprint(theirs.one._cache._cache_path)")
+    # nor does a child process inherit a locator it would have to import petrobot for
+    code = ("import os\nfrom coordinator.analysis import jit; jit.configure()\nimport theirs\n"
+            "assert theirs.one(1) == 2\nassert 'NUMBA_CACHE_LOCATOR_CLASSES' not in os.environ\n"
+            "print(theirs.one._cache._cache_path)")
     out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, check=True, capture_output=True,
                          text=True)
     folder = Path(out.stdout.strip())
