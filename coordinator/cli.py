@@ -6,10 +6,11 @@ import argparse
 import importlib
 import logging
 import os
+import select
 import signal
 import sys
 
-__all__ = ["COMMANDS", "EXIT_READER_GONE", "build_parser", "main"]
+__all__ = ["COMMANDS", "EXIT_READER_GONE", "build_parser", "main", "reader_gone"]
 
 #: Subcommand modules, in the order ``--help`` lists them.
 COMMANDS = (
@@ -73,7 +74,9 @@ def main(argv: list[str] | None = None) -> int:
         code = int(args.func(args) or 0)
         sys.stdout.flush()
     except BrokenPipeError:
-        return _reader_gone()
+        if not reader_gone(sys.stdout):
+            raise  # a broken pipe elsewhere (a socket, a child's stdin) is a failure to show
+        return _quiet_exit()
     return code
 
 
@@ -81,7 +84,20 @@ def main(argv: list[str] | None = None) -> int:
 EXIT_READER_GONE = 128 + signal.SIGPIPE
 
 
-def _reader_gone() -> int:
+def reader_gone(stream: object) -> bool:
+    """Whether ``stream`` (a file object) is the write end of a pipe or socket whose reader has
+    closed its end: polled for writing, it reports an error or a hang-up. False for a terminal, a
+    file, or a stream without a file descriptor."""
+    try:
+        fd = stream.fileno()  # type: ignore[attr-defined]
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poller.poll(0))
+    except (AttributeError, OSError, ValueError):
+        return False
+
+
+def _quiet_exit() -> int:
     """The reader of stdout closed its end (``petrobot analyze --json | head``): stop quietly, as
     a Unix filter does, with no traceback. Python ignores SIGPIPE, so a write raised
     ``BrokenPipeError`` instead; stdout is pointed at ``/dev/null`` so that the interpreter's own

@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from coordinator.cli import EXIT_READER_GONE
+from coordinator.cli import EXIT_READER_GONE, reader_gone
 
 ROOT = Path(__file__).resolve().parents[2]
 NET = ROOT / "tests" / "data" / "mcc" / "Philosophers-PT-000005" / "model.pnml"
@@ -25,3 +25,14 @@ def test_a_reader_that_closes_stdout_ends_the_command_quietly_as_sigpipe_would()
         os.close(write)
     assert "Traceback" not in done.stderr, done.stderr
     assert done.returncode == EXIT_READER_GONE == 141
+
+
+def test_only_a_closed_reader_of_stdout_counts_as_gone(tmp_path: Path) -> None:
+    # a BrokenPipeError from anything else (a socket to a node) is re-raised, not hidden behind 141
+    read, write = os.pipe()
+    with os.fdopen(write, "w") as stream:
+        assert not reader_gone(stream)  # its reader is still there
+        os.close(read)
+        assert reader_gone(stream)
+        with (tmp_path / "file").open("w") as plain:
+            assert not reader_gone(plain)
