@@ -9,6 +9,7 @@ import os
 import select
 import signal
 import sys
+from typing import IO, Any
 
 __all__ = ["COMMANDS", "EXIT_READER_GONE", "build_parser", "main", "reader_gone"]
 
@@ -84,16 +85,15 @@ def main(argv: list[str] | None = None) -> int:
 EXIT_READER_GONE = 128 + signal.SIGPIPE
 
 
-def reader_gone(stream: object) -> bool:
+def reader_gone(stream: IO[Any]) -> bool:
     """Whether ``stream`` (a file object) is the write end of a pipe or socket whose reader has
     closed its end: polled for writing, it reports an error or a hang-up. False for a terminal, a
-    file, or a stream without a file descriptor."""
+    file, or a stream without a file descriptor or already closed."""
     try:
-        fd = stream.fileno()  # type: ignore[attr-defined]
         poller = select.poll()
-        poller.register(fd, select.POLLOUT)
+        poller.register(stream.fileno(), select.POLLOUT)
         return any(ev & (select.POLLERR | select.POLLHUP) for _, ev in poller.poll(0))
-    except (AttributeError, OSError, ValueError):
+    except (OSError, ValueError):  # no descriptor (io.UnsupportedOperation), or closed
         return False
 
 

@@ -28,7 +28,6 @@ __all__ = ["CheckoutLocator", "install", "subpath"]
 
 #: the directory that holds the ``coordinator`` package (a checkout's root, or site-packages)
 _ROOT = Path(__file__).resolve().parents[2]
-_PACKAGE = _ROOT / "coordinator"
 
 # numba's locator for NUMBA_CACHE_DIR: public in numba 0.68, private in older releases
 _Base: Any = getattr(caching, "UserProvidedCacheLocator", None) or getattr(caching, "_UserProvidedCacheLocator")
@@ -47,7 +46,7 @@ def subpath(py_file: str) -> str | None:
         rel = folder.relative_to(_ROOT)
     except ValueError:
         return None
-    if not rel.parts or rel.parts[0] != _PACKAGE.name:
+    if not rel.parts or rel.parts[0] != "coordinator":
         return None
     return "petrobot-" + ".".join(rel.parts)
 
@@ -59,7 +58,8 @@ class CheckoutLocator(_Base):  # type: ignore[misc]
     @classmethod
     def get_suitable_cache_subpath(cls, py_file: str) -> str:
         name = subpath(py_file)
-        return name if name is not None else str(_Base.get_suitable_cache_subpath(py_file))
+        assert name is not None  # from_function makes locators for the package's files only
+        return name
 
     @classmethod
     def from_function(cls, py_func: Any, py_file: str) -> Any:
