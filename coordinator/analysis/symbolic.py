@@ -26,9 +26,11 @@ the set, with exact integers of any size:
   place, one-safety, the largest token count of a marking, stable places;
 * reversibility (M0 is reachable from every reachable marking: backward saturation from M0 inside
   the reachable set, Zhao & Ciardo 2009) and liveness (L4): a quasi-live reversible net is live;
-  otherwise each transition t is live iff every reachable marking can reach one that enables t,
-  one backward saturation per transition within the time left; what is not decided in time stays
-  ``None`` ("undecided"), never a guess.
+  otherwise a transition is live iff some marking of every terminal strongly connected component
+  of the reachability graph enables it, the components found by saturations forward and backward
+  from single markings (:func:`_terminal`); beyond a few components, each transition t left is live
+  iff every reachable marking can reach one that enables t, one backward saturation per transition
+  within the time left; what is not decided in time stays ``None`` ("undecided"), never a guess.
 
 Counts are exact: every count is computed modulo a few primes below 2**61 and rebuilt by the
 Chinese remainder theorem, with as many primes as a float estimate of the count (or a bound of the
@@ -1613,14 +1615,84 @@ class _Upside:
         self.kept.drop()
 
 
+#: most terminal components :func:`_terminal` looks for, and most steps it takes towards one, before the
+#: backward saturation per transition decides what is left
+_TERMINALS = 8
+_TERMINAL_STEPS = 16
+
+
+def _terminal(store: _Store, fwd: Events, back: Events, single: Events, reach: int, result: SymbolicResult,
+              say: Callable[[str], None], first_suffices: bool) -> bool:
+    """Liveness (L4) from the terminal strongly connected components of the reachability graph (its
+    bottom components: no edge leaves them). In a finite graph every marking reaches a terminal
+    component, and in one every marking reaches every other, so a transition is live iff some
+    marking of every terminal component enables it (the liveness levels of Murata 1989, section
+    IV-C, as :mod:`.structure` reads them off the explicit graph; the components found symbolically
+    as in Xie and Beerel, implicit enumeration of strongly connected components, 1999). A component
+    is found from a marking m: F = R(m) by saturation forward, B = the markings of F that reach m,
+    by saturation backward inside F (a path from F stays in F); F is terminal iff B = F, else m
+    moves to a marking of F \\ B, whose R is inside F without m, so F shrinks. The markings that
+    reach a component found (backward inside the reachable set) are set aside, and the next
+    component is looked for from one that is left; when none is left, every terminal component is
+    known. A net that is not reversible and has one terminal component takes about four
+    saturations, where the backward saturation per transition takes one for each: Anderson-PT-06
+    (600 transitions, live) is decided in 1.6 s, where those saturations had not decided it in 46 s.
+
+    Sets ``result.live`` and ``result.live_transitions`` and returns True when it decides them;
+    ``first_suffices``: a transition missing from one component answers the net (not live), the
+    others stay undecided. Returns False after :data:`_TERMINALS` components or
+    :data:`_TERMINAL_STEPS` steps towards one, with the transitions missing from a component found
+    set not live. Raises _OutOfTime, _OutOfMemory as :meth:`_Store.call`."""
+    say("symbolic: liveness, from the terminal components of the reachability graph")
+    live_t = result.live_transitions
+    n_t = live_t.shape[0]
+    missing = np.zeros(n_t, dtype=bool)
+    left, found = reach, 0
+    while left != mk.EMPTY:
+        if found == _TERMINALS:
+            break
+        m = store.path(store.pick(left))
+        for _ in range(_TERMINAL_STEPS):
+            ahead = store.closure(fwd, m)
+            back_in = store.closure(back, m, c=ahead)
+            if back_in == ahead:
+                break
+            m = store.path(store.pick(store.call(mk.MODE_APPLY, back, ahead, back_in, arg=mk.APPLY_DIFF)))
+        else:
+            break
+        found += 1
+        store.count(ahead, at_most=_as_float(result.states) * max(1, single.n_events))
+        for e, n in enumerate(store.enabled_counts(ahead, single)):
+            if n == 0:
+                missing[list(single.members[e])] = True
+        if missing.any():
+            live_t[missing] = False
+            result.live = False
+            if first_suffices:
+                return True
+        reaching = store.closure(back, ahead, c=reach)
+        left = store.call(mk.MODE_APPLY, back, left, reaching, arg=mk.APPLY_DIFF)
+    live_t[missing] = False
+    if left != mk.EMPTY:
+        return False
+    say(f"symbolic: {found} terminal component{'s' if found > 1 else ''}")
+    for t in range(n_t):
+        if live_t[t] is None:
+            live_t[t] = True
+    result.live = not missing.any() and bool(result.fireable.all())
+    return True
+
+
 def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, reach: int, counts: list[int],
               result: SymbolicResult, say: Callable[[str], None], until: float, probes: int,
               stop: threading.Event | None = None, upside: _Upside | None = None) -> None:
     """Reversibility and liveness (module docstring), until ``until`` (``time.monotonic()``
     seconds): what the drawn markings tell forward first (:func:`_probe`, within a share of the
-    time), then backward saturation from M0 (reversibility) and, for each transition not yet
-    decided, from the markings that enable it, the transitions enabled in the fewest reachable
-    markings (``counts``, per event of ``single``) first: they are the likeliest not to be live.
+    time), then backward saturation from M0 (reversibility), then the terminal components
+    (:func:`_terminal`) and, if there are more than it looks for, for each transition not yet
+    decided, backward saturation from the markings that enable it, the transitions enabled in the
+    fewest reachable markings (``counts``, per event of ``single``) first: they are the likeliest
+    not to be live.
     ``upside``: reversibility decided beside on the order upside down; whichever is done first
     answers."""
     t0 = time.monotonic()
@@ -1674,7 +1746,8 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
         if result.live is None and result.reversible:
             result.live = quasi
             live_t[:] = True
-        elif result.live is None:
+        elif result.live is None and not _terminal(store, fwd, back, single, reach, result, say, probes > 0):
+            # more terminal components than it looks for: what they left, by a saturation each
             say("symbolic: liveness, transition by transition")
             todo = sorted((e for e in range(single.n_events) if live_t[single.members[e][0]] is None),
                           key=lambda e: counts[e])
@@ -1689,10 +1762,10 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
                     result.live = False
                     if probes:  # the answer is known; without the probe every transition is decided
                         break
-            if result.live is None:
-                free = [t for t in range(n_t) if live_t[t] is None]
-                live_t[free] = True
-                result.live = True
+            else:  # those left have no event: enabled in every marking (Encoding.free)
+                live_t[[t for t in range(n_t) if live_t[t] is None]] = True
+                if result.live is None:
+                    result.live = True
     except _OutOfTime:
         result.notes.append("liveness and reversibility: not decided within the time budget (answer_seconds "
                             "or seconds)")
