@@ -1540,23 +1540,31 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
 _PROBE_SHARE = 0.4
 
 
+#: a marking drawn by :func:`_probe` (its value per level and its node) and the node of what it reaches
+_Drawn = tuple[np.ndarray, int, int]
+
+
 def _probe(store: _Store, fwd: Events, single: Events, reach: int, result: SymbolicResult, until: float,
-           probes: int, stop: threading.Event | None = None) -> None:
+           probes: int, stop: threading.Event | None = None, drawn: list[_Drawn] | None = None) -> None:
     """Decide what a few markings drawn from the reachable set tell, forward: from a marking m, the
     set R(m) of the markings it reaches is saturated (the reachable set's own events, its computed
     table kept); a transition enabled in no marking of R(m) can never fire again after m, so it is
     not live (L4), and M0 outside R(m) makes the net not reversible. Nets with a one-shot start
     (an initialisation the net never returns to) are decided so in a forward saturation or two,
     where the backward saturations below may not finish (UtahNoC-PT-none: 2 s against undecided
-    after 40 s). At most ``probes`` markings; stops at ``until`` (or ``stop``) or when both are decided."""
+    after 40 s). At most ``probes`` markings; stops at ``until`` (or ``stop``) or when both are decided.
+    Each marking whose R(m) is done is added to ``drawn``, for :func:`_terminal`."""
     rng = np.random.default_rng(0x11FE)
     live_t = result.live_transitions
     mk.set_watch(until, None, stop)
     for _ in range(probes):
         if result.reversible is not None and result.live is not None:
             return
-        m = store.path(store.sample(reach, rng))
+        values = store.sample(reach, rng)
+        m = store.path(values)
         r = store.closure(fwd, m)
+        if drawn is not None:
+            drawn.append((values, m, r))
         if not store.contains(r, store.enc.m0):
             result.reversible = False
         store.count(r, at_most=_as_float(result.states) * max(1, single.n_events))
@@ -1622,7 +1630,7 @@ _TERMINAL_STEPS = 16
 
 
 def _terminal(store: _Store, fwd: Events, back: Events, single: Events, reach: int, result: SymbolicResult,
-              say: Callable[[str], None], first_suffices: bool) -> bool:
+              say: Callable[[str], None], first_suffices: bool, drawn: list[_Drawn]) -> bool:
     """Liveness (L4) from the terminal strongly connected components of the reachability graph (its
     bottom components: no edge leaves them). In a finite graph every marking reaches a terminal
     component, and in one every marking reaches every other, so a transition is live iff some
@@ -1634,7 +1642,10 @@ def _terminal(store: _Store, fwd: Events, back: Events, single: Events, reach: i
     moves to a marking of F \\ B, whose R is inside F without m, so F shrinks. The markings that
     reach a component found (backward inside the reachable set) are set aside, and the next
     component is looked for from one that is left; when none is left, every terminal component is
-    known. A net that is not reversible and has one terminal component takes about four
+    known. The markings m start from those :func:`_probe` drew (``drawn``), whose R(m) is built
+    already, then from markings drawn among those left: a marking drawn about uniformly is most
+    often in a terminal component already, and R(m) of one is often slow to build forward
+    (NoC3x3-PT-1A: the first marking of the set in the levels' order, not done in 9 s). A net that is not reversible and has one terminal component takes about four
     saturations, where the backward saturation per transition takes one for each: Anderson-PT-06
     (600 transitions, live) is decided in 1.6 s, where those saturations had not decided it in 46 s.
 
@@ -1647,19 +1658,30 @@ def _terminal(store: _Store, fwd: Events, back: Events, single: Events, reach: i
     live_t = result.live_transitions
     n_t = live_t.shape[0]
     missing = np.zeros(n_t, dtype=bool)
+    rng = np.random.default_rng(0x7E2)
+    starts = list(drawn)
     left, found = reach, 0
     while left != mk.EMPTY:
         if found == _TERMINALS:
             break
-        m = store.path(store.pick(left))
+        start = next((x for x in starts if store.contains(left, x[0])), None)
+        ahead: int | None = None
+        if start is not None:
+            starts.remove(start)
+            _values, m, ahead = start
+        else:
+            m = store.path(store.sample(left, rng))
         for _ in range(_TERMINAL_STEPS):
-            ahead = store.closure(fwd, m)
+            if ahead is None:
+                ahead = store.closure(fwd, m)
             back_in = store.closure(back, m, c=ahead)
             if back_in == ahead:
                 break
-            m = store.path(store.pick(store.call(mk.MODE_APPLY, back, ahead, back_in, arg=mk.APPLY_DIFF)))
+            m = store.path(store.sample(store.call(mk.MODE_APPLY, back, ahead, back_in, arg=mk.APPLY_DIFF), rng))
+            ahead = None
         else:
             break
+        assert ahead is not None
         found += 1
         store.count(ahead, at_most=_as_float(result.states) * max(1, single.n_events))
         for e, n in enumerate(store.enabled_counts(ahead, single)):
@@ -1712,6 +1734,7 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
                                 "reset arcs; left undecided")
         result.seconds["liveness"] = time.monotonic() - t0
         return
+    drawn: list[_Drawn] = []
     try:
         if probes and (result.reversible is None or result.live is None):
             say("symbolic: liveness and reversibility, forward from drawn markings")
@@ -1720,7 +1743,7 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
             # deadline what it decided stays and the backward saturations take the rest
             share = min(_PROBE_SHARE * max(0.0, until - t0), max(1.0, result.seconds.get("reach", 0.0)))
             with contextlib.suppress(_OutOfTime):
-                _probe(store, fwd, single, reach, result, min(until, t0 + share), probes, stop)
+                _probe(store, fwd, single, reach, result, min(until, t0 + share), probes, stop, drawn)
             mk.set_watch(until, None, stop)
         if upside is not None and result.reversible is not None:
             upside.cancel.set()  # decided forward: the thread's work is not needed
@@ -1746,8 +1769,12 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
         if result.live is None and result.reversible:
             result.live = quasi
             live_t[:] = True
-        elif result.live is None and not _terminal(store, fwd, back, single, reach, result, say, probes > 0):
-            # more terminal components than it looks for: what they left, by a saturation each
+        elif result.live is None and (probes and not drawn or not _terminal(store, fwd, back, single, reach,
+                                                                              result, say, probes > 0, drawn)):
+            # more terminal components than it looks for, or no drawn marking's R(m) done within the
+            # probe's share (forward saturation from one marking is slow on this net, and the terminal
+            # components need it; NoC3x3-PT-1A: 34 s for one, where the backward saturation of the
+            # first transition tried shows it not live in 0.4 s): a backward saturation each
             say("symbolic: liveness, transition by transition")
             todo = sorted((e for e in range(single.n_events) if live_t[single.members[e][0]] is None),
                           key=lambda e: counts[e])
