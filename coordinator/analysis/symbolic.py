@@ -1712,8 +1712,9 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
     """Reversibility and liveness (module docstring), until ``until`` (``time.monotonic()``
     seconds): what the drawn markings tell forward first (:func:`_probe`, within a share of the
     time), then backward saturation from M0 (reversibility), then the terminal components
-    (:func:`_terminal`) and, if there are more than it looks for, for each transition not yet
-    decided, backward saturation from the markings that enable it, the transitions enabled in the
+    (:func:`_terminal`, from the drawn markings whose R(m) the probe built). If there are more than
+    it looks for, or the probe built no R(m) within its share, each transition not yet decided
+    gets a backward saturation from the markings that enable it, the transitions enabled in the
     fewest reachable markings (``counts``, per event of ``single``) first: they are the likeliest
     not to be live.
     ``upside``: reversibility decided beside on the order upside down; whichever is done first
