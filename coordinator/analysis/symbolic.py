@@ -1662,9 +1662,7 @@ def _terminal(store: _Store, fwd: Events, back: Events, single: Events, reach: i
     rng = np.random.default_rng(0x7E2)
     starts = list(drawn)
     left, found = reach, 0
-    while left != mk.EMPTY:
-        if found == _TERMINALS:
-            break
+    while left != mk.EMPTY and found < _TERMINALS:
         start = next((x for x in starts if store.contains(left, x[0])), None)
         ahead: int | None = None
         if start is not None:
@@ -1699,9 +1697,7 @@ def _terminal(store: _Store, fwd: Events, back: Events, single: Events, reach: i
     if left != mk.EMPTY:
         return False
     say(f"symbolic: {found} terminal component{'s' if found > 1 else ''}")
-    for t in range(n_t):
-        if live_t[t] is None:
-            live_t[t] = True
+    live_t[[t for t in range(n_t) if live_t[t] is None]] = True
     result.live = not missing.any() and bool(result.fireable.all())
     return True
 
