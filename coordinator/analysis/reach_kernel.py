@@ -795,9 +795,10 @@ def run(pre: np.ndarray, inhibitor: np.ndarray, incidence: np.ndarray, tab: np.n
                     for p in range(n_p):
                         c = (states[j * n_w + wd[p]] >> sh[p]) & msk[p]
                         packed[j * new_w + new_lay[p]] |= c << new_sh[p]
-                lay[:] = new_lay
-                sh[:] = new_sh
-                msk[:] = new_msk
+                for p in range(4 * n_p):  # plain loops: a slice copy compiles numba's shape-error text
+                    lay[p] = new_lay[p]
+                for p in range(n_p):
+                    sh[p], msk[p] = new_sh[p], new_msk[p]
                 held += cap * 8 * (new_w - n_w)
                 unit_s += 8 * (new_w - n_w)
                 states = packed
