@@ -1,5 +1,6 @@
 """Where numba keeps the compiled state-space search, and whether it is there already (reads and
-sets environment variables and asks numba; never opens a file itself).
+sets environment variables and asks numba; opens no file itself, beyond importing a kernel's
+source a second time for :func:`interpreted`).
 
 numba compiles :mod:`.reach_kernel` on its first use on a machine and caches the machine code
 (``cache=True``). By default it writes the cache beside the source, in
@@ -20,16 +21,28 @@ fresh clone of the same source loads what another one compiled.
 execution despite nogil=True": both kernels release the GIL (``nogil``) and take it back only for
 a moment, in their object-mode hooks (the search's progress report every 65,536 markings, the
 saturation's watch every million steps), which is what nogil is asked for.
+
+:func:`interpreted` gives the same source run by the interpreter, with no compile: a second copy
+of a kernel module made while numba's JIT is disabled. :func:`.statespace.explore` uses it for a
+small net while the compiled search is not in the cache yet (docs/analysis.md, section 2).
 """
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import os
 import sys
+import threading
 import warnings
+from collections.abc import Callable
 from pathlib import Path
+from types import ModuleType
+from typing import Any
 
-__all__ = ["cache_dir", "configure"]
+__all__ = ["cache_dir", "configure", "interpreted"]
+
+_DISABLING = threading.Lock()
 
 
 def cache_dir(environ: dict[str, str] | None = None) -> Path:
@@ -63,3 +76,52 @@ def configure() -> str:
     jit_locator.install()
     return chosen
 
+
+def interpreted(module: ModuleType) -> ModuleType:
+    """A second copy of the kernel ``module`` whose functions run in the Python interpreter.
+
+    The module's source file is executed again, as ``<name>_interpreted``, while numba's JIT is
+    disabled (``numba.core.config.DISABLE_JIT``, the switch behind ``NUMBA_DISABLE_JIT``: ``njit``
+    then hands back the Python function itself, and an ``objmode`` block runs as a plain block),
+    so one source serves both and nothing is compiled. Machine integers wrap silently in compiled
+    code, and the hashes rely on that; numpy scalars wrap the same way but warn, so the public
+    functions (the module's ``__all__``) run with numpy's overflow warnings off.
+
+    About a thousand times slower than the compiled code (a few thousand markings a second on the
+    MCC models of tests/data) and ready in well under a second: worth it for a small net while
+    the compiled code is not in numba's cache yet. Configures numba first (:func:`configure`).
+
+    Raises:
+        ImportError: if the module's source file cannot be found or read.
+    """
+    configure()
+    from numba.core import config
+
+    origin = getattr(module, "__file__", None)
+    spec = importlib.util.spec_from_file_location(f"{module.__name__}_interpreted", origin) if origin else None
+    if spec is None or spec.loader is None:
+        raise ImportError(f"{module.__name__} has no source file to interpret")
+    twin = importlib.util.module_from_spec(spec)
+    with _DISABLING:
+        before = config.DISABLE_JIT  # type: ignore[attr-defined]
+        config.DISABLE_JIT = True  # type: ignore[attr-defined]
+        try:
+            spec.loader.exec_module(twin)
+        finally:
+            config.DISABLE_JIT = before  # type: ignore[attr-defined]
+    for name in getattr(twin, "__all__", ()):
+        value = getattr(twin, name)
+        if callable(value) and not isinstance(value, type):
+            setattr(twin, name, _wrapping(value))
+    return twin
+
+
+def _wrapping(function: Callable[..., Any]) -> Callable[..., Any]:
+    import numpy as np
+
+    @functools.wraps(function)
+    def call(*args: Any, **kwargs: Any) -> Any:
+        with np.errstate(over="ignore"):
+            return function(*args, **kwargs)
+
+    return call

@@ -34,7 +34,7 @@ from coordinator.errors import AnalysisError
 from coordinator.net import Arc, Marking, PetriNet, Place, Transition
 
 __all__ = ["StateSpace", "arc_table", "default_max_bytes", "enabled_mask", "explore", "implicit_pass_bytes",
-           "load_search", "packed_layout", "search_is_compiled"]
+           "load_search", "packed_layout", "search_is_compiled", "set_compile_notice"]
 
 #: largest n·|P|·|T| for which enabling is computed by matrix products (see _enabled)
 _MAX_PRODUCT = 500_000
@@ -85,6 +85,8 @@ class StateSpace:
             if it did not.
         fired: (|T|,) bool, the transitions that label an edge found (kept or only counted): in a
             complete graph, the quasi-live ones (Murata's L1); None if the caller did not say.
+        interpreted: True if the search ran in the interpreter (the same code, not compiled: a
+            small net while the compiled search is not in numba's cache yet, :func:`explore`).
 
     ``src`` (edge sources, (E,) int32, non-decreasing) is derived from ``out_ptr`` on first use.
     """
@@ -106,6 +108,7 @@ class StateSpace:
     priority: np.ndarray | None = None
     edges_shed_at: int | None = None
     fired: np.ndarray | None = None
+    interpreted: bool = False
 
     @property
     def states(self) -> np.ndarray:
@@ -115,7 +118,7 @@ class StateSpace:
         if cached is None:
             cached = np.empty((self.n_states, len(self.net.places)), _storage_dtype(self.max_count))
             if self.n_states:
-                _kernel().unpack(self.words, self.layout, cached)
+                _ready().unpack(self.words, self.layout, cached)
             object.__setattr__(self, "_states", cached)
         return cached
 
@@ -129,7 +132,7 @@ class StateSpace:
             n_p = len(self.net.places)
             hi, lo, top = np.zeros(n_p, np.int64), np.zeros(n_p, np.int64), 0
             if self.n_states:
-                top = int(_kernel().extremes(self.words, self.layout, hi, lo))
+                top = int(_ready().extremes(self.words, self.layout, hi, lo))
             for a in (hi, lo):
                 a.flags.writeable = False
             found = (hi, lo, top)
@@ -142,7 +145,7 @@ class StateSpace:
         block = self.words[lo:hi]
         out = np.empty((block.shape[0], len(self.net.places)), np.int64)
         if block.shape[0]:
-            _kernel().unpack(np.ascontiguousarray(block), self.layout, out)
+            _ready().unpack(np.ascontiguousarray(block), self.layout, out)
         return out
 
     def seen_counts(self, max_values: int = 50_000_000) -> np.ndarray:
@@ -158,7 +161,7 @@ class StateSpace:
         for lo in range(0, rows.shape[0], block):
             part = np.ascontiguousarray(rows[lo:lo + block])
             counts = np.empty((part.shape[0], n_places), np.int64)
-            _kernel().unpack(part, self.layout, counts)
+            _ready().unpack(part, self.layout, counts)
             np.maximum(out, counts.max(axis=0, initial=0), out=out)
         return out
 
@@ -356,7 +359,7 @@ class StateSpace:
         if not self.complete:
             raise AnalysisError("liveness needs the complete reachability graph; this one stopped early "
                                 f"({self.stopped_by})")
-        rk = _kernel()
+        rk = _ready()
         if self.edges_kept:
             levels, labels, terminal, deepest, tallest = rk.edge_components(
                 self.out_ptr, self.dst, self.transition, len(self.net.transitions))
@@ -633,7 +636,11 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     The ordinary firing rule of :mod:`coordinator.net` is used (inhibitor arcs honoured, reset arcs
     empty their places; events, weights and rates ignored). Technique and cost: :mod:`.reach_kernel` and docs/analysis.md;
     reachability graphs: Murata 1989, section V-A. The first call in a process loads the compiled
-    search (about 0.5 s; a few seconds more the first time on a machine, to compile it).
+    search (about 0.5 s). While it is not in numba's cache yet (the first use on a machine), the
+    same code runs in the interpreter (:func:`.jit.interpreted`) for up to
+    :data:`INTERPRETED_SECONDS`: a small net's graph is done by then, with nothing compiled
+    (``interpreted`` True); a larger net's search is compiled (15–20 s, once per machine; the
+    notice of :func:`set_compile_notice` is called first) and run from the start.
 
     Markings are stored packed (:func:`packed_layout`): a place with a proven bound b in the bits
     its count needs so far, bit_length(b) once one such place overflows; one without in 8 bits,
@@ -681,7 +688,7 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         AnalysisError: on a bad ``priority`` or ``bounds`` shape, ``max_states < 1``, or a token
             count above 2**31 - 1 (the largest field holds 31 bits).
     """
-    rk = _kernel()
+    rk = _ready()
     if max_states < 1:
         raise AnalysisError(f"max_states must be >= 1, got {max_states}")
     max_states = min(int(max_states), 2**31 - 1)
@@ -699,18 +706,26 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     else:
         pre = inh = inc = _NO_MATRIX
         tab, m0 = arc_table(net), sparse_net(net).m0
-    if net.has_resets:
-        rk.load_resets()  # the search of nets with reset arcs is a second compiled specialisation
     start, target = _widths(bounds, np.asarray(m0))
     layout = np.concatenate([packed_layout(start)[0], target])
-    rk.set_progress(progress, stop)
     report_every = max(1, int(report_every)) if progress is not None or stop is not None else 0
-    try:
-        status, words, dst, tr, parent, expanded, out_ptr, complete, top, layout, store, shed_at, fired = rk.run(
-            pre, inh, inc, tab, m0, layout, prio, use_prio, max_states, budget, report_every, bool(edges),
+    args = (pre, inh, inc, tab, m0, layout, prio, use_prio, max_states, budget, report_every, bool(edges),
             bool(shed_edges), tab if net.has_resets else None, bool(finish_level))
-    finally:
-        rk.set_progress(None)
+    found = None
+    interpreted = rk is not _RK
+    if interpreted:
+        found = _interpreted(rk, args, progress, stop)
+        interpreted = found is not None
+    if found is None:
+        rk = _kernel()
+        if net.has_resets:
+            rk.load_resets()  # the search of nets with reset arcs is a second compiled specialisation
+        rk.set_progress(progress, stop)
+        try:
+            found = rk.run(*args)
+        finally:
+            rk.set_progress(None)
+    status, words, dst, tr, parent, expanded, out_ptr, complete, top, layout, store, shed_at, fired = found
     if status == rk.OVERFLOW:
         raise AnalysisError(f"a token count reached {top}, above 2**31 - 1 (the search stores counts in at most "
                             f"31 bits), after {words.shape[0]} markings; petrobot analyze decides boundedness "
@@ -721,7 +736,44 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
                       complete=bool(complete), parent=parent, expanded=expanded, stopped_by=stopped,
                       packed_bits=int(layout[2 * n_p:3 * n_p].sum()), store_bytes=int(store), max_count=int(top),
                       edges_kept=bool(edges) and shed_at < 0, priority=None if priority is None else prio,
-                      edges_shed_at=None if shed_at < 0 else int(shed_at), fired=fired)
+                      edges_shed_at=None if shed_at < 0 else int(shed_at), fired=fired, interpreted=interpreted)
+
+
+def _interpreted(twin: Any, args: tuple[Any, ...], progress: Callable[[int, int], None] | None,
+                 stop: threading.Event | None) -> tuple[Any, ...] | None:
+    """Run the search of ``args`` (:func:`.reach_kernel.run`'s) in the interpreter, ``twin``; return
+    its result, or None if it was still going after :data:`INTERPRETED_SECONDS` (then the caller
+    compiles the search and runs it from the start). ``progress`` is called about every
+    ``report_every`` expanded markings, as the compiled search would, and ``stop`` honoured."""
+    caller_every = int(args[10])
+    every = max(1, min(caller_every, _INTERPRETED_REPORT)) if caller_every else _INTERPRETED_REPORT
+    calls_per_report = max(1, caller_every // every)
+    deadline = time.monotonic() + INTERPRETED_SECONDS
+    halt = threading.Event()
+    late = False
+    calls = 0
+
+    def watch(n_states: int, n_edges: int) -> None:
+        nonlocal late, calls
+        calls += 1
+        if progress is not None and calls % calls_per_report == 0:
+            progress(n_states, n_edges)
+        if stop is not None and stop.is_set():
+            halt.set()
+        elif time.monotonic() > deadline:
+            late = True
+            halt.set()
+
+    twin.set_progress(watch, halt)
+    try:
+        found = twin.run(*args[:10], every, *args[11:])
+    finally:
+        twin.set_progress(None)
+    if late and found[0] == twin.STOPPED:
+        return None
+    if progress is not None and caller_every:
+        progress(int(found[1].shape[0]), int(found[6][-1]))
+    return tuple(found)
 
 
 def load_search() -> float:
@@ -729,6 +781,7 @@ def load_search() -> float:
     one-place net; return the seconds it took. Commands call it before they start timing a search,
     so the rate they report is that of the search. Later calls return almost at once."""
     start = time.perf_counter()
+    _kernel()
     explore(_ONE_PLACE)
     return time.perf_counter() - start
 
@@ -740,21 +793,53 @@ _NO_TABLE = np.zeros(0, np.int64)  # run builds the arc lists from the dense mat
 _NO_MATRIX = np.zeros((0, 0), np.int64)  # the dense matrices, unused when the arc lists are given
 _NO_MATRIX.flags.writeable = False  # same numba type as a net's read-only matrices: one compilation
 _RK: Any = None
+_TWIN: Any = None
+_LOADING = threading.RLock()
+_compile_notice: Callable[[], None] | None = None
+#: seconds of interpreted search a net gets, while the compiled search is not in numba's cache, before
+#: the search is compiled and run from the start (:func:`explore`)
+INTERPRETED_SECONDS = 1.0
+#: expanded markings between two looks at the clock of the interpreted search
+_INTERPRETED_REPORT = 64
 
 
 def _kernel() -> Any:
     """The compiled search module, imported on first use (numba takes ~0.3 s to import) with numba's
     cache in the user's cache directory (:mod:`.jit`), its search loaded from there or compiled."""
     global _RK
-    if _RK is None:
-        from coordinator.analysis import jit
+    with _LOADING:
+        if _RK is None:
+            from coordinator.analysis import jit
 
-        jit.configure()
-        from coordinator.analysis import reach_kernel
+            jit.configure()
+            from coordinator.analysis import reach_kernel
 
-        reach_kernel.load()
-        _RK = reach_kernel
+            if reach_kernel.cached() is False and _compile_notice is not None:
+                _compile_notice()
+            reach_kernel.load()
+            _RK = reach_kernel
     return _RK
+
+
+def _ready() -> Any:
+    """The compiled search module if its search is loaded or in numba's cache (or numba cannot say),
+    else the same module run by the interpreter (:func:`.jit.interpreted`), made once."""
+    global _TWIN
+    with _LOADING:
+        if _RK is not None or search_is_compiled() is not False:
+            return _kernel()
+        if _TWIN is None:
+            from coordinator.analysis import jit, reach_kernel
+
+            _TWIN = jit.interpreted(reach_kernel)
+        return _TWIN
+
+
+def set_compile_notice(notice: Callable[[], None] | None) -> None:
+    """Have ``notice()`` called just before the search is compiled (its first use on a machine with a
+    net too large for the interpreted search; once per process at most), or no longer (None)."""
+    global _compile_notice
+    _compile_notice = notice
 
 
 

@@ -318,7 +318,7 @@ def render(rep: dict[str, Any]) -> str:
 def run(args: argparse.Namespace) -> int:
     """Analyse the net; print the report; return 0, or 1 if the net cannot be loaded."""
     from coordinator.analysis.robotic import report
-    from coordinator.analysis.statespace import load_search
+    from coordinator.analysis.statespace import load_search, set_compile_notice
     from coordinator.netfile import load_any
 
     try:
@@ -327,13 +327,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"petrobot analyze: {exc}", file=sys.stderr)
         return 2
     show = args.progress or sys.stderr.isatty()
-    if _search_is_compiled() is False:
-        sys.stderr.write("compiling the state-space search (once per machine)...\n")
+
+    def compiling() -> None:
+        sys.stderr.write(("\n" if show else "") + "compiling the state-space search (once per machine)...\n")
         sys.stderr.flush()
-    if show:
+
+    set_compile_notice(compiling)
+    if show and _search_is_compiled() is not False:
         sys.stderr.write("  loading the compiled state-space search ...")
         sys.stderr.flush()
         sys.stderr.write(f" {load_search():.1f} s\n")
+    elif show:
+        sys.stderr.write("  the compiled state-space search is not in the cache yet: a small net is searched by "
+                         "the interpreter, a larger one compiles it first\n")
     progress = _progress(sys.stderr) if show else None
     with _long_counts():
         try:
@@ -343,6 +349,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"petrobot analyze: {exc}", file=sys.stderr)
             return 1
         finally:
+            set_compile_notice(None)
             if show:
                 sys.stderr.write("\n")
         if args.json:
