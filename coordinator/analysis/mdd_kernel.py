@@ -282,6 +282,14 @@ def _checkin(k: int, arena: np.ndarray, b0: int, n: int, meta: np.ndarray, level
     return r  # type: ignore[no-any-return]
 
 
+@njit(cache=True, inline="always")
+def _copy(dst: np.ndarray, src: np.ndarray, n: int) -> None:
+    """``dst[:n] = src[:n]`` element by element: a slice copy compiles numba's text for shape
+    errors, seconds of a first compile."""
+    for i in range(n):
+        dst[i] = src[i]
+
+
 @njit(cache=True)
 def _rehash(unique: np.ndarray, n_nodes: int, level: np.ndarray, offset: np.ndarray, size: np.ndarray,
             kids: np.ndarray) -> None:
@@ -308,14 +316,14 @@ def add_path(values: np.ndarray, dom: np.ndarray, meta: np.ndarray, level: np.nd
         nl = np.zeros(gn, np.int32)
         no = np.zeros(gn, np.int64)
         ns = np.zeros(gn, np.int32)
-        nl[:level.shape[0]] = level
-        no[:offset.shape[0]] = offset
-        ns[:size.shape[0]] = size
+        _copy(nl, level, level.shape[0])
+        _copy(no, offset, offset.shape[0])
+        _copy(ns, size, size.shape[0])
         level, offset, size = nl, no, ns
     need = meta[META_KIDS] + dom.sum()
     if need > kids.shape[0]:
         nk = np.zeros(max(2 * kids.shape[0], need), np.int32)
-        nk[:kids.shape[0]] = kids
+        _copy(nk, kids, kids.shape[0])
         kids = nk
     gu = unique.shape[0]
     while 2 * (meta[META_UNIQUE] + n_levels + 1) > gu:
@@ -388,7 +396,7 @@ def _prepare(ty: int, k: int, a: int, b: int, c: int, e: int, saturating: bool, 
 
 @njit(cache=True, inline="always")
 def _full(n_nodes: int, n_kids: int, n_unique: int, ct_used: int, node_cap: int, kid_cap: int, unique_cap: int,
-          ct_cap: int, max_dom: int, ct_max: int) -> bool:
+          ct_cap: int, max_dom: int | np.int64, ct_max: int) -> bool | np.bool_:
     """Whether a buffer of the store must grow before the next step (room for one more node of
     ``max_dom`` children, the unique table at most half full, the computed table at most a quarter
     full below ``ct_max`` entries); numbers only, so that the loop keeps no reference count."""
@@ -402,11 +410,11 @@ def _steps(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr:
            dom_ptr: np.ndarray, byval_ptr: np.ndarray, byval: np.ndarray,
            dz: tuple[np.ndarray, ...], meta: np.ndarray, level: np.ndarray, offset: np.ndarray, size: np.ndarray,
            kids: np.ndarray, unique: np.ndarray, ct: np.ndarray, check_overflow: bool, saturating: bool,
-           max_dom: int, f_ty: np.ndarray,
+           max_dom: int | np.int64, f_ty: np.ndarray,
            f_pc: np.ndarray, f_k: np.ndarray, f_a: np.ndarray, f_b: np.ndarray, f_c: np.ndarray, f_e: np.ndarray,
            f_i: np.ndarray, f_j: np.ndarray, f_buf: np.ndarray, f_k0: np.ndarray, f_k1: np.ndarray,
-           f_s: np.ndarray, arena: np.ndarray, depth: int, atop: int, ret: int, ct_used: int,
-           steps: int, ct_max: int) -> tuple:  # type: ignore[type-arg]
+           f_s: np.ndarray, arena: np.ndarray, depth: int, atop: int | np.int64, ret: int, ct_used: int,
+           steps: int | np.int64, ct_max: int) -> tuple:  # type: ignore[type-arg]
     """The steps of :func:`run` on its stack of frames, until the stack is empty, a status is set,
     or a buffer of the store is full (``_FULL``: :func:`run` grows it and calls again). No array is
     reassigned here: numba then keeps no reference count in the loop (with the buffers grown in
@@ -890,7 +898,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
         ``(status, result node, meta, level, offset, size, kids, unique, ct)``.
     """
     n_levels = dom.shape[0]
-    max_dom = 1
+    max_dom = np.int64(1)  # typed, not a literal: a literal argument of _steps compiles it twice
     for k in range(n_levels):
         max_dom = max(max_dom, dom[k])
     saturating = mode == MODE_SATURATE
@@ -916,7 +924,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
     f_k1 = np.zeros(fcap, np.int64)
     f_s = np.zeros(fcap, np.int64)  # a NODE frame's lowest value that may be dirty
     arena = np.zeros((fcap + 1) * max_dom, np.int32)
-    atop = 0
+    atop = np.int64(0)
     fixed = fcap * 104 + arena.shape[0] * 4
     status = OK
     ret = EMPTY
@@ -946,7 +954,7 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
             f_k0[0] = key0
             f_k1[0] = key1
             depth = 1
-    steps = 0
+    steps = np.int64(0)
     while depth > 0:
         n_nodes = meta[META_NODES]
         if _full(n_nodes, meta[META_KIDS], meta[META_UNIQUE], ct_used, level.shape[0], kids.shape[0],
@@ -983,13 +991,13 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 nl = np.zeros(gn, np.int32)
                 no = np.zeros(gn, np.int64)
                 ns = np.zeros(gn, np.int32)
-                nl[:n_nodes] = level[:n_nodes]
-                no[:n_nodes] = offset[:n_nodes]
-                ns[:n_nodes] = size[:n_nodes]
+                _copy(nl, level, n_nodes)
+                _copy(no, offset, n_nodes)
+                _copy(ns, size, n_nodes)
                 level, offset, size = nl, no, ns
             if gk != kids.shape[0]:
                 nk = np.zeros(gk, np.int32)
-                nk[:meta[META_KIDS]] = kids[:meta[META_KIDS]]
+                _copy(nk, kids, meta[META_KIDS])
                 kids = nk
             if gu != unique.shape[0]:
                 unique = np.zeros(gu, np.int32)
@@ -1096,7 +1104,7 @@ def _nodes_of(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray,
         n = stack[top]
         if m == out.shape[0]:
             grown = np.zeros(2 * m, np.int64)
-            grown[:m] = out
+            _copy(grown, out, m)
             out = grown
         out[m] = n
         m += 1
@@ -1106,7 +1114,7 @@ def _nodes_of(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray,
                 seen[c] = 1
                 if top == stack.shape[0]:
                     grown = np.zeros(2 * stack.shape[0], np.int64)
-                    grown[:top] = stack[:top]
+                    _copy(grown, stack, top)
                     stack = grown
                 stack[top] = c
                 top += 1
@@ -1306,7 +1314,8 @@ def enabled_counts(root: int, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_pt
             out_approx[e] = float(root)
         return
     # the set's nodes, compacted, top-down
-    ids = np.sort(_nodes_of(root, offset, size, kids, np.zeros(n_nodes, np.uint8)))[::-1].copy()
+    found = _nodes_of(root, offset, size, kids, np.zeros(n_nodes, np.uint8))
+    ids = found[np.argsort(found, kind="mergesort")[::-1]]  # the sort the events take too: one compile
     m = ids.shape[0]
     comp = np.full(n_nodes, -1, np.int64)
     for x in range(m):
