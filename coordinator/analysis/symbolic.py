@@ -62,7 +62,8 @@ from coordinator.analysis.mdd_order import Encoding, EncodingTooLarge, Events, e
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet
 
-__all__ = ["ANSWER_SECONDS", "PROBES", "BeyondBounds", "Rival", "SymbolicResult", "analyse_symbolic", "load_kernel"]
+__all__ = ["ANSWER_SECONDS", "PROBES", "BeyondBounds", "Rival", "SymbolicResult", "analyse_symbolic", "load_kernel",
+           "set_kernels_wait"]
 
 _TWO61 = (1 << 61) - 1
 #: default time after which reversibility and liveness are left undecided (seconds from the start of
@@ -412,6 +413,28 @@ def _crt(residues: list[int], primes: list[int]) -> int:
     return value
 
 
+_kernels_wait: Callable[[], None] | None = None
+_KERNELS_WAIT_LOCK = threading.Lock()
+
+
+def set_kernels_wait(wait: Callable[[], None] | None) -> None:
+    """Have ``wait()`` called once, by the next :func:`analyse_symbolic` before it first uses the
+    compiled kernels (None: no longer). A command that has another process compile them into
+    numba's cache meanwhile waits for it there, so that this process loads them instead of
+    compiling them a second time."""
+    global _kernels_wait
+    with _KERNELS_WAIT_LOCK:
+        _kernels_wait = wait
+
+
+def _await_kernels() -> None:
+    global _kernels_wait
+    with _KERNELS_WAIT_LOCK:
+        wait, _kernels_wait = _kernels_wait, None
+    if wait is not None:
+        wait()
+
+
 def load_kernel() -> None:
     """Import the compiled MDD kernel (numba; its cache, or a first compile) with numba's cache in the
     user's cache directory (:mod:`.jit`)."""
@@ -726,6 +749,7 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             firing still leaves after their last raise, the memory budget, the time budget reached before
             the reachable set was complete, or ``stop`` set before it was.
     """
+    _await_kernels()
     start = time.monotonic()
     deadline = start + seconds
     say = progress or (lambda _text: None)

@@ -7,7 +7,8 @@ within a state limit and a memory budget, and prints a readable report, or the J
 ``--json``. The engine (explicit reachability graph or symbolic decision diagram) is chosen by the
 analysis unless ``--engine`` forces one; the report says which ran and why. Progress of long state-space constructions goes to stderr, on a terminal or with
 ``--progress``; a one-line notice goes to stderr when the compiled search has to be compiled first
-(once per machine).
+(once per machine). The symbolic engine's kernels are then compiled beside it, in a second
+process (:func:`compile_symbolic`), which the symbolic engine waits for if it is needed.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
+import subprocess
 import sys
 import time
 from collections.abc import Callable, Iterator
@@ -23,7 +25,7 @@ from typing import Any, TextIO
 from coordinator.analysis.budget import default_max_bytes
 from services.errors import PetrobotError
 
-__all__ = ["add_parser", "parse_size", "render", "run"]
+__all__ = ["add_parser", "compile_symbolic", "parse_size", "render", "run"]
 
 DEFAULT_MAX_STATES = 25_000_000
 _UNITS = {"": 1, "B": 1, "K": 1 << 10, "KB": 1 << 10, "KIB": 1 << 10, "M": 1 << 20, "MB": 1 << 20,
@@ -315,10 +317,59 @@ def render(rep: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+#: seconds the symbolic engine waits for the process compiling its kernels before it compiles them
+#: itself (a compile takes 25-30 s on 2 cores)
+SYMBOLIC_COMPILE_WAIT = 120.0
+
+
+def compile_symbolic() -> None:
+    """Compile the symbolic engine's kernels into numba's cache (or load them from there): the
+    symbolic analysis of a two-robot fleet (:mod:`coordinator.netfile.fleet`), its report dropped.
+    Run by ``analyze`` in a second process while it compiles the explicit search, so that a first
+    analysis on a machine compiles the two at once (docs/analysis.md, section 2)."""
+    from coordinator.analysis.robotic import report
+    from coordinator.netfile.fleet import fleet_toml
+    from coordinator.netfile.loader import loads_net
+
+    report(loads_net(fleet_toml(2), "<fleet of 2>", interpreted=False), engine="symbolic")
+
+
+class _Beside:
+    """The process that compiles the symbolic engine's kernels beside this one's compile."""
+
+    def __init__(self) -> None:
+        self.proc: subprocess.Popen[bytes] | None = None
+
+    def start(self) -> None:
+        if self.proc is not None:
+            return
+        code = "from coordinator.commands.analyze import compile_symbolic; compile_symbolic()"
+        try:
+            self.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
+                                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        except OSError as exc:
+            sys.stderr.write(f"(the symbolic engine's kernels will compile when needed: {exc})\n")
+
+    def wait(self) -> None:
+        if self.proc is None:
+            return
+        sys.stderr.write("waiting for the symbolic engine's kernels, compiling in another process...\n")
+        sys.stderr.flush()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            self.proc.wait(timeout=SYMBOLIC_COMPILE_WAIT)
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self.proc.wait(timeout=10)
+
+
 def run(args: argparse.Namespace) -> int:
     """Analyse the net; print the report; return 0, or 1 if the net cannot be loaded."""
     from coordinator.analysis.robotic import report
     from coordinator.analysis.statespace import load_search, set_compile_notice
+    from coordinator.analysis.symbolic import set_kernels_wait
     from coordinator.netfile import load_any
 
     try:
@@ -328,8 +379,14 @@ def run(args: argparse.Namespace) -> int:
         return 2
     show = args.progress or sys.stderr.isatty()
 
+    beside = _Beside()
+
     def compiling() -> None:
         sys.stderr.write(("\n" if show else "") + "compiling the state-space search (once per machine)...\n")
+        if args.engine != "explicit":
+            sys.stderr.write("compiling the symbolic engine's kernels beside it, in another process\n")
+            beside.start()
+            set_kernels_wait(beside.wait)
         sys.stderr.flush()
 
     set_compile_notice(compiling)
@@ -350,6 +407,8 @@ def run(args: argparse.Namespace) -> int:
             return 1
         finally:
             set_compile_notice(None)
+            set_kernels_wait(None)
+            beside.stop()
             if show:
                 sys.stderr.write("\n")
         if args.json:

@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from coordinator.analysis import jit
@@ -114,3 +115,50 @@ def test_functions_outside_petrobot_keep_numbas_own_cache_folders(tmp_path: Path
     folder = Path(out.stdout.strip())
     assert folder.parent == tmp_path / "cache" / "petrobot" / "numba"
     assert not folder.name.startswith("petrobot-")
+
+
+def test_analyze_compiles_the_symbolic_kernels_beside_the_search_and_ends_that_process(
+        monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    from coordinator.analysis import reach_kernel, statespace
+    from coordinator.commands import analyze
+
+    started: list[analyze._Beside] = []
+    real_start = analyze._Beside.start
+
+    def start(self: analyze._Beside) -> None:
+        real_start(self)
+        started.append(self)
+
+    monkeypatch.setattr(analyze._Beside, "start", start)
+    net = ROOT / "tests" / "data" / "mcc" / "FMS-PT-00002" / "model.pnml"
+    statespace.load_search()
+    monkeypatch.setattr(statespace, "_RK", None)
+    monkeypatch.setattr(statespace, "search_is_compiled", lambda: False)
+    monkeypatch.setattr(reach_kernel, "cached", lambda: False)
+    monkeypatch.setattr(statespace, "INTERPRETED_SECONDS", 0.0)
+    assert main(["analyze", str(net), "--json", "--engine", "explicit"]) == 0
+    assert "symbolic engine" not in capsys.readouterr().err and not started
+    monkeypatch.setattr(statespace, "_RK", None)
+    assert main(["analyze", str(net), "--json"]) == 0
+    assert "compiling the symbolic engine's kernels beside it, in another process" in capsys.readouterr().err
+    assert len(started) == 1 and started[0].proc is not None
+    assert started[0].proc.poll() is not None  # ended (done, or stopped) when analyze returned
+
+
+def test_the_symbolic_engine_waits_once_for_kernels_compiled_elsewhere() -> None:
+    from coordinator.analysis.statespace import explore
+    from coordinator.analysis.symbolic import analyse_symbolic, set_kernels_wait
+    from coordinator.commands.analyze import compile_symbolic
+    from coordinator.netfile.pnml import load_pnml
+
+    compile_symbolic()  # what the second process runs: here the kernels are loaded already
+    net = load_pnml(str(ROOT / "tests" / "data" / "mcc" / "Philosophers-PT-000005" / "model.pnml"))
+    waits: list[int] = []
+    set_kernels_wait(lambda: waits.append(1))
+    try:
+        bounds = np.ones(len(net.places), np.int64)
+        for _ in range(2):
+            assert analyse_symbolic(net, bounds).states == explore(net).n_states
+    finally:
+        set_kernels_wait(None)
+    assert waits == [1]
