@@ -1,5 +1,5 @@
 """Where numba keeps the compiled state-space search, and whether it is there already (reads and
-sets environment variables and asks numba; opens no file itself, beyond importing a kernel's
+sets environment variables and asks numba; opens no file itself, beyond reading a kernel's
 source a second time for :func:`interpreted`).
 
 numba compiles :mod:`.reach_kernel` on its first use on a machine and caches the machine code
@@ -23,17 +23,16 @@ a moment, in their object-mode hooks (the search's progress report every 65,536 
 saturation's watch every million steps), which is what nogil is asked for.
 
 :func:`interpreted` gives the same source run by the interpreter, with no compile: a second copy
-of a kernel module made while numba's JIT is disabled. :func:`.statespace.explore` uses it for a
+of a kernel module without its ``njit`` decorators. :func:`.statespace.explore` uses it for a
 small net while the compiled search is not in the cache yet (docs/analysis.md, section 2).
 """
 
 from __future__ import annotations
 
+import ast
 import functools
-import importlib.util
 import os
 import sys
-import threading
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -41,8 +40,6 @@ from types import ModuleType
 from typing import Any
 
 __all__ = ["cache_dir", "configure", "interpreted"]
-
-_DISABLING = threading.Lock()
 
 
 def cache_dir(environ: dict[str, str] | None = None) -> Path:
@@ -80,12 +77,14 @@ def configure() -> str:
 def interpreted(module: ModuleType) -> ModuleType:
     """A second copy of the kernel ``module`` whose functions run in the Python interpreter.
 
-    The module's source file is executed again, as ``<name>_interpreted``, while numba's JIT is
-    disabled (``numba.core.config.DISABLE_JIT``, the switch behind ``NUMBA_DISABLE_JIT``: ``njit``
-    then hands back the Python function itself, and an ``objmode`` block runs as a plain block),
-    so one source serves both and nothing is compiled. Machine integers wrap silently in compiled
-    code, and the hashes rely on that; numpy scalars wrap the same way but warn, so the public
-    functions (the module's ``__all__``) run with numpy's overflow warnings off.
+    The module's source file is parsed, its functions' ``njit`` decorators are left out, and the
+    rest is executed as a new module, ``<name>_interpreted`` (line numbers kept, so tracebacks
+    point into the source): one source serves both, nothing is compiled, and nothing global of
+    numba's is touched (``NUMBA_DISABLE_JIT`` would reach every module a thread imports
+    meanwhile). An ``objmode`` block runs as a plain block in the interpreter. Machine integers
+    wrap silently in compiled code, and the hashes rely on that; numpy scalars wrap the same way
+    but warn, so the public functions (the module's ``__all__``) run with numpy's overflow
+    warnings off.
 
     About a thousand times slower than the compiled code (a few thousand markings a second on the
     MCC models of tests/data) and ready in well under a second: worth it for a small net while
@@ -95,25 +94,31 @@ def interpreted(module: ModuleType) -> ModuleType:
         ImportError: if the module's source file cannot be found or read.
     """
     configure()
-    from numba.core import config
-
     origin = getattr(module, "__file__", None)
-    spec = importlib.util.spec_from_file_location(f"{module.__name__}_interpreted", origin) if origin else None
-    if spec is None or spec.loader is None:
+    if not origin:
         raise ImportError(f"{module.__name__} has no source file to interpret")
-    twin = importlib.util.module_from_spec(spec)
-    with _DISABLING:
-        before = config.DISABLE_JIT  # type: ignore[attr-defined]
-        config.DISABLE_JIT = True  # type: ignore[attr-defined]
-        try:
-            spec.loader.exec_module(twin)
-        finally:
-            config.DISABLE_JIT = before  # type: ignore[attr-defined]
+    try:
+        source = Path(origin).read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ImportError(f"cannot read the source of {module.__name__}: {exc}") from exc
+    tree = ast.parse(source, filename=origin)
+    for node in ast.walk(tree):
+        if isinstance(node, ast.FunctionDef):
+            node.decorator_list = [d for d in node.decorator_list if not _is_njit(d)]
+    twin = ModuleType(f"{module.__name__}_interpreted")
+    twin.__file__ = origin
+    exec(compile(tree, origin, "exec"), twin.__dict__)  # noqa: S102 - our own module's source
     for name in getattr(twin, "__all__", ()):
         value = getattr(twin, name)
         if callable(value) and not isinstance(value, type):
             setattr(twin, name, _wrapping(value))
     return twin
+
+
+def _is_njit(decorator: ast.expr) -> bool:
+    target = decorator.func if isinstance(decorator, ast.Call) else decorator
+    return (isinstance(target, ast.Name) and target.id == "njit") or (
+        isinstance(target, ast.Attribute) and target.attr == "njit")
 
 
 def _wrapping(function: Callable[..., Any]) -> Callable[..., Any]:

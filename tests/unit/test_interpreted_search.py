@@ -138,3 +138,16 @@ def statespace_cache() -> Path:
     from coordinator.analysis import jit
 
     return Path(jit.configure())
+
+
+def test_the_interpreted_copy_leaves_the_compiled_module_and_numbas_switches_alone() -> None:
+    from numba.core import config
+
+    from coordinator.analysis import jit
+
+    twin = jit.interpreted(reach_kernel)
+    assert not hasattr(twin._search, "py_func") and not hasattr(twin.run, "py_func")  # plain functions
+    assert hasattr(reach_kernel._search, "py_func") and hasattr(reach_kernel.run, "py_func")  # still numba's
+    assert not config.DISABLE_JIT
+    assert twin.__name__ == "coordinator.analysis.reach_kernel_interpreted"
+    assert twin.RUN_SIGNATURE == reach_kernel.RUN_SIGNATURE
