@@ -639,7 +639,7 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
     search (about 0.5 s). While it is not in numba's cache yet (the first use on a machine), the
     same code runs in the interpreter (:func:`.jit.interpreted`) for up to
     :data:`INTERPRETED_SECONDS`: a small net's graph is done by then, with nothing compiled
-    (``interpreted`` True); a larger net's search is compiled (15–20 s, once per machine; the
+    (``interpreted`` True); a larger net's search is compiled (12–15 s on 2 cores, once per machine; the
     notice of :func:`set_compile_notice` is called first) and run from the start.
 
     Markings are stored packed (:func:`packed_layout`): a place with a proven bound b in the bits

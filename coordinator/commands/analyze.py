@@ -326,7 +326,7 @@ def compile_symbolic() -> None:
     """Compile the symbolic engine's kernels into numba's cache (or load them from there): the
     symbolic analysis of a two-robot fleet (:mod:`coordinator.netfile.fleet`), its report dropped.
     Run by ``analyze`` in a second process while it compiles the explicit search, so that a first
-    analysis on a machine compiles the two at once (docs/analysis.md, section 2)."""
+    analysis on a machine compiles the two at once (docs/analysis.md, section 9, *Cold start*)."""
     from coordinator.analysis.robotic import report
     from coordinator.netfile.fleet import fleet_toml
     from coordinator.netfile.loader import loads_net
@@ -343,10 +343,17 @@ class _Beside:
     def start(self) -> None:
         if self.proc is not None:
             return
+        import os
+        from pathlib import Path
+
+        import coordinator
+
         code = "from coordinator.commands.analyze import compile_symbolic; compile_symbolic()"
+        root = str(Path(coordinator.__file__).resolve().parents[1])  # this petrobot, wherever it runs from
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")])))
         try:
             self.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
-                                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
         except OSError as exc:
             sys.stderr.write(f"(the symbolic engine's kernels will compile when needed: {exc})\n")
 
@@ -369,7 +376,6 @@ def run(args: argparse.Namespace) -> int:
     """Analyse the net; print the report; return 0, or 1 if the net cannot be loaded."""
     from coordinator.analysis.robotic import report
     from coordinator.analysis.statespace import load_search, set_compile_notice
-    from coordinator.analysis.symbolic import set_kernels_wait
     from coordinator.netfile import load_any
 
     try:
@@ -384,9 +390,12 @@ def run(args: argparse.Namespace) -> int:
     def compiling() -> None:
         sys.stderr.write(("\n" if show else "") + "compiling the state-space search (once per machine)...\n")
         if args.engine != "explicit":
+            from coordinator.analysis.symbolic import set_kernels_wait
+
             sys.stderr.write("compiling the symbolic engine's kernels beside it, in another process\n")
             beside.start()
-            set_kernels_wait(beside.wait)
+            if beside.proc is not None:
+                set_kernels_wait(beside.wait)
         sys.stderr.flush()
 
     set_compile_notice(compiling)
@@ -407,7 +416,10 @@ def run(args: argparse.Namespace) -> int:
             return 1
         finally:
             set_compile_notice(None)
-            set_kernels_wait(None)
+            if beside.proc is not None:
+                from coordinator.analysis.symbolic import set_kernels_wait
+
+                set_kernels_wait(None)
             beside.stop()
             if show:
                 sys.stderr.write("\n")
