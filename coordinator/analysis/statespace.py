@@ -743,21 +743,18 @@ def _interpreted(twin: Any, args: tuple[Any, ...], progress: Callable[[int, int]
                  stop: threading.Event | None) -> tuple[Any, ...] | None:
     """Run the search of ``args`` (:func:`.reach_kernel.run`'s) in the interpreter, ``twin``; return
     its result, or None if it was still going after :data:`INTERPRETED_SECONDS` (then the caller
-    compiles the search and runs it from the start). ``progress`` is called about every
-    ``report_every`` expanded markings, as the compiled search would, and ``stop`` honoured."""
+    compiles the search and runs it from the start). ``stop`` is honoured as the compiled search
+    does; ``progress`` is called once, with the counts of the result, and not while the search
+    runs: a search given up would report counts that the compiled one then reports again from
+    zero, and a caller that follows the counts sees one search."""
     caller_every = int(args[10])
     every = max(1, min(caller_every, _INTERPRETED_REPORT)) if caller_every else _INTERPRETED_REPORT
-    calls_per_report = max(1, caller_every // every)
     deadline = time.monotonic() + INTERPRETED_SECONDS
     halt = threading.Event()
     late = False
-    calls = 0
 
-    def watch(n_states: int, n_edges: int) -> None:
-        nonlocal late, calls
-        calls += 1
-        if progress is not None and calls % calls_per_report == 0:
-            progress(n_states, n_edges)
+    def watch(_n_states: int, _n_edges: int) -> None:
+        nonlocal late
         if stop is not None and stop.is_set():
             halt.set()
         elif time.monotonic() > deadline:

@@ -107,6 +107,18 @@ def test_a_net_too_large_for_the_interpreters_share_is_searched_compiled(cold: N
     assert statespace._RK is reach_kernel
 
 
+def test_the_counts_reported_never_start_again_when_the_interpreted_search_is_given_up(
+        cold: None, monkeypatch: pytest.MonkeyPatch) -> None:
+    from coordinator.netfile.pnml import load_pnml
+
+    monkeypatch.setattr(statespace, "INTERPRETED_SECONDS", 0.3)  # Murphy-PT-D1N010 needs some seconds
+    reports: list[int] = []
+    space = explore(load_pnml(str(MCC / "Murphy-PT-D1N010" / "model.pnml")), report_every=500,
+                    progress=lambda states, edges: reports.append(states))
+    assert not space.interpreted and space.n_states == 39_780
+    assert len(reports) > 10 and reports == sorted(reports) and reports[-1] == 39_780
+
+
 def test_a_stop_event_ends_the_interpreted_search_with_what_it_found(cold: None) -> None:
     import threading
 
