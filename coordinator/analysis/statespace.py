@@ -748,7 +748,7 @@ def _interpreted(twin: Any, args: tuple[Any, ...], progress: Callable[[int, int]
     runs: a search given up would report counts that the compiled one then reports again from
     zero, and a caller that follows the counts sees one search."""
     caller_every = int(args[10])
-    every = max(1, min(caller_every, _INTERPRETED_REPORT)) if caller_every else _INTERPRETED_REPORT
+    every = min(caller_every or _INTERPRETED_REPORT, _INTERPRETED_REPORT)  # the caller's stop, as often
     deadline = time.monotonic() + INTERPRETED_SECONDS
     halt = threading.Event()
     late = False
@@ -823,9 +823,11 @@ def _ready() -> Any:
     else the same module run by the interpreter (:func:`.jit.interpreted`), made once."""
     global _TWIN
     with _LOADING:
-        if _RK is not None or search_is_compiled() is not False:
-            return _kernel()
-        if _TWIN is None:
+        if _RK is not None:
+            return _RK
+        if _TWIN is None:  # numba's cache is asked once; the copy, once made, serves until a compile
+            if search_is_compiled() is not False:
+                return _kernel()
             from coordinator.analysis import jit, reach_kernel
 
             _TWIN = jit.interpreted(reach_kernel)
