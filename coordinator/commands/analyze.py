@@ -271,8 +271,9 @@ def render(rep: dict[str, Any]) -> str:
                      "operator; see ends below]")
     else:
         n_dead = rep["n_deadlocks"]
-        lines.append(f"  deadlock:           {_yes(rep['deadlock'])} (some reachable marking enables nothing"
-                     + (f": {n_dead} dead markings, intended ends included" if n_dead else "") + "; see ends below)")
+        lines.append(f"  deadlock:           {_yes(rep['deadlock'])} [deadlock = some reachable marking enables no "
+                     "transition" + (f"; {n_dead} dead markings, intended ends included" if n_dead else "")
+                     + "; see ends below]")
     lines.append(f"  quasi-live:         {_yes(rep['quasi_live'])} [{_PLAIN['quasi-live']}]")
     lines.append(f"  live:               {_yes(rep['live'])} [{_PLAIN['live']}]")
     if rep["liveness"]:
