@@ -499,6 +499,7 @@ class _LevelValues:
             offset += span
         self.mult = np.concatenate(mult)
         self.base = base
+        self.sizes = np.array([ps.size for ps in enc.levels], dtype=np.int64)
         every = np.concatenate(keys)
         rank = np.argsort(every, kind="stable")
         self.keys = every[rank]
@@ -520,6 +521,42 @@ class _LevelValues:
         out = np.where(self.keys[pos] == key, self.vals[pos], -1)
         out[bad | (out < 0).any(axis=1)] = -1
         return out
+
+
+    def after(self, vals: np.ndarray, markings: np.ndarray, ts: np.ndarray, lev_ptr: np.ndarray,
+              lev: np.ndarray) -> np.ndarray:
+        """(n, K) int64 level values of the (n, |P|) ``markings``, row i being the marking whose
+        level values are ``vals`` ((K,), each found) changed by transition ``ts[i]`` on the levels
+        ``lev[lev_ptr[t]:lev_ptr[t + 1]]`` alone (−1 there: a place on no level): only those
+        levels are looked up. A row is all −1 as in :meth:`of`."""
+        if not self.exact:
+            return self.of(markings)
+        n = ts.size
+        cnt = lev_ptr[ts + 1] - lev_ptr[ts]
+        rows = np.repeat(np.arange(n), cnt)
+        levs = lev[_ranges(lev_ptr[ts], cnt)]
+        out = np.repeat(vals[None, :].astype(np.int64), n, axis=0)
+        bad = np.zeros(n, dtype=bool)
+        bad[rows[levs < 0]] = True  # a place whose count never changes would change
+        rows, levs = rows[levs >= 0], levs[levs >= 0]
+        if levs.size:
+            size = self.sizes[levs]
+            pos = _ranges(self.starts[levs], size)
+            prow = np.repeat(rows, size)
+            digits = markings[prow, self.order[pos]]
+            bad[prow[(digits < 0) | (digits > self.top[pos])]] = True
+            key = np.add.reduceat(digits * self.mult[pos], np.cumsum(size) - size) + self.base[levs]
+            at = np.minimum(np.searchsorted(self.keys, key), self.keys.size - 1)
+            found = np.where(self.keys[at] == key, self.vals[at], -1)
+            out[rows, levs] = found
+            bad[rows[found < 0]] = True
+        out[bad] = -1
+        return out
+
+
+def _ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """The integers ``starts[i] .. starts[i] + counts[i] - 1`` for every i, one after the other."""
+    return np.repeat(starts - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
 
 
 def _blocks(ts: np.ndarray, n_places: int) -> list[np.ndarray]:
@@ -545,6 +582,11 @@ class _Explicit:
         self.post = sn.post.tocsc()
         self.inh = sn.inhibitor.tocsc()
         self.inc = sn.incidence.tocsc()
+        # the incidence by transition (rows), for the successors and predecessors of a marking
+        inc_t = sn.incidence.T.tocsr()
+        self.inc_ptr = inc_t.indptr.astype(np.int64)
+        self.inc_places = inc_t.indices.astype(np.int64)
+        self.inc_data = inc_t.data.astype(np.int64)
         self.pre.sort_indices()
         self.inh.sort_indices()
         self.pre_t = np.repeat(np.arange(self.n_t), np.diff(self.pre.indptr))
@@ -558,12 +600,34 @@ class _Explicit:
     def lookup(self) -> _LevelValues:
         return _LevelValues(self.enc)
 
+    @functools.cached_property
+    def changed(self) -> tuple[np.ndarray, np.ndarray]:
+        """The levels each transition's firing changes, ``(ptr, lev)``: those of transition t are
+        ``lev[ptr[t]:ptr[t + 1]]``, increasing, −1 first when it changes a place on no level (for
+        :meth:`_LevelValues.after`)."""
+        arc_t = np.repeat(np.arange(self.n_t, dtype=np.int64), np.diff(self.inc_ptr))
+        pairs = np.unique(np.stack([arc_t, self.enc.place_level[self.inc_places]], axis=1), axis=0)
+        pairs = pairs.reshape(-1, 2)
+        return np.searchsorted(pairs[:, 0], np.arange(self.n_t + 1)).astype(np.int64), pairs[:, 1].copy()
+
     def enabled(self, m: np.ndarray) -> np.ndarray:
         """(k,) int64: the transitions that the (|P|,) marking ``m`` enables, in index order."""
         off = np.zeros(self.n_t, dtype=bool)
         off[self.pre_t[m[self.pre.indices] < self.pre.data]] = True
         off[self.inh_t[(self.inh.data > 0) & (m[self.inh.indices] >= self.inh.data)]] = True
         return np.flatnonzero(~off)
+
+    def fired(self, m: np.ndarray, ts: np.ndarray, sign: int = 1) -> np.ndarray:
+        """(len(ts), |P|) int64: the (|P|,) marking ``m`` plus ``sign`` times the incidence column
+        of each transition of ``ts`` (its successors by them, or with ``sign`` −1 the predecessors
+        they lead from), dense rows built from the arcs alone."""
+        ptr = self.inc_ptr
+        counts = ptr[ts + 1] - ptr[ts]
+        rows = np.repeat(np.arange(ts.size), counts)
+        at = _ranges(ptr[ts], counts)
+        out = np.repeat(m[None, :].astype(np.int64), ts.size, axis=0)
+        out[rows, self.inc_places[at]] += sign * self.inc_data[at]
+        return out
 
     def reached_by(self, m: np.ndarray) -> np.ndarray:
         """(k,) int64: the transitions that can have led to the (|P|,) marking ``m``: ``m`` holds
@@ -585,11 +649,13 @@ def _guided_sequence(store: _Store, ex: _Explicit, net: PetriNet, inside: int, t
     and incidence) and its successors, built in blocks (:func:`_blocks`), not |P|·|T|."""
     import heapq
 
-    inc, lookup, m0 = ex.inc, ex.lookup, ex.m0
+    lookup, m0 = ex.lookup, ex.m0
     vals0 = lookup.of(m0[None, :])[0]
     if vals0[0] >= 0 and store.contains(targets, vals0):
         return [], m0
+    lev_ptr, lev = ex.changed
     marks = [m0]
+    levels = [vals0]  # the level values of each marking of marks
     parent = [-1]
     via = [-1]
     depth = [0]
@@ -601,8 +667,8 @@ def _guided_sequence(store: _Store, ex: _Explicit, net: PetriNet, inside: int, t
         _, _, i = heapq.heappop(heap)
         m = marks[i]
         for ts in _blocks(ex.enabled(m), ex.n_places):
-            succ = m[None, :] + inc[:, ts].T.toarray()
-            vals = lookup.of(succ)
+            succ = ex.fired(m, ts)
+            vals = lookup.after(levels[i], succ, ts, lev_ptr, lev)
             for j, t in enumerate(ts):
                 key = succ[j].tobytes()
                 if key in seen:
@@ -611,6 +677,7 @@ def _guided_sequence(store: _Store, ex: _Explicit, net: PetriNet, inside: int, t
                 if vals[j, 0] < 0 or not store.contains(inside, vals[j]):
                     continue
                 marks.append(succ[j])
+                levels.append(vals[j])
                 parent.append(i)
                 via.append(int(t))
                 depth.append(depth[i] + 1)
@@ -681,15 +748,18 @@ def _bfs_sequence(store: _Store, ex: _Explicit, net: PetriNet, fwd: Events, insi
     if len(layers) == 1:  # M0 is a target
         return [], end
     seq: list[str] = []
+    lev_ptr, lev = ex.changed
+    cur_vals = ex.lookup.of(cur[None, :])[0]
     for layer in reversed(layers[:-1]):
         before = None
         for ts in _blocks(ex.reached_by(cur), ex.n_places):
-            prev = cur[None, :] - ex.inc[:, ts].T.toarray()
-            vals = ex.lookup.of(prev)
+            prev = ex.fired(cur, ts, -1)
+            vals = ex.lookup.after(cur_vals, prev, ts, lev_ptr, lev)
             for j in np.flatnonzero(vals[:, 0] >= 0):
                 if store.contains(layer, vals[j]):
                     seq.append(net.transitions[int(ts[j])].id)
                     before = prev[j]
+                    cur_vals = vals[j]
                     break
             if before is not None:
                 break

@@ -798,6 +798,39 @@ def test_level_values_of_many_markings_at_once_are_those_of_the_encoding() -> No
     assert (got[:5] >= 0).all()
 
 
+@pytest.mark.parametrize("model", ["FMS-PT-00002", "Eratosthenes-PT-010", "seed-3", "seed-6"])
+def test_level_values_after_a_firing_are_looked_up_on_the_changed_levels_as_on_all(model: str) -> None:
+    # the witness's searches look up only the levels a transition changes; every transition, enabled
+    # or not, from reachable markings: counts below zero or beyond a level's values, and places fixed
+    # on no level (Eratosthenes' primes, read only) that a firing would change, are not found either way
+    from coordinator.analysis.mdd_order import encode
+    from coordinator.analysis.symbolic import _Explicit
+
+    if model.startswith("seed-"):
+        net, _, sn, enc = generated_encoding(int(model[5:]))
+    else:
+        net = load_pnml(MCC / model / "model.pnml")
+        bounds, flows = proven_bounds(net)
+        sn = sparse_net(net)
+        enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    ex = _Explicit(sn, enc)
+    space = explore(net, max_states=2_000)
+    ts = np.arange(len(net.transitions), dtype=np.int64)
+    dense = sn.incidence.toarray().T.astype(np.int64)
+    lev_ptr, lev = ex.changed
+    found = 0
+    for i in range(0, space.n_states, max(1, space.n_states // 40)):
+        m = np.asarray(space.rows(i, i + 1)[0], dtype=np.int64)
+        succ = ex.fired(m, ts)
+        assert (succ == m[None, :] + dense).all() and (ex.fired(m, ts, -1) == m[None, :] - dense).all()
+        vals = ex.lookup.of(m[None, :])[0]
+        assert (vals >= 0).all()
+        got = ex.lookup.after(vals, succ, ts, lev_ptr, lev)
+        assert got.tolist() == ex.lookup.of(succ).tolist()
+        found += int((got[:, 0] >= 0).sum())
+    assert found > 0
+
+
 def test_a_place_that_is_only_read_is_fixed_at_its_initial_count_and_the_counts_stay_exact() -> None:
     from coordinator.analysis.mdd_order import encode
     from coordinator.analysis.statespace import explore
