@@ -221,3 +221,25 @@ def test_the_cover_finds_the_small_semiflows_from_scratch_and_from_one_basis_to_
         for y in cover:
             lp._apply(upper, np.zeros(sn.n_places, dtype=bool), y, sn.m0, True)
         assert upper.tolist() == want
+
+
+def test_a_place_another_lp_s_certificate_bounds_by_one_gets_no_lp_of_its_own() -> None:
+    # two rings, of one token (a, b) and of five (c, d): the total's certificate bounds each place by
+    # six; a's own LP bounds a and b by one (its certificate weighs both), so b needs no LP of its own
+    # when one token is all the encoding asks (lp_above 1); c's bounds c and d by five, which d's own
+    # LP is still given (five is above one and no marking reached it)
+    net = make_net("two rings", {"a": 1, "c": 5}, {"ab": ({"a": 1}, {"b": 1}), "ba": ({"b": 1}, {"a": 1}),
+                                                  "cd": ({"c": 1}, {"d": 1}), "dc": ({"d": 1}, {"c": 1})})
+    sn = sparse_net(net)
+    order = [net.places[i].id for i in range(sn.n_places)]
+    pb = lp.place_bounds(sn, lp_above=1)
+    bounds = dict(zip(order, pb.bounds.tolist()))
+    own = dict(zip(order, pb.own.tolist()))
+    assert bounds == {"a": 1, "b": 1, "c": 5, "d": 5} and pb.complete and pb.certified.all()
+    assert own == {"a": True, "b": False, "c": True, "d": True}
+    # every place's bound to the last token (lp_above 0), counts reached given: a's certificate brings
+    # b's bound down to the one token it reached, c's brings d's to five, which d did not reach
+    seen = np.array([{"a": 1, "b": 1, "c": 5, "d": 3}[p] for p in order])
+    pb = lp.place_bounds(sn, seen=seen)
+    assert dict(zip(order, pb.own.tolist())) == {"a": True, "b": False, "c": True, "d": True}
+    assert pb.bounds.tolist() == [{"a": 1, "b": 1, "c": 5, "d": 5}[p] for p in order] and pb.complete
