@@ -383,8 +383,8 @@ def place_bounds(sn: SparseNet, *, seconds: float = 5.0, seen: np.ndarray | None
     Each LP's certificate y bounds every place it weighs, by ⌊y·M0 / y_q⌋, too; so a place that an
     earlier LP's certificate has bounded to its reached count, or to at most ``lp_above``, needs no
     LP of its own (CloudReconfiguration-PT-309, no semiflow, ``lp_above`` 1: its 2,585 places are
-    all bounded by one token after 10 LPs, 0.05 s, where one LP per place had done 1,786 of them in
-    the 10 s it was given and left the rest at the total's bound).
+    all bounded by one token after 10 LPs, 0.07 s, where one LP per place had done about 1,800 of
+    them in the 10 s it was given and left the rest at 5 tokens).
 
     Args:
         sn: the net's sparse matrices.

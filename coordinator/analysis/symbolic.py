@@ -522,7 +522,6 @@ class _LevelValues:
         out[bad | (out < 0).any(axis=1)] = -1
         return out
 
-
     def after(self, vals: np.ndarray, markings: np.ndarray, ts: np.ndarray, lev_ptr: np.ndarray,
               lev: np.ndarray) -> np.ndarray:
         """(n, K) int64 level values of the (n, |P|) ``markings``, row i being the marking whose
