@@ -106,28 +106,37 @@ def add_parser(subparsers: Any) -> None:
                         help="report state-space progress on stderr even when stderr is not a terminal")
 
 
-def _progress(stream: TextIO) -> Callable[[int, int], None]:
-    start = time.monotonic()
-    last = [0.0]
+class _Progress:
+    """The progress on stderr: the markings counter, rewritten in place (``\\r``), and one line per
+    phase, written whole with its newline, so that a reader of a pipe (a log, ``tee``) gets each
+    phase when it begins, not when the next one does."""
 
-    def show(states: int, edges: int) -> None:
+    def __init__(self, stream: TextIO) -> None:
+        self.stream = stream
+        self.start = time.monotonic()
+        self.last = 0.0
+        self.open = False  # the counter's line is not ended yet
+
+    def count(self, states: int, edges: int) -> None:
         now = time.monotonic()
-        if now - last[0] < 0.5:
+        if now - self.last < 0.5:
             return
-        last[0] = now
-        rate = states / max(now - start, 1e-9)
-        stream.write(f"\r  {states:>12,} markings  {edges:>14,} edges  {rate:>11,.0f} markings/s")
-        stream.flush()
+        self.last = now
+        rate = states / max(now - self.start, 1e-9)
+        self.stream.write(f"\r  {states:>12,} markings  {edges:>14,} edges  {rate:>11,.0f} markings/s")
+        self.stream.flush()
+        self.open = True
 
-    return show
+    def phase(self, text: str) -> None:
+        self.stream.write(("\n" if self.open else "") + f"  {text}\n")
+        self.stream.flush()
+        self.open = False
 
-
-def _phase(stream: TextIO) -> Callable[[str], None]:
-    def show(text: str) -> None:
-        stream.write(f"\n  {text}")
-        stream.flush()
-
-    return show
+    def end(self) -> None:
+        """End the counter's line, if it is the last one written."""
+        if self.open:
+            self.stream.write("\n")
+            self.open = False
 
 
 def _yes(value: Any) -> str:
@@ -407,11 +416,12 @@ def run(args: argparse.Namespace) -> int:
     elif show:
         sys.stderr.write("  the compiled state-space search is not in the cache yet: a small net is searched by "
                          "the interpreter, a larger one compiles it first\n")
-    progress = _progress(sys.stderr) if show else None
+    shown = _Progress(sys.stderr) if show else None
     with _long_counts():
         try:
-            rep = report(net, max_states=args.max_states, max_bytes=args.max_memory, progress=progress,
-                         engine=args.engine, phase=_phase(sys.stderr) if show else None)
+            rep = report(net, max_states=args.max_states, max_bytes=args.max_memory,
+                         progress=shown.count if shown else None, engine=args.engine,
+                         phase=shown.phase if shown else None)
         except PetrobotError as exc:
             print(f"petrobot analyze: {exc}", file=sys.stderr)
             return 1
@@ -422,8 +432,8 @@ def run(args: argparse.Namespace) -> int:
 
                 set_kernels_wait(None)
             beside.stop()
-            if show:
-                sys.stderr.write("\n")
+            if shown:
+                shown.end()
         if args.json:
             print(json.dumps(rep, indent=2))
         else:
