@@ -231,7 +231,6 @@ def test_analyze_command_shows_progress_on_request(tmp_path: pytest.TempPathFact
     assert err.startswith("  loading the compiled state-space search ... ") and "markings/s" in err
 
 
-
 def test_analyze_progress_writes_each_phase_as_a_whole_line(capsys: pytest.CaptureFixture[str]) -> None:
     # a phase's line ends with its newline when it is written (a log fed by a pipe shows it then),
     # and no blank line comes before it: the counter's line, rewritten in place, is ended first
@@ -244,6 +243,7 @@ def test_analyze_progress_writes_each_phase_as_a_whole_line(capsys: pytest.Captu
     phases = [line for line in lines if line.startswith("  symbolic: ")]
     assert phases and phases[0].startswith("  symbolic: 7 levels")
     assert err.endswith("\n") and "" not in lines[:-1]
+
 
 EXPERIMENT = """
 [net]
