@@ -516,11 +516,15 @@ class _LevelValues:
         digits = markings[:, self.order]
         bad = ((digits < 0) | (digits > self.top)).any(axis=1)
         bad |= (markings[:, self.enc.fixed] != self.enc.fixed_values).any(axis=1)
-        key = np.add.reduceat(digits * self.mult, self.starts, axis=1) + self.base
-        pos = np.minimum(np.searchsorted(self.keys, key), self.keys.size - 1)
-        out = np.where(self.keys[pos] == key, self.vals[pos], -1)
+        out = self._found(np.add.reduceat(digits * self.mult, self.starts, axis=1) + self.base)
         out[bad | (out < 0).any(axis=1)] = -1
         return out
+
+    def _found(self, key: np.ndarray) -> np.ndarray:
+        """The level value of each level number ``key`` (any shape), −1 where it is none."""
+        at = np.minimum(np.searchsorted(self.keys, key), self.keys.size - 1)
+        found: np.ndarray = np.where(self.keys[at] == key, self.vals[at], -1)
+        return found
 
     def after(self, vals: np.ndarray, markings: np.ndarray, ts: np.ndarray, lev_ptr: np.ndarray,
               lev: np.ndarray) -> np.ndarray:
@@ -544,9 +548,7 @@ class _LevelValues:
             prow = np.repeat(rows, size)
             digits = markings[prow, self.order[pos]]
             bad[prow[(digits < 0) | (digits > self.top[pos])]] = True
-            key = np.add.reduceat(digits * self.mult[pos], np.cumsum(size) - size) + self.base[levs]
-            at = np.minimum(np.searchsorted(self.keys, key), self.keys.size - 1)
-            found = np.where(self.keys[at] == key, self.vals[at], -1)
+            found = self._found(np.add.reduceat(digits * self.mult[pos], np.cumsum(size) - size) + self.base[levs])
             out[rows, levs] = found
             bad[rows[found < 0]] = True
         out[bad] = -1
@@ -567,7 +569,7 @@ def _blocks(ts: np.ndarray, n_places: int) -> list[np.ndarray]:
 
 class _Explicit:
     """What the witness's searches over explicit markings share, built once a witness: the net's
-    arcs by transition (Pre, Post, inhibitor and incidence as sparse columns), so that the
+    arcs by transition (Pre, Post and inhibitor as sparse columns, the incidence as rows), so that the
     transitions a marking enables, or may have been reached by, cost the arcs and not |P|·|T|;
     and the level values of the encoding's markings (:class:`_LevelValues`, built when first asked:
     an encoding without levels has none, and its only marking needs no search)."""
@@ -580,7 +582,6 @@ class _Explicit:
         self.pre = sn.pre.tocsc()
         self.post = sn.post.tocsc()
         self.inh = sn.inhibitor.tocsc()
-        self.inc = sn.incidence.tocsc()
         # the incidence by transition (rows), for the successors and predecessors of a marking
         inc_t = sn.incidence.T.tocsr()
         self.inc_ptr = inc_t.indptr.astype(np.int64)
@@ -592,7 +593,7 @@ class _Explicit:
         self.post_t = np.repeat(np.arange(self.n_t), np.diff(self.post.indptr))
         self.inh_t = np.repeat(np.arange(self.n_t), np.diff(self.inh.indptr))
         # the incidence on the inhibitor arcs: a predecessor's count there is the marking's minus it
-        self.inh_c = (np.asarray(self.inc[self.inh.indices, self.inh_t]).ravel() if self.inh.nnz
+        self.inh_c = (np.asarray(sn.incidence.tocsc()[self.inh.indices, self.inh_t]).ravel() if self.inh.nnz
                       else np.zeros(0, np.int64))
 
     @functools.cached_property
@@ -702,8 +703,7 @@ def _walk_sequence(store: _Store, ex: _Explicit, net: PetriNet, targets: int,
     is the empty one, has walks of 51 to 172 steps, milliseconds each, where the guided search
     found none among 100,000 markings and breadth-first images took 174 s. None if no walk ends
     in a target. A step costs the net's arcs, not |P|·|T|."""
-    inc = ex.inc
-    inc_data = inc.data.astype(np.int64)
+    ptr, places, data = ex.inc_ptr, ex.inc_places, ex.inc_data
     rng = np.random.default_rng(0xDEAD)
     for _ in range(_WALKS):
         m = ex.m0.copy()
@@ -716,7 +716,7 @@ def _walk_sequence(store: _Store, ex: _Explicit, net: PetriNet, targets: int,
                     return [net.transitions[t].id for t in seq], m
                 break
             t = int(on[rng.integers(on.size)])
-            m[inc.indices[inc.indptr[t]:inc.indptr[t + 1]]] += inc_data[inc.indptr[t]:inc.indptr[t + 1]]
+            m[places[ptr[t]:ptr[t + 1]]] += data[ptr[t]:ptr[t + 1]]
             seq.append(t)
             if len(seq) % 256 == 0 and time.monotonic() > stop:
                 return None
