@@ -108,8 +108,9 @@ def add_parser(subparsers: Any) -> None:
 
 class _Progress:
     """The progress on stderr: the markings counter, rewritten in place (``\\r``), and one line per
-    phase, written whole with its newline, so that a reader of a pipe (a log, ``tee``) gets each
-    phase when it begins, not when the next one does."""
+    phase or notice (the compile's), written whole with its newline, so that a reader of a pipe (a
+    log, ``tee``) gets each phase when it begins, not when the next one does; an open line (the
+    counter's) is ended first."""
 
     def __init__(self, stream: TextIO) -> None:
         self.stream = stream
@@ -128,15 +129,30 @@ class _Progress:
         self.open = True
 
     def phase(self, text: str) -> None:
-        self.stream.write(("\n" if self.open else "") + f"  {text}\n")
+        self.note(f"  {text}")
+
+    def note(self, text: str) -> None:
+        """A line of its own (a phase, or a notice such as the compile's), the counter's line ended
+        first if it is open."""
+        self.stream.write(("\n" if self.open else "") + f"{text}\n")
         self.stream.flush()
         self.open = False
 
-    def end(self) -> None:
-        """End the counter's line, if it is the last one written."""
+    def begin(self, text: str) -> None:
+        """A line left open, for :meth:`end` to finish (a notice in between starts a line of its own)."""
+        self.stream.write(text)
+        self.stream.flush()
+        self.open = True
+
+    def end(self, tail: str = "", alone: str = "") -> None:
+        """End the open line (the counter's, or :meth:`begin`'s) with ``tail``; if a notice ended it
+        already, ``alone`` on a line of its own instead (nothing if empty)."""
         if self.open:
-            self.stream.write("\n")
+            self.stream.write(f"{tail}\n")
+            self.stream.flush()
             self.open = False
+        elif alone:
+            self.note(alone)
 
 
 def _yes(value: Any) -> str:
@@ -345,10 +361,12 @@ def compile_symbolic() -> None:
 
 
 class _Beside:
-    """The process that compiles the symbolic engine's kernels beside this one's compile."""
+    """The process that compiles the symbolic engine's kernels beside this one's compile; ``say``
+    writes its notices (a line each)."""
 
-    def __init__(self) -> None:
+    def __init__(self, say: Callable[[str], None]) -> None:
         self.proc: subprocess.Popen[bytes] | None = None
+        self.say = say
 
     def start(self) -> None:
         if self.proc is not None:
@@ -365,13 +383,12 @@ class _Beside:
             self.proc = subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.DEVNULL,
                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
         except OSError as exc:
-            sys.stderr.write(f"(the symbolic engine's kernels will compile when needed: {exc})\n")
+            self.say(f"(the symbolic engine's kernels will compile when needed: {exc})")
 
     def wait(self) -> None:
         if self.proc is None:
             return
-        sys.stderr.write("waiting for the symbolic engine's kernels, compiling in another process...\n")
-        sys.stderr.flush()
+        self.say("waiting for the symbolic engine's kernels, compiling in another process...")
         with contextlib.suppress(subprocess.TimeoutExpired):
             self.proc.wait(timeout=SYMBOLIC_COMPILE_WAIT)
 
@@ -394,29 +411,38 @@ def run(args: argparse.Namespace) -> int:
         print(f"petrobot analyze: {exc}", file=sys.stderr)
         return 2
     show = args.progress or sys.stderr.isatty()
+    shown = _Progress(sys.stderr) if show else None
 
-    beside = _Beside()
+    def say(text: str) -> None:
+        """A notice on a line of its own (after the progress counter's line, if that is open)."""
+        if shown is not None:
+            shown.note(text)
+        else:
+            sys.stderr.write(f"{text}\n")
+            sys.stderr.flush()
+
+    beside = _Beside(say)
 
     def compiling() -> None:
-        sys.stderr.write(("\n" if show else "") + "compiling the state-space search (once per machine)...\n")
+        say("compiling the state-space search (once per machine)...")
         if args.engine != "explicit":
             from coordinator.analysis.symbolic import set_kernels_wait
 
-            sys.stderr.write("compiling the symbolic engine's kernels beside it, in another process\n")
+            say("compiling the symbolic engine's kernels beside it, in another process")
             beside.start()
             if beside.proc is not None:
                 set_kernels_wait(beside.wait)
-        sys.stderr.flush()
 
     set_compile_notice(compiling)
-    if show and _search_is_compiled() is not False:
-        sys.stderr.write("  loading the compiled state-space search ...")
-        sys.stderr.flush()
-        sys.stderr.write(f" {load_search():.1f} s\n")
+    if shown is not None and _search_is_compiled() is not False:
+        shown.begin("  loading the compiled state-space search ...")
+        seconds = load_search()
+        shown.end(f" {seconds:.1f} s", f"  loaded the compiled state-space search in {seconds:.1f} s")
     elif show:
         sys.stderr.write("  the compiled state-space search is not in the cache yet: a small net is searched by "
                          "the interpreter, a larger one compiles it first\n")
-    shown = _Progress(sys.stderr) if show else None
+    if shown is not None:
+        shown.start = time.monotonic()  # the markings/s figure counts from here, the search's loading aside
     with _long_counts():
         try:
             rep = report(net, max_states=args.max_states, max_bytes=args.max_memory,

@@ -55,6 +55,12 @@ def test_analyze_says_on_stderr_when_it_has_to_compile_the_search(monkeypatch: p
     monkeypatch.setattr(reach_kernel, "cached", lambda: True)  # now it is loaded
     assert main(["analyze", str(net), "--json"]) == 0
     assert "compiling" not in capsys.readouterr().err
+    # with the progress shown, the notice is a line of its own: no blank line before it
+    monkeypatch.setattr(statespace, "_RK", None)
+    monkeypatch.setattr(reach_kernel, "cached", lambda: False)
+    assert main(["analyze", str(net), "--json", "--progress", "--engine", "explicit"]) == 0
+    err = capsys.readouterr().err
+    assert "\ncompiling the state-space search (once per machine)...\n" in err and "\n\n" not in err
 
 
 def test_the_loaded_search_reports_itself_compiled() -> None:

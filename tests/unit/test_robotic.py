@@ -245,6 +245,30 @@ def test_analyze_progress_writes_each_phase_as_a_whole_line(capsys: pytest.Captu
     assert err.endswith("\n") and "" not in lines[:-1]
 
 
+def test_analyze_progress_puts_a_notice_on_a_line_of_its_own() -> None:
+    # a notice (the compile's) met while the counter's line, or the loading line, is open starts a
+    # line of its own; the loading line then ends as a line of its own too
+    import io
+
+    out = io.StringIO()
+    shown = analyze._Progress(out)
+    shown.count(10, 20)
+    shown.note("compiling the state-space search (once per machine)...")
+    shown.phase("symbolic: 7 levels")
+    shown.end()
+    lines = out.getvalue().split("\n")
+    assert lines[0].startswith("\r  ") and lines[0].endswith("markings/s")
+    assert lines[1:] == ["compiling the state-space search (once per machine)...", "  symbolic: 7 levels", ""]
+    out = io.StringIO()
+    shown = analyze._Progress(out)
+    shown.begin("  loading ...")
+    shown.end(" 0.1 s", "  loaded in 0.1 s")
+    shown.begin("  loading ...")
+    shown.note("compiling")
+    shown.end(" 9.0 s", "  loaded in 9.0 s")
+    assert out.getvalue() == "  loading ... 0.1 s\n  loading ...\ncompiling\n  loaded in 9.0 s\n"
+
+
 EXPERIMENT = """
 [net]
 name = "two_runs"
