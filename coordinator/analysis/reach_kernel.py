@@ -14,7 +14,10 @@ result. What they implement (the reasons and the measurements are in docs/analys
   arcs has empty reset lists, and its search is a specialisation compiled without their code (an
   argument that is ``None`` for such nets, pruned by numba when it compiles). Each transition
   with input places is listed under its first input place (its *trigger*), so a marking only tests
-  the transitions whose trigger place is marked (enabling rule: Murata 1989, section II).
+  the transitions whose trigger place is marked (enabling rule: Murata 1989, section II); the
+  caller's lists put first a place that no marking marks, if a transition has one
+  (:func:`coordinator.analysis.statespace.arc_table`), so a transition that never fires is never
+  tested.
 * A queue that is the state array itself: states are numbered in order of discovery and expanded in
   that order, so the search is breadth-first, a level (the markings at one distance from M0) is a
   contiguous index range, and edges come out sorted by source, then transition.

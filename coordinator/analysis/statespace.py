@@ -563,11 +563,26 @@ def _reset_lists(net: PetriNet) -> tuple[sp.csc_matrix, sp.csc_matrix]:
 
 def arc_table(net: PetriNet) -> np.ndarray:
     """The packed arc lists of :func:`.reach_kernel.tables` built from the sparse matrices (for nets
-    whose dense matrices would be large), shape (k,), int64."""
+    whose dense matrices would be large, and nets with transitions that never fire), shape (k,),
+    int64.
+
+    A transition that consumes from the largest siphon unmarked at M0 never fires
+    (:meth:`.SparseNet.markable`); its input list starts with a place of that siphon, which is its
+    trigger in the search (:mod:`.reach_kernel`): no marking marks it, so the search never tests
+    the transition. Medical-PT-08, 5,204 of whose 5,431 transitions are such, is searched about 3×
+    faster (its first 500,000 markings, 5.4–5.5 s then 1.6–1.9 s). The other lists are in place order."""
     sn = sparse_net(net)
     inc, after = _reset_lists(net) if net.has_resets else (sn.incidence, None)
-    parts = []
-    for mat in (sn.pre, sn.inhibitor, inc):
+    pre_p = sn.pre.indices.astype(np.int64)
+    pre_w = sn.pre.data.astype(np.int64)
+    markable, fires = sn.markable()
+    for t in np.flatnonzero(~fires).tolist():
+        lo, hi = int(sn.pre.indptr[t]), int(sn.pre.indptr[t + 1])
+        first = lo + int(np.argmin(markable[pre_p[lo:hi]]))  # an unmarkable input place (one exists)
+        pre_p[[lo, first]] = pre_p[[first, lo]]
+        pre_w[[lo, first]] = pre_w[[first, lo]]
+    parts = [sn.pre.indptr.astype(np.int64), pre_p, pre_w]
+    for mat in (sn.inhibitor, inc):
         parts += [mat.indptr.astype(np.int64), mat.indices.astype(np.int64), mat.data.astype(np.int64)]
     if after is not None:
         parts += [after.indptr.astype(np.int64), after.indices.astype(np.int64), after.data.astype(np.int64) - 1]
@@ -701,7 +716,7 @@ def explore(net: PetriNet, *, max_states: int = 10_000_000, priority: np.ndarray
         prio.flags.writeable = False
         if prio.shape != (n_t,):
             raise AnalysisError(f"priority has shape {prio.shape}; expected ({n_t},)")
-    if dense_is_cheap(net) and not net.has_resets:
+    if dense_is_cheap(net) and not net.has_resets and sparse_net(net).markable()[1].all():
         pre, inh, inc, tab, m0 = net.pre, net.inhibitor, net.incidence, _NO_TABLE, net.initial_vector
     else:
         pre = inh = inc = _NO_MATRIX

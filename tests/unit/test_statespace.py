@@ -310,6 +310,29 @@ def test_source_transitions_weights_and_inhibitors_follow_the_firing_rule() -> N
 
 
 
+def test_a_transition_that_never_fires_is_listed_under_a_place_no_marking_marks() -> None:
+    # "stuck" consumes from "a" (marked) and from the unmarked siphon {s, u}: its trigger in the
+    # search is s, which no marking marks, so it is never tested; the graph is the firing rule's
+    from coordinator.analysis.reach_kernel import HEAD
+    from coordinator.analysis.statespace import arc_table
+
+    net = make_net("siphon", {"a": 2, "b": 0}, {
+        "go": ({"a": 1}, {"b": 1}),
+        "back": ({"b": 1}, {"a": 1}),
+        "stuck": ({"a": 1, "s": 1}, {"u": 1}),
+        "refill": ({"u": 1}, {"s": 1, "b": 1}),
+    }, places=("a", "b", "s", "u"))
+    tab = arc_table(net)
+    assert tab[0] == HEAD
+    in_ptr, in_p = tab[tab[0]:tab[1]], tab[tab[1]:tab[2]]
+    firsts = [int(in_p[in_ptr[t]]) for t in range(4)]
+    assert firsts == [0, 1, 2, 3]  # go: a; back: b; stuck: s (not a, its lower-numbered place); refill: u
+    assert sorted(in_p[in_ptr[2]:in_ptr[3]].tolist()) == [0, 2]
+    ss = assert_same_as_reference(net)
+    assert ss.n_states == 3 and set(ss.transition.tolist()) == {0, 1}
+    assert_matches_reference(net)
+
+
 def test_a_count_beyond_int32_is_a_clear_error_not_a_wrong_graph() -> None:
     net = make_net("huge", {"go": 1}, {"t": ({"go": 1}, {"go": 1, "n": 2**30})})
     with pytest.raises(AnalysisError, match="2\\*\\*31 - 1"):
