@@ -310,11 +310,17 @@ def test_source_transitions_weights_and_inhibitors_follow_the_firing_rule() -> N
 
 
 
-def test_a_transition_that_never_fires_is_listed_under_a_place_no_marking_marks() -> None:
+def test_a_transition_that_never_fires_is_listed_under_a_place_no_marking_marks(
+        monkeypatch: pytest.MonkeyPatch) -> None:
     # "stuck" consumes from "a" (marked) and from the unmarked siphon {s, u}: its trigger in the
     # search is s, which no marking marks, so it is never tested; the graph is the firing rule's
+    from coordinator.analysis import statespace
     from coordinator.analysis.reach_kernel import HEAD
     from coordinator.analysis.statespace import arc_table
+
+    tables: list[np.ndarray] = []
+    monkeypatch.setattr(statespace, "_FEW_TRANSITIONS", 0)  # these lists, not the dense matrices, even so small
+    monkeypatch.setattr(statespace, "arc_table", lambda net: tables.append(arc_table(net)) or tables[-1])
 
     net = make_net("siphon", {"a": 2, "b": 0}, {
         "go": ({"a": 1}, {"b": 1}),
@@ -331,6 +337,7 @@ def test_a_transition_that_never_fires_is_listed_under_a_place_no_marking_marks(
     ss = assert_same_as_reference(net)
     assert ss.n_states == 3 and set(ss.transition.tolist()) == {0, 1}
     assert_matches_reference(net)
+    assert len(tables) == 2  # both searches ran on these lists
 
 
 def test_a_count_beyond_int32_is_a_clear_error_not_a_wrong_graph() -> None:
