@@ -576,11 +576,13 @@ def arc_table(net: PetriNet) -> np.ndarray:
     pre_p = sn.pre.indices.astype(np.int64)
     pre_w = sn.pre.data.astype(np.int64)
     markable, fires = sn.markable()
-    for t in np.flatnonzero(~fires).tolist():
-        lo, hi = int(sn.pre.indptr[t]), int(sn.pre.indptr[t + 1])
-        first = lo + int(np.argmin(markable[pre_p[lo:hi]]))  # an unmarkable input place (one exists)
-        pre_p[[lo, first]] = pre_p[[first, lo]]
-        pre_w[[lo, first]] = pre_w[[first, lo]]
+    arc_t = np.repeat(np.arange(sn.n_transitions), np.diff(sn.pre.indptr))
+    # each dead transition's first unmarkable input place (one exists) swapped to the front of its list
+    dead_t, first = np.unique(arc_t[~markable[pre_p]], return_index=True)
+    first = np.flatnonzero(~markable[pre_p])[first[~fires[dead_t]]]
+    lo = sn.pre.indptr[arc_t[first]].astype(np.int64)
+    pre_p[lo], pre_p[first] = pre_p[first], pre_p[lo].copy()
+    pre_w[lo], pre_w[first] = pre_w[first], pre_w[lo].copy()
     parts = [sn.pre.indptr.astype(np.int64), pre_p, pre_w]
     for mat in (sn.inhibitor, inc):
         parts += [mat.indptr.astype(np.int64), mat.indices.astype(np.int64), mat.data.astype(np.int64)]
