@@ -166,6 +166,9 @@ def _marking(marking: dict[str, int]) -> str:
 def _ends(rep: dict[str, Any]) -> list[str]:
     """The dead markings read as the runtime ends a run there (robotic.dead_ends)."""
     ends = rep.get("ends") or {}
+    if rep["deadlock"] is None and not ends.get("total"):
+        return ["ends:               not decided: no dead marking was found, and the markings searched are not "
+                "all the reachable ones"]
     if not rep["deadlock"] and not ends.get("total"):
         return ["ends:               none: in every reachable marking some transition can fire"]
     total = ends.get("total")
@@ -333,7 +336,11 @@ def render(rep: dict[str, Any]) -> str:
     lines.append(f"  structural conflicts: {len(conflicts)}")
     for c in conflicts[:10]:
         eff = {True: "effective", False: "never effective", None: "?"}[c["effective"]]
-        lines.append(f"    {c['place']}: {', '.join(c['transitions'])} ({eff})")
+        many = len(c["transitions"]) - 10
+        listed = ", ".join(c["transitions"][:10]) + (f" and {many:,} more (see --json)" if many > 0 else "")
+        lines.append(f"    {c['place']}: {listed} ({eff})")
+    if len(conflicts) > 10:
+        lines.append(f"    ... {len(conflicts) - 10} more (see --json)")
     lines.append("")
     lines.extend(_ends(rep))
     for problem in rep["interpretation_problems"]:

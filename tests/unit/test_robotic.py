@@ -439,6 +439,28 @@ def test_the_mobile_nets_out_of_service_ends_wait_for_the_operators_reset_and_no
     assert "deadlock:           no [" in analyze.render(doc)
 
 
+def test_an_undecided_deadlock_is_not_reported_as_no_dead_marking() -> None:
+    from analysis_nets import make_net
+
+    # pump can fire for ever, c grows without bound, and no search or structural rule here decides
+    # whether a dead marking is reachable
+    net = make_net("pump", {"src": 1, "x": 1}, {"pump": ({"src": 1, "x": 1}, {"src": 1, "x": 1, "c": 1}),
+                                                 "drain": ({"c": 2}, {"d": 1})})
+    doc = report(net)
+    assert doc["bounded"] is False and doc["deadlock"] is None
+    text = analyze.render(doc)
+    assert "ends:               not decided: no dead marking was found" in text
+    assert "none: in every reachable marking" not in text
+
+
+def test_a_conflict_of_many_transitions_lists_ten_of_them_and_counts_the_rest() -> None:
+    from analysis_nets import make_net
+
+    fan = {f"t{i}": ({"p": 1}, {f"q{i}": 1}) for i in range(25)}
+    text = analyze.render(report(make_net("fan", {"p": 1}, fan)))
+    assert "    p: t0, t1, t2, t3, t4, t5, t6, t7, t8, t9 and 15 more (see --json)" in text
+
+
 def test_home_states_compared_in_row_blocks_match_a_column_by_column_comparison() -> None:
     import numpy as np
     from analysis_nets import make_net
