@@ -32,7 +32,7 @@ from coordinator.analysis.statespace import StateSpace
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet
 
-__all__ = ["OMEGA", "Coverability", "CoveringWitness", "covering_witness", "karp_miller"]
+__all__ = ["OMEGA", "Coverability", "CoveringWitness", "Walks", "covering_witness", "karp_miller", "random_walks"]
 
 #: Value standing for ω in :attr:`Coverability.markings`.
 OMEGA = -1
@@ -293,3 +293,176 @@ def covering_witness(space: StateSpace, *, max_work: int = 200_000_000, block_by
         anc[alive] = par[anc[alive]]
         alive = alive[anc[alive] >= 0]
     return None
+
+
+@dataclass(frozen=True)
+class Walks:
+    """What random firing sequences from M0 found (:func:`random_walks`); all of it holds for the net.
+
+    Attributes:
+        witness: a pumping witness found on one walk (a marking that strictly covers an earlier one of
+            the same walk, under :func:`covering_witness`'s conditions), or None.
+        dead: up to ``max_dead`` distinct dead markings the walks ended in, each as (its counts,
+            (|P|,) int64; the transition ids of its firing sequence from M0).
+        fired: (|T|,) bool, the transitions fired on some walk.
+        walks: how many walks started.
+        steps: how many firings they made in all.
+    """
+
+    witness: CoveringWitness | None
+    dead: list[tuple[np.ndarray, list[str]]]
+    fired: np.ndarray
+    walks: int
+    steps: int
+
+
+class _Walker:
+    """The enabling counts of one marking, updated firing by firing (:func:`random_walks`).
+
+    ``missing[t]`` is the number of t's input arcs whose place holds fewer tokens than the arc's
+    weight plus the number of its inhibitor arcs whose place holds at least the threshold: t is
+    enabled iff it is 0. A firing changes the counts of a few places, and only the arcs from those
+    places are looked at again.
+    """
+
+    def __init__(self, sn: SparseNet) -> None:
+        self.sn = sn
+        self.pre_rows = sn.pre.tocsr()
+        self.inh_rows = sn.inhibitor.tocsr()
+        self.resets = sn.reset if sn.reset is not None and sn.reset.nnz else None
+        self.m = sn.m0.astype(np.int64).copy()
+        self.missing = np.zeros(sn.n_transitions, dtype=np.int64)
+        self.restart()
+
+    def restart(self) -> None:
+        """Back to M0."""
+        sn = self.sn
+        self.m[:] = sn.m0
+        short = self.m[sn.pre.indices] < sn.pre.data
+        cols = np.repeat(np.arange(sn.n_transitions), np.diff(sn.pre.indptr))
+        self.missing[:] = np.bincount(cols[short], minlength=sn.n_transitions)
+        if sn.inhibitor.nnz:
+            over = self.m[sn.inhibitor.indices] >= sn.inhibitor.data
+            cols = np.repeat(np.arange(sn.n_transitions), np.diff(sn.inhibitor.indptr))
+            self.missing += np.bincount(cols[over], minlength=sn.n_transitions)
+
+    def fire(self, t: int) -> np.ndarray:
+        """Fire t (enabled); return the ids of the places its reset arcs empty, (k,) int64."""
+        sn = self.sn
+        lo, hi = sn.incidence.indptr[t], sn.incidence.indptr[t + 1]
+        places = sn.incidence.indices[lo:hi]
+        new = self.m[places] + sn.incidence.data[lo:hi]
+        reset = np.zeros(0, dtype=np.int64)
+        if self.resets is not None:
+            reset = self.resets.indices[self.resets.indptr[t]:self.resets.indptr[t + 1]].astype(np.int64)
+            if reset.size:
+                places = np.concatenate([places, reset])
+                new = np.concatenate([new, sn.post[:, t].toarray().ravel()[reset]])
+        for p, v in zip(places.tolist(), new.tolist()):  # a reset place last: its value wins
+            old = int(self.m[p])
+            if old == v:
+                continue
+            self.m[p] = v
+            for rows, inhibit in ((self.pre_rows, False), (self.inh_rows, True)):
+                a, b = rows.indptr[p], rows.indptr[p + 1]
+                if a == b:
+                    continue
+                w = rows.data[a:b]
+                if inhibit:
+                    change = (v >= w).astype(np.int64) - (old >= w)
+                else:
+                    change = (v < w).astype(np.int64) - (old < w)
+                self.missing[rows.indices[a:b]] += change
+        return reset
+
+
+def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_000, length: int = 2_000,
+                 seed: int = 0, max_dead: int = 10) -> Walks:
+    """Fire random sequences from M0 (each step a transition drawn uniformly among the enabled ones),
+    looking for a pumping witness and for dead markings.
+
+    A breadth-first search meets a pumping loop only after it has expanded every marking closer to M0,
+    and on a net whose loop is forty firings deep that is more markings than any budget holds
+    (Medical-PT-08 in the Model Checking Contest's models: no witness among the first million markings).
+    One walk reaches such depths at once. Each walk compares every marking it reaches with the earlier
+    ones of the same walk, under :func:`covering_witness`'s conditions: covering, equal on the places
+    read by inhibitor arcs, and larger on a place that no transition of the loop resets. A walk stops
+    at the first witness (returned), at a dead marking (kept), or after ``length`` firings; the next
+    starts from M0 again. All that is found is reachable, so it holds for the net; what is not found
+    says nothing.
+
+    Args:
+        net: a plain net (its ordinary view: events and priorities play no part).
+        seconds: time budget, seconds.
+        max_steps: budget of firings over all walks (each walk counts one more).
+        length: firings per walk at most.
+        seed: seed of the random draws (the same seed, the same walks).
+        max_dead: how many distinct dead markings are kept.
+
+    Returns:
+        A :class:`Walks`.
+    """
+    sn = sparse_net(net)
+    rng = np.random.default_rng(seed)
+    ids = [t.id for t in net.transitions]
+    inhibited = np.flatnonzero(sn.inhibitor.getnnz(axis=1) > 0).astype(np.int64)
+    walker = _Walker(sn)
+    hist = np.empty((length + 1, sn.n_places), dtype=np.int64)
+    sums = np.empty(length + 1, dtype=np.int64)
+    reset_since = np.zeros((length + 1, sn.n_places), dtype=bool) if walker.resets is not None else None
+    fired = np.zeros(sn.n_transitions, dtype=bool)
+    dead: list[tuple[np.ndarray, list[str]]] = []
+    seen_dead: set[bytes] = set()
+    start = time.monotonic()
+    walks = steps = 0
+    while steps + walks < max_steps and time.monotonic() - start < seconds:  # a walk costs one step at least
+        walks += 1
+        if walks > 1:
+            walker.restart()
+        m = walker.m
+        hist[0] = m
+        sums[0] = int(m.sum())
+        if reset_since is not None:
+            reset_since[0] = False
+        seq: list[int] = []
+        for i in range(1, length + 1):
+            enabled = np.flatnonzero(walker.missing == 0)
+            if not enabled.size:
+                key = m.tobytes()
+                if key not in seen_dead and len(dead) < max_dead:
+                    seen_dead.add(key)
+                    dead.append((m.copy(), [ids[t] for t in seq]))
+                if not seq:  # M0 is dead: every walk would end there
+                    return Walks(witness=None, dead=dead, fired=fired, walks=walks, steps=steps)
+                break
+            t = int(enabled[rng.integers(enabled.size)]) if enabled.size > 1 else int(enabled[0])
+            reset = walker.fire(t)
+            seq.append(t)
+            fired[t] = True
+            steps += 1
+            if reset_since is not None:
+                reset_since[i] = False
+                if reset.size:
+                    reset_since[:i, reset] = True  # the loop from each earlier marking holds t
+            total = int(m.sum())
+            below = np.flatnonzero(sums[:i] < total)  # a strictly covered marking has fewer tokens
+            if below.size:
+                diff = m[None, :] - hist[below]
+                ok = (diff >= 0).all(axis=1)
+                if inhibited.size:
+                    ok &= (diff[:, inhibited] == 0).all(axis=1)
+                grows = diff > 0
+                if reset_since is not None:
+                    grows &= ~reset_since[below]
+                ok &= grows.any(axis=1)
+                hit = np.flatnonzero(ok)
+                if hit.size:
+                    j, k = int(below[hit[0]]), int(hit[0])
+                    witness = CoveringWitness(prefix=[ids[u] for u in seq[:j]], loop=[ids[u] for u in seq[j:]],
+                                              growing=[net.places[int(p)].id for p in np.flatnonzero(grows[k])])
+                    return Walks(witness=witness, dead=dead, fired=fired, walks=walks, steps=steps)
+            hist[i] = m
+            sums[i] = total
+            if steps >= max_steps or (steps & 255 == 0 and time.monotonic() - start >= seconds):
+                break
+    return Walks(witness=None, dead=dead, fired=fired, walks=walks, steps=steps)

@@ -118,6 +118,47 @@ class SparseNet:
                         todo.append(p)
         return places, fires
 
+    def lone_input_trap(self) -> tuple[np.ndarray, np.ndarray]:
+        """Two structural reasons why some transition is enabled in every reachable marking (so no
+        marking is dead), found without a search.
+
+        A transition with no input place and no inhibitor arc is enabled in every marking. A place
+        that is the only input place of a transition, by an arc of weight 1, with no inhibitor arc
+        on that transition, enables it whenever the place is marked. A trap (a set of places every
+        transition that consumes from or resets one of them puts a token back into one of them)
+        that is marked at M0 stays marked (Murata 1989, section VI-B, with a reset counted as a
+        consumption): if each of its places is such a lone input place, some transition is enabled
+        in every reachable marking. The trap returned is the largest one made of lone input places
+        (unique: a union of traps is a trap), found by removing, until none is left, the places a
+        transition consumes from or resets without putting a token into the set: each round is
+        linear in the number of arcs, and each round but the last drops a place.
+
+        Returns:
+            ``(sources, trap)``: (|T|,) bool, True for a transition with no input place and no
+            inhibitor arc; (|P|,) bool, True for a place of the largest trap of lone input places.
+            Some transition is enabled in every reachable marking when ``sources.any()`` or
+            ``(trap & (m0 > 0)).any()``.
+        """
+        inputs = np.diff(self.pre.indptr)
+        free = np.diff(self.inhibitor.indptr) == 0
+        sources = (inputs == 0) & free
+        lone = np.flatnonzero((inputs == 1) & free)
+        lone = lone[self.pre.data[self.pre.indptr[lone]] == 1]
+        trap = np.zeros(self.n_places, dtype=bool)
+        trap[self.pre.indices[self.pre.indptr[lone]]] = True
+        touch = self.pre != 0
+        if self.reset is not None and self.reset.nnz:
+            touch = touch + (self.reset != 0)
+        touch_rows = sp.csr_matrix(touch, dtype=np.int64)
+        post_cols = sp.csc_matrix(self.post != 0, dtype=np.int64)
+        while trap.any():  # each round drops the places a transition takes from without giving back
+            gives_back = (post_cols.T @ trap.astype(np.int64)) > 0
+            drop = trap & ((touch_rows @ (~gives_back).astype(np.int64)) > 0)
+            if not drop.any():
+                break
+            trap &= ~drop
+        return sources, trap
+
     def firing_rows(self, rows: np.ndarray, t: int) -> np.ndarray:
         """Successors of markings ``rows`` (k, |P|) by transition t (assumed enabled), (k, |P|) int64:
         ``M + C[:, t]``, with the places of t's reset arcs set to ``Post[p, t]``."""

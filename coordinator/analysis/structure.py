@@ -63,8 +63,10 @@ from coordinator.analysis import lp
 from coordinator.analysis.coverability import (
     Coverability,
     CoveringWitness,
+    Walks,
     covering_witness,
     karp_miller,
+    random_walks,
 )
 from coordinator.analysis.invariants import (
     DEFAULT_MAX_BYTES as DEFAULT_INVARIANT_BYTES,
@@ -110,6 +112,10 @@ __all__ = [
 
 #: States explored first when the net is not structurally bounded, to look for cheap unboundedness.
 PROBE_STATES = 2_000
+#: When the probe holds no pumping witness, random firing sequences look for one deeper
+#: (:func:`.coverability.random_walks`), within this many seconds and firings.
+WALK_SECONDS = 2.0
+WALK_STEPS = 100_000
 #: How many deadlock witnesses are kept.
 MAX_WITNESSES = 10
 
@@ -572,6 +578,7 @@ class _Structure:
     notes: list[str]
     sources: dict[str, str]
     lp_bounds: np.ndarray  # per place, from the certificate of the total token count's LP (-1: none)
+    walks: Walks | None = None  # the random walks of the first search of a net not bounded (_search_phase)
 
     @property
     def bounded(self) -> bool:
@@ -640,7 +647,9 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
                   stop: threading.Event | None = None,
                   report_every: int = PROGRESS_STATES) -> tuple[StateSpace, CoveringWitness | None]:
     """The reachability graph within its limits, and a pumping witness of unboundedness when the
-    structure does not bound the net (a short probe first: unboundedness is often cheap to see).
+    structure does not bound the net (a short probe first: unboundedness is often cheap to see; then,
+    once per analysis, random walks, which reach a loop deeper than any breadth-first budget:
+    ``st.walks``).
     ``finish_level`` False: stop at once at ``max_states`` (:func:`.statespace.explore`), for the
     automatic engine's question whether the graph fits its explicit share. ``stop``: another
     thread's event that ends the search, ``report_every`` how often ``progress`` is called and
@@ -657,6 +666,14 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
             space = probe
         else:
             witness = covering_witness(probe)
+            if witness is None:
+                if st.walks is None:  # once per analysis: a later search of the same net finds them here
+                    st.walks = random_walks(net, seconds=WALK_SECONDS, max_steps=WALK_STEPS)
+                    if st.walks.witness is not None:
+                        st.notes.append(f"the pumping witness comes from a random walk ({st.walks.walks:,} walks, "
+                                        f"{st.walks.steps:,} firings): the breadth-first search's first "
+                                        f"{probe.n_states:,} markings hold none")
+                witness = st.walks.witness
             if witness is not None:
                 space = probe
     if space is None:
@@ -1009,15 +1026,27 @@ def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Struc
         if pid in v.exact:
             v.exact.remove(pid)
     dead_seen = space.deadlocks()
+    walked = st.walks.dead if st.walks is not None else []
     if dead_seen.size:
         v.deadlock = True
         sources["deadlock"] = "reachability graph (explored part)"
         if not v.deadlocks:
             v.deadlocks = [Deadlock(marking=space.marking(int(i)).to_dict(),
                                     firing_sequence=space.firing_sequence(int(i))) for i in dead_seen[:MAX_WITNESSES]]
-    if v.quasi is None and space.n_edges and _fired_seen(net, sn, space).all():
-        v.quasi = True
-        sources["quasi_live"] = "reachability graph (explored part)"
+    elif walked:
+        v.deadlock = True
+        sources["deadlock"] = "a random walk from M0 ended in a dead marking"
+        if not v.deadlocks:
+            v.deadlocks = [Deadlock(marking={p.id: int(c) for p, c in zip(net.places, m) if c}, firing_sequence=seq)
+                           for m, seq in walked[:MAX_WITNESSES]]
+    if v.quasi is None and space.n_edges:
+        fired = _fired_seen(net, sn, space)
+        if st.walks is not None:
+            fired |= st.walks.fired
+        if fired.all():
+            v.quasi = True
+            sources["quasi_live"] = "reachability graph (explored part)" + (
+                " and random walks" if st.walks is not None else "")
     if v.one_safe is None and int(seen_max.max(initial=0)) > 1:
         v.one_safe = False
         sources["one_safe"] = "reachability graph (explored part)"
@@ -1027,6 +1056,26 @@ def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Struc
     if v.live is None and v.deadlock and net.transitions:
         v.live = False
         sources["live"] = "a reachable deadlock: no transition can fire from it"
+    if v.deadlock is None:
+        never = _never_dead(net, sn)
+        if never is not None:
+            v.deadlock = False
+            sources["deadlock"] = never
+
+
+def _never_dead(net: PetriNet, sn: SparseNet) -> str | None:
+    """Why some transition is enabled in every reachable marking, when the structure shows it
+    (:meth:`.SparseNet.lone_input_trap`), else None."""
+    free, trap = sn.lone_input_trap()
+    if free.any():
+        return (f"structure: transition {net.transitions[int(np.flatnonzero(free)[0])].id} has no input place and "
+                "no inhibitor arc, so it is enabled in every marking")
+    if (trap & (sn.m0 > 0)).any():
+        places = [net.places[int(p)].id for p in np.flatnonzero(trap)]
+        return (f"structure: the trap {{{_some(places)}}} is marked at M0, so it stays marked, and each of its "
+                "places is the only input place of a transition (arc weight 1, no inhibitor arc), which it "
+                "enables when marked")
+    return None
 
 
 def _partial_from_siphon(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structure) -> np.ndarray:

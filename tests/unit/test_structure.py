@@ -95,6 +95,83 @@ def test_covering_witness_ignores_pumps_that_change_an_inhibitor_place() -> None
     assert covering_witness(ss) is None
 
 
+def _replay(net: PetriNet, sequence: list[str]) -> list[np.ndarray]:
+    """The markings along ``sequence`` from M0 by the firing rule (each firing checked enabled)."""
+    from coordinator.analysis.matrices import sparse_net
+    from coordinator.analysis.statespace import enabled_mask
+
+    sn = sparse_net(net)
+    index = {t.id: i for i, t in enumerate(net.transitions)}
+    path = [sn.m0.astype(np.int64)[None, :]]
+    for tid in sequence:
+        assert enabled_mask(net, path[-1])[0, index[tid]], tid
+        path.append(sn.firing_rows(path[-1], index[tid]))
+    return [row[0] for row in path]
+
+
+def test_random_walks_find_only_true_witnesses_and_dead_markings_on_random_nets() -> None:
+    from test_statespace import random_net
+
+    from coordinator.analysis.coverability import random_walks
+    from coordinator.analysis.statespace import enabled_mask
+
+    witnesses = dead = 0
+    for seed in range(150):
+        rng = np.random.default_rng(seed)
+        net = random_net(rng, n_places=int(rng.integers(2, 6)), n_transitions=int(rng.integers(2, 7)))
+        resets = [(str(rng.choice([p.id for p in net.places])), t.id) for t in net.transitions if rng.random() < 0.25]
+        net = PetriNet(name=net.name, places=net.places, transitions=net.transitions,
+                       arcs=(*net.arcs, *(Arc(source=p, target=t, reset=True) for p, t in resets
+                                          if not any(a.source == p and a.target == t for a in net.arcs))),
+                       initial_marking=net.initial_marking)
+        walks = random_walks(net, seconds=5.0, max_steps=400, length=40, seed=seed)
+        for marking, sequence in walks.dead:
+            dead += 1
+            end = _replay(net, sequence)[-1]
+            assert np.array_equal(end, marking) and not enabled_mask(net, end[None, :]).any(), seed
+        if walks.witness is not None:
+            witnesses += 1
+            w = walks.witness
+            path = _replay(net, w.prefix + w.loop * 4)  # the loop repeats, and the growing places grow
+            ends = [path[len(w.prefix) + k * len(w.loop)] for k in range(5)]
+            grow = [i for i, p in enumerate(net.places) if p.id in w.growing]
+            assert grow and all((b[grow] > a[grow]).all() for a, b in zip(ends, ends[1:])), seed
+            assert not explore(net, max_states=5_000).complete, seed  # a finite graph has no witness
+    assert witnesses >= 20 and dead >= 20  # both were put to the test
+
+
+def test_random_walks_find_a_pumping_loop_deeper_than_the_breadth_first_probe() -> None:
+    from coordinator.analysis.coverability import random_walks
+    from coordinator.analysis.structure import PROBE_STATES
+
+    # twelve toggles make 4,096 markings at each position of a token on a chain of 30 places: the
+    # probe's 2,000 markings never reach the chain's end, where grow pumps g
+    toggles = {**{f"on{i}": ({f"x{i}": 1}, {f"y{i}": 1}) for i in range(12)},
+               **{f"off{i}": ({f"y{i}": 1}, {f"x{i}": 1}) for i in range(12)}}
+    chain = {f"s{k}": ({f"c{k}": 1}, {f"c{k + 1}": 1}) for k in range(30)}
+    net = make_net("deep", {"c0": 1, **{f"x{i}": 1 for i in range(12)}},
+                   {**toggles, **chain, "grow": ({"c30": 1}, {"c30": 1, "g": 1}), "use": ({"g": 2}, {})})
+    assert covering_witness(explore(net, max_states=PROBE_STATES)) is None
+    w = random_walks(net)
+    assert w.witness is not None and w.witness.loop[-1] == "grow" and w.witness.growing == ["g"]
+    a = analyse(net, max_states=20_000, coverability_seconds=1.0)
+    assert a.bounded is False and a.unbounded_places == ["g"] and a.covering is not None
+    assert any("the pumping witness comes from a random walk" in n for n in a.notes)
+
+
+def test_random_walks_take_no_loop_that_changes_an_inhibitor_place_or_resets_its_growth() -> None:
+    from coordinator.analysis.coverability import random_walks
+
+    guarded = make_net("guarded", {"go": 1}, {"t": ({"go": 1}, {"go": 1, "b": 1})}, inhibitors={"t": {"b": 5}})
+    w = random_walks(guarded, max_steps=2_000)
+    assert w.witness is None and len(w.dead) == 1 and w.dead[0][1] == ["t"] * 5
+    refill = make_net("refill", {"go": 1}, {"refill": ({"go": 1}, {"go": 1, "buf": 1})})
+    refill = PetriNet(name=refill.name, places=refill.places, transitions=refill.transitions,
+                      arcs=(*refill.arcs, Arc(source="buf", target="refill", reset=True)),
+                      initial_marking=refill.initial_marking)
+    assert random_walks(refill, max_steps=2_000).witness is None
+
+
 def test_unbounded_net_is_decided_with_growing_places_and_bounds_of_the_others() -> None:
     a = analyse(pump(), max_states=100)
     assert a.bounded is False
@@ -261,6 +338,56 @@ def test_markable_places_and_transitions_hold_every_reachable_one_on_random_nets
     assert dead_seen > 0  # the property was put to the test
 
 
+def test_the_lone_input_trap_keeps_a_transition_enabled_in_every_reachable_marking_on_random_nets() -> None:
+    from test_statespace import random_net
+
+    from coordinator.analysis.matrices import sparse_net
+    from coordinator.analysis.statespace import enabled_mask
+
+    claimed = traps = 0
+    for seed in range(300):
+        rng = np.random.default_rng(seed)
+        net = random_net(rng, n_places=int(rng.integers(2, 7)), n_transitions=int(rng.integers(2, 8)))
+        resets = [(str(rng.choice([p.id for p in net.places])), t.id) for t in net.transitions if rng.random() < 0.2]
+        net = PetriNet(name=net.name, places=net.places, transitions=net.transitions,
+                       arcs=(*net.arcs, *(Arc(source=p, target=t, reset=True) for p, t in resets
+                                          if not any(a.source == p and a.target == t for a in net.arcs))),
+                       initial_marking=net.initial_marking)
+        sn = sparse_net(net)
+        free, trap = sn.lone_input_trap()
+        marked_trap = bool((trap & (sn.m0 > 0)).any())
+        if not (free.any() or marked_trap):
+            continue
+        claimed += 1
+        space = explore(net, max_states=3_000)
+        assert enabled_mask(net, space.states).any(axis=1).all(), seed  # no explored marking is dead
+        if marked_trap:
+            traps += 1
+            assert (space.states[:, trap] > 0).any(axis=1).all(), seed  # the trap stays marked
+    assert claimed >= 30 and traps >= 10  # the rule was put to the test, the trap part too
+
+
+def test_a_marked_trap_of_lone_input_places_shows_an_unbounded_net_never_dead() -> None:
+    # a and b pass one token around; each is the only input place of a transition, and {a, b} is a
+    # trap: some transition is enabled in every reachable marking, which the search cannot show
+    net = make_net("ring_pump", {"a": 1, "x": 1}, {
+        "ab": ({"a": 1}, {"b": 1, "c": 1}),
+        "ba": ({"b": 1}, {"a": 1}),
+        "use": ({"c": 2, "x": 1}, {"x": 1, "d": 1}),
+    })
+    a = analyse(net, max_states=100)
+    assert a.bounded is False and a.complete is False
+    assert a.deadlock is False and a.sources["deadlock"].startswith("structure: the trap {a, b}")
+    # with a reset arc that empties a without putting a token back, {a, b} is no trap: not decided
+    reset = PetriNet(name=net.name, places=net.places, transitions=net.transitions,
+                     arcs=(*net.arcs, Arc(source="a", target="use", reset=True)), initial_marking=net.initial_marking)
+    assert analyse(reset, max_states=100).deadlock is not False
+    # a transition with no input place and no inhibitor arc is enabled in every marking
+    source = make_net("source", {"x": 1}, {"make": ({}, {"c": 1}), "use": ({"c": 2, "x": 1}, {"d": 1})})
+    a = analyse(source, max_states=100)
+    assert a.deadlock is False and a.sources["deadlock"].startswith("structure: transition make has no input place")
+
+
 def test_an_unbounded_net_gets_its_dead_transitions_from_the_unmarked_siphon_without_karp_miller() -> None:
     net = make_net("producer_dead", {"go": 1, "r": 1}, {
         "produce": ({"go": 1, "r": 1}, {"go": 1, "r": 1, "buf": 1}),
@@ -355,7 +482,9 @@ def test_when_the_search_without_edges_stops_too_its_markings_still_show_every_t
     assert a.space.edges_shed_at is not None and a.space.edges_shed_at < a.space.n_states
     assert any("without keeping them, and stopped too, after" in n for n in a.notes)
     assert a.quasi_live is True and a.sources["quasi_live"] == "reachability graph (explored part)"
-    assert a.deadlock is None and a.live is None
+    assert a.live is None
+    # each a_i and b_i is the only input place of a transition and {a_i, b_i} a marked trap
+    assert a.deadlock is False and a.sources["deadlock"].startswith("structure: the trap {")
 
 
 def conflict_flags(net: PetriNet, **how: object) -> tuple[list[tuple[str, bool | None]], bool]:
