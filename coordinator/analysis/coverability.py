@@ -376,8 +376,29 @@ class _Walker:
         return reset
 
 
+def _covered(m: np.ndarray, hist: np.ndarray, sums: np.ndarray, i: int, inhibited: np.ndarray,
+             reset_since: np.ndarray | None) -> tuple[int, np.ndarray] | None:
+    """The first of the walk's markings ``hist[:i]`` that ``m`` covers as a pumping witness requires
+    (:func:`covering_witness`), and the (|P|,) bool places that grow; or None. Only the markings with
+    fewer tokens than ``m`` (``sums``) can be covered strictly, and only they are compared."""
+    below = np.flatnonzero(sums[:i] < int(m.sum()))
+    if not below.size:
+        return None
+    diff = m[None, :] - hist[below]
+    ok = (diff >= 0).all(axis=1)
+    if inhibited.size:
+        ok &= (diff[:, inhibited] == 0).all(axis=1)
+    grows = diff > 0
+    if reset_since is not None:
+        grows &= ~reset_since[below]
+    hit = np.flatnonzero(ok & grows.any(axis=1))
+    if not hit.size:
+        return None
+    return int(below[hit[0]]), grows[hit[0]]
+
+
 def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_000, length: int = 2_000,
-                 seed: int = 0, max_dead: int = 10) -> Walks:
+                 seed: int = 0, max_dead: int = 10, witness: bool = True) -> Walks:
     """Fire random sequences from M0 (each step a transition drawn uniformly among the enabled ones),
     looking for a pumping witness and for dead markings.
 
@@ -388,8 +409,9 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
     ones of the same walk, under :func:`covering_witness`'s conditions: covering, equal on the places
     read by inhibitor arcs, and larger on a place that no transition of the loop resets. A walk stops
     at the first witness (returned), at a dead marking (kept), or after ``length`` firings; the next
-    starts from M0 again. All that is found is reachable, so it holds for the net; what is not found
-    says nothing.
+    starts from M0 again. With ``witness`` False the walks look for dead markings alone (no comparison,
+    no stop at a covering marking): the walks go on past the loops, to the dead ends beyond them. All
+    that is found is reachable, so it holds for the net; what is not found says nothing.
 
     Args:
         net: a plain net (its ordinary view: events and priorities play no part).
@@ -398,6 +420,7 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
         length: firings per walk at most.
         seed: seed of the random draws (the same seed, the same walks).
         max_dead: how many distinct dead markings are kept.
+        witness: look for a pumping witness (and stop at the first).
 
     Returns:
         A :class:`Walks`.
@@ -432,7 +455,7 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
                 if key not in seen_dead and len(dead) < max_dead:
                     seen_dead.add(key)
                     dead.append((m.copy(), [ids[t] for t in seq]))
-                if not seq:  # M0 is dead: every walk would end there
+                if not seq or (not witness and len(dead) >= max_dead):  # M0 dead: every walk would end there
                     return Walks(witness=None, dead=dead, fired=fired, walks=walks, steps=steps)
                 break
             t = int(enabled[rng.integers(enabled.size)]) if enabled.size > 1 else int(enabled[0])
@@ -440,29 +463,19 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
             seq.append(t)
             fired[t] = True
             steps += 1
-            if reset_since is not None:
+            if reset_since is not None and witness:
                 reset_since[i] = False
                 if reset.size:
                     reset_since[:i, reset] = True  # the loop from each earlier marking holds t
-            total = int(m.sum())
-            below = np.flatnonzero(sums[:i] < total)  # a strictly covered marking has fewer tokens
-            if below.size:
-                diff = m[None, :] - hist[below]
-                ok = (diff >= 0).all(axis=1)
-                if inhibited.size:
-                    ok &= (diff[:, inhibited] == 0).all(axis=1)
-                grows = diff > 0
-                if reset_since is not None:
-                    grows &= ~reset_since[below]
-                ok &= grows.any(axis=1)
-                hit = np.flatnonzero(ok)
-                if hit.size:
-                    j, k = int(below[hit[0]]), int(hit[0])
-                    witness = CoveringWitness(prefix=[ids[u] for u in seq[:j]], loop=[ids[u] for u in seq[j:]],
-                                              growing=[net.places[int(p)].id for p in np.flatnonzero(grows[k])])
-                    return Walks(witness=witness, dead=dead, fired=fired, walks=walks, steps=steps)
-            hist[i] = m
-            sums[i] = total
+            if witness:
+                pair = _covered(m, hist, sums, i, inhibited, reset_since)
+                if pair is not None:
+                    j, grows = pair
+                    found = CoveringWitness(prefix=[ids[u] for u in seq[:j]], loop=[ids[u] for u in seq[j:]],
+                                            growing=[net.places[int(p)].id for p in np.flatnonzero(grows)])
+                    return Walks(witness=found, dead=dead, fired=fired, walks=walks, steps=steps)
+                hist[i] = m
+                sums[i] = int(m.sum())
             if steps >= max_steps or (steps & 255 == 0 and time.monotonic() - start >= seconds):
                 break
     return Walks(witness=None, dead=dead, fired=fired, walks=walks, steps=steps)

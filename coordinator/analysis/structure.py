@@ -113,9 +113,11 @@ __all__ = [
 #: States explored first when the net is not structurally bounded, to look for cheap unboundedness.
 PROBE_STATES = 2_000
 #: When the probe holds no pumping witness, random firing sequences look for one deeper
-#: (:func:`.coverability.random_walks`), within this many seconds and firings.
-WALK_SECONDS = 2.0
-WALK_STEPS = 100_000
+#: (:func:`.coverability.random_walks`), within this many seconds and firings; when the explored
+#: part holds no dead marking and the structure does not show none is reachable, they look for one
+#: with the same budget.
+WALK_SECONDS = 1.0
+WALK_STEPS = 50_000
 #: How many deadlock witnesses are kept.
 MAX_WITNESSES = 10
 
@@ -1026,19 +1028,14 @@ def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Struc
         if pid in v.exact:
             v.exact.remove(pid)
     dead_seen = space.deadlocks()
-    walked = st.walks.dead if st.walks is not None else []
     if dead_seen.size:
         v.deadlock = True
         sources["deadlock"] = "reachability graph (explored part)"
         if not v.deadlocks:
             v.deadlocks = [Deadlock(marking=space.marking(int(i)).to_dict(),
                                     firing_sequence=space.firing_sequence(int(i))) for i in dead_seen[:MAX_WITNESSES]]
-    elif walked:
-        v.deadlock = True
-        sources["deadlock"] = "a random walk from M0 ended in a dead marking"
-        if not v.deadlocks:
-            v.deadlocks = [Deadlock(marking={p.id: int(c) for p, c in zip(net.places, m) if c}, firing_sequence=seq)
-                           for m, seq in walked[:MAX_WITNESSES]]
+    elif v.deadlock is None:
+        _deadlock_unexplored(v, net, sn, st)
     if v.quasi is None and space.n_edges:
         fired = _fired_seen(net, sn, space)
         if st.walks is not None:
@@ -1056,11 +1053,29 @@ def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Struc
     if v.live is None and v.deadlock and net.transitions:
         v.live = False
         sources["live"] = "a reachable deadlock: no transition can fire from it"
-    if v.deadlock is None:
+
+
+def _deadlock_unexplored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structure) -> None:
+    """The deadlock question when the explored part holds no dead marking: a dead marking the random
+    walks of the search ended in; else the structure's proof that none is dead
+    (:func:`_never_dead`); else random walks that look for dead markings alone, past the pumping
+    loops (:func:`.coverability.random_walks`, within :data:`WALK_SECONDS` and :data:`WALK_STEPS`)."""
+    walked = st.walks.dead if st.walks is not None else []
+    how = "a random walk from M0 (looking for a pumping loop) ended in it"
+    if not walked:
         never = _never_dead(net, sn)
         if never is not None:
             v.deadlock = False
-            sources["deadlock"] = never
+            st.sources["deadlock"] = never
+            return
+        walked = random_walks(net, seconds=WALK_SECONDS, max_steps=WALK_STEPS, witness=False,
+                              max_dead=MAX_WITNESSES).dead
+        how = "a random walk from M0 ended in it"
+    if walked:
+        v.deadlock = True
+        st.sources["deadlock"] = f"a dead marking: {how}"
+        v.deadlocks = [Deadlock(marking={p.id: int(c) for p, c in zip(net.places, m) if c}, firing_sequence=seq)
+                       for m, seq in walked[:MAX_WITNESSES]]
 
 
 def _never_dead(net: PetriNet, sn: SparseNet) -> str | None:

@@ -159,6 +159,28 @@ def test_random_walks_find_a_pumping_loop_deeper_than_the_breadth_first_probe() 
     assert any("the pumping witness comes from a random walk" in n for n in a.notes)
 
 
+def test_random_walks_past_the_pumping_loop_find_a_dead_marking_the_search_does_not_reach() -> None:
+    from coordinator.analysis.statespace import enabled_mask
+
+    # grow pumps g from the start (the probe's witness), and the run halts only when a token has
+    # walked down a chain of 30 places among twelve toggles: the dead markings lie beyond 20,000
+    # markings of breadth-first search
+    toggles = {**{f"on{i}": ({f"x{i}": 1, "run": 1}, {f"y{i}": 1, "run": 1}) for i in range(12)},
+               **{f"off{i}": ({f"y{i}": 1, "run": 1}, {f"x{i}": 1, "run": 1}) for i in range(12)}}
+    chain = {f"s{k}": ({f"c{k}": 1}, {f"c{k + 1}": 1}) for k in range(30)}
+    net = make_net("halting", {"c0": 1, "run": 1, **{f"x{i}": 1 for i in range(12)}},
+                   {**toggles, **chain, "grow": ({"run": 1}, {"run": 1, "g": 1}), "use": ({"g": 2}, {}),
+                    "halt": ({"c30": 1, "run": 1}, {})})
+    a = analyse(net, max_states=20_000, coverability_seconds=1.0)
+    assert a.bounded is False and a.space is not None and not a.space.deadlocks().size
+    assert a.deadlock is True and a.sources["deadlock"] == "a dead marking: a random walk from M0 ended in it"
+    assert a.live is False and a.deadlocks
+    for d in a.deadlocks:
+        end = _replay(net, d.firing_sequence)[-1]
+        assert {p.id: int(c) for p, c in zip(net.places, end) if c} == d.marking
+        assert not enabled_mask(net, end[None, :]).any()
+
+
 def test_random_walks_take_no_loop_that_changes_an_inhibitor_place_or_resets_its_growth() -> None:
     from coordinator.analysis.coverability import random_walks
 
