@@ -26,6 +26,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from coordinator.analysis.matrices import SparseNet, sparse_net
 from coordinator.analysis.statespace import StateSpace
@@ -317,47 +318,57 @@ class Walks:
 
 
 class _Walker:
-    """The enabling counts of one marking, updated firing by firing (:func:`random_walks`).
+    """The enabling counts of one marking, updated firing by firing (:func:`random_walks`), over the
+    transitions that may fire (:meth:`.SparseNet.markable`: the others are never enabled).
 
-    ``missing[t]`` is the number of t's input arcs whose place holds fewer tokens than the arc's
-    weight plus the number of its inhibitor arcs whose place holds at least the threshold: t is
-    enabled iff it is 0. A firing changes the counts of a few places, and only the arcs from those
-    places are looked at again.
+    ``missing[k]`` is the number of the k-th such transition's input arcs whose place holds fewer
+    tokens than the arc's weight plus the number of its inhibitor arcs whose place holds at least the
+    threshold: it is enabled iff ``missing[k]`` is 0. A firing changes the counts of a few places,
+    and only the arcs from those places are looked at again.
+
+    Attributes:
+        ids: (k,) int64, the net's index of each transition walked.
+        m: (|P|,) int64, the current marking.
     """
 
     def __init__(self, sn: SparseNet) -> None:
-        self.sn = sn
-        self.pre_rows = sn.pre.tocsr()
-        self.inh_rows = sn.inhibitor.tocsr()
-        self.resets = sn.reset if sn.reset is not None and sn.reset.nnz else None
+        self.m0 = sn.m0
+        self.ids = np.flatnonzero(sn.markable()[1]).astype(np.int64)
+        self.pre = sp.csc_matrix(sn.pre[:, self.ids])
+        self.inh = sp.csc_matrix(sn.inhibitor[:, self.ids])
+        self.inc = sp.csc_matrix(sn.incidence[:, self.ids])
+        self.pre_rows = self.pre.tocsr()
+        self.inh_rows = self.inh.tocsr()
+        self.resets: sp.csc_matrix | None = None
+        self.post: sp.csc_matrix | None = None
+        if sn.reset is not None and sn.reset.nnz:
+            self.resets = sp.csc_matrix(sn.reset[:, self.ids])
+            self.post = sp.csc_matrix(sn.post[:, self.ids])
         self.m = sn.m0.astype(np.int64).copy()
-        self.missing = np.zeros(sn.n_transitions, dtype=np.int64)
+        self.missing = np.zeros(self.ids.size, dtype=np.int64)
         self.restart()
 
     def restart(self) -> None:
         """Back to M0."""
-        sn = self.sn
-        self.m[:] = sn.m0
-        short = self.m[sn.pre.indices] < sn.pre.data
-        cols = np.repeat(np.arange(sn.n_transitions), np.diff(sn.pre.indptr))
-        self.missing[:] = np.bincount(cols[short], minlength=sn.n_transitions)
-        if sn.inhibitor.nnz:
-            over = self.m[sn.inhibitor.indices] >= sn.inhibitor.data
-            cols = np.repeat(np.arange(sn.n_transitions), np.diff(sn.inhibitor.indptr))
-            self.missing += np.bincount(cols[over], minlength=sn.n_transitions)
+        self.m[:] = self.m0
+        n = self.ids.size
+        self.missing[:] = 0
+        for mat, disabled in ((self.pre, self.m[self.pre.indices] < self.pre.data),
+                              (self.inh, self.m[self.inh.indices] >= self.inh.data)):
+            cols = np.repeat(np.arange(n), np.diff(mat.indptr))
+            self.missing += np.bincount(cols[disabled], minlength=n)
 
-    def fire(self, t: int) -> np.ndarray:
-        """Fire t (enabled); return the ids of the places its reset arcs empty, (k,) int64."""
-        sn = self.sn
-        lo, hi = sn.incidence.indptr[t], sn.incidence.indptr[t + 1]
-        places = sn.incidence.indices[lo:hi]
-        new = self.m[places] + sn.incidence.data[lo:hi]
+    def fire(self, k: int) -> np.ndarray:
+        """Fire the k-th transition walked (enabled); return the places its reset arcs empty, (r,) int64."""
+        lo, hi = self.inc.indptr[k], self.inc.indptr[k + 1]
+        places = self.inc.indices[lo:hi]
+        new = self.m[places] + self.inc.data[lo:hi]
         reset = np.zeros(0, dtype=np.int64)
-        if self.resets is not None:
-            reset = self.resets.indices[self.resets.indptr[t]:self.resets.indptr[t + 1]].astype(np.int64)
+        if self.resets is not None and self.post is not None:
+            reset = self.resets.indices[self.resets.indptr[k]:self.resets.indptr[k + 1]].astype(np.int64)
             if reset.size:
                 places = np.concatenate([places, reset])
-                new = np.concatenate([new, sn.post[:, t].toarray().ravel()[reset]])
+                new = np.concatenate([new, self.post[:, k].toarray().ravel()[reset]])
         for p, v in zip(places.tolist(), new.tolist()):  # a reset place last: its value wins
             old = int(self.m[p])
             if old == v:
@@ -397,6 +408,10 @@ def _covered(m: np.ndarray, hist: np.ndarray, sums: np.ndarray, i: int, inhibite
     return int(below[hit[0]]), grows[hit[0]]
 
 
+#: memory of the markings a walk keeps to compare with each new one, bytes
+_WALK_BYTES = 64 << 20
+
+
 def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_000, length: int = 2_000,
                  seed: int = 0, max_dead: int = 10, witness: bool = True) -> Walks:
     """Fire random sequences from M0 (each step a transition drawn uniformly among the enabled ones),
@@ -417,7 +432,8 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
         net: a plain net (its ordinary view: events and priorities play no part).
         seconds: time budget, seconds.
         max_steps: budget of firings over all walks (each walk counts one more).
-        length: firings per walk at most.
+        length: firings per walk at most (when looking for a witness, also at most as many as
+            :data:`_WALK_BYTES` hold of the walk's markings).
         seed: seed of the random draws (the same seed, the same walks).
         max_dead: how many distinct dead markings are kept.
         witness: look for a pumping witness (and stop at the first).
@@ -427,12 +443,16 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
     """
     sn = sparse_net(net)
     rng = np.random.default_rng(seed)
-    ids = [t.id for t in net.transitions]
     inhibited = np.flatnonzero(sn.inhibitor.getnnz(axis=1) > 0).astype(np.int64)
     walker = _Walker(sn)
-    hist = np.empty((length + 1, sn.n_places), dtype=np.int64)
-    sums = np.empty(length + 1, dtype=np.int64)
-    reset_since = np.zeros((length + 1, sn.n_places), dtype=bool) if walker.resets is not None else None
+    ids = [net.transitions[int(t)].id for t in walker.ids]
+    rows = 1
+    if witness:  # the walk's markings, compared with each new one: at most _WALK_BYTES of them
+        length = max(1, min(length, _WALK_BYTES // (9 * max(sn.n_places, 1)) - 1))
+        rows = length + 1
+    hist = np.empty((rows, sn.n_places), dtype=np.int64)
+    sums = np.empty(rows, dtype=np.int64)
+    reset_since = np.zeros((rows, sn.n_places), dtype=bool) if walker.resets is not None and witness else None
     fired = np.zeros(sn.n_transitions, dtype=bool)
     dead: list[tuple[np.ndarray, list[str]]] = []
     seen_dead: set[bytes] = set()
@@ -443,8 +463,9 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
         if walks > 1:
             walker.restart()
         m = walker.m
-        hist[0] = m
-        sums[0] = int(m.sum())
+        if witness:
+            hist[0] = m
+            sums[0] = int(m.sum())
         if reset_since is not None:
             reset_since[0] = False
         seq: list[int] = []
@@ -461,9 +482,9 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
             t = int(enabled[rng.integers(enabled.size)]) if enabled.size > 1 else int(enabled[0])
             reset = walker.fire(t)
             seq.append(t)
-            fired[t] = True
+            fired[walker.ids[t]] = True
             steps += 1
-            if reset_since is not None and witness:
+            if reset_since is not None:
                 reset_since[i] = False
                 if reset.size:
                     reset_since[:i, reset] = True  # the loop from each earlier marking holds t

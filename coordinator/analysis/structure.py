@@ -118,6 +118,9 @@ PROBE_STATES = 2_000
 #: with the same budget.
 WALK_SECONDS = 1.0
 WALK_STEPS = 50_000
+#: firings per walk at most when the walks look for a dead marking (a dead end may lie thousands of
+#: firings deep: BugTracking-PT-q8m256's, about 4,400)
+DEAD_WALK_LENGTH = 10_000
 #: How many deadlock witnesses are kept.
 MAX_WITNESSES = 10
 
@@ -1059,7 +1062,8 @@ def _deadlock_unexplored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structu
     """The deadlock question when the explored part holds no dead marking: a dead marking the random
     walks of the search ended in; else the structure's proof that none is dead
     (:func:`_never_dead`); else random walks that look for dead markings alone, past the pumping
-    loops (:func:`.coverability.random_walks`, within :data:`WALK_SECONDS` and :data:`WALK_STEPS`)."""
+    loops (:func:`.coverability.random_walks`, within :data:`WALK_SECONDS` and :data:`WALK_STEPS`,
+    :data:`DEAD_WALK_LENGTH` firings per walk)."""
     walked = st.walks.dead if st.walks is not None else []
     how = "a random walk from M0 (looking for a pumping loop) ended in it"
     if not walked:
@@ -1068,8 +1072,8 @@ def _deadlock_unexplored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structu
             v.deadlock = False
             st.sources["deadlock"] = never
             return
-        walked = random_walks(net, seconds=WALK_SECONDS, max_steps=WALK_STEPS, witness=False,
-                              max_dead=MAX_WITNESSES).dead
+        walked = random_walks(net, seconds=WALK_SECONDS, max_steps=WALK_STEPS, length=DEAD_WALK_LENGTH,
+                              witness=False, max_dead=MAX_WITNESSES).dead
         how = "a random walk from M0 ended in it"
     if walked:
         v.deadlock = True

@@ -163,6 +163,19 @@ def _marking(marking: dict[str, int]) -> str:
     return "{" + (", ".join(f"{p}:{c}" for p, c in marking.items()) or "no tokens") + "}"
 
 
+#: the firings a text report shows of a long firing sequence: the first ones and the last ones
+_SEQUENCE_HEAD, _SEQUENCE_TAIL = 30, 10
+
+
+def _sequence(ids: list[str]) -> str:
+    """A firing sequence for the text report: whole when short, else its first and last firings
+    and how many there are (``--json`` lists them all)."""
+    if len(ids) <= _SEQUENCE_HEAD + _SEQUENCE_TAIL + 1:
+        return " ".join(ids)
+    return (" ".join(ids[:_SEQUENCE_HEAD]) + f" ... ({len(ids):,} firings in all, --json lists them) ... "
+            + " ".join(ids[-_SEQUENCE_TAIL:]))
+
+
 def _ends(rep: dict[str, Any]) -> list[str]:
     """The dead markings read as the runtime ends a run there (robotic.dead_ends)."""
     ends = rep.get("ends") or {}
@@ -191,7 +204,7 @@ def _ends(rep: dict[str, Any]) -> list[str]:
         elif examples:
             lines.append(f"  {what[kind]}: among the examples found")
         for ex in examples:
-            seq = " ".join(ex["firing_sequence"]) or "(initial marking)"
+            seq = _sequence(ex["firing_sequence"]) or "(initial marking)"
             lines.append(f"    {_marking(ex['marking'])} after: {seq}")
             if kind == "stuck" and ex["away_from_home"]:
                 lines.append(f"      away from home: {'; '.join(ex['away_from_home'])}")
@@ -270,7 +283,7 @@ def render(rep: dict[str, Any]) -> str:
             lines.append(f"  retry {r['transition']} (task {r['task']}): bounded (no loop of error branches repeats it)")
         else:
             ex = r.get("example")
-            where = f" (e.g. after {' '.join(ex['firing_sequence']) or 'the initial marking'})" if ex else ""
+            where = f" (e.g. after {_sequence(ex['firing_sequence']) or 'the initial marking'})" if ex else ""
             lines.append(f"  retry {r['transition']} (task {r['task']}): UNBOUNDED: it can fire for ever while nothing "
                          f"else happens{where}; bound it with a counter place")
     lines.append("")

@@ -453,6 +453,17 @@ def test_an_undecided_deadlock_is_not_reported_as_no_dead_marking() -> None:
     assert "none: in every reachable marking" not in text
 
 
+def test_a_long_firing_sequence_shows_its_first_and_last_firings_and_its_length() -> None:
+    from analysis_nets import make_net
+
+    # the only dead marking lies 60 firings deep
+    net = make_net("chain", {"c0": 1}, {f"s{k}": ({f"c{k}": 1}, {f"c{k + 1}": 1}) for k in range(60)})
+    text = analyze.render(report(net))
+    first = " ".join(f"s{k}" for k in range(30))
+    last = " ".join(f"s{k}" for k in range(50, 60))
+    assert f"after: {first} ... (60 firings in all, --json lists them) ... {last}" in text
+
+
 def test_a_conflict_of_many_transitions_lists_ten_of_them_and_counts_the_rest() -> None:
     from analysis_nets import make_net
 
