@@ -1039,6 +1039,7 @@ def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Struc
                                     firing_sequence=space.firing_sequence(int(i))) for i in dead_seen[:MAX_WITNESSES]]
     elif v.deadlock is None:
         _deadlock_unexplored(v, net, sn, st)
+    fired: np.ndarray | None = None  # the transitions known to fire from a reachable marking
     if v.quasi is None and space.n_edges:
         fired = _fired_seen(net, sn, space)
         if st.walks is not None:
@@ -1050,12 +1051,38 @@ def _partial_from_explored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Struc
     if v.one_safe is None and int(seen_max.max(initial=0)) > 1:
         v.one_safe = False
         sources["one_safe"] = "reachability graph (explored part)"
-    if space.n_states and (space.extremes()[1] != space.extremes()[0]).all():
-        v.stable_known = False
-        sources["stable_marking"] = "reachability graph (explored part): every place varies"
+    if space.n_states and v.stable_known is not True:
+        varies = space.extremes()[1] != space.extremes()[0]
+        how = "reachability graph (explored part): every place varies"
+        if not varies.all():
+            if v.quasi:
+                fired = np.ones(sn.n_transitions, dtype=bool)
+            elif v.cover is not None and v.cover.complete:
+                fired = v.cover.fireable_transitions()
+            elif fired is None and space.n_edges:
+                fired = _fired_seen(net, sn, space)
+            if fired is not None:
+                varies |= _changed_by(sn, fired)
+                how = ("every place varies: between explored markings, or by the firing of a transition that can "
+                       "fire (it changes the place's count)")
+        if varies.all():
+            v.stable_known = False
+            sources["stable_marking"] = how
     if v.live is None and v.deadlock and net.transitions:
         v.live = False
         sources["live"] = "a reachable deadlock: no transition can fire from it"
+
+
+def _changed_by(sn: SparseNet, fired: np.ndarray) -> np.ndarray:
+    """(|P|,) bool: the places whose count some transition of ``fired`` ((|T|,) bool) changes
+    whenever it fires (a nonzero incidence, no reset arc from the place to the transition)."""
+    changed = np.zeros(sn.n_places, dtype=bool)
+    moves = sp.csc_matrix(sn.incidence[:, fired] != 0, dtype=np.int8)
+    if sn.reset is not None and sn.reset.nnz:
+        moves = sp.csc_matrix(moves - moves.multiply(sn.reset[:, fired] != 0))
+        moves.eliminate_zeros()
+    changed[moves.indices] = True
+    return changed
 
 
 def _deadlock_unexplored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structure) -> None:

@@ -157,6 +157,11 @@ def test_random_walks_find_a_pumping_loop_deeper_than_the_breadth_first_probe() 
     a = analyse(net, max_states=20_000, coverability_seconds=1.0)
     assert a.bounded is False and a.unbounded_places == ["g"] and a.covering is not None
     assert any("the pumping witness comes from a random walk" in n for n in a.notes)
+    # the chain's far places never vary in the explored markings, but the walk fired the transitions
+    # that move them: no place is stable
+    assert a.space is not None and (a.space.extremes()[0][[p.id == "c30" for p in net.places]] == 0).all()
+    assert a.stable_marking_partial is False
+    assert a.sources["stable_marking"].startswith("every place varies: between explored markings, or by the firing")
 
 
 def test_random_walks_past_the_pumping_loop_find_a_dead_marking_the_search_does_not_reach() -> None:
@@ -179,6 +184,19 @@ def test_random_walks_past_the_pumping_loop_find_a_dead_marking_the_search_does_
         end = _replay(net, d.firing_sequence)[-1]
         assert {p.id: int(c) for p, c in zip(net.places, end) if c} == d.marking
         assert not enabled_mask(net, end[None, :]).any()
+
+
+def test_a_transition_that_fires_changes_the_places_of_its_incidence_but_not_those_it_resets() -> None:
+    from coordinator.analysis.matrices import sparse_net
+    from coordinator.analysis.structure import _changed_by
+
+    net = make_net("flush", {"go": 1}, {"fill": ({"go": 1}, {"go": 1, "buf": 1}), "flush": ({"buf": 1}, {"out": 1})})
+    net = PetriNet(name=net.name, places=net.places, transitions=net.transitions,
+                   arcs=(*net.arcs, Arc(source="buf", target="flush", reset=True)), initial_marking=net.initial_marking)
+    sn = sparse_net(net)
+    assert [p.id for p in net.places] == ["go", "buf", "out"]
+    assert _changed_by(sn, np.array([True, False])).tolist() == [False, True, False]  # go: a self-loop
+    assert _changed_by(sn, np.array([False, True])).tolist() == [False, False, True]  # buf: reset, maybe to 0
 
 
 def test_random_walks_take_no_loop_that_changes_an_inhibitor_place_or_resets_its_growth() -> None:
