@@ -346,11 +346,12 @@ class _Walker:
             self.post = sp.csc_matrix(sn.post[:, self.ids])
         self.m = sn.m0.astype(np.int64).copy()
         self.missing = np.zeros(self.ids.size, dtype=np.int64)
+        self._cache: dict[int, tuple[np.ndarray, ...]] = {}
         self.restart()
 
-    def restart(self) -> None:
-        """Back to M0."""
-        self.m[:] = self.m0
+    def restart(self, marking: np.ndarray | None = None) -> None:
+        """Back to M0, or to ``marking`` ((|P|,) int64, one the walk reached)."""
+        self.m[:] = self.m0 if marking is None else marking
         n = self.ids.size
         self.missing[:] = 0
         for mat, disabled in ((self.pre, self.m[self.pre.indices] < self.pre.data),
@@ -358,32 +359,49 @@ class _Walker:
             cols = np.repeat(np.arange(n), np.diff(mat.indptr))
             self.missing += np.bincount(cols[disabled], minlength=n)
 
-    def fire(self, k: int) -> np.ndarray:
-        """Fire the k-th transition walked (enabled); return the places its reset arcs empty, (r,) int64."""
+    def _arcs(self, k: int) -> tuple[np.ndarray, ...]:
+        """What firing the k-th transition walked touches, gathered on its first firing: the places
+        its incidence changes and by how much, the places its reset arcs set and their values, and
+        the input and inhibitor arcs from all of them (place, weight, transition walked)."""
+        found = self._cache.get(k)
+        if found is not None:
+            return found
         lo, hi = self.inc.indptr[k], self.inc.indptr[k + 1]
-        places = self.inc.indices[lo:hi]
-        new = self.m[places] + self.inc.data[lo:hi]
+        moved, delta = self.inc.indices[lo:hi], self.inc.data[lo:hi]
         reset = np.zeros(0, dtype=np.int64)
+        value = np.zeros(0, dtype=np.int64)
         if self.resets is not None and self.post is not None:
             reset = self.resets.indices[self.resets.indptr[k]:self.resets.indptr[k + 1]].astype(np.int64)
-            if reset.size:
-                places = np.concatenate([places, reset])
-                new = np.concatenate([new, self.post[:, k].toarray().ravel()[reset]])
-        for p, v in zip(places.tolist(), new.tolist()):  # a reset place last: its value wins
-            old = int(self.m[p])
-            if old == v:
-                continue
-            self.m[p] = v
-            for rows, inhibit in ((self.pre_rows, False), (self.inh_rows, True)):
-                a, b = rows.indptr[p], rows.indptr[p + 1]
-                if a == b:
-                    continue
-                w = rows.data[a:b]
-                if inhibit:
-                    change = (v >= w).astype(np.int64) - (old >= w)
-                else:
-                    change = (v < w).astype(np.int64) - (old < w)
-                self.missing[rows.indices[a:b]] += change
+            value = self.post[:, k].toarray().ravel()[reset].astype(np.int64)
+        places = np.union1d(moved, reset)
+        arcs: list[np.ndarray] = []
+        for rows in (self.pre_rows, self.inh_rows):
+            lo_r, hi_r = rows.indptr[places], rows.indptr[places + 1]
+            idx = np.concatenate([np.arange(a, b) for a, b in zip(lo_r.tolist(), hi_r.tolist())] or [np.zeros(0, np.int64)])
+            idx = idx.astype(np.int64)
+            owner = np.repeat(places, hi_r - lo_r)
+            arcs.extend((owner, rows.data[idx], rows.indices[idx]))
+        found = (moved, delta, reset, value, *arcs)
+        self._cache[k] = found
+        return found
+
+    def reset_places(self, k: int) -> np.ndarray:
+        """The places the reset arcs of the k-th transition walked set, (r,) int64."""
+        return self._arcs(k)[2]
+
+    def fire(self, k: int) -> np.ndarray:
+        """Fire the k-th transition walked (enabled); return the places its reset arcs set, (r,) int64."""
+        moved, delta, reset, value, pre_p, pre_w, pre_t, inh_p, inh_w, inh_t = self._arcs(k)
+        m = self.m
+        before_pre = m[pre_p] < pre_w
+        before_inh = m[inh_p] >= inh_w
+        m[moved] += delta
+        if reset.size:
+            m[reset] = value  # a reset place ends with what the transition puts in it
+        if pre_t.size:
+            np.add.at(self.missing, pre_t, (m[pre_p] < pre_w).astype(np.int64) - before_pre)
+        if inh_t.size:
+            np.add.at(self.missing, inh_t, (m[inh_p] >= inh_w).astype(np.int64) - before_inh)
         return reset
 
 
@@ -410,6 +428,9 @@ def _covered(m: np.ndarray, hist: np.ndarray, sums: np.ndarray, i: int, inhibite
 
 #: memory of the markings a walk keeps to compare with each new one, bytes
 _WALK_BYTES = 64 << 20
+#: how many times a walk that looks for a witness and meets a dead marking goes back one firing and
+#: on from there, before a new walk starts from M0
+_BACKTRACKS = 32
 
 
 def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_000, length: int = 2_000,
@@ -423,9 +444,12 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
     One walk reaches such depths at once. Each walk compares every marking it reaches with the earlier
     ones of the same walk, under :func:`covering_witness`'s conditions: covering, equal on the places
     read by inhibitor arcs, and larger on a place that no transition of the loop resets. A walk stops
-    at the first witness (returned), at a dead marking (kept), or after ``length`` firings; the next
+    at the first witness (returned) or after ``length`` firings; at a dead marking (kept) it goes
+    back to the marking before and on from there, up to :data:`_BACKTRACKS` times (where most walks
+    end in a dead marking soon, the loops lie past them), then stops. The next
     starts from M0 again. With ``witness`` False the walks look for dead markings alone (no comparison,
-    no stop at a covering marking): the walks go on past the loops, to the dead ends beyond them. All
+    no stop at a covering marking, a new walk at each dead marking): the walks go on past the loops,
+    to the dead ends beyond them. All
     that is found is reachable, so it holds for the net; what is not found says nothing.
 
     Args:
@@ -458,18 +482,20 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
     seen_dead: set[bytes] = set()
     start = time.monotonic()
     walks = steps = 0
+    m = walker.m
     while steps + walks < max_steps and time.monotonic() - start < seconds:  # a walk costs one step at least
         walks += 1
         if walks > 1:
             walker.restart()
-        m = walker.m
         if witness:
             hist[0] = m
             sums[0] = int(m.sum())
         if reset_since is not None:
             reset_since[0] = False
         seq: list[int] = []
-        for i in range(1, length + 1):
+        backs = _BACKTRACKS if witness else 0
+        while len(seq) < length:
+            i = len(seq) + 1  # the index of the marking the next firing reaches
             enabled = np.flatnonzero(walker.missing == 0)
             if not enabled.size:
                 key = m.tobytes()
@@ -478,7 +504,14 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
                     dead.append((m.copy(), [ids[t] for t in seq]))
                 if not seq or (not witness and len(dead) >= max_dead):  # M0 dead: every walk would end there
                     return Walks(witness=None, dead=dead, fired=fired, walks=walks, steps=steps)
-                break
+                if not backs:
+                    break
+                backs -= 1  # back to the marking before, and on from there
+                seq.pop()
+                walker.restart(hist[len(seq)])
+                if reset_since is not None:
+                    _resets_since(reset_since, seq, walker)
+                continue
             t = int(enabled[rng.integers(enabled.size)]) if enabled.size > 1 else int(enabled[0])
             reset = walker.fire(t)
             seq.append(t)
@@ -500,3 +533,13 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
             if steps >= max_steps or (steps & 255 == 0 and time.monotonic() - start >= seconds):
                 break
     return Walks(witness=None, dead=dead, fired=fired, walks=walks, steps=steps)
+
+
+def _resets_since(reset_since: np.ndarray, seq: list[int], walker: _Walker) -> None:
+    """Row j of ``reset_since`` for j ≤ len(seq): the places the reset arcs of ``seq[j:]`` empty
+    (after a walk went back to the marking ``seq`` reaches)."""
+    acc = np.zeros(reset_since.shape[1], dtype=bool)
+    reset_since[len(seq)] = False
+    for j in range(len(seq) - 1, -1, -1):
+        acc[walker.reset_places(seq[j])] = True
+        reset_since[j] = acc

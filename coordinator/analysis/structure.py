@@ -113,11 +113,13 @@ __all__ = [
 #: States explored first when the net is not structurally bounded, to look for cheap unboundedness.
 PROBE_STATES = 2_000
 #: When the probe holds no pumping witness, random firing sequences look for one deeper
-#: (:func:`.coverability.random_walks`), within this many seconds and firings; when the explored
-#: part holds no dead marking and the structure does not show none is reachable, they look for one
-#: with the same budget.
-WALK_SECONDS = 1.0
-WALK_STEPS = 50_000
+#: (:func:`.coverability.random_walks`), within this many seconds and firings (DoubleLock-PT-p1s2's
+#: witness takes 0.3-1.4 s, depending on the seed)
+WALK_SECONDS = 2.0
+WALK_STEPS = 100_000
+#: When the explored part holds no dead marking and the structure does not show none is reachable,
+#: random walks look for one within this many seconds and :data:`WALK_STEPS` firings
+DEAD_WALK_SECONDS = 1.0
 #: firings per walk at most when the walks look for a dead marking (a dead end may lie thousands of
 #: firings deep: BugTracking-PT-q8m256's, about 4,400)
 DEAD_WALK_LENGTH = 10_000
@@ -1089,7 +1091,7 @@ def _deadlock_unexplored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structu
     """The deadlock question when the explored part holds no dead marking: a dead marking the random
     walks of the search ended in; else the structure's proof that none is dead
     (:func:`_never_dead`); else random walks that look for dead markings alone, past the pumping
-    loops (:func:`.coverability.random_walks`, within :data:`WALK_SECONDS` and :data:`WALK_STEPS`,
+    loops (:func:`.coverability.random_walks`, within :data:`DEAD_WALK_SECONDS` and :data:`WALK_STEPS`,
     :data:`DEAD_WALK_LENGTH` firings per walk)."""
     walked = st.walks.dead if st.walks is not None else []
     how = "a random walk from M0 (looking for a pumping loop) ended in it"
@@ -1099,7 +1101,7 @@ def _deadlock_unexplored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structu
             v.deadlock = False
             st.sources["deadlock"] = never
             return
-        walked = random_walks(net, seconds=WALK_SECONDS, max_steps=WALK_STEPS, length=DEAD_WALK_LENGTH,
+        walked = random_walks(net, seconds=DEAD_WALK_SECONDS, max_steps=WALK_STEPS, length=DEAD_WALK_LENGTH,
                               witness=False, max_dead=MAX_WITNESSES).dead
         how = "a random walk from M0 ended in it"
     if walked:

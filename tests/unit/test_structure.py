@@ -164,6 +164,19 @@ def test_random_walks_find_a_pumping_loop_deeper_than_the_breadth_first_probe() 
     assert a.sources["stable_marking"].startswith("every place varies: between explored markings, or by the firing")
 
 
+def test_a_walk_that_meets_a_dead_marking_goes_back_a_firing_and_climbs_past_twenty_dead_ends() -> None:
+    from coordinator.analysis.coverability import random_walks
+
+    # at each of 20 stages the token goes on or dies: one walk from M0 in a million reaches grow
+    stages = {**{f"go{k}": ({f"s{k}": 1}, {f"s{k + 1}": 1}) for k in range(20)},
+              **{f"die{k}": ({f"s{k}": 1}, {f"dead{k}": 1}) for k in range(20)}}
+    net = make_net("gauntlet", {"s0": 1}, {**stages, "grow": ({"s20": 1}, {"s20": 1, "g": 1})})
+    w = random_walks(net, max_steps=20_000)
+    assert w.witness is not None and w.witness.prefix == [f"go{k}" for k in range(20)]
+    assert w.witness.loop == ["grow"] and w.witness.growing == ["g"]
+    assert w.dead and all(seq[-1].startswith("die") for _, seq in w.dead)  # the dead ends met on the way
+
+
 def test_random_walks_past_the_pumping_loop_find_a_dead_marking_the_search_does_not_reach() -> None:
     from coordinator.analysis.statespace import enabled_mask
 
