@@ -405,12 +405,14 @@ class _Walker:
         return reset
 
 
-def _covered(m: np.ndarray, hist: np.ndarray, sums: np.ndarray, i: int, inhibited: np.ndarray,
-             reset_since: np.ndarray | None) -> tuple[int, np.ndarray] | None:
+def _covered(m: np.ndarray, hist: np.ndarray, sums: np.ndarray, parts: np.ndarray, part: np.ndarray, i: int,
+             inhibited: np.ndarray, reset_since: np.ndarray | None) -> tuple[int, np.ndarray] | None:
     """The first of the walk's markings ``hist[:i]`` that ``m`` covers as a pumping witness requires
-    (:func:`covering_witness`), and the (|P|,) bool places that grow; or None. Only the markings with
-    fewer tokens than ``m`` (``sums``) can be covered strictly, and only they are compared."""
-    below = np.flatnonzero(sums[:i] < int(m.sum()))
+    (:func:`covering_witness`), and the (|P|,) bool places that grow; or None. A marking ``m`` covers
+    strictly has fewer tokens (``sums``) and no more in any set of places (``parts``: (rows, k) token
+    counts of k fixed sets, ``part`` those of ``m``); only the markings that pass both are compared
+    place by place."""
+    below = np.flatnonzero((sums[:i] < int(m.sum())) & (parts[:i] <= part).all(axis=1))
     if not below.size:
         return None
     diff = m[None, :] - hist[below]
@@ -426,8 +428,12 @@ def _covered(m: np.ndarray, hist: np.ndarray, sums: np.ndarray, i: int, inhibite
     return int(below[hit[0]]), grows[hit[0]]
 
 
+#: random sets of places whose token counts sift the walk's markings a new one may cover
+_SETS = 16
 #: memory of the markings a walk keeps to compare with each new one, bytes
 _WALK_BYTES = 64 << 20
+#: the first walk's length at most; each next one twice the last, :data:`_LENGTHS` lengths in turn
+_FIRST_LENGTH, _LENGTHS = 50, 6
 #: how many times a walk that looks for a witness and meets a dead marking goes back one firing and
 #: on from there, before a new walk starts from M0
 _BACKTRACKS = 32
@@ -476,6 +482,8 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
         rows = length + 1
     hist = np.empty((rows, sn.n_places), dtype=np.int64)
     sums = np.empty(rows, dtype=np.int64)
+    sets = np.random.default_rng(seed + 1).integers(0, 2, size=(sn.n_places, _SETS)).astype(np.int64)
+    parts = np.zeros((rows, _SETS), dtype=np.int64)
     reset_since = np.zeros((rows, sn.n_places), dtype=bool) if walker.resets is not None and witness else None
     fired = np.zeros(sn.n_transitions, dtype=bool)
     dead: list[tuple[np.ndarray, list[str]]] = []
@@ -490,11 +498,13 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
         if witness:
             hist[0] = m
             sums[0] = int(m.sum())
+            parts[0] = m @ sets
         if reset_since is not None:
             reset_since[0] = False
         seq: list[int] = []
         backs = _BACKTRACKS if witness else 0
-        while len(seq) < length:
+        cap = min(length, _FIRST_LENGTH << ((walks - 1) % _LENGTHS))
+        while len(seq) < cap:
             i = len(seq) + 1  # the index of the marking the next firing reaches
             enabled = np.flatnonzero(walker.missing == 0)
             if not enabled.size:
@@ -522,7 +532,8 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
                 if reset.size:
                     reset_since[:i, reset] = True  # the loop from each earlier marking holds t
             if witness:
-                pair = _covered(m, hist, sums, i, inhibited, reset_since)
+                part = m @ sets
+                pair = _covered(m, hist, sums, parts, part, i, inhibited, reset_since)
                 if pair is not None:
                     j, grows = pair
                     found = CoveringWitness(prefix=[ids[u] for u in seq[:j]], loop=[ids[u] for u in seq[j:]],
@@ -530,6 +541,7 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
                     return Walks(witness=found, dead=dead, fired=fired, walks=walks, steps=steps)
                 hist[i] = m
                 sums[i] = int(m.sum())
+                parts[i] = part
             if steps >= max_steps or (steps & 255 == 0 and time.monotonic() - start >= seconds):
                 break
     return Walks(witness=None, dead=dead, fired=fired, walks=walks, steps=steps)

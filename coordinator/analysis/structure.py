@@ -884,8 +884,12 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                      "equation does not bound it: boundedness is undecidable in general and was not decided "
                      "(Karp-Miller coverability is unsound for such nets and was not run)")
     longer = min(max_states, AUTO_PROBE_STATES)
-    if witness is not None and v.quasi is None and not space.complete and space.n_states < longer:
-        # the probe's pumping witness ended the search; a longer one may still show every transition fire
+    if witness is not None and v.deadlock is None and not space.complete and not space.deadlocks().size:
+        _deadlock_unexplored(v, net, sn, st)  # before a longer search: the structure or a walk may settle it
+    if witness is not None and (v.quasi is None or v.deadlock is None) and not space.complete and (
+            space.n_states < longer):
+        # the probe's pumping witness ended the search; a longer one may still show every transition
+        # fire, or a dead marking (FunctionPointer-PT-c002's, 13 firings deep, that walks seldom meet)
         space = explore(net, max_states=longer, progress=progress, max_bytes=graph_bytes, bounds=_search_bounds(st),
                         finish_level=False)
         seen_max = space.extremes()[0] if space.n_states else seen_max
@@ -937,6 +941,7 @@ class _Partial:
     reversible: bool | None = None
     stable_known: bool | None = None
     projection: Analysis | None = None
+    dead_walked: bool = False  # _deadlock_unexplored ran
 
 
 def _partial_from_bounds(v: _Partial, sn: SparseNet, st: _Structure, space: StateSpace, seen_max: np.ndarray,
@@ -1093,6 +1098,9 @@ def _deadlock_unexplored(v: _Partial, net: PetriNet, sn: SparseNet, st: _Structu
     (:func:`_never_dead`); else random walks that look for dead markings alone, past the pumping
     loops (:func:`.coverability.random_walks`, within :data:`DEAD_WALK_SECONDS` and :data:`WALK_STEPS`,
     :data:`DEAD_WALK_LENGTH` firings per walk)."""
+    if v.dead_walked:
+        return
+    v.dead_walked = True
     walked = st.walks.dead if st.walks is not None else []
     how = "a random walk from M0 (looking for a pumping loop) ended in it"
     if not walked:
