@@ -432,8 +432,8 @@ def _covered(m: np.ndarray, hist: np.ndarray, sums: np.ndarray, parts: np.ndarra
 _SETS = 16
 #: memory of the markings a walk keeps to compare with each new one, bytes
 _WALK_BYTES = 64 << 20
-#: the first walk's length at most; each next one twice the last, :data:`_LENGTHS` lengths in turn
-_FIRST_LENGTH, _LENGTHS = 50, 6
+#: the first walk's length at most; each next one twice the last, up to ``length``, then again
+_FIRST_LENGTH = 50
 #: how many times a walk that looks for a witness and meets a dead marking goes back one firing and
 #: on from there, before a new walk starts from M0
 _BACKTRACKS = 32
@@ -449,8 +449,10 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
     (Medical-PT-08 in the Model Checking Contest's models: no witness among the first million markings).
     One walk reaches such depths at once. Each walk compares every marking it reaches with the earlier
     ones of the same walk, under :func:`covering_witness`'s conditions: covering, equal on the places
-    read by inhibitor arcs, and larger on a place that no transition of the loop resets. A walk stops
-    at the first witness (returned) or after ``length`` firings; at a dead marking (kept) it goes
+    read by inhibitor arcs, and larger on a place that no transition of the loop resets. The first walk
+    makes at most 50 firings, each next one twice as many as the last, up to ``length``, and then
+    the same lengths again (short walks try many starts, long ones reach deep). A walk stops at the
+    first witness (returned) or after its length; at a dead marking (kept) it goes
     back to the marking before and on from there, up to :data:`_BACKTRACKS` times (where most walks
     end in a dead marking soon, the loops lie past them), then stops. The next
     starts from M0 again. With ``witness`` False the walks look for dead markings alone (no comparison,
@@ -462,7 +464,7 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
         net: a plain net (its ordinary view: events and priorities play no part).
         seconds: time budget, seconds.
         max_steps: budget of firings over all walks (each walk counts one more).
-        length: firings per walk at most (when looking for a witness, also at most as many as
+        length: firings of the longest walk (when looking for a witness, also at most as many as
             :data:`_WALK_BYTES` hold of the walk's markings).
         seed: seed of the random draws (the same seed, the same walks).
         max_dead: how many distinct dead markings are kept.
@@ -491,6 +493,7 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
     start = time.monotonic()
     walks = steps = 0
     m = walker.m
+    lengths = 1 + max(0, math.ceil(math.log2(length / _FIRST_LENGTH)))  # 50, 100, ..., length in turn
     while steps + walks < max_steps and time.monotonic() - start < seconds:  # a walk costs one step at least
         walks += 1
         if walks > 1:
@@ -503,7 +506,7 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
             reset_since[0] = False
         seq: list[int] = []
         backs = _BACKTRACKS if witness else 0
-        cap = min(length, _FIRST_LENGTH << ((walks - 1) % _LENGTHS))
+        cap = min(length, _FIRST_LENGTH << ((walks - 1) % lengths))
         while len(seq) < cap:
             i = len(seq) + 1  # the index of the marking the next firing reaches
             enabled = np.flatnonzero(walker.missing == 0)
