@@ -884,9 +884,11 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                      "equation does not bound it: boundedness is undecidable in general and was not decided "
                      "(Karp-Miller coverability is unsound for such nets and was not run)")
     longer = min(max_states, AUTO_PROBE_STATES)
-    if witness is not None and v.deadlock is None and not space.complete and not space.deadlocks().size:
+    dead_known = v.deadlock is not None or bool(space.deadlocks().size)
+    if witness is not None and not dead_known and not space.complete:
         _deadlock_unexplored(v, net, sn, st)  # before a longer search: the structure or a walk may settle it
-    if witness is not None and (v.quasi is None or v.deadlock is None) and not space.complete and (
+        dead_known = v.deadlock is not None
+    if witness is not None and (v.quasi is None or not dead_known) and not space.complete and (
             space.n_states < longer):
         # the probe's pumping witness ended the search; a longer one may still show every transition
         # fire, or a dead marking (FunctionPointer-PT-c002's, 13 firings deep, that walks seldom meet)

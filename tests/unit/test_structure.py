@@ -164,6 +164,21 @@ def test_random_walks_find_a_pumping_loop_deeper_than_the_breadth_first_probe() 
     assert a.sources["stable_marking"].startswith("every place varies: between explored markings, or by the firing")
 
 
+def test_a_probe_with_a_pumping_witness_and_a_dead_marking_needs_no_longer_search() -> None:
+    from coordinator.analysis.structure import PROBE_STATES
+
+    net = make_net("producer_stop", {"go": 1, "r": 1}, {
+        "produce": ({"go": 1, "r": 1}, {"go": 1, "r": 1, "buf": 1}),
+        "drain": ({"buf": 2}, {"buf": 1}),
+        "stop": ({"go": 1}, {"done": 1}),
+        "never": ({"z": 1}, {"go": 1}),
+    })
+    a = analyse(net, max_states=100_000)
+    assert a.bounded is False and a.quasi_live is False and a.deadlock is True
+    assert a.sources["deadlock"] == "reachability graph (explored part)"
+    assert a.space is not None and a.space.n_states == PROBE_STATES  # the probe settled all a search could
+
+
 def test_a_walk_that_meets_a_dead_marking_goes_back_a_firing_and_climbs_past_twenty_dead_ends() -> None:
     from coordinator.analysis.coverability import random_walks
 
