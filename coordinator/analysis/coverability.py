@@ -436,7 +436,7 @@ _WALK_BYTES = 64 << 20
 _FIRST_LENGTH = 50
 #: how many times a walk that looks for a witness and meets a dead marking goes back one firing and
 #: on from there, before a new walk starts from M0
-_BACKTRACKS = 32
+_BACKTRACKS = 4
 
 
 def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_000, length: int = 2_000,
