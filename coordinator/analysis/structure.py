@@ -117,6 +117,10 @@ PROBE_STATES = 2_000
 #: witness takes 0.3-1.4 s, depending on the seed)
 WALK_SECONDS = 2.0
 WALK_STEPS = 100_000
+#: firings per walk at most when the walks look for a pumping witness (50, 100, 200, 400 in turn;
+#: longer walks spend their time comparing markings: FunctionPointer-PT-c016's witness took
+#: 0.4-2.7 s over four seeds at 400, and was not found within 4 s on three of them at 2,000)
+WALK_LENGTH = 400
 #: When the explored part holds no dead marking and the structure does not show none is reachable,
 #: random walks look for one within this many seconds and :data:`WALK_STEPS` firings
 DEAD_WALK_SECONDS = 1.0
@@ -675,7 +679,7 @@ def _search_phase(net: PetriNet, sn: SparseNet, st: _Structure, max_states: int,
             witness = covering_witness(probe)
             if witness is None:
                 if st.walks is None:  # once per analysis: a later search of the same net finds them here
-                    st.walks = random_walks(net, seconds=WALK_SECONDS, max_steps=WALK_STEPS)
+                    st.walks = random_walks(net, seconds=WALK_SECONDS, max_steps=WALK_STEPS, length=WALK_LENGTH)
                     if st.walks.witness is not None:
                         st.notes.append(f"the pumping witness comes from a random walk ({st.walks.walks:,} walks, "
                                         f"{st.walks.steps:,} firings): the breadth-first search's first "
