@@ -450,15 +450,14 @@ def random_walks(net: PetriNet, *, seconds: float = 2.0, max_steps: int = 200_00
     One walk reaches such depths at once. Each walk compares every marking it reaches with the earlier
     ones of the same walk, under :func:`covering_witness`'s conditions: covering, equal on the places
     read by inhibitor arcs, and larger on a place that no transition of the loop resets. The first walk
-    makes at most 50 firings, each next one twice as many as the last, up to ``length``, and then
-    the same lengths again (short walks try many starts, long ones reach deep). A walk stops at the
-    first witness (returned) or after its length; at a dead marking (kept) it goes
-    back to the marking before and on from there, up to :data:`_BACKTRACKS` times (where most walks
-    end in a dead marking soon, the loops lie past them), then stops. The next
-    starts from M0 again. With ``witness`` False the walks look for dead markings alone (no comparison,
-    no stop at a covering marking, a new walk at each dead marking): the walks go on past the loops,
-    to the dead ends beyond them. All
-    that is found is reachable, so it holds for the net; what is not found says nothing.
+    makes at most 50 firings, each next one twice as many as the last, up to ``length``, and then the
+    same lengths again (short walks try many starts, long ones reach deep). A walk stops at the first
+    witness (returned) or after its length; at a dead marking (kept) it goes back to the marking
+    before and on from there, up to :data:`_BACKTRACKS` times (where most walks end in a dead marking
+    soon, the loops lie past them), then stops, and the next starts from M0 again. With ``witness``
+    False the walks look for dead markings alone (no comparison, no stop at a covering marking, a new
+    walk at each dead marking): they go on past the loops, to the dead ends beyond them. All that is
+    found is reachable, so it holds for the net; what is not found says nothing.
 
     Args:
         net: a plain net (its ordinary view: events and priorities play no part).

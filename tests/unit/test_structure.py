@@ -109,6 +109,16 @@ def _replay(net: PetriNet, sequence: list[str]) -> list[np.ndarray]:
     return [row[0] for row in path]
 
 
+def _with_random_resets(net: PetriNet, rng: np.random.Generator, share: float) -> PetriNet:
+    """``net`` plus, for about ``share`` of its transitions, a reset arc from a random place (none
+    where an arc already joins the two)."""
+    resets = [(str(rng.choice([p.id for p in net.places])), t.id) for t in net.transitions if rng.random() < share]
+    return PetriNet(name=net.name, places=net.places, transitions=net.transitions,
+                    arcs=(*net.arcs, *(Arc(source=p, target=t, reset=True) for p, t in resets
+                                       if not any(a.source == p and a.target == t for a in net.arcs))),
+                    initial_marking=net.initial_marking)
+
+
 def test_random_walks_find_only_true_witnesses_and_dead_markings_on_random_nets() -> None:
     from test_statespace import random_net
 
@@ -119,11 +129,7 @@ def test_random_walks_find_only_true_witnesses_and_dead_markings_on_random_nets(
     for seed in range(150):
         rng = np.random.default_rng(seed)
         net = random_net(rng, n_places=int(rng.integers(2, 6)), n_transitions=int(rng.integers(2, 7)))
-        resets = [(str(rng.choice([p.id for p in net.places])), t.id) for t in net.transitions if rng.random() < 0.25]
-        net = PetriNet(name=net.name, places=net.places, transitions=net.transitions,
-                       arcs=(*net.arcs, *(Arc(source=p, target=t, reset=True) for p, t in resets
-                                          if not any(a.source == p and a.target == t for a in net.arcs))),
-                       initial_marking=net.initial_marking)
+        net = _with_random_resets(net, rng, 0.25)
         walks = random_walks(net, seconds=5.0, max_steps=400, length=40, seed=seed)
         for marking, sequence in walks.dead:
             dead += 1
@@ -416,11 +422,7 @@ def test_the_lone_input_trap_keeps_a_transition_enabled_in_every_reachable_marki
     for seed in range(300):
         rng = np.random.default_rng(seed)
         net = random_net(rng, n_places=int(rng.integers(2, 7)), n_transitions=int(rng.integers(2, 8)))
-        resets = [(str(rng.choice([p.id for p in net.places])), t.id) for t in net.transitions if rng.random() < 0.2]
-        net = PetriNet(name=net.name, places=net.places, transitions=net.transitions,
-                       arcs=(*net.arcs, *(Arc(source=p, target=t, reset=True) for p, t in resets
-                                          if not any(a.source == p and a.target == t for a in net.arcs))),
-                       initial_marking=net.initial_marking)
+        net = _with_random_resets(net, rng, 0.2)
         sn = sparse_net(net)
         free, trap = sn.lone_input_trap()
         marked_trap = bool((trap & (sn.m0 > 0)).any())
