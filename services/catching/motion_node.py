@@ -35,6 +35,7 @@ a lost bus. ``move_home``: success at the home pose, error on timeout or a lost 
 from __future__ import annotations
 
 import asyncio
+import logging
 import time
 from collections.abc import Callable
 from typing import Any
@@ -50,6 +51,8 @@ from services.devices.drives import BusError
 from services.results import ActionResult, Status
 
 __all__ = ["Catch", "MoveHome"]
+
+log = logging.getLogger(__name__)
 
 _WALL_BACKSTOP = 3.0
 """Catch timeouts are in bus time; wall time this many times longer ends the wait anyway."""
@@ -252,6 +255,8 @@ when it started, bus time).
         while drv.bus_time() - t_bus0 <= timeout and time.monotonic() < end:
             sp = sub.state.latest
             if sp is not None:
+                log.info("catch: first set point %.3f s (bus time) after the call; ball at the line at t=%.3f s",
+                         drv.bus_time() - t_bus0, sp.t)
                 return sp
             drv.check()
             await asyncio.sleep(0.002)

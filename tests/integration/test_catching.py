@@ -16,6 +16,7 @@ import pytest
 
 from coordinator.journal import JournalReader
 from coordinator.rosbag import export_run
+from waiting import file_says
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.timeout(240)]
 
@@ -177,7 +178,9 @@ def test_a_vision_node_killed_mid_run_turns_the_catch_into_an_error_and_takes_th
         if "start catch -> catch on motion" in line:
             break
         assert time.monotonic() < end, "".join(lines)
-    time.sleep(0.3)
+    # killed once the catch has a set point (before the first one, a lost stream has no motion for
+    # the watchdog to stop); the motion node logs it
+    file_says(tmp_path / "logs" / "motion.log", "catch: first set point")
     found = subprocess.run(["pgrep", "-f", f"services.node vision --services {cluster.services_path}"],
                            capture_output=True, text=True)
     pids = [int(p) for p in found.stdout.split()]

@@ -38,6 +38,7 @@ from typing import Any
 
 import pytest
 from conftest import ROOT
+from waiting import file_says
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.netns, pytest.mark.timeout(420)]
 
@@ -233,15 +234,6 @@ class Lines:
                 return
 
 
-def _wait_log(path: Path, text: str, timeout: float) -> None:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if path.exists() and text in path.read_text(errors="replace"):
-            return
-        time.sleep(0.1)
-    raise AssertionError(f"{path.name} has no {text!r} after {timeout} s:\n" + (path.read_text() if path.exists() else ""))
-
-
 def _arm_moving(line: str) -> bool:
     """A simulator line reporting a joint of the arm moving faster than 0.1 rad/s (homing ends within
     0.01 rad of the pose, at rest)."""
@@ -278,7 +270,7 @@ def test_catching_across_hosts_survives_cut_links_with_the_watchdogs_and_recover
         lab.spawn(host, [sys.executable, "-m", "services.node", node, "--services", str(services),
                          "--key-file", str(key), "--state-dir", str(tmp_path / "state" / node)], logs[node])
     for node, path in logs.items():
-        _wait_log(path, f"node {node} listening on", 60)
+        file_says(path, f"node {node} listening on", 60)
     journal = tmp_path / "journal.sqlite"
     co = lab.spawn("co", [sys.executable, "-m", "coordinator.cli", "run", str(net), "--services", str(services),
                           "--journal", str(journal), "--key-file", str(key), "--lines", "--no-input",
