@@ -136,13 +136,19 @@ async def _wait(pred, what: str, timeout: float = 10.0) -> None:
         await asyncio.sleep(0.01)
 
 
+async def _subscribed(node: Node, link: NodeLink) -> None:
+    """Wait until ``link`` is connected and its subscription to set points is in place on ``node``
+    (what is published before is not delivered to it)."""
+    await _wait(lambda: link.connected, "connection")
+    await _wait(lambda: bool(node._fanout.subscribers("setpoints")), "subscription on the node")
+
+
 async def test_set_points_published_by_a_node_reach_the_subscription_and_a_bad_one_is_only_counted(vision):
     link = NodeLink("vision", ("127.0.0.1", vision.port), KEY, name="node:motion")
     sub = SetPointSubscription(link, max_age=5.0)
     sub.start()
     try:
-        await _wait(lambda: link.connected, "connection")
-        await asyncio.sleep(0.1)  # the subscription reaches the node
+        await _subscribed(vision, link)
         for i in range(5):
             vision.publish("setpoints", _sp(i, 0.01 * i).to_dict())
         vision.publish("setpoints", {**_sp(5).to_dict(), "seq": float("inf")})
@@ -167,8 +173,7 @@ async def test_a_peer_without_the_key_cannot_inject_and_a_connect_then_close_end
     sub = SetPointSubscription(link, max_age=5.0)
     sub.start()
     try:
-        await _wait(lambda: link.connected, "connection")
-        await asyncio.sleep(0.1)
+        await _subscribed(vision, link)
         vision.publish("setpoints", _sp(1).to_dict())
         await _wait(lambda: sub.state.latest is not None, "the first set point")
         stranger = NodeLink("vision", ("127.0.0.1", vision.port), bytes(32), name="intruder", connect_timeout_s=2.0)
@@ -230,8 +235,7 @@ async def test_a_subscription_refused_by_a_stranger_on_the_port_retries_until_th
         await stranger.stop()
         real = Node("vision", parse_location(f'[nodes.vision]\nhost = "127.0.0.1"\nport = {port}\n'), KEY)
         await real.start()
-        await _wait(lambda: link.connected, "the link to the real node")
-        await asyncio.sleep(0.1)  # the subscription reaches the node
+        await _subscribed(real, link)
         real.publish("setpoints", _sp(1, 0.2).to_dict())
         await _wait(lambda: sub.state.latest is not None, "a set point from the real node")
     finally:

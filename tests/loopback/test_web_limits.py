@@ -41,7 +41,10 @@ async def test_read_only_pages_beyond_the_cap_are_refused_and_the_token_still_ge
         async with http.ws_connect(console.ws_url()) as operator:
             assert (await hello(operator, console.server.token))["control"] is True
         await viewers[0].close()
-        await asyncio.sleep(0.1)
+        for _ in range(2000):  # until the server has seen the page go (bounded: 20 s)
+            if console.server.guard.viewers < 3:
+                break
+            await asyncio.sleep(0.01)
         async with http.ws_connect(console.ws_url()) as again:  # a place came free
             assert (await hello(again, None))["control"] is False
         for ws in viewers[1:]:
