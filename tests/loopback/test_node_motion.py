@@ -63,23 +63,24 @@ async def outcome(node, cid: str) -> tuple[str, str | None, float]:  # type: ign
 
 
 async def test_a_motion_whose_caller_is_killed_is_cancelled_at_once_and_an_ordinary_call_after_its_grace() -> None:
-    async with running_node(ACTIONS, peer_timeout_s=2.0) as node:
+    # a grace far longer than any stall of a loaded machine, so "at once" and "after the grace" differ
+    async with running_node(ACTIONS, peer_timeout_s=10.0) as node:
         await call_and_lose(node, "move", "m-1", silent=False)
         t0 = time.monotonic()
         await eventually("m-1 cancelled", lambda: node._calls.running("m-1") is None, timeout_s=10)
-        assert time.monotonic() - t0 < 1.0  # at once: not after the 2 s an ordinary call is given
+        assert time.monotonic() - t0 < 5.0  # at once: not after the 10 s an ordinary call is given
         status, reason, wall = await outcome(node, "m-1")
-        assert (status, reason) == ("error", "caller_gone") and wall < 0.5
+        assert (status, reason) == ("error", "caller_gone") and wall < 5.0
         await call_and_lose(node, "slow", "s-1", silent=False)
         await asyncio.sleep(1.0)
-        assert node._calls.running("s-1") is not None  # an ordinary action waits for its caller 2 s
+        assert node._calls.running("s-1") is not None  # an ordinary action waits for its caller 10 s
         await call_and_lose(node, "glide", "g-1", silent=False)
         await asyncio.sleep(0.5)
         assert node._calls.running("g-1") is not None  # an unattended motion runs on
 
 
 async def test_a_motion_whose_caller_falls_silent_is_cancelled_after_three_heartbeat_periods() -> None:
-    async with running_node(ACTIONS, peer_timeout_s=2.0) as node:
+    async with running_node(ACTIONS, peer_timeout_s=10.0) as node:
         _, ordinary = await call_and_lose(node, "slow", "s-2", silent=True)  # silent first, for longer
         before = asyncio.get_running_loop().time()  # the caller's last frame is sent after this
         _, writer = await call_and_lose(node, "move", "m-2", silent=True)
