@@ -255,7 +255,7 @@ when it started, bus time).
         while drv.bus_time() - t_bus0 <= timeout and time.monotonic() < end:
             sp = sub.state.latest
             if sp is not None:
-                log.info("catch: first set point %.3f s (bus time) after the call; ball at the line at t=%.3f s",
+                log.info("catch: first set point after %.3f s of waiting (bus time); ball at the line at t=%.3f s",
                          drv.bus_time() - t_bus0, sp.t)
                 return sp
             drv.check()
