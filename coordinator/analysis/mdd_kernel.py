@@ -27,7 +27,8 @@ driven by :mod:`coordinator.analysis.symbolic`, which documents the results. Wha
   residual conditions still pending (:func:`dead_tables`), numbered as met; a node's result is
   cached on the node and that set's number.
 * **Counts** that build no node: the paths of a set (:func:`count`), and per event the paths on
-  which it is enabled (:func:`enabled_counts`), exact modulo primes.
+  which it is enabled (:func:`enabled_counts`), exact modulo primes; the most paths below any node
+  of the store (:func:`most_paths`, a float).
 
 numba cannot load a recursive function from its cache (it crashes: checked on numba 0.68), so the
 recursion runs on an explicit stack of frames, each with a program counter. The loop over the
@@ -65,8 +66,8 @@ from numba import njit, objmode  # noqa: E402
 __all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "Flag", "IMAGE_CHAIN_DEEP", "IMAGE_CHAIN_ROOT",
            "IMAGE_EACH", "MEMORY", "MODE_APPLY", "MODE_DEAD", "MODE_IMAGE", "MODE_RESTRICT", "MODE_SATURATE",
            "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "WIDE", "add_path", "clear_cache", "count",
-           "dead_tables", "enabled_counts", "enabling_values", "max_weight", "new_store", "node_of_path", "presence",
-           "run", "set_watch"]
+           "dead_tables", "enabled_counts", "enabling_values", "max_weight", "most_paths", "new_store", "node_of_path",
+           "presence", "run", "set_watch"]
 
 EMPTY, TERMINAL = 0, 1
 NO_CONSTRAINT = -1
@@ -1085,6 +1086,24 @@ def count(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, n_l
         approx[n] = tot
         done[n] = 1
         depth -= 1
+
+
+@njit(cache=True)
+def most_paths(n_nodes: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray) -> float:
+    """The most paths below any node of the store (its first ``n_nodes`` nodes), float64 (inf past a
+    float's range). One pass in the order of the node numbers: a node is checked in after its
+    children, so theirs are counted first."""
+    paths = np.zeros(max(n_nodes, 2), np.float64)
+    paths[TERMINAL] = 1.0
+    best = 1.0  # the terminal: the one path of no level
+    for n in range(2, n_nodes):
+        tot = 0.0
+        for i in range(size[n]):
+            tot += paths[kids[offset[n] + i]]
+        paths[n] = tot
+        if tot > best:
+            best = tot
+    return best
 
 
 @njit(cache=True)

@@ -1275,9 +1275,12 @@ class _Beside:
         self.st = replace(st, notes=list(st.notes))
         from coordinator.analysis.symbolic import Rival  # the symbolic engine runs next: loaded anyway
 
-        self.rival = Rival(_BESIDE_NICE, phase)  # its lanes whose diagrams outgrow the graph yield to the search
+        # its lanes whose diagrams outgrow the graph yield to the search; one that shows more than
+        # max_states markings reachable stops it
+        self.rival = Rival(_BESIDE_NICE, phase, limit=max_states)
         self.finished = threading.Event()  # the graph is complete: the symbolic engine stops
-        # the symbolic engine has the reachable set, or is done: the search stops
+        # the symbolic engine has the reachable set, or is done, or has shown more markings
+        # reachable than the search may find: the search stops
         self.answered = self.rival.settled
         self.passed = threading.Event()  # the search found ``share`` markings, or it ended
         if share <= 0:
@@ -1294,11 +1297,12 @@ class _Beside:
         def search() -> None:
             _yield_cpus()
             try:
-                self.found = _search_phase(net, sn, self.st, max_states, graph_bytes, report,
-                                           finish_level=False, stop=self.answered,
-                                           report_every=min(share or PROGRESS_STATES, PROGRESS_STATES))
-                if self.found[0].complete:
+                found = _search_phase(net, sn, self.st, max_states, graph_bytes, report, finish_level=False,
+                                      stop=self.answered, report_every=min(share or PROGRESS_STATES, PROGRESS_STATES))
+                if found[0].complete:
                     self.finished.set()
+                # a search cut short says nothing the other searches do not: its graph is freed now
+                self.found = None if found[0].stopped_by == "stopped" else found
             except Exception:
                 # e.g. a count beyond 31 bits: nothing found here; analyse runs the search again
                 # (as the probe or, if the symbolic engine gives up, over its whole limit), which
@@ -1344,8 +1348,6 @@ class _Beside:
             self.answered.set()
         while self.thread.is_alive():
             self.thread.join(0.2)
-        if self.found is not None and self.found[0].stopped_by == "stopped":
-            self.found = None  # a search cut short says nothing the other searches do not
 
 
 def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, lp_seconds: float, seconds: float,

@@ -338,6 +338,17 @@ class _Store:
             return self.count(node)
         return _crt([int(r) for r in self._residue[node]], self._primes)
 
+    def fewest_reachable(self) -> float:
+        """A lower bound of the reachable set's size while a forward closure from M0 builds it in
+        this store (and no other call has run on it): the most paths below any of its nodes
+        (:func:`.mdd_kernel.most_paths`; inf past a float's range). Saturation and chained images
+        check in only sets of sub-markings that complete a reachable marking of the levels above
+        into reachable markings (they unite images of reachable markings: Ciardo, Lüttgen,
+        Siminiceanu 2001), so each node's paths are as many reachable markings. One pass over the
+        nodes, |nodes| floats of scratch."""
+        meta, _level, offset, size, kids = self.arrays[:5]
+        return float(mk.most_paths(int(meta[mk.META_NODES]), offset, size, kids))
+
     def _primes_cover_domain(self) -> bool:
         """The primes' product exceeds every set's count (:attr:`domain_bits`)."""
         return 60 * len(self._primes) - 3 > self.domain_bits
@@ -1158,6 +1169,14 @@ class _Race:
         self.lanes: list[_Lane] = []
         self.exclusive: _Lane | None = None
         self.candidates: list[_Candidate] = []  # every lane's, in the order they joined
+        self.rival: Rival | None = None  # the search racing the engine, if any (:class:`Rival`)
+
+    def bounded_below(self, lane: _Lane, store: _Store, whose: str) -> None:
+        """Tell the rival search, if any, how many markings ``store`` (``lane``'s forward closure
+        from M0 stopped part-way, ``whose``) has shown reachable already (:meth:`Rival.shown`)."""
+        rival = self.rival
+        if rival is not None and not rival.settled.is_set():
+            rival.shown(lane, store.fewest_reachable(), store.nodes, whose)
 
     def upside_down(self) -> _Candidate | None:
         """Once the race is decided, when the winner is the first order reversed: the first order's
@@ -1350,10 +1369,12 @@ class _Lane:
             if not self.cancel.is_set():
                 race.say(f"symbolic: order 1 by chaining not done within {_CHAIN_SECONDS:.0f} s ({store.nodes:,} "
                          "nodes), dropped")
+                race.bounded_below(self, store, "order 1 by chaining")
             return self.cancel.is_set()
         except _OutOfMemory:
             race.say(f"symbolic: order 1 by chaining outgrew this lane's share of the memory ({store.nodes:,} "
                      "nodes), dropped")
+            race.bounded_below(self, store, "order 1 by chaining")
             return self.cancel.is_set()
         finally:
             mk.set_watch(None, None)
@@ -1439,6 +1460,7 @@ class _Lane:
                 if n_cands > 1:
                     say(f"symbolic: {race.name(cand.name)} not done after its {mine:.0f} s turn ({store.nodes:,} "
                         "nodes)")
+                race.bounded_below(self, store, race.name(cand.name))
             except AnalysisError as exc:
                 if "memory budget" not in str(exc):
                     raise
@@ -1481,7 +1503,9 @@ class Rival:
     was undecided after 110 s, where the search alone completes in 23 s. Where the decision
     diagrams win, their nodes seldom pass the markings found, and then by little (over eight
     contest models they won, at most 1.29 times, on Railroad-PT-020's second lane, which then
-    yields; the answer still comes in about 40 s; docs/BENCHMARKS.md). A lane
+    yields; the answer still comes in about 40 s; docs/BENCHMARKS.md). A lane also yields at the end
+    of a turn when its diagram holds fewer markings than nodes and than the search has found
+    (:meth:`shown`). A lane
     that yielded stays so until the race ends (an unprivileged process may not raise a priority
     again); with the search over, nothing competes with it.
 
@@ -1489,11 +1513,20 @@ class Rival:
     answer would come after this one's), and the phases that follow have the CPUs. SafeBus-PT-06:
     the set at 51 s, its liveness and reversibility in 2 s more; the search, left going, completed
     its 6,816,756 markings during them, stopped them, and its graph's passes gave the answer at
-    75 s."""
+    75 s. It is set as well when a lane shows more markings reachable than the search's ``limit``
+    (:meth:`beyond`): the search cannot complete, and the CPU and memory it takes are the engine's.
 
-    def __init__(self, nice: int, say: Callable[[str], None] | None = None) -> None:
+    Args:
+        nice: how many steps lower a lane that yields runs.
+        say: where its notices go (a line each).
+        limit: the markings at which the search stops, incomplete (None: no limit).
+    """
+
+    def __init__(self, nice: int, say: Callable[[str], None] | None = None, limit: int | None = None) -> None:
         self.nice = nice
         self.say = say or (lambda _text: None)
+        self.limit = limit
+        self._found = 0  # the markings the search has found, at its last report
         self.settled = threading.Event()
         self._lock = threading.Lock()
         self._race: _Race | None = None
@@ -1511,16 +1544,60 @@ class Rival:
         yield to it (each once)."""
         with self._lock:
             race = self._race
+            self._found = markings
         if race is None:
             return
         for i, lane in enumerate(race.lanes):
             nodes = lane.nodes_now()
             if lane.tid is None or lane.yielded or nodes <= markings:
                 continue
+            self._yield(lane, f"symbolic: lane {i + 1} of the race yields to the explicit search: its decision "
+                              f"diagram has {nodes:,} nodes, the search {markings:,} markings")
+
+    def _yield(self, lane: _Lane, why: str) -> None:
+        """Lower ``lane``'s thread priority, once (the search's thread and the lane's may both ask)."""
+        with self._lock:
+            if lane.yielded:
+                return
             lane.yielded = True
+        if lane.tid is not None:
             lower_priority(lane.tid, self.nice)
-            self.say(f"symbolic: lane {i + 1} of the race yields to the explicit search: its decision diagram has "
-                     f"{nodes:,} nodes, the search {markings:,} markings")
+        self.say(why)
+
+    def shown(self, lane: _Lane, markings: float, nodes: int, whose: str) -> None:
+        """``lane``'s diagram (``whose``, stopped part-way: at the end of a turn, or dropped) holds
+        ``markings`` reachable markings (:meth:`_Store.fewest_reachable`) in ``nodes`` nodes. Past
+        :attr:`limit`, the search is stopped (:meth:`beyond`). Fewer than its nodes and fewer than
+        the search has found, the diagram is neither compressing the set nor ahead of the search,
+        and the lane yields to it (once): on NQueens-PT-10 every order held 0.03 to 0.2 markings a
+        node at the end of its turns (chaining 0.95), and whether chaining's nodes passed the
+        markings the search had found while it ran, the one other reason to yield, was a matter of a
+        few thousand either way (docs/BENCHMARKS.md)."""
+        self.beyond(markings, whose)
+        with self._lock:
+            found = self._found
+        if self.settled.is_set() or lane.yielded or markings >= nodes or markings >= found:
+            return
+        i = next((k for k, other in enumerate(self._lanes()) if other is lane), 0)
+        self._yield(lane, f"symbolic: lane {i + 1} of the race yields to the explicit search: {whose} holds "
+                          f"{markings:,.0f} reachable markings in {nodes:,} nodes, the search has found {found:,}")
+
+    def _lanes(self) -> list[_Lane]:
+        with self._lock:
+            race = self._race
+        return [] if race is None else race.lanes
+
+    def beyond(self, markings: float, whose: str) -> None:
+        """A lane's diagram (``whose``, part-way) holds ``markings`` reachable markings
+        (:meth:`_Store.fewest_reachable`): past :attr:`limit`, the search is stopped
+        (:attr:`settled`), once."""
+        with self._lock:
+            if self.limit is None or markings <= self.limit or self.settled.is_set():
+                return
+            self.settled.set()
+        shown = f"{markings:,.0f}" if markings < 1e15 else f"{markings:.3g}"
+        self.say(f"symbolic: {whose} holds {shown} reachable markings already, more than the explicit "
+                 f"search's limit of {self.limit:,}: the search beside is stopped")
 
 
 def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes: int, deadline: float,
@@ -1577,7 +1654,9 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     other lanes are stopped and dropped and it gets the whole; when it outgrows the whole,
     ``borrow`` may add to it once (:meth:`_Race.widen`). ``stop`` set (by another thread) ends
     every lane. A lane whose decision diagram has more nodes than ``rival``'s search has markings
-    yields the CPUs to it (:class:`Rival`).
+    yields the CPUs to it (:class:`Rival`), as does one whose diagram holds fewer markings than
+    nodes and than the search has found, at the end of a turn; one whose diagram holds more than the
+    search's limit stops the search (:meth:`Rival.shown`).
 
     Returns:
         The winner, and the candidate whose order is the winner's upside down if the race kept its
@@ -1588,6 +1667,7 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
             ``stop`` was set first.
     """
     race = _Race(sn, bounds, flows, max_bytes, deadline, say, stop, borrow)
+    race.rival = rival
     if cpus() >= 2:
         race.lanes = [_Lane(race, True, 0, max_bytes // 2), _Lane(race, False, _CANDIDATES - 1, max_bytes // 2)]
     else:

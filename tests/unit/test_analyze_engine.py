@@ -117,6 +117,25 @@ def test_the_search_beside_starts_first_and_waits_only_for_its_share_of_markings
     assert no_search_left_running()
 
 
+def test_a_lane_that_shows_more_markings_reachable_than_the_search_may_find_stops_the_search_beside() -> None:
+    net = structure.ordinary_view(load_pnml(KANBAN))  # 2,546,432 markings
+    sn = structure.sparse_net(net)
+    st = structure._structure_phase(net, sn, 1 << 30, 20_000, 5.0, 10.0)
+    said: list[str] = []
+    b = structure._Beside(net, sn, st, 2_000_000, 1 << 29, 100, None, said.append)
+    assert b.wait_share() is True
+    b.rival.beyond(2_000_000, "order 2")  # not more than the search's limit: it goes on
+    assert not b.rival.settled.is_set()
+    b.rival.beyond(2.5e6, "order 2")
+    b.rival.beyond(3e6, "order 3")  # once
+    b.end(stop=False)  # the search had been stopped: its graph, cut short, was dropped
+    assert b.found is None and not b.finished.is_set()
+    assert no_search_left_running()
+    assert [line for line in said if "beyond" in line or "holds" in line] == [
+        "symbolic: order 2 holds 2,500,000 reachable markings already, more than the explicit search's limit "
+        "of 2,000,000: the search beside is stopped"]
+
+
 def test_when_the_symbolic_engine_answers_first_the_search_beside_it_is_stopped(
         monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(structure, "AUTO_PROBE_STATES", 1_000)

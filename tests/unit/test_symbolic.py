@@ -297,6 +297,29 @@ def test_chained_images_reach_the_sets_saturation_reaches_forward_and_backward_i
     assert store.closure(back, store.m0, c=reach) == home
 
 
+@pytest.mark.parametrize("seed", range(40))
+def test_a_store_part_way_through_a_forward_closure_bounds_the_reachable_set_from_below_and_meets_it_at_the_end(
+        seed: int) -> None:
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import events
+    from coordinator.analysis.symbolic import _Store
+
+    net, a, sn, enc = generated_encoding(seed)
+    fwd = events(sn, enc, merge=True)
+    store = _Store(enc, 64 << 20)
+    assert store.fewest_reachable() == 1  # M0 alone
+    reached = store.m0
+    for _ in range(6):  # breadth-first layers: every node checked in holds reachable sub-markings
+        step = store.call(mk.MODE_IMAGE, fwd, reached, arg=mk.IMAGE_EACH)
+        reached = store.call(mk.MODE_APPLY, fwd, reached, step, arg=mk.APPLY_UNION)
+        assert store.count(reached) <= store.fewest_reachable() <= a.states
+    for chain in (False, True):
+        whole = _Store(enc, 64 << 20)
+        whole.chain = chain
+        reach = whole.closure(fwd, whole.m0)
+        assert whole.fewest_reachable() == whole.count(reach) == a.states
+
+
 @pytest.mark.parametrize("seed", range(24))
 def test_reversibility_on_the_order_upside_down_beside_the_later_phases_agrees_with_the_graph(seed: int) -> None:
     # the candidate the race kept, its saturation stopped part way by a deadline, or not begun
@@ -1022,3 +1045,31 @@ def test_a_lane_whose_diagram_outgrows_the_rival_search_s_markings_yields_and_th
     assert any(line.startswith("symbolic: lane ") and "yields to the explicit search" in line for line in said), said
     assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == before  # the lanes had threads of their own
     rival.found(1)  # after the race: nothing to yield
+
+
+def test_a_lane_whose_diagram_shows_fewer_markings_than_its_nodes_and_the_search_yields_and_past_the_limit_stops_it(
+        ) -> None:
+    from coordinator.analysis.symbolic import Rival, _Lane, _Race
+
+    net = kanban(5)
+    bounds, flows = proven_bounds(net)
+    race = _Race(sparse_net(net), bounds, flows, 1 << 26, 0.0, lambda _text: None)
+    race.lanes = [_Lane(race, True, 0, 1 << 25), _Lane(race, False, 3, 1 << 25)]  # no thread: no priority
+    said: list[str] = []
+    rival = Rival(3, said.append, limit=10_000)
+    rival.found(5_000)  # before the race: nothing to yield
+    rival._enter(race)
+    first, second = race.lanes
+    rival.shown(first, 4_000.0, 3_000, "order 1")  # more markings than nodes: compressing
+    rival.shown(first, 6_000.0, 9_000, "order 1")  # ahead of the search
+    assert not first.yielded and said == []
+    rival.shown(second, 4_000.0, 9_000, "order 3")
+    rival.shown(second, 3_000.0, 9_000, "order 4")  # once
+    assert second.yielded and said == [
+        "symbolic: lane 2 of the race yields to the explicit search: order 3 holds 4,000 reachable markings in "
+        "9,000 nodes, the search has found 5,000"]
+    rival.shown(first, 20_000.0, 30_000, "order 1")  # past the search's limit: it is stopped, no lane yields
+    assert rival.settled.is_set() and not first.yielded
+    assert said[1:] == ["symbolic: order 1 holds 20,000 reachable markings already, more than the explicit search's "
+                        "limit of 10,000: the search beside is stopped"]
+    rival._leave()
