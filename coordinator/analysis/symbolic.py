@@ -1576,16 +1576,12 @@ class Rival:
         self.beyond(markings, whose)
         with self._lock:
             found = self._found
+            lanes = [] if self._race is None else self._race.lanes
         if self.settled.is_set() or lane.yielded or markings >= nodes or markings >= found:
             return
-        i = next((k for k, other in enumerate(self._lanes()) if other is lane), 0)
+        i = next((k for k, other in enumerate(lanes) if other is lane), 0)
         self._yield(lane, f"symbolic: lane {i + 1} of the race yields to the explicit search: {whose} holds "
                           f"{markings:,.0f} reachable markings in {nodes:,} nodes, the search has found {found:,}")
-
-    def _lanes(self) -> list[_Lane]:
-        with self._lock:
-            race = self._race
-        return [] if race is None else race.lanes
 
     def beyond(self, markings: float, whose: str) -> None:
         """A lane's diagram (``whose``, part-way) holds ``markings`` reachable markings
