@@ -41,16 +41,19 @@ async def echo(params: dict[str, Any], ctx: CallContext) -> ActionResult:
 async def wait(params: dict[str, Any], ctx: CallContext) -> ActionResult:
     """Wait ``params["seconds"]`` (default 1.0 s), reporting progress ``{"fraction": f}`` every ``step`` s.
 
+    The clock is read once per step, for both the feedback and the test for the end, so the last
+    feedback of a wait that ran its course is exactly ``{"fraction": 1.0}``.
     Cancellation and the deadline cut the wait short (the CancelledError propagates).
     """
     seconds = float(params.get("seconds", 1.0))
     step = max(0.001, float(params.get("step", 0.1)))
     loop = asyncio.get_running_loop()
-    start = loop.time()
+    start = now = loop.time()
     end = start + seconds
-    while (now := loop.time()) < end:
+    while now < end:
         await asyncio.sleep(min(step, end - now))
-        ctx.feedback({"fraction": min(1.0, (loop.time() - start) / seconds) if seconds > 0 else 1.0})
+        now = loop.time()
+        ctx.feedback({"fraction": min(1.0, (now - start) / seconds)})
     return ActionResult(status=Status.SUCCESS, value={"waited_s": loop.time() - start}, cost=seconds)
 
 

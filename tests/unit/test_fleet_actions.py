@@ -3,6 +3,9 @@ the seeded draw and their params, called as a node calls them (no sockets)."""
 
 from __future__ import annotations
 
+import asyncio
+import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -16,11 +19,11 @@ from services.results import Status
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def context(call_id: str, feedback: list[Any]) -> CallContext:
+def context(call_id: str, feedback: list[Any], send: Callable[[Any], None] | None = None) -> CallContext:
     node = NodeContext(name="alpha", location=load_location(ROOT / "services.toml"), drivers={}, memory=None,  # type: ignore[arg-type]
                        publish=lambda topic, data: None, link=lambda name: None)  # type: ignore[arg-type,return-value]
     return CallContext(call_id=call_id, action="load_tote", deadline=None, peer="test", node=node,
-                       feedback=feedback.append)
+                       feedback=send or feedback.append)
 
 
 async def test_the_error_exit_comes_with_the_settable_probability_and_a_seed_repeats_the_draws() -> None:
@@ -60,3 +63,37 @@ def test_services_toml_places_every_fleet_action_the_fleet_net_calls() -> None:
     assert called == set(FLEET_ACTIONS)
     location = load_location(ROOT / "services.toml")
     assert all(location.node_of(name) == "alpha" for name in FLEET_ACTIONS)
+
+
+async def test_the_last_feedback_of_a_wait_is_one_on_a_coarse_clock_with_a_slow_feedback_send() -> None:
+    """A loop woken by other work (here a timer every 0.2 ms, as a node's sockets wake it) runs timers
+    up to its clock resolution early (5 ms here, as on a coarse clock), and a feedback send takes
+    0.3 ms (a frame out on a busy host): the wait still ends on fraction 1.0."""
+    from services.actions.demo import wait
+
+    loop = asyncio.get_running_loop()
+    loop._clock_resolution = 0.005  # type: ignore[attr-defined]  # the asyncio loop's own setting
+    sent: list[Any] = []
+
+    ticker = loop.call_later(0.0002, lambda: None)
+
+    def tick() -> None:
+        nonlocal ticker
+        ticker = loop.call_later(0.0002, tick)
+
+    tick()
+
+    def slow_send(data: Any) -> None:
+        sent.append(data)
+        until = time.monotonic() + 0.0003
+        while time.monotonic() < until:
+            pass
+
+    try:
+        for k in range(20):
+            sent.clear()
+            await wait({"seconds": 0.03, "step": 0.01}, context(f"w{k}", [], slow_send))
+            assert sent and sent[-1] == {"fraction": 1.0}, sent[-3:]
+    finally:
+        ticker.cancel()
+        loop._clock_resolution = time.get_clock_info("monotonic").resolution  # type: ignore[attr-defined]
