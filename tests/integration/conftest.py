@@ -30,6 +30,7 @@ import pytest
 
 from services.client import ServiceClient
 from services.location import Location, load_location
+from tests.ports import free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -97,13 +98,6 @@ node = "beta"
 node = "beta"
 """
 """A two-node layout of the demo actions (``alpha`` with memory, ``beta`` with a ticker driver)."""
-
-
-def free_port() -> int:
-    """A TCP port free on 127.0.0.1 right now."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 class Cluster:

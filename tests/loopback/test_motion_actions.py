@@ -31,6 +31,7 @@ from services.catching.robot import puma560 as P
 from services.catching.setpoints import CatchSetPoint
 from services.results import ActionResult
 from sim.socketcand import CanGateway
+from tests.ports import free_port
 
 ROBOT_BASE = (0.75, 0.0, 0.46, math.pi)
 KEY = bytes.fromhex("9c41e7d02b5f86a3147ed9c2058bf36e71a4d80c95e32fb6486a1dd7c0935e2b")
@@ -43,12 +44,6 @@ port = {vision}
 host = "127.0.0.1"
 port = {motion}
 """
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def test_table_frame_set_points_map_into_the_robot_base_frame():
@@ -69,7 +64,7 @@ class Bench:
         self.can_port = self.gw.start()
         self.rig.start()
         self.events: list[tuple[str, object]] = []
-        self.location = parse_location(LOCATION.format(vision=_free_port(), motion=_free_port()))
+        self.location = parse_location(LOCATION.format(vision=free_port(), motion=free_port()))
         self.vision = Node("vision", self.location, KEY)
         self._links: dict[str, NodeLink] = {}
         self.driver = PumaDriver("puma", {"can_port": self.can_port, "robot_base": list(ROBOT_BASE),

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import socket
 from collections.abc import AsyncIterator, Callable
 from typing import Any
 
@@ -20,17 +19,12 @@ from services.ros2.graph import Attachment, Dialect, Entity, EntityKind
 from services.ros2.qos import encode_qos, Qos
 from services.ros2.session import Ros2Session
 from services.ros2.typestore import TypeStore, load_definitions
+from tests.ports import free_port
 
 pytestmark = pytest.mark.timeout(60)
 
 STORE = TypeStore(load_definitions())
 ADD = "example_interfaces/srv/AddTwoInts"
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def _config(mode: str, **values: Any) -> zenoh.Config:
@@ -44,7 +38,7 @@ class Peer:
     """A Zenoh router and a raw peer session playing the ROS 2 side."""
 
     def __init__(self) -> None:
-        self.endpoint = f"tcp/127.0.0.1:{_free_port()}"
+        self.endpoint = f"tcp/127.0.0.1:{free_port()}"
         self.router = zenoh.open(_config("router", **{"listen/endpoints": [self.endpoint]}))
         # client mode on both sides: every message through the router, no peer-to-peer links being
         # set up while a test runs (which can briefly route a query nowhere)
@@ -302,7 +296,7 @@ class SecurePeer(Peer):
     """A router on a TLS endpoint (mutual TLS) and, optionally, a user/password dictionary."""
 
     def __init__(self, certs: Any, dictionary: Any = None) -> None:
-        self.endpoint = f"tls/127.0.0.1:{_free_port()}"
+        self.endpoint = f"tls/127.0.0.1:{free_port()}"
         tls = {"transport/link/tls/root_ca_certificate": str(certs / "ca.pem"),
                "transport/link/tls/listen_certificate": str(certs / "host.pem"),
                "transport/link/tls/listen_private_key": str(certs / "host.key"),

@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from coordinator.commands import sim
+from tests.ports import free_port
 
 
 def _parse(*argv: str) -> argparse.Namespace:
@@ -93,15 +94,9 @@ params = {{ can_port = {can} }}
 }
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.mark.parametrize("world", ["catching", "mobile"])
 def test_sim_serves_its_devices_on_the_ports_services_toml_gives_their_drivers(world, tmp_path, capsys):
-    camera, can = _free_port(), _free_port()
+    camera, can = free_port(), free_port()
     services = tmp_path / "services.toml"
     services.write_text(SERVICES[world].format(camera=camera, can=can))
     parser = argparse.ArgumentParser()
@@ -115,7 +110,7 @@ def test_sim_serves_its_devices_on_the_ports_services_toml_gives_their_drivers(w
 
 
 def test_sim_zenoh_listens_where_services_toml_has_its_ros2_nodes_connect(tmp_path):
-    port = _free_port()
+    port = free_port()
     services = tmp_path / "services.toml"
     services.write_text(f"""
 [nodes.rosbot]

@@ -22,6 +22,7 @@ from services.catching.setpoints import (
     SetPointSubscription,
     StreamLostError,
 )
+from tests.ports import free_port
 
 KEY = bytes.fromhex("9c41e7d02b5f86a3147ed9c2058bf36e71a4d80c95e32fb6486a1dd7c0935e2b")
 
@@ -115,15 +116,9 @@ def test_a_slow_camera_clock_keeps_a_set_point_fresh_that_the_wall_clock_alone_w
 
 # --- over a node on 127.0.0.1 -------------------------------------------------------------------
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 @pytest.fixture
 async def vision():
-    node = Node("vision", parse_location(f'[nodes.vision]\nhost = "127.0.0.1"\nport = {_free_port()}\n'), KEY)
+    node = Node("vision", parse_location(f'[nodes.vision]\nhost = "127.0.0.1"\nport = {free_port()}\n'), KEY)
     await node.start()
     yield node
     await node.stop()
@@ -196,7 +191,7 @@ async def test_a_peer_without_the_key_cannot_inject_and_a_connect_then_close_end
 
 
 async def test_a_subscription_says_so_when_its_link_is_down():
-    link = NodeLink("vision", ("127.0.0.1", _free_port()), KEY, name="node:motion", connect_timeout_s=0.2)
+    link = NodeLink("vision", ("127.0.0.1", free_port()), KEY, name="node:motion", connect_timeout_s=0.2)
     sub = SetPointSubscription(link)
     sub.start()
     try:
@@ -221,7 +216,7 @@ def test_a_sequence_number_far_ahead_is_refused_while_the_stream_is_live_and_res
 async def test_a_subscription_refused_by_a_stranger_on_the_port_retries_until_the_real_node_is_back():
     """Issue 22: a failed authentication towards a publisher (a stranger on a restarted node's port)
     made the subscriber give up for good; now it retries with backoff, as for a lost connection."""
-    port = _free_port()
+    port = free_port()
     stranger = Node("vision", parse_location(f'[nodes.vision]\nhost = "127.0.0.1"\nport = {port}\n'),
                     bytes.fromhex("61f0c2b9e8d4a7135c9e0f27b86d4a1c3e5f70b2d9a8c6e41f3b57d09a2c8e61"))
     await stranger.start()
