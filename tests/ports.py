@@ -10,6 +10,7 @@ take it, and :func:`free_port` never gives the same port twice in one process.
 
 from __future__ import annotations
 
+import functools
 import random
 import socket
 from pathlib import Path
@@ -25,13 +26,14 @@ _given: set[int] = set()
 _rng = random.Random()
 
 
-def _outside_ephemeral() -> list[range]:
+@functools.cache
+def _outside_ephemeral() -> tuple[range, ...]:
     """The port ranges at or above :data:`_LOWEST` outside the ephemeral range; empty when it has none."""
     try:
         low, high = (int(v) for v in _RANGE_FILE.read_text().split())
     except (OSError, ValueError):
         low, high = 32768, 60999  # Linux's default
-    return [r for r in (range(_LOWEST, low), range(high + 1, 65536)) if len(r) > 0]
+    return tuple(r for r in (range(_LOWEST, low), range(high + 1, 65536)) if len(r) > 0)
 
 
 def free_port(host: str = "127.0.0.1") -> int:

@@ -23,6 +23,7 @@ from sim import socketcand
 from sim.canbus import SimBus
 from sim.drives import POSITION_UNIT
 from sim.socketcand import CanGateway
+from tests.ports import free_port
 
 PUMA_BUS = load_bus(PROJECT_DEVICES / "puma.toml")
 
@@ -577,12 +578,7 @@ def test_a_closed_gateway_makes_the_drives_report_a_dead_bus(served):
 
 
 def test_opening_a_bus_where_nothing_listens_fails_fast():
-    import socket
-
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    free = s.getsockname()[1]
-    s.close()
+    free = free_port()
     with pytest.raises(BusError, match="cannot open"):
         PumaDrives("127.0.0.1", free, bus=PUMA_BUS).open(timeout=0.3)
 

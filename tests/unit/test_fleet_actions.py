@@ -74,26 +74,22 @@ async def test_the_last_feedback_of_a_wait_is_one_on_a_coarse_clock_with_a_slow_
     loop = asyncio.get_running_loop()
     loop._clock_resolution = 0.005  # type: ignore[attr-defined]  # the asyncio loop's own setting
     sent: list[Any] = []
-
-    ticker = loop.call_later(0.0002, lambda: None)
+    ticking = True
 
     def tick() -> None:
-        nonlocal ticker
-        ticker = loop.call_later(0.0002, tick)
-
-    tick()
+        if ticking:
+            loop.call_later(0.0002, tick)
 
     def slow_send(data: Any) -> None:
         sent.append(data)
-        until = time.monotonic() + 0.0003
-        while time.monotonic() < until:
-            pass
+        time.sleep(0.0003)  # blocks the loop, as a slow send does
 
+    tick()
     try:
         for k in range(20):
             sent.clear()
             await wait({"seconds": 0.03, "step": 0.01}, context(f"w{k}", [], slow_send))
             assert sent and sent[-1] == {"fraction": 1.0}, sent[-3:]
     finally:
-        ticker.cancel()
+        ticking = False
         loop._clock_resolution = time.get_clock_info("monotonic").resolution  # type: ignore[attr-defined]
