@@ -1377,14 +1377,16 @@ def _symbolic_phase(net: PetriNet, sn: SparseNet, st: _Structure, budget: int, l
     # leave above one token get the state equation's LP of their own (Philosophers-PT-000500: the
     # cover bounds its 2,500 places by 1, which 2,500 LPs would take 5 s to say again; where they
     # do not, as NeoElection-PT-4's 483 places, the LPs lower them)
-    flows = lp.semiflow_cover(sn, seconds=min(lp_seconds, 3.0),
-                              covered=None if st.psup.covered is None else ~st.psup.covered)
-    _, upper = _upper_bounds(sn, st, lp_seconds, np.asarray(sn.m0, dtype=np.int64), more=flows, lp_above=1)
     from coordinator.analysis import jit
 
     jit.configure()  # numba's cache directory, before the kernel (and numba) is imported
+    from coordinator.analysis.mdd_order import MAX_LOCAL
     from coordinator.analysis.symbolic import ANSWER_SECONDS, analyse_symbolic
 
+    # the 0/1 semiflows a weighted one hides too, where they fit on one level (lp.semiflow_cover)
+    flows = lp.semiflow_cover(sn, seconds=min(lp_seconds, 3.0), spread=MAX_LOCAL,
+                              covered=None if st.psup.covered is None else ~st.psup.covered)
+    _, upper = _upper_bounds(sn, st, lp_seconds, np.asarray(sn.m0, dtype=np.int64), more=flows, lp_above=1)
 
     def counts() -> np.ndarray:
         if seen is not None:

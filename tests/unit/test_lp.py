@@ -223,6 +223,50 @@ def test_the_cover_finds_the_small_semiflows_from_scratch_and_from_one_basis_to_
         assert upper.tolist() == want
 
 
+def counter(k: int, m: int = 4) -> PetriNet:
+    """A one-hot counter load0..load{k}, moved up by taking one of ``m`` free slots and leaving one
+    of ``m`` requests, and down the other way (k free slots at first): semiflows Σ load = 1,
+    Σ free + Σ request = k, Σ (k − i)·load_i + Σ request = k and Σ i·load_i + Σ free = k."""
+    trans = {}
+    for i in range(k):
+        for a in range(m):
+            for b in range(m):
+                trans[f"up{i}_{a}_{b}"] = ({f"load{i}": 1, f"free{a}": 1}, {f"load{i + 1}": 1, f"request{b}": 1})
+                trans[f"down{i}_{a}_{b}"] = ({f"load{i + 1}": 1, f"request{b}": 1}, {f"load{i}": 1, f"free{a}": 1})
+    loads = tuple(f"load{i}" for i in range(k + 1))
+    return make_net("counter", {"load0": 1, "free0": k}, trans,
+                    places=loads + tuple(f"free{a}" for a in range(m)) + tuple(f"request{b}" for b in range(m)))
+
+
+def test_the_second_pass_finds_the_one_hot_semiflow_two_weighted_ones_hide() -> None:
+    # the first pass's LP for load0 has the smaller Σ y from Σ (k − i)·load_i + Σ request, scaled
+    # to y_load0 = 1, and load{k}'s from Σ i·load_i + Σ free: every place is covered, the one-hot
+    # Σ load never comes out. With every y ≤ 1 (spread), it does: one level of k + 1 local markings
+    # for the counter in a decision diagram, instead of k + 1 levels (SimpleLoadBal-PT-10's loads)
+    from coordinator.analysis.mdd_order import MAX_LOCAL, encode
+
+    k, m = 10, 4
+    sn = sparse_net(counter(k, m))
+    one_hot = [1] * (k + 1) + [0] * (2 * m)
+    first = lp.semiflow_cover(sn, seconds=60.0)
+    assert len(first) == 2 and not any((y <= 1).all() for y in first)
+    both = lp.semiflow_cover(sn, seconds=60.0, spread=MAX_LOCAL)
+    assert [y.tolist() for y in both] == [y.tolist() for y in first] + [one_hot]
+    bounds = np.array([1] * (k + 1) + [k] * (2 * m), dtype=np.int64)
+    # neither weighted semiflow makes a group (their places' local markings are more than MAX_LOCAL)
+    assert len(encode(sn, bounds, first, seconds=5.0).levels) == k + 1 + 2 * m
+    levels = encode(sn, bounds, both, seconds=5.0).levels
+    assert sorted(len(ps) for ps in levels) == [1] * (2 * m) + [k + 1]
+    # Σ free + Σ request = k is a 0/1 semiflow too, not added: its k tokens lie on its 2m places in
+    # C(2m + k − 1, k) = 19,448 ways; and none is added with a smaller spread than the one-hot's 11
+    assert len(lp.semiflow_cover(sn, seconds=60.0, spread=k)) == 2
+    # nor where it would take a place from a small semiflow of the first pass (a group of its own):
+    # with k = 2 and one slot, 2·load0 + load1 + request = 2 has 18 ways at most
+    small = sparse_net(counter(2, 1))
+    assert [y.tolist() for y in lp.semiflow_cover(small, seconds=60.0, spread=MAX_LOCAL)] == [
+        y.tolist() for y in lp.semiflow_cover(small, seconds=60.0)] == [[2, 1, 0, 0, 1], [0, 1, 2, 1, 0]]
+
+
 def test_a_place_another_lp_s_certificate_bounds_by_one_gets_no_lp_of_its_own() -> None:
     # two rings, of one token (a, b) and of five (c, d): the total's certificate bounds each place by
     # six; a's own LP bounds a and b by one (its certificate weighs both), so b needs no LP of its own
