@@ -568,7 +568,7 @@ def semiflow_cover(sn: SparseNet, *, seconds: float = 3.0, covered: np.ndarray |
             out.append(y)
         return out
     through = _Through(c_t)
-    uniform = done.copy()  # places in a 0/1 semiflow found, or in none at all
+    tried = done.copy()  # places of no semiflow at all (and then of a small one: the second pass)
     for p in range(n):
         left = seconds - (time.monotonic() - start)
         if left <= 0:
@@ -583,18 +583,16 @@ def semiflow_cover(sn: SparseNet, *, seconds: float = 3.0, covered: np.ndarray |
             return out
         done[p] = True
         if x is False:
-            uniform[p] = True
+            tried[p] = True
             continue
         for cand in _rationalised(np.maximum(x, 0.0)):
             if cand[p] > 0 and (cand >= 0).all() and not any(_exact_product(c_int, cand)):
                 out.append(cand)
                 done |= cand > 0
-                if (cand <= 1).all():
-                    uniform |= cand > 0
                 break
     # the second pass (docstring): on SimpleLoadBal-PT-10 a level of 11 local markings for each
     # server's load instead of 11 levels, and the reachable set in 13 s, against none in 100 s
-    if uniform.all() or spread <= 0:
+    if spread <= 0:
         return out
     known = {cand.tobytes() for cand in out}
 
@@ -611,25 +609,27 @@ def semiflow_cover(sn: SparseNet, *, seconds: float = 3.0, covered: np.ndarray |
         support = np.flatnonzero(cand)
         if few(cand, support):
             grouped[support] = True
+    tried |= grouped
     through = _Through(c_t, upper=1.0)
-    for p in np.flatnonzero(~uniform).tolist():
+    for p in np.flatnonzero(~tried).tolist():
         left = seconds - (time.monotonic() - start)
         if left <= 0:
             break
-        if uniform[p]:
+        if tried[p]:
             continue
         x = through.solve(p, left, bool(warm))
         if x is True:
             break
-        uniform[p] = True
+        tried[p] = True
         if x is False:
             continue
         for cand in _rationalised(np.maximum(x, 0.0)):
             if cand[p] > 0 and (cand >= 0).all() and (cand <= 1).all() and not any(_exact_product(c_int, cand)):
                 support = np.flatnonzero(cand)
-                if cand.tobytes() not in known and few(cand, support) and not grouped[support].any():
-                    known.add(cand.tobytes())
-                    out.append(cand)
-                uniform[support] = True
+                if few(cand, support):
+                    tried[support] = True
+                    if cand.tobytes() not in known and not grouped[support].any():
+                        known.add(cand.tobytes())
+                        out.append(cand)
                 break
     return out

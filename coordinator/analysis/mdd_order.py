@@ -196,9 +196,11 @@ def touched_places(sn: SparseNet) -> list[np.ndarray]:
 
 
 def _local_space(places: np.ndarray, sn: SparseNet, bounds: np.ndarray, trans: np.ndarray,
-                 cap: int) -> np.ndarray | None:
+                 cap: int, within: tuple[np.ndarray, int] | None = None) -> np.ndarray | None:
     """The local markings of a group of places (module docstring), shape (n, len(places)); None if
-    more than ``cap``."""
+    more than ``cap``. ``within``: (weights (len(places),), total) with weights·M ≤ total in every
+    reachable marking (part of a semiflow's support: the rest holds no negative count), which
+    the local markings keep too."""
     rows = np.asarray(places, dtype=np.int64)
     pre = sn.pre[rows][:, trans].toarray().T
     post = sn.post[rows][:, trans].toarray().T
@@ -217,7 +219,7 @@ def _local_space(places: np.ndarray, sn: SparseNet, bounds: np.ndarray, trans: n
             nxt = m - pre[r] + post[r]
             if reset is not None:
                 nxt = np.where(reset[r], post[r], nxt)
-            if (nxt > top).any():
+            if (nxt > top).any() or (within is not None and int(np.dot(within[0], nxt)) > within[1]):
                 continue  # beyond a proven bound: never reached
             key = tuple(int(v) for v in nxt)
             if key not in seen:
@@ -248,7 +250,7 @@ def _groups(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], touched:
     # candidates by an upper bound of their local markings (a weighted count y·M = y·M0 caps each
     # place at ⌊y·M0 / y_p⌋): those surely within MAX_LOCAL first, the larger support first among
     # them; then the others, the smallest bound first
-    cands: list[tuple[float, int, np.ndarray]] = []
+    cands: list[tuple[float, int, np.ndarray, np.ndarray]] = []
     for y in flows:
         support = np.flatnonzero(y)
         if support.size < 2:
@@ -259,7 +261,7 @@ def _groups(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], touched:
             upper = float(np.prod((caps + 1).astype(np.float64)))
         if (y[support] == 1).all() and total < 64:
             upper = min(upper, float(comb(support.size + total - 1, total)))
-        cands.append((upper, -support.size, support))
+        cands.append((upper, -support.size, support, y))
     cands.sort(key=lambda c: (c[0] > MAX_LOCAL, c[1] if c[0] <= MAX_LOCAL else c[0], c[1]))
     found: dict[bytes, tuple[np.ndarray, np.ndarray] | None] = {}  # a support's group, None if not one
     changed = np.zeros(n_p, dtype=bool)
@@ -268,11 +270,11 @@ def _groups(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], touched:
         changed[sp.csc_matrix(sn.reset).indices] = True
     constant = ~changed
 
-    def pack(order: list[tuple[float, int, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
+    def pack(order: list[tuple[float, int, np.ndarray, np.ndarray]]) -> list[tuple[np.ndarray, np.ndarray]]:
         used = np.zeros(n_p, dtype=bool)
         out: list[tuple[np.ndarray, np.ndarray]] = []
         seen: set[bytes] = set()
-        for _, _, support in order:
+        for _, _, support, _ in order:
             if time.monotonic() > deadline:
                 break
             key = support.tobytes()
@@ -292,6 +294,21 @@ def _groups(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], touched:
             if group is not None:
                 used[support] = True
                 out.append(group)
+        for _, _, support, y in order:
+            # what a semiflow whose support meets the groups above leaves (ARMCacheCoherence-PT-none:
+            # twelve one-hot semiflows, each through its own places and one shared idle place, so
+            # only the first was a group): its places still hold y·M ≤ y·M0 between them
+            rest = support[~used[support]]
+            if rest.size < 2 or rest.size == support.size or time.monotonic() > deadline:
+                continue
+            with np.errstate(over="ignore"):
+                product = float(np.prod((bounds[rest] + 1).astype(np.float64)))
+            trans = np.array(sorted({t for p in rest.tolist() for t in trans_of[p]}), dtype=np.int64)
+            local = _local_space(rest, sn, bounds, trans, MAX_LOCAL,
+                                 within=(y[rest], int(np.dot(y[support], sn.m0[support]))))
+            if local is not None and local.shape[0] < product:
+                used[rest] = True
+                out.append((rest.astype(np.int64), local))
         for p in np.flatnonzero(~used).tolist():
             # a place no firing changes (only read: pre = post, no reset) keeps its initial count, one
             # local marking: :func:`_fixed` takes it off the levels (Eratosthenes' primes)

@@ -557,6 +557,10 @@ def _conflicts(net: PetriNet, space: StateSpace | None, *, seconds: float = 10.0
 #: (and, on two CPUs or more, the explicit search, started in a thread of its own, goes on beside
 #: the symbolic engine: _Beside)
 AUTO_PROBE_STATES = 1_000_000
+#: ... or for this long, on two CPUs or more (seconds from the search's start): a net of many
+#: transitions is searched slowly (ARMCacheCoherence-PT-none's 33,676: 15,000 markings a second, so
+#: its share took 60 s, where its decision diagram takes 10 s), and the search goes on beside anyway
+AUTO_PROBE_SECONDS = 10.0
 #: markings of the explicit search run for the symbolic engine's guessed levels when it was asked
 #: for alone (``--engine symbolic``) and the proven bounds make its levels too wide
 SEEN_STATES = 100_000
@@ -743,7 +747,8 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         progress: passed to :func:`~coordinator.analysis.statespace.explore`.
         engine: ``"explicit"`` (the reachability graph), ``"symbolic"`` (the reachable set as a
             decision diagram, :mod:`.symbolic`; needs a proven bound on every place) or ``"auto"``:
-            explicit up to :data:`AUTO_PROBE_STATES` markings, symbolic beyond when every place has
+            explicit up to :data:`AUTO_PROBE_STATES` markings (or, on two CPUs or more,
+            :data:`AUTO_PROBE_SECONDS` of search), symbolic beyond when every place has
             a proven bound, with the explicit search going on beside it on two CPUs or more
             (:class:`_Beside`: whichever completes first answers; :attr:`Analysis.engine_reason`
             says which and why).
@@ -811,7 +816,9 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                                          "is bounded")
         seen: np.ndarray | None = None  # counts for levels guessed from them
         if beside is not None:
-            reason = (f"symbolic: the explicit search passed its share of {limit:,} markings and {proven}, so the "
+            share = (f"passed its share of {limit:,} markings" if not beside.timed_out else
+                     f"ran its {AUTO_PROBE_SECONDS:g} s share before finding {limit:,} markings")
+            reason = (f"symbolic: the explicit search {share} and {proven}, so the "
                       f"symbolic engine takes over (the search goes on beside it){guessed}")
         else:
             why = "its memory budget" if space.stopped_by == "max_memory" else f"{space.n_states:,} markings"
@@ -1249,7 +1256,8 @@ class _Beside:
     symbolic engine once it has passed the explicit share (two CPUs or more: :func:`analyse`).
 
     It starts before the symbolic engine: :meth:`wait_share` returns when it has found ``share``
-    markings (checked every ``min(share, 65,536)`` expanded markings), or when it has ended
+    markings (checked every ``min(share, 65,536)`` expanded markings), or searched for
+    :data:`AUTO_PROBE_SECONDS` (:attr:`timed_out`), or when it has ended
     (complete, or stopped by its memory), so the share's markings are searched once, not by a probe
     and again by the search beside (``share`` 0: at once, for a net not every proven bound covers,
     whose share was searched first for a pumping witness). Then whichever completes first answers:
@@ -1285,6 +1293,8 @@ class _Beside:
         self.passed = threading.Event()  # the search found ``share`` markings, or it ended
         if share <= 0:
             self.passed.set()
+        self.started = time.monotonic()
+        self.timed_out = False  # the share ended by its time (AUTO_PROBE_SECONDS), not its markings
         self.found: tuple[StateSpace, CoveringWitness | None] | None = None
 
         def report(states: int, edges: int) -> None:
@@ -1315,11 +1325,14 @@ class _Beside:
         self.thread.start()
 
     def wait_share(self) -> bool:
-        """Wait (Ctrl-C stays possible) until the search has found its share of markings or ended;
+        """Wait (Ctrl-C stays possible) until the search has found its share of markings, run its
+        share of time, or ended;
         True if it goes on (the symbolic engine starts beside it: a phase line says so), False if it
         ended (:attr:`found`: its graph, complete or stopped by its memory; None if it failed)."""
         while not self.passed.wait(0.2):
-            pass
+            if time.monotonic() - self.started >= AUTO_PROBE_SECONDS:
+                self.timed_out = True
+                break
         if not self.thread.is_alive() or self.finished.is_set():
             self.end(stop=False)
             return False
