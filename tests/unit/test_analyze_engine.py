@@ -117,6 +117,23 @@ def test_the_search_beside_starts_first_and_waits_only_for_its_share_of_markings
     assert no_search_left_running()
 
 
+def test_the_search_beside_ends_its_share_after_its_time_too(monkeypatch: pytest.MonkeyPatch) -> None:
+    # a net of many transitions is searched slowly: the share also ends after AUTO_PROBE_SECONDS
+    # (here none), and the symbolic engine starts while the search goes on
+    monkeypatch.setattr(structure, "AUTO_PROBE_SECONDS", 0.0)
+    net = structure.ordinary_view(load_pnml(KANBAN))  # 2,546,432 markings
+    sn = structure.sparse_net(net)
+    st = structure._structure_phase(net, sn, 1 << 30, 20_000, 5.0, 10.0)
+    b = structure._Beside(net, sn, st, 2_000_000, 1 << 29, 1_000_000_000, None, None)
+    assert b.wait_share() is True and b.timed_out
+    b.end(stop=True)
+    assert no_search_left_running()
+    a = structure.analyse(load_pnml(KANBAN), engine="auto")
+    if cpus() >= 2:
+        assert "ran its 0 s share before finding 1,000,000 markings" in a.engine_reason or a.engine == "explicit"
+    assert (a.complete, a.states) == (True, 2_546_432)
+
+
 def test_a_lane_that_shows_more_markings_reachable_than_the_search_may_find_stops_the_search_beside() -> None:
     net = structure.ordinary_view(load_pnml(KANBAN))  # 2,546,432 markings
     sn = structure.sparse_net(net)
