@@ -241,7 +241,7 @@ def test_analyze_progress_writes_each_phase_as_a_whole_line(capsys: pytest.Captu
     err = capsys.readouterr().err
     lines = err.split("\n")
     phases = [line for line in lines if line.startswith("  symbolic: ")]
-    assert phases and phases[0].startswith("  symbolic: 7 levels")
+    assert phases and phases[0].startswith("  symbolic: 5 levels (4 groups of places)")
     assert err.endswith("\n") and "" not in lines[:-1]
 
 
