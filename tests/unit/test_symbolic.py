@@ -557,7 +557,7 @@ def test_a_stop_event_set_by_another_thread_ends_the_engine_with_a_clear_error()
 
 
 # outgrown in the race, and after it (the computed table stops growing within the budget: the
-# reachable set fits in 320 KiB, reversibility from 352 KiB)
+# reachable set fits in 272 KiB, reversibility from 400 KiB)
 @pytest.mark.parametrize("budget", [256 << 10, 272 << 10])
 def test_a_diagram_that_outgrows_its_budget_borrows_once_and_goes_on(budget: int) -> None:
     # a place a level (no semiflow given): groups make this net's diagram too small to outgrow a budget
