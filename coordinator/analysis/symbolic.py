@@ -364,7 +364,8 @@ class _Store:
         res = np.zeros((ev.n_events, len(self._primes)), np.int64)
         approx = np.zeros(ev.n_events, np.float64)
         on_ptr, on_val = mk.enabling_values(ev.fn_ptr, ev.fn)
-        mk.enabled_counts(node, ev.top, ev.bot, ev.slot_ptr, ev.slot, on_ptr, on_val, offset, size, kids, level,
+        sid = mk.suffix_ids(ev.top, ev.bot, ev.slot_ptr, ev.slot, on_ptr, on_val, self.enc.dom)
+        mk.enabled_counts(node, ev.top, ev.bot, ev.slot_ptr, ev.slot, sid, on_ptr, on_val, offset, size, kids, level,
                           self.enc.n_levels, int(meta[mk.META_NODES]), self._residue, self._approx, primes, res,
                           approx)
         if approx.size and _beyond(float(approx.max()), len(self._primes)) and not self._primes_cover_domain():
