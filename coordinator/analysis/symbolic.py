@@ -1723,8 +1723,12 @@ def _probe(store: _Store, fwd: Events, single: Events, reach: int, result: Symbo
     not live (L4), and M0 outside R(m) makes the net not reversible. Nets with a one-shot start
     (an initialisation the net never returns to) are decided so in a forward saturation or two,
     where the backward saturations below may not finish (UtahNoC-PT-none: 2 s against undecided
-    after 40 s). At most ``probes`` markings; stops at ``until`` (or ``stop``) or when both are decided.
-    Each marking whose R(m) is done is added to ``drawn``, for :func:`_terminal`."""
+    after 40 s). At most ``probes`` markings; stops at ``until`` (or ``stop``) or when both are decided,
+    or after a marking that reaches the whole reachable set (R(m) = R(M0)) and decided nothing: the
+    net then looks strongly connected, where more markings drawn tell no more and the backward
+    saturation decides (SmallOperatingSystem-PT-MT0512DC0128, live and reversible: each R(m) took
+    about 5 s, which the backward saturation needed). Each marking whose R(m) is done is added to
+    ``drawn``, for :func:`_terminal`."""
     rng = np.random.default_rng(0x11FE)
     live_t = result.live_transitions
     mk.set_watch(until, None, stop)
@@ -1743,6 +1747,8 @@ def _probe(store: _Store, fwd: Events, single: Events, reach: int, result: Symbo
             if n == 0:
                 live_t[list(single.members[e])] = False
                 result.live = False
+        if r == reach and result.live is None and result.reversible is None:
+            return
 
 
 class _Upside:
