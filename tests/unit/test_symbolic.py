@@ -1101,3 +1101,77 @@ def test_a_lane_whose_diagram_shows_fewer_markings_than_its_nodes_and_the_search
     assert said[1:] == ["symbolic: order 1 holds 20,000 reachable markings already, more than the explicit search's "
                         "limit of 10,000: the search beside is stopped"]
     rival._leave()
+
+
+def test_events_alike_below_their_top_level_share_one_condition_number() -> None:
+    from coordinator.analysis import mdd_kernel as mk
+
+    dom = np.array([3, 2, 4], dtype=np.int64)
+    # local functions (value -> next value, -1: not enabled), one table per (event, level)
+    tables = [
+        [0, -1, -1], [-1, 0], [1, 2, 3, 0],  # event 0, levels 0..2: level 2 takes every value
+        [-1, 2, -1], [-1, 1],  # event 1, levels 0..1 (level 2 below: no function)
+        [-1, 0], [1, -1, -1, -1],  # event 2, levels 1..2: on level 2 value 0 only
+    ]
+    fn_ptr = np.concatenate([[0], np.cumsum([len(t) for t in tables])]).astype(np.int64)
+    fn = np.concatenate([np.array(t, dtype=np.int64) for t in tables])
+    top, bot = np.array([0, 0, 1], dtype=np.int64), np.array([2, 2, 2], dtype=np.int64)
+    slot_ptr = np.array([0, 3, 6, 8], dtype=np.int64)
+    slot = np.array([0, 1, 2, 3, 4, -1, 5, 6], dtype=np.int64)
+    on_ptr, on_val = mk.enabling_values(fn_ptr, fn)
+    sid = mk.suffix_ids(top, bot, slot_ptr, slot, on_ptr, on_val, dom).tolist()
+    assert sid[0] == sid[3] == sid[6] == -1  # the top levels: no number
+    assert sid[1] == sid[4] and sid[2] == sid[5]  # value 1 on level 1 and any on level 2, for events 0 and 1
+    assert sid[7] not in (sid[2], sid[5]) and sid[6 + 0] == -1  # event 2: value 0 only on level 2
+    assert len({sid[1], sid[2], sid[7]}) == 3
+
+
+def lookers_net(n: int) -> PetriNet:
+    """``n`` three-place cycles, each with one token, and transitions that read where one cycle's
+    token is and where the tokens of two other cycles are (the same two places for every
+    transition of the first cycle's index): many transitions alike below their top level."""
+    transitions: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        for j in range(3):
+            transitions[f"step{i}_{j}"] = ({f"c{i}_{j}": 1}, {f"c{i}_{(j + 1) % 3}": 1})
+            for k in range(1, n - 1):  # the two other cycles: i + k and i + k + 1, neither i
+                a, b = f"c{(i + k) % n}_0", f"c{(i + k + 1) % n}_{k % 3}"
+                pre = {f"c{i}_{j}": 1, a: 1, b: 1}
+                transitions[f"look{i}_{j}_{k}"] = (pre, dict(pre))
+    return make_net("lookers", {f"c{i}_0": 1 for i in range(n)}, transitions)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_edges_of_transitions_alike_below_their_top_level_are_counted_as_on_the_explicit_graph(seed: int) -> None:
+    net = lookers_net(5)
+    a = analyse(net, engine="explicit")
+    bounds, flows = proven_bounds(net)
+    r = analyse_symbolic(net, bounds, flows=[] if seed else flows, seconds=60.0)
+    assert r.states == a.states == 3**5 and r.edges == a.edges
+    assert r.fireable.tolist() == [a.liveness[t.id] >= 1 for t in net.transitions]
+
+
+def test_the_probe_draws_no_more_markings_after_one_that_reaches_the_whole_reachable_set() -> None:
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _probe, _Store
+
+    net = lookers_net(4)  # strongly connected: every marking reaches every other
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    fwd, single = events(sn, enc, merge=True), events(sn, enc)
+    store = _Store(enc, 64 << 20)
+    reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
+    states = store.count(reach, at_most=81.0 * single.n_events)
+    result = SymbolicResult(
+        states=states, edges=0, deadlock=False, n_deadlocks=0, deadlock_marking=None, deadlock_sequence=None,
+        fireable=np.ones(len(net.transitions), dtype=bool), place_bounds=np.ones(len(net.places), dtype=np.int64),
+        stable=np.zeros(len(net.places), dtype=bool), max_token_per_marking=4, live=None,
+        live_transitions=np.full(len(net.transitions), None, dtype=object), reversible=None, levels=enc.n_levels,
+        groups=enc.groups, nodes=store.nodes, order_score=enc.score, seconds={}, notes=[])
+    drawn: list = []
+    _probe(store, fwd, single, reach, result, float("inf"), 3, None, drawn)
+    assert len(drawn) == 1 and drawn[0][2] == reach  # one marking, whose R(m) is the whole set
+    assert result.live is None and result.reversible is None  # decided by the backward saturation after
+    mk.set_watch(None, None)
