@@ -1249,7 +1249,6 @@ def suffix_ids(top: np.ndarray, bot: np.ndarray, slot_ptr: np.ndarray, slot: np.
     for f in range(kind.shape[0]):
         vals = on_val[on_ptr[f]:on_ptr[f + 1]]
         kind[f] = by_values.setdefault(vals.tobytes(), len(by_values))
-    full = {by_values.get(np.arange(int(d), dtype=np.int64).tobytes(), -2) for d in np.unique(dom)}
     out = np.full(slot.shape[0], -1, dtype=np.int64)
     named: dict[tuple[int, int, int], int] = {}
     for e in range(top.shape[0]):
@@ -1257,7 +1256,9 @@ def suffix_ids(top: np.ndarray, bot: np.ndarray, slot_ptr: np.ndarray, slot: np.
         below = -1  # the condition on the levels under the current one (none under b)
         for j in range(b - t, 0, -1):
             f = int(slot[at + j])
-            values = -1 if f < 0 or int(kind[f]) in full and on_ptr[f + 1] - on_ptr[f] == dom[t + j] else int(kind[f])
+            # a function is defined on distinct values of its level's domain: on all of them when
+            # it has as many as the domain
+            values = -1 if f < 0 or on_ptr[f + 1] - on_ptr[f] == dom[t + j] else int(kind[f])
             below = named.setdefault((t + j, values, below), len(named))
             out[at + j] = below
     return out
