@@ -1103,6 +1103,62 @@ def test_a_lane_whose_diagram_shows_fewer_markings_than_its_nodes_and_the_search
     rival._leave()
 
 
+def test_a_lane_alone_tells_the_search_beside_what_it_has_shown_reachable_part_way_and_past_the_limit_stops_it(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # without turns a lane would tell only when done; it stops every _TELL_SECONDS instead (here
+    # at its kernel's first check of the clock), and the search, told of more markings than it may
+    # find, stops there, while the lanes go on from where they stopped to the exact set
+    from coordinator.analysis import symbolic
+
+    monkeypatch.setattr(symbolic, "_TELL_SECONDS", 0.0)
+    net = kanban(100)  # the first order saturates for about 2 s, through 113,617 nodes
+    bounds, flows = proven_bounds(net)
+    said: list[str] = []
+    rival = symbolic.Rival(3, said.append, limit=1_000)
+    r = analyse_symbolic(net, bounds, flows=flows, seconds=120.0, answer_seconds=0.0, rival=rival)
+    assert r.states == analyse_symbolic(net, bounds, flows=flows, seconds=120.0, answer_seconds=0.0).states
+    assert rival.settled.is_set()
+    told = [line for line in said if "more than the explicit search's limit of 1,000" in line]
+    assert len(told) == 1 and told[0].startswith("symbolic: order 1 "), said  # the first lane, or the chaining
+    assert not any("yields" in line for line in said)  # told part-way, no lane yields
+
+
+def test_a_closure_stopped_at_every_check_of_the_clock_and_resumed_each_time_gives_the_whole_set() -> None:
+    # what a lane alone does while it tells the search beside (_TELL_SECONDS), at its most often:
+    # each call stopped at the kernel's first check of its clock (every 2^20 steps), by saturation
+    # and by chaining (whose images are mostly shorter than that), resumed from the store it kept
+    import time
+
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _OutOfTime, _Store
+
+    net = kanban(40)  # its saturation is stopped twice or so
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    fwd = events(sn, enc, merge=True)
+    whole = _Store(enc, 1 << 30)
+    states = whole.count(whole.call(mk.MODE_SATURATE, fwd, whole.m0))
+    stopped = 0
+    for chain in (False, True):
+        store = _Store(enc, 1 << 30)
+        store.chain = chain
+        try:
+            while True:
+                mk.set_watch(time.monotonic() - 1.0, None)
+                try:
+                    reach = store.closure(fwd, store.m0, check_overflow=True)
+                    break
+                except _OutOfTime:
+                    stopped += 1
+                    assert store.fewest_reachable() <= states
+        finally:
+            mk.set_watch(None, None)
+        assert store.count(reach) == states
+    assert stopped > 0
+
+
 def test_events_alike_below_their_top_level_share_one_condition_number() -> None:
     from coordinator.analysis import mdd_kernel as mk
 
