@@ -1687,9 +1687,8 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     search's limit stops the search (:meth:`Rival.shown`). A lane without turns (the first on two
     CPUs, and chaining) stops every :data:`_TELL_SECONDS` while the search goes on, to tell it so
     (:meth:`_Race.passed_limit`), and resumes: the search, which cannot complete, then stops seconds
-    earlier than at the lane's end, and its CPU and memory are the race's (SmallOperatingSystem-PT-
-    MT0512DC0128: the search stopped at 5.9 s instead of 16.3 s, the reachable set at 25 to 37 s
-    instead of 38 s; docs/BENCHMARKS.md).
+    earlier than at the lane's end, and its CPU is the race's (SwimmingPool-PT-10: at 4.3 s instead
+    of 16.2 s; docs/BENCHMARKS.md).
 
     Returns:
         The winner, and the candidate whose order is the winner's upside down if the race kept its
