@@ -1469,9 +1469,9 @@ class _Lane:
             cand = cands[i]
             store = cand.store
             mine = slice_s * (_LEAD if cand.name == 1 else 1.0)
-            told = n_cands == 1 and race.telling()  # alone: no turns, but stops to tell the rival
-            mk.set_watch(min(race.deadline, time.monotonic() + (mine if n_cands > 1 else _TELL_SECONDS))
-                         if n_cands > 1 or told else race.deadline, None, self.cancel)
+            # by turns; alone, no turns, but stops to tell the rival while it goes on
+            pause = mine if n_cands > 1 else _TELL_SECONDS if race.telling() else inf
+            mk.set_watch(min(race.deadline, time.monotonic() + pause), None, self.cancel)
             self.working = store
             try:
                 reach = store.call(mk.MODE_SATURATE, cand.fwd, store.m0, check_overflow=True)
