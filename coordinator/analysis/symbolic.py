@@ -1101,8 +1101,15 @@ _HEAD_START = 2.0
 _CHAIN_SECONDS = 10.0
 #: while the explicit search runs beside the race (:class:`Rival`), a lane that saturates or chains
 #: without turns stops this often to tell it how many markings it has shown reachable
-#: (:meth:`_Race.passed_limit`), and resumes where it stopped
+#: (:meth:`_Race.bounded_below`), and resumes where it stopped
 _TELL_SECONDS = 1.0
+#: a lane stopped part-way yields to the search beside when its diagram holds fewer than this many
+#: reachable markings a node (and fewer than the search has found: :meth:`Rival.shown`). Measured at
+#: the first order's stops every second: NQueens-PT-10 (7,535,369 markings, the search answers) at
+#: most 0.28 over its first 36 s, QuasiCertifProtocol-PT-06 (2,271,960, the search answers) at most
+#: 0.09; SafeBus-PT-06 (6,816,756, the diagram answers) at least 0.98 in one run, 1.3 in another
+#: (docs/BENCHMARKS.md)
+_YIELD_RATIO = 0.5
 
 
 def _same_order(a: Encoding, b: Encoding) -> bool:
@@ -1178,25 +1185,18 @@ class _Race:
 
     def bounded_below(self, lane: _Lane, store: _Store, whose: str) -> None:
         """Tell the rival search, if any, how many markings ``store`` (``lane``'s forward closure
-        from M0 stopped part-way, ``whose``) has shown reachable already (:meth:`Rival.shown`)."""
+        from M0 stopped part-way, ``whose``: at the end of a turn, dropped, or at a stop to tell
+        while it has no turns) has shown reachable already (:meth:`Rival.shown`): past its limit
+        the search stops, and with too few markings a node the lane yields to it."""
         rival = self.rival
         if rival is not None and not rival.settled.is_set():
             rival.shown(lane, store.fewest_reachable(), store.nodes, whose)
 
     def telling(self) -> bool:
         """A rival search is beside the race and still going: lanes without turns stop every
-        :data:`_TELL_SECONDS` for :meth:`passed_limit`."""
+        :data:`_TELL_SECONDS` for :meth:`bounded_below`."""
         rival = self.rival
         return rival is not None and not rival.settled.is_set()
-
-    def passed_limit(self, store: _Store, whose: str) -> None:
-        """Tell the rival search, if any, how many markings ``store`` (a lane's forward closure from
-        M0 stopped part-way, ``whose``) has shown reachable already; past its limit it is stopped
-        (:meth:`Rival.beyond`) and the CPU and memory it took are the race's. Only that: a lane
-        does not yield on what it shows part-way through a turn (:meth:`Rival.shown`)."""
-        rival = self.rival
-        if rival is not None and not rival.settled.is_set():
-            rival.beyond(store.fewest_reachable(), whose)
 
     def upside_down(self) -> _Candidate | None:
         """Once the race is decided, when the winner is the first order reversed: the first order's
@@ -1393,7 +1393,7 @@ class _Lane:
                 except _OutOfTime:
                     if not told or self.cancel.is_set() or time.monotonic() >= end:
                         raise
-                    race.passed_limit(store, "order 1 by chaining")  # and on, from the images its store kept
+                    race.bounded_below(self, store, "order 1 by chaining")  # and on, from the images its store kept
         except _OutOfTime:
             if not self.cancel.is_set():
                 race.say(f"symbolic: order 1 by chaining not done within {_CHAIN_SECONDS:.0f} s ({store.nodes:,} "
@@ -1490,9 +1490,7 @@ class _Lane:
                 if n_cands > 1:
                     say(f"symbolic: {race.name(cand.name)} not done after its {mine:.0f} s turn ({store.nodes:,} "
                         "nodes)")
-                    race.bounded_below(self, store, race.name(cand.name))
-                else:
-                    race.passed_limit(store, race.name(cand.name))
+                race.bounded_below(self, store, race.name(cand.name))
             except AnalysisError as exc:
                 if "memory budget" not in str(exc):
                     raise
@@ -1535,11 +1533,11 @@ class Rival:
     was undecided after 110 s, where the search alone completes in 23 s. Where the decision
     diagrams win, their nodes seldom pass the markings found, and then by little (over eight
     contest models they won, at most 1.29 times, on Railroad-PT-020's second lane, which then
-    yields; the answer still comes in about 40 s; docs/BENCHMARKS.md). A lane also yields at the end
-    of a turn when its diagram holds fewer markings than nodes and than the search has found
-    (:meth:`shown`). A lane
-    that yielded stays so until the race ends (an unprivileged process may not raise a priority
-    again); with the search over, nothing competes with it.
+    yields; the answer still comes in about 40 s; docs/BENCHMARKS.md). A lane also yields when,
+    stopped part-way (at the end of a turn, or at a stop to tell while it has no turns), its
+    diagram holds fewer than :data:`_YIELD_RATIO` markings a node and fewer than the search has
+    found (:meth:`shown`). A lane that yielded stays so until the race ends (an unprivileged
+    process may not raise a priority again); with the search over, nothing competes with it.
 
     :attr:`settled` is set when the engine has the reachable set: the search stops then (its
     answer would come after this one's), and the phases that follow have the CPUs. SafeBus-PT-06:
@@ -1597,19 +1595,21 @@ class Rival:
         self.say(why)
 
     def shown(self, lane: _Lane, markings: float, nodes: int, whose: str) -> None:
-        """``lane``'s diagram (``whose``, stopped part-way: at the end of a turn, or dropped) holds
-        ``markings`` reachable markings (:meth:`_Store.fewest_reachable`) in ``nodes`` nodes. Past
-        :attr:`limit`, the search is stopped (:meth:`beyond`). Fewer than its nodes and fewer than
-        the search has found, the diagram is neither compressing the set nor ahead of the search,
-        and the lane yields to it (once): on NQueens-PT-10 every order held 0.03 to 0.2 markings a
-        node at the end of its turns (chaining 0.95), and whether chaining's nodes passed the
-        markings the search had found while it ran, the one other reason to yield, was a matter of a
-        few thousand either way (docs/BENCHMARKS.md)."""
+        """``lane``'s diagram (``whose``, stopped part-way: at the end of a turn, dropped, or at a
+        stop to tell while it has no turns) holds ``markings`` reachable markings
+        (:meth:`_Store.fewest_reachable`) in ``nodes`` nodes. Past :attr:`limit`, the search is
+        stopped (:meth:`beyond`). Fewer than :data:`_YIELD_RATIO` a node and fewer than the search
+        has found, the diagram is neither compressing the set nor ahead of the search, and the lane
+        yields to it (once): on NQueens-PT-10 every order held 0.03 to 0.2 markings a node at the
+        end of its turns, the first order at most 0.28 at its stops to tell, and chaining 0.23 three
+        seconds in, 0.95 when dropped; whether chaining's nodes passed the markings the search had
+        found while it ran, the one other reason to yield, was a matter of a few thousand either way
+        (docs/BENCHMARKS.md)."""
         self.beyond(markings, whose)
         with self._lock:
             found = self._found
             lanes = [] if self._race is None else self._race.lanes
-        if self.settled.is_set() or lane.yielded or markings >= nodes or markings >= found:
+        if self.settled.is_set() or lane.yielded or markings >= _YIELD_RATIO * nodes or markings >= found:
             return
         i = next((k for k, other in enumerate(lanes) if other is lane), 0)
         self._yield(lane, f"symbolic: lane {i + 1} of the race yields to the explicit search: {whose} holds "
@@ -1682,13 +1682,15 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     other lanes are stopped and dropped and it gets the whole; when it outgrows the whole,
     ``borrow`` may add to it once (:meth:`_Race.widen`). ``stop`` set (by another thread) ends
     every lane. A lane whose decision diagram has more nodes than ``rival``'s search has markings
-    yields the CPUs to it (:class:`Rival`), as does one whose diagram holds fewer markings than
-    nodes and than the search has found, at the end of a turn; one whose diagram holds more than the
-    search's limit stops the search (:meth:`Rival.shown`). A lane without turns (the first on two
-    CPUs, and chaining) stops every :data:`_TELL_SECONDS` while the search goes on, to tell it so
-    (:meth:`_Race.passed_limit`), and resumes: the search, which cannot complete, then stops seconds
-    earlier than at the lane's end, and its CPU is the race's (SwimmingPool-PT-10: at 4.3 s instead
-    of 16.2 s; docs/BENCHMARKS.md).
+    yields the CPUs to it (:class:`Rival`), as does one whose diagram holds fewer than
+    :data:`_YIELD_RATIO` markings a node and fewer than the search has found, at the end of a turn;
+    one whose diagram holds more than the search's limit stops the search (:meth:`Rival.shown`). A
+    lane without turns (the first on two CPUs, and chaining) stops every :data:`_TELL_SECONDS` while
+    the search goes on, to tell it so (:meth:`_Race.bounded_below`), and resumes: the search, which
+    cannot complete, then stops seconds earlier than at the lane's end, and its CPU is the race's
+    (SwimmingPool-PT-10: at 4.3 s instead of 16.2 s); where the search can complete, the lane whose
+    diagram does not compress the set yields to it seconds after the start (NQueens-PT-10: 45.9 s
+    instead of 64 s; docs/BENCHMARKS.md).
 
     Returns:
         The winner, and the candidate whose order is the winner's upside down if the race kept its

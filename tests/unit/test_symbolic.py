@@ -1075,7 +1075,7 @@ def test_a_lane_whose_diagram_outgrows_the_rival_search_s_markings_yields_and_th
     rival.found(1)  # after the race: nothing to yield
 
 
-def test_a_lane_whose_diagram_shows_fewer_markings_than_its_nodes_and_the_search_yields_and_past_the_limit_stops_it(
+def test_a_lane_whose_diagram_holds_under_half_a_marking_a_node_and_less_than_the_search_yields_past_the_limit_stops_it(
         ) -> None:
     from coordinator.analysis.symbolic import Rival, _Lane, _Race
 
@@ -1090,6 +1090,7 @@ def test_a_lane_whose_diagram_shows_fewer_markings_than_its_nodes_and_the_search
     first, second = race.lanes
     rival.shown(first, 4_000.0, 3_000, "order 1")  # more markings than nodes: compressing
     rival.shown(first, 6_000.0, 9_000, "order 1")  # ahead of the search
+    rival.shown(first, 4_600.0, 9_000, "order 1")  # over half a marking a node (_YIELD_RATIO)
     assert not first.yielded and said == []
     rival.shown(second, 4_000.0, 9_000, "order 3")
     rival.shown(second, 3_000.0, 9_000, "order 4")  # once
@@ -1120,7 +1121,28 @@ def test_a_lane_alone_tells_the_search_beside_what_it_has_shown_reachable_part_w
     assert rival.settled.is_set()
     told = [line for line in said if "more than the explicit search's limit of 1,000" in line]
     assert len(told) == 1 and told[0].startswith("symbolic: order 1 "), said  # the first lane, or the chaining
-    assert not any("yields" in line for line in said)  # told part-way, no lane yields
+    assert not any("yields" in line for line in said)  # the search has found nothing: no lane yields to it
+
+
+def test_a_lane_alone_that_shows_too_few_markings_a_node_part_way_yields_to_the_search_beside_and_the_set_is_exact(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    # the stops to tell (_TELL_SECONDS) carry the yield by the lower bound too: with every ratio of
+    # markings to nodes too low (_YIELD_RATIO) and a search that has found more than any diagram
+    # holds, the lanes yield at their first stops, part-way, and go on to the exact set
+    from coordinator.analysis import symbolic
+
+    monkeypatch.setattr(symbolic, "_TELL_SECONDS", 0.0)
+    monkeypatch.setattr(symbolic, "_YIELD_RATIO", 1e30)
+    net = kanban(100)
+    bounds, flows = proven_bounds(net)
+    said: list[str] = []
+    rival = symbolic.Rival(3, said.append)
+    rival.found(10**30)  # more than Kanban-PT-00100's 1.7·10^19 markings; before the race: kept
+    r = analyse_symbolic(net, bounds, flows=flows, seconds=120.0, answer_seconds=0.0, rival=rival)
+    assert r.states == analyse_symbolic(net, bounds, flows=flows, seconds=120.0, answer_seconds=0.0).states
+    yielded = [line for line in said if "yields to the explicit search" in line]
+    assert yielded and ": order 1 " in yielded[0], said
+    assert yielded[0].endswith(f"the search has found {10**30:,}")
 
 
 def test_a_closure_stopped_at_every_check_of_the_clock_and_resumed_each_time_gives_the_whole_set() -> None:
