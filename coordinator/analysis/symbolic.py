@@ -1689,8 +1689,8 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     the search goes on, to tell it so (:meth:`_Race.bounded_below`), and resumes: the search, which
     cannot complete, then stops seconds earlier than at the lane's end, and its CPU is the race's
     (SwimmingPool-PT-10: at 4.3 s instead of 16.2 s); where the search can complete, the lane whose
-    diagram does not compress the set yields to it seconds after the start (NQueens-PT-10: 45.9 s
-    instead of 64 s; docs/BENCHMARKS.md).
+    diagram does not compress the set yields to it seconds after the start (NQueens-PT-10: answered
+    in 45 to 50 s instead of 70 to 74 s; docs/BENCHMARKS.md).
 
     Returns:
         The winner, and the candidate whose order is the winner's upside down if the race kept its
