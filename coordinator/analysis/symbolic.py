@@ -1188,9 +1188,9 @@ class _Race:
         from M0 stopped part-way, ``whose``: at the end of a turn, dropped, or at a stop to tell
         while it has no turns) has shown reachable already (:meth:`Rival.shown`): past its limit
         the search stops, and with too few markings a node the lane yields to it."""
-        rival = self.rival
-        if rival is not None and not rival.settled.is_set():
-            rival.shown(lane, store.fewest_reachable(), store.nodes, whose)
+        if self.telling():
+            assert self.rival is not None
+            self.rival.shown(lane, store.fewest_reachable(), store.nodes, whose)
 
     def telling(self) -> bool:
         """A rival search is beside the race and still going: lanes without turns stop every
