@@ -46,6 +46,12 @@ FMS-PT-00200, 239 million steps of saturation instead of 75 million.) Buffers gr
 compiled call, within a byte budget: the computed table stops growing where it would pass it, and
 status ``MEMORY`` comes when the nodes' own buffers would. The store is handed back to the caller,
 who passes it to the next call; nothing is ever freed (the store lives as long as one analysis).
+A grown buffer is made by numpy, in an ``objmode`` block, not by numba: numpy asks Linux for
+transparent huge pages for a large array (``madvise``, where the system's setting is ``madvise`` as
+Debian's is, or ``always``), numba's allocator does not, and the unique and computed tables are
+read at random, so with 4 KiB pages nearly every look-up misses the TLB (TCPcondis-PT-15, the
+first order's saturation alone, six alternating pairs: 31 to 54 s with huge pages, 53 to 59 s
+without, faster in every pair; docs/BENCHMARKS.md).
 """
 
 from __future__ import annotations
@@ -989,23 +995,25 @@ def run(mode: int, dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_s
                 status = MEMORY
                 break
             if gn != level.shape[0]:
-                nl = np.zeros(gn, np.int32)
-                no = np.zeros(gn, np.int64)
-                ns = np.zeros(gn, np.int32)
+                with objmode(nl="int32[::1]", no="int64[::1]", ns="int32[::1]"):  # huge pages (module docstring)
+                    nl, no, ns = np.zeros(gn, np.int32), np.zeros(gn, np.int64), np.zeros(gn, np.int32)
                 _copy(nl, level, n_nodes)
                 _copy(no, offset, n_nodes)
                 _copy(ns, size, n_nodes)
                 level, offset, size = nl, no, ns
             if gk != kids.shape[0]:
-                nk = np.zeros(gk, np.int32)
+                with objmode(nk="int32[::1]"):
+                    nk = np.zeros(gk, np.int32)
                 _copy(nk, kids, meta[META_KIDS])
                 kids = nk
             if gu != unique.shape[0]:
-                unique = np.zeros(gu, np.int32)
+                with objmode(unique="int32[::1]"):
+                    unique = np.zeros(gu, np.int32)
                 _rehash(unique, n_nodes, level, offset, size, kids)
             if gc != ccap:
                 # a larger table, refilled with the entries of the old one
-                nct = np.zeros((gc, 3), np.int64)
+                with objmode(nct="int64[:, ::1]"):
+                    nct = np.zeros((gc, 3), np.int64)
                 nct[:, 0] = -1
                 ct_used = 0
                 # the insertion of _steps at a node's check-in, written again here: _steps hands no

@@ -444,6 +444,39 @@ def kanban(n: int) -> PetriNet:
     return net.with_initial_marking({f"P{i}": n for i in range(1, 5)})
 
 
+def advised_huge(address: int) -> bool:
+    """Whether the mapping of this process holding ``address`` is advised for transparent huge pages
+    (``hg`` among its ``VmFlags`` in /proc/self/smaps: ``madvise(MADV_HUGEPAGE)``)."""
+    inside = False
+    with open("/proc/self/smaps", encoding="ascii") as fh:
+        for line in fh:
+            head = line.split()
+            if head and "-" in head[0] and not head[0].endswith(":"):
+                lo, hi = (int(x, 16) for x in head[0].split("-"))
+                inside = lo <= address < hi
+            elif inside and head and head[0] == "VmFlags:":
+                return "hg" in head[1:]
+    raise AssertionError(f"no mapping holds {address:#x}")
+
+
+def test_the_store_s_grown_buffers_are_numpy_s_advised_for_transparent_huge_pages() -> None:
+    # the unique and computed tables are read at random: with 4 KiB pages nearly every look-up misses
+    # the TLB (mdd_kernel's docstring); numpy advises an array of 4 MiB or more, numba does not
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _Store
+
+    net = kanban(60)
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0, sink=True)
+    store = _Store(enc, 256 << 20)
+    store.call(mk.MODE_SATURATE, events(sn, enc, merge=True), store.m0)
+    big = [a for a in store.arrays if a.nbytes >= 8 << 20]  # kids and the computed table, grown in the call
+    assert len(big) >= 2
+    assert all(advised_huge(a.ctypes.data + a.nbytes // 2) for a in big)
+
+
 def test_kanban_s_order_is_saturated_fastest_upside_down_and_the_race_takes_the_reverse() -> None:
     # the order search scores a span alike both ways up, but saturation fires an event at its top:
     # on the order found the stages' nodes are rebuilt for every token count on the way (113,617
