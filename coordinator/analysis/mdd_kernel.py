@@ -47,11 +47,11 @@ compiled call, within a byte budget: the computed table stops growing where it w
 status ``MEMORY`` comes when the nodes' own buffers would. The store is handed back to the caller,
 who passes it to the next call; nothing is ever freed (the store lives as long as one analysis).
 A grown buffer is made by numpy, in an ``objmode`` block, not by numba: numpy asks Linux for
-transparent huge pages for a large array (``madvise``, where the system's setting is ``madvise`` as
-Debian's is, or ``always``), numba's allocator does not, and the unique and computed tables are
-read at random, so with 4 KiB pages nearly every look-up misses the TLB (TCPcondis-PT-15, the
-first order's saturation alone, six alternating pairs: 31 to 54 s with huge pages, 53 to 59 s
-without, faster in every pair; docs/BENCHMARKS.md).
+transparent huge pages for an array of 4 MiB or more (``madvise``, honoured where the system's
+setting is ``madvise``, as on the machine measured, or ``always``), numba's allocator does not,
+and the unique and computed tables are read at random, so with 4 KiB pages nearly every look-up
+misses the TLB (TCPcondis-PT-15, the first order's saturation alone, six alternating pairs: 31
+to 54 s with huge pages, 53 to 59 s without, faster in every pair; docs/BENCHMARKS.md).
 """
 
 from __future__ import annotations
