@@ -1352,7 +1352,7 @@ def _enabled_below(y: int, e: int, t: int, b: int, ev_slot_ptr: np.ndarray, ev_s
         depth += 1
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # beside the deadlocks and the witness (symbolic._Counting)
 def enabled_counts(root: int, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot_ptr: np.ndarray,
                    ev_slot: np.ndarray, ev_sid: np.ndarray, on_ptr: np.ndarray, on_val: np.ndarray, offset: np.ndarray,
                    size: np.ndarray, kids: np.ndarray, level: np.ndarray, n_levels: int, n_nodes: int,

@@ -358,19 +358,36 @@ class _Store:
         enabled (:func:`.mdd_kernel.enabled_counts`; builds no node). Counts modulo the primes of
         the set's own :meth:`count`, so that count must have been given a bound (``at_most``) of
         the largest of these."""
+        return self.counting(node, ev)()
+
+    def counting(self, node: int, ev: Events) -> Callable[[], list[int]]:
+        """:meth:`enabled_counts` in two steps: what the count reads is taken now (the set's
+        :meth:`count` first, in the calling thread), and the function returned counts. That
+        function may run in another thread while this one goes on with the store
+        (:class:`_Counting`): it reads the nodes of the set, which the store never changes (it
+        only appends nodes, and a grown buffer is a new array, the old one kept alive by the
+        function), and their counts, which :meth:`count` writes once each (a new prime starts new
+        arrays). Raises AnalysisError (internal) when a count outgrows the set's primes."""
         self.count(node)
         meta, level, offset, size, kids = self.arrays[:5]
-        primes = np.array(self._primes, dtype=np.int64)
-        res = np.zeros((ev.n_events, len(self._primes)), np.int64)
-        approx = np.zeros(ev.n_events, np.float64)
-        on_ptr, on_val = mk.enabling_values(ev.fn_ptr, ev.fn)
-        sid = mk.suffix_ids(ev.top, ev.bot, ev.slot_ptr, ev.slot, on_ptr, on_val, self.enc.dom)
-        mk.enabled_counts(node, ev.top, ev.bot, ev.slot_ptr, ev.slot, sid, on_ptr, on_val, offset, size, kids, level,
-                          self.enc.n_levels, int(meta[mk.META_NODES]), self._residue, self._approx, primes, res,
-                          approx)
-        if approx.size and _beyond(float(approx.max()), len(self._primes)) and not self._primes_cover_domain():
-            raise AnalysisError("internal: an enabled count beyond the primes of the set's count")
-        return [_crt([int(r) for r in row], self._primes) for row in res]
+        n_nodes = int(meta[mk.META_NODES])
+        residue, approx_of, primes_of = self._residue, self._approx, list(self._primes)
+        covered = 60 * len(primes_of) - 3 > self.domain_bits
+        n_levels = self.enc.n_levels
+
+        def run() -> list[int]:
+            primes = np.array(primes_of, dtype=np.int64)
+            res = np.zeros((ev.n_events, len(primes_of)), np.int64)
+            approx = np.zeros(ev.n_events, np.float64)
+            on_ptr, on_val = mk.enabling_values(ev.fn_ptr, ev.fn)
+            sid = mk.suffix_ids(ev.top, ev.bot, ev.slot_ptr, ev.slot, on_ptr, on_val, self.dom)
+            mk.enabled_counts(node, ev.top, ev.bot, ev.slot_ptr, ev.slot, sid, on_ptr, on_val, offset, size, kids,
+                              level, n_levels, n_nodes, residue, approx_of, primes, res, approx)
+            if approx.size and _beyond(float(approx.max()), len(primes_of)) and not covered:
+                raise AnalysisError("internal: an enabled count beyond the primes of the set's count")
+            return [_crt([int(r) for r in row], primes_of) for row in res]
+
+        return run
 
     def presence(self, node: int) -> np.ndarray:
         """(Σ dom,) uint8: the values each level takes in the set (flat, per level by ``dom_ptr``)."""
@@ -860,9 +877,10 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         t0 = time.monotonic()
         free = enc.free(touched_places(sn))
         fireable = free.copy()
-        edges, counts = _fireable(store, single, reach, states, fireable)
-        edges += int(free.sum()) * states
-        dead = _dead(store, fwd, single, reach, counts, states) if not free.any() else mk.EMPTY
+        store.count(reach, at_most=_as_float(states) * max(1, single.n_events))
+        # the counts per transition (edges, quasi-liveness) beside the deadlocks, bounds and witness
+        enabled = _Counting(store.counting(reach, single), beside=cpus() >= 2)
+        dead = _dead(store, fwd, single, reach, enabled, states) if not free.any() else mk.EMPTY
         n_dead = store.count(dead)
         present = store.presence(reach)
         place_bounds = np.zeros(len(net.places), dtype=np.int64)
@@ -877,7 +895,7 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         max_total = store.max_weight(reach, weight) + enc.fixed_tokens
         secs["properties"] = time.monotonic() - t0
         result = SymbolicResult(
-            states=states, edges=edges, deadlock=n_dead > 0, n_deadlocks=n_dead, deadlock_marking=None,
+            states=states, edges=0, deadlock=n_dead > 0, n_deadlocks=n_dead, deadlock_marking=None,
             deadlock_sequence=None, fireable=fireable, place_bounds=place_bounds, stable=place_bounds == low,
             max_token_per_marking=max_total, live=None,
             live_transitions=np.full(len(net.transitions), None, dtype=object), reversible=None,
@@ -893,6 +911,10 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         mk.set_watch(traced, None, stop)
         _witness(store, sn, enc, net, fwd, back, reach, dead, result, say, traced)
         mk.set_watch(until, None, stop)
+        t0 = time.monotonic()
+        edges, counts = _edges(enabled.result(), single, fireable)  # fireable is the result's
+        result.edges = edges + int(free.sum()) * states
+        secs["properties"] += time.monotonic() - t0  # the wait for the counts
         upside: _Upside | None = None
         held = 0 if kept is None else kept.store.held()  # already taken from the store's budget
         spare = max(0, store.max_bytes - store.held()) // 2
@@ -1036,21 +1058,70 @@ def _fireable(store: _Store, single: Events, reach: int, states: int, fireable: 
     ``single`` (one transition each). Counted per transition by :meth:`_Store.enabled_counts`: a
     count restricted to the levels the transition reads, which builds no node."""
     store.count(reach, at_most=_as_float(states) * max(1, single.n_events))
-    counts = store.enabled_counts(reach, single)
+    return _edges(store.enabled_counts(reach, single), single, fireable)
+
+
+def _edges(counts: list[int], single: Events, fireable: np.ndarray) -> tuple[int, list[int]]:
+    """:func:`_fireable` from the counts per event of ``single``: ``fireable`` set, the edges summed."""
     for e, n in enumerate(counts):
         fireable[list(single.members[e])] = n > 0
     return sum(counts), counts
 
 
-def _dead(store: _Store, fwd: Events, single: Events, reach: int, counts: list[int], states: int,
+class _Counting:
+    """The number of reachable markings enabling each event (:meth:`_Store.counting`), counted in a
+    thread beside the phases that follow the reachable set (``beside``: two CPUs or more), or at
+    once. After the race the second CPU is idle; the deadlocks, the bounds and the witness's
+    firing sequence need no count per transition, and the count reads only nodes the store never
+    changes, so it runs beside them (BridgeAndVehicles-PT-V80P20N20, 3,728 transitions: 4.7 s of
+    counts; Sudoku-PT-AN04: 2.1 s beside 3.2 s of deadlocks; docs/BENCHMARKS.md). While it runs,
+    a buffer the store outgrows stays allocated until the count ends: memory beyond the store's
+    budget, at most its nodes' buffers (levels, offsets, sizes, children) once more."""
+
+    def __init__(self, count: Callable[[], list[int]], beside: bool) -> None:
+        self._count = count
+        self._counts: list[int] | None = None
+        self._error: BaseException | None = None
+        self._thread: threading.Thread | None = None
+        if beside:
+            self._thread = threading.Thread(target=self._run, name="petrobot-enabled-counts", daemon=True)
+            self._thread.start()
+        else:
+            self._run()
+
+    def _run(self) -> None:
+        try:
+            self._counts = self._count()
+        except BaseException as exc:  # raised again in the caller's thread, by result()
+            self._error = exc
+
+    def now(self) -> list[int] | None:
+        """The counts if they are done, else None (no wait)."""
+        return self._counts
+
+    def result(self) -> list[int]:
+        """The counts, once done (Ctrl-C stays possible while it waits); raises what the count raised."""
+        if self._thread is not None:
+            while self._thread.is_alive():
+                self._thread.join(0.2)
+        if self._error is not None:
+            raise self._error
+        assert self._counts is not None
+        return self._counts
+
+
+def _dead(store: _Store, fwd: Events, single: Events, reach: int, counts: list[int] | _Counting, states: int,
           max_sets: int = 1 << 19) -> int:
     """The reachable markings that enable no event of ``fwd``: empty at once when one is enabled in
-    every reachable marking; else in one pass over the reachable set, with the conditions pending on
-    each path (MODE_DEAD, :func:`.mdd_kernel.dead_tables`: at most ``max_sets`` sets of them, of
-    8 ``max_sets`` residuals in all); when those outgrow their tables, the reachable set restricted
-    event by event instead (:func:`_dead_by_events`). One pass: AirplaneLD-PT-1000, whose 8,008
-    events share six places, in 0.15 s where event by event took 24.5 s."""
-    if states in counts:
+    every reachable marking (known when ``counts`` are, per event of ``single``: a list, or a
+    :class:`_Counting` done already); else in one pass over the reachable set, with the conditions
+    pending on each path (MODE_DEAD, :func:`.mdd_kernel.dead_tables`: at most ``max_sets`` sets of
+    them, of 8 ``max_sets`` residuals in all); when those outgrow their tables, the reachable set
+    restricted event by event instead (:func:`_dead_by_events`, which waits for the counts). One
+    pass: AirplaneLD-PT-1000, whose 8,008 events share six places, in 0.15 s where event by event
+    took 24.5 s."""
+    known = counts if isinstance(counts, list) else counts.now()
+    if known is not None and states in known:
         return mk.EMPTY
     dz = mk.dead_tables(store.dom, fwd.top, fwd.bot, fwd.slot_ptr, fwd.slot, fwd.fn_ptr, fwd.fn,
                         max_sets=max_sets, max_items=8 * max_sets)
@@ -1059,7 +1130,7 @@ def _dead(store: _Store, fwd: Events, single: Events, reach: int, counts: list[i
     try:
         return store.call(mk.MODE_DEAD, fwd, reach, dz=dz)
     except _TooWide:
-        return _dead_by_events(store, fwd, single, reach, counts)
+        return _dead_by_events(store, fwd, single, reach, counts if isinstance(counts, list) else counts.result())
     finally:
         mk.clear_cache(store.arrays)  # its results name sets of dz
 

@@ -477,6 +477,34 @@ def test_the_store_s_grown_buffers_are_numpy_s_advised_for_transparent_huge_page
     assert all(advised_huge(a.ctypes.data + a.nbytes // 2) for a in big)
 
 
+def test_the_counts_per_transition_taken_before_the_store_moves_on_are_the_counts_after() -> None:
+    # symbolic._Counting counts beside the deadlocks and the witness, which grow the store's buffers
+    # and may give the counts new primes: what _Store.counting took stays valid (nodes are only appended)
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _Counting, _Store
+
+    net = kanban(20)  # 805,422,366,595 markings
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0, sink=True)
+    fwd, single = events(sn, enc, merge=True), events(sn, enc)
+    store = _Store(enc, 256 << 20)
+    reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
+    states = store.count(reach, at_most=float(store.count(reach)) * single.n_events)
+    taken = store.counting(reach, single)
+    beside = _Counting(store.counting(reach, single), beside=True)
+    kids, primes = store.arrays[4], list(store._primes)
+    # the markings reached from another one (as the witness's and liveness's closures): the children
+    # buffer grows; then a count with more primes: new arrays of counts
+    other = store.call(mk.MODE_APPLY, fwd, reach, store.m0, arg=mk.APPLY_DIFF)
+    ahead = store.closure(fwd, store.path(store.pick(other)))
+    store.count(ahead, at_most=2.0**200)
+    assert store.arrays[4] is not kids and store._primes != primes
+    alone = store.enabled_counts(reach, single)
+    assert taken() == beside.result() == alone
+    assert 0 < min(alone) and max(alone) < states
+
 def test_kanban_s_order_is_saturated_fastest_upside_down_and_the_race_takes_the_reverse() -> None:
     # the order search scores a span alike both ways up, but saturation fires an event at its top:
     # on the order found the stages' nodes are rebuilt for every token count on the way (113,617
