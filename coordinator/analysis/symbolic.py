@@ -15,7 +15,8 @@ the set, with exact integers of any size:
 
 * the number of markings and of edges (one per reachable marking and transition enabled in it:
   the Model Checking Contest's count), the edges counted per transition on the levels it reads
-  only, building no node (:func:`.mdd_kernel.enabled_counts`);
+  only, building no node (:func:`.mdd_kernel.enabled_counts`; on two CPUs in a thread beside the
+  deadlocks and the witness, :class:`_Counting`);
 * deadlocks: the dead markings (the reachable set restricted, event by event, to the markings
   where the event is disabled), their number, one of them with a firing sequence from M0: a
   best-first search over explicit markings, nearest to one dead marking first, that never leaves
