@@ -73,7 +73,7 @@ __all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "Flag", "IMAGE_C
            "IMAGE_EACH", "MEMORY", "MODE_APPLY", "MODE_DEAD", "MODE_IMAGE", "MODE_RESTRICT", "MODE_SATURATE",
            "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "WIDE", "add_path", "clear_cache", "count",
            "dead_tables", "enabled_counts", "enabling_values", "max_weight", "most_paths", "new_store", "node_of_path",
-           "presence", "run", "set_watch", "suffix_ids"]
+           "presence", "run", "set_watch", "subset", "suffix_ids"]
 
 EMPTY, TERMINAL = 0, 1
 NO_CONSTRAINT = -1
@@ -1161,6 +1161,54 @@ def presence(root: int, offset: np.ndarray, size: np.ndarray, kids: np.ndarray, 
             if kids[offset[n] + i] != EMPTY:
                 out[dom_ptr[k] + i] = 1
     return int(nodes.shape[0])
+
+
+@njit(cache=True, nogil=True)  # beside the main thread's closures (symbolic._Home)
+def subset(a: int, offset_a: np.ndarray, size_a: np.ndarray, kids_a: np.ndarray, b: int, offset_b: np.ndarray,
+           size_b: np.ndarray, kids_b: np.ndarray) -> bool:
+    """Whether the set ``a`` of one store is inside the set ``b`` of another on the same levels (the
+    same variable order and domains): a walk over the pairs of nodes (one of each) that the same
+    values lead to from the roots, each pair once (a set of their keys), building no node. Every
+    stored node leads to the terminal, so a pair is inside iff every non-empty child of the first
+    has a non-empty child of the second under the same value and that pair is inside."""
+    if a == EMPTY:
+        return True
+    if b == EMPTY:
+        return False
+    if a == TERMINAL or b == TERMINAL:
+        return a == b
+    n_b = np.int64(size_b.shape[0])
+    seen = {np.int64(a) * n_b + b}
+    stack = np.empty(1024, np.int64)
+    stack[0] = np.int64(a) * n_b + b
+    depth = 1
+    while depth > 0:
+        depth -= 1
+        x, y = stack[depth] // n_b, stack[depth] % n_b
+        for i in range(size_a[x]):
+            ca = kids_a[offset_a[x] + i]
+            if ca == EMPTY:
+                continue
+            if i >= size_b[y]:
+                return False
+            cb = kids_b[offset_b[y] + i]
+            if cb == EMPTY:
+                return False
+            if ca == TERMINAL or cb == TERMINAL:
+                if ca != cb:
+                    return False
+                continue
+            key = np.int64(ca) * n_b + cb
+            if key in seen:
+                continue
+            seen.add(key)
+            if depth == stack.shape[0]:
+                grown = np.empty(2 * depth, np.int64)
+                grown[:depth] = stack
+                stack = grown
+            stack[depth] = key
+            depth += 1
+    return True
 
 
 @njit(cache=True)
