@@ -927,18 +927,14 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             if kept is not None:
                 kept.drop()
             store.max_bytes += held
-            held = 0
             if beside and back is not None:
                 store.max_bytes -= spare
                 upside = _Home(store, back, reach, spare, until, stop, say)
-            else:
-                spare = 0
         try:
             _liveness(store, fwd, single, back, reach, counts, result, say, until, probes, stop, upside)
         finally:
             if upside is not None:
-                upside.end()
-            store.max_bytes += held + spare
+                _take_back(store, upside)
         result.nodes = store.nodes
         return result
     finally:
@@ -1886,6 +1882,8 @@ class _Upside:
         self.say, self.kept = say, kept
         #: where the thread decides, for the progress lines
         self.how = "on the order upside down"
+        #: the bytes it took from the main store's budget (:func:`_take_back`)
+        self.lent = max_bytes
         self.reversible: bool | None = None
         self.decided = _Cancel(stop)
         self.cancel = _Cancel(stop)
@@ -1938,6 +1936,8 @@ class _Home:
                  stop: threading.Event | None, say: Callable[[str], None]) -> None:
         self.say = say
         self.how = "beside, on a store of its own"
+        #: the bytes it took from the main store's budget (:func:`_take_back`)
+        self.lent = max_bytes
         self.reversible: bool | None = None
         self.decided = _Cancel(stop)
         self.cancel = _Cancel(stop)
@@ -1966,6 +1966,14 @@ class _Home:
         """Stop the thread and wait for it (its store is freed with it)."""
         self.cancel.set()
         self.thread.join()
+
+
+def _take_back(store: _Store, beside: _Upside | _Home) -> None:
+    """End the thread ``beside`` (it is waited for) and give ``store`` back the bytes it lent it;
+    once (again: nothing more)."""
+    beside.end()
+    store.max_bytes += beside.lent
+    beside.lent = 0
 
 
 class _ShownReversible:
@@ -2111,14 +2119,24 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
                 home = store.closure(back, store.m0, c=reach)
                 result.reversible = home == reach
                 upside.cancel.set()
-            except (_OutOfTime, _OutOfMemory):  # its answer, the deadline or a stop; or this store's budget
+            except _OutOfTime:  # its answer, the deadline or a stop
                 while upside.thread.is_alive():  # it ends by the same deadline and stop
                     upside.thread.join(0.2)
                 if upside.reversible is None:
                     raise
                 result.reversible = upside.reversible
                 say(f"symbolic: reversibility decided {upside.how}")
+            except _OutOfMemory:  # this store's budget, the thread's part lent: it stops, and gives it back
+                _take_back(store, upside)
+                if upside.reversible is None:
+                    mk.set_watch(until, None, stop)
+                    result.reversible = store.closure(back, store.m0, c=reach) == reach
+                else:
+                    result.reversible = upside.reversible
+                    say(f"symbolic: reversibility decided {upside.how}")
             mk.set_watch(until, None, stop)
+        if upside is not None:
+            _take_back(store, upside)  # its answer is in, or not needed: its bytes are the main store's again
         if result.reversible is None:
             say("symbolic: reversibility (backward from M0)")
             home = store.closure(back, store.m0, c=reach)

@@ -745,6 +745,93 @@ def test_backward_saturation_inside_the_reachable_set_stays_inside_it() -> None:
     assert r.reversible is False and r.live is False and r.live_transitions[-1] is False
 
 
+def test_a_set_is_inside_a_set_of_another_store_on_the_same_levels() -> None:
+    # _Home compares the reachable set of the main store with the markings that reach M0, built on
+    # a store of its own: mdd_kernel.subset walks pairs of nodes, one of each store
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _Store
+
+    net = kanban(6)
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0, sink=True)
+    fwd = events(sn, enc, merge=True)
+    one, other = _Store(enc, 64 << 20), _Store(enc, 64 << 20)
+    reach = one.call(mk.MODE_SATURATE, fwd, one.m0)
+    other.path(np.zeros(enc.n_levels, dtype=np.int64))  # the two stores number their nodes apart
+    again = other.call(mk.MODE_SATURATE, fwd, other.m0)
+    but_m0 = other.call(mk.MODE_APPLY, fwd, again, other.m0, arg=mk.APPLY_DIFF)
+    assert other.count(again) == one.count(reach) == other.count(but_m0) + 1
+    assert reach != again  # the same set, numbered apart
+
+    def inside(a: int, sa: _Store, b: int, sb: _Store) -> bool:
+        return bool(mk.subset(a, *sa.arrays[2:5], b, *sb.arrays[2:5]))
+
+    assert inside(reach, one, again, other) and inside(again, other, reach, one)
+    assert inside(but_m0, other, reach, one) and not inside(reach, one, but_m0, other)
+    assert inside(mk.EMPTY, one, mk.EMPTY, other) and not inside(reach, one, mk.EMPTY, other)
+
+
+def test_the_main_thread_takes_back_the_bytes_lent_beside_when_its_closure_outgrows_the_rest() -> None:
+    # the thread beside reversibility takes part of the main store's budget while it runs; when the
+    # main thread's backward saturation outgrows what is left and the thread has not decided, the
+    # thread is stopped and the saturation goes on with the whole budget
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import SymbolicResult, _Home, _liveness, _Store
+
+    net = kanban(20)
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0, sink=True).reversed()  # backward: 404 to 6,829 nodes
+    fwd, single, back = events(sn, enc, merge=True), events(sn, enc), events(sn, enc, inverse=True, merge=True)
+    store = _Store(enc, 256 << 20)
+    reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
+    states = store.count(reach, at_most=float(store.count(reach)) * single.n_events)
+    counts = store.enabled_counts(reach, single)
+    home = _Home(store, back, reach, 0, float("inf"), None, lambda _text: None)  # no bytes: it cannot decide
+    home.thread.join()
+    assert home.reversible is None
+    home.lent = 64 << 20  # as analyse_symbolic lends it: the main store keeps only what it holds
+    store.max_bytes = store.held()
+    result = SymbolicResult(
+        states=states, edges=sum(counts), deadlock=False, n_deadlocks=0, deadlock_marking=None,
+        deadlock_sequence=None, fireable=np.array([n > 0 for n in counts]), place_bounds=np.zeros(len(net.places),
+                                                                                                  dtype=np.int64),
+        stable=np.zeros(len(net.places), dtype=bool), max_token_per_marking=0, live=None,
+        live_transitions=np.full(len(net.transitions), None, dtype=object), reversible=None, levels=enc.n_levels,
+        groups=enc.groups, nodes=store.nodes, order_score=enc.score, seconds={}, notes=[])
+    held = store.held()
+    _liveness(store, fwd, single, back, reach, counts, result, lambda _text: None, float("inf"), 0, None, home)
+    assert result.reversible is True and result.live is True and not result.notes
+    assert store.held() > held and store.max_bytes == held + (64 << 20) and home.lent == 0
+
+
+@pytest.mark.parametrize("reversible", [True, False])
+def test_reversibility_is_decided_beside_on_a_store_of_its_own(reversible: bool) -> None:
+    # where the race kept no order upside down, symbolic._Home saturates backward from M0 without
+    # the reachable set as its constraint, then compares the two across the stores
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _Home, _Store
+
+    net = kanban(6) if reversible else one_shot_net(4)
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0, sink=True)
+    store = _Store(enc, 64 << 20)
+    reach = store.call(mk.MODE_SATURATE, events(sn, enc, merge=True), store.m0)
+    said: list[str] = []
+    home = _Home(store, events(sn, enc, inverse=True, merge=True), reach, 64 << 20, float("inf"), None, said.append)
+    assert home.decided.wait(60.0)
+    home.end()
+    assert home.reversible is reversible
+    assert said and "the markings that reach M0, beside, on a store of its own" in said[0]
+    # the answer of the whole engine is the same, whichever thread gave it
+    r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0)
+    assert r.reversible is reversible and r.live is reversible
+
 def branches_net(n: int) -> PetriNet:
     """A one-shot choice among n branches, each a two-step cycle of its own, beside a clock that
     ticks in every marking: n terminal components, each missing the others' cycles; only the tick
