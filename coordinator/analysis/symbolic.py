@@ -1877,7 +1877,8 @@ class _Upside:
     closure (it watches that flag, which ``stop`` sets too); :meth:`end` stops this one. Its store
     has ``max_bytes``, which the caller takes from the main store's budget while it runs. Not
     started from M0 on an order the race did not keep: it would take a CPU and memory bandwidth
-    from the main thread's closures for a whole saturation forward first."""
+    from the main thread's closures for a whole saturation forward first (where the race kept
+    none, :class:`_Home` works on the winner's order instead)."""
 
     def __init__(self, sn: SparseNet, kept: _Candidate, max_bytes: int, until: float, stop: threading.Event | None,
                  say: Callable[[str], None]) -> None:
