@@ -53,6 +53,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from math import ceil, inf, log2
+from typing import Any
 
 import numpy as np
 
@@ -916,7 +917,7 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         edges, counts = _edges(enabled.result(), single, fireable)  # fireable is the result's
         result.edges = edges + int(free.sum()) * states
         secs["properties"] += time.monotonic() - t0  # the wait for the counts
-        upside: _Upside | _Home | None = None
+        upside: _Beside | None = None
         held = 0 if kept is None else kept.store.held()  # already taken from the store's budget
         spare = max(0, store.max_bytes - store.held()) // 2
         beside = back is not None and cpus() >= 2 and states > 1 and not result.deadlock
@@ -1055,17 +1056,11 @@ def _check_suspects(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, 
                            np.intersect1d(touched_places(sn)[t], enc.fixed).astype(np.int64))
 
 
-def _fireable(store: _Store, single: Events, reach: int, states: int, fireable: np.ndarray) -> tuple[int, list[int]]:
-    """Mark the transitions enabled in some reachable marking; return the number of edges (reachable
-    marking, enabled transition) and the number of reachable markings enabling each event of
-    ``single`` (one transition each). Counted per transition by :meth:`_Store.enabled_counts`: a
-    count restricted to the levels the transition reads, which builds no node."""
-    store.count(reach, at_most=_as_float(states) * max(1, single.n_events))
-    return _edges(store.enabled_counts(reach, single), single, fireable)
-
-
 def _edges(counts: list[int], single: Events, fireable: np.ndarray) -> tuple[int, list[int]]:
-    """:func:`_fireable` from the counts per event of ``single``: ``fireable`` set, the edges summed."""
+    """Mark in ``fireable`` the transitions enabled in some reachable marking, from ``counts``: per
+    event of ``single`` (one transition each), the number of reachable markings enabling it
+    (:meth:`_Store.enabled_counts`); return the number of edges (reachable marking, enabled
+    transition) and ``counts``."""
     for e, n in enumerate(counts):
         fireable[list(single.members[e])] = n > 0
     return sum(counts), counts
@@ -1862,7 +1857,32 @@ def _probe(store: _Store, fwd: Events, single: Events, reach: int, result: Symbo
             return
 
 
-class _Upside:
+class _Beside:
+    """A thread that decides reversibility beside the main thread's closure (:class:`_Upside`,
+    :class:`_Home`): :attr:`reversible` once :attr:`decided` is set (which stops the main thread's
+    closure: it watches that flag, which ``stop`` sets too), :attr:`lent` the bytes it took from
+    the main store's budget while it runs (:func:`_take_back`), :meth:`end` stops it. The thread,
+    ``name``, runs ``run(*args)`` and starts here, last."""
+
+    def __init__(self, how: str, max_bytes: int, stop: threading.Event | None, name: str, run: Callable[..., None],
+                 *args: Any) -> None:
+        #: where the thread decides, for the progress lines
+        self.how = how
+        #: the bytes it took from the main store's budget (:func:`_take_back`)
+        self.lent = max_bytes
+        self.reversible: bool | None = None
+        self.decided = _Cancel(stop)
+        self.cancel = _Cancel(stop)
+        self.thread = threading.Thread(target=run, args=args, name=name, daemon=True)
+        self.thread.start()
+
+    def end(self) -> None:
+        """Stop the thread and wait for it (its store is freed with it)."""
+        self.cancel.set()
+        self.thread.join()
+
+
+class _Upside(_Beside):
     """Reversibility on the reachable set's order upside down (:meth:`.mdd_order.Encoding.reversed`),
     in a thread beside the later phases (two CPUs or more, :func:`analyse_symbolic`), when the race
     left that order's candidate with its store (``kept``, :meth:`_Race.upside_down`): first, for
@@ -1883,16 +1903,8 @@ class _Upside:
     def __init__(self, sn: SparseNet, kept: _Candidate, max_bytes: int, until: float, stop: threading.Event | None,
                  say: Callable[[str], None]) -> None:
         self.say, self.kept = say, kept
-        #: where the thread decides, for the progress lines
-        self.how = "on the order upside down"
-        #: the bytes it took from the main store's budget (:func:`_take_back`)
-        self.lent = max_bytes
-        self.reversible: bool | None = None
-        self.decided = _Cancel(stop)
-        self.cancel = _Cancel(stop)
-        self.thread = threading.Thread(target=self._run, args=(sn, kept, max_bytes, until),
-                                       name="petrobot-upside-down", daemon=True)
-        self.thread.start()
+        super().__init__("on the order upside down", max_bytes, stop, "petrobot-upside-down", self._run, sn, kept,
+                         max_bytes, until)
 
     def _run(self, sn: SparseNet, kept: _Candidate, max_bytes: int, until: float) -> None:
         mk.set_watch(until, None, self.cancel)
@@ -1923,8 +1935,7 @@ class _Upside:
 
     def end(self) -> None:
         """Stop the thread, wait for it and free the kept candidate's store."""
-        self.cancel.set()
-        self.thread.join()
+        super().end()
         self.kept.drop()
 
 
@@ -1952,7 +1963,7 @@ def _closed_home(enc: Encoding, fwd: Events, back: Events, max_bytes: int) -> bo
         return False
 
 
-class _Home:
+class _Home(_Beside):
     """Reversibility beside the main thread where the race kept no order upside down (two CPUs or
     more, :func:`analyse_symbolic`): on a store of its own, on the reachable set's encoding, the
     markings that reach M0 by saturation backward from M0, not kept inside the reachable set (that
@@ -1967,21 +1978,14 @@ class _Home:
     more; SmallOperatingSystem-PT-MT0512DC0128 on its first order, none, in 0.8 s. Where they are
     many, the thread's time or its memory (``max_bytes``, taken from the main store's budget while
     it runs) ends it undecided, and the main thread's answer stands. The interface of
-    :class:`_Upside`: :attr:`decided` stops the main thread's closure, :meth:`end` this thread."""
+    :class:`_Beside`."""
 
     def __init__(self, store: _Store, back: Events, reach: int, max_bytes: int, until: float,
                  stop: threading.Event | None, say: Callable[[str], None]) -> None:
         self.say = say
-        self.how = "beside, on a store of its own"
-        #: the bytes it took from the main store's budget (:func:`_take_back`)
-        self.lent = max_bytes
-        self.reversible: bool | None = None
-        self.decided = _Cancel(stop)
-        self.cancel = _Cancel(stop)
         _meta, _level, offset, size, kids = store.arrays[:5]
-        self.thread = threading.Thread(target=self._run, args=(store.enc, back, (reach, offset, size, kids), max_bytes,
-                                                               until), name="petrobot-home", daemon=True)
-        self.thread.start()
+        super().__init__("beside, on a store of its own", max_bytes, stop, "petrobot-home", self._run, store.enc, back,
+                         (reach, offset, size, kids), max_bytes, until)
 
     def _run(self, enc: Encoding, back: Events, reach: tuple[int, np.ndarray, np.ndarray, np.ndarray], max_bytes: int,
              until: float) -> None:
@@ -1999,13 +2003,8 @@ class _Home:
         finally:
             mk.set_watch(None, None)
 
-    def end(self) -> None:
-        """Stop the thread and wait for it (its store is freed with it)."""
-        self.cancel.set()
-        self.thread.join()
 
-
-def _take_back(store: _Store, beside: _Upside | _Home) -> None:
+def _take_back(store: _Store, beside: _Beside) -> None:
     """End the thread ``beside`` (it is waited for) and give ``store`` back the bytes it lent it;
     once (again: nothing more)."""
     beside.end()
@@ -2017,7 +2016,7 @@ class _ShownReversible:
     """A :class:`.mdd_kernel.Flag`: set once the thread ``beside`` has shown the net reversible, or
     ``stop`` is set."""
 
-    def __init__(self, beside: _Upside | _Home, stop: threading.Event | None) -> None:
+    def __init__(self, beside: _Beside, stop: threading.Event | None) -> None:
         self.beside, self.stop = beside, stop
 
     def is_set(self) -> bool:
@@ -2105,7 +2104,7 @@ def _terminal(store: _Store, fwd: Events, back: Events, single: Events, reach: i
 
 def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, reach: int, counts: list[int],
               result: SymbolicResult, say: Callable[[str], None], until: float, probes: int,
-              stop: threading.Event | None = None, upside: _Upside | _Home | None = None) -> None:
+              stop: threading.Event | None = None, upside: _Beside | None = None) -> None:
     """Reversibility and liveness (module docstring), until ``until`` (``time.monotonic()``
     seconds): what the drawn markings tell forward first (:func:`_probe`, within a share of the
     time), then backward saturation from M0 (reversibility), then the terminal components

@@ -14,10 +14,10 @@ from analysis_nets import dekker, make_net, philosophers_arcs
 
 from coordinator.analysis import lp
 from coordinator.analysis.matrices import SparseNet, sparse_net
-from coordinator.analysis.mdd_order import Encoding
+from coordinator.analysis.mdd_order import Encoding, Events
 from coordinator.analysis.statespace import explore
 from coordinator.analysis.structure import Analysis, analyse
-from coordinator.analysis.symbolic import SymbolicResult, analyse_symbolic
+from coordinator.analysis.symbolic import SymbolicResult, _Store, analyse_symbolic
 from coordinator.errors import AnalysisError
 from coordinator.net import Marking, PetriNet
 from coordinator.netfile.pnml import load_pnml
@@ -180,18 +180,24 @@ def generated_encoding(seed: int) -> tuple[PetriNet, Analysis, SparseNet, Encodi
     return net, a, sn, encode(sn, bounds, flows, seconds=5.0, seed=0)
 
 
+def counts_per_transition(store: _Store, single: Events, reach: int, states: int) -> list[int]:
+    """Per event of ``single``: the markings of ``reach`` enabling it, counted as analyse_symbolic counts them."""
+    store.count(reach, at_most=float(states) * max(1, single.n_events))
+    return store.enabled_counts(reach, single)
+
+
 @pytest.mark.parametrize("seed", range(40))
 def test_the_breadth_first_trace_to_a_deadlock_is_a_shortest_firing_sequence(seed: int) -> None:
     from coordinator.analysis import mdd_kernel as mk
     from coordinator.analysis.mdd_order import events, touched_places
-    from coordinator.analysis.symbolic import _bfs_sequence, _dead, _Explicit, _fireable, _Store
+    from coordinator.analysis.symbolic import _bfs_sequence, _dead, _Explicit, _Store
 
     net, a, sn, enc = generated_encoding(seed)
     fwd, single = events(sn, enc, merge=True), events(sn, enc)
     store = _Store(enc, 64 << 20)
     reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
     states = store.count(reach)
-    _, counts = _fireable(store, single, reach, states, np.zeros(len(net.transitions), dtype=bool))
+    counts = counts_per_transition(store, single, reach, states)
     free = enc.free(touched_places(sn)).any()  # a transition enabled everywhere: no dead marking
     dead = mk.EMPTY if free else _dead(store, fwd, single, reach, counts, states)
     assert store.count(dead) == a.n_deadlocks
@@ -228,14 +234,14 @@ def test_the_dead_markings_in_one_pass_are_those_restricted_event_by_event_and_t
         seed: int) -> None:
     from coordinator.analysis import mdd_kernel as mk
     from coordinator.analysis.mdd_order import events, touched_places
-    from coordinator.analysis.symbolic import _dead, _dead_by_events, _fireable, _Store
+    from coordinator.analysis.symbolic import _dead, _dead_by_events, _Store
 
     net, a, sn, enc = generated_encoding(seed)
     fwd, single = events(sn, enc, merge=True), events(sn, enc)
     store = _Store(enc, 64 << 20)  # one store: equal sets are the same node
     reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
     states = store.count(reach)
-    _, counts = _fireable(store, single, reach, states, np.zeros(len(net.transitions), dtype=bool))
+    counts = counts_per_transition(store, single, reach, states)
     if enc.free(touched_places(sn)).any():  # a transition that reads no level: enabled everywhere
         return
     by_events = _dead_by_events(store, fwd, single, reach, counts)
@@ -252,7 +258,7 @@ def test_the_conditions_pending_on_a_path_are_shared_by_the_events_of_one_place_
     # every path down has the controller's one condition pending, not one per station
     from coordinator.analysis import mdd_kernel as mk
     from coordinator.analysis.mdd_order import encode, events
-    from coordinator.analysis.symbolic import _dead_by_events, _fireable, _Store
+    from coordinator.analysis.symbolic import _dead_by_events, _Store
 
     n = 40
     marking = {f"idle{i}": 1 for i in range(n)} | {"go": 1}
@@ -266,7 +272,7 @@ def test_the_conditions_pending_on_a_path_are_shared_by_the_events_of_one_place_
     store = _Store(enc, 256 << 20)
     reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
     states = store.count(reach)
-    _, counts = _fireable(store, single, reach, states, np.zeros(len(net.transitions), dtype=bool))
+    counts = counts_per_transition(store, single, reach, states)
     dz = mk.dead_tables(store.dom, fwd.top, fwd.bot, fwd.slot_ptr, fwd.slot, fwd.fn_ptr, fwd.fn)
     assert dz is not None
     dead = store.call(mk.MODE_DEAD, fwd, reach, dz=dz)
@@ -372,16 +378,24 @@ def test_kanban_s_reversibility_is_decided_on_the_first_order_kept_when_its_reve
     assert r.reversible is True and r.live is True
 
 
-@pytest.mark.parametrize("reversible", [True, False])
-def test_the_markings_that_reach_m0_closed_under_firing_show_the_net_reversible(reversible: bool) -> None:
-    # symbolic._closed_home: backward from M0 without the reachable set, then one image forward
-    from coordinator.analysis.mdd_order import encode, events
-    from coordinator.analysis.symbolic import _closed_home
+def reversible_or_not(reversible: bool) -> tuple[PetriNet, np.ndarray, list[np.ndarray], SparseNet, Encoding]:
+    """Kanban-6 (reversible) or a net whose first firing cannot be undone (not reversible), with its
+    proven bounds, P-semiflows, sparse form and an encoding for saturation."""
+    from coordinator.analysis.mdd_order import encode
 
     net = kanban(6) if reversible else one_shot_net(4)
     bounds, flows = proven_bounds(net)
     sn = sparse_net(net)
-    enc = encode(sn, bounds, flows, seconds=5.0, seed=0, sink=True)
+    return net, bounds, flows, sn, encode(sn, bounds, flows, seconds=5.0, seed=0, sink=True)
+
+
+@pytest.mark.parametrize("reversible", [True, False])
+def test_the_markings_that_reach_m0_closed_under_firing_show_the_net_reversible(reversible: bool) -> None:
+    # symbolic._closed_home: backward from M0 without the reachable set, then one image forward
+    from coordinator.analysis.mdd_order import events
+    from coordinator.analysis.symbolic import _closed_home
+
+    _net, _bounds, _flows, sn, enc = reversible_or_not(reversible)
     for e in (enc, enc.reversed()):
         fwd, back = events(sn, e, merge=True), events(sn, e, inverse=True, merge=True)
         assert _closed_home(e, fwd, back, 64 << 20) is reversible
@@ -830,13 +844,10 @@ def test_reversibility_is_decided_beside_on_a_store_of_its_own(reversible: bool)
     # where the race kept no order upside down, symbolic._Home saturates backward from M0 without
     # the reachable set as its constraint, then compares the two across the stores
     from coordinator.analysis import mdd_kernel as mk
-    from coordinator.analysis.mdd_order import encode, events
-    from coordinator.analysis.symbolic import _Home, _Store
+    from coordinator.analysis.mdd_order import events
+    from coordinator.analysis.symbolic import _Home
 
-    net = kanban(6) if reversible else one_shot_net(4)
-    bounds, flows = proven_bounds(net)
-    sn = sparse_net(net)
-    enc = encode(sn, bounds, flows, seconds=5.0, seed=0, sink=True)
+    net, bounds, flows, sn, enc = reversible_or_not(reversible)
     store = _Store(enc, 64 << 20)
     reach = store.call(mk.MODE_SATURATE, events(sn, enc, merge=True), store.m0)
     said: list[str] = []
@@ -1175,7 +1186,7 @@ def test_random_walks_fall_into_a_deadlock_and_give_a_firing_sequence_that_repla
 
     from coordinator.analysis import mdd_kernel as mk
     from coordinator.analysis import symbolic
-    from coordinator.analysis.mdd_order import encode, events, touched_places
+    from coordinator.analysis.mdd_order import encode, events
 
     net = philosophers(n)
     sn = sparse_net(net)
@@ -1186,7 +1197,7 @@ def test_random_walks_fall_into_a_deadlock_and_give_a_firing_sequence_that_repla
     reach = store.call(mk.MODE_SATURATE, fwd, store.m0, check_overflow=True)
     single = events(sn, enc)
     states = store.count(reach)
-    _, counts = symbolic._fireable(store, single, reach, states, enc.free(touched_places(sn)).copy())
+    counts = counts_per_transition(store, single, reach, states)
     dead = symbolic._dead(store, fwd, single, reach, counts, states)
     ex = symbolic._Explicit(sn, enc)
     found = symbolic._walk_sequence(store, ex, net, dead, time.monotonic() + 60.0)
