@@ -73,7 +73,7 @@ __all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "Flag", "IMAGE_C
            "IMAGE_EACH", "MEMORY", "MODE_APPLY", "MODE_DEAD", "MODE_IMAGE", "MODE_RESTRICT", "MODE_SATURATE",
            "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "WIDE", "add_path", "clear_cache", "count",
            "dead_tables", "enabled_counts", "enabling_values", "max_weight", "most_paths", "new_store", "node_of_path",
-           "presence", "run", "set_watch", "subset", "suffix_ids"]
+           "presence", "run", "set_watch", "subset", "suffix_ids", "wider_dead_tables"]
 
 EMPTY, TERMINAL = 0, 1
 NO_CONSTRAINT = -1
@@ -195,24 +195,33 @@ def dead_tables(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot
     flat: list[np.ndarray] = []
     used = 0
     starts: list[set[int]] = [set() for _ in range(n_levels)]
-    for e in range(ev_top.shape[0]):
-        top = int(ev_top[e])
-        slots = ev_slot[ev_slot_ptr[e]:ev_slot_ptr[e] + int(ev_bot[e]) - top + 1]
-        lits: list[tuple[int, np.ndarray]] = []
-        for off in np.flatnonzero(slots >= 0):
-            k = top + int(off)
-            holds = nxt[slot_ptr[slots[off]]:slot_ptr[slots[off]] + dom[k]] >= 0
-            if not holds.all():
-                lits.append((k, holds))
-        if not lits:
-            return None
+    n_ev = ev_top.shape[0]
+    # every (event, level) with a local function, at once: a literal where the function maps fewer
+    # values than the level's domain (those of one event are consecutive, in level order)
+    pos = np.flatnonzero(ev_slot[:int(ev_slot_ptr[n_ev]) if n_ev else 0] >= 0)
+    ev_of = np.searchsorted(ev_slot_ptr, pos, side="right") - 1
+    lev = ev_top[ev_of] + pos - ev_slot_ptr[ev_of]
+    fid = ev_slot[pos]
+    mapped = np.zeros(nxt.shape[0] + 1, np.int64)
+    np.cumsum(nxt >= 0, out=mapped[1:])
+    lit = np.flatnonzero(mapped[slot_ptr[fid] + dom[lev]] - mapped[slot_ptr[fid]] < dom[lev])
+    first = np.searchsorted(ev_of[lit], np.arange(n_ev + 1))
+    if n_ev and (np.diff(first) == 0).any():  # an event with no literal
+        return None
+    mask_of: dict[tuple[int, int], int] = {}  # (level, function) → its mask's offset
+    for e in range(n_ev):
         r = 0
-        for k, holds in reversed(lits):
-            m = masks.get((k, holds.tobytes()))
+        for i in lit[first[e]:first[e + 1]][::-1].tolist():
+            k, f = int(lev[i]), int(fid[i])
+            m = mask_of.get((k, f))
             if m is None:
-                m = masks[(k, holds.tobytes())] = used
-                flat.append(holds.astype(np.int64))
-                used += holds.shape[0]
+                holds = nxt[slot_ptr[f]:slot_ptr[f] + dom[k]] >= 0
+                m = masks.get((k, holds.tobytes()))
+                if m is None:
+                    m = masks[(k, holds.tobytes())] = used
+                    flat.append(holds.astype(np.int64))
+                    used += holds.shape[0]
+                mask_of[(k, f)] = m
             rid = res.get((k, m, r))
             if rid is None:
                 rid = res[(k, m, r)] = len(r_level)
@@ -220,16 +229,23 @@ def dead_tables(dom: np.ndarray, ev_top: np.ndarray, ev_bot: np.ndarray, ev_slot
                 r_next.append(r)
                 r_mask_ptr.append(m)
             r = rid
-        starts[lits[0][0]].add(r)
+        starts[int(lev[lit[first[e]]])].add(r)
     start_ptr = np.zeros(n_levels + 1, np.int64)
     start_ptr[1:] = np.cumsum([len(x) for x in starts])
     start = np.array([r for x in starts for r in sorted(x)], np.int64)
+    return wider_dead_tables((np.array(r_level, np.int64), np.array(r_next, np.int64), np.array(r_mask_ptr, np.int64),
+                              np.concatenate(flat) if flat else np.zeros(1, np.int64), start_ptr, start),
+                             max_sets, max_items)
+
+
+def wider_dead_tables(dz: tuple[np.ndarray, ...], max_sets: int, max_items: int) -> tuple[np.ndarray, ...]:
+    """MODE_DEAD's tables ``dz`` (:func:`dead_tables`) with its residuals as they are and empty
+    tables of sets: at most ``max_sets`` sets of ``max_items`` residuals in all (a call that met
+    status WIDE runs again on larger ones without the residuals built again)."""
     s_ptr = np.zeros(max_sets + 1, np.int64)  # set 0: the empty set
     s_hash = np.full(2 * max_sets, -1, np.int64)
     s_meta = np.array([1, 0], np.int64)
-    return (np.array(r_level, np.int64), np.array(r_next, np.int64), np.array(r_mask_ptr, np.int64),
-            np.concatenate(flat) if flat else np.zeros(1, np.int64), start_ptr, start, s_ptr,
-            np.zeros(max_items, np.int64), s_hash, s_meta)
+    return (*dz[:6], s_ptr, np.zeros(max_items, np.int64), s_hash, s_meta)
 
 
 @njit(cache=True, inline="always")
@@ -1305,17 +1321,57 @@ def suffix_ids(top: np.ndarray, bot: np.ndarray, slot_ptr: np.ndarray, slot: np.
     for f in range(kind.shape[0]):
         vals = on_val[on_ptr[f]:on_ptr[f + 1]]
         kind[f] = by_values.setdefault(vals.tobytes(), len(by_values))
+    return _suffix_numbers(top, bot, slot_ptr, slot, on_ptr, kind, dom)
+
+
+@njit(cache=True, nogil=True)
+def _suffix_numbers(top: np.ndarray, bot: np.ndarray, slot_ptr: np.ndarray, slot: np.ndarray, on_ptr: np.ndarray,
+                    kind: np.ndarray, dom: np.ndarray) -> np.ndarray:
+    """:func:`suffix_ids` once each local function's set of values is numbered (``kind``): the
+    conditions (level, values, condition below) numbered as first met, in an open-addressing hash
+    table that grows (AirplaneLD-PT-2000: 27,912,124 (event, level) pairs, 13,661,773 conditions;
+    a dictionary of tuples took 15 s and held the interpreter's lock throughout)."""
     out = np.full(slot.shape[0], -1, dtype=np.int64)
-    named: dict[tuple[int, int, int], int] = {}
+    cap = 1 << 12
+    table = np.full(cap, -1, np.int64)
+    keys = np.empty((cap // 2, 3), np.int64)  # per condition: level, values (-1: any), the condition below
+    n = 0
     for e in range(top.shape[0]):
-        t, b, at = int(top[e]), int(bot[e]), int(slot_ptr[e])
+        t, b, at = top[e], bot[e], slot_ptr[e]
         below = -1  # the condition on the levels under the current one (none under b)
         for j in range(b - t, 0, -1):
-            f = int(slot[at + j])
+            k = t + j
+            f = slot[at + j]
             # a function is defined on distinct values of its level's domain: on all of them when
             # it has as many as the domain
-            values = -1 if f < 0 or on_ptr[f + 1] - on_ptr[f] == dom[t + j] else int(kind[f])
-            below = named.setdefault((t + j, values, below), len(named))
+            v = -1 if f < 0 or on_ptr[f + 1] - on_ptr[f] == dom[k] else kind[f]
+            h = _slot(k + 1, (v + 1) * 0x100000001 + below + 1, cap - 1)
+            while True:
+                i = table[h]
+                if i < 0:
+                    if 2 * (n + 1) > cap:  # grow: twice the slots, every condition placed again
+                        cap *= 2
+                        grown = np.empty((cap // 2, 3), np.int64)
+                        grown[:n] = keys[:n]
+                        keys = grown
+                        table = np.full(cap, -1, np.int64)
+                        for c in range(n):
+                            g = _slot(keys[c, 0] + 1, (keys[c, 1] + 1) * 0x100000001 + keys[c, 2] + 1, cap - 1)
+                            while table[g] >= 0:
+                                g = (g + 1) & (cap - 1)
+                            table[g] = c
+                        h = _slot(k + 1, (v + 1) * 0x100000001 + below + 1, cap - 1)
+                        while table[h] >= 0:
+                            h = (h + 1) & (cap - 1)
+                    keys[n, 0], keys[n, 1], keys[n, 2] = k, v, below
+                    table[h] = n
+                    i = n
+                    n += 1
+                    break
+                if keys[i, 0] == k and keys[i, 1] == v and keys[i, 2] == below:
+                    break
+                h = (h + 1) & (cap - 1)
+            below = i
             out[at + j] = below
     return out
 

@@ -1109,28 +1109,42 @@ class _Counting:
 
 
 def _dead(store: _Store, fwd: Events, single: Events, reach: int, counts: list[int] | _Counting, states: int,
-          max_sets: int = 1 << 19) -> int:
+          max_sets: int = 1 << 19, table_bytes: int | None = None) -> int:
     """The reachable markings that enable no event of ``fwd``: empty at once when one is enabled in
     every reachable marking (known when ``counts`` are, per event of ``single``: a list, or a
     :class:`_Counting` done already); else in one pass over the reachable set, with the conditions
     pending on each path (MODE_DEAD, :func:`.mdd_kernel.dead_tables`: at most ``max_sets`` sets of
-    them, of 8 ``max_sets`` residuals in all); when those outgrow their tables, the reachable set
-    restricted event by event instead (:func:`_dead_by_events`, which waits for the counts). One
-    pass: AirplaneLD-PT-1000, whose 8,008 events share six places, in 0.15 s where event by event
-    took 24.5 s."""
+    them, of 8 ``max_sets`` residuals in all, :data:`_DEAD_SET_BYTES` each); when those outgrow
+    their tables, the pass again on tables twice as large while they fit in ``table_bytes`` (default:
+    half of what the store's budget has left), then the reachable set restricted event by event
+    (:func:`_dead_by_events`, which waits for the counts). One pass: AirplaneLD-PT-1000, whose 8,008
+    events share six places, in 0.15 s where event by event took 24.5 s; AirplaneLD-PT-2000's
+    16,008 events need 7,305,766 residuals in 3,833 sets, past the first tables after 0.2 s, then
+    0.1 s on twice their size, where event by event was not done in 100 s (docs/BENCHMARKS.md)."""
     known = counts if isinstance(counts, list) else counts.now()
     if known is not None and states in known:
         return mk.EMPTY
+    if table_bytes is None:
+        table_bytes = max(0, store.max_bytes - store.held()) // 2
     dz = mk.dead_tables(store.dom, fwd.top, fwd.bot, fwd.slot_ptr, fwd.slot, fwd.fn_ptr, fwd.fn,
                         max_sets=max_sets, max_items=8 * max_sets)
     if dz is None:  # an event enabled in every marking
         return mk.EMPTY
-    try:
-        return store.call(mk.MODE_DEAD, fwd, reach, dz=dz)
-    except _TooWide:
-        return _dead_by_events(store, fwd, single, reach, counts if isinstance(counts, list) else counts.result())
-    finally:
-        mk.clear_cache(store.arrays)  # its results name sets of dz
+    while True:
+        try:
+            return store.call(mk.MODE_DEAD, fwd, reach, dz=dz)
+        except _TooWide:
+            max_sets *= 2
+            if max_sets * _DEAD_SET_BYTES > table_bytes:
+                break
+            dz = mk.wider_dead_tables(dz, max_sets, 8 * max_sets)
+        finally:
+            mk.clear_cache(store.arrays)  # its results name sets of dz
+    return _dead_by_events(store, fwd, single, reach, counts if isinstance(counts, list) else counts.result())
+
+
+#: bytes of :func:`.mdd_kernel.dead_tables` per set: its pointer, two hash slots and 8 residuals
+_DEAD_SET_BYTES = 8 * (1 + 2 + 8)
 
 
 def _dead_by_events(store: _Store, fwd: Events, single: Events, reach: int, counts: list[int]) -> int:

@@ -250,7 +250,8 @@ def test_the_dead_markings_in_one_pass_are_those_restricted_event_by_event_and_t
         assert _dead(store, fwd, single, reach, counts, states) == mk.EMPTY == by_events
         return
     assert _dead(store, fwd, single, reach, counts, states) == by_events
-    assert _dead(store, fwd, single, reach, counts, states, max_sets=1) == by_events  # status WIDE
+    assert _dead(store, fwd, single, reach, counts, states, max_sets=1) == by_events  # WIDE, then tables twice as large
+    assert _dead(store, fwd, single, reach, counts, states, max_sets=1, table_bytes=0) == by_events  # WIDE, by events
 
 
 def test_the_conditions_pending_on_a_path_are_shared_by_the_events_of_one_place_below() -> None:
