@@ -1381,6 +1381,45 @@ def test_events_alike_below_their_top_level_share_one_condition_number() -> None
     assert len({sid[1], sid[2], sid[7]}) == 3
 
 
+def test_condition_numbers_are_those_of_a_dictionary_as_first_met_past_the_hash_table_s_growth() -> None:
+    # mdd_kernel.suffix_ids numbers the conditions in a compiled hash table that starts at 4,096 slots
+    # and grows; 3,000 events over 12 levels give more conditions than its first slots hold
+    from coordinator.analysis import mdd_kernel as mk
+
+    rng = np.random.default_rng(7)
+    n_levels, n_ev = 12, 3000
+    dom = rng.integers(2, 5, size=n_levels).astype(np.int64)
+    top = rng.integers(0, n_levels - 1, size=n_ev).astype(np.int64)
+    bot = np.array([rng.integers(t + 1, n_levels) for t in top], dtype=np.int64)
+    tables: list[np.ndarray] = []
+    slot: list[int] = []
+    slot_ptr = [0]
+    for t, b in zip(top.tolist(), bot.tolist()):
+        for k in range(t, b + 1):
+            if k > t and rng.random() < 0.3:
+                slot.append(-1)  # no function on this level
+                continue
+            slot.append(len(tables))
+            tables.append(np.where(rng.random(dom[k]) < 0.6, rng.integers(0, dom[k], size=dom[k]), -1))
+        slot_ptr.append(len(slot))
+    fn_ptr = np.concatenate([[0], np.cumsum([len(x) for x in tables])]).astype(np.int64)
+    fn = np.concatenate(tables).astype(np.int64)
+    on_ptr, on_val = mk.enabling_values(fn_ptr, fn)
+    sid = mk.suffix_ids(top, bot, np.array(slot_ptr, np.int64), np.array(slot, np.int64), on_ptr, on_val, dom)
+    kinds: dict[bytes, int] = {}
+    named: dict[tuple[int, int, int], int] = {}
+    expected = np.full(len(slot), -1, np.int64)
+    for e in range(n_ev):
+        t, b, at = int(top[e]), int(bot[e]), slot_ptr[e]
+        below = -1
+        for j in range(b - t, 0, -1):
+            f = slot[at + j]
+            vals = on_val[on_ptr[f]:on_ptr[f + 1]] if f >= 0 else None
+            v = -1 if vals is None or len(vals) == dom[t + j] else kinds.setdefault(vals.tobytes(), len(kinds))
+            below = expected[at + j] = named.setdefault((t + j, v, below), len(named))
+    assert len(named) > 2048 and np.array_equal(sid, expected)
+
+
 def lookers_net(n: int) -> PetriNet:
     """``n`` three-place cycles, each with one token, and transitions that read where one cycle's
     token is and where the tokens of two other cycles are (the same two places for every
