@@ -369,30 +369,39 @@ def _groups(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], touched:
 def _fixed(sn: SparseNet, groups: list[tuple[np.ndarray, np.ndarray]]
            ) -> tuple[list[tuple[np.ndarray, np.ndarray]], np.ndarray, np.ndarray, np.ndarray]:
     """The groups that stay levels, the fixed places (a group of one local marking), the transitions
-    they disable and those they enable but that would change them (module docstring)."""
+    they disable and those they enable but that would change them (module docstring). A transition
+    is disabled by some fixed place or enabled by all of them, so both are read off the arcs of the
+    fixed places at once (AirplaneLD-PT-2000's 6,002 fixed groups: 2.9 s group by group)."""
+    keep = [(ps, loc) for ps, loc in groups if loc.shape[0] != 1]
+    one = [(np.asarray(ps, dtype=np.int64), loc[0]) for ps, loc in groups if loc.shape[0] == 1]
     never = np.zeros(sn.n_transitions, dtype=bool)
-    suspect = np.zeros(sn.n_transitions, dtype=bool)
-    keep: list[tuple[np.ndarray, np.ndarray]] = []
-    fixed: list[np.ndarray] = []
-    reset = sn.reset if sn.reset is not None and sn.reset.nnz else None
-    for ps, loc in groups:
-        if loc.shape[0] != 1:
-            keep.append((ps, loc))
-            continue
-        rows = np.asarray(ps, dtype=np.int64)
-        value = loc[0]
-        pre = sn.pre[rows].toarray().T
-        post = sn.post[rows].toarray().T
-        inh = sn.inhibitor[rows].toarray().T
-        ok = (value[None, :] >= pre).all(axis=1) & ((inh == 0) | (value[None, :] < inh)).all(axis=1)
-        nxt = value[None, :] - pre + post
-        if reset is not None:
-            nxt = np.where(reset[rows].toarray().T > 0, post, nxt)
-        fixed.append(rows)
-        never |= ~ok
-        suspect |= ok & (nxt != value[None, :]).any(axis=1)
-    out = np.sort(np.concatenate(fixed)).astype(np.int64) if fixed else np.zeros(0, np.int64)
-    return keep, out, never, suspect & ~never
+    changed = np.zeros(sn.n_transitions, dtype=bool)
+    if not one:
+        return keep, np.zeros(0, np.int64), never, changed
+    rows = np.concatenate([ps for ps, _ in one])
+    value = np.zeros(sn.n_places, dtype=np.int64)
+    value[rows] = np.concatenate([v for _, v in one])
+    is_fixed = np.zeros(sn.n_places, dtype=bool)
+    is_fixed[rows] = True
+
+    def arcs(m: sp.spmatrix) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        c = sp.coo_matrix(m)
+        on = is_fixed[c.row] & (c.data != 0)
+        return c.row[on].astype(np.int64), c.col[on].astype(np.int64), c.data[on].astype(np.int64)
+
+    p, t, w = arcs(sn.pre)
+    never[t[value[p] < w]] = True
+    p, t, w = arcs(sn.inhibitor)
+    never[t[value[p] >= w]] = True
+    p, t, _ = arcs(sn.incidence)  # a firing changes p by C[p, t], where no reset arc empties p
+    if sn.reset is not None and sn.reset.nnz:
+        rp, rt, _ = arcs(sn.reset)
+        emptied = np.isin(p * sn.n_transitions + t, rp * sn.n_transitions + rt)
+        p, t = p[~emptied], t[~emptied]
+        after = np.asarray(sp.csr_matrix(sn.post)[rp, rt]).ravel()  # a reset leaves p what t puts back
+        changed[rt[after != value[rp]]] = True
+    changed[t] = True
+    return keep, np.sort(rows), never, changed & ~never
 
 
 def _score(pos: np.ndarray, hp: np.ndarray, hidx: np.ndarray, hw: np.ndarray | None = None) -> float:
