@@ -124,14 +124,19 @@ def _rationalised(values: np.ndarray) -> list[np.ndarray]:
 
 
 def _exact_product(mat: sp.csr_matrix, vec: np.ndarray | list[int]) -> list[int]:
-    """mat @ vec in exact integer arithmetic (int64 when it provably fits, Python ints otherwise)."""
-    vec = [int(v) for v in vec]
-    big = max((abs(v) for v in vec), default=0)
+    """mat @ vec in exact integer arithmetic (int64 when it provably fits, Python ints otherwise).
+    An integer array is read as it is (no Python int per entry: AirplaneLD-PT-2000's semiflow
+    cover checked 357 vectors of 8,017 and 16,008 entries, 1.8 s that way, most of it in the bound)."""
+    arr = np.asarray(vec)
+    if arr.dtype.kind not in "iu" or arr.ndim != 1:
+        arr = np.array([int(v) for v in vec], dtype=object)
+    big = max(int(arr.max(initial=0)), -int(arr.min(initial=0)))
     row_nnz = int(np.diff(mat.indptr).max(initial=0))
     scale = int(np.abs(mat.data).max(initial=0))
-    if big * scale * max(row_nnz, 1) < 2**62:
-        res = mat.astype(np.int64) @ np.array(vec, dtype=np.int64)
-        return [int(v) for v in res]
+    if big < 2**62 and big * scale * max(row_nnz, 1) < 2**62:
+        res = mat.astype(np.int64) @ arr.astype(np.int64)
+        return np.asarray(res, dtype=np.int64).ravel().tolist()  # Python ints
+    vec = [int(v) for v in arr.tolist()]
     out = []
     data, idx, ptr = mat.data.tolist(), mat.indices.tolist(), mat.indptr.tolist()
     for r in range(mat.shape[0]):
