@@ -1049,6 +1049,24 @@ def test_a_place_that_is_only_read_is_fixed_at_its_initial_count_and_the_counts_
     assert r.states == explore(net).n_states == 32  # the contest's answer
 
 
+def test_fixed_places_disable_the_transitions_they_cannot_feed_and_flag_those_that_would_change_them() -> None:
+    # mdd_order._fixed reads the arcs of every fixed place (a group of one local marking) at once
+    from coordinator.analysis.mdd_order import _fixed
+
+    net = make_net("fixed", {"lock": 1, "a": 1},
+                   {"use": ({"lock": 1, "a": 1}, {"lock": 1, "b": 1}), "take": ({"lock": 1}, {"a": 1}),
+                    "need": ({"empty": 1}, {"a": 1}), "blocked": ({"a": 1}, {"b": 1}), "free": ({"b": 1}, {"a": 1})},
+                   places=("lock", "empty", "a", "b"), inhibitors={"blocked": {"lock": 1}})
+    sn = sparse_net(net)
+    kept = (np.array([2, 3]), np.array([[1, 0], [0, 1]]))
+    groups = [(np.array([0]), np.array([[1]])), kept, (np.array([1]), np.array([[0]]))]
+    keep, fixed, never, suspect = _fixed(sn, groups)
+    names = [tr.id for tr in net.transitions]
+    assert len(keep) == 1 and keep[0][0] is kept[0] and fixed.tolist() == [0, 1]
+    assert {names[i] for i in np.flatnonzero(never)} == {"need", "blocked"}
+    assert {names[i] for i in np.flatnonzero(suspect)} == {"take"}
+
+
 def test_what_a_semiflow_leaves_beside_a_group_above_is_a_group_of_its_own_with_the_semiflow_s_bound() -> None:
     from coordinator.analysis.mdd_order import encode
     from coordinator.analysis.statespace import explore
