@@ -1324,6 +1324,13 @@ def suffix_ids(top: np.ndarray, bot: np.ndarray, slot_ptr: np.ndarray, slot: np.
     return _suffix_numbers(top, bot, slot_ptr, slot, on_ptr, kind, dom)
 
 
+@njit(cache=True, inline="always")
+def _condition_slot(k: int, v: int, below: int, mask: int) -> int:
+    """The first slot of condition (level ``k``, values ``v``, condition ``below``) in a table of
+    ``mask + 1`` slots (:func:`_suffix_numbers`)."""
+    return _slot(k + 1, (v + 1) * 0x100000001 + below + 1, mask)
+
+
 @njit(cache=True, nogil=True)
 def _suffix_numbers(top: np.ndarray, bot: np.ndarray, slot_ptr: np.ndarray, slot: np.ndarray, on_ptr: np.ndarray,
                     kind: np.ndarray, dom: np.ndarray) -> np.ndarray:
@@ -1345,7 +1352,7 @@ def _suffix_numbers(top: np.ndarray, bot: np.ndarray, slot_ptr: np.ndarray, slot
             # a function is defined on distinct values of its level's domain: on all of them when
             # it has as many as the domain
             v = -1 if f < 0 or on_ptr[f + 1] - on_ptr[f] == dom[k] else kind[f]
-            h = _slot(k + 1, (v + 1) * 0x100000001 + below + 1, cap - 1)
+            h = _condition_slot(k, v, below, cap - 1)
             while True:
                 i = table[h]
                 if i < 0:
@@ -1356,11 +1363,11 @@ def _suffix_numbers(top: np.ndarray, bot: np.ndarray, slot_ptr: np.ndarray, slot
                         keys = grown
                         table = np.full(cap, -1, np.int64)
                         for c in range(n):
-                            g = _slot(keys[c, 0] + 1, (keys[c, 1] + 1) * 0x100000001 + keys[c, 2] + 1, cap - 1)
+                            g = _condition_slot(keys[c, 0], keys[c, 1], keys[c, 2], cap - 1)
                             while table[g] >= 0:
                                 g = (g + 1) & (cap - 1)
                             table[g] = c
-                        h = _slot(k + 1, (v + 1) * 0x100000001 + below + 1, cap - 1)
+                        h = _condition_slot(k, v, below, cap - 1)
                         while table[h] >= 0:
                             h = (h + 1) & (cap - 1)
                     keys[n, 0], keys[n, 1], keys[n, 2] = k, v, below
