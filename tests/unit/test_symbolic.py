@@ -639,7 +639,7 @@ def test_a_net_of_over_a_thousand_levels_is_saturated() -> None:
 
 
 def test_a_stop_event_set_by_another_thread_ends_the_engine_with_a_clear_error() -> None:
-    net = load_pnml(SCALE / "Railroad-PT-020" / "model.pnml")  # its reachable set takes tens of seconds
+    net = load_pnml(SCALE / "LamportFastMutEx-PT-5" / "model.pnml")  # its reachable set takes seconds
     bounds, flows = proven_bounds(net)
     stop = threading.Event()
     timer = threading.Timer(0.5, stop.set)
@@ -1487,3 +1487,71 @@ def test_the_probe_draws_no_more_markings_after_one_that_reaches_the_whole_reach
     assert len(drawn) == 1 and drawn[0][2] == reach  # one marking, whose R(m) is the whole set
     assert result.live is None and result.reversible is None  # decided by the backward saturation after
     mk.set_watch(None, None)
+
+
+def two_phase_locking(clients: int) -> PetriNet:
+    """The Model Checking Contest's TwoPhaseLocking (PT, nC…vN): clients lock A, then B, release A,
+    lock A again, release both; resources A and B hold ``clients // 2`` and ``clients // 2 + 1``."""
+    return make_net("two-phase-locking", {"Clients": clients, "resA": clients // 2, "resB": clients // 2 + 1}, {
+        "lockA": ({"resA": 1, "Clients": 1}, {"haveA": 1}),
+        "lockB": ({"resB": 1, "haveA": 1}, {"haveAandB": 1}),
+        "relA": ({"haveAandB": 1}, {"resA": 1, "haveB": 1}),
+        "lockA2": ({"resA": 1, "haveB": 1}, {"haveA2andB": 1}),
+        "relB": ({"haveA2andB": 1}, {"resB": 1, "haveA2": 1}),
+        "relA2": ({"haveA2": 1}, {"Clients": 1, "resA": 1})})
+
+
+def test_the_order_is_sifted_on_the_ranks_of_the_semiflows_partial_sums_and_holds_the_same_markings(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from coordinator.analysis import mdd_order
+    from coordinator.analysis.mdd_order import _PartialSums, encode, events
+
+    net = two_phase_locking(40)
+    sn = sparse_net(net)
+    bounds, flows = proven_bounds(net)
+    assert len(flows) == 3
+    ranked = encode(sn, bounds, flows)
+    monkeypatch.setattr(mdd_order, "RANK_LEVELS", 0)
+    spans = encode(sn, bounds, flows)
+    owner = np.arange(sn.n_places)
+
+    def widths(enc: Encoding) -> np.ndarray:
+        order = np.array([int(ps[0]) for ps in enc.levels])  # one place a level: no group on this net
+        return _PartialSums(flows, owner, sn.n_places).cuts(order)
+
+    # the span score's order has a cut of rank 3 (three partial sums free below it), the ranks' none
+    assert int(widths(spans).max()) == 3 and int(widths(ranked).max()) == 2
+    assert int(widths(ranked).sum()) < int(widths(spans).sum())
+    graph = explore(net)
+    nodes = []
+    for enc in (ranked, spans):
+        store = _Store(enc, 256 << 20)
+        reach = store.closure(events(sn, enc, merge=True), store.m0)
+        assert store.count(reach) == graph.n_states
+        nodes.append(store.nodes)
+    assert nodes[0] < nodes[1]
+
+
+def test_a_lane_that_outgrows_its_share_gives_way_to_a_lane_still_working_on_a_smaller_diagram() -> None:
+    import time
+
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _Lane, _Race
+
+    net = two_phase_locking(20)
+    sn = sparse_net(net)
+    bounds, flows = proven_bounds(net)
+    enc = encode(sn, bounds, flows)
+    race = _Race(sn, bounds, flows, 64 << 20, time.monotonic() + 60.0, lambda _text: None)
+    first, second = _Lane(race, True, 0, 32 << 20), _Lane(race, False, 2, 32 << 20)
+    race.lanes = [first, second]
+    small, large = _Store(enc, 32 << 20), _Store(enc, 32 << 20)
+    large.closure(events(sn, enc, merge=True), large.m0)
+    assert small.nodes < large.nodes
+    first.working, second.working = small, large
+    assert race.smaller_beside(second, large.nodes) and not race.smaller_beside(first, small.nodes)
+    first.working = None  # between calls: nothing to compare
+    assert not race.smaller_beside(second, large.nodes)
+    first.working = small
+    first.ended.set()  # a lane that ended works on nothing
+    assert not race.smaller_beside(second, large.nodes)
