@@ -1386,11 +1386,16 @@ class _Race:
         return True
 
     def smaller_beside(self, lane: _Lane, nodes: int) -> bool:
-        """Another lane than ``lane`` is still working on a diagram of fewer than ``nodes`` nodes: when
-        ``lane``'s outgrows its share of the memory, that one is the better bet, and ``lane``'s is
-        dropped rather than the other stopped (TwoPhaseLocking-PT-nC00500vN: the token flow's order,
-        past a million nodes, took the whole budget and stopped the first order, 445,508 nodes when
-        done; the set was not built in 80 s, and is now in 26 s)."""
+        """Another lane than ``lane`` is still working on a diagram of fewer than ``nodes`` nodes. When
+        the diagram of a later candidate (the second lane's) outgrows its lane's share of the memory
+        beside the first lane's smaller one, the first is the better bet: the later candidate is
+        dropped rather than the first lane stopped (TwoPhaseLocking-PT-nC00500vN: the token flow's
+        order, past a million nodes, took the whole budget and stopped the first order, 445,508 nodes
+        when done; the set was not built in 80 s, and is now in 26 s). Not the other way round: the
+        first lane's diagram, grown for as long as the race has run, is compared with a later one
+        a turn or two old (Angiogenesis-PT-15: the first order, 1.4 million nodes at 24 s, would give
+        way to the fourth, 250,429 nodes after its first 2 s turn; it takes the whole and is done at
+        32 s, and the fourth was not done in 70 s)."""
         return any(other is not lane and not other.ended.is_set() and 0 < other.nodes_now() < nodes
                    for other in self.lanes)
 
@@ -1586,10 +1591,12 @@ class _Lane:
             except AnalysisError as exc:
                 if "memory budget" not in str(exc):
                     raise
-                # first this lane's share (the other lane goes on), then the whole (the others stopped),
-                # unless another lane's diagram is the smaller one: this one is dropped instead
+                # first this lane's share (the other lane goes on), then the whole (the others stopped);
+                # on the lane of the later candidates, not while the first lane's diagram is smaller:
+                # this one is dropped instead
                 whole = store.max_bytes >= self.share
-                if whole and store.max_bytes < race.max_bytes and race.smaller_beside(self, store.nodes):
+                if (whole and not self.has_first and store.max_bytes < race.max_bytes
+                        and race.smaller_beside(self, store.nodes)):
                     say(f"symbolic: {race.name(cand.name)} outgrew this lane's share of the memory ({store.nodes:,} "
                         "nodes) beside a smaller diagram, dropped")
                     alive[i] = False
