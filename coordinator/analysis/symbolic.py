@@ -1391,7 +1391,7 @@ class _Race:
         beside the first lane's smaller one, the first is the better bet: the later candidate is
         dropped rather than the first lane stopped (TwoPhaseLocking-PT-nC00500vN: the token flow's
         order, past a million nodes, took the whole budget and stopped the first order, 445,508 nodes
-        when done; the set was not built in 80 s, and is now in 26 s). Not the other way round: the
+        when done; the set was not built in 80 s, and is now in 26–34 s). Not the other way round: the
         first lane's diagram, grown for as long as the race has run, is compared with a later one
         a turn or two old (Angiogenesis-PT-15: the first order, 1.4 million nodes at 24 s, would give
         way to the fourth, 250,429 nodes after its first 2 s turn; it takes the whole and is done at
