@@ -1385,6 +1385,24 @@ class _Race:
             self.max_bytes += extra
         return True
 
+    def widen_shares(self) -> bool:
+        """A lane outgrew its share while the search beside has stopped (:attr:`Rival.settled`): what
+        that search held goes to the lanes at once, split evenly (``borrow``, asked once), rather
+        than only when one outgrows the whole, which first stops the other lanes. ERK-PT-001000:
+        the first order outgrew its 1 GiB share, took the whole and stopped the second lane before
+        its first candidate, the first order reversed, had its turn; it was not done in 70 s, where
+        the reversed order is done in its first 2 s turn. False when there is one lane, the search
+        is still going, or nothing was freed."""
+        rival = self.rival
+        if rival is None or not rival.settled.is_set() or len(self.lanes) < 2:
+            return False
+        before = self.max_bytes
+        if not self.widen():
+            return False
+        for lane in self.lanes:
+            lane.share += (self.max_bytes - before) // len(self.lanes)
+        return True
+
     def smaller_beside(self, lane: _Lane, nodes: int) -> bool:
         """Another lane than ``lane`` is still working on a diagram of fewer than ``nodes`` nodes. When
         the diagram of a later candidate (the second lane's) outgrows its lane's share of the memory
@@ -1595,6 +1613,10 @@ class _Lane:
                 # on the lane of the later candidates, not while the first lane's diagram is smaller:
                 # this one is dropped instead
                 whole = store.max_bytes >= self.share
+                if whole and race.widen_shares():
+                    store.max_bytes = self.share  # the call resumes from its store
+                    turn -= 1
+                    continue
                 if (whole and not self.has_first and store.max_bytes < race.max_bytes
                         and race.smaller_beside(self, store.nodes)):
                     say(f"symbolic: {race.name(cand.name)} outgrew this lane's share of the memory ({store.nodes:,} "

@@ -1555,3 +1555,27 @@ def test_a_lane_that_outgrows_its_share_gives_way_to_a_lane_still_working_on_a_s
     first.working = small
     first.ended.set()  # a lane that ended works on nothing
     assert not race.smaller_beside(second, large.nodes)
+
+
+def test_the_memory_of_the_search_beside_goes_to_the_lanes_once_it_stopped() -> None:
+    import time
+
+    from coordinator.analysis.symbolic import Rival, _Lane, _Race
+
+    net = two_phase_locking(20)
+    sn = sparse_net(net)
+    bounds, flows = proven_bounds(net)
+    lent: list[int] = []
+
+    def borrow() -> int:
+        lent.append(8 << 20)
+        return lent[-1]
+
+    race = _Race(sn, bounds, flows, 64 << 20, time.monotonic() + 60.0, lambda _text: None, borrow=borrow)
+    race.rival = Rival(nice=0)
+    race.lanes = [_Lane(race, True, 0, 32 << 20), _Lane(race, False, 2, 32 << 20)]
+    assert not race.widen_shares() and not lent  # the search is still going: its memory is its own
+    race.rival.settled.set()
+    assert race.widen_shares() and lent == [8 << 20]
+    assert race.max_bytes == 72 << 20 and [lane.share for lane in race.lanes] == [36 << 20, 36 << 20]
+    assert not race.widen_shares() and len(lent) == 1  # asked once
