@@ -639,15 +639,16 @@ def _spans(order: np.ndarray, hypers: list[np.ndarray]) -> float:
                   np.concatenate(kept).astype(np.int64))
 
 
-def _rank_sift(order: np.ndarray, sums: _PartialSums, deadline: float, rounds: int = 5) -> np.ndarray:
-    """Sifting (as :func:`_sift`) of ``order`` on the sum of its cuts' ranks (:class:`_PartialSums`):
-    each level moved to the position where that sum is lowest, when it is lower than where it is;
-    ties leave a level where the span score put it. A neighbour swap changes the set above one cut
-    only, so a swap computes one rank. Ends at ``deadline`` (``time.monotonic()``) between levels."""
-    order = order.copy()
+def _rank_sift(order: np.ndarray, cuts: np.ndarray, sums: _PartialSums, deadline: float,
+               rounds: int = 5) -> tuple[np.ndarray, np.ndarray]:
+    """Sifting (as :func:`_sift`) of ``order`` on the sum of its cuts' ranks (:class:`_PartialSums`;
+    ``cuts``: those of ``order``, :meth:`_PartialSums.cuts`): each level moved to the position where
+    that sum is lowest, when it is lower than where it is; ties leave a level where the span score
+    put it. A neighbour swap changes the set above one cut only, so a swap computes one rank. Ends
+    at ``deadline`` (``time.monotonic()``) between levels. Returns the order sifted and its cuts."""
+    order, cuts = order.copy(), cuts.copy()
     n = order.shape[0]
     above = np.zeros(n, dtype=bool)
-    cuts = sums.cuts(order)
 
     def cut(i: int) -> int:  # the rank below position i of the current order
         above[:] = False
@@ -658,7 +659,7 @@ def _rank_sift(order: np.ndarray, sums: _PartialSums, deadline: float, rounds: i
         improved = False
         for v in order.copy().tolist():
             if time.monotonic() > deadline:
-                return order
+                return order, cuts
             start = int(np.flatnonzero(order == v)[0])
             best, best_at = 0, start
             for step in (-1, 1):
@@ -679,7 +680,7 @@ def _rank_sift(order: np.ndarray, sums: _PartialSums, deadline: float, rounds: i
                 improved = True
         if not improved:
             break
-    return order
+    return order, cuts
 
 
 def _flow_order(sn: SparseNet, owner: np.ndarray, n: int) -> np.ndarray:
@@ -819,12 +820,13 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
     many = any(int(np.dot(y, sn.m0)) > 1 for y in flows)
     if not flow and 2 < n_k <= RANK_LEVELS and many:
         sums = _PartialSums(flows, owner, n_k)
-        sifted = _rank_sift(order, sums, min(start + seconds, time.monotonic() + _RANK_SECONDS))
+        cuts = sums.cuts(order)
+        sifted, sifted_cuts = _rank_sift(order, cuts, sums, min(start + seconds, time.monotonic() + _RANK_SECONDS))
         # a lower sum of ranks alone is not enough: the nodes grow as r^d, so the widest cut must
         # narrow, and the spans, which saturation walks, must not grow much (Angiogenesis-PT-15: the
         # sum 107 → 89, the widest cut 5 either way, and 36 s → not done in 70 s; AutoFlight-PT-04b:
         # the widest 14 → 10 but the span score 578 → 989, and 4.5 s → 16 s)
-        if int(sums.cuts(sifted).max()) < int(sums.cuts(order).max()) and _spans(sifted, hypers) <= _RANK_SPAN * score:
+        if int(sifted_cuts.max()) < int(cuts.max()) and _spans(sifted, hypers) <= _RANK_SPAN * score:
             order, ranked = sifted, True
     if shared.any():
         order = np.concatenate([order[~shared[order]], order[shared[order]]])

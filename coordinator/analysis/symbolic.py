@@ -1609,14 +1609,14 @@ class _Lane:
             except AnalysisError as exc:
                 if "memory budget" not in str(exc):
                     raise
-                # first this lane's share (the other lane goes on), then the whole (the others stopped);
-                # on the lane of the later candidates, not while the first lane's diagram is smaller:
-                # this one is dropped instead
+                # first this lane's share (the other lane goes on), then the whole (the others stopped)
                 whole = store.max_bytes >= self.share
-                if whole and race.widen_shares():
+                if whole and race.widen_shares():  # the stopped search's memory: every lane's share grew
                     store.max_bytes = self.share  # the call resumes from its store
                     turn -= 1
                     continue
+                # on the lane of the later candidates, not while the first lane's diagram is smaller:
+                # this one is dropped instead
                 if (whole and not self.has_first and store.max_bytes < race.max_bytes
                         and race.smaller_beside(self, store.nodes)):
                     say(f"symbolic: {race.name(cand.name)} outgrew this lane's share of the memory ({store.nodes:,} "
