@@ -238,12 +238,16 @@ class _Store:
                                "given to the symbolic engine are wrong", self.enc.levels[k])
         return int(ret)
 
-    def closure(self, ev: Events, a: int, c: int = mk.NO_CONSTRAINT, check_overflow: bool = False) -> int:
+    def closure(self, ev: Events, a: int, c: int = mk.NO_CONSTRAINT, check_overflow: bool = False,
+                passes: int = 0) -> int:
         """The markings reachable from the set ``a`` by the events ``ev`` (inside the constraint
         ``c``): by saturation, or when :attr:`chain` is set by chained images to a fixed point
         (:func:`.mdd_kernel.run`), the events of the deepest tops first and of the root's first by
         turns (the first order is the better one forward on some nets, the second backward: inside
-        SharedMemory-PT-000020's reachable set, backward from M0, 2.3 s and 0.6 s, by turns 0.8 s)."""
+        SharedMemory-PT-000020's reachable set, backward from M0, 2.3 s and 0.6 s, by turns 0.8 s).
+        ``passes``: chained images give up, raising _NoFixedPoint, when this many passes have not
+        found the fixed point (0: no limit; a call resumed after a stop counts its passes from
+        ``a`` again, the ones its store kept being quick). Raises as :meth:`call`."""
         if not self.chain:
             return self.call(mk.MODE_SATURATE, ev, a, c=c, check_overflow=check_overflow)
         turn = 0
@@ -253,6 +257,8 @@ class _Store:
             if more == a:  # each event's image of a is inside a
                 return a
             a, turn = more, turn + 1
+            if passes and turn >= passes:
+                raise _NoFixedPoint()
 
     @property
     def nodes(self) -> int:
@@ -408,6 +414,10 @@ class _Store:
 
 class _OutOfTime(Exception):
     """The deadline of the symbolic analysis passed inside a kernel call."""
+
+
+class _NoFixedPoint(Exception):
+    """Chained images (:meth:`_Store.closure` given ``passes``) still added markings in their last pass."""
 
 
 class _TooWide(Exception):
@@ -1182,6 +1192,12 @@ _LEAD = 2.0
 _HEAD_START = 2.0
 #: most seconds the first order's chaining runs before the second lane's other orders (:func:`_race`)
 _CHAIN_SECONDS = 10.0
+#: most passes of chained images the first order's chaining makes in the race: where it was the first
+#: done, its fixed point came at the third pass (Dekker-PT-050 in 1.5 s, SharedMemory-PT-000050 in
+#: 6.6 s, Philosophers-PT-000100 in 0.8 s) or the fourth (Dekker-PT-100, 11.9 s); where it was
+#: not, the passes went on, each adding markings (IOTPpurchase-PT-C12M10P15D17: 17 passes in 11 s,
+#: CloudDeployment-PT-6a: 6 passes in 9.6 s), and the other orders waited for its 10 s
+_CHAIN_PASSES = 4
 #: while the explicit search runs beside the race (:class:`Rival`), a lane that saturates or chains
 #: without turns stops this often to tell it how many markings it has shown reachable
 #: (:meth:`_Race.bounded_below`), and resumes where it stopped
@@ -1479,9 +1495,10 @@ class _Lane:
 
     def _chained(self, max_bytes: int, fwd: Events | None = None) -> bool:
         """The first order by chaining (:meth:`_Store.closure`), once its saturation has run alone
-        for :data:`_HEAD_START` seconds, within ``max_bytes``, for at most :data:`_CHAIN_SECONDS`;
-        then its store is dropped. The second lane's first work, or on one CPU the single lane's
-        after the first candidate's first turn (``fwd``: its events, when this lane has them); not
+        for :data:`_HEAD_START` seconds, within ``max_bytes``, for at most :data:`_CHAIN_SECONDS` and
+        :data:`_CHAIN_PASSES` passes; then its store is dropped. The second lane's first work, or on
+        one CPU the single lane's after the first candidate's first turn (``fwd``: its events, when
+        this lane has them); not
         when the first order has shared levels sunk (the lane's first candidate is then that order
         with them in place, which chaining would delay: Referendum-PT-0050's answer in 3.2 s, 16.3 s
         with chaining first). True when the race is decided (by it or another lane)."""
@@ -1503,7 +1520,7 @@ class _Lane:
                 told = race.telling()
                 mk.set_watch(min(end, time.monotonic() + _TELL_SECONDS) if told else end, None, self.cancel)
                 try:
-                    reach = store.closure(fwd, store.m0, check_overflow=True)
+                    reach = store.closure(fwd, store.m0, check_overflow=True, passes=_CHAIN_PASSES)
                     break
                 except _OutOfTime:
                     if not told or self.cancel.is_set() or time.monotonic() >= end:
@@ -1514,6 +1531,11 @@ class _Lane:
                 race.say(f"symbolic: order 1 by chaining not done within {_CHAIN_SECONDS:.0f} s ({store.nodes:,} "
                          "nodes), dropped")
                 race.bounded_below(self, store, "order 1 by chaining")
+            return self.cancel.is_set()
+        except _NoFixedPoint:
+            race.say(f"symbolic: order 1 by chaining found no fixed point in {_CHAIN_PASSES} passes ({store.nodes:,} "
+                     "nodes), dropped")
+            race.bounded_below(self, store, "order 1 by chaining")
             return self.cancel.is_set()
         except _OutOfMemory:
             race.say(f"symbolic: order 1 by chaining outgrew this lane's share of the memory ({store.nodes:,} "

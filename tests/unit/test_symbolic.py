@@ -304,6 +304,30 @@ def test_chained_images_reach_the_sets_saturation_reaches_forward_and_backward_i
     assert store.closure(back, store.m0, c=reach) == home
 
 
+def test_chained_images_given_a_number_of_passes_give_up_when_it_does_not_reach_their_fixed_point() -> None:
+    # one event moving one token of n a firing: each pass fires it once on the set so far, so the
+    # counts 0..n take n passes and the (n + 1)-th finds nothing new; the race gives the first order's
+    # chaining _CHAIN_PASSES passes at most (symbolic._chained)
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _CHAIN_PASSES, _NoFixedPoint
+
+    n = 6
+    net = make_net("counter", {"free": n}, {"take": ({"free": 1}, {"held": 1})})
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=1.0)
+    fwd = events(sn, enc, merge=True)
+    for passes in (1, n, _CHAIN_PASSES):
+        store = _Store(enc, 64 << 20)  # a store each: no images kept from the last try
+        store.chain = True
+        with pytest.raises(_NoFixedPoint):
+            store.closure(fwd, store.m0, passes=passes)
+    for passes in (n + 1, 0):  # enough, and no limit
+        store = _Store(enc, 64 << 20)
+        store.chain = True
+        assert store.count(store.closure(fwd, store.m0, passes=passes)) == n + 1
+
+
 @pytest.mark.parametrize("seed", range(40))
 def test_a_store_part_way_through_a_forward_closure_bounds_the_reachable_set_from_below_and_meets_it_at_the_end(
         seed: int) -> None:
