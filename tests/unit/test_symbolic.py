@@ -311,7 +311,7 @@ def test_chained_images_given_a_number_of_passes_give_up_when_it_does_not_reach_
     from coordinator.analysis.mdd_order import encode, events
     from coordinator.analysis.symbolic import _CHAIN_PASSES, _NoFixedPoint
 
-    n = 6
+    n = _CHAIN_PASSES + 2
     net = make_net("counter", {"free": n}, {"take": ({"free": 1}, {"held": 1})})
     bounds, flows = proven_bounds(net)
     sn = sparse_net(net)
