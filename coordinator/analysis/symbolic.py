@@ -1499,10 +1499,10 @@ class _Lane:
         for :data:`_HEAD_START` seconds, within ``max_bytes``, for at most :data:`_CHAIN_SECONDS` and
         :data:`_CHAIN_PASSES` passes; then its store is dropped. The second lane's first work, or on
         one CPU the single lane's after the first candidate's first turn (``fwd``: its events, when
-        this lane has them); not
-        when the first order has shared levels sunk (the lane's first candidate is then that order
-        with them in place, which chaining would delay: Referendum-PT-0050's answer in 3.2 s, 16.3 s
-        with chaining first). True when the race is decided (by it or another lane)."""
+        this lane has them); not when the first order has shared levels sunk (the lane's first
+        candidate is then that order with them in place, which chaining would delay:
+        Referendum-PT-0050's answer in 3.2 s, 16.3 s with chaining first). True when the race is
+        decided (by it or another lane)."""
         race = self.race
         race.first.wait()
         with race.lock:

@@ -304,7 +304,7 @@ def test_chained_images_reach_the_sets_saturation_reaches_forward_and_backward_i
     assert store.closure(back, store.m0, c=reach) == home
 
 
-def test_chained_images_given_a_number_of_passes_give_up_when_it_does_not_reach_their_fixed_point() -> None:
+def test_chained_images_given_a_number_of_passes_give_up_when_they_do_not_reach_their_fixed_point() -> None:
     # one event moving one token of n a firing: each pass fires it once on the set so far, so the
     # counts 0..n take n passes and the (n + 1)-th finds nothing new; the race gives the first order's
     # chaining _CHAIN_PASSES passes at most (symbolic._chained)
