@@ -1527,21 +1527,13 @@ class _Lane:
                     if not told or self.cancel.is_set() or time.monotonic() >= end:
                         raise
                     race.bounded_below(self, store, "order 1 by chaining")  # and on, from the images its store kept
-        except _OutOfTime:
-            if not self.cancel.is_set():
-                race.say(f"symbolic: order 1 by chaining not done within {_CHAIN_SECONDS:.0f} s ({store.nodes:,} "
-                         "nodes), dropped")
+        except (_OutOfTime, _NoFixedPoint, _OutOfMemory) as exc:
+            if not (isinstance(exc, _OutOfTime) and self.cancel.is_set()):  # cancelled: the race is decided
+                why = (f"not done within {_CHAIN_SECONDS:.0f} s" if isinstance(exc, _OutOfTime)
+                       else f"found no fixed point in {_CHAIN_PASSES} passes" if isinstance(exc, _NoFixedPoint)
+                       else "outgrew this lane's share of the memory")
+                race.say(f"symbolic: order 1 by chaining {why} ({store.nodes:,} nodes), dropped")
                 race.bounded_below(self, store, "order 1 by chaining")
-            return self.cancel.is_set()
-        except _NoFixedPoint:
-            race.say(f"symbolic: order 1 by chaining found no fixed point in {_CHAIN_PASSES} passes ({store.nodes:,} "
-                     "nodes), dropped")
-            race.bounded_below(self, store, "order 1 by chaining")
-            return self.cancel.is_set()
-        except _OutOfMemory:
-            race.say(f"symbolic: order 1 by chaining outgrew this lane's share of the memory ({store.nodes:,} "
-                     "nodes), dropped")
-            race.bounded_below(self, store, "order 1 by chaining")
             return self.cancel.is_set()
         finally:
             mk.set_watch(None, None)
