@@ -2176,6 +2176,15 @@ def _terminal(store: _Store, fwd: Events, back: Events, single: Events, reach: i
     return True
 
 
+def _has_way_back(store: _Store, back: Events, reach: int) -> bool:
+    """Whether a reachable marking other than M0 enables a transition whose firing gives M0: one
+    image of the inverse events ``back`` from M0, inside the reachable set ``reach``. Without one
+    the net is not reversible (a path back to M0 ends with such a firing) when the reachable set
+    holds more than M0. Raises as :meth:`_Store.call`."""
+    before = store.call(mk.MODE_IMAGE, back, store.m0, c=reach, arg=mk.IMAGE_EACH)
+    return store.call(mk.MODE_APPLY, back, before, store.m0, arg=mk.APPLY_DIFF) != mk.EMPTY
+
+
 def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, reach: int, counts: list[int],
               result: SymbolicResult, say: Callable[[str], None], until: float, probes: int,
               stop: threading.Event | None = None, upside: _Beside | None = None) -> None:
@@ -2209,17 +2218,31 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
         result.seconds["liveness"] = time.monotonic() - t0
         return
     drawn: list[_Drawn] = []
-    try:
+
+    def probe() -> None:
         if probes and (result.reversible is None or result.live is None):
             say("symbolic: liveness and reversibility, forward from drawn markings")
             # a drawn marking reaches a part of the reachable set, on the computed table of the
             # whole: worth at most as long as the whole took, and a share of the time left; at its
             # deadline what it decided stays and the backward saturations take the rest
-            share = min(_PROBE_SHARE * max(0.0, until - t0), max(1.0, result.seconds.get("reach", 0.0)))
+            start = time.monotonic()
+            share = min(_PROBE_SHARE * max(0.0, until - start), max(1.0, result.seconds.get("reach", 0.0)))
             with contextlib.suppress(_OutOfTime):
-                _probe(store, fwd, single, reach, result, min(until, t0 + share), probes,
+                _probe(store, fwd, single, reach, result, min(until, start + share), probes,
                        stop if upside is None else _ShownReversible(upside, stop), drawn)
             mk.set_watch(until, None, stop)
+
+    try:
+        if result.reversible is None and not _has_way_back(store, back, reach):
+            result.reversible = False
+            say("symbolic: no reachable marking fires into M0: the net is not reversible")
+        # M0 entered from a reachable marking: the backward saturation from M0 first, which decides
+        # a reversible net (and then a quasi-live one is live), before the probe, whose forward
+        # saturations from drawn markings tell nothing on such a net (R(m) is the whole reachable
+        # set); a net whose initialisation is left for good has no way back and is probed first
+        home_first = result.reversible is None
+        if not home_first:
+            probe()
         if upside is not None and result.reversible is not None:
             upside.cancel.set()  # decided forward: the thread's work is not needed
         if result.reversible is None and upside is not None:
@@ -2251,6 +2274,8 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
             say("symbolic: reversibility (backward from M0)")
             home = store.closure(back, store.m0, c=reach)
             result.reversible = home == reach
+        if home_first and not result.reversible:
+            probe()
         if result.live is None and result.reversible:
             result.live = quasi
             live_t[:] = True
