@@ -833,8 +833,8 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             before included, comes within a minute by default when the reachable set and its
             counts are quick.
         progress: called with short phase descriptions.
-        probes: markings drawn from the reachable set for the forward test of liveness and
-            reversibility before the backward saturations (:func:`_probe`); 0: backward only,
+        probes: markings drawn from the reachable set for the forward test of liveness on a net
+            that is not reversible, before the backward saturations (:func:`_probe`); 0: backward only,
             which decides every transition's liveness when there is time (the probe stops at the
             first transition it shows not live).
         stop: an event another thread sets to stop the engine (the automatic engine's explicit
@@ -2086,18 +2086,6 @@ def _take_back(store: _Store, beside: _Beside) -> None:
     beside.lent = 0
 
 
-class _ShownReversible:
-    """A :class:`.mdd_kernel.Flag`: set once the thread ``beside`` has shown the net reversible, or
-    ``stop`` is set."""
-
-    def __init__(self, beside: _Beside, stop: threading.Event | None) -> None:
-        self.beside, self.stop = beside, stop
-
-    def is_set(self) -> bool:
-        return (self.stop is not None and self.stop.is_set()) or (
-            self.beside.decided.is_set() and self.beside.reversible is True)
-
-
 #: most terminal components :func:`_terminal` looks for, and most steps it takes towards one, before the
 #: backward saturation per transition decides what is left
 _TERMINALS = 8
@@ -2189,17 +2177,17 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
               result: SymbolicResult, say: Callable[[str], None], until: float, probes: int,
               stop: threading.Event | None = None, upside: _Beside | None = None) -> None:
     """Reversibility and liveness (module docstring), until ``until`` (``time.monotonic()``
-    seconds): what the drawn markings tell forward first (:func:`_probe`, within a share of the
-    time), then backward saturation from M0 (reversibility), then the terminal components
-    (:func:`_terminal`, from the drawn markings whose R(m) the probe built). If there are more than
-    it looks for, or the probe built no R(m) within its share, each transition not yet decided
-    gets a backward saturation from the markings that enable it, the transitions enabled in the
-    fewest reachable markings (``counts``, per event of ``single``) first: they are the likeliest
-    not to be live.
+    seconds): first whether a reachable marking fires into M0 (:func:`_has_way_back`: without one,
+    the net is not reversible); if one does, backward saturation from M0 (reversibility; a
+    reversible quasi-live net is live); else, or when the net is not reversible, what the drawn
+    markings tell forward (:func:`_probe`, within a share of the time), then the terminal
+    components (:func:`_terminal`, from the drawn markings whose R(m) the probe built). If there
+    are more than it looks for, or the probe built no R(m) within its share, each transition not
+    yet decided gets a backward saturation from the markings that enable it, the transitions
+    enabled in the fewest reachable markings (``counts``, per event of ``single``) first: they are
+    the likeliest not to be live.
     ``upside``: reversibility decided beside (:class:`_Upside`, on the order upside down, or
-    :class:`_Home`, on a store of its own); whichever is done first answers, and the probe stops
-    when it shows the net reversible (a quasi-live reversible net is live: nothing is left for the
-    probe to tell)."""
+    :class:`_Home`, on a store of its own); whichever is done first answers, before the probe."""
     t0 = time.monotonic()
     n_t = result.fireable.shape[0]
     quasi = bool(result.fireable.all())
@@ -2218,33 +2206,12 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
         result.seconds["liveness"] = time.monotonic() - t0
         return
     drawn: list[_Drawn] = []
-
-    def probe() -> None:
-        if probes and (result.reversible is None or result.live is None):
-            say("symbolic: liveness and reversibility, forward from drawn markings")
-            # a drawn marking reaches a part of the reachable set, on the computed table of the
-            # whole: worth at most as long as the whole took, and a share of the time left; at its
-            # deadline what it decided stays and the backward saturations take the rest
-            start = time.monotonic()
-            share = min(_PROBE_SHARE * max(0.0, until - start), max(1.0, result.seconds.get("reach", 0.0)))
-            with contextlib.suppress(_OutOfTime):
-                _probe(store, fwd, single, reach, result, min(until, start + share), probes,
-                       stop if upside is None else _ShownReversible(upside, stop), drawn)
-            mk.set_watch(until, None, stop)
-
     try:
         if result.reversible is None and not _has_way_back(store, back, reach):
             result.reversible = False
-            say("symbolic: no reachable marking fires into M0: the net is not reversible")
-        # M0 entered from a reachable marking: the backward saturation from M0 first, which decides
-        # a reversible net (and then a quasi-live one is live), before the probe, whose forward
-        # saturations from drawn markings tell nothing on such a net (R(m) is the whole reachable
-        # set); a net whose initialisation is left for good has no way back and is probed first
-        home_first = result.reversible is None
-        if not home_first:
-            probe()
+            say("symbolic: no reachable marking other than M0 fires into M0: the net is not reversible")
         if upside is not None and result.reversible is not None:
-            upside.cancel.set()  # decided forward: the thread's work is not needed
+            upside.cancel.set()  # decided: the thread's work is not needed
         if result.reversible is None and upside is not None:
             say(f"symbolic: reversibility (backward from M0, and {upside.how})")
             mk.set_watch(until, None, upside.decided)
@@ -2274,13 +2241,23 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
             say("symbolic: reversibility (backward from M0)")
             home = store.closure(back, store.m0, c=reach)
             result.reversible = home == reach
-        if home_first and not result.reversible:
-            probe()
         if result.live is None and result.reversible:
             result.live = quasi
             live_t[:] = True
-        elif result.live is None and (probes and not drawn or not _terminal(store, fwd, back, single, reach,
-                                                                              result, say, probes > 0, drawn)):
+        elif result.live is None and probes:
+            # not reversible: a transition enabled nowhere in what a drawn marking reaches is not live
+            # (a net whose initialisation is left for good, decided so in a forward saturation or two)
+            say("symbolic: liveness, forward from drawn markings")
+            # a drawn marking reaches a part of the reachable set, on the computed table of the
+            # whole: worth at most as long as the whole took, and a share of the time left; at its
+            # deadline what it decided stays and the backward saturations take the rest
+            start = time.monotonic()
+            share = min(_PROBE_SHARE * max(0.0, until - start), max(1.0, result.seconds.get("reach", 0.0)))
+            with contextlib.suppress(_OutOfTime):
+                _probe(store, fwd, single, reach, result, min(until, start + share), probes, stop, drawn)
+            mk.set_watch(until, None, stop)
+        if result.live is None and (probes and not drawn or not _terminal(store, fwd, back, single, reach,
+                                                                          result, say, probes > 0, drawn)):
             # more terminal components than it looks for, or no drawn marking's R(m) done within the
             # probe's share (forward saturation from one marking is slow on this net, and the terminal
             # components need it; NoC3x3-PT-1A: 34 s for one, where the backward saturation of the

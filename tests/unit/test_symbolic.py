@@ -801,6 +801,41 @@ def test_backward_saturation_inside_the_reachable_set_stays_inside_it() -> None:
     assert r.reversible is False and r.live is False and r.live_transitions[-1] is False
 
 
+@pytest.mark.parametrize("seed", range(40))
+def test_a_way_back_into_m0_is_found_iff_the_explicit_graph_has_an_edge_into_m0_from_another_marking(
+        seed: int) -> None:
+    # _liveness runs the backward saturation from M0 before the probe when such an edge exists; with
+    # none (and more than one marking) the net is not reversible at once
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import events
+    from coordinator.analysis.symbolic import _has_way_back
+
+    net, a, sn, enc = generated_encoding(seed)
+    store = _Store(enc, 64 << 20)
+    reach = store.call(mk.MODE_SATURATE, events(sn, enc, merge=True), store.m0)
+    back = events(sn, enc, inverse=True, merge=True)
+    m0 = a.space.index_of(net.initial_vector)
+    expected = any(src != m0 for src, _t in a.space.predecessors(m0))
+    assert _has_way_back(store, back, reach) is expected
+    if not expected and a.states > 1:
+        assert a.reversible is False
+
+
+def test_a_one_shot_start_has_no_way_back_into_m0_and_a_self_loop_at_m0_is_none() -> None:
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _has_way_back
+
+    for net, way_back in ((one_shot_net(3), False), (kanban(2), True),
+                          (make_net("loop", {"a": 1}, {"stay": ({"a": 1}, {"a": 1}), "go": ({"a": 1}, {"b": 1}),
+                                                       "back": ({"b": 1}, {"c": 1})}), False)):
+        bounds, flows = proven_bounds(net)
+        sn = sparse_net(net)
+        enc = encode(sn, bounds, flows, seconds=1.0)
+        store = _Store(enc, 64 << 20)
+        reach = store.call(mk.MODE_SATURATE, events(sn, enc, merge=True), store.m0)
+        assert _has_way_back(store, events(sn, enc, inverse=True, merge=True), reach) is way_back
+
 def test_a_set_is_inside_a_set_of_another_store_on_the_same_levels() -> None:
     # _Home compares the reachable set of the main store with the markings that reach M0, built on
     # a store of its own: mdd_kernel.subset walks pairs of nodes, one of each store
