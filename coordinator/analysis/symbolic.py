@@ -1087,7 +1087,7 @@ class _Counting:
     budget, at most its nodes' buffers (levels, offsets, sizes, children) once more."""
 
     def __init__(self, count: Callable[[], list[int]], beside: bool) -> None:
-        self._count = count
+        self._count: Callable[[], list[int]] | None = count
         self._counts: list[int] | None = None
         self._error: BaseException | None = None
         self._thread: threading.Thread | None = None
@@ -1098,10 +1098,14 @@ class _Counting:
             self._run()
 
     def _run(self) -> None:
+        count, self._count = self._count, None
+        assert count is not None
         try:
-            self._counts = self._count()
+            self._counts = count()
         except BaseException as exc:  # raised again in the caller's thread, by result()
             self._error = exc
+        finally:
+            del count  # the buffers it read, which the store may have outgrown, are freed now, not with this object
 
     def now(self) -> list[int] | None:
         """The counts if they are done, else None (no wait)."""
