@@ -717,8 +717,8 @@ def _guided_sequence(store: _Store, ex: _Explicit, net: PetriNet, inside: int, t
                 seen.add(key)
                 if vals[j, 0] < 0 or not store.contains(inside, vals[j]):
                     continue
-                marks.append(succ[j])
-                levels.append(vals[j])
+                marks.append(succ[j].copy())  # copies: a view would keep its whole block of successors alive
+                levels.append(vals[j].copy())
                 parent.append(i)
                 via.append(int(t))
                 depth.append(depth[i] + 1)
