@@ -828,13 +828,14 @@ def test_a_one_shot_start_has_no_way_back_into_m0_and_a_self_loop_at_m0_is_none(
 
     for net, way_back in ((one_shot_net(3), False), (kanban(2), True),
                           (make_net("loop", {"a": 1}, {"stay": ({"a": 1}, {"a": 1}), "go": ({"a": 1}, {"b": 1}),
-                                                       "back": ({"b": 1}, {"c": 1})}), False)):
+                                                       "on": ({"b": 1}, {"c": 1})}), False)):
         bounds, flows = proven_bounds(net)
         sn = sparse_net(net)
         enc = encode(sn, bounds, flows, seconds=1.0)
         store = _Store(enc, 64 << 20)
         reach = store.call(mk.MODE_SATURATE, events(sn, enc, merge=True), store.m0)
         assert _has_way_back(store, events(sn, enc, inverse=True, merge=True), reach) is way_back
+
 
 def test_a_set_is_inside_a_set_of_another_store_on_the_same_levels() -> None:
     # _Home compares the reachable set of the main store with the markings that reach M0, built on
