@@ -837,6 +837,36 @@ def test_a_one_shot_start_has_no_way_back_into_m0_and_a_self_loop_at_m0_is_none(
         assert _has_way_back(store, events(sn, enc, inverse=True, merge=True), reach) is way_back
 
 
+def test_the_guided_search_keeps_no_block_of_successors_alive_for_the_markings_it_keeps() -> None:
+    # each of 10 toggles goes one way by 40 parallel transitions: a marking has up to 400 successors,
+    # of which at most 10 are new, so each block of successors a kept marking was a view of stayed
+    # allocated (CloudDeployment-PT-5a: 2.5 GiB beside a 4 GiB budget; docs/BENCHMARKS.md)
+    import tracemalloc
+
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _Explicit, _guided_sequence
+
+    n, ways = 10, 40
+    arcs = {f"go{i}_{k}": ({f"p{i}": 1}, {f"q{i}": 1}) for i in range(n) for k in range(ways)}
+    arcs.update({f"back{i}": ({f"q{i}": 1}, {f"p{i}": 1}) for i in range(n)})
+    net = make_net("parallel-toggles", {f"p{i}": 1 for i in range(n)}, arcs)
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=1.0)
+    store = _Store(enc, 64 << 20)
+    reach = store.call(mk.MODE_SATURATE, events(sn, enc, merge=True), store.m0)
+    ex = _Explicit(sn, enc)
+    goal = np.zeros(sn.n_places, dtype=np.int64)
+    tracemalloc.start()
+    try:
+        # no target: it goes on from every one of the 1,024 markings
+        assert _guided_sequence(store, ex, net, reach, mk.EMPTY, goal, limit=10**6, stop=float("inf")) is None
+        _now, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert peak < 6 << 20  # 1.1 MB; the views kept 15 MB alive
+
 def test_a_set_is_inside_a_set_of_another_store_on_the_same_levels() -> None:
     # _Home compares the reachable set of the main store with the markings that reach M0, built on
     # a store of its own: mdd_kernel.subset walks pairs of nodes, one of each store
