@@ -1098,14 +1098,14 @@ class _Counting:
             self._run()
 
     def _run(self) -> None:
+        # the function holds the buffers it reads: dropped here, those the store has outgrown are
+        # freed when the count ends, not with this object
         count, self._count = self._count, None
         assert count is not None
         try:
             self._counts = count()
         except BaseException as exc:  # raised again in the caller's thread, by result()
             self._error = exc
-        finally:
-            del count  # the buffers it read, which the store may have outgrown, are freed now, not with this object
 
     def now(self) -> list[int] | None:
         """The counts if they are done, else None (no wait)."""
