@@ -80,6 +80,13 @@ PROBES = 3
 _DENSE_BLOCK = 4_000_000
 #: longest that search may take before breadth-first images take over (seconds)
 _GUIDED_SECONDS = 10.0
+#: most bytes that search's markings may take (:func:`_guided_sequence`), and fewest when the
+#: decision diagram has left less of its budget (:func:`_witness` gives it half of what is left)
+_GUIDED_BYTES = 512 << 20
+_GUIDED_MIN_BYTES = 32 << 20
+#: bytes a marking the search has seen costs besides its counts and level values: the key's bytes
+#: object and its slot in the set, the arrays' headers, its entries in the lists and the heap
+_SEEN_OVERHEAD = 600
 #: longest that search may take inside the reachable set alone, before the markings that can reach a
 #: deadlock are computed to guide it (seconds); random walks get as long after it
 _QUICK_SECONDS = 2.0
@@ -642,6 +649,16 @@ class _Explicit:
         return _LevelValues(self.enc)
 
     @functools.cached_property
+    def narrow(self) -> tuple[np.dtype, np.dtype]:
+        """The narrowest signed integer types of a marking of the encoding (every count at most
+        the largest of its levels' local markings or of its fixed places: int8 on a 1-safe net)
+        and of its level values (below the widest level's number of values): the witness's
+        search keeps its markings in them."""
+        enc = self.enc
+        top = max([0, int(enc.fixed_values.max(initial=0))] + [int(loc.max(initial=0)) for loc in enc.local])
+        return np.min_scalar_type(-top - 1), np.min_scalar_type(-int(enc.dom.max(initial=1)) - 1)
+
+    @functools.cached_property
     def changed(self) -> tuple[np.ndarray, np.ndarray]:
         """The levels each transition's firing changes, ``(ptr, lev)``: those of transition t are
         ``lev[ptr[t]:ptr[t + 1]]``, increasing, −1 first when it changes a place on no level (for
@@ -681,44 +698,55 @@ class _Explicit:
 
 
 def _guided_sequence(store: _Store, ex: _Explicit, net: PetriNet, inside: int, targets: int, goal: np.ndarray,
-                     limit: int, stop: float) -> tuple[list[str], np.ndarray] | None:
+                     limit: int, stop: float, max_bytes: int = _GUIDED_BYTES) -> tuple[list[str], np.ndarray] | None:
     """A firing sequence from M0 to one of ``targets`` by a best-first search over explicit markings
     that never leaves ``inside`` (every marking of which can reach a target), always going on from
     the marking nearest (in tokens) to the dead marking ``goal``, the deepest first among equals; so
-    it mostly walks straight to a target. None when it has seen ``limit`` markings, or at ``stop``
-    (``time.monotonic()`` seconds), first. A marking costs the net's arcs (sparse Pre, inhibitor
-    and incidence) and its successors, built in blocks (:func:`_blocks`), not |P|·|T|."""
+    it mostly walks straight to a target. None when it has seen ``limit`` markings, or as many as
+    ``max_bytes`` hold, or at ``stop`` (``time.monotonic()`` seconds), first. A marking costs the
+    net's arcs (sparse Pre, inhibitor and incidence) and its successors, built in blocks
+    (:func:`_blocks`), not |P|·|T|; one it has seen is kept in the narrowest integer types
+    (:attr:`_Explicit.narrow`), about 2·|P| + 8·K + 600 bytes on a 1-safe net with K levels
+    (AirplaneLD-PT-2000: 14,019 places, 8,017 levels; as int64 arrays, 100,000 would take 22 GB)."""
     import heapq
 
     lookup, m0 = ex.lookup, ex.m0
     vals0 = lookup.of(m0[None, :])[0]
     if vals0[0] >= 0 and store.contains(targets, vals0):
         return [], m0
+    if vals0[0] < 0:  # M0 outside the encoding: nothing to search from
+        return None
+    small, small_vals = ex.narrow
+    per = 2 * ex.n_places * small.itemsize + vals0.size * small_vals.itemsize + _SEEN_OVERHEAD
+    limit = min(limit, max(1, max_bytes // per))
     lev_ptr, lev = ex.changed
-    marks = [m0]
-    levels = [vals0]  # the level values of each marking of marks
+    marks = [m0.astype(small)]
+    levels = [vals0.astype(small_vals)]  # the level values of each marking of marks
     parent = [-1]
     via = [-1]
     depth = [0]
-    seen = {m0.tobytes()}
+    seen = {marks[0].tobytes()}
     heap = [(int(np.abs(m0 - goal).sum()), 0, 0)]
     while heap:
         if len(seen) > limit or time.monotonic() > stop:
             return None
         _, _, i = heapq.heappop(heap)
-        m = marks[i]
+        m = marks[i].astype(np.int64)
         for ts in _blocks(ex.enabled(m), ex.n_places):
             succ = ex.fired(m, ts)
             vals = lookup.after(levels[i], succ, ts, lev_ptr, lev)
+            keys = succ.astype(small)  # a row outside the encoding may wrap: it is never looked at
             for j, t in enumerate(ts):
-                key = succ[j].tobytes()
+                if vals[j, 0] < 0:  # outside the encoding: never inside, and not kept as seen
+                    continue
+                key = keys[j].tobytes()
                 if key in seen:
                     continue
                 seen.add(key)
-                if vals[j, 0] < 0 or not store.contains(inside, vals[j]):
+                if not store.contains(inside, vals[j]):
                     continue
-                marks.append(succ[j].copy())  # copies: a view would keep its whole block of successors alive
-                levels.append(vals[j].copy())
+                marks.append(keys[j].copy())  # copies: a view would keep its whole block of successors alive
+                levels.append(vals[j].astype(small_vals))
                 parent.append(i)
                 via.append(int(t))
                 depth.append(depth[i] + 1)
@@ -2312,11 +2340,15 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
         say("symbolic: a firing sequence to a deadlock")
         explicit = enc.n_levels > 0
         ex = _Explicit(sn, enc)
+
+        def room() -> int:  # the guided search's bytes, outside the diagram's: half of what it has left
+            return min(_GUIDED_BYTES, max(_GUIDED_MIN_BYTES, (store.max_bytes - store.held()) // 2))
+
         found = None
         if explicit:  # first inside the reachable set alone: most often a deadlock is reachable from
             now = time.monotonic()  # everywhere, and the backward saturation below costs more
             stop = now + min(_QUICK_SECONDS, max(0.0, deadline - now))
-            found = _guided_sequence(store, ex, net, reach, dead, marking, limit=20_000, stop=stop)
+            found = _guided_sequence(store, ex, net, reach, dead, marking, limit=20_000, stop=stop, max_bytes=room())
             if found is None:  # then random walks, as briefly
                 now = time.monotonic()
                 found = _walk_sequence(store, ex, net, dead, now + min(_QUICK_SECONDS, max(0.0, deadline - now)))
@@ -2325,7 +2357,8 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
             if explicit:
                 now = time.monotonic()
                 stop = now + min(_GUIDED_SECONDS, max(0.0, (deadline - now) / 3))
-                found = _guided_sequence(store, ex, net, inside, dead, marking, limit=100_000, stop=stop)
+                found = _guided_sequence(store, ex, net, inside, dead, marking, limit=100_000, stop=stop,
+                                         max_bytes=room())
             if found is None:
                 found = _bfs_sequence(store, ex, net, fwd, inside, dead)
         if found is not None:

@@ -867,6 +867,42 @@ def test_the_guided_search_keeps_no_block_of_successors_alive_for_the_markings_i
         tracemalloc.stop()
     assert peak < 6 << 20  # 1.1 MB; the views kept 15 MB alive
 
+
+def test_the_guided_search_stops_at_its_byte_budget_with_its_markings_kept_narrow() -> None:
+    # 300 toggles, 600 places: 2^300 markings and no target, so only its budget stops the search;
+    # a marking seen is kept as int8 (1-safe), not as the int64 it is built in
+    import tracemalloc
+
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _Explicit, _guided_sequence
+
+    n = 300
+    arcs = {f"go{i}": ({f"p{i}": 1}, {f"q{i}": 1}) for i in range(n)}
+    arcs.update({f"back{i}": ({f"q{i}": 1}, {f"p{i}": 1}) for i in range(n)})
+    net = make_net("toggles", {f"p{i}": 1 for i in range(n)}, arcs)
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=1.0)
+    store = _Store(enc, 64 << 20)
+    reach = store.call(mk.MODE_SATURATE, events(sn, enc, merge=True), store.m0)
+    ex = _Explicit(sn, enc)
+    assert ex.narrow[0] == np.int8
+    assert ex.lookup.exact and ex.changed[0].size == sn.n_transitions + 1  # built before the search is traced
+    goal = np.zeros(sn.n_places, dtype=np.int64)
+    budget = 8 << 20
+    tracemalloc.start()
+    try:
+        assert _guided_sequence(store, ex, net, reach, mk.EMPTY, goal, limit=10**6, stop=float("inf"),
+                                max_bytes=budget) is None
+        _now, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    # the markings within the budget (11.0 MiB in all), beside one block of successors (300 × 600
+    # int64, 1.4 MB) and its level values; as int64 arrays, as many markings took 52 MiB
+    assert peak < budget + (4 << 20), peak
+
+
 def test_a_set_is_inside_a_set_of_another_store_on_the_same_levels() -> None:
     # _Home compares the reachable set of the main store with the markings that reach M0, built on
     # a store of its own: mdd_kernel.subset walks pairs of nodes, one of each store
