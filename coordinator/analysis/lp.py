@@ -14,7 +14,8 @@ proved or reported as resting on floating point (``certified`` False).
   scaled up freely, so z is 1 exactly on that support. By Tucker's complementarity theorem (the
   strict form of Farkas' lemma; Schrijver 1986, *Theory of Linear and Integer Programming*, §7.8),
   every index outside it carries a witness x with A·x ≥ 0 and (A·x)_i > 0, found by the LP
-  ``max Σ w  s.t.  A·x ≥ 0, 0 ≤ w ≤ 1, w ≤ A·x``. Both vectors together prove the partition. With
+  ``max Σ w  s.t.  A·x ≥ 0, 0 ≤ w ≤ 1, w ≤ (A·x)_U``, w only on the indices U outside the support
+  (on the support, (A·x)_i = 0 for every such x). Both vectors together prove the partition. With
   A = C (incidence, |P| × |T|): the net is *conservative* (a strictly positive P-semiflow exists)
   iff every place is covered; with A = Cᵀ: *consistent* (a strictly positive T-semiflow) iff
   every transition is covered (Murata 1989, section VI; Silva, Teruel, Colom 1998, *Linear algebraic
@@ -179,11 +180,18 @@ def semiflow_support(matrix: sp.spmatrix | np.ndarray, *, seconds: float = LP_SE
             break
     if covered.all():
         return Support(covered=covered, certified=semiflow is not None, semiflow=semiflow)
-    # LP 2: max sum w, A x >= 0, w <= A x, 0 <= w <= 1, x free; variables [x, w]
-    a_ub2 = sp.vstack([sp.hstack([-a, sp.csr_matrix((n, n))]), sp.hstack([-a, eye])], format="csr")
-    c2 = np.concatenate([np.zeros(m), -np.ones(n)])
-    bounds2 = [(None, None)] * m + [(0.0, 1.0)] * n
-    res2 = _solve(c2, a_ub2, np.zeros(2 * n), None, None, bounds2, seconds)
+    # LP 2: max sum w, A x >= 0, w <= (A x)_U, 0 <= w <= 1, x free; variables [x, w], w only on the
+    # indices U outside the support: on an index of a semiflow's support, (A x)_i is 0 for every x
+    # with A x >= 0 (yᵀA x = 0), so a w there would always be 0. StigmergyCommit-PT-08b (42,776
+    # transitions, 515 outside): 0.7 s, where a w on every transition took 19 s
+    out = np.flatnonzero(~covered)
+    k = out.size
+    pick = sp.csr_matrix((np.ones(k), (np.arange(k), out)), shape=(k, n))
+    a_ub2 = sp.vstack([sp.hstack([-a, sp.csr_matrix((n, k))]), sp.hstack([-(pick @ a), sp.identity(k, format="csr")])],
+                      format="csr")
+    c2 = np.concatenate([np.zeros(m), -np.ones(k)])
+    bounds2 = [(None, None)] * m + [(0.0, 1.0)] * k
+    res2 = _solve(c2, a_ub2, np.zeros(n + k), None, None, bounds2, seconds)
     witness: np.ndarray | None = None
     if res2.status == 0:
         x = np.asarray(res2.x[:m])
