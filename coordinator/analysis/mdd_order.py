@@ -869,7 +869,7 @@ class _LocalFunctions:
         for m in mats:
             m.sort_indices()
         self.mats = [(m.indptr, m.indices.astype(np.int64), m.data.astype(np.int64)) for m in mats]
-        self.cache: dict[tuple[int, bytes], np.ndarray] = {}
+        self.cache: dict[tuple[object, ...], np.ndarray] = {}
         # per level: its local markings as mixed-radix numbers (a digit per place, radix its largest
         # local value + 1), sorted, when they fit in 62 bits; else a dictionary of their bytes
         self.radix: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None] = []
@@ -893,24 +893,28 @@ class _LocalFunctions:
                                       for i, row in enumerate(loc)})
 
     def of(self, t: int, places: np.ndarray) -> dict[int, np.ndarray]:
-        """Transition t's function on each level of ``places`` (the places it touches on levels)."""
+        """Transition t's function on each level of ``places`` (the places it touches on levels).
+        Its pattern on a level is named by the (column, weight) pairs of its arcs there, small
+        tuples: dense weight vectors per level were built only for a pattern not seen before
+        (StigmergyElection-PT-09b, 41,210 transitions: 6 s a set of events, most of it in them)."""
         enc = self.enc
-        cols: list[tuple[np.ndarray, np.ndarray]] = []
+        arcs: list[list[tuple[int, int, int]]] = []  # per matrix: (level, column, weight) of t's arcs
         for indptr, indices, data in self.mats:
             lo, hi = int(indptr[t]), int(indptr[t + 1])
-            cols.append((indices[lo:hi], data[lo:hi]))
+            idx = indices[lo:hi]
+            arcs.append(list(zip(enc.place_level[idx].tolist(), enc.place_col[idx].tolist(), data[lo:hi].tolist())))
         out: dict[int, np.ndarray] = {}
-        for k in np.unique(enc.place_level[places]).tolist():
-            n = enc.levels[k].size
-            vecs = []
-            for idx, val in cols:
-                v = np.zeros(n, dtype=np.int64)
-                on = enc.place_level[idx] == k
-                v[enc.place_col[idx[on]]] = val[on]
-                vecs.append(v)
-            key = (k, b"".join(v.tobytes() for v in vecs))
+        for k in sorted(set(enc.place_level[places].tolist())):
+            key = (k, *(tuple((c, w) for lev, c, w in m if lev == k) for m in arcs))
             f = self.cache.get(key)
             if f is None:
+                n = enc.levels[k].size
+                vecs = []
+                for pairs in key[1:]:
+                    v = np.zeros(n, dtype=np.int64)
+                    for c, w in pairs:
+                        v[c] = w
+                    vecs.append(v)
                 f = self._compute(k, *vecs)
                 self.cache[key] = f
             out[k] = f
@@ -1022,18 +1026,16 @@ def _merge(funcs: list[dict[int, np.ndarray]], members: list[tuple[int, ...]]
     return [{k: tabs[f] for k, f in ev} for ev in evs], mem
 
 
-def _inverse(f: dict[int, np.ndarray], dom: np.ndarray) -> dict[int, np.ndarray] | None:
-    """The inverse local functions, or None when one is not injective (a reset arc)."""
-    out: dict[int, np.ndarray] = {}
-    for k, tab in f.items():
-        inv = np.full(int(dom[k]), -1, dtype=np.int64)
-        for i, j in enumerate(tab.tolist()):
-            if 0 <= j < dom[k]:
-                if inv[j] >= 0:
-                    return None
-                inv[j] = i
-        out[k] = inv
-    return out
+def _inverse(tab: np.ndarray, dom: int) -> np.ndarray | None:
+    """The inverse of a local function on a level of ``dom`` values (value → value, -1 where
+    disabled, ``dom`` for an overflow), or None when it is not injective (a reset arc)."""
+    src = np.flatnonzero((tab >= 0) & (tab < dom))
+    dst = tab[src]
+    if np.unique(dst).size < dst.size:
+        return None
+    inv = np.full(dom, -1, dtype=np.int64)
+    inv[dst] = src
+    return inv
 
 
 def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool = False,
@@ -1056,15 +1058,23 @@ def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool =
     funcs: list[dict[int, np.ndarray]] = []
     members: list[tuple[int, ...]] = []
     local = _LocalFunctions(sn, enc)
+    # the inverse of each function once: transitions alike share their functions (_LocalFunctions),
+    # which the cache keeps alive, so that an id names one function
+    inverses: dict[tuple[int, int], np.ndarray | None] = {}
     for t in ts:
         on_levels = touched[t][enc.place_level[touched[t]] >= 0]
         if on_levels.size == 0 or (transitions is None and (enc.never[t] or enc.suspect[t])):
             continue  # enabled everywhere and changing no level (Encoding.free), or never enabled
         f = local.of(t, on_levels)
         if inverse:
-            g = _inverse(f, enc.dom)
-            if g is None:
-                raise AnalysisError("backward reachability is not available on a net with reset arcs")
+            g: dict[int, np.ndarray] = {}
+            for k, tab in f.items():
+                inv = inverses.get((k, id(tab)), tab)
+                if inv is tab:
+                    inv = inverses[k, id(tab)] = _inverse(tab, int(enc.dom[k]))
+                if inv is None:
+                    raise AnalysisError("backward reachability is not available on a net with reset arcs")
+                g[k] = inv
             f = g
         funcs.append(f)
         members.append((t,))
