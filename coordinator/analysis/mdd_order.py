@@ -212,21 +212,27 @@ def _local_space(places: np.ndarray, sn: SparseNet, bounds: np.ndarray, trans: n
     reachable marking (part of a semiflow's support: the rest holds no negative count), which
     the local markings keep too."""
     rows = np.asarray(places, dtype=np.int64)
-    pre = sn.pre[rows][:, trans].toarray().T
-    post = sn.post[rows][:, trans].toarray().T
-    inh = sn.inhibitor[rows][:, trans].toarray().T
-    reset = (sn.reset[rows][:, trans].toarray().T > 0) if sn.reset is not None and sn.reset.nnz else None
+    has_reset = sn.reset is not None and bool(sn.reset.nnz)
+    parts = [sn.pre[rows][:, trans], sn.post[rows][:, trans], sn.inhibitor[rows][:, trans]]
+    if has_reset:
+        assert sn.reset is not None
+        parts.append((sn.reset[rows][:, trans] > 0).astype(np.int64))
     # transitions of the same effect on the group are one (BridgeAndVehicles-PT-V80P20N20: 3,728
-    # transitions, a handful of effects on a group, each looked at in every local marking): one
-    # row of bytes an effect, the rows told apart by a sort of those bytes
+    # transitions, a handful of effects on a group, each looked at in every local marking): an
+    # effect is named by its column's entries, sparse, and only the first of each is made dense
+    # (StigmergyElection-PT-09b: 41,210 transitions on groups of 125 places, 3 s a group as
+    # sorted dense rows)
+    sub = sp.csc_matrix(sp.vstack(parts, format="csc"), dtype=np.int64)
+    sub.eliminate_zeros()
+    sub.sort_indices()
+    ptr, ind, dat = sub.indptr, sub.indices, sub.data
+    firsts: dict[bytes, int] = {}
+    for j in range(trans.size):
+        firsts.setdefault(ind[ptr[j]:ptr[j + 1]].tobytes() + dat[ptr[j]:ptr[j + 1]].tobytes(), j)
+    effects = sub[:, np.array(sorted(firsts.values()), dtype=np.int64)].toarray().T
     k = rows.size
-    parts = [pre, post, inh] + ([reset.astype(np.int64)] if reset is not None else [])
-    effects = np.ascontiguousarray(np.concatenate(parts, axis=1), dtype=np.int64)
-    _, first = np.unique(effects.view(np.dtype((np.void, 8 * effects.shape[1]))).ravel(), return_index=True)
-    effects = effects[np.sort(first)]
     pre, post, inh = effects[:, :k], effects[:, k:2 * k], effects[:, 2 * k:3 * k]
-    if reset is not None:
-        reset = effects[:, 3 * k:] > 0
+    reset = effects[:, 3 * k:] > 0 if has_reset else None
     top = bounds[rows]
     start = tuple(int(v) for v in sn.m0[rows])
     seen = {start: 0}
