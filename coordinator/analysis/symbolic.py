@@ -706,8 +706,9 @@ def _guided_sequence(store: _Store, ex: _Explicit, net: PetriNet, inside: int, t
     ``max_bytes`` hold, or at ``stop`` (``time.monotonic()`` seconds), first. A marking costs the
     net's arcs (sparse Pre, inhibitor and incidence) and its successors, built in blocks
     (:func:`_blocks`), not |P|·|T|; one it has seen is kept in the narrowest integer types
-    (:attr:`_Explicit.narrow`), about 2·|P| + 8·K + 600 bytes on a 1-safe net with K levels
-    (AirplaneLD-PT-2000: 14,019 places, 8,017 levels; as int64 arrays, 100,000 would take 22 GB)."""
+    (:attr:`_Explicit.narrow`): 2·|P| + K + 600 bytes on a 1-safe net whose K levels have fewer
+    than 128 values each (AirplaneLD-PT-2000: 14,019 places, 8,017 levels; as int64 arrays,
+    100,000 markings would take 22 GB)."""
     import heapq
 
     lookup, m0 = ex.lookup, ex.m0
