@@ -7,6 +7,7 @@ import csv
 import os
 import threading
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -837,48 +838,17 @@ def test_a_one_shot_start_has_no_way_back_into_m0_and_a_self_loop_at_m0_is_none(
         assert _has_way_back(store, events(sn, enc, inverse=True, merge=True), reach) is way_back
 
 
-def test_the_guided_search_keeps_no_block_of_successors_alive_for_the_markings_it_keeps() -> None:
-    # each of 10 toggles goes one way by 40 parallel transitions: a marking has up to 400 successors,
-    # of which at most 10 are new, so each block of successors a kept marking was a view of stayed
-    # allocated (CloudDeployment-PT-5a: 2.5 GiB beside a 4 GiB budget; docs/BENCHMARKS.md)
+def _toggles_search(n: int, ways: int, max_bytes: int | None = None) -> tuple[Any, int]:
+    """``n`` toggles, each going one way by ``ways`` parallel transitions and back by one: the
+    guided search from M0 with no target (it goes on until its limits), traced; the search's
+    _Explicit and its traced peak (bytes). The level lookups are built before the trace."""
     import tracemalloc
 
     from coordinator.analysis import mdd_kernel as mk
     from coordinator.analysis.mdd_order import encode, events
     from coordinator.analysis.symbolic import _Explicit, _guided_sequence
 
-    n, ways = 10, 40
     arcs = {f"go{i}_{k}": ({f"p{i}": 1}, {f"q{i}": 1}) for i in range(n) for k in range(ways)}
-    arcs.update({f"back{i}": ({f"q{i}": 1}, {f"p{i}": 1}) for i in range(n)})
-    net = make_net("parallel-toggles", {f"p{i}": 1 for i in range(n)}, arcs)
-    bounds, flows = proven_bounds(net)
-    sn = sparse_net(net)
-    enc = encode(sn, bounds, flows, seconds=1.0)
-    store = _Store(enc, 64 << 20)
-    reach = store.call(mk.MODE_SATURATE, events(sn, enc, merge=True), store.m0)
-    ex = _Explicit(sn, enc)
-    goal = np.zeros(sn.n_places, dtype=np.int64)
-    tracemalloc.start()
-    try:
-        # no target: it goes on from every one of the 1,024 markings
-        assert _guided_sequence(store, ex, net, reach, mk.EMPTY, goal, limit=10**6, stop=float("inf")) is None
-        _now, peak = tracemalloc.get_traced_memory()
-    finally:
-        tracemalloc.stop()
-    assert peak < 6 << 20  # 1.1 MB; the views kept 15 MB alive
-
-
-def test_the_guided_search_stops_at_its_byte_budget_with_its_markings_kept_narrow() -> None:
-    # 300 toggles, 600 places: 2^300 markings and no target, so only its budget stops the search;
-    # a marking seen is kept as int8 (1-safe), not as the int64 it is built in
-    import tracemalloc
-
-    from coordinator.analysis import mdd_kernel as mk
-    from coordinator.analysis.mdd_order import encode, events
-    from coordinator.analysis.symbolic import _Explicit, _guided_sequence
-
-    n = 300
-    arcs = {f"go{i}": ({f"p{i}": 1}, {f"q{i}": 1}) for i in range(n)}
     arcs.update({f"back{i}": ({f"q{i}": 1}, {f"p{i}": 1}) for i in range(n)})
     net = make_net("toggles", {f"p{i}": 1 for i in range(n)}, arcs)
     bounds, flows = proven_bounds(net)
@@ -887,17 +857,34 @@ def test_the_guided_search_stops_at_its_byte_budget_with_its_markings_kept_narro
     store = _Store(enc, 64 << 20)
     reach = store.call(mk.MODE_SATURATE, events(sn, enc, merge=True), store.m0)
     ex = _Explicit(sn, enc)
-    assert ex.narrow[0] == np.int8
     assert ex.lookup.exact and ex.changed[0].size == sn.n_transitions + 1  # built before the search is traced
     goal = np.zeros(sn.n_places, dtype=np.int64)
-    budget = 8 << 20
+    budget = {} if max_bytes is None else {"max_bytes": max_bytes}
     tracemalloc.start()
     try:
         assert _guided_sequence(store, ex, net, reach, mk.EMPTY, goal, limit=10**6, stop=float("inf"),
-                                max_bytes=budget) is None
+                                **budget) is None
         _now, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
+    return ex, peak
+
+
+def test_the_guided_search_keeps_no_block_of_successors_alive_for_the_markings_it_keeps() -> None:
+    # each of 10 toggles goes one way by 40 parallel transitions: a marking has up to 400 successors,
+    # of which at most 10 are new, so each block of successors a kept marking was a view of stayed
+    # allocated (CloudDeployment-PT-5a: 2.5 GiB beside a 4 GiB budget; docs/BENCHMARKS.md); with no
+    # target, it goes on from every one of the 1,024 markings
+    _ex, peak = _toggles_search(10, 40)
+    assert peak < 6 << 20  # 1.1 MB; the views kept 15 MB alive
+
+
+def test_the_guided_search_stops_at_its_byte_budget_with_its_markings_kept_narrow() -> None:
+    # 300 toggles, 600 places: 2^300 markings and no target, so only its budget stops the search;
+    # a marking seen is kept as int8 (1-safe), not as the int64 it is built in
+    budget = 8 << 20
+    ex, peak = _toggles_search(300, 1, max_bytes=budget)
+    assert ex.narrow[0] == np.int8
     # the markings within the budget (11.0 MiB in all), beside one block of successors (300 × 600
     # int64, 1.4 MB) and its level values; as int64 arrays, as many markings took 52 MiB
     assert peak < budget + (4 << 20), peak
