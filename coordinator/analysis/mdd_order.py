@@ -175,6 +175,8 @@ class Events:
     Attributes:
         top, bot, slot_ptr, slot, fn_ptr, fn, by_top_ptr, by_top: the kernel's event tables.
         members: the transition indices of each event (one, or several merged).
+        local: the transitions' local functions these events were built from, kept so that other
+            events of the same encoding take them again (:func:`events`, ``like``).
     """
 
     top: np.ndarray
@@ -186,6 +188,7 @@ class Events:
     by_top_ptr: np.ndarray
     by_top: np.ndarray
     members: tuple[tuple[int, ...], ...]
+    local: _LocalFunctions | None = field(default=None, repr=False, compare=False)
 
     def tables(self) -> tuple[np.ndarray, ...]:
         """The arrays in the order :func:`.mdd_kernel.run` takes them after ``dom``."""
@@ -202,7 +205,9 @@ def touched_places(sn: SparseNet) -> list[np.ndarray]:
     mats = [sn.pre, sn.post, sn.inhibitor] + ([sn.reset] if sn.reset is not None and sn.reset.nnz else [])
     both = sp.csc_matrix(sum((abs(m) for m in mats), sp.csc_matrix(sn.pre.shape, dtype=np.int64)))
     both.sort_indices()
-    return [both.indices[both.indptr[t]:both.indptr[t + 1]].astype(np.int64) for t in range(sn.n_transitions)]
+    idx = both.indices.astype(np.int64)  # converted once: a conversion per slice took 1 s on 41,210 transitions
+    ptr = both.indptr.tolist()
+    return [idx[ptr[t]:ptr[t + 1]] for t in range(sn.n_transitions)]
 
 
 def _local_space(places: np.ndarray, sn: SparseNet, bounds: np.ndarray, trans: np.ndarray,
@@ -881,6 +886,9 @@ class _LocalFunctions:
             m.sort_indices()
         self.mats = [(m.indptr, m.indices.astype(np.int64), m.data.astype(np.int64)) for m in mats]
         self.cache: dict[tuple[object, ...], np.ndarray] = {}
+        # each transition's functions, once: the forward, single and backward events of an
+        # encoding are built from the same (StigmergyElection-PT-09b: 2.4 s a set of events)
+        self.by_transition: dict[int, dict[int, np.ndarray]] = {}
         # per level: its local markings as mixed-radix numbers (a digit per place, radix its largest
         # local value + 1), sorted, when they fit in 62 bits; else a dictionary of their bytes
         self.radix: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None] = []
@@ -983,10 +991,20 @@ def _merge(funcs: list[dict[int, np.ndarray]], members: list[tuple[int, ...]]
             masks.append(int.from_bytes(np.packbits(tab >= 0, bitorder="little").tobytes(), "little"))
         return i
 
-    # identical events (equal functions on every level: duplicated transitions) are one event
+    # identical events (equal functions on every level: duplicated transitions) are one event; the
+    # transitions share their functions' arrays (_LocalFunctions), so an array is named by its id
+    # first (``funcs`` holds every one of them alive meanwhile, so no id is taken again)
+    by_id: dict[int, int] = {}
+
+    def named(tab: np.ndarray) -> int:
+        i = by_id.get(id(tab))
+        if i is None:
+            i = by_id[id(tab)] = name(tab)
+        return i
+
     same: dict[tuple[tuple[int, int], ...], list[int]] = {}
     for idx, f in enumerate(funcs):
-        same.setdefault(tuple((k, name(f[k])) for k in sorted(f)), []).append(idx)
+        same.setdefault(tuple((k, named(f[k])) for k in sorted(f)), []).append(idx)
     evs = list(same)
     mem = [tuple(sorted(t for i in idxs for t in members[i])) for idxs in same.values()]
     changed = True
@@ -1050,7 +1068,7 @@ def _inverse(tab: np.ndarray, dom: int) -> np.ndarray | None:
 
 
 def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool = False,
-           transitions: np.ndarray | None = None) -> Events:
+           transitions: np.ndarray | None = None, like: Events | None = None) -> Events:
     """The events of the net's transitions (module docstring).
 
     Args:
@@ -1060,6 +1078,8 @@ def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool =
         transitions: the transitions to include (default all that read or change some level and
             are not disabled by fixed places, :class:`Encoding`; given, those that read or change
             some level, with their functions there).
+        like: events built before on ``enc``, whose transitions' local functions are taken again
+            instead of computed (ignored when they were built on another encoding).
 
     Raises:
         AnalysisError: ``inverse`` on a net with reset arcs.
@@ -1068,7 +1088,8 @@ def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool =
     ts = range(sn.n_transitions) if transitions is None else transitions.tolist()
     funcs: list[dict[int, np.ndarray]] = []
     members: list[tuple[int, ...]] = []
-    local = _LocalFunctions(sn, enc)
+    local = like.local if like is not None and like.local is not None and like.local.enc is enc else (
+        _LocalFunctions(sn, enc))
     # the inverse of each function once: transitions alike share their functions (_LocalFunctions),
     # which the cache keeps alive, so that an id names one function
     inverses: dict[tuple[int, int], np.ndarray | None] = {}
@@ -1076,7 +1097,9 @@ def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool =
         on_levels = touched[t][enc.place_level[touched[t]] >= 0]
         if on_levels.size == 0 or (transitions is None and (enc.never[t] or enc.suspect[t])):
             continue  # enabled everywhere and changing no level (Encoding.free), or never enabled
-        f = local.of(t, on_levels)
+        f = local.by_transition.get(t)
+        if f is None:
+            f = local.by_transition[t] = local.of(t, on_levels)
         if inverse:
             g: dict[int, np.ndarray] = {}
             for k, tab in f.items():
@@ -1092,14 +1115,23 @@ def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool =
     if merge:
         funcs, members = _merge(funcs, members)
     top, bot, slot_ptr, slot, fn_ptr, fn = [], [], [0], [], [0], []
+    # a function the events share (transitions alike share their arrays: _LocalFunctions) is stored
+    # once, its slots naming the same index (StigmergyElection-PT-09b's 41,210 events of one
+    # transition: 383 MiB of functions as one copy each, then copied again by the conversion);
+    # ``funcs`` holds every array alive meanwhile, so no id is taken again
+    index_of: dict[int, int] = {}
     for f in funcs:
         ks = sorted(f)
         lo, hi = ks[0], ks[-1]
         slots = [-1] * (hi - lo + 1)
         for k in ks:
-            slots[k - lo] = len(fn_ptr) - 1
-            fn.append(f[k])
-            fn_ptr.append(fn_ptr[-1] + f[k].size)
+            tab = f[k]
+            i = index_of.get(id(tab))
+            if i is None:
+                i = index_of[id(tab)] = len(fn_ptr) - 1
+                fn.append(tab)
+                fn_ptr.append(fn_ptr[-1] + tab.size)
+            slots[k - lo] = i
         top.append(lo)
         bot.append(hi)
         slot.extend(slots)
@@ -1108,6 +1140,6 @@ def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool =
     counts = np.bincount(top_a, minlength=enc.n_levels) if top_a.size else np.zeros(enc.n_levels, np.int64)
     return Events(top=top_a, bot=np.array(bot, dtype=np.int64), slot_ptr=np.array(slot_ptr, dtype=np.int64),
                   slot=np.array(slot, dtype=np.int64), fn_ptr=np.array(fn_ptr, dtype=np.int64),
-                  fn=np.concatenate(fn).astype(np.int64) if fn else np.zeros(0, np.int64),
+                  fn=np.concatenate(fn).astype(np.int64, copy=False) if fn else np.zeros(0, np.int64),
                   by_top_ptr=np.concatenate([[0], np.cumsum(counts)]).astype(np.int64),
-                  by_top=np.argsort(top_a, kind="stable").astype(np.int64), members=tuple(members))
+                  by_top=np.argsort(top_a, kind="stable").astype(np.int64), members=tuple(members), local=local)

@@ -911,7 +911,7 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
                                                             notes)
         if rival is not None:
             rival.settled.set()  # the search racing for the same set stops
-        single = events(sn, enc)
+        single = events(sn, enc, like=fwd)  # the transitions' functions of the forward events, again
         secs["encode"] = enc.seconds
         secs["reach"] = time.monotonic() - t0 - enc.seconds
         say(f"symbolic: {states:,} markings, {store.nodes:,} nodes, {secs['reach']:.1f} s")
@@ -944,7 +944,7 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
             method="chaining" if store.chain else "saturation", seconds=secs, notes=notes)
         back: Events | None = None
         if sn.n_resets == 0:
-            back = events(sn, enc, inverse=True, merge=True)
+            back = events(sn, enc, inverse=True, merge=True, like=fwd)
         # the firing sequence to a dead marking is traced within the answer's time too (its quick
         # search at least): the verdict and the dead marking are already known
         until = min(deadline, start + answer_seconds)
@@ -2031,7 +2031,7 @@ class _Upside(_Beside):
         try:
             # its time, its memory or a stop ends it undecided: the main thread's answer stands
             with contextlib.suppress(_OutOfTime, AnalysisError):
-                back = events(sn, kept.enc, inverse=True, merge=True)
+                back = events(sn, kept.enc, inverse=True, merge=True, like=kept.fwd)
                 t0 = time.monotonic()
                 mk.set_watch(min(until, t0 + _CLOSED_SECONDS), None, self.cancel)
                 with contextlib.suppress(_OutOfTime):  # its slice: the way below goes on

@@ -211,6 +211,42 @@ def test_the_breadth_first_trace_to_a_deadlock_is_a_shortest_firing_sequence(see
     assert len(seq) == shortest_to_a_deadlock(net)
 
 
+def event_functions(ev: Events) -> list[tuple[int, int, tuple[bytes | None, ...]]]:
+    """Each event's top and bottom level and its local function on every level between (bytes of
+    the function's values, None where it leaves the level alone): what the kernel reads."""
+    out = []
+    for e in range(ev.n_events):
+        fs = [int(ev.slot[j]) for j in range(int(ev.slot_ptr[e]), int(ev.slot_ptr[e + 1]))]
+        out.append((int(ev.top[e]), int(ev.bot[e]),
+                    tuple(None if f < 0 else ev.fn[ev.fn_ptr[f]:ev.fn_ptr[f + 1]].tobytes() for f in fs)))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_events_built_like_the_forward_ones_take_their_functions_again_and_store_a_shared_one_once(
+        seed: int) -> None:
+    from coordinator.analysis.mdd_order import encode, events
+
+    _, _, sn, enc = generated_encoding(seed)
+    fwd = events(sn, enc, merge=True)
+    for kw in ({}, {"merge": True}, {"inverse": True, "merge": True}):
+        if kw.get("inverse") and sn.n_resets:
+            continue
+        fresh, like = events(sn, enc, **kw), events(sn, enc, **kw, like=fwd)
+        assert event_functions(like) == event_functions(fresh)
+        assert like.members == fresh.members
+        assert like.local is fwd.local and fresh.local is not fwd.local
+    # the transitions of a coloured net share their local functions: the single events store each once
+    net = make_net("philosophers", *philosophers_arcs(12))
+    sn = sparse_net(net)
+    bounds, flows = proven_bounds(net)
+    enc = encode(sn, bounds, flows, seconds=1.0)
+    single = events(sn, enc)
+    slots = single.slot[single.slot >= 0]
+    assert np.unique(slots).size == single.fn_ptr.size - 1 < slots.size
+    assert event_functions(single) == event_functions(events(sn, enc, like=events(sn, enc, merge=True)))
+
+
 @pytest.mark.parametrize("seed", range(10))
 def test_saturation_s_loop_lists_per_value_the_events_of_the_level_enabled_on_it(seed: int) -> None:
     from coordinator.analysis import mdd_kernel as mk
