@@ -1010,11 +1010,12 @@ def _merge(funcs: list[dict[int, np.ndarray]], members: list[tuple[int, ...]]
     changed = True
     while changed:
         changed = False
-        groups: dict[tuple[tuple[int, ...], int, tuple[tuple[int, int], ...]], list[int]] = {}
+        # keyed by the position and level left out and the rest: the rest names the other levels,
+        # so events of one key have the same levels (a tuple of them per event took 0.7 s on 09b)
+        groups: dict[tuple[int, int, tuple[tuple[int, int], ...]], list[int]] = {}
         for idx, ev in enumerate(evs):
-            levels = tuple(k for k, _ in ev)
             for a in range(len(ev)):
-                groups.setdefault((levels, a, ev[:a] + ev[a + 1:]), []).append(idx)
+                groups.setdefault((a, ev[a][0], ev[:a] + ev[a + 1:]), []).append(idx)
         gone = np.zeros(len(evs), dtype=bool)
         new_e: list[tuple[tuple[int, int], ...]] = []
         new_m: list[tuple[int, ...]] = []
@@ -1024,7 +1025,7 @@ def _merge(funcs: list[dict[int, np.ndarray]], members: list[tuple[int, ...]]
             idxs = [i for i in idxs if not gone[i]]
             if len(idxs) < 2:
                 continue
-            a = key[1]
+            a = key[0]
             # first fit: each event joins the first merged event it is disjoint from there, so a
             # large group is merged in one round, not one merged event a round
             bins: list[list[int]] = []  # each: its enabled values' bits, then its events
