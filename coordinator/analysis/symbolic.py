@@ -60,7 +60,15 @@ import numpy as np
 from coordinator.analysis import mdd_kernel as mk
 from coordinator.analysis.budget import cpus, lower_priority
 from coordinator.analysis.matrices import SparseNet, sparse_net
-from coordinator.analysis.mdd_order import Encoding, EncodingTooLarge, Events, encode, events, touched_places
+from coordinator.analysis.mdd_order import (
+    Encoding,
+    EncodingTooLarge,
+    Events,
+    concat_ranges,
+    encode,
+    events,
+    touched_places,
+)
 from coordinator.errors import AnalysisError
 from coordinator.net import PetriNet
 
@@ -585,14 +593,14 @@ class _LevelValues:
         n = ts.size
         cnt = lev_ptr[ts + 1] - lev_ptr[ts]
         rows = np.repeat(np.arange(n), cnt)
-        levs = lev[_ranges(lev_ptr[ts], cnt)]
+        levs = lev[concat_ranges(lev_ptr[ts], cnt)]
         out = np.repeat(vals[None, :].astype(np.int64), n, axis=0)
         bad = np.zeros(n, dtype=bool)
         bad[rows[levs < 0]] = True  # a place whose count never changes would change
         rows, levs = rows[levs >= 0], levs[levs >= 0]
         if levs.size:
             size = self.sizes[levs]
-            pos = _ranges(self.starts[levs], size)
+            pos = concat_ranges(self.starts[levs], size)
             prow = np.repeat(rows, size)
             digits = markings[prow, self.order[pos]]
             bad[prow[(digits < 0) | (digits > self.top[pos])]] = True
@@ -601,11 +609,6 @@ class _LevelValues:
             bad[rows[found < 0]] = True
         out[bad] = -1
         return out
-
-
-def _ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    """The integers ``starts[i] .. starts[i] + counts[i] - 1`` for every i, one after the other."""
-    return np.repeat(starts - (np.cumsum(counts) - counts), counts) + np.arange(int(counts.sum()))
 
 
 def _blocks(ts: np.ndarray, n_places: int) -> list[np.ndarray]:
@@ -682,7 +685,7 @@ class _Explicit:
         ptr = self.inc_ptr
         counts = ptr[ts + 1] - ptr[ts]
         rows = np.repeat(np.arange(ts.size), counts)
-        at = _ranges(ptr[ts], counts)
+        at = concat_ranges(ptr[ts], counts)
         out = np.repeat(m[None, :].astype(np.int64), ts.size, axis=0)
         out[rows, self.inc_places[at]] += sign * self.inc_data[at]
         return out
