@@ -1119,8 +1119,7 @@ def events(sn: SparseNet, enc: Encoding, *, merge: bool = False, inverse: bool =
     inverses: dict[tuple[int, int], np.ndarray | None] = {}
     kept: list[int] = []
     for t in ts:
-        on_levels = touched[t][enc.place_level[touched[t]] >= 0]
-        if on_levels.size == 0 or (transitions is None and (enc.never[t] or enc.suspect[t])):
+        if not (enc.place_level[touched[t]] >= 0).any() or (transitions is None and (enc.never[t] or enc.suspect[t])):
             continue  # enabled everywhere and changing no level (Encoding.free), or never enabled
         kept.append(t)
     local.fill([t for t in kept if t not in local.by_transition])

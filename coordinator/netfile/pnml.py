@@ -492,16 +492,18 @@ class _Reader:
             merged[key] = total
             if key not in first_elem:
                 first_elem[key] = elem
+        def arc(key: tuple[str, str, str], weight: int) -> Arc:
+            return Arc(source=key[0], target=key[1], weight=weight, inhibitor=key[2] == "inhibitor",
+                       reset=key[2] == "reset")
+
         out: list[Arc] = []
         try:
             for key, w in merged.items():
-                out.append(Arc(source=key[0], target=key[1], weight=w, inhibitor=key[2] == "inhibitor",
-                               reset=key[2] == "reset"))
+                out.append(arc(key, w))
         except (NetError, TypeError, ValueError):
             # the arc that failed, again, with its element's line
             key, w = list(merged.items())[len(out)]
-            self.guarded(first_elem[key], partial(Arc, source=key[0], target=key[1], weight=w,
-                                                  inhibitor=key[2] == "inhibitor", reset=key[2] == "reset"))
+            self.guarded(first_elem[key], partial(arc, key, w))
             raise
         return out
 
