@@ -64,6 +64,7 @@ from coordinator.analysis.mdd_order import (
     Encoding,
     EncodingTooLarge,
     Events,
+    PlaceGroups,
     concat_ranges,
     encode,
     events,
@@ -1303,6 +1304,7 @@ class _Race:
         self.max_bytes, self.deadline, self.say = max_bytes, deadline, say
         self.lock = threading.Lock()
         self.orders: list[Encoding] = []  # every candidate's encoding, the first one's first
+        self.groups = PlaceGroups()  # the groups of places, found by the first encoding for all
         self.first = threading.Event()  # the first candidate's encoding is known (or never will be)
         # its forward events, built once by its lane and read by the lane that chains the same order
         self.first_fwd: Events | None = None
@@ -1363,7 +1365,7 @@ class _Race:
         seconds = min(10.0, max(1.0, (self.deadline - time.monotonic()) / 20))
         # an encoding and its events may take a quarter of the budget (two lanes hold one each)
         enc = encode(self.sn, self.bounds, self.flows, seconds=seconds, seed=max(seed, 0), sink=sink,
-                     flow=seed == _FLOW, stop=stop, max_bytes=self.max_bytes // 4)
+                     flow=seed == _FLOW, stop=stop, max_bytes=self.max_bytes // 4, place_groups=self.groups)
         if sink and enc.sunk:
             with self.lock:
                 if not self.plain_first:  # the same search with its shared levels left in place, next
