@@ -1728,3 +1728,26 @@ def test_the_memory_of_the_search_beside_goes_to_the_lanes_once_it_stopped() -> 
     assert race.widen_shares() and lent == [8 << 20]
     assert race.max_bytes == 72 << 20 and [lane.share for lane in race.lanes] == [36 << 20, 36 << 20]
     assert not race.widen_shares() and len(lent) == 1  # asked once
+
+
+def test_the_candidate_orders_of_one_net_share_its_groups_of_places_found_once() -> None:
+    # mdd_order.PlaceGroups: the race's encodings differ in their order alone
+    from coordinator.analysis.mdd_order import PlaceGroups, encode
+
+    net = kanban(6)
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    found = PlaceGroups()
+    how = ((0, False), (1, False), (0, True))
+    alone = [encode(sn, bounds, flows, seed=s, flow=f) for s, f in how]
+    shared = [encode(sn, bounds, flows, seed=s, flow=f, place_groups=found) for s, f in how]
+    assert any(len(ps) > 1 for ps in shared[0].levels)
+    for a, b in zip(alone, shared):
+        assert len(a.levels) == len(b.levels)
+        assert all(np.array_equal(x, y) for x, y in zip(a.levels, b.levels))
+        assert all(np.array_equal(x, y) for x, y in zip(a.local, b.local))
+    # found once: every encoding holds the same arrays of local markings, level by level
+    first = {ps.tobytes(): loc for ps, loc in zip(shared[0].levels, shared[0].local)}
+    for enc in shared[1:]:
+        assert all(loc is first[ps.tobytes()] for ps, loc in zip(enc.levels, enc.local))
+    assert not any(loc is first[ps.tobytes()] for ps, loc in zip(alone[1].levels, alone[1].local))
