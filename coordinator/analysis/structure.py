@@ -559,8 +559,10 @@ def _conflicts(net: PetriNet, space: StateSpace | None, *, seconds: float = 10.0
 AUTO_PROBE_STATES = 1_000_000
 #: ... or for this long, on two CPUs or more (seconds from the search's start): a net of many
 #: transitions is searched slowly (ARMCacheCoherence-PT-none's 33,676: 15,000 markings a second, so
-#: its share took 60 s, where its decision diagram takes 10 s), and the search goes on beside anyway
-AUTO_PROBE_SECONDS = 10.0
+#: its share took 60 s, where its decision diagram takes 10 s), and the search goes on beside anyway,
+#: so a short share costs a net the search completes little (ARMCacheCoherence and EnergyBus-PT-none
+#: answered in 17.3 s and 9.3 s with 4 s, 22.3 s and 16.0 s with 10 s; docs/BENCHMARKS.md)
+AUTO_PROBE_SECONDS = 4.0
 #: markings of the explicit search run for the symbolic engine's guessed levels when it was asked
 #: for alone (``--engine symbolic``) and the proven bounds make its levels too wide
 SEEN_STATES = 100_000
