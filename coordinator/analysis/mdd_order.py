@@ -253,8 +253,9 @@ def _local_space(places: np.ndarray, sn: SparseNet, bounds: np.ndarray, trans: n
     seen = {found[0].tobytes()}
     frontier = found
     n = 1
-    # the markings × effects × places looked at a step at most (about 64 MiB of booleans)
-    step = max(1, (1 << 26) // max(1, pre.shape[0] * k))
+    # the markings × effects × places compared a step at most: 8 MiB of booleans, and at most 64 MiB
+    # of successors
+    step = max(1, (1 << 23) // max(1, pre.shape[0] * k))
     while frontier.shape[0]:
         new: list[np.ndarray] = []
         for lo in range(0, frontier.shape[0], step):
@@ -793,8 +794,8 @@ def shared_levels(n: int, hypers: list[np.ndarray]) -> np.ndarray:
 class PlaceGroups:
     """The groups of places of one net with its bounds and semiflows (:func:`_groups`), found once
     for all the encodings :func:`encode` is given it for: candidate orders of one net differ in
-    their order alone, and its groups are the same (IBMB2S565S3960-PT-none: 0.9 s of local markings
-    a search, its 100 semiflow supports each beyond :data:`MAX_LOCAL`). Thread-safe: an encoding
+    their order alone, and its groups are the same (IBMB2S565S3960-PT-none: 0.9 s a search, each of
+    its 100 semiflow supports beyond :data:`MAX_LOCAL` local markings). Thread-safe: an encoding
     that needs them while another thread finds them waits for them."""
 
     def __init__(self) -> None:
@@ -848,8 +849,8 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
         raise EncodingTooLarge(f"a place is bounded by {int(bounds.max()):,} tokens only: the symbolic engine "
                             f"takes places of at most {MAX_DOMAIN - 1:,}")
     touched = touched_places(sn)
-    found = (PlaceGroups() if place_groups is None else place_groups).of(sn, bounds, flows, touched, start + seconds / 2)
-    groups, fixed, never, suspect = _fixed(sn, found)
+    found = PlaceGroups() if place_groups is None else place_groups
+    groups, fixed, never, suspect = _fixed(sn, found.of(sn, bounds, flows, touched, start + seconds / 2))
     n_k = len(groups)
     owner = np.full(sn.n_places, -1, dtype=np.int64)
     for k, (ps, _) in enumerate(groups):
