@@ -849,8 +849,8 @@ def encode(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], *, second
         raise EncodingTooLarge(f"a place is bounded by {int(bounds.max()):,} tokens only: the symbolic engine "
                             f"takes places of at most {MAX_DOMAIN - 1:,}")
     touched = touched_places(sn)
-    found = PlaceGroups() if place_groups is None else place_groups
-    groups, fixed, never, suspect = _fixed(sn, found.of(sn, bounds, flows, touched, start + seconds / 2))
+    memo = PlaceGroups() if place_groups is None else place_groups
+    groups, fixed, never, suspect = _fixed(sn, memo.of(sn, bounds, flows, touched, start + seconds / 2))
     n_k = len(groups)
     owner = np.full(sn.n_places, -1, dtype=np.int64)
     for k, (ps, _) in enumerate(groups):
@@ -994,10 +994,7 @@ class _LocalFunctions:
                 for i, c, w in key[1]:
                     vecs[i][c] = w
                 f = self.cache[key] = self._compute(k, *vecs)
-            funcs = by_t.get(t)
-            if funcs is None:
-                funcs = by_t[t] = {}
-            funcs[k] = f
+            by_t.setdefault(t, {})[k] = f
 
     def _compute(self, k: int, pre: np.ndarray, post: np.ndarray, inh: np.ndarray,
                  reset: np.ndarray | None = None) -> np.ndarray:

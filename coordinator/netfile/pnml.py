@@ -492,6 +492,7 @@ class _Reader:
             merged[key] = total
             if key not in first_elem:
                 first_elem[key] = elem
+
         def arc(key: tuple[str, str, str], weight: int) -> Arc:
             return Arc(source=key[0], target=key[1], weight=weight, inhibitor=key[2] == "inhibitor",
                        reset=key[2] == "reset")
