@@ -265,6 +265,15 @@ def _highs(cols: sp.csc_matrix, cost: np.ndarray, col_lower: np.ndarray, row_low
     return h
 
 
+def _time_limit(h: Any, seconds: float) -> None:
+    """Let the next run of HiGHS instance ``h`` take ``seconds`` (at least 0.01). HiGHS compares its
+    ``time_limit`` with the instance's run time summed over all its runs, so the limit is that sum
+    plus ``seconds``: given as ``seconds`` alone, the LPs of :func:`semiflow_cover` stopped when the
+    runs before them had taken what was left of its time, about half of it (NeoElection-PT-3, from
+    scratch: at 1.3 s of its 3 s, 527 semiflows one run, 449 or 506 another, 186 places uncovered)."""
+    h.setOptionValue("time_limit", h.getRunTime() + max(float(seconds), 0.01))
+
+
 class _StateEquation:
     """``max w·M  s.t.  M = M0 + Cσ ≥ 0, σ ≥ 0`` for one weight vector w after another, in one HiGHS
     instance: only the objective changes between two, so the last optimal basis stays feasible and
@@ -295,7 +304,7 @@ class _StateEquation:
         """The LP for ``weights`` ((|P|,), ≥ 0) within ``seconds``."""
         h, st = self.h, self.status
         h.changeColsCost(self.columns.size, self.columns, -(self.c_mat.T @ weights))
-        h.setOptionValue("time_limit", max(float(seconds), 0.01))
+        _time_limit(h, seconds)
         if self.solved == 1:  # from the first optimal basis on, the objective alone changes
             h.setOptionValue("simplex_strategy", 4)  # primal
         h.run()
@@ -475,6 +484,12 @@ def place_bounds(sn: SparseNet, *, seconds: float = 5.0, seen: np.ndarray | None
     return PlaceBounds(total=tb.value, bounds=bounds, own=own, certified=cert, complete=complete, notes=notes)
 
 
+#: :func:`semiflow_cover` starts each LP from the last one's basis beyond this many places to cover
+_WARM_PLACES = 1000
+#: below, the LPs from scratch whose time per place covered decides whether the rest may start from one
+_SAMPLE_LPS = 8
+
+
 class _Through:
     """``min Σ y  s.t.  yᵀC = 0, 0 ≤ y ≤ upper, y_p ≥ 1`` for one place p after another, in one HiGHS
     instance (only p's lower bound changes between two solves). A solve starts from scratch, or,
@@ -508,7 +523,7 @@ class _Through:
         if not warm:
             h.clearSolver()
         h.changeColBounds(p, 1.0, self.upper)
-        h.setOptionValue("time_limit", max(float(seconds), 0.01))
+        _time_limit(h, seconds)
         try:
             h.run()
             status = h.getModelStatus()
@@ -529,11 +544,18 @@ def semiflow_cover(sn: SparseNet, *, seconds: float = 3.0, covered: np.ndarray |
     Cheaper than the Farkas enumeration (:mod:`.invariants`) when that one explodes, and enough
     where only some semiflows are needed (groups and order of a decision diagram, :mod:`.mdd_order`).
     The LPs of successive places differ in one bound and are solved in one HiGHS instance
-    (:class:`_Through`), each from scratch while the first one's time says that all of them fit in
-    ``seconds`` (its vertex then does not depend on the order of the places), else each from the
-    last one's basis: Philosophers-PT-000500's 1,000 semiflows over 2,500 places in 1.5 s,
+    (:class:`_Through`). Each starts from the last one's basis beyond :data:`_WARM_PLACES` places
+    to cover: Philosophers-PT-000500's 1,000 semiflows over 2,500 places in 1.5 s,
     RwMutex-PT-r0500w0010's 1,010 over 1,520 places in 1.0 s (7.2 s and 4.6 s from scratch; 11.8 s
-    and 8.4 s with an LP built for each place over the whole net).
+    and 8.4 s with an LP built for each place over the whole net). Below, each starts from scratch
+    (its vertex then does not depend on the order of the places), unless the time per place covered
+    of the first :data:`_SAMPLE_LPS` LPs says that the places left do not fit in ``seconds``. The
+    two give different covers on some nets (AirplaneLD-PT-0200: 605 semiflows from one basis to the
+    next, 3 from scratch), so the choice is made on the count of places where it can be: made on the
+    first LP's time times the places to cover, as it was, ASLink-PT-02a (626 places, 4.7 ms for the
+    first LP, about 3.6 ms for each next one; 102 LPs from scratch take 0.5 s) came out on either
+    side of its 3 s from one run to the next, with covers of 100 or 102 semiflows, and reachable
+    sets of 4.7 s or 13 s.
 
     A weighted semiflow can have the smaller Σ y and hide a 0/1 one through the same places
     (SimpleLoadBal-PT-10: Σ_k (10 − k)·load_k plus the requests, against the one-hot Σ_k load_k = 1).
@@ -551,7 +573,7 @@ def semiflow_cover(sn: SparseNet, *, seconds: float = 3.0, covered: np.ndarray |
         seconds: time for all the LPs together.
         covered: (|P|,) places to skip (already covered by known semiflows, or by none).
         warm: True: each LP from the last one's basis; False: each from scratch; None (default):
-            decided by the first LP's time, as above.
+            decided by the places to cover, and the first LPs' time, as above.
         spread: 0 (default): no second pass; else the most ways its tokens can lie of a 0/1
             semiflow the second pass adds.
 
@@ -582,16 +604,20 @@ def semiflow_cover(sn: SparseNet, *, seconds: float = 3.0, covered: np.ndarray |
         return out
     through = _Through(c_t)
     tried = done.copy()  # places of no semiflow at all (and then of a small one: the second pass)
+    before, lps, spent = int(done.sum()), 0, 0.0  # the LPs from scratch that decide ``warm``
+    if warm is None and n - before > _WARM_PLACES:
+        warm = True
     for p in range(n):
         left = seconds - (time.monotonic() - start)
         if left <= 0:
             return out
         if done[p]:
             continue
+        if warm is None and lps == _SAMPLE_LPS:  # their time per place covered, for the places left
+            warm = spent / (int(done.sum()) - before) * int((~done).sum()) > left
         t0 = time.monotonic()
-        x = through.solve(p, left, bool(warm))
-        if warm is None:
-            warm = (time.monotonic() - t0) * int((~done).sum()) > left
+        x = through.solve(p, left, bool(warm) and lps > 0)  # the first from scratch: no basis before it
+        lps, spent = lps + 1, spent + time.monotonic() - t0
         if x is True:
             return out
         done[p] = True

@@ -223,6 +223,20 @@ def test_the_cover_finds_the_small_semiflows_from_scratch_and_from_one_basis_to_
         assert upper.tolist() == want
 
 
+def test_whether_the_cover_starts_each_lp_from_the_last_basis_is_decided_by_the_places_to_cover() -> None:
+    # beyond _WARM_PLACES places each LP starts from the last one's basis, whatever the first LP's
+    # time (made on that time, ASLink-PT-02a's choice, and its cover, changed from run to run);
+    # below, from scratch while the places left fit in the time
+    def cover(n: int, warm: bool | None) -> list[list[int]]:
+        marking, trans = philosophers_arcs(n)
+        return [y.tolist() for y in lp.semiflow_cover(sparse_net(make_net("ring", marking, trans)), seconds=60.0,
+                                                        warm=warm)]
+
+    big = lp._WARM_PLACES // 4 + 10  # four places a philosopher
+    assert cover(big, None) == cover(big, True)
+    assert cover(20, None) == cover(20, False)
+
+
 def counter(k: int, m: int = 4) -> PetriNet:
     """A one-hot counter load0..load{k}, moved up by taking one of ``m`` free slots and leaving one
     of ``m`` requests, and down the other way (k free slots at first): semiflows Σ load = 1,
