@@ -268,9 +268,10 @@ def _highs(cols: sp.csc_matrix, cost: np.ndarray, col_lower: np.ndarray, row_low
 def _time_limit(h: Any, seconds: float) -> None:
     """Let the next run of HiGHS instance ``h`` take ``seconds`` (at least 0.01). HiGHS compares its
     ``time_limit`` with the instance's run time summed over all its runs, so the limit is that sum
-    plus ``seconds``: given as ``seconds`` alone, the LPs of :func:`semiflow_cover` stopped when the
-    runs before them had taken what was left of its time, about half of it (NeoElection-PT-3, from
-    scratch: at 1.3 s of its 3 s, 527 semiflows one run, 449 or 506 another, 186 places uncovered)."""
+    plus ``seconds``: given as ``seconds`` alone, the LPs of one instance stopped when the runs
+    before them had taken what was left of the time, about half of it (NeoElection-PT-3's cover
+    from scratch, :func:`semiflow_cover`: at 1.3 s of its 3 s, with 449 to 527 semiflows from one
+    run to the next; 664 now)."""
     h.setOptionValue("time_limit", h.getRunTime() + max(float(seconds), 0.01))
 
 

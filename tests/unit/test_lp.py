@@ -237,6 +237,22 @@ def test_whether_the_cover_starts_each_lp_from_the_last_basis_is_decided_by_the_
     assert cover(20, None) == cover(20, False)
 
 
+def test_an_lp_of_a_shared_instance_has_its_own_time_whatever_the_runs_before_it_took() -> None:
+    # HiGHS compares its time limit with the instance's run time summed over its runs: given the
+    # time left alone, the LPs of NeoElection-PT-3's cover stopped at about half their budget
+    from coordinator.analysis.structure import ordinary_view
+
+    sn = sparse_net(ordinary_view(load_pnml(DATA / "mcc-large" / "NeoElection-PT-3" / "model.pnml")))
+    through = lp._Through(sp.csr_matrix(sn.incidence.T, dtype=np.float64))
+    runs = 0
+    while through.h.getRunTime() < 0.5 and runs < 20 * sn.n_places:  # LPs of a few ms each
+        through.solve(runs % sn.n_places, 60.0, False)
+        runs += 1
+    assert through.h.getRunTime() >= 0.5
+    y = through.solve(0, 0.25, False)  # the first place's LP again, from scratch: a few ms of its own
+    assert isinstance(y, np.ndarray) and y[0] >= 1 and not (y @ sn.incidence.toarray()).round(6).any()
+
+
 def counter(k: int, m: int = 4) -> PetriNet:
     """A one-hot counter load0..load{k}, moved up by taking one of ``m`` free slots and leaving one
     of ``m`` requests, and down the other way (k free slots at first): semiflows Σ load = 1,
