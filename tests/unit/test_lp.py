@@ -16,7 +16,7 @@ from analysis_nets import make_net, philosophers_arcs
 from coordinator.analysis import lp
 from coordinator.analysis.invariants import farkas_estimate, semiflows
 from coordinator.analysis.matrices import sparse_net
-from coordinator.analysis.structure import analyse
+from coordinator.analysis.structure import analyse, ordinary_view
 from coordinator.net import PetriNet
 from coordinator.netfile import loads_net
 from coordinator.netfile.pnml import load_pnml
@@ -240,8 +240,6 @@ def test_whether_the_cover_starts_each_lp_from_the_last_basis_is_decided_by_the_
 def test_an_lp_of_a_shared_instance_has_its_own_time_whatever_the_runs_before_it_took() -> None:
     # HiGHS compares its time limit with the instance's run time summed over its runs: given the
     # time left alone, the LPs of NeoElection-PT-3's cover stopped at about half their budget
-    from coordinator.analysis.structure import ordinary_view
-
     sn = sparse_net(ordinary_view(load_pnml(DATA / "mcc-large" / "NeoElection-PT-3" / "model.pnml")))
     through = lp._Through(sp.csr_matrix(sn.incidence.T, dtype=np.float64))
     runs = 0
