@@ -218,6 +218,9 @@ class _Store:
         self.borrow: Callable[[], int] | None = None
         #: closures by chained images instead of saturation (:meth:`closure`)
         self.chain = False
+        #: the last closure by chained images: its events, start and constraint, the passes it had
+        #: made and the set they built, where a call stopped part-way resumes (:meth:`closure`)
+        self._resume: tuple[Events, int, int, int, int] | None = None
 
     def call(self, mode: int, ev: Events, a: int, b: int = 0, c: int = mk.NO_CONSTRAINT, arg: int = 0,
              check_overflow: bool = False, dz: tuple[np.ndarray, ...] | None = None) -> int:
@@ -262,17 +265,21 @@ class _Store:
         turns (the first order is the better one forward on some nets, the second backward: inside
         SharedMemory-PT-000020's reachable set, backward from M0, 2.3 s and 0.6 s, by turns 0.8 s).
         ``passes``: chained images give up, raising _NoFixedPoint, when this many passes have not
-        found the fixed point (0: no limit; a call resumed after a stop counts its passes from
-        ``a`` again, the ones its store kept being quick). Raises as :meth:`call`."""
+        found the fixed point (0: no limit). A call stopped part-way (the deadline, the watch) and
+        made again with the same ``ev``, ``a`` and ``c`` resumes from the last set its passes had
+        built, with the passes it had made: nodes are never freed, so that set is still in the
+        store, and chained images from it reach the same fixed point. Raises as :meth:`call`."""
         if not self.chain:
             return self.call(mk.MODE_SATURATE, ev, a, c=c, check_overflow=check_overflow)
-        turn = 0
+        last = self._resume
+        turn, now = (last[3], last[4]) if last is not None and last[0] is ev and last[1:3] == (a, c) else (0, a)
         while True:
             how = mk.IMAGE_CHAIN_ROOT if turn % 2 else mk.IMAGE_CHAIN_DEEP
-            more = self.call(mk.MODE_IMAGE, ev, a, c=c, arg=how, check_overflow=check_overflow)
-            if more == a:  # each event's image of a is inside a
-                return a
-            a, turn = more, turn + 1
+            more = self.call(mk.MODE_IMAGE, ev, now, c=c, arg=how, check_overflow=check_overflow)
+            if more == now:  # each event's image of the set is inside it
+                return now
+            now, turn = more, turn + 1
+            self._resume = (ev, a, c, turn, now)
             if passes and turn >= passes:
                 raise _NoFixedPoint()
 
@@ -1353,7 +1360,8 @@ class _Race:
         enc, _, store, _ = self.winner
         rev = enc.reversed()
         for cand in self.candidates:
-            if cand.name == 1 and not cand.dropped and cand.store is not store and _same_order(cand.enc, rev):
+            if (cand.name == 1 and not cand.dropped and not cand.store.chain and cand.store is not store
+                    and _same_order(cand.enc, rev)):
                 store.max_bytes -= cand.store.held()
                 return cand
         return None
@@ -1537,27 +1545,29 @@ class _Lane:
                 race.first_built.set()
             self.ended.set()
 
-    def _chained(self, max_bytes: int, fwd: Events | None = None) -> bool:
+    def _chained(self, max_bytes: int, fwd: Events | None = None) -> tuple[bool, _Candidate | None]:
         """The first order by chaining (:meth:`_Store.closure`), once its saturation has run alone
         for :data:`_HEAD_START` seconds, within ``max_bytes``, for at most :data:`_CHAIN_SECONDS` and
-        :data:`_CHAIN_PASSES` passes; then its store is dropped. The second lane's first work, or on
-        one CPU the single lane's after the first candidate's first turn (``fwd``: its events, when
-        this lane has them); not when the first order has shared levels sunk (the lane's first
-        candidate is then that order with them in place, which chaining would delay:
-        Referendum-PT-0050's answer in 3.2 s, 16.3 s with chaining first). True when the race is
-        decided (by it or another lane)."""
+        :data:`_CHAIN_PASSES` passes. The second lane's first work, or on one CPU the single lane's
+        after the first candidate's first turn (``fwd``: its events, when this lane has them); not
+        when the first order has shared levels sunk (the lane's first candidate is then that order
+        with them in place, which chaining would delay: Referendum-PT-0050's answer in 3.2 s, 16.3 s
+        with chaining first). Whether the race is decided (by it or another lane), and the chaining
+        as a candidate that takes turns with the lane's other orders when its time ran out: its
+        store is kept, and each turn resumes from its last pass. Where it found no fixed point in
+        its passes, or outgrew the memory, its store is dropped."""
         race = self.race
         race.first.wait()
         with race.lock:
             enc = race.orders[0] if race.orders else None
         if enc is None or enc.sunk or self.cancel.is_set():  # sunk: the same order unsunk is raced instead
-            return self.cancel.is_set()
+            return self.cancel.is_set(), None
         if self.cancel.wait(race.start + _HEAD_START - time.monotonic()):
-            return True
+            return True, None
         if fwd is None:  # the first lane builds the same events: 6 s on StigmergyElection-PT-09b's 41,210
             while not race.first_built.wait(0.05):  # transitions, done twice at once on two CPUs
                 if self.cancel.is_set():
-                    return True
+                    return True, None
             fwd = race.first_fwd if race.orders and race.orders[0] is enc else None
         fwd = fwd if fwd is not None else events(race.sn, enc, merge=True)
         store = _Store(enc, max_bytes)
@@ -1574,33 +1584,73 @@ class _Lane:
                 except _OutOfTime:
                     if not told or self.cancel.is_set() or time.monotonic() >= end:
                         raise
-                    race.bounded_below(self, store, "order 1 by chaining")  # and on, from the images its store kept
+                    race.bounded_below(self, store, "order 1 by chaining")  # and on, from its last pass
         except (_OutOfTime, _NoFixedPoint, _OutOfMemory) as exc:
-            if not (isinstance(exc, _OutOfTime) and self.cancel.is_set()):  # cancelled: the race is decided
-                why = (f"not done within {_CHAIN_SECONDS:.0f} s" if isinstance(exc, _OutOfTime)
-                       else f"found no fixed point in {_CHAIN_PASSES} passes" if isinstance(exc, _NoFixedPoint)
-                       else "outgrew this lane's share of the memory")
-                race.say(f"symbolic: order 1 by chaining {why} ({store.nodes:,} nodes), dropped")
-                race.bounded_below(self, store, "order 1 by chaining")
-            return self.cancel.is_set()
+            if isinstance(exc, _OutOfTime) and self.cancel.is_set():  # cancelled: the race is decided
+                return True, None
+            race.bounded_below(self, store, "order 1 by chaining")
+            if isinstance(exc, _OutOfTime) and time.monotonic() < race.deadline:
+                race.say(f"symbolic: order 1 by chaining not done within {_CHAIN_SECONDS:.0f} s ({store.nodes:,} "
+                         "nodes), it takes turns with the other orders")
+                return False, _Candidate(1, enc, fwd, store)
+            why = ("not done by the deadline" if isinstance(exc, _OutOfTime)
+                   else f"found no fixed point in {_CHAIN_PASSES} passes" if isinstance(exc, _NoFixedPoint)
+                   else "outgrew this lane's share of the memory")
+            race.say(f"symbolic: order 1 by chaining {why} ({store.nodes:,} nodes), dropped")
+            return self.cancel.is_set(), None
         finally:
             mk.set_watch(None, None)
             self.working = None
         store.max_bytes = race.max_bytes
         race.say("symbolic: order 1 by chaining was the first done")
         race.won(self, (enc, fwd, store, reach))
-        return True
+        return True, None
+
+    def _held(self, chain: _Candidate | None) -> int:
+        """The bytes the first order by chaining (:meth:`_chained`) holds when its time ran out, to
+        be kept for it out of the lane's share, once the search beside, if it has stopped, has
+        handed its memory to the lanes (:meth:`_Race.widen_shares`). 0 when there is no chaining,
+        or when it holds more than half of the share: it is then dropped."""
+        if chain is None:
+            return 0
+        if not self.race.telling():
+            self.race.widen_shares()
+        held = chain.store.held()
+        if 2 * held > self.share:
+            self.race.say(f"symbolic: order 1 by chaining holds more than half of this lane's memory "
+                          f"({chain.store.nodes:,} nodes), dropped")
+            chain.drop()
+            return 0
+        return held
+
+    def _join(self, chain: _Candidate, held: int, part: int) -> None:
+        """The first order by chaining joins the lane's candidates (:meth:`_run`), with the bytes it
+        holds and an equal part of the rest of the share, ``part``, as the others have: when it
+        outgrows them it is dropped, the others going on."""
+        chain.store.max_bytes = held + part
+        self.cands.append(chain)
+        with self.race.lock:
+            self.race.candidates.append(chain)
 
     def _run(self) -> None:
         race, say = self.race, self.race.say
         want = int(self.has_first) + self.others
-        if want == 0 or (not self.has_first and self._chained(self.share)):
+        if want == 0:
             return
         cands = self.cands
         alive: list[bool] = []
-        n_cands = want
         slice_s = _FIRST_SLICE
         turn = 0
+        chain: _Candidate | None = None  # the first order by chaining, to take turns once the others joined
+        held = 0  # the bytes it holds, kept for it out of the share
+        if not self.has_first:
+            decided, chain = self._chained(self.share)
+            if decided:
+                return
+            held = self._held(chain)
+            chain = chain if held else None
+            want += chain is not None
+        n_cands = want
         while not self.cancel.is_set():
             i = turn % n_cands
             turn += 1
@@ -1610,7 +1660,11 @@ class _Lane:
                 if turn % n_cands == 0:
                     slice_s *= 2
                 continue
-            if i == len(cands):
+            if i == len(cands) and chain is not None and i + 1 == want:  # the other orders are in
+                self._join(chain, held, (self.share - held) // want)
+                alive.append(True)
+                chain = None
+            elif i == len(cands):
                 found: tuple[int, Encoding] | None = None
                 if self.has_first and not cands:
                     enc0 = race.encode(0, sink=True)
@@ -1620,16 +1674,27 @@ class _Lane:
                     found = (1, enc0)
                 else:
                     first = cands[0] if self.has_first and len(cands) == 1 else None
-                    if first is not None and self._chained(self.share - first.store.max_bytes, first.fwd):
-                        return  # one CPU: the first order by chaining, beside its saturated part
+                    if first is not None:  # one CPU: the first order by chaining, beside its saturated part
+                        decided, chain = self._chained(self.share - first.store.max_bytes, first.fwd)
+                        if decided:
+                            return
+                        held = self._held(chain)
+                        chain = chain if held else None
+                        want += chain is not None
+                        n_cands = want
                     found = race.another_order(self)
                 if found is None or self.cancel.is_set():  # no other order: race those there are
+                    if chain is not None:
+                        self._join(chain, held, (self.share - held) // want)
+                        alive.append(True)
+                        chain = None
                     n_cands = len(cands)
                     if n_cands == 0:
                         return
                     turn = 0
                     for cand in cands:
-                        cand.store.max_bytes = max(cand.store.max_bytes, self.share // n_cands)
+                        part = (self.share - held) // n_cands + (held if cand.store.chain else 0)
+                        cand.store.max_bytes = max(cand.store.max_bytes, part)
                     if self.others:
                         plural = "s" if len(race.orders) > 1 else ""
                         say(f"symbolic: {len(race.orders)} distinct variable order{plural} found")
@@ -1639,7 +1704,7 @@ class _Lane:
                 if name == 1:
                     race.first_fwd = fwd
                     race.first_built.set()
-                cands.append(_Candidate(name, enc, fwd, _Store(enc, self.share // want)))
+                cands.append(_Candidate(name, enc, fwd, _Store(enc, (self.share - held) // want)))
                 alive.append(True)
                 with race.lock:
                     race.candidates.append(cands[-1])
@@ -1649,18 +1714,24 @@ class _Lane:
                         + f"), {fwd.n_events} events for {race.sn.n_transitions} transitions")
             cand = cands[i]
             store = cand.store
+            label = race.name(cand.name) + (" by chaining" if store.chain else "")
             mine = slice_s * (_LEAD if cand.name == 1 else 1.0)
             # by turns; alone, no turns, but stops to tell the rival while it goes on
             pause = mine if n_cands > 1 else _TELL_SECONDS if race.telling() else inf
             mk.set_watch(min(race.deadline, time.monotonic() + pause), None, self.cancel)
             self.working = store
             try:
-                reach = store.call(mk.MODE_SATURATE, cand.fwd, store.m0, check_overflow=True)
+                reach = store.closure(cand.fwd, store.m0, check_overflow=True, passes=_CHAIN_PASSES)
                 store.max_bytes = race.max_bytes  # the others are dropped: the winner has the whole budget
-                if cand.name != 1:
-                    say(f"symbolic: {race.name(cand.name)} was the first done")
+                if cand.name != 1 or store.chain:
+                    say(f"symbolic: {label} was the first done")
                 race.won(self, (cand.enc, cand.fwd, store, reach))
                 return
+            except _NoFixedPoint:
+                say(f"symbolic: {label} found no fixed point in {_CHAIN_PASSES} passes ({store.nodes:,} nodes), "
+                    "dropped")
+                alive[i] = False
+                cand.drop()
             except _OutOfTime:
                 self.nodes = store.nodes
                 if self.cancel.is_set():
@@ -1669,12 +1740,17 @@ class _Lane:
                     self.timed_out = True
                     return
                 if n_cands > 1:
-                    say(f"symbolic: {race.name(cand.name)} not done after its {mine:.0f} s turn ({store.nodes:,} "
+                    say(f"symbolic: {label} not done after its {mine:.0f} s turn ({store.nodes:,} "
                         "nodes)")
-                race.bounded_below(self, store, race.name(cand.name))
+                race.bounded_below(self, store, label)
             except AnalysisError as exc:
                 if "memory budget" not in str(exc):
                     raise
+                if store.chain and sum(alive) > 1:  # what it held and its part: dropped, the others go on
+                    say(f"symbolic: {label} outgrew its part of the memory ({store.nodes:,} nodes), dropped")
+                    alive[i] = False
+                    cand.drop()
+                    continue
                 # first this lane's share (the other lane goes on), then the whole (the others stopped)
                 whole = store.max_bytes >= self.share
                 if whole and race.widen_shares():  # the stopped search's memory: every lane's share grew
@@ -1685,19 +1761,22 @@ class _Lane:
                 # this one is dropped instead
                 if (whole and not self.has_first and store.max_bytes < race.max_bytes
                         and race.smaller_beside(self, store.nodes)):
-                    say(f"symbolic: {race.name(cand.name)} outgrew this lane's share of the memory ({store.nodes:,} "
+                    say(f"symbolic: {label} outgrew this lane's share of the memory ({store.nodes:,} "
                         "nodes) beside a smaller diagram, dropped")
                     alive[i] = False
                     cand.drop()
                     continue
                 if not whole or (store.max_bytes < race.max_bytes and race.take_whole(self)):
                     if not whole and sum(alive) > 1:
-                        say(f"symbolic: {race.name(cand.name)} outgrew its part of the memory, the orders it took "
+                        say(f"symbolic: {label} outgrew its part of the memory, the orders it took "
                             "turns with are dropped")
                     for j, other in enumerate(cands):
                         if j != i:  # no other is added after
                             alive[j] = False
                             other.drop()
+                    if chain is not None:  # nor the chaining that was to join
+                        chain.drop()
+                        chain = None
                     n_cands, turn = len(cands), i
                     store.max_bytes = race.max_bytes if whole else self.share
                     continue
@@ -1857,8 +1936,15 @@ def _race(sn: SparseNet, bounds: np.ndarray, flows: list[np.ndarray], max_bytes:
     of the memory, for at most :data:`_CHAIN_SECONDS` (it mostly grows fast where it does not win:
     Referendum-PT-0050 took 5 million nodes in 5 s, where its reachable set has 396), after the
     first lane has saturated alone for :data:`_HEAD_START` seconds; then the lane goes on with the
-    other orders. The winner's way also builds the later phases' closures (liveness, reversibility,
-    the witness). On one CPU the single lane tries it after the first candidate's first turn, with
+    other orders. Where only its time ran out (not its passes, nor the memory), the chaining is not
+    dropped: it joins the lane's turns after the other orders' first turns, as the first order with
+    its turns :data:`_LEAD` times as long, its store kept, each turn resuming from its last pass
+    (:meth:`_Store.closure`). It keeps the bytes it holds, and has an equal part of the rest of the
+    share, as the others do; when it outgrows that it is dropped and the others go on (where it
+    holds more than half of the share, it is dropped at once). CloudDeployment-PT-6a's chained
+    images reach the fixed point in 8 passes, 19 s alone, where no order's saturation is done in
+    60 s. The winner's way also builds the later phases' closures (liveness, reversibility, the
+    witness). On one CPU the single lane tries it after the first candidate's first turn, with
     the memory the others would have had.
 
     On two CPUs or more the race has two lanes, threads that run at once (the kernel releases the

@@ -365,6 +365,61 @@ def test_chained_images_given_a_number_of_passes_give_up_when_they_do_not_reach_
         assert store.count(store.closure(fwd, store.m0, passes=passes)) == n + 1
 
 
+def test_chained_images_stopped_part_way_resume_from_the_set_their_last_pass_built() -> None:
+    # the counter above: n + 1 passes reach the fixed point. Stopped after n - 1 and called again
+    # with the same start, the closure makes the two passes left, not n + 1 from M0 again: with
+    # the computed table cleared in between, it fills far fewer entries than a fresh store does
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _CHAIN_PASSES, _NoFixedPoint
+
+    n = _CHAIN_PASSES + 2
+    net = make_net("counter", {"free": n}, {"take": ({"free": 1}, {"held": 1})})
+    bounds, flows = proven_bounds(net)
+    sn = sparse_net(net)
+    enc = encode(sn, bounds, flows, seconds=1.0)
+    fwd = events(sn, enc, merge=True)
+    used = []
+    for stopped_first in (True, False):
+        store = _Store(enc, 64 << 20)
+        store.chain = True
+        if stopped_first:
+            with pytest.raises(_NoFixedPoint):
+                store.closure(fwd, store.m0, passes=n - 1)
+            mk.clear_cache(store.arrays)
+        assert store.count(store.closure(fwd, store.m0, passes=n + 1)) == n + 1
+        used.append(int(store.arrays[0][mk.META_CT_USED]))
+    assert used[0] * 4 < used[1]
+
+
+@pytest.mark.parametrize("cpus", [1, 2])
+def test_chaining_out_of_its_seconds_takes_turns_with_the_other_orders_and_wins_where_it_is_the_faster(
+        cpus: int, monkeypatch: pytest.MonkeyPatch) -> None:
+    # Dekker's flags read by every enter (test_dekker_s_flags_..., below): chaining is the faster.
+    # Given almost no time of its own (_CHAIN_SECONDS), it is not dropped but takes turns with the
+    # other orders, resuming from its last pass, and is still the first done; on one CPU and on two
+    from coordinator.analysis import symbolic
+
+    if cpus > len(os.sched_getaffinity(0)):
+        pytest.skip("this machine has one CPU")
+    monkeypatch.setattr(symbolic, "_CHAIN_SECONDS", 0.01)
+    monkeypatch.setattr(symbolic, "_HEAD_START", 0.0)
+    monkeypatch.setattr(symbolic, "_FIRST_SLICE", 0.25)
+    n = 50
+    net = dekker(n)
+    bounds, flows = proven_bounds(net)
+    said: list[str] = []
+    mine = os.sched_getaffinity(0)
+    os.sched_setaffinity(0, sorted(mine)[:cpus])
+    try:
+        r = analyse_symbolic(net, bounds, flows=flows, seconds=120.0, progress=said.append)
+    finally:
+        os.sched_setaffinity(0, mine)
+    assert any("by chaining not done within" in line and "takes turns" in line for line in said), said
+    assert r.method == "chaining" and any("by chaining was the first done" in line for line in said), said
+    assert r.states == 2 ** (n - 1) * (n + 2)
+
+
 @pytest.mark.parametrize("seed", range(40))
 def test_a_store_part_way_through_a_forward_closure_bounds_the_reachable_set_from_below_and_meets_it_at_the_end(
         seed: int) -> None:
