@@ -1545,7 +1545,7 @@ class _Lane:
                 race.first_built.set()
             self.ended.set()
 
-    def _chained(self, max_bytes: int, fwd: Events | None = None) -> tuple[bool, _Candidate | None]:
+    def _chained(self, max_bytes: int, fwd: Events | None = None) -> tuple[bool, _Candidate | None, int]:
         """The first order by chaining (:meth:`_Store.closure`), once its saturation has run alone
         for :data:`_HEAD_START` seconds, within ``max_bytes``, for at most :data:`_CHAIN_SECONDS` and
         :data:`_CHAIN_PASSES` passes. The second lane's first work, or on one CPU the single lane's
@@ -1553,21 +1553,22 @@ class _Lane:
         when the first order has shared levels sunk (the lane's first candidate is then that order
         with them in place, which chaining would delay: Referendum-PT-0050's answer in 3.2 s, 16.3 s
         with chaining first). Whether the race is decided (by it or another lane), and the chaining
-        as a candidate that takes turns with the lane's other orders when its time ran out: its
-        store is kept, and each turn resumes from its last pass. Where it found no fixed point in
-        its passes, or outgrew the memory, its store is dropped."""
+        as a candidate that takes turns with the lane's other orders when its time ran out, with
+        the bytes it holds (:meth:`_held`): its store is kept, and each turn resumes from its last
+        pass. Where it found no fixed point in its passes, or outgrew the memory, its store is
+        dropped."""
         race = self.race
         race.first.wait()
         with race.lock:
             enc = race.orders[0] if race.orders else None
         if enc is None or enc.sunk or self.cancel.is_set():  # sunk: the same order unsunk is raced instead
-            return self.cancel.is_set(), None
+            return self.cancel.is_set(), None, 0
         if self.cancel.wait(race.start + _HEAD_START - time.monotonic()):
-            return True, None
+            return True, None, 0
         if fwd is None:  # the first lane builds the same events: 6 s on StigmergyElection-PT-09b's 41,210
             while not race.first_built.wait(0.05):  # transitions, done twice at once on two CPUs
                 if self.cancel.is_set():
-                    return True, None
+                    return True, None, 0
             fwd = race.first_fwd if race.orders and race.orders[0] is enc else None
         fwd = fwd if fwd is not None else events(race.sn, enc, merge=True)
         store = _Store(enc, max_bytes)
@@ -1587,32 +1588,32 @@ class _Lane:
                     race.bounded_below(self, store, "order 1 by chaining")  # and on, from its last pass
         except (_OutOfTime, _NoFixedPoint, _OutOfMemory) as exc:
             if isinstance(exc, _OutOfTime) and self.cancel.is_set():  # cancelled: the race is decided
-                return True, None
+                return True, None, 0
             race.bounded_below(self, store, "order 1 by chaining")
             if isinstance(exc, _OutOfTime) and time.monotonic() < race.deadline:
                 race.say(f"symbolic: order 1 by chaining not done within {_CHAIN_SECONDS:.0f} s ({store.nodes:,} "
                          "nodes), it takes turns with the other orders")
-                return False, _Candidate(1, enc, fwd, store)
+                chain = _Candidate(1, enc, fwd, store)
+                held = self._held(chain)
+                return False, chain if held else None, held
             why = ("not done by the deadline" if isinstance(exc, _OutOfTime)
                    else f"found no fixed point in {_CHAIN_PASSES} passes" if isinstance(exc, _NoFixedPoint)
                    else "outgrew this lane's share of the memory")
             race.say(f"symbolic: order 1 by chaining {why} ({store.nodes:,} nodes), dropped")
-            return self.cancel.is_set(), None
+            return self.cancel.is_set(), None, 0
         finally:
             mk.set_watch(None, None)
             self.working = None
         store.max_bytes = race.max_bytes
         race.say("symbolic: order 1 by chaining was the first done")
         race.won(self, (enc, fwd, store, reach))
-        return True, None
+        return True, None, 0
 
-    def _held(self, chain: _Candidate | None) -> int:
+    def _held(self, chain: _Candidate) -> int:
         """The bytes the first order by chaining (:meth:`_chained`) holds when its time ran out, to
         be kept for it out of the lane's share, once the search beside, if it has stopped, has
-        handed its memory to the lanes (:meth:`_Race.widen_shares`). 0 when there is no chaining,
-        or when it holds more than half of the share: it is then dropped."""
-        if chain is None:
-            return 0
+        handed its memory to the lanes (:meth:`_Race.widen_shares`). 0 when it holds more than half
+        of the share: it is then dropped."""
         if not self.race.telling():
             self.race.widen_shares()
         held = chain.store.held()
@@ -1644,11 +1645,9 @@ class _Lane:
         chain: _Candidate | None = None  # the first order by chaining, to take turns once the others joined
         held = 0  # the bytes it holds, kept for it out of the share
         if not self.has_first:
-            decided, chain = self._chained(self.share)
+            decided, chain, held = self._chained(self.share)
             if decided:
                 return
-            held = self._held(chain)
-            chain = chain if held else None
             want += chain is not None
         n_cands = want
         while not self.cancel.is_set():
@@ -1675,11 +1674,9 @@ class _Lane:
                 else:
                     first = cands[0] if self.has_first and len(cands) == 1 else None
                     if first is not None:  # one CPU: the first order by chaining, beside its saturated part
-                        decided, chain = self._chained(self.share - first.store.max_bytes, first.fwd)
+                        decided, chain, held = self._chained(self.share - first.store.max_bytes, first.fwd)
                         if decided:
                             return
-                        held = self._held(chain)
-                        chain = chain if held else None
                         want += chain is not None
                         n_cands = want
                     found = race.another_order(self)

@@ -341,19 +341,24 @@ def test_chained_images_reach_the_sets_saturation_reaches_forward_and_backward_i
     assert store.closure(back, store.m0, c=reach) == home
 
 
-def test_chained_images_given_a_number_of_passes_give_up_when_they_do_not_reach_their_fixed_point() -> None:
-    # one event moving one token of n a firing: each pass fires it once on the set so far, so the
-    # counts 0..n take n passes and the (n + 1)-th finds nothing new; the race gives the first order's
-    # chaining _CHAIN_PASSES passes at most (symbolic._chained)
+def counter(n: int) -> tuple[Encoding, Events]:
+    """One event moving one token of ``n`` a firing: each pass of chained images fires it once on
+    the set so far, so the counts 0..n take n passes and the (n + 1)-th finds nothing new."""
     from coordinator.analysis.mdd_order import encode, events
-    from coordinator.analysis.symbolic import _CHAIN_PASSES, _NoFixedPoint
 
-    n = _CHAIN_PASSES + 2
     net = make_net("counter", {"free": n}, {"take": ({"free": 1}, {"held": 1})})
     bounds, flows = proven_bounds(net)
     sn = sparse_net(net)
     enc = encode(sn, bounds, flows, seconds=1.0)
-    fwd = events(sn, enc, merge=True)
+    return enc, events(sn, enc, merge=True)
+
+
+def test_chained_images_given_a_number_of_passes_give_up_when_they_do_not_reach_their_fixed_point() -> None:
+    # the race gives the first order's chaining _CHAIN_PASSES passes at most (symbolic._chained)
+    from coordinator.analysis.symbolic import _CHAIN_PASSES, _NoFixedPoint
+
+    n = _CHAIN_PASSES + 2
+    enc, fwd = counter(n)
     for passes in (1, n, _CHAIN_PASSES):
         store = _Store(enc, 64 << 20)  # a store each: no images kept from the last try
         store.chain = True
@@ -366,19 +371,14 @@ def test_chained_images_given_a_number_of_passes_give_up_when_they_do_not_reach_
 
 
 def test_chained_images_stopped_part_way_resume_from_the_set_their_last_pass_built() -> None:
-    # the counter above: n + 1 passes reach the fixed point. Stopped after n - 1 and called again
-    # with the same start, the closure makes the two passes left, not n + 1 from M0 again: with
-    # the computed table cleared in between, it fills far fewer entries than a fresh store does
+    # the counter: n + 1 passes reach the fixed point. Stopped after n - 1 and called again with
+    # the same start, the closure makes the two passes left, not n + 1 from M0 again: with the
+    # computed table cleared in between, it fills far fewer entries than a fresh store does
     from coordinator.analysis import mdd_kernel as mk
-    from coordinator.analysis.mdd_order import encode, events
     from coordinator.analysis.symbolic import _CHAIN_PASSES, _NoFixedPoint
 
     n = _CHAIN_PASSES + 2
-    net = make_net("counter", {"free": n}, {"take": ({"free": 1}, {"held": 1})})
-    bounds, flows = proven_bounds(net)
-    sn = sparse_net(net)
-    enc = encode(sn, bounds, flows, seconds=1.0)
-    fwd = events(sn, enc, merge=True)
+    enc, fwd = counter(n)
     used = []
     for stopped_first in (True, False):
         store = _Store(enc, 64 << 20)
@@ -392,7 +392,7 @@ def test_chained_images_stopped_part_way_resume_from_the_set_their_last_pass_bui
     assert used[0] * 4 < used[1]
 
 
-@pytest.mark.parametrize("cpus", [1, 2])
+@pytest.mark.parametrize("cpus", [n for n in (1, 2) if n <= len(os.sched_getaffinity(0))])  # the CPUs there are
 def test_chaining_out_of_its_seconds_takes_turns_with_the_other_orders_and_wins_where_it_is_the_faster(
         cpus: int, monkeypatch: pytest.MonkeyPatch) -> None:
     # Dekker's flags read by every enter (test_dekker_s_flags_..., below): chaining is the faster.
@@ -400,8 +400,6 @@ def test_chaining_out_of_its_seconds_takes_turns_with_the_other_orders_and_wins_
     # other orders, resuming from its last pass, and is still the first done; on one CPU and on two
     from coordinator.analysis import symbolic
 
-    if cpus > len(os.sched_getaffinity(0)):
-        pytest.skip("this machine has one CPU")
     monkeypatch.setattr(symbolic, "_CHAIN_SECONDS", 0.01)
     monkeypatch.setattr(symbolic, "_HEAD_START", 0.0)
     monkeypatch.setattr(symbolic, "_FIRST_SLICE", 0.25)
