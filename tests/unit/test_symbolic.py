@@ -1430,6 +1430,47 @@ def test_random_walks_fall_into_a_deadlock_and_give_a_firing_sequence_that_repla
     assert symbolic._walk_sequence(store, ex, net, store.m0, time.monotonic() + 60.0) is None
 
 
+def test_walks_that_stay_where_a_deadlock_is_reachable_reach_one_where_free_walks_fall_into_a_trap() -> None:
+    """A ladder of 40 rungs, each with a way down into a cycle that never ends: a free walk reaches
+    the top, the only dead marking, once in 2^40 walks; a walk that never leaves the markings that
+    can reach it climbs straight up."""
+    import time
+
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis import symbolic
+    from coordinator.analysis.mdd_order import encode, events
+
+    n = 40
+    ts: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        ts[f"up{i}"] = ({f"rung{i}": 1}, {f"rung{i + 1}": 1})
+        ts[f"fall{i}"] = ({f"rung{i}": 1}, {"trap_a": 1})
+    ts["round"] = ({"trap_a": 1}, {"trap_b": 1})
+    ts["again"] = ({"trap_b": 1}, {"trap_a": 1})
+    net = make_net("ladder", {"rung0": 1}, ts)
+    sn = sparse_net(net)
+    bounds, flows = proven_bounds(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    fwd, single = events(sn, enc, merge=True), events(sn, enc)
+    back = events(sn, enc, merge=True, inverse=True)
+    store = symbolic._Store(enc, 1 << 30)
+    reach = store.call(mk.MODE_SATURATE, fwd, store.m0, check_overflow=True)
+    states = store.count(reach)
+    dead = symbolic._dead(store, fwd, single, reach, counts_per_transition(store, single, reach, states), states)
+    assert states == n + 3 and store.count(dead) == 1
+    ex = symbolic._Explicit(sn, enc)
+    assert symbolic._walk_sequence(store, ex, net, dead, time.monotonic() + 0.5) is None
+    inside = store.closure(back, dead, c=reach)
+    assert store.count(inside) == n + 1  # the rungs: not the cycle
+    found = symbolic._inside_walk_sequence(store, ex, net, inside, dead, time.monotonic() + 60.0)
+    assert found is not None
+    seq, end = found
+    assert seq == [f"up{i}" for i in range(n)]
+    assert replays_to(net, seq, {p.id: int(end[i]) for i, p in enumerate(net.places) if end[i]})
+    # M0 outside ``inside`` (here the top rung alone, and M0 the target): every walk stops at its first step
+    assert symbolic._inside_walk_sequence(store, ex, net, dead, store.m0, time.monotonic() + 60.0) is None
+
+
 def test_a_count_beyond_a_float_s_range_is_exact() -> None:
     """2^1100 markings: the float estimate of the count is infinite, and the primes of the exact
     count come from the product of the level domains."""
