@@ -821,8 +821,8 @@ def _inside_walk_sequence(store: _Store, ex: _Explicit, net: PetriNet, inside: i
     target. A step costs the enabled transitions' arcs and a path through the diagram for each
     successor tried. Where the walks of :func:`_walk_sequence` leave for markings from which no
     deadlock is reachable, these cannot: CloudDeployment-PT-5a's dead marking, which neither those
-    walks nor the guided search reached, and whose breadth-first images were not done in 35 s, at
-    the end of a walk of 9,885 steps taken in 1.2 s."""
+    walks nor the guided search reached, and whose breadth-first images were not done by the
+    answer's 50 s, is at the end of a walk of 9,885 steps taken in 1.2 s."""
     lev_ptr, lev = ex.changed
     rng = np.random.default_rng(0xD1CE)
     for _ in range(_WALKS):
