@@ -88,7 +88,7 @@ PROBES = 3
 #: witness searches build at once (int64: 32 MB)
 _DENSE_BLOCK = 4_000_000
 #: longest that search may take before breadth-first images take over (seconds), and the walks that
-#: stay among the markings that can reach a deadlock before it (:func:`_inside_walk_sequence`)
+#: stay among the markings that can reach a deadlock before it (:func:`_walk_sequence` with ``inside``)
 _GUIDED_SECONDS = 10.0
 #: most bytes that search's markings may take (:func:`_guided_sequence`), and fewest when the
 #: decision diagram has left less of its budget (:func:`_witness` gives it half of what is left)
@@ -104,7 +104,7 @@ _QUICK_SECONDS = 2.0
 _WALKS = 1_000
 _WALK_STEPS = 10_000
 #: most steps of a walk that stays among the markings that can reach a deadlock
-#: (:func:`_inside_walk_sequence`): it can only end in one, so it is given longer
+#: (:func:`_walk_sequence` with ``inside``): it can only end in one, so it is given longer
 _INSIDE_WALK_STEPS = 1_000_000
 
 
@@ -777,8 +777,8 @@ def _guided_sequence(store: _Store, ex: _Explicit, net: PetriNet, inside: int, t
     return None
 
 
-def _walk_sequence(store: _Store, ex: _Explicit, net: PetriNet, targets: int,
-                   stop: float) -> tuple[list[str], np.ndarray] | None:
+def _walk_sequence(store: _Store, ex: _Explicit, net: PetriNet, targets: int, stop: float,
+                   inside: int | None = None) -> tuple[list[str], np.ndarray] | None:
     """A firing sequence from M0 to one of ``targets`` by random walks: from M0, a transition drawn
     among the enabled ones fires, again and again, until none is enabled (the walk ends in a dead
     marking, kept when it is one of ``targets``) or after :data:`_WALK_STEPS` steps; at most
@@ -787,72 +787,60 @@ def _walk_sequence(store: _Store, ex: _Explicit, net: PetriNet, targets: int,
     search guided by the token distance wanders: CloudReconfiguration-PT-303, whose dead marking
     is the empty one, has walks of 51 to 172 steps, milliseconds each, where the guided search
     found none among 100,000 markings and breadth-first images took 174 s. None if no walk ends
-    in a target. A step costs the net's arcs, not |P|·|T|."""
+    in a target. A step costs the net's arcs, not |P|·|T|.
+
+    With ``inside``, the reachable markings that can reach one of ``targets`` (a backward closure),
+    the walks never leave it (:func:`_step_inside`), for up to :data:`_INSIDE_WALK_STEPS` steps:
+    every marking of it that is not a target has a successor in it, so a walk ends in a target or
+    goes round a cycle. Where free walks leave for markings from which no deadlock is reachable,
+    these cannot: CloudDeployment-PT-5a's dead marking, which neither free walks nor the guided
+    search reached, and whose breadth-first images were not done by the answer's 50 s, is at the end
+    of a walk of 9,885 steps taken in 1.2 s."""
     ptr, places, data = ex.inc_ptr, ex.inc_places, ex.inc_data
-    rng = np.random.default_rng(0xDEAD)
+    rng = np.random.default_rng(0xDEAD if inside is None else 0xD1CE)
+    steps = _WALK_STEPS if inside is None else _INSIDE_WALK_STEPS
     for _ in range(_WALKS):
         m = ex.m0.copy()
+        vals = None if inside is None else ex.lookup.of(m[None, :])[0]  # kept along a walk inside
         seq: list[int] = []
-        while len(seq) < _WALK_STEPS:
+        while len(seq) < steps:
             on = ex.enabled(m)
             if on.size == 0:
-                vals = ex.lookup.of(m[None, :])[0]
+                if vals is None:
+                    vals = ex.lookup.of(m[None, :])[0]
                 if vals[0] >= 0 and store.contains(targets, vals):
                     return [net.transitions[t].id for t in seq], m
                 break
-            t = int(on[rng.integers(on.size)])
-            m[places[ptr[t]:ptr[t + 1]]] += data[ptr[t]:ptr[t + 1]]
+            if inside is None:
+                t = int(on[rng.integers(on.size)])
+                m[places[ptr[t]:ptr[t + 1]]] += data[ptr[t]:ptr[t + 1]]
+            else:
+                assert vals is not None
+                step = _step_inside(store, ex, m, vals, on[rng.permutation(on.size)], inside)
+                if step is None:  # no successor inside: only a marking outside could be so (M0, if not in it)
+                    break
+                t, m, vals = step
             seq.append(t)
-            if len(seq) % 256 == 0 and time.monotonic() > stop:
+            if len(seq) % 64 == 0 and time.monotonic() > stop:
                 return None
         if time.monotonic() > stop:
             return None
     return None
 
 
-def _inside_walk_sequence(store: _Store, ex: _Explicit, net: PetriNet, inside: int, targets: int,
-                          stop: float) -> tuple[list[str], np.ndarray] | None:
-    """A firing sequence from M0 to one of ``targets`` by random walks that never leave ``inside``,
-    the reachable markings that can reach one of them (a backward closure). Every marking of it that
-    is not a target has a successor in it, so a walk ends in a target, or runs out of its
-    :data:`_INSIDE_WALK_STEPS` steps going round a cycle. At each step the enabled transitions are
-    tried in a random order, and the first whose successor lies inside fires. Walks go on until
-    ``stop`` (``time.monotonic()`` seconds), at most :data:`_WALKS` of them; None if none ends in a
-    target. A step costs the enabled transitions' arcs and a path through the diagram for each
-    successor tried. Where the walks of :func:`_walk_sequence` leave for markings from which no
-    deadlock is reachable, these cannot: CloudDeployment-PT-5a's dead marking, which neither those
-    walks nor the guided search reached, and whose breadth-first images were not done by the
-    answer's 50 s, is at the end of a walk of 9,885 steps taken in 1.2 s."""
+def _step_inside(store: _Store, ex: _Explicit, m: np.ndarray, vals: np.ndarray, on: np.ndarray,
+                 inside: int) -> tuple[int, np.ndarray, np.ndarray] | None:
+    """The first transition of ``on`` (enabled in the (|P|,) marking ``m``, whose level values are
+    ``vals``) whose successor lies in ``inside``, with that successor and its level values; None if
+    none does. Costs the transitions' arcs and a path through the diagram for each successor tried,
+    its level values looked up on the levels the transition changes alone."""
     lev_ptr, lev = ex.changed
-    rng = np.random.default_rng(0xD1CE)
-    for _ in range(_WALKS):
-        m = ex.m0.copy()
-        vals = ex.lookup.of(m[None, :])[0]
-        seq: list[int] = []
-        while len(seq) < _INSIDE_WALK_STEPS:
-            on = ex.enabled(m)
-            if on.size == 0:
-                if store.contains(targets, vals):
-                    return [net.transitions[t].id for t in seq], m
-                break
-            step: tuple[int, np.ndarray, np.ndarray] | None = None
-            for ts in _blocks(on[rng.permutation(on.size)], ex.n_places):
-                succ = ex.fired(m, ts)
-                after = ex.lookup.after(vals, succ, ts, lev_ptr, lev)
-                for j in range(ts.size):
-                    if after[j, 0] >= 0 and store.contains(inside, after[j]):
-                        step = (int(ts[j]), succ[j], after[j])
-                        break
-                if step is not None:
-                    break
-            if step is None:  # no successor inside: only a marking outside could be so (M0, if not in it)
-                break
-            t, m, vals = step
-            seq.append(t)
-            if len(seq) % 64 == 0 and time.monotonic() > stop:
-                return None
-        if time.monotonic() > stop:
-            return None
+    for ts in _blocks(on, ex.n_places):
+        succ = ex.fired(m, ts)
+        after = ex.lookup.after(vals, succ, ts, lev_ptr, lev)
+        for j in range(ts.size):
+            if after[j, 0] >= 0 and store.contains(inside, after[j]):
+                return int(ts[j]), succ[j], after[j]
     return None
 
 
@@ -2478,7 +2466,7 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
     seconds): a search over explicit markings guided towards the dead marking, first inside the
     reachable set alone (briefly), then random walks (as briefly, :func:`_walk_sequence`); then,
     inside the markings that can reach a deadlock (backward saturation), random walks that stay
-    there (:func:`_inside_walk_sequence`) and the guided search, each within its share of the time,
+    there (:func:`_walk_sequence` with ``inside``) and the guided search, each within its share of the time,
     and breadth-first images (a shortest sequence) when neither has found one."""
     if dead == mk.EMPTY:
         return
@@ -2508,8 +2496,8 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
             inside = store.closure(back, dead, c=reach)
             if explicit:  # walks that stay inside, then the guided search inside
                 now = time.monotonic()
-                found = _inside_walk_sequence(store, ex, net, inside, dead,
-                                              now + min(_GUIDED_SECONDS, max(0.0, (deadline - now) / 3)))
+                found = _walk_sequence(store, ex, net, dead, now + min(_GUIDED_SECONDS, max(0.0, (deadline - now) / 3)),
+                                       inside=inside)
             if explicit and found is None:
                 now = time.monotonic()
                 stop = now + min(_GUIDED_SECONDS, max(0.0, (deadline - now) / 3))

@@ -1462,13 +1462,13 @@ def test_walks_that_stay_where_a_deadlock_is_reachable_reach_one_where_free_walk
     assert symbolic._walk_sequence(store, ex, net, dead, time.monotonic() + 0.5) is None
     inside = store.closure(back, dead, c=reach)
     assert store.count(inside) == n + 1  # the rungs: not the cycle
-    found = symbolic._inside_walk_sequence(store, ex, net, inside, dead, time.monotonic() + 60.0)
+    found = symbolic._walk_sequence(store, ex, net, dead, time.monotonic() + 60.0, inside=inside)
     assert found is not None
     seq, end = found
     assert seq == [f"up{i}" for i in range(n)]
     assert replays_to(net, seq, {p.id: int(end[i]) for i, p in enumerate(net.places) if end[i]})
     # M0 outside ``inside`` (here the top rung alone, and M0 the target): every walk stops at its first step
-    assert symbolic._inside_walk_sequence(store, ex, net, dead, store.m0, time.monotonic() + 60.0) is None
+    assert symbolic._walk_sequence(store, ex, net, store.m0, time.monotonic() + 60.0, inside=dead) is None
 
 
 def test_a_count_beyond_a_float_s_range_is_exact() -> None:
