@@ -124,10 +124,11 @@ def _rationalised(values: np.ndarray) -> list[np.ndarray]:
     return out
 
 
-def _exact_product(mat: sp.csr_matrix, vec: np.ndarray | list[int]) -> list[int]:
-    """mat @ vec in exact integer arithmetic (int64 when it provably fits, Python ints otherwise).
-    An integer array is read as it is (no Python int per entry: AirplaneLD-PT-2000's semiflow
-    cover checked 357 vectors of 8,017 and 16,008 entries, 1.8 s that way, most of it in the bound)."""
+def _exact_product(mat: sp.csr_matrix, vec: np.ndarray | list[int]) -> np.ndarray:
+    """mat @ vec in exact integer arithmetic: an int64 array when it provably fits, an array of
+    Python ints (dtype object) otherwise. An integer array is read as it is (no Python int per
+    entry: AirplaneLD-PT-2000's semiflow cover checked 357 vectors of 8,017 and 16,008 entries, 1.8 s
+    that way, most of it in the bound); an int64 ``mat`` is not copied."""
     arr = np.asarray(vec)
     if arr.dtype.kind not in "iu" or arr.ndim != 1:
         arr = np.array([int(v) for v in vec], dtype=object)
@@ -135,13 +136,12 @@ def _exact_product(mat: sp.csr_matrix, vec: np.ndarray | list[int]) -> list[int]
     row_nnz = int(np.diff(mat.indptr).max(initial=0))
     scale = int(np.abs(mat.data).max(initial=0))
     if big < 2**62 and big * scale * max(row_nnz, 1) < 2**62:
-        res = mat.astype(np.int64) @ arr.astype(np.int64)
-        return np.asarray(res, dtype=np.int64).ravel().tolist()  # Python ints
+        return np.asarray(mat.astype(np.int64, copy=False) @ arr.astype(np.int64), dtype=np.int64).ravel()
     vec = [int(v) for v in arr.tolist()]
-    out = []
+    out = np.empty(mat.shape[0], dtype=object)
     data, idx, ptr = mat.data.tolist(), mat.indices.tolist(), mat.indptr.tolist()
     for r in range(mat.shape[0]):
-        out.append(sum(int(data[k]) * vec[idx[k]] for k in range(ptr[r], ptr[r + 1])))
+        out[r] = sum(int(data[k]) * vec[idx[k]] for k in range(ptr[r], ptr[r + 1]))
     return out
 
 
@@ -175,7 +175,7 @@ def semiflow_support(matrix: sp.spmatrix | np.ndarray, *, seconds: float = LP_SE
     covered = z > 0.5
     semiflow: np.ndarray | None = None
     for cand in _rationalised(np.where(covered, np.maximum(y, 0.0), 0.0)):
-        if (cand[covered] > 0).all() and (cand >= 0).all() and not any(_exact_product(at_int, cand)):
+        if (cand[covered] > 0).all() and (cand >= 0).all() and not _exact_product(at_int, cand).any():
             semiflow = cand
             break
     if covered.all():
@@ -196,7 +196,7 @@ def semiflow_support(matrix: sp.spmatrix | np.ndarray, *, seconds: float = LP_SE
     if res2.status == 0:
         x = np.asarray(res2.x[:m])
         for cand in _rationalised(x):
-            ax = np.array(_exact_product(a_int, cand), dtype=object)
+            ax = _exact_product(a_int, cand)
             if (ax >= 0).all() and (ax[~covered] > 0).all():
                 witness = cand
                 break
@@ -222,10 +222,9 @@ class _Bound:
     dual: np.ndarray | None = None  # the integer certificate y (yᵀC <= 0, y >= 0), if any
 
 
-def _certified_dual(sn: SparseNet, weights: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, int] | None:
+def _certified_dual(ct: sp.csr_matrix, weights: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, int] | None:
     """An integer y = d·(weights + u') (u' ≈ u, rounded to a common denominator d) with yᵀC ≤ 0,
-    checked exactly; returned with d, or None."""
-    ct = sp.csr_matrix(sn.incidence.T).astype(np.int64)
+    checked exactly (``ct``: Cᵀ, int64, (|T|, |P|)); returned with d, or None."""
     w = np.asarray(weights, dtype=np.float64)
     for den in _DENOMINATORS:
         scaled = u * den
@@ -233,7 +232,7 @@ def _certified_dual(sn: SparseNet, weights: np.ndarray, u: np.ndarray) -> tuple[
         if np.abs(scaled).max(initial=0.0) > 2.0**52 or np.abs(scaled - ints).max(initial=0.0) > 1e-6 * den:
             continue
         y = ints.astype(np.int64) + np.rint(w * den).astype(np.int64)
-        if all(v <= 0 for v in _exact_product(ct, y)):
+        if (_exact_product(ct, y) <= 0).all():
             return y, den
     return None
 
@@ -298,13 +297,20 @@ class _StateEquation:
         inf = np.full(n_p, highspy.kHighsInf)
         self.h = _highs(sp.csc_matrix(self.c_mat), np.zeros(n_t), np.zeros(n_t), -self.m0, inf)
         self.status = highspy.HighsModelStatus
-        self.columns = np.arange(n_t, dtype=np.int32)
+        self.ct = sp.csr_matrix(sn.incidence.T).astype(np.int64)
+        self.cost = np.zeros(n_t)  # the objective the instance holds
         self.solved = 0
 
     def bound(self, weights: np.ndarray, seconds: float) -> _Bound:
         """The LP for ``weights`` ((|P|,), ≥ 0) within ``seconds``."""
         h, st = self.h, self.status
-        h.changeColsCost(self.columns.size, self.columns, -(self.c_mat.T @ weights))
+        cost = -(self.c_mat.T @ weights)
+        # only the columns whose cost changes: passing all of them makes HiGHS sort the set each time
+        # (AirplaneLD-PT-1000, 8,008 transitions: 14% of its 7,019 LPs' time)
+        cols = np.flatnonzero(cost != self.cost).astype(np.int32)
+        if cols.size:
+            h.changeColsCost(cols.size, cols, cost[cols])
+            self.cost = cost
         _time_limit(h, seconds)
         if self.solved == 1:  # from the first optimal basis on, the objective alone changes
             h.setOptionValue("simplex_strategy", 4)  # primal
@@ -320,7 +326,7 @@ class _StateEquation:
         # dual certificate: y = weights + u, u ≥ 0 the rows' duals (Cσ ≥ -M0), with yᵀC ≤ 0; then
         # w·M ≤ y·M ≤ y·M0
         u = np.maximum(np.asarray(h.getSolution().row_dual, dtype=np.float64), 0.0)
-        y = _certified_dual(self.sn, weights, u)
+        y = _certified_dual(self.ct, weights, u)
         if y is not None:
             vec, den = y
             num = int(np.dot(vec.astype(object), self.sn.m0.astype(object)))
@@ -626,7 +632,7 @@ def semiflow_cover(sn: SparseNet, *, seconds: float = 3.0, covered: np.ndarray |
             tried[p] = True
             continue
         for cand in _rationalised(np.maximum(x, 0.0)):
-            if cand[p] > 0 and (cand >= 0).all() and not any(_exact_product(c_int, cand)):
+            if cand[p] > 0 and (cand >= 0).all() and not _exact_product(c_int, cand).any():
                 out.append(cand)
                 done |= cand > 0
                 break
@@ -664,7 +670,7 @@ def semiflow_cover(sn: SparseNet, *, seconds: float = 3.0, covered: np.ndarray |
         if x is False:
             continue
         for cand in _rationalised(np.maximum(x, 0.0)):
-            if cand[p] > 0 and (cand >= 0).all() and (cand <= 1).all() and not any(_exact_product(c_int, cand)):
+            if cand[p] > 0 and (cand >= 0).all() and (cand <= 1).all() and not _exact_product(c_int, cand).any():
                 support = np.flatnonzero(cand)
                 if few(cand, support):
                     tried[support] = True
