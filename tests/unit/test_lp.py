@@ -176,6 +176,21 @@ def test_the_bounds_from_one_basis_to_the_next_are_each_place_s_own_lp_solved_al
     assert pb.complete
 
 
+@pytest.mark.parametrize("big", [False, True])
+def test_the_exact_product_is_exact_in_int64_and_beyond_it(big: bool) -> None:
+    # the certificates' check yᵀC: an int64 array where the product provably fits, Python ints past
+    # 2**63 otherwise; both the sums a Python loop gives
+    rng = np.random.default_rng(7)
+    mat = sp.csr_matrix(rng.integers(-3, 4, (30, 40)) * (rng.random((30, 40)) < 0.3)).astype(np.int64)
+    vec = rng.integers(0, 2**61 if big else 1000, 40, dtype=np.int64)
+    out = lp._exact_product(mat, vec)
+    dense = mat.toarray().tolist()
+    want = [sum(int(a) * int(v) for a, v in zip(row, vec.tolist())) for row in dense]
+    assert out.dtype == (object if big else np.int64)
+    assert out.tolist() == want
+    assert big == any(abs(v) >= 2**63 for v in want)
+
+
 def test_kanban_bounds_are_decided_by_structure_when_the_graph_is_cut_short() -> None:
     a = analyse(load_pnml(MCC / "Kanban-PT-00005" / "model.pnml"), max_states=20_000)
     assert not a.complete and a.stopped_by == "max_states"
