@@ -191,6 +191,28 @@ def test_the_exact_product_is_exact_in_int64_and_beyond_it(big: bool) -> None:
     assert big == any(abs(v) >= 2**63 for v in want)
 
 
+def test_a_run_of_places_that_exclude_each_other_is_bounded_by_one_lp() -> None:
+    # a choice among 64 values (AirplaneLD's altitudes): one token in stp goes to one of alt_i and
+    # back; each val_i is read. The total's LP bounds each alt_i by 65; an LP for a run of _BLOCK
+    # places bounds them by one, with the certificate checked, as each one's own LP does
+    n = 64
+    trans = {f"get{i}": ({"stp": 1, f"val{i}": 1}, {f"val{i}": 1, f"alt{i}": 1}) for i in range(n)}
+    trans |= {f"put{i}": ({f"alt{i}": 1}, {"stp": 1}) for i in range(n)}
+    alts = [f"alt{i}" for i in range(n)]
+    net = make_net("choice", {"stp": 1} | {f"val{i}": 1 for i in range(n)}, trans, places=("stp", *alts))
+    sn = sparse_net(net)
+    lps = lp._StateEquation(sn)
+    bounds = np.full(sn.n_places, n + 1, dtype=np.int64)
+    cert = np.zeros(sn.n_places, dtype=bool)
+    todo = np.arange(1, n + 1)
+    lp._blocks(sn, lps, todo, lambda ps: bounds[ps] > 1, bounds, cert, float("inf"))
+    assert 1 <= lps.solved <= n // lp._BLOCK  # one LP a run at most (here the first
+    # run's certificate, stp plus every alt_i, bounds all of them)
+    assert (bounds[todo] == 1).all() and cert[todo].all()
+    alone = lp.place_bounds(sn, seconds=60.0)
+    assert (alone.bounds[todo] == 1).all()
+
+
 def test_kanban_bounds_are_decided_by_structure_when_the_graph_is_cut_short() -> None:
     a = analyse(load_pnml(MCC / "Kanban-PT-00005" / "model.pnml"), max_states=20_000)
     assert not a.complete and a.stopped_by == "max_states"
