@@ -306,7 +306,7 @@ class _StateEquation:
         h, st = self.h, self.status
         cost = -(self.c_mat.T @ weights)
         # only the columns whose cost changes: passing all of them makes HiGHS sort the set each time
-        # (AirplaneLD-PT-1000, 8,008 transitions: 14% of its 7,019 LPs' time)
+        # (AirplaneLD-PT-1000, 8,008 transitions: 14% of the time of its per-place LPs)
         cols = np.flatnonzero(cost != self.cost).astype(np.int32)
         if cols.size:
             h.changeColsCost(cols.size, cols, cost[cols])
