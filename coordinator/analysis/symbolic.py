@@ -2484,25 +2484,24 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
         def room() -> int:  # the guided search's bytes, outside the diagram's: half of what it has left
             return min(_GUIDED_BYTES, max(_GUIDED_MIN_BYTES, (store.max_bytes - store.held()) // 2))
 
+        def until(most: float, part: float = 1.0) -> float:  # a share of the time left, at most ``most``
+            now = time.monotonic()
+            return now + min(most, max(0.0, (deadline - now) * part))
+
         found = None
         if explicit:  # first inside the reachable set alone: most often a deadlock is reachable from
-            now = time.monotonic()  # everywhere, and the backward saturation below costs more
-            stop = now + min(_QUICK_SECONDS, max(0.0, deadline - now))
-            found = _guided_sequence(store, ex, net, reach, dead, marking, limit=20_000, stop=stop, max_bytes=room())
+            # everywhere, and the backward saturation below costs more
+            found = _guided_sequence(store, ex, net, reach, dead, marking, limit=20_000, stop=until(_QUICK_SECONDS),
+                                     max_bytes=room())
             if found is None:  # then random walks, as briefly
-                now = time.monotonic()
-                found = _walk_sequence(store, ex, net, dead, now + min(_QUICK_SECONDS, max(0.0, deadline - now)))
+                found = _walk_sequence(store, ex, net, dead, until(_QUICK_SECONDS))
         if found is None:
             inside = store.closure(back, dead, c=reach)
             if explicit:  # walks that stay inside, then the guided search inside
-                now = time.monotonic()
-                found = _walk_sequence(store, ex, net, dead, now + min(_GUIDED_SECONDS, max(0.0, (deadline - now) / 3)),
-                                       inside=inside)
+                found = _walk_sequence(store, ex, net, dead, until(_GUIDED_SECONDS, 1 / 3), inside=inside)
             if explicit and found is None:
-                now = time.monotonic()
-                stop = now + min(_GUIDED_SECONDS, max(0.0, (deadline - now) / 3))
-                found = _guided_sequence(store, ex, net, inside, dead, marking, limit=100_000, stop=stop,
-                                         max_bytes=room())
+                found = _guided_sequence(store, ex, net, inside, dead, marking, limit=100_000,
+                                         stop=until(_GUIDED_SECONDS, 1 / 3), max_bytes=room())
             if found is None:
                 found = _bfs_sequence(store, ex, net, fwd, inside, dead)
         if found is not None:
