@@ -77,7 +77,7 @@ from coordinator.analysis.invariants import (
     structural_bounds,
     t_invariants,
 )
-from coordinator.analysis.budget import cpus, lower_priority
+from coordinator.analysis.budget import cpus, lower_priority, room
 from coordinator.analysis.lp import PlaceBounds, Support
 from coordinator.analysis.matrices import SparseNet, sparse_net
 from coordinator.analysis.statespace import (
@@ -740,7 +740,9 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
             reachability graph's search, up to a quarter (at most 512 MiB) to each invariant
             enumeration (before the search, freed after), and the passes over a complete graph
             (liveness, recovery) run only if their estimated need fits in the budget beside the graph;
-            the symbolic engine has the whole budget (half while the explicit search runs beside it).
+            the symbolic engine has the whole budget (half while the explicit search runs beside it),
+            less what the process already holds where the two would pass the default budget
+            (:func:`.budget.room`: under the default budget the process stays within it).
         max_coverability_nodes: limit of the Karp–Miller graph (lowered to what the budget holds).
         max_invariant_rows: size guard of the Farkas algorithm.
         invariant_seconds: time budget of each Farkas enumeration.
@@ -773,7 +775,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     st = _structure_phase(net, sn, budget, max_invariant_rows, invariant_seconds, lp_seconds)
     graph_bytes = budget // 2  # the explicit search's share
     if engine == "symbolic":
-        return _symbolic_phase(net, sn, st, budget, lp_seconds, symbolic_seconds, phase,
+        return _symbolic_phase(net, sn, st, room(budget), lp_seconds, symbolic_seconds, phase,
                                "symbolic: asked for (--engine symbolic)", started)
     limit = max_states
     if engine == "auto":
@@ -781,6 +783,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
     reason = "explicit: asked for (--engine explicit)"
     beside: _Beside | None = None
     searched = False  # the graph below is that of the search over the whole limit
+    dropped = False  # ... and it was dropped for the symbolic engine: searched again if that gives up
     if engine == "auto" and st.bounded and limit < max_states and cpus() >= 2:
         # two CPUs and a bounded net: the search over the whole limit starts at once, in a thread,
         # and the symbolic engine starts beside it when it passes the explicit share (searched once)
@@ -827,7 +830,13 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
             reason = f"symbolic: the explicit search stopped at {why} and {proven}, so the symbolic engine takes over"
             reason += guessed
             seen = space.seen_counts()
-            if not st.bounded and cpus() >= 2:
+            if st.bounded:
+                # its graph is dropped while the decision diagram takes the memory: if the symbolic
+                # engine gives up, the search runs again (AirplaneLD-PT-2000: 0.3 GiB of 14,019-place
+                # markings held beside a decision diagram of 3 GiB)
+                del space
+                dropped = True
+            elif cpus() >= 2:
                 # its share told whether a pumping witness shows in it: the search over the whole
                 # limit goes on beside the symbolic engine, from the start
                 del space
@@ -835,7 +844,8 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                 beside.wait_share()
         found: Analysis | None = None
         try:
-            found = _symbolic_phase(net, sn, st, budget - (0 if beside is None else beside.graph_bytes), lp_seconds,
+            found = _symbolic_phase(net, sn, st, max(0, room(budget) - (0 if beside is None else beside.graph_bytes)),
+                                    lp_seconds,
                                     symbolic_seconds if st.bounded else min(symbolic_seconds, UNPROVEN_SECONDS),
                                     phase, reason, started,
                                     stop=None if beside is None else beside.finished,
@@ -857,7 +867,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
             beside.end(stop=found is not None)  # the symbolic engine gave up: the search goes on to its limits
         if found is not None and (beside is None or not beside.finished.is_set()):
             return found
-        rerun = limit < max_states and not searched
+        rerun = (limit < max_states and not searched) or dropped
         if beside is not None and beside.found is not None:
             space, witness = beside.found
             beside.found = None
@@ -868,6 +878,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
                           "the explicit search that went on beside the symbolic engine (which it stopped)")
         if rerun:
             space, witness = _search_phase(net, sn, st, max_states, graph_bytes, progress)
+            st.notes[:] = dict.fromkeys(st.notes)  # a search run again says again what it said the first time
     elif engine == "auto":
         reason = "explicit: not every place has a proven bound, so only the explicit search (and coverability) apply"
         if limit < max_states and space.stopped_by == "max_states" and space.n_states >= limit:

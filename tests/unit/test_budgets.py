@@ -18,6 +18,7 @@ import pytest
 from analysis_nets import make_net
 
 from coordinator.analysis import statespace
+from coordinator.analysis.budget import default_max_bytes, resident_bytes, room
 from coordinator.analysis.statespace import arc_table, explore
 from coordinator.analysis.structure import analyse
 from coordinator.cli import main
@@ -118,6 +119,29 @@ def test_the_byte_budget_stops_the_search_with_a_breadth_first_prefix() -> None:
     assert np.array_equal(part.out_ptr[:k + 1], full.out_ptr[:k + 1])
     assert (np.diff(part.out_ptr)[k:] == 0).all()  # unexpanded states have no edges
     assert np.array_equal(part.dst, full.dst[:part.n_edges])
+
+
+def test_the_symbolic_engine_leaves_room_for_what_the_process_holds_under_the_default_budget() -> None:
+    whole, held = default_max_bytes(), resident_bytes()
+    assert held > 0  # Linux: /proc/self/statm
+    assert room(1 << 20) == 1 << 20  # a small budget asked for bounds the data alone
+    slack = 64 << 20  # what the process allocates or frees between the two reads
+    assert whole - held - slack <= room(whole) <= whole - held + slack
+
+
+def test_a_graph_dropped_for_the_symbolic_engine_is_searched_again_when_it_gives_up() -> None:
+    # 1,000 independent cycles of two places: bounded (one token each), 2^1000 markings. In 1 MB the
+    # explicit search stops at once, by its memory; the symbolic engine takes over with that graph
+    # dropped, cannot hold its encoding and gives up; the search runs again for the partial report
+    cycles = make_net("cycles", {f"p{i}": 1 for i in range(1000)},
+                      {t: arcs for i in range(1000) for t, arcs in ((f"a{i}", ({f"p{i}": 1}, {f"q{i}": 1})),
+                                                                    (f"b{i}", ({f"q{i}": 1}, {f"p{i}": 1})))})
+    a = analyse(cycles, engine="auto", max_bytes=1_000_000)
+    assert a.engine == "explicit" and a.engine_reason.startswith("explicit: the symbolic engine gave up")
+    assert not a.complete and a.space is not None and a.space.stopped_by == "max_memory"
+    assert a.bounded is True and a.one_safe is True and a.live is None
+    assert len(a.notes) == len(set(a.notes))  # the search run again does not say twice what it found
+    assert sum("filled its memory budget" in n for n in a.notes) == 1
 
 
 def test_the_byte_budget_leaves_unbounded_nets_decided_by_their_witness() -> None:
