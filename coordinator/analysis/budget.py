@@ -37,9 +37,9 @@ def room(max_bytes: int) -> int:
     engine) may take, bytes: ``max_bytes``, less what the process already holds
     (:func:`resident_bytes`: the interpreter, the net, the linear programs' leftovers) where the
     two together would pass the larger of ``max_bytes`` and :func:`default_max_bytes`. So under the
-    default budget the whole process stays within it (AirplaneLD-PT-2000: 0.9 GiB held when its
-    decision diagram starts, whose peak was 4.1 GiB with the whole 4 GiB given), and a small budget
-    asked for still bounds the data alone. Never below 0."""
+    default budget what the process holds counts against it (AirplaneLD-PT-2000: 0.7 to 0.9 GiB
+    held when its decision diagram starts, whose peak was 3.4 to 4.1 GiB with the whole 4 GiB
+    given), and a small budget asked for still bounds the data alone. Never below 0."""
     ceiling = max(max_bytes, default_max_bytes())
     return max(0, min(max_bytes, ceiling - resident_bytes()))
 
