@@ -89,8 +89,9 @@ def add_parser(subparsers: Any) -> None:
                              "properties that need the whole graph are then left undecided")
     parser.add_argument("--max-memory", type=parse_size, default=None, metavar="SIZE",
                         help="memory budget of the analysis, e.g. 512M or 8G (default: half the physical "
-                             f"memory or 4 GiB, whichever is smaller; here {default_max_bytes() / 2**30:.1f} GiB, for the "
-                             "whole process); a search that reaches it stops with a partial, labelled report")
+                             f"memory or 4 GiB, whichever is smaller; here {default_max_bytes() / 2**30:.1f} GiB); "
+                             "at the default or above, what the process already holds counts against it; "
+                             "a search that reaches it stops with a partial, labelled report")
     parser.add_argument("--max-file-size", type=parse_size, default=DEFAULT_MAX_FILE_BYTES, metavar="SIZE",
                         help=f"largest PNML file read, e.g. 64M (default: {DEFAULT_MAX_FILE_BYTES // 2**20} MiB; "
                              "Model Checking Contest models reach 42 MiB; other commands read at most 16 MiB)")
