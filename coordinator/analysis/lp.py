@@ -511,16 +511,16 @@ def place_bounds(sn: SparseNet, *, seconds: float = 5.0, seen: np.ndarray | None
                 cert[p] = b.certified
             if b.dual is not None:
                 _apply(bounds, cert, b.dual, sn.m0, True)
-        if not blocked and done and (done == 1 or done % _BLOCK == 0):
+        if done == 1 or (done and not blocked and done % _BLOCK == 0):
             rest = int(improvable(todo[i + 1:]).sum())
             now = time.monotonic()
-            if rest >= 2 * _BLOCK and (now - lp_start) / done * rest > seconds - (now - start):
+            if not blocked and rest >= 2 * _BLOCK and (now - lp_start) / done * rest > seconds - (now - start):
                 # at this rate the places left would not fit: runs of them first, by one LP each
                 blocked = True
                 assert lps is not None
                 _blocks(sn, lps, todo[i + 1:], improvable, bounds, cert, start + seconds)
+                rest = int(improvable(todo[i + 1:]).sum())
         if done == 1:
-            rest = int(improvable(todo[i + 1:]).sum())
             took = per * rest
             if took > 2 * (seconds - (time.monotonic() - start)):
                 # the first place's LP (from the total's basis) says the others do not nearly fit:

@@ -794,7 +794,7 @@ def analyse(net: PetriNet, *, max_states: int = 10_000_000, max_bytes: int | Non
         limit = min(max_states, AUTO_PROBE_STATES)
     reason = "explicit: asked for (--engine explicit)"
     beside: _Beside | None = None
-    whole = budget  # what the process may take beside what it holds when a search beside starts (budget.room)
+    whole = budget  # the budget less what the process holds when a search beside starts (budget.room)
     searched = False  # the graph below is that of the search over the whole limit
     dropped = False  # ... and it was dropped for the symbolic engine: searched again if that gives up
     if engine == "auto" and st.bounded and limit < max_states and cpus() >= 2:
