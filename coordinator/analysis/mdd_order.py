@@ -200,6 +200,12 @@ class Events:
         """Number of events."""
         return int(self.top.shape[0])
 
+    @property
+    def nbytes(self) -> int:
+        """The bytes of the kernel's tables (AirplaneLD-PT-2000's 16,008 events: 169 MB to 490 MB by
+        the order)."""
+        return sum(a.nbytes for a in self.tables())
+
 
 def concat_ranges(starts: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """The integers ``starts[i] .. starts[i] + counts[i] - 1`` for every i, one after the other."""

@@ -38,8 +38,9 @@ Counts are exact: every count is computed modulo a few primes below 2**61 and re
 Chinese remainder theorem, with as many primes as a float estimate of the count (or a bound of the
 counts to come: markings times transitions for the edges) asks for.
 
-Budgets: ``max_bytes`` bounds the store, its tables and stacks (:class:`~coordinator.errors.
-AnalysisError` when it is reached), ``seconds`` the whole computation (the reachable set first;
+Budgets: ``max_bytes`` bounds the store, its tables and stacks, the counts of its sets and the
+event tables of each call (:class:`~coordinator.errors.AnalysisError` when it is reached; each
+order raced has tables of its own, 169 MB to 490 MB on AirplaneLD-PT-2000), ``seconds`` the whole computation (the reachable set first;
 the witness's firing sequence, then reversibility and liveness, get what is left of
 ``answer_seconds``, and what is not decided in time is left undecided).
 """
@@ -230,6 +231,9 @@ class _Store:
              check_overflow: bool = False, dz: tuple[np.ndarray, ...] | None = None) -> int:
         """One operation of :func:`.mdd_kernel.run` on the store (arguments as there); its result node.
 
+        The kernel's budget is ``max_bytes`` less the counts of the store's sets and the bytes of the
+        call's tables (``ev``, ``dz``), which it does not see.
+
         Raises:
             _OutOfMemory: the byte budget. _OutOfTime: the deadline, or the watch. BeyondBounds: a
                 firing beyond the proven local markings. _TooWide: MODE_DEAD's sets outgrew ``dz``."""
@@ -238,7 +242,7 @@ class _Store:
             self._events = ev
         while True:
             args = (mode, self.dom, *ev.tables(), dz or self._no_dead, *self.arrays, a, b, c, arg, check_overflow,
-                    self.max_bytes)
+                    max(0, self.max_bytes - self._count_bytes() - ev.nbytes - sum(t.nbytes for t in dz or ())))
             status, ret, *arrays = mk.run(*args)  # type: ignore[arg-type]
             self.arrays = tuple(arrays)
             if status != mk.MEMORY or self.borrow is None:
@@ -292,8 +296,16 @@ class _Store:
         return int(self.arrays[0][mk.META_NODES])
 
     def held(self) -> int:
-        """The bytes its arrays hold now."""
-        return sum(a.nbytes for a in self.arrays)
+        """The bytes its arrays hold now: the nodes, tables and the counts of its sets (:meth:`count`)."""
+        return sum(a.nbytes for a in self.arrays) + self._count_bytes()
+
+    def _count_bytes(self) -> int:
+        """The bytes of the counts of its sets (:meth:`count`): about 17 a node with one prime."""
+        return self._done.nbytes + self._approx.nbytes + self._residue.nbytes
+
+    def read_bytes(self) -> int:
+        """The bytes a count of its sets reads (:meth:`counting`): the nodes' buffers and their counts."""
+        return sum(a.nbytes for a in self.arrays[1:5]) + self._count_bytes()
 
     def contains(self, node: int, values: np.ndarray) -> bool:
         offset, size, kids = self.arrays[2:5]
@@ -969,7 +981,7 @@ def analyse_symbolic(net: PetriNet, bounds: np.ndarray, *, flows: list[np.ndarra
         fireable = free.copy()
         store.count(reach, at_most=_as_float(states) * max(1, single.n_events))
         # the counts per transition (edges, quasi-liveness) beside the deadlocks, bounds and witness
-        enabled = _Counting(store.counting(reach, single), beside=cpus() >= 2)
+        enabled = _Counting(store, reach, single, beside=cpus() >= 2)
         dead = _dead(store, fwd, single, reach, enabled, states) if not free.any() else mk.EMPTY
         n_dead = store.count(dead)
         present = store.presence(reach)
@@ -1161,15 +1173,20 @@ class _Counting:
     firing sequence need no count per transition, and the count reads only nodes the store never
     changes, so it runs beside them (BridgeAndVehicles-PT-V80P20N20, 3,728 transitions: 4.7 s of
     counts; Sudoku-PT-AN04: 2.1 s beside 3.2 s of deadlocks; docs/BENCHMARKS.md). While it runs,
-    a buffer the store outgrows stays allocated until the count ends: memory beyond the store's
-    budget, at most its nodes' buffers (levels, offsets, sizes, children) once more."""
+    a buffer the store outgrows stays allocated until the count ends, so what the count reads
+    (:meth:`_Store.read_bytes`: the nodes' buffers and their counts) is lent out of the store's
+    budget until :meth:`result` (AirplaneLD-PT-2000: 0.47 GiB of a store of 0.81 GiB; a witness
+    that doubled the buffers took its process 0.95 GiB past what the budget counted)."""
 
-    def __init__(self, count: Callable[[], list[int]], beside: bool) -> None:
-        self._count: Callable[[], list[int]] | None = count
+    def __init__(self, store: _Store, node: int, ev: Events, beside: bool) -> None:
+        self._count: Callable[[], list[int]] | None = store.counting(node, ev)
         self._counts: list[int] | None = None
         self._error: BaseException | None = None
         self._thread: threading.Thread | None = None
+        self._store, self._lent = store, 0
         if beside:
+            self._lent = store.read_bytes()
+            store.max_bytes -= self._lent
             self._thread = threading.Thread(target=self._run, name="petrobot-enabled-counts", daemon=True)
             self._thread.start()
         else:
@@ -1194,6 +1211,8 @@ class _Counting:
         if self._thread is not None:
             while self._thread.is_alive():
                 self._thread.join(0.2)
+        self._store.max_bytes += self._lent  # the buffers it read are the store's alone again
+        self._lent = 0
         if self._error is not None:
             raise self._error
         assert self._counts is not None
