@@ -221,6 +221,9 @@ class _Store:
         self._residue = np.zeros((0, 1), np.int64)
         #: what frees more bytes for this store when a call outgrows ``max_bytes`` (asked once)
         self.borrow: Callable[[], int] | None = None
+        #: what gives back bytes lent out of ``max_bytes`` (:class:`_Counting`: waits for the enabled
+        #: counts beside to end), asked once before ``borrow``; the bytes given back
+        self.reclaim: Callable[[], int] | None = None
         #: closures by chained images instead of saturation (:meth:`closure`)
         self.chain = False
         #: the last closure by chained images: its events, start and constraint, the passes it had
@@ -231,8 +234,9 @@ class _Store:
              check_overflow: bool = False, dz: tuple[np.ndarray, ...] | None = None) -> int:
         """One operation of :func:`.mdd_kernel.run` on the store (arguments as there); its result node.
 
-        The kernel's budget is ``max_bytes`` less the counts of the store's sets and the bytes of the
-        call's tables (``ev``, ``dz``), which it does not see.
+        The kernel's budget is ``max_bytes`` less what it does not see: the counts of the store's
+        sets and the call's event tables (``ev``; MODE_DEAD's tables ``dz`` are bounded by their
+        caller, :func:`_dead`).
 
         Raises:
             _OutOfMemory: the byte budget. _OutOfTime: the deadline, or the watch. BeyondBounds: a
@@ -242,10 +246,16 @@ class _Store:
             self._events = ev
         while True:
             args = (mode, self.dom, *ev.tables(), dz or self._no_dead, *self.arrays, a, b, c, arg, check_overflow,
-                    max(0, self.max_bytes - self._count_bytes() - ev.nbytes - sum(t.nbytes for t in dz or ())))
+                    max(0, self.max_bytes - self._count_bytes() - ev.nbytes))
             status, ret, *arrays = mk.run(*args)  # type: ignore[arg-type]
             self.arrays = tuple(arrays)
-            if status != mk.MEMORY or self.borrow is None:
+            if status != mk.MEMORY:
+                break
+            if self.reclaim is not None:
+                reclaim, self.reclaim = self.reclaim, None
+                if reclaim() > 0:
+                    continue  # the call again, from the results its store kept
+            if self.borrow is None:
                 break
             borrow, self.borrow = self.borrow, None
             extra = borrow()
@@ -1175,8 +1185,10 @@ class _Counting:
     counts; Sudoku-PT-AN04: 2.1 s beside 3.2 s of deadlocks; docs/BENCHMARKS.md). While it runs,
     a buffer the store outgrows stays allocated until the count ends, so what the count reads
     (:meth:`_Store.read_bytes`: the nodes' buffers and their counts) is lent out of the store's
-    budget until :meth:`result` (AirplaneLD-PT-2000: 0.47 GiB of a store of 0.81 GiB; a witness
-    that doubled the buffers took its process 0.95 GiB past what the budget counted)."""
+    budget until :meth:`result` (AirplaneLD-PT-2000: 0.47 GiB of a store of 0.97 GiB; in a run
+    before, its process grew from 2.9 to 3.85 GiB during the witness, buffers doubled beside those
+    the count still read), or until a call on the store outgrows what is left: that call waits for
+    the count to end and goes on with the bytes given back (:attr:`_Store.reclaim`)."""
 
     def __init__(self, store: _Store, node: int, ev: Events, beside: bool) -> None:
         self._count: Callable[[], list[int]] | None = store.counting(node, ev)
@@ -1187,6 +1199,7 @@ class _Counting:
         if beside:
             self._lent = store.read_bytes()
             store.max_bytes -= self._lent
+            store.reclaim = self._give_back
             self._thread = threading.Thread(target=self._run, name="petrobot-enabled-counts", daemon=True)
             self._thread.start()
         else:
@@ -1206,13 +1219,21 @@ class _Counting:
         """The counts if they are done, else None (no wait)."""
         return self._counts
 
-    def result(self) -> list[int]:
-        """The counts, once done (Ctrl-C stays possible while it waits); raises what the count raised."""
+    def _give_back(self) -> int:
+        """Wait for the count to end (Ctrl-C stays possible), then give the bytes lent back to the
+        store's budget (once: 0 after); the bytes given back."""
         if self._thread is not None:
             while self._thread.is_alive():
                 self._thread.join(0.2)
-        self._store.max_bytes += self._lent  # the buffers it read are the store's alone again
-        self._lent = 0
+        lent, self._lent = self._lent, 0
+        self._store.max_bytes += lent  # the buffers it read are the store's alone again
+        if self._store.reclaim == self._give_back:
+            self._store.reclaim = None
+        return lent
+
+    def result(self) -> list[int]:
+        """The counts, once done; raises what the count raised."""
+        self._give_back()
         if self._error is not None:
             raise self._error
         assert self._counts is not None
