@@ -40,9 +40,10 @@ counts to come: markings times transitions for the edges) asks for.
 
 Budgets: ``max_bytes`` bounds the store, its tables and stacks, the counts of its sets and the
 event tables of each call (:class:`~coordinator.errors.AnalysisError` when it is reached; each
-order raced has tables of its own, 169 MB to 490 MB on AirplaneLD-PT-2000), ``seconds`` the whole computation (the reachable set first;
-the witness's firing sequence, then reversibility and liveness, get what is left of
-``answer_seconds``, and what is not decided in time is left undecided).
+order raced has tables of its own, 169 MB to 490 MB on AirplaneLD-PT-2000), ``seconds`` the whole
+computation (the reachable set first; the witness's firing sequence, then reversibility and
+liveness, get what is left of ``answer_seconds``, and what is not decided in time is left
+undecided).
 """
 
 from __future__ import annotations

@@ -655,6 +655,7 @@ def test_the_counts_per_transition_taken_before_the_store_moves_on_are_the_count
     assert store.max_bytes == budget  # given back once the counts are taken
     assert 0 < min(alone) and max(alone) < states
 
+
 def test_a_call_that_outgrows_what_the_counts_beside_left_waits_for_them_and_goes_on() -> None:
     # the bytes lent to the enabled counts beside (_Counting) come back when a call needs them:
     # the call waits for the counts to end, then goes on from what its store kept
