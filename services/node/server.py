@@ -47,6 +47,7 @@ escaped and shortened (:func:`services.protocol.shown`) and lines a peer can pro
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import os
 import resource
@@ -458,7 +459,9 @@ class Node(PeerHost):
             action = self._actions[call.action]
             run = action.fn if type(action) is FunctionAction else action.run
             defaults = self._placements[call.action].params
-            self._tasks[cid] = self._loop.create_task(self._run(verdict.running, run, defaults, peer))
+            task = self._loop.create_task(self._run(verdict.running, run, defaults, peer))
+            task.add_done_callback(functools.partial(self._cancelled_unstarted, verdict.running, time.perf_counter()))
+            self._tasks[cid] = task
             peer.send(Accepted(id=cid))
         elif type(verdict) is Reject:
             reason = verdict.reason.value
@@ -560,6 +563,20 @@ class Node(PeerHost):
             log.warning("call %s %s raised %s", shown(call.id, 64), call.action, shown(record.reason, 200))
         record = replace(record, wall_s=time.perf_counter() - t0, cpu_s=max(0.0, time.process_time() - c0))
         self._finish(rec, Result(id=call.id, result=record), info)
+
+    def _cancelled_unstarted(self, rec: RunningCall[Peer], admitted: float, task: asyncio.Task[None]) -> None:
+        """End the call of a task cancelled before its first step, whose :meth:`_run` never ran: a
+        cancel read with its call (one write), or the node stopping. Without this the call stayed
+        running for ever, its slot of ``max_in_flight`` taken and a repeat of its id joined to a
+        result that never came (a coordinator interrupted by Ctrl-C right after a call, resumed,
+        waited for it until the call's deadline). Its ``wall_s`` is the time since it was admitted
+        (``admitted``, ``time.perf_counter()`` seconds): a node times every call it ends, and a
+        coordinator tells the node's word from its own by that (``coordinator.reconcile.given_up``)."""
+        cid = rec.call.id
+        if task.cancelled() and self._tasks.get(cid) is task:  # _run ends every call it starts
+            error = replace(ActionResult.error(rec.cancel_reason or "node shutdown"),
+                            wall_s=time.perf_counter() - admitted)
+            self._finish(rec, Result(id=cid, result=error), log.isEnabledFor(logging.INFO))
 
     def _finish(self, rec: RunningCall[Peer], result: Result, info: bool) -> None:
         """Keep ``result`` (charged its frame length) and send it to every waiter still connected,

@@ -237,6 +237,9 @@ def test_a_run_interrupted_with_ctrl_c_resumes_where_it_stopped(cluster: Any, tm
     rest = Output(again)
     assert again.wait(timeout=TIMEOUT_S) == 0, rest.text
     assert f"run {run.id} resumed" in rest.text
+    # the interrupted call was cancelled on its node, and its result is kept: the resumed run gets
+    # it at once, never waiting out the call's deadline (the node ends a call cancelled before it started)
+    assert "no answer from node" not in rest.text and "not reconciled" not in rest.text, rest.text
     with JournalReader.open(journal) as reader:
         (resumed,) = reader.runs()
         assert (resumed.id, resumed.end_state) == (run.id, "completed")

@@ -328,6 +328,26 @@ async def test_s5_a_cancel_ends_a_call_with_reason_cancelled_and_an_unknown_canc
     c.close()
 
 
+async def test_s5_a_cancel_read_with_its_call_before_the_call_starts_still_ends_it(node: Node) -> None:
+    # call and cancel in one write: the node admits the call and cancels its task before the task's
+    # first step, so the action never runs; the call must still end (it held its slot for ever, and
+    # a coordinator resumed after Ctrl-C waited for it until its deadline)
+    c = await connect(node)
+    await c.login()
+    c.send({"type": "call", "id": "k2", "action": "wait", "params": {"seconds": 10, "step": 1}})
+    c.send({"type": "cancel", "id": "k2"})
+    await c.recv_type("accepted")
+    result = await c.recv_type("result")
+    assert (result["id"], result["status"], result["reason"]) == ("k2", "error", "cancelled")
+    assert result["wall_s"] > 0  # timed by the node: its own word, not a coordinator's guess
+    assert node._calls.running("k2") is None and node._calls.in_flight == 0
+    c.send({"type": "call", "id": "k2", "action": "wait", "params": {"seconds": 10, "step": 1}})
+    await c.recv_type("accepted")
+    again = await c.recv_type("result")  # the kept result, not a second run
+    assert (again["status"], again["reason"]) == ("error", "cancelled")
+    c.close()
+
+
 async def test_s5_a_call_whose_caller_is_gone_is_cancelled_after_the_grace_and_a_query_tells_so(
         node: Node) -> None:
     c = await connect(node)
