@@ -623,14 +623,14 @@ def test_the_store_s_grown_buffers_are_numpy_s_advised_for_transparent_huge_page
     assert all(advised_huge(a.ctypes.data + a.nbytes // 2) for a in big)
 
 
-def test_the_counts_per_transition_taken_before_the_store_moves_on_are_the_counts_after() -> None:
-    # symbolic._Counting counts beside the deadlocks and the witness, which grow the store's buffers
-    # and may give the counts new primes: what _Store.counting took stays valid (nodes are only appended)
+def kanban_20_counted() -> tuple[_Store, Events, Events, int, int]:
+    """kanban(20)'s reachable set (805,422,366,595 markings) saturated in a store of 256 MiB, counted
+    with primes enough for its enabled counts: the store, the forward and the single events, the
+    set's node and its count."""
     from coordinator.analysis import mdd_kernel as mk
     from coordinator.analysis.mdd_order import encode, events
-    from coordinator.analysis.symbolic import _Counting, _Store
 
-    net = kanban(20)  # 805,422,366,595 markings
+    net = kanban(20)
     bounds, flows = proven_bounds(net)
     sn = sparse_net(net)
     enc = encode(sn, bounds, flows, seconds=5.0, seed=0, sink=True)
@@ -638,6 +638,16 @@ def test_the_counts_per_transition_taken_before_the_store_moves_on_are_the_count
     store = _Store(enc, 256 << 20)
     reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
     states = store.count(reach, at_most=float(store.count(reach)) * single.n_events)
+    return store, fwd, single, reach, states
+
+
+def test_the_counts_per_transition_taken_before_the_store_moves_on_are_the_counts_after() -> None:
+    # symbolic._Counting counts beside the deadlocks and the witness, which grow the store's buffers
+    # and may give the counts new primes: what _Store.counting took stays valid (nodes are only appended)
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.symbolic import _Counting
+
+    store, fwd, single, reach, states = kanban_20_counted()
     taken = store.counting(reach, single)
     budget, lent = store.max_bytes, store.read_bytes()
     beside = _Counting(store, reach, single, beside=True)
@@ -660,17 +670,9 @@ def test_a_call_that_outgrows_what_the_counts_beside_left_waits_for_them_and_goe
     # the bytes lent to the enabled counts beside (_Counting) come back when a call needs them:
     # the call waits for the counts to end, then goes on from what its store kept
     from coordinator.analysis import mdd_kernel as mk
-    from coordinator.analysis.mdd_order import encode, events
-    from coordinator.analysis.symbolic import _Counting, _Store
+    from coordinator.analysis.symbolic import _Counting
 
-    net = kanban(20)
-    bounds, flows = proven_bounds(net)
-    sn = sparse_net(net)
-    enc = encode(sn, bounds, flows, seconds=5.0, seed=0, sink=True)
-    fwd, single = events(sn, enc, merge=True), events(sn, enc)
-    store = _Store(enc, 256 << 20)
-    reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
-    store.count(reach, at_most=float(store.count(reach)) * single.n_events)
+    store, fwd, single, reach, _ = kanban_20_counted()
     alone = store.enabled_counts(reach, single)
     beside = _Counting(store, reach, single, beside=True)
     held = store.held()
