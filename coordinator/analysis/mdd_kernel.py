@@ -73,7 +73,7 @@ __all__ = ["APPLY_DIFF", "APPLY_INTER", "APPLY_UNION", "EMPTY", "Flag", "IMAGE_C
            "IMAGE_EACH", "MEMORY", "MODE_APPLY", "MODE_DEAD", "MODE_IMAGE", "MODE_RESTRICT", "MODE_SATURATE",
            "NO_CONSTRAINT", "OK", "OVERFLOW", "STOPPED", "TERMINAL", "WIDE", "add_path", "clear_cache", "count",
            "dead_tables", "enabled_counts", "enabling_values", "max_weight", "most_paths", "new_store", "node_of_path",
-           "presence", "run", "set_watch", "subset", "suffix_ids", "wider_dead_tables"]
+           "presence", "run", "set_watch", "subset", "suffix_ids", "watch", "wider_dead_tables"]
 
 EMPTY, TERMINAL = 0, 1
 NO_CONSTRAINT = -1
@@ -122,6 +122,12 @@ def set_watch(deadline: float | None, progress: Callable[[int], None] | None = N
     _watch.deadline = deadline
     _watch.progress = progress
     _watch.cancel = cancel
+
+
+def watch() -> tuple[float | None, Callable[[int], None] | None, Flag | None]:
+    """This thread's ``(deadline, progress, cancel)`` as :func:`set_watch` set them (all None when
+    never set), for a caller that narrows the deadline for a while and then restores them."""
+    return getattr(_watch, "deadline", None), getattr(_watch, "progress", None), getattr(_watch, "cancel", None)
 
 
 def _tick(nodes: int) -> int:

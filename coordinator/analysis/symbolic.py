@@ -1242,58 +1242,128 @@ class _Counting:
 
 
 def _dead(store: _Store, fwd: Events, single: Events, reach: int, counts: list[int] | _Counting, states: int,
-          max_sets: int = 1 << 19, table_bytes: int | None = None) -> int:
+          max_sets: int = 1 << 19, table_bytes: int | None = None, by_turns: bool = True) -> int:
     """The reachable markings that enable no event of ``fwd``: empty at once when one is enabled in
     every reachable marking (known when ``counts`` are, per event of ``single``: a list, or a
     :class:`_Counting` done already); else in one pass over the reachable set, with the conditions
     pending on each path (MODE_DEAD, :func:`.mdd_kernel.dead_tables`: at most ``max_sets`` sets of
     them, of 8 ``max_sets`` residuals in all, :data:`_DEAD_SET_BYTES` each); when those outgrow
     their tables, the pass again on tables twice as large while they fit in ``table_bytes`` (default:
-    half of what the store's budget has left), then the reachable set restricted event by event
-    (:func:`_dead_by_events`, which waits for the counts). One pass: AirplaneLD-PT-1000, whose 8,008
-    events share six places, in 0.15 s where event by event took 24.5 s; AirplaneLD-PT-2000's
-    16,008 events need 7,305,766 residuals in 3,833 sets, past the first tables after 0.2 s, then
-    0.1 s on twice their size, where event by event was not done in 100 s (docs/BENCHMARKS.md)."""
+    half of what the store's budget has left then), and between two passes the reachable set
+    restricted event by event (:class:`_ByEvents`, once the counts are done) for as long as the
+    passes have taken in all, less what it took before: whichever is done first answers, and the
+    restriction alone goes on to the end when the tables no longer fit. One pass:
+    AirplaneLD-PT-1000, whose 8,008 events share six places, in 0.15 s where event by event took
+    24.5 s; AirplaneLD-PT-2000's 16,008 events need 7,305,766 residuals in 3,833 sets, past the
+    first tables after 0.2 s, then 0.1 s on twice their size, where event by event was not done in
+    100 s. SharedMemory-PT-000050 outgrew tables of up to 16,777,216 sets in six passes (9.7 s),
+    where event by event takes 1.7 s (docs/BENCHMARKS.md). ``by_turns`` False: no restriction
+    between the passes, only after the last (bench/deadlocks.py measures both ways)."""
     known = counts if isinstance(counts, list) else counts.now()
     if known is not None and states in known:
         return mk.EMPTY
-    if table_bytes is None:
-        table_bytes = max(0, store.max_bytes - store.held()) // 2
     dz = mk.dead_tables(store.dom, fwd.top, fwd.bot, fwd.slot_ptr, fwd.slot, fwd.fn_ptr, fwd.fn,
                         max_sets=max_sets, max_items=8 * max_sets)
     if dz is None:  # an event enabled in every marking
         return mk.EMPTY
+    by_events = _ByEvents(store, fwd, single, reach)
+    passes = 0.0  # the seconds the passes took
     while True:
+        t0 = time.monotonic()
         try:
             return store.call(mk.MODE_DEAD, fwd, reach, dz=dz)
         except _TooWide:
-            max_sets *= 2
-            if max_sets * _DEAD_SET_BYTES > table_bytes:
-                break
-            dz = mk.wider_dead_tables(dz, max_sets, 8 * max_sets)
+            passes += time.monotonic() - t0
         finally:
             mk.clear_cache(store.arrays)  # its results name sets of dz
-    return _dead_by_events(store, fwd, single, reach, counts if isinstance(counts, list) else counts.result())
+        max_sets *= 2
+        room = max(0, store.max_bytes - store.held()) // 2 if table_bytes is None else table_bytes
+        if max_sets * _DEAD_SET_BYTES > room:
+            break
+        known = counts if isinstance(counts, list) else counts.now()
+        if by_turns and known is not None and by_events.run(known, passes - by_events.seconds):
+            return by_events.dead
+        dz = mk.wider_dead_tables(dz, max_sets, 8 * max_sets)
+    by_events.run(counts if isinstance(counts, list) else counts.result())
+    return by_events.dead
 
 
 #: bytes of :func:`.mdd_kernel.dead_tables` per set: its pointer, two hash slots and 8 residuals
 _DEAD_SET_BYTES = 8 * (1 + 2 + 8)
 
 
-def _dead_by_events(store: _Store, fwd: Events, single: Events, reach: int, counts: list[int]) -> int:
-    """:func:`_dead` event by event, from the top level down (the events of one level, those enabled
-    in the most markings first). Restricting level by level builds fewer intermediate nodes than
+class _ByEvents:
+    """The reachable markings that enable no event of ``fwd`` (:func:`_dead`), by restricting the
+    reachable set event by event, from the top level down (the events of one level, those enabled
+    in the most markings first), in slices of time (:meth:`run`): :attr:`dead` once done, the
+    markings left so far before. Restricting level by level builds fewer intermediate nodes than
     the most-enabled events first across levels (Sudoku-PT-AN04: 4.3 million new nodes in 17 s
     against 7.8 million in 26 s; ASLink-PT-02a: 2.4 million in 4.6 s against 6.0 million in 9.6 s)."""
-    by_t = {single.members[e][0]: n for e, n in enumerate(counts)}
-    order = sorted(range(fwd.n_events),
-                   key=lambda e: (int(fwd.top[e]), -sum(by_t.get(t, 0) for t in fwd.members[e])))
-    dead = reach
-    for e in order:
-        if dead == mk.EMPTY:
-            break
-        dead = store.call(mk.MODE_RESTRICT, fwd, dead, 0, arg=e)
-    return dead
+
+    def __init__(self, store: _Store, fwd: Events, single: Events, reach: int) -> None:
+        self.store, self.fwd, self.single = store, fwd, single
+        #: the markings that enable none of the events restricted so far
+        self.dead = reach
+        #: the seconds the slices have taken
+        self.seconds = 0.0
+        self._order: list[int] | None = None
+        self._next = 0  # the position in the order of the next event to restrict
+        self._failed: _OutOfMemory | None = None
+
+    def run(self, counts: list[int], seconds: float | None = None) -> bool:
+        """Go on restricting, for about ``seconds`` (None: to the end; the clock is read after each
+        restriction, one at least, and by the kernel within a restriction); whether it is done.
+        ``counts``: per event of ``single``, the reachable markings enabling it
+        (:meth:`_Store.enabled_counts`), which order the events at the first call. A restriction
+        stopped at the slice's end is made again at the next (what it had computed is dropped when
+        the store's cache is cleared).
+
+        Raises:
+            _OutOfMemory: the store's budget, at once when ``seconds`` is None, else at the call
+                to the end (a slice that outgrows it ends the slices: what the restrictions built stays
+                in the store). _OutOfTime: the watch this thread had before (:func:`.mdd_kernel.set_watch`)."""
+        if self._failed is not None:
+            if seconds is None:
+                raise self._failed
+            return False
+        if self._order is None:
+            by_t = {self.single.members[e][0]: n for e, n in enumerate(counts)}
+            fwd = self.fwd
+            self._order = sorted(range(fwd.n_events),
+                                 key=lambda e: (int(fwd.top[e]), -sum(by_t.get(t, 0) for t in fwd.members[e])))
+        before = mk.watch()
+        t0 = time.monotonic()
+        end = None if seconds is None else t0 + max(0.0, seconds)
+        if end is not None:
+            mk.set_watch(end if before[0] is None else min(before[0], end), before[1], before[2])
+        try:
+            while self._next < len(self._order) and self.dead != mk.EMPTY:
+                self.dead = self.store.call(mk.MODE_RESTRICT, self.fwd, self.dead, 0, arg=self._order[self._next])
+                self._next += 1
+                if end is not None and time.monotonic() >= end:
+                    break  # the slice is over (a restriction at least is made in each)
+            return self._next == len(self._order) or self.dead == mk.EMPTY
+        except _OutOfTime:
+            cancel = before[2]
+            if end is None or (cancel is not None and cancel.is_set()) or (
+                    before[0] is not None and time.monotonic() > before[0]):
+                raise  # the watch before, not the slice's end
+            return False
+        except _OutOfMemory as exc:
+            if seconds is None:
+                raise
+            self._failed = exc
+            return False
+        finally:
+            mk.set_watch(*before)
+            self.seconds += time.monotonic() - t0
+
+
+def _dead_by_events(store: _Store, fwd: Events, single: Events, reach: int, counts: list[int]) -> int:
+    """:func:`_dead` event by event alone, to the end (:class:`_ByEvents`)."""
+    by_events = _ByEvents(store, fwd, single, reach)
+    by_events.run(counts)
+    return by_events.dead
 
 
 #: candidate variable orders raced against each other, and the first time slice of each (seconds)

@@ -6,6 +6,7 @@ import contextlib
 import csv
 import os
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -289,6 +290,37 @@ def test_the_dead_markings_in_one_pass_are_those_restricted_event_by_event_and_t
     assert _dead(store, fwd, single, reach, counts, states) == by_events
     assert _dead(store, fwd, single, reach, counts, states, max_sets=1) == by_events  # WIDE, then tables twice as large
     assert _dead(store, fwd, single, reach, counts, states, max_sets=1, table_bytes=0) == by_events  # WIDE, by events
+
+
+@pytest.mark.parametrize("seed", range(0, 40, 3))
+def test_the_restriction_event_by_event_stopped_at_the_end_of_each_slice_resumes_to_the_same_dead_markings(
+        seed: int) -> None:
+    # slices of no time at all: each makes one restriction and stops at its first look at the clock;
+    # with the store's cache cleared between them, they hold at the end what one run holds
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis.mdd_order import events
+    from coordinator.analysis.symbolic import _ByEvents, _dead_by_events, _Store
+
+    _net, _a, sn, enc = generated_encoding(seed)
+    fwd, single = events(sn, enc, merge=True), events(sn, enc)
+    store = _Store(enc, 64 << 20)
+    reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
+    counts = counts_per_transition(store, single, reach, store.count(reach))
+    whole = _dead_by_events(store, fwd, single, reach, counts)
+    outer = time.monotonic() + 600.0
+    mk.set_watch(outer, None, None)
+    slices = 0
+    try:
+        sliced = _ByEvents(store, fwd, single, reach)
+        while not sliced.run(counts, 0.0):
+            mk.clear_cache(store.arrays)  # as a pass of MODE_DEAD between two slices does
+            slices += 1
+            assert slices <= fwd.n_events
+            assert mk.watch() == (outer, None, None)  # the watch before each slice, restored after it
+    finally:
+        mk.set_watch(None, None)
+    assert sliced.dead == whole
+    assert slices > 0 or whole == mk.EMPTY or fwd.n_events <= 1
 
 
 def test_the_conditions_pending_on_a_path_are_shared_by_the_events_of_one_place_below() -> None:
