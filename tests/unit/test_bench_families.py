@@ -35,3 +35,16 @@ def test_an_unknown_family_or_size_is_refused_with_the_known_ones() -> None:
         build("railroad:3", MCC)
     with pytest.raises(ValueError, match="positive integer"):
         build("kanban:0", MCC)
+
+
+def test_the_deadlock_bench_finds_the_same_dead_markings_both_ways_and_prints_their_ratio(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from bench.deadlocks import main
+
+    assert main(["--json", "--mcc", str(MCC), "philosophers:6", "sharedmemory:5"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [(r["model"], r["states"], r["dead"]) for r in rows] == [("philosophers:6", 3 ** 6, 2),
+                                                                    ("sharedmemory:5", 1863, 0)]
+    assert all(r["ratio"] > 0 for r in rows)
