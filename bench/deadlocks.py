@@ -7,8 +7,8 @@ for as long as the passes have taken (:func:`coordinator.analysis.symbolic._dead
 in the same run, is the way before: the passes alone, then the restriction after the last
 (``by_turns=False``).
 
-For each net and each way, on a fresh store: the net's encoding (:func:`.mdd_order.encode`, seed 0,
-shared levels at the bottom: the race's first order) and its reachable set by saturation, or with
+For each net, once: its encoding (:func:`.mdd_order.encode`, seed 0, shared levels at the bottom:
+the race's first order). For each way, on a fresh store: the reachable set by saturation, or with
 ``--chain`` by chained images (untimed), its enabled counts (untimed, as the engine has them
 by then on most nets), then the dead markings, timed. Printed per net: markings, dead markings
 (the same both ways, checked), the seconds each way and their ratio (before / by turns).
@@ -33,17 +33,24 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def measure(net: Any, by_turns: bool, max_bytes: int, chain: bool) -> dict[str, Any]:
-    """One way on a fresh store: the markings, the dead markings and the seconds they took."""
+def prepare(net: Any) -> tuple[Any, Any, Any]:
+    """The net's encoding and its forward and single events, once per net: every run of both ways
+    is on the same variable order (its search is time-limited, so two searches may differ)."""
     from coordinator.analysis import lp
     from coordinator.analysis.matrices import sparse_net
     from coordinator.analysis.mdd_order import encode, events
-    from coordinator.analysis.symbolic import _dead, _Store
 
     sn = sparse_net(net)
     bounds = lp.place_bounds(sn, seconds=10.0).bounds  # as bench/statespace.py --symbolic proves them
     enc = encode(sn, bounds, lp.semiflow_cover(sn, seconds=3.0), seconds=5.0, seed=0, sink=True)
-    fwd, single = events(sn, enc, merge=True), events(sn, enc)
+    return enc, events(sn, enc, merge=True), events(sn, enc)
+
+
+def measure(prepared: tuple[Any, Any, Any], by_turns: bool, max_bytes: int, chain: bool) -> dict[str, Any]:
+    """One way on a fresh store: the markings, the dead markings and the seconds they took."""
+    from coordinator.analysis.symbolic import _dead, _Store
+
+    enc, fwd, single = prepared
     store = _Store(enc, max_bytes)
     store.chain = chain
     t0 = time.monotonic()
@@ -77,11 +84,11 @@ def main(argv: list[str] | None = None) -> int:
 
     load_kernel()
     for spec in args.models:
-        net = load_model(spec, args.mcc)
+        prepared = prepare(load_model(spec, args.mcc))
         runs: dict[str, list[dict[str, Any]]] = {"before": [], "by_turns": []}
         for _ in range(max(1, args.repeat)):
             for way in ("before", "by_turns"):
-                runs[way].append(measure(net, way == "by_turns", int(args.max_memory * 2**30), args.chain))
+                runs[way].append(measure(prepared, way == "by_turns", int(args.max_memory * 2**30), args.chain))
         dead = {r["dead"] for rs in runs.values() for r in rs}
         if len(dead) != 1:
             print(f"{spec}: the two ways disagree on the dead markings: {sorted(dead)}", file=sys.stderr)
