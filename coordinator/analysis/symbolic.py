@@ -1432,7 +1432,7 @@ class _Cancel:
     """A lane's cancel flag: set by the race (:meth:`set`), or by whoever stops the whole engine
     (``outer``, another thread's event)."""
 
-    def __init__(self, outer: threading.Event | None) -> None:
+    def __init__(self, outer: mk.Flag | None) -> None:
         self.own = threading.Event()
         self.outer = outer
 
@@ -2571,14 +2571,75 @@ def _liveness(store: _Store, fwd: Events, single: Events, back: Events | None, r
     result.seconds["liveness"] = time.monotonic() - t0
 
 
+class _TowardDead:
+    """The reachable markings that can reach a dead marking (the backward closure of ``dead`` by
+    ``back`` inside ``reach``, :meth:`_Store.closure`), computed in a thread beside the witness's
+    quick searches over explicit markings (:func:`_witness`): those run in the interpreter and only
+    read the store (:meth:`_Store.contains`; a store never changes a node), the closure runs compiled
+    without it. The closure's budget is the store's less ``lent`` bytes, the quick searches' own,
+    until :meth:`result` or :meth:`cancel` gives them back. The thread stops at the deadline or
+    cancel flag of the caller's watch (:func:`.mdd_kernel.watch`) too. CloudDeployment-PT-6a: its
+    quick searches find no sequence in 4.0 s and the closure takes 5.0 s after them; beside them,
+    it is done 1.0 s after they give up."""
+
+    def __init__(self, store: _Store, back: Events, dead: int, reach: int, lent: int) -> None:
+        deadline, _progress, outer = mk.watch()
+        self.store = store
+        self.args = (back, dead, reach)
+        self.lent = lent
+        self.flag = _Cancel(outer)
+        self.node: int | None = None
+        self.error: BaseException | None = None
+        store.max_bytes -= lent
+        self.thread = threading.Thread(target=self._run, args=(deadline,), name="petrobot-toward-dead",
+                                       daemon=True)
+        self.thread.start()
+
+    def _run(self, deadline: float | None) -> None:
+        back, dead, reach = self.args
+        mk.set_watch(deadline, None, self.flag)
+        try:
+            self.node = self.store.closure(back, dead, c=reach)
+        except BaseException as exc:  # raised again in the caller's thread, by :meth:`result`
+            self.error = exc
+        finally:
+            mk.set_watch(None, None)
+
+    def _end(self) -> None:
+        self.thread.join()
+        self.store.max_bytes += self.lent
+        self.lent = 0
+
+    def cancel(self) -> None:
+        """Stop the closure and wait for the thread; the store keeps the nodes it made."""
+        self.flag.set()
+        self._end()
+
+    def result(self) -> int:
+        """Wait for the closure: its node. Where it outgrew its budget it is made again here, on the
+        whole budget (chained images resume where they stopped, :meth:`_Store.closure`).
+
+        Raises:
+            _OutOfTime: the caller's deadline or cancel flag stopped it. As :meth:`_Store.call`."""
+        self._end()
+        if isinstance(self.error, _OutOfMemory):
+            back, dead, reach = self.args
+            return self.store.closure(back, dead, c=reach)
+        if self.error is not None:
+            raise self.error
+        assert self.node is not None
+        return self.node
+
+
 def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Events, back: Events | None,
              reach: int, dead: int, result: SymbolicResult, say: Callable[[str], None], deadline: float) -> None:
     """One dead marking with a firing sequence to it, within the deadline (``time.monotonic()``
     seconds): a search over explicit markings guided towards the dead marking, first inside the
     reachable set alone (briefly), then random walks (as briefly, :func:`_walk_sequence`); then,
-    inside the markings that can reach a deadlock (backward saturation), random walks that stay
-    there (:func:`_walk_sequence` with ``inside``) and the guided search, each within its share of the time,
-    and breadth-first images (a shortest sequence) when neither has found one."""
+    inside the markings that can reach a deadlock (a backward closure, on two CPUs computed beside
+    the first two, :class:`_TowardDead`), random walks that stay there (:func:`_walk_sequence` with
+    ``inside``) and the guided search, each within its share of the time, and breadth-first images
+    (a shortest sequence) when neither has found one."""
     if dead == mk.EMPTY:
         return
     t0 = time.monotonic()
@@ -2600,14 +2661,25 @@ def _witness(store: _Store, sn: SparseNet, enc: Encoding, net: PetriNet, fwd: Ev
             return now + min(most, max(0.0, (deadline - now) * part))
 
         found = None
+        toward: _TowardDead | None = None
         if explicit:  # first inside the reachable set alone: most often a deadlock is reachable from
-            # everywhere, and the backward saturation below costs more
-            found = _guided_sequence(store, ex, net, reach, dead, marking, limit=20_000, stop=until(_QUICK_SECONDS),
-                                     max_bytes=room())
-            if found is None:  # then random walks, as briefly
-                found = _walk_sequence(store, ex, net, dead, until(_QUICK_SECONDS))
+            # everywhere, and the backward closure below costs more; on two CPUs that closure starts
+            # beside these quick searches, which hold the interpreter while it runs compiled
+            lent = room()
+            toward = _TowardDead(store, back, dead, reach, lent) if cpus() >= 2 else None
+            try:
+                found = _guided_sequence(store, ex, net, reach, dead, marking, limit=20_000,
+                                         stop=until(_QUICK_SECONDS), max_bytes=lent)
+                if found is None:  # then random walks, as briefly
+                    found = _walk_sequence(store, ex, net, dead, until(_QUICK_SECONDS))
+            except BaseException:
+                if toward is not None:
+                    toward.cancel()
+                raise
+            if toward is not None and found is not None:
+                toward.cancel()
         if found is None:
-            inside = store.closure(back, dead, c=reach)
+            inside = store.closure(back, dead, c=reach) if toward is None else toward.result()
             if explicit:  # walks that stay inside, then the guided search inside
                 found = _walk_sequence(store, ex, net, dead, until(_GUIDED_SECONDS, 1 / 3), inside=inside)
             if explicit and found is None:

@@ -1529,6 +1529,17 @@ def test_random_walks_fall_into_a_deadlock_and_give_a_firing_sequence_that_repla
     assert symbolic._walk_sequence(store, ex, net, store.m0, time.monotonic() + 60.0) is None
 
 
+def _ladder(n: int) -> PetriNet:
+    """Rungs 0..n with a way up from each and a way down into a cycle that never ends."""
+    ts: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        ts[f"up{i}"] = ({f"rung{i}": 1}, {f"rung{i + 1}": 1})
+        ts[f"fall{i}"] = ({f"rung{i}": 1}, {"trap_a": 1})
+    ts["round"] = ({"trap_a": 1}, {"trap_b": 1})
+    ts["again"] = ({"trap_b": 1}, {"trap_a": 1})
+    return make_net("ladder", {"rung0": 1}, ts)
+
+
 def test_walks_that_stay_where_a_deadlock_is_reachable_reach_one_where_free_walks_fall_into_a_trap() -> None:
     """A ladder of 40 rungs, each with a way down into a cycle that never ends: a free walk reaches
     the top, the only dead marking, once in 2^40 walks; a walk that never leaves the markings that
@@ -1540,13 +1551,7 @@ def test_walks_that_stay_where_a_deadlock_is_reachable_reach_one_where_free_walk
     from coordinator.analysis.mdd_order import encode, events
 
     n = 40
-    ts: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
-    for i in range(n):
-        ts[f"up{i}"] = ({f"rung{i}": 1}, {f"rung{i + 1}": 1})
-        ts[f"fall{i}"] = ({f"rung{i}": 1}, {"trap_a": 1})
-    ts["round"] = ({"trap_a": 1}, {"trap_b": 1})
-    ts["again"] = ({"trap_b": 1}, {"trap_a": 1})
-    net = make_net("ladder", {"rung0": 1}, ts)
+    net = _ladder(n)
     sn = sparse_net(net)
     bounds, flows = proven_bounds(net)
     enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
@@ -1568,6 +1573,75 @@ def test_walks_that_stay_where_a_deadlock_is_reachable_reach_one_where_free_walk
     assert replays_to(net, seq, {p.id: int(end[i]) for i, p in enumerate(net.places) if end[i]})
     # M0 outside ``inside`` (here the top rung alone, and M0 the target): every walk stops at its first step
     assert symbolic._walk_sequence(store, ex, net, store.m0, time.monotonic() + 60.0, inside=dead) is None
+
+
+@pytest.mark.parametrize("quick", [True, False])
+def test_the_closure_toward_the_dead_markings_runs_beside_the_quick_searches_and_gives_its_budget_back(
+        monkeypatch: pytest.MonkeyPatch, quick: bool) -> None:
+    """On two CPUs the witness's backward closure starts beside its quick searches: stopped when
+    they find the sequence, taken when they do not (their time cut to nothing), and either way the
+    store has its whole budget back and no thread is left."""
+    from coordinator.analysis import symbolic
+
+    monkeypatch.setattr(symbolic, "cpus", lambda: 2)
+    if not quick:
+        monkeypatch.setattr(symbolic, "_QUICK_SECONDS", 0.0)
+    made: list[symbolic._TowardDead] = []
+    real = symbolic._TowardDead
+
+    def spy(*args: Any) -> symbolic._TowardDead:
+        made.append(real(*args))
+        return made[-1]
+
+    monkeypatch.setattr(symbolic, "_TowardDead", spy)
+    net = _ladder(40)
+    bounds, flows = proven_bounds(net)
+    r = analyse_symbolic(net, bounds, flows=flows, max_bytes=1 << 30)
+    assert r.states == 43 and r.n_deadlocks == 1
+    assert r.deadlock_sequence == [f"up{i}" for i in range(40)]
+    assert len(made) == 1
+    toward = made[0]
+    assert not toward.thread.is_alive() and toward.lent == 0 and toward.store.max_bytes == 1 << 30
+    assert toward.flag.is_set() is quick  # cancelled only when the quick searches found it
+
+
+def test_the_closure_toward_the_dead_markings_is_made_again_on_the_whole_budget_when_its_part_is_outgrown() -> None:
+    """Lent all but what the store holds, the closure beside outgrows its part and stops; the
+    caller makes it again on the whole budget, to the same set (200 philosophers: the store's
+    buffers grow from about 1 MB to 13 MB). The thread watches the caller's cancel flag too."""
+    from coordinator.analysis import mdd_kernel as mk
+    from coordinator.analysis import symbolic
+    from coordinator.analysis.mdd_order import encode, events
+
+    net = make_net("philosophers", *philosophers_arcs(200))
+    sn = sparse_net(net)
+    bounds, flows = proven_bounds(net)
+    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
+    fwd, single = events(sn, enc, merge=True), events(sn, enc)
+    back = events(sn, enc, merge=True, inverse=True)
+    store = symbolic._Store(enc, 1 << 30)
+    reach = store.call(mk.MODE_SATURATE, fwd, store.m0, check_overflow=True)
+    states = store.count(reach)
+    dead = symbolic._dead(store, fwd, single, reach, counts_per_transition(store, single, reach, states), states)
+    assert store.count(dead) == 1
+    toward = symbolic._TowardDead(store, back, dead, reach, store.max_bytes - store.held())
+    inside = toward.result()
+    assert isinstance(toward.error, symbolic._OutOfMemory)
+    assert store.max_bytes == 1 << 30
+    assert inside == store.closure(back, dead, c=reach)  # the same node: the set made on one thread
+    assert store.count(inside) == states  # every marking can still reach the deadlock
+    # the thread watches the caller's cancel flag (read by the kernel every million steps or so)
+    flag = threading.Event()
+    mk.set_watch(None, None, flag)
+    try:
+        beside = symbolic._TowardDead(store, back, dead, reach, 0)
+        assert not beside.flag.is_set()
+        flag.set()
+        assert beside.flag.is_set()
+        beside.cancel()
+        assert not beside.thread.is_alive() and store.max_bytes == 1 << 30
+    finally:
+        mk.set_watch(None, None)
 
 
 def test_a_count_beyond_a_float_s_range_is_exact() -> None:
