@@ -48,3 +48,17 @@ def test_the_deadlock_bench_finds_the_same_dead_markings_both_ways_and_prints_th
     assert [(r["model"], r["states"], r["dead"]) for r in rows] == [("philosophers:6", 3 ** 6, 2),
                                                                     ("sharedmemory:5", 1863, 0)]
     assert all(r["ratio"] > 0 for r in rows)
+
+
+def test_the_witness_bench_finds_the_same_sequence_both_ways_and_prints_their_ratio(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    import json
+
+    from bench.witness import main
+
+    assert main(["--json", "--mcc", str(MCC), "philosophers:6", "sharedmemory:5"]) == 0
+    out = capsys.readouterr().out.splitlines()
+    row = json.loads(out[0])
+    assert (row["model"], row["states"], row["dead"], row["length"]) == ("philosophers:6", 3 ** 6, 2, 6)
+    assert row["ratio"] > 0 and len(row["after_seconds"]) == len(row["beside_seconds"]) == 1
+    assert out[1] == "sharedmemory:5: 1,863 markings and no dead marking: no witness to time"
