@@ -1123,7 +1123,7 @@ def test_the_main_thread_takes_back_the_bytes_lent_beside_when_its_closure_outgr
     reach = store.call(mk.MODE_SATURATE, fwd, store.m0)
     states = store.count(reach, at_most=float(store.count(reach)) * single.n_events)
     counts = store.enabled_counts(reach, single)
-    home = _Home(store, back, reach, 0, float("inf"), None, lambda _text: None)  # no bytes: it cannot decide
+    home = _Home(sn, store, back, reach, 0, float("inf"), None, lambda _text: None)  # no bytes: it cannot decide
     home.thread.join()
     assert home.reversible is None
     home.lent = 64 << 20  # as analyse_symbolic lends it: the main store keeps only what it holds
@@ -1143,8 +1143,10 @@ def test_the_main_thread_takes_back_the_bytes_lent_beside_when_its_closure_outgr
 
 @pytest.mark.parametrize("reversible", [True, False])
 def test_reversibility_is_decided_beside_on_a_store_of_its_own(reversible: bool) -> None:
-    # where the race kept no order upside down, symbolic._Home saturates backward from M0 without
-    # the reachable set as its constraint, then compares the two across the stores
+    # where the race kept no order upside down, symbolic._Home first asks whether the markings that
+    # reach M0 on the order upside down are closed under firing (yes: reversible; no: nothing
+    # known), then saturates backward from M0 without the reachable set as its constraint, and
+    # compares the two across the stores
     from coordinator.analysis import mdd_kernel as mk
     from coordinator.analysis.mdd_order import events
     from coordinator.analysis.symbolic import _Home
@@ -1153,11 +1155,16 @@ def test_reversibility_is_decided_beside_on_a_store_of_its_own(reversible: bool)
     store = _Store(enc, 64 << 20)
     reach = store.call(mk.MODE_SATURATE, events(sn, enc, merge=True), store.m0)
     said: list[str] = []
-    home = _Home(store, events(sn, enc, inverse=True, merge=True), reach, 64 << 20, float("inf"), None, said.append)
+    home = _Home(sn, store, events(sn, enc, inverse=True, merge=True), reach, 64 << 20, float("inf"), None,
+                 said.append)
     assert home.decided.wait(60.0)
     home.end()
     assert home.reversible is reversible
-    assert said and "the markings that reach M0, beside, on a store of its own" in said[0]
+    assert len(said) == 1
+    if reversible:
+        assert "on the reachable set's order upside down, the markings that reach M0 are closed" in said[0]
+    else:
+        assert "the markings that reach M0, beside, on a store of its own" in said[0]
     # the answer of the whole engine is the same, whichever thread gave it
     r = analyse_symbolic(net, bounds, flows=flows, seconds=60.0)
     assert r.reversible is reversible and r.live is reversible
