@@ -2296,12 +2296,10 @@ class _Upside(_Beside):
         self.kept.drop()
 
 
-#: seconds :class:`_Upside` gives :func:`_closed_home` before it resumes its saturation forward
+#: seconds :class:`_Upside` gives :func:`_closed_home` before it resumes its saturation forward, and
+#: :class:`_Home` on the order upside down before its own saturation (2 s was too short for
+#: RobotManipulation-PT-00050's 1.4 to 2.3 s while the main thread's closure runs beside)
 _CLOSED_SECONDS = 5.0
-#: seconds :class:`_Home` gives :func:`_closed_home` on the order upside down before its own saturation:
-#: short, since that saturation decides where this does not (TCPcondis-PT-15: 7.6 s, where this takes
-#: 5.2 s on either order)
-_REVERSED_SECONDS = 2.0
 
 
 def _closed_home(enc: Encoding, fwd: Events, back: Events, max_bytes: int) -> bool:
@@ -2326,11 +2324,12 @@ def _closed_home(enc: Encoding, fwd: Events, back: Events, max_bytes: int) -> bo
 
 class _Home(_Beside):
     """Reversibility beside the main thread where the race kept no order upside down (two CPUs or
-    more, :func:`analyse_symbolic`): first, for at most :data:`_REVERSED_SECONDS`, whether the
+    more, :func:`analyse_symbolic`): first, for at most :data:`_CLOSED_SECONDS`, whether the
     markings that reach M0 on the reachable set's order upside down are closed under firing
     (:func:`_closed_home`: the net is reversible if they are; RobotManipulation-PT-00050, 1.4 s,
-    where backward saturation on the race's winning order takes 12 to 14 s); then, on a store of
-    its own, on the reachable set's encoding, the
+    where backward saturation on the race's winning order takes 12 to 14 s; TCPcondis-PT-15,
+    where it takes 5.2 s and the way below decides, pays those 5 s); then, on a store of its own,
+    on the reachable set's encoding, the
     markings that reach M0 by saturation backward from M0, not kept inside the reachable set (that
     set is in the main store), then whether the reachable set is inside them
     (:func:`.mdd_kernel.subset`, which reads the main store's nodes of that set: a store never
@@ -2358,7 +2357,7 @@ class _Home(_Beside):
             # its time, its memory or a stop ends it undecided: the main thread's answer stands
             with contextlib.suppress(_OutOfTime, AnalysisError):
                 t0 = time.monotonic()
-                mk.set_watch(min(until, t0 + _REVERSED_SECONDS), None, self.cancel)
+                mk.set_watch(min(until, t0 + _CLOSED_SECONDS), None, self.cancel)
                 with contextlib.suppress(_OutOfTime):  # its slice: the way below goes on
                     upside = enc.reversed()
                     ahead = events(sn, upside, merge=True)
