@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
-from conftest import ROOT, free_port
+from tests.integration.cluster import ROOT, free_port
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(240)]
 

@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import ROOT
+from tests.integration.cluster import ROOT
 from waiting import file_says
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.netns, pytest.mark.timeout(420)]

@@ -9,7 +9,7 @@ import struct
 import time
 
 import pytest
-from conftest import Cluster
+from tests.integration.cluster import Cluster
 from waiting import eventually, log_says
 
 from services.client import NodeLink

@@ -11,7 +11,7 @@ import subprocess
 import sys
 
 import pytest
-from conftest import ROOT, Cluster
+from tests.integration.cluster import ROOT, Cluster
 
 pytestmark = pytest.mark.integration
 

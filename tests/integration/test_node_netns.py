@@ -18,7 +18,7 @@ import sys
 from collections.abc import Iterator
 
 import pytest
-from conftest import ROOT, Cluster
+from tests.integration.cluster import ROOT, Cluster
 
 pytestmark = [pytest.mark.integration, pytest.mark.netns]
 

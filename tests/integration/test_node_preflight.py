@@ -7,7 +7,7 @@ list means every action is placed and offered by a reachable node that loaded ou
 from __future__ import annotations
 
 import pytest
-from conftest import DEMO_SERVICES, Cluster
+from tests.integration.cluster import DEMO_SERVICES, Cluster
 
 from services.client import ServiceClient
 from services.location import parse_location

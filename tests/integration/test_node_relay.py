@@ -17,7 +17,7 @@ from typing import Any
 
 import msgpack
 import pytest
-from conftest import DEMO_SERVICES, Cluster
+from tests.integration.cluster import DEMO_SERVICES, Cluster
 
 pytestmark = pytest.mark.integration
 

@@ -14,7 +14,7 @@ import asyncio
 import signal
 
 import pytest
-from conftest import Cluster
+from tests.integration.cluster import Cluster
 from waiting import log_says
 
 pytestmark = pytest.mark.integration

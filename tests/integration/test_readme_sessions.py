@@ -26,7 +26,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from conftest import ROOT
+from tests.integration.cluster import ROOT
 
 pytestmark = [pytest.mark.integration, pytest.mark.slow, pytest.mark.netns, pytest.mark.timeout(480)]
 

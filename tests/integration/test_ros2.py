@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import Cluster, free_port
+from tests.integration.cluster import Cluster, free_port
 from test_run_cli import Output, petrobot
 
 from coordinator.journal import JournalReader

@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from conftest import ROOT, Cluster
+from tests.integration.cluster import ROOT, Cluster
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(120)]
 

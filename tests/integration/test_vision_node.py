@@ -13,7 +13,7 @@ import time
 from typing import Any
 
 import pytest
-from conftest import ROOT, Cluster
+from tests.integration.cluster import ROOT, Cluster
 
 from services.catching.setpoints import SETPOINT_TOPIC, LatestSetPoint
 

@@ -8,7 +8,7 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from conftest import Cluster
+from tests.integration.cluster import Cluster
 
 
 async def eventually(what: str, cond: Callable[[], bool], timeout_s: float = 20.0) -> None:
