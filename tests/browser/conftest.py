@@ -206,7 +206,7 @@ def catching_demo(petrobot: Any, tmp_path: Path, journal: Path, max_seconds: int
     camera, as the demo runs it) and the vision and motion nodes; the world and the nodes are stopped
     on leaving."""
     from coordinator.commands.demo_start import SimWorld
-    from tests.integration.conftest import Cluster
+    from tests.integration.cluster import Cluster
     from tests.integration.test_catching import SERVICES
 
     cluster = Cluster(tmp_path)

@@ -86,7 +86,7 @@ outputs = { robot = 1, failed = 1 }
 def lab(tmp_path: Path) -> Any:
     """Nodes alpha and beta of a services.toml whose alpha also publishes ``go`` (nothing sends it:
     the operator raises it), the drill net and the foundation demo net in the console's folder."""
-    from tests.integration.conftest import DEMO_SERVICES, Cluster
+    from tests.integration.cluster import DEMO_SERVICES, Cluster
 
     cluster = Cluster(tmp_path)
     cluster.write_services(DEMO_SERVICES + '\n[events.go]\nnode = "alpha"\n\n[actions.coin]\nnode = "alpha"\n'

@@ -237,7 +237,7 @@ impl = "services.actions.demo:echo"
 
 def test_the_page_shows_failing_tasks_unused_nodes_the_real_state_and_keeps_the_end(page: Page, petrobot: Any,
                                                                                     tmp_path: Path):
-    from tests.integration.conftest import free_port
+    from tests.integration.cluster import free_port
 
     net = tmp_path / "flaky.toml"
     net.write_text(FLAKY)
