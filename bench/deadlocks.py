@@ -66,18 +66,25 @@ def measure(prepared: tuple[Any, Any, Any], by_turns: bool, max_bytes: int, chai
             "nodes": store.nodes}
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+def arguments(doc: str, chain_example: str, argv: list[str] | None) -> argparse.Namespace:
+    """The command line of a bench that times two ways on fresh stores of one encoding per net
+    (this one and ``bench/witness.py``): models, ``--repeat``, ``--max-memory``, ``--mcc``,
+    ``--chain`` (``chain_example`` ends its help) and ``--json``; ``doc`` is the bench's docstring."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0],
+                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=doc)
     ap.add_argument("models", nargs="+", help="PNML paths or FAMILY:N")
     ap.add_argument("--repeat", type=int, default=1, help="runs of each way, by turns (default 1)")
     ap.add_argument("--max-memory", type=float, default=4.0, help="the store's budget, GiB (default 4)")
     ap.add_argument("--mcc", metavar="DIR", help="folder of the MCC models (default: where the tests find them)")
     ap.add_argument("--chain", action="store_true",
-                    help="build the reachable set by chained images, not saturation (the race's first order "
-                         "by chaining; SharedMemory-PT-000050 is not saturated in 10 minutes on this order)")
+                    help=f"build the reachable set by chained images, not saturation (the race's first order "
+                         f"by chaining; {chain_example})")
     ap.add_argument("--json", action="store_true", help="one JSON object per model")
-    args = ap.parse_args(argv)
+    return ap.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = arguments(__doc__, "SharedMemory-PT-000050 is not saturated in 10 minutes on this order", argv)
     sys.path.insert(0, str(ROOT))
     from bench.statespace import load_model
     from coordinator.analysis.symbolic import load_kernel

@@ -25,7 +25,6 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -68,22 +67,12 @@ def measure(net: Any, prepared: tuple[Any, Any, Any], beside: bool, max_bytes: i
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
-    ap.add_argument("models", nargs="+", help="PNML paths or FAMILY:N")
-    ap.add_argument("--repeat", type=int, default=1, help="runs of each way, by turns (default 1)")
-    ap.add_argument("--max-memory", type=float, default=4.0, help="the store's budget, GiB (default 4)")
-    ap.add_argument("--mcc", metavar="DIR", help="folder of the MCC models (default: where the tests find them)")
-    ap.add_argument("--chain", action="store_true",
-                    help="build the reachable set by chained images, not saturation (the race's first order "
-                         "by chaining, as CloudDeployment-PT-6a's race finishes it)")
-    ap.add_argument("--json", action="store_true", help="one JSON object per model")
-    args = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT))
-    from bench.deadlocks import prepare
+    from bench.deadlocks import arguments, prepare
     from bench.statespace import load_model
     from coordinator.analysis.symbolic import load_kernel
 
+    args = arguments(__doc__, "as CloudDeployment-PT-6a's race finishes it", argv)
     load_kernel()
     for spec in args.models:
         net = load_model(spec, args.mcc)

@@ -15,6 +15,7 @@ wait until each accepts TCP connections, kill/stop/restart them, read their logs
 
 from __future__ import annotations
 
+import contextlib
 import os
 import secrets
 import signal
@@ -207,13 +208,9 @@ class Cluster:
         """Kill every node still running."""
         for proc in self.procs.values():
             if proc.poll() is None:
-                try:
+                with contextlib.suppress(ProcessLookupError):  # it ended in between
                     proc.send_signal(signal.SIGCONT)
                     proc.kill()
-                except ProcessLookupError:
-                    pass
         for proc in self.procs.values():
-            try:
+            with contextlib.suppress(subprocess.TimeoutExpired):
                 proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                pass

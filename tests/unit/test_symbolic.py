@@ -1547,27 +1547,39 @@ def _ladder(n: int) -> PetriNet:
     return make_net("ladder", {"rung0": 1}, ts)
 
 
+class _Deadlocked:
+    """A net's encoding (seed 0), its forward, single and inverse events, and a store holding its
+    reachable set and dead markings (:func:`symbolic._dead`), for the witness's tests."""
+
+    def __init__(self, net: PetriNet) -> None:
+        from coordinator.analysis import mdd_kernel as mk
+        from coordinator.analysis import symbolic
+        from coordinator.analysis.mdd_order import encode, events
+
+        self.sn = sparse_net(net)
+        bounds, flows = proven_bounds(net)
+        self.enc = encode(self.sn, bounds, flows, seconds=5.0, seed=0)
+        self.fwd, self.single = events(self.sn, self.enc, merge=True), events(self.sn, self.enc)
+        self.back = events(self.sn, self.enc, merge=True, inverse=True)
+        self.store = store = symbolic._Store(self.enc, 1 << 30)
+        self.reach = store.call(mk.MODE_SATURATE, self.fwd, store.m0, check_overflow=True)
+        self.states = store.count(self.reach)
+        self.dead = symbolic._dead(store, self.fwd, self.single, self.reach,
+                                   counts_per_transition(store, self.single, self.reach, self.states), self.states)
+
+
 def test_walks_that_stay_where_a_deadlock_is_reachable_reach_one_where_free_walks_fall_into_a_trap() -> None:
     """A ladder of 40 rungs, each with a way down into a cycle that never ends: a free walk reaches
     the top, the only dead marking, once in 2^40 walks; a walk that never leaves the markings that
     can reach it climbs straight up."""
     import time
 
-    from coordinator.analysis import mdd_kernel as mk
     from coordinator.analysis import symbolic
-    from coordinator.analysis.mdd_order import encode, events
 
     n = 40
     net = _ladder(n)
-    sn = sparse_net(net)
-    bounds, flows = proven_bounds(net)
-    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
-    fwd, single = events(sn, enc, merge=True), events(sn, enc)
-    back = events(sn, enc, merge=True, inverse=True)
-    store = symbolic._Store(enc, 1 << 30)
-    reach = store.call(mk.MODE_SATURATE, fwd, store.m0, check_overflow=True)
-    states = store.count(reach)
-    dead = symbolic._dead(store, fwd, single, reach, counts_per_transition(store, single, reach, states), states)
+    d = _Deadlocked(net)
+    sn, enc, back, store, reach, states, dead = d.sn, d.enc, d.back, d.store, d.reach, d.states, d.dead
     assert states == n + 3 and store.count(dead) == 1
     ex = symbolic._Explicit(sn, enc)
     assert symbolic._walk_sequence(store, ex, net, dead, time.monotonic() + 0.5) is None
@@ -1618,18 +1630,9 @@ def test_the_closure_toward_the_dead_markings_is_made_again_on_the_whole_budget_
     buffers grow from about 1 MB to 13 MB). The thread watches the caller's cancel flag too."""
     from coordinator.analysis import mdd_kernel as mk
     from coordinator.analysis import symbolic
-    from coordinator.analysis.mdd_order import encode, events
 
-    net = make_net("philosophers", *philosophers_arcs(200))
-    sn = sparse_net(net)
-    bounds, flows = proven_bounds(net)
-    enc = encode(sn, bounds, flows, seconds=5.0, seed=0)
-    fwd, single = events(sn, enc, merge=True), events(sn, enc)
-    back = events(sn, enc, merge=True, inverse=True)
-    store = symbolic._Store(enc, 1 << 30)
-    reach = store.call(mk.MODE_SATURATE, fwd, store.m0, check_overflow=True)
-    states = store.count(reach)
-    dead = symbolic._dead(store, fwd, single, reach, counts_per_transition(store, single, reach, states), states)
+    d = _Deadlocked(make_net("philosophers", *philosophers_arcs(200)))
+    back, store, reach, states, dead = d.back, d.store, d.reach, d.states, d.dead
     assert store.count(dead) == 1
     toward = symbolic._TowardDead(store, back, dead, reach, store.max_bytes - store.held())
     inside = toward.result()
