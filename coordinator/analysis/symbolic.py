@@ -1417,6 +1417,18 @@ class _Candidate:
 
     def __init__(self, name: int, enc: Encoding, fwd: Events, store: _Store) -> None:
         self.name, self.enc, self.fwd, self.store = name, enc, fwd, store
+        self.spent = 0.0  # the seconds of its turns so far, s
+
+    def outdone(self, others: list[_Candidate], spent: float) -> bool:
+        """Whether one of ``others`` (the lane's candidates still in the race), not by chaining, has
+        had at least ``spent`` seconds of turns (this one's, its current turn included) and holds
+        fewer nodes. The test of a candidate that outgrew its part of a lane's memory
+        (:meth:`_Lane._run`): if so it is dropped, not the others. RobotManipulation-PT-00050: the
+        token flow's order outgrew its part at 2 million nodes, not done alone in 30 s; the first
+        order reversed beside it held 950,000 and is done alone in 8.2 s. Where the order that
+        outgrew its part is the faster (IOTPpurchase-PT-C12M10P15D17, DBSingleClientW-PT-d0m10), it
+        outgrew it after more time than the others had had, or holding fewer nodes."""
+        return any(not o.store.chain and o.spent >= spent and o.store.nodes < self.store.nodes for o in others)
 
     def drop(self) -> None:
         """Free the store (the candidate is out of the race)."""
@@ -1782,6 +1794,16 @@ class _Lane:
         with self.race.lock:
             self.race.candidates.append(chain)
 
+    def _split(self, alive: list[bool], held: int) -> None:
+        """Share the lane's memory among its candidates still in the race (``alive``, by their
+        place in :attr:`cands`): an equal part each of what the first order by chaining does not
+        hold, and that one its bytes besides (``held``, :meth:`_held`). No part is made smaller;
+        a dropped candidate gets none."""
+        left = [cand for cand, live in zip(self.cands, alive) if live]
+        for cand in left:
+            part = (self.share - held) // len(left) + (held if cand.store.chain else 0)
+            cand.store.max_bytes = max(cand.store.max_bytes, part)
+
     def _run(self) -> None:
         race, say = self.race, self.race.say
         want = int(self.has_first) + self.others
@@ -1838,9 +1860,7 @@ class _Lane:
                     if n_cands == 0:
                         return
                     turn = 0
-                    for cand in cands:
-                        part = (self.share - held) // n_cands + (held if cand.store.chain else 0)
-                        cand.store.max_bytes = max(cand.store.max_bytes, part)
+                    self._split(alive, held)
                     if self.others:
                         plural = "s" if len(race.orders) > 1 else ""
                         say(f"symbolic: {len(race.orders)} distinct variable order{plural} found")
@@ -1866,6 +1886,7 @@ class _Lane:
             pause = mine if n_cands > 1 else _TELL_SECONDS if race.telling() else inf
             mk.set_watch(min(race.deadline, time.monotonic() + pause), None, self.cancel)
             self.working = store
+            began = time.monotonic()
             try:
                 reach = store.closure(cand.fwd, store.m0, check_overflow=True, passes=_CHAIN_PASSES)
                 store.max_bytes = race.max_bytes  # the others are dropped: the winner has the whole budget
@@ -1912,6 +1933,14 @@ class _Lane:
                     alive[i] = False
                     cand.drop()
                     continue
+                if not whole and cand.outdone([c for j, c in enumerate(cands) if j != i and alive[j]],
+                                              cand.spent + time.monotonic() - began):
+                    say(f"symbolic: {label} outgrew its part of the memory ({store.nodes:,} nodes) beside a "
+                        "smaller diagram that has had as long, dropped")
+                    alive[i] = False
+                    cand.drop()
+                    self._split(alive, held)
+                    continue
                 if not whole or (store.max_bytes < race.max_bytes and race.take_whole(self)):
                     if not whole and sum(alive) > 1:
                         say(f"symbolic: {label} outgrew its part of the memory, the orders it took "
@@ -1935,6 +1964,7 @@ class _Lane:
             finally:
                 mk.set_watch(None, None)
                 self.working = None
+                cand.spent += time.monotonic() - began
             if turn % n_cands == 0:
                 slice_s *= 2
 

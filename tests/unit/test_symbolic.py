@@ -1983,6 +1983,45 @@ def test_a_lane_that_outgrows_its_share_gives_way_to_a_lane_still_working_on_a_s
     assert not race.smaller_beside(second, large.nodes)
 
 
+def test_an_order_that_outgrows_its_part_of_a_lane_gives_way_to_a_smaller_one_that_has_had_as_long() -> None:
+    # _Lane._run: the order that outgrew its part is dropped, not the others, when another order of
+    # the lane, not by chaining, has had at least its seconds of turns and holds fewer nodes; the
+    # lane's share is then split among those left, and a dropped order gets none of it
+    import time
+
+    from coordinator.analysis.mdd_order import encode, events
+    from coordinator.analysis.symbolic import _Candidate, _Lane, _Race
+
+    net = two_phase_locking(20)
+    sn = sparse_net(net)
+    bounds, flows = proven_bounds(net)
+    enc = encode(sn, bounds, flows)
+    fwd = events(sn, enc, merge=True)
+    large = _Candidate(1, enc, fwd, _Store(enc, 8 << 20))
+    large.store.closure(fwd, large.store.m0)
+    small, chained, gone = (_Candidate(n, enc, fwd, _Store(enc, 8 << 20)) for n in (2, 1, 3))
+    chained.store.chain = True
+    gone.drop()
+    assert small.store.nodes < large.store.nodes
+    large.spent = 3.0
+    small.spent = 3.0
+    assert large.outdone([small], large.spent) and not small.outdone([large], small.spent)
+    assert not large.outdone([small], 3.5)  # the smaller one has had less time
+    assert not large.outdone([], 0.0)
+    chained.spent = 10.0  # by chaining: its diagram is dropped when it outgrows its part in any case
+    assert not large.outdone([chained], 3.0)
+    race = _Race(sn, bounds, flows, 64 << 20, time.monotonic() + 60.0, lambda _text: None)
+    lane = _Lane(race, True, 3, 32 << 20)
+    lane.cands = [large, small, chained, gone]
+    held = 2 << 20  # what the order by chaining holds, kept for it
+    lane._split([False, True, True, False], held)
+    assert small.store.max_bytes == 15 << 20 and chained.store.max_bytes == (15 << 20) + held
+    assert gone.dropped and large.store.max_bytes == 8 << 20
+    small.store.max_bytes = 20 << 20
+    lane._split([False, True, True, False], held)
+    assert small.store.max_bytes == 20 << 20  # no part is made smaller
+
+
 def test_the_memory_of_the_search_beside_goes_to_the_lanes_once_it_stopped() -> None:
     import time
 
