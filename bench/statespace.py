@@ -67,9 +67,12 @@ import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from coordinator.net import PetriNet
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -113,7 +116,7 @@ def mcc_dir(given: str | None) -> Path:
     return Path(MCC)
 
 
-def load_model(spec: str, mcc: str | None) -> Any:
+def load_model(spec: str, mcc: str | None) -> PetriNet:
     """A PNML path, or ``FAMILY:N``: a contest family at size N (:mod:`bench.families`)."""
     sys.path.insert(0, str(ROOT))
     from coordinator.netfile.pnml import load_pnml
