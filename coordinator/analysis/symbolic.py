@@ -108,6 +108,8 @@ _WALK_STEPS = 10_000
 #: most steps of a walk that stays among the markings that can reach a deadlock
 #: (:func:`_walk_sequence` with ``inside``): it can only end in one, so it is given longer
 _INSIDE_WALK_STEPS = 1_000_000
+#: successors a step of that walk tries one at a time before the rest in blocks (:func:`_step_inside`)
+_ONE_BY_ONE = 4
 
 
 def _is_prime(n: int) -> bool:
@@ -563,6 +565,8 @@ class _LevelValues:
 
     def __init__(self, enc: Encoding) -> None:
         self.enc = enc
+        # what each transition's levels take in after_one, gathered when first asked (None: never found)
+        self._plans: dict[int, tuple[np.ndarray, ...] | None] = {}
         places = np.concatenate(enc.levels)
         self.order = places
         self.starts = np.cumsum([0] + [ps.size for ps in enc.levels[:-1]]).astype(np.int64)
@@ -616,6 +620,39 @@ class _LevelValues:
         at = np.minimum(np.searchsorted(self.keys, key), self.keys.size - 1)
         found: np.ndarray = np.where(self.keys[at] == key, self.vals[at], -1)
         return found
+
+    def after_one(self, vals: np.ndarray, marking: np.ndarray, t: int, lev_ptr: np.ndarray,
+                  lev: np.ndarray) -> np.ndarray:
+        """(K,) int64: the row of :meth:`after` for one marking and one transition, ``marking``
+        being the (|P|,) marking whose level values are ``vals`` changed by transition ``t``. What
+        its levels take (their places, radices and offsets) is gathered once a transition and
+        kept, so that a step of a walk costs a few small array operations, not the dozen
+        :meth:`after` makes for any number of rows (CloudDeployment-PT-6a: 46 µs a step)."""
+        if not self.exact:
+            return self.of(marking[None, :])[0]
+        plan = self._plans.get(t)
+        if plan is None:
+            levs = lev[lev_ptr[t]:lev_ptr[t + 1]]
+            if (levs < 0).any():  # a place on no level would change: never found
+                plan = None
+            else:
+                size = self.sizes[levs]
+                at = concat_ranges(self.starts[levs], size)
+                plan = (levs, self.order[at], self.mult[at], self.top[at], np.cumsum(size) - size, self.base[levs])
+            self._plans[t] = plan
+        out = vals.astype(np.int64)
+        if plan is None:
+            out[:] = -1
+            return out
+        levs, places, mult, top, seg, base = plan
+        if levs.size:
+            digits = marking[places]
+            found = self._found(np.add.reduceat(digits * mult, seg) + base)
+            if ((digits < 0) | (digits > top)).any() or (found < 0).any():
+                out[:] = -1
+                return out
+            out[levs] = found
+        return out
 
     def after(self, vals: np.ndarray, markings: np.ndarray, ts: np.ndarray, lev_ptr: np.ndarray,
               lev: np.ndarray) -> np.ndarray:
@@ -673,6 +710,9 @@ class _Explicit:
         self.inc_ptr = inc_t.indptr.astype(np.int64)
         self.inc_places = inc_t.indices.astype(np.int64)
         self.inc_data = inc_t.data.astype(np.int64)
+        # the transitions whose firing leaves every count as it was (self-loops, or none at all)
+        self.still = np.bincount(np.repeat(np.arange(self.n_t), np.diff(self.inc_ptr))[self.inc_data != 0],
+                                 minlength=self.n_t) == 0
         self.pre.sort_indices()
         self.inh.sort_indices()
         self.pre_t = np.repeat(np.arange(self.n_t), np.diff(self.pre.indptr))
@@ -818,7 +858,9 @@ def _walk_sequence(store: _Store, ex: _Explicit, net: PetriNet, targets: int, st
     goes round a cycle. Where free walks leave for markings from which no deadlock is reachable,
     these cannot: CloudDeployment-PT-5a's dead marking, which neither free walks nor the guided
     search reached, and whose breadth-first images were not done by the answer's 50 s, is at the end
-    of a walk of 9,885 steps taken in 1.2 s."""
+    of a walk of 7,628 steps. A walk takes no step by a transition whose firing changes no count
+    (:attr:`_Explicit.still`), and stops where only such are enabled: it would stand still
+    (CloudDeployment-PT-6a's walk inside: 32,917 steps in 2.2 s with them, 4,716 without)."""
     ptr, places, data = ex.inc_ptr, ex.inc_places, ex.inc_data
     rng = np.random.default_rng(0xDEAD if inside is None else 0xD1CE)
     steps = _WALK_STEPS if inside is None else _INSIDE_WALK_STEPS
@@ -833,6 +875,9 @@ def _walk_sequence(store: _Store, ex: _Explicit, net: PetriNet, targets: int, st
                     vals = ex.lookup.of(m[None, :])[0]
                 if vals[0] >= 0 and store.contains(targets, vals):
                     return [net.transitions[t].id for t in seq], m
+                break
+            on = on[~ex.still[on]]  # a firing that changes nothing is no step
+            if on.size == 0:  # only such: the walk would stay here for ever
                 break
             if inside is None:
                 t = int(on[rng.integers(on.size)])
@@ -856,9 +901,19 @@ def _step_inside(store: _Store, ex: _Explicit, m: np.ndarray, vals: np.ndarray, 
     """The first transition of ``on`` (enabled in the (|P|,) marking ``m``, whose level values are
     ``vals``) whose successor lies in ``inside``, with that successor and its level values; None if
     none does. Costs the transitions' arcs and a path through the diagram for each successor tried,
-    its level values looked up on the levels the transition changes alone."""
+    its level values looked up on the levels the transition changes alone: the first
+    :data:`_ONE_BY_ONE` one at a time (:meth:`_LevelValues.after_one`), as the first one tried is
+    most often inside (CloudDeployment-PT-6a: 33,288 tried in a walk of 32,917 steps), the others
+    in blocks."""
     lev_ptr, lev = ex.changed
-    for ts in _blocks(on, ex.n_places):
+    ptr, places, data = ex.inc_ptr, ex.inc_places, ex.inc_data
+    for t in on[:_ONE_BY_ONE].tolist():
+        succ1 = m.copy()
+        succ1[places[ptr[t]:ptr[t + 1]]] += data[ptr[t]:ptr[t + 1]]
+        after1 = ex.lookup.after_one(vals, succ1, t, lev_ptr, lev)
+        if after1[0] >= 0 and store.contains(inside, after1):
+            return t, succ1, after1
+    for ts in _blocks(on[_ONE_BY_ONE:], ex.n_places):
         succ = ex.fired(m, ts)
         after = ex.lookup.after(vals, succ, ts, lev_ptr, lev)
         for j in range(ts.size):

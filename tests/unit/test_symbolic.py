@@ -1309,7 +1309,8 @@ def test_level_values_of_many_markings_at_once_are_those_of_the_encoding() -> No
 
 
 @pytest.mark.parametrize("model", ["FMS-PT-00002", "Eratosthenes-PT-010", "seed-3", "seed-6"])
-def test_level_values_after_a_firing_are_looked_up_on_the_changed_levels_as_on_all(model: str) -> None:
+def test_level_values_after_a_firing_are_looked_up_on_the_changed_levels_as_on_all_and_one_at_a_time(
+        model: str) -> None:
     # the witness's searches look up only the levels a transition changes; every transition, enabled
     # or not, from reachable markings: counts below zero or beyond a level's values, and places fixed
     # on no level (Eratosthenes' primes, read only) that a firing would change, are not found either way
@@ -1337,6 +1338,9 @@ def test_level_values_after_a_firing_are_looked_up_on_the_changed_levels_as_on_a
         assert (vals >= 0).all()
         got = ex.lookup.after(vals, succ, ts, lev_ptr, lev)
         assert got.tolist() == ex.lookup.of(succ).tolist()
+        # one transition at a time, as a walk's step tries them (its plans gathered once, then kept)
+        for _ in range(2):
+            assert [ex.lookup.after_one(vals, succ[t], int(t), lev_ptr, lev).tolist() for t in ts] == got.tolist()
         found += int((got[:, 0] >= 0).sum())
     assert found > 0
 
@@ -1592,6 +1596,32 @@ def test_walks_that_stay_where_a_deadlock_is_reachable_reach_one_where_free_walk
     assert replays_to(net, seq, {p.id: int(end[i]) for i, p in enumerate(net.places) if end[i]})
     # M0 outside ``inside`` (here the top rung alone, and M0 the target): every walk stops at its first step
     assert symbolic._walk_sequence(store, ex, net, store.m0, time.monotonic() + 60.0, inside=dead) is None
+
+
+def test_walks_toward_a_deadlock_take_no_step_that_changes_nothing() -> None:
+    """Every step of a chain also enables five transitions that read its token and put it back: a
+    walk that fired them would mostly stand still (CloudDeployment-PT-6a: 219 of its 908
+    transitions change no count, and its walk inside took 32,917 firings, 4,716 without them).
+    Both walks, free and inside, climb the chain in n firings, the dead marking at its top."""
+    import time
+
+    from coordinator.analysis import symbolic
+
+    n = 30
+    ts: dict[str, tuple[dict[str, int], dict[str, int]]] = {}
+    for i in range(n):
+        ts[f"next{i}"] = ({f"step{i}": 1}, {f"step{i + 1}": 1})
+        for k in range(5):
+            ts[f"look{i}_{k}"] = ({f"step{i}": 1}, {f"step{i}": 1})
+    net = make_net("chain", {"step0": 1}, ts)
+    d = _Deadlocked(net)
+    assert d.states == n + 1 and d.store.count(d.dead) == 1
+    ex = symbolic._Explicit(d.sn, d.enc)
+    assert int(ex.still.sum()) == 5 * n
+    inside = d.store.closure(d.back, d.dead, c=d.reach)
+    for within in (None, inside):
+        found = symbolic._walk_sequence(d.store, ex, net, d.dead, time.monotonic() + 60.0, inside=within)
+        assert found is not None and found[0] == [f"next{i}" for i in range(n)]
 
 
 @pytest.mark.parametrize("quick", [True, False])
