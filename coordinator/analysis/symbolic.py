@@ -630,17 +630,18 @@ class _LevelValues:
         :meth:`after` makes for any number of rows (about half of a step's time in
         CloudDeployment-PT-6a's walk inside, before)."""
         if not self.exact:
-            return self.of(marking[None, :])[0]
-        plan = self._plans.get(t)
-        if plan is None:
+            row: np.ndarray = self.of(marking[None, :])[0]
+            return row
+        if t not in self._plans:
             levs = lev[lev_ptr[t]:lev_ptr[t + 1]]
             if (levs < 0).any():  # a place on no level would change: never found
-                plan = None
+                self._plans[t] = None
             else:
                 size = self.sizes[levs]
                 at = concat_ranges(self.starts[levs], size)
-                plan = (levs, self.order[at], self.mult[at], self.top[at], np.cumsum(size) - size, self.base[levs])
-            self._plans[t] = plan
+                self._plans[t] = (levs, self.order[at], self.mult[at], self.top[at], np.cumsum(size) - size,
+                                  self.base[levs])
+        plan = self._plans[t]
         out = vals.astype(np.int64)
         if plan is None:
             out[:] = -1
