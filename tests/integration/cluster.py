@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import resource
 import secrets
 import signal
 import socket
@@ -141,10 +142,17 @@ class Cluster:
 
     # ---- processes
 
-    def start(self, *names: str, timeout: float = 15.0) -> None:
-        """Start nodes ``names`` and wait until each accepts connections."""
+    def start(self, *names: str, timeout: float = 15.0, max_open_files: int | None = None) -> None:
+        """Start nodes ``names`` and wait until each accepts connections; with ``max_open_files``,
+        each node's soft RLIMIT_NOFILE is set to it."""
         if not self.services_path.exists():
             self.write_services()
+        hard = resource.getrlimit(resource.RLIMIT_NOFILE)[1]
+
+        def limit() -> None:  # in the child, before the node starts
+            if max_open_files is not None:
+                resource.setrlimit(resource.RLIMIT_NOFILE, (max_open_files, hard))
+
         for name in names:
             log = self.tmp / f"{name}.log"
             self._logs[name] = log
@@ -153,6 +161,7 @@ class Cluster:
                     [sys.executable, "-m", "services.node", name, "--services", str(self.services_path),
                      "--key-file", str(self.key_file)],
                     cwd=ROOT, env=self.env(), stdout=fh, stderr=subprocess.STDOUT,
+                    preexec_fn=None if max_open_files is None else limit,  # noqa: PLW1509
                 )
         for name in names:
             self.wait_listening(name, timeout)

@@ -26,21 +26,6 @@ impl = "services.actions.demo:echo"
 """
 
 
-def start_with_fd_limit(cluster: Cluster, name: str, nofile: int) -> None:
-    """Start node ``name`` with its soft RLIMIT_NOFILE at ``nofile``."""
-    _, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
-    log = cluster.tmp / f"{name}.log"
-    cluster._logs[name] = log
-    with open(log, "ab") as fh:
-        cluster.procs[name] = subprocess.Popen(
-            [sys.executable, "-m", "services.node", name, "--services", str(cluster.services_path),
-             "--key-file", str(cluster.key_file)],
-            cwd=ROOT, env=cluster.env(), stdout=fh, stderr=subprocess.STDOUT,
-            preexec_fn=lambda: resource.setrlimit(resource.RLIMIT_NOFILE, (nofile, hard)),  # noqa: PLW1509
-        )
-    cluster.wait_listening(name)
-
-
 async def slow_peer(host: str, port: int, source: str, stop: asyncio.Event) -> None:
     """Connect, send a byte a second; connect again a second after being dropped."""
     while not stop.is_set():
@@ -68,7 +53,7 @@ async def test_with_1024_descriptors_1100_slow_peers_do_not_keep_a_client_out(cl
     if soft < 4096:
         resource.setrlimit(resource.RLIMIT_NOFILE, (min(4096, hard), hard))
     cluster.write_services(SERVICES)
-    start_with_fd_limit(cluster, "alpha", 1024)
+    cluster.start("alpha", max_open_files=1024)
     host, port = cluster.location.address("alpha")
     stop = asyncio.Event()
     # a third of them from the client's own address: the per-address caps protect nobody there
